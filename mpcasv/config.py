@@ -1,0 +1,107 @@
+"""Strict loading of TOML files into frozen, validated dataclasses.
+
+Every parameter set, scenario, preset and suite in mpcasv is a frozen pydantic dataclass with
+``extra="forbid"``: an unknown key, a missing field, a non-numeric value or an out-of-range
+number is refused with a :class:`ConfigError` naming the file and the field, before anything
+runs. Numbers are strict: ``"1.5"`` (a string) is not a number.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import tomllib
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Annotated, Any, TypeVar
+
+from pydantic import ConfigDict, Field, Strict, TypeAdapter, ValidationError
+from pydantic.dataclasses import dataclass as _pydantic_dataclass
+
+T = TypeVar("T")
+
+#: A real number given as a number (int or float), never as a string or a bool.
+Float = Annotated[float, Strict()]
+#: A strictly positive number.
+Pos = Annotated[float, Strict(), Field(gt=0)]
+#: A number >= 0.
+NonNeg = Annotated[float, Strict(), Field(ge=0)]
+#: A probability in [0, 1].
+Prob = Annotated[float, Strict(), Field(ge=0, le=1)]
+#: A strictly positive integer.
+PosInt = Annotated[int, Strict(), Field(gt=0)]
+
+STRICT = ConfigDict(extra="forbid", arbitrary_types_allowed=False)
+
+
+def frozen(cls: type[T]) -> type[T]:
+    """Decorate ``cls`` as a frozen dataclass validated by pydantic (unknown keys refused)."""
+    return _pydantic_dataclass(frozen=True, config=STRICT)(cls)
+
+
+class ConfigError(ValueError):
+    """A configuration file (or mapping) is invalid; the message names the source and field."""
+
+
+def _format_loc(loc: tuple[Any, ...]) -> str:
+    out = ""
+    for part in loc:
+        out += f"[{part}]" if isinstance(part, int) else (f".{part}" if out else str(part))
+    return out or "(top level)"
+
+
+def parse(cls: type[T], data: Mapping[str, Any], source: str | Path = "<mapping>") -> T:
+    """Validate ``data`` into an instance of the frozen dataclass ``cls``.
+
+    Raises
+    ------
+    ConfigError
+        One line per problem: ``source: field.path: message``.
+    """
+    try:
+        return TypeAdapter(cls).validate_python(dict(data))
+    except ValidationError as exc:
+        lines = [f"{source}: {_format_loc(e['loc'])}: {e['msg']}" for e in exc.errors()]
+        raise ConfigError("invalid configuration\n  " + "\n  ".join(lines)) from None
+
+
+def load_toml(path: str | Path) -> dict[str, Any]:
+    """Read a TOML file, turning I/O and syntax errors into :class:`ConfigError`."""
+    path = Path(path)
+    try:
+        with path.open("rb") as fh:
+            return tomllib.load(fh)
+    except FileNotFoundError:
+        raise ConfigError(f"{path}: no such file") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{path}: not valid TOML: {exc}") from None
+
+
+def load(cls: type[T], path: str | Path) -> T:
+    """Load and validate a TOML file into ``cls``."""
+    return parse(cls, load_toml(path), path)
+
+
+def replace(obj: T, **changes: Any) -> T:
+    """Return a re-validated copy of a frozen config dataclass with some fields changed."""
+    data = dataclasses.asdict(obj)  # type: ignore[arg-type]
+    data.update(changes)
+    return parse(type(obj), data, f"{type(obj).__name__} override")
+
+
+DATA_DIR = Path(__file__).parent / "data"
+
+
+def resolve(kind: str, name_or_path: str | Path) -> Path:
+    """Find a shipped data file (``kind`` = ``vessels``, ``presets``, ...) or a user path.
+
+    A bare name such as ``"gretha"`` means ``mpcasv/data/<kind>/gretha.toml``; anything that
+    exists as a path is used as it is.
+    """
+    p = Path(name_or_path)
+    if p.suffix == ".toml" and p.exists():
+        return p
+    shipped = DATA_DIR / kind / f"{name_or_path}.toml"
+    if shipped.exists():
+        return shipped
+    known = sorted(f.stem for f in (DATA_DIR / kind).glob("*.toml"))
+    raise ConfigError(f"unknown {kind[:-1]} {str(name_or_path)!r}: not a file, and not one of {known}")

@@ -1,0 +1,182 @@
+"""The one Fossen 3-DOF vessel model, written once, symbolically in CasADi.
+
+State  x = [N, E, psi, u, v, r, T, delta]   (m, m, rad, m/s, m/s, rad/s, N, rad)
+Input  u = [T_cmd, delta_cmd]              (N, rad): thrust and steering set-points
+Current c = [V_N, V_E]                     (m/s): constant, irrotational, in NED
+
+Gretha has one steerable stern drive at (x_p, 0): its thrust in body axes is
+[T cos(delta), -T sin(delta)], and its steered underwater leg adds a lift force
+Y_uudelta |u_r| u_r delta, so the yaw moment is x_p times the total side force (positive
+delta turns the bow to starboard, r > 0). Yaw authority therefore grows with thrust and with
+speed, and vanishes at rest. Thrust and steering follow their set-points with first-order
+lags, so the actuators are part of the state and every user (simulator, MPC, tuning)
+sees the same lag.
+
+Equations (thesis eqs. 2.5-2.6 reduced to 3 DOF; Fossen 2021 ch. 6):
+    eta_dot = R(psi) nu                                                     (2.5)
+    M_RB nu_dot + M_A nu_r_dot + C_RB(nu) nu + C_A(nu_r) nu_r + D(nu_r) nu_r = tau   (2.6)
+with nu_r = nu - nu_c, nu_c = R(psi)^T [V_N, V_E, 0] and, the current being constant in
+NED, nu_c_dot = [r v_c, -r u_c, 0].
+
+Argument order, kept everywhere: ``(x, u, c)`` and ``(x, u, c, p)`` with ``p`` the parameter
+vector in :data:`mpcasv.models.params.MODEL_COEFFS` order.
+"""
+
+from __future__ import annotations
+
+from functools import cached_property
+
+import casadi as ca
+import numpy as np
+
+from mpcasv.models.params import MODEL_COEFFS, VesselParams
+
+STATE_NAMES = ("N", "E", "psi", "u", "v", "r", "T", "delta")
+INPUT_NAMES = ("T_cmd", "delta_cmd")
+NX, NU, NC, NP = len(STATE_NAMES), len(INPUT_NAMES), 2, len(MODEL_COEFFS)
+IX = {name: i for i, name in enumerate(STATE_NAMES)}
+
+
+def sabs(x, eps):
+    """Smooth |x| = sqrt(x^2 + eps^2) - eps: differentiable, zero at zero, >= 0."""
+    return ca.sqrt(x * x + eps * eps) - eps
+
+
+def xdot_expr(x, u, c, p):
+    """Right-hand side of the model as a CasADi expression (SX or MX).
+
+    This is the single definition of the vessel's equations of motion in mpcasv.
+    """
+    P = {name: p[i] for i, name in enumerate(MODEL_COEFFS)}
+    psi, uu, v, r, T, delta = x[2], x[3], x[4], x[5], x[6], x[7]
+    T_cmd, delta_cmd = u[0], u[1]
+    cpsi, spsi = ca.cos(psi), ca.sin(psi)
+
+    # current in body axes and relative velocity
+    u_c = c[0] * cpsi + c[1] * spsi
+    v_c = -c[0] * spsi + c[1] * cpsi
+    u_r, v_r = uu - u_c, v - v_c
+    nu = ca.vertcat(uu, v, r)
+
+    m, I_z, x_g = P["m"], P["I_z"], P["x_g"]
+    Xud, Yvd, Yrd, Nvd, Nrd = P["X_udot"], P["Y_vdot"], P["Y_rdot"], P["N_vdot"], P["N_rdot"]
+    eps = P["eps_abs"]
+
+    M_RB = ca.vertcat(
+        ca.horzcat(m, 0, 0), ca.horzcat(0, m, m * x_g), ca.horzcat(0, m * x_g, I_z)
+    )
+    M_A = -ca.vertcat(ca.horzcat(Xud, 0, 0), ca.horzcat(0, Yvd, Yrd), ca.horzcat(0, Nvd, Nrd))
+
+    # Coriolis-centripetal forces (Fossen 2021 eqs. 6.43 and 6.52 in 3 DOF)
+    C_RB_nu = ca.vertcat(-m * (x_g * r + v) * r, m * uu * r, m * x_g * uu * r)
+    C_A_nur = ca.vertcat(
+        (Yvd * v_r + Yrd * r) * r,
+        -Xud * u_r * r,
+        (Xud - Yvd) * u_r * v_r - Yrd * u_r * r,
+    )
+
+    # damping: linear (constant + proportional to speed, Clarke 1982) and quadratic
+    U = sabs(u_r, eps)
+    D_nur = -ca.vertcat(
+        P["X_u"] * u_r + P["X_uu"] * sabs(u_r, eps) * u_r,
+        (P["Y_v"] + P["Y_uv"] * U) * v_r
+        + (P["Y_r"] + P["Y_ur"] * U) * r
+        + P["Y_vv"] * sabs(v_r, eps) * v_r,
+        (P["N_v"] + P["N_uv"] * U) * v_r
+        + (P["N_r"] + P["N_ur"] * U) * r
+        + P["N_rr"] * sabs(r, eps) * r,
+    )
+
+    # steerable stern thrust
+    Y_act = -T * ca.sin(delta) + P["Y_uudelta"] * sabs(u_r, eps) * u_r * delta
+    tau = ca.vertcat(T * ca.cos(delta), Y_act, P["x_p"] * Y_act)
+
+    # (2.6): M_RB nu_dot + M_A (nu_dot - nu_c_dot) + ... = tau
+    nu_c_dot = ca.vertcat(r * v_c, -r * u_c, 0)
+    rhs = tau - C_RB_nu - C_A_nur - D_nur + ca.mtimes(M_A, nu_c_dot)
+    nu_dot = ca.solve(M_RB + M_A, rhs)
+
+    eta_dot = ca.vertcat(uu * cpsi - v * spsi, uu * spsi + v * cpsi, r)  # (2.5)
+    act_dot = ca.vertcat((T_cmd - T) / P["T_thrust"], (delta_cmd - delta) / P["T_delta"])
+    del nu
+    return ca.vertcat(eta_dot, nu_dot, act_dot)
+
+
+def rk4_expr(f, x, u, c, dt, n_sub=1):
+    """Classic Runge-Kutta 4 over ``dt`` in ``n_sub`` equal sub-steps, input held (ZOH)."""
+    h = dt / n_sub
+    for _ in range(n_sub):
+        k1 = f(x, u, c)
+        k2 = f(x + h / 2 * k1, u, c)
+        k3 = f(x + h / 2 * k2, u, c)
+        k4 = f(x + h * k3, u, c)
+        x = x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+    return x
+
+
+class VesselModel:
+    """The shared vessel model: continuous dynamics, RK4 step, linearisation, trim.
+
+    Parameters
+    ----------
+    params : VesselParams
+        Numeric parameters; baked into the fast functions :attr:`f` and :meth:`rk4`.
+        :attr:`f_param` keeps them symbolic (for identification).
+    """
+
+    def __init__(self, params: VesselParams):
+        self.params = params
+        self.p = params.vector()
+        x, u = ca.SX.sym("x", NX), ca.SX.sym("u", NU)
+        c, p = ca.SX.sym("c", NC), ca.SX.sym("p", NP)
+        self.f_param = ca.Function(
+            "f_param", [x, u, c, p], [xdot_expr(x, u, c, p)], ["x", "u", "c", "p"], ["xdot"]
+        )
+        #: continuous dynamics x_dot = f(x, u, c) with the numeric parameters
+        self.f = ca.Function(
+            "f", [x, u, c], [xdot_expr(x, u, c, self.p)], ["x", "u", "c"], ["xdot"]
+        )
+        self._jac = ca.Function(
+            "jacobians", [x, u, c], [ca.jacobian(self.f(x, u, c), x), ca.jacobian(self.f(x, u, c), u)]
+        )
+
+    def rk4(self, dt: float, n_sub: int = 1) -> ca.Function:
+        """Discrete step ``F(x, u, c) -> x_next`` by RK4 over ``dt`` (``n_sub`` sub-steps)."""
+        x, u, c = ca.SX.sym("x", NX), ca.SX.sym("u", NU), ca.SX.sym("c", NC)
+        return ca.Function(
+            "F_rk4", [x, u, c], [rk4_expr(self.f, x, u, c, dt, n_sub)],
+            ["x", "u", "c"], ["x_next"],
+        )  # fmt: skip
+
+    def linearize(self, x0, u0, c0=(0.0, 0.0)) -> tuple[np.ndarray, np.ndarray]:
+        """Jacobians ``A = df/dx``, ``B = df/du`` at an operating point (exact, by AD)."""
+        A, B = self._jac(np.asarray(x0, float), np.asarray(u0, float), np.asarray(c0, float))
+        return np.array(A), np.array(B)
+
+    def thrust_for_speed(self, u: float) -> float:
+        """Thrust that holds surge speed ``u`` straight ahead in still water (trim, eq. 2.6)."""
+        P = self.params
+        su = np.sqrt(u * u + P.eps_abs**2) - P.eps_abs
+        return float(-(P.X_u * u + P.X_uu * su * u))
+
+    def trim(self, u: float) -> tuple[np.ndarray, np.ndarray]:
+        """Straight-line equilibrium at surge speed ``u`` heading north: (x0, u0)."""
+        T = self.thrust_for_speed(u)
+        x0 = np.array([0.0, 0.0, 0.0, u, 0.0, 0.0, T, 0.0])
+        return x0, np.array([T, 0.0])
+
+    @cached_property
+    def top_speed(self) -> float:
+        """Straight-line speed at full thrust in still water (solved on the model)."""
+        from scipy.optimize import brentq
+
+        return float(brentq(lambda u: self.thrust_for_speed(u) - self.params.T_max, 0.0, 20.0))
+
+    def sway_yaw_eigenvalues(self, u: float) -> np.ndarray:
+        """Eigenvalues of the linearised sway-yaw subsystem at straight-line speed ``u``.
+
+        All real parts negative means the hull is straight-line (course) stable there.
+        """
+        A, _ = self.linearize(*self.trim(u))
+        idx = [IX["v"], IX["r"]]
+        return np.linalg.eigvals(A[np.ix_(idx, idx)])
