@@ -104,4 +104,6 @@ def resolve(kind: str, name_or_path: str | Path) -> Path:
     if shipped.exists():
         return shipped
     known = sorted(f.stem for f in (DATA_DIR / kind).glob("*.toml"))
-    raise ConfigError(f"unknown {kind[:-1]} {str(name_or_path)!r}: not a file, and not one of {known}")
+    raise ConfigError(
+        f"unknown {kind[:-1]} {str(name_or_path)!r}: not a file, and not one of {known}"
+    )

@@ -74,7 +74,7 @@ def derive_gretha() -> tuple[dict[str, float | str], dict[str, str]]:
     S = L * (1.7 * T + C_B * B)  # Mumford wetted surface
     Re = U_top * L / NU_WATER
     C_F = 0.075 / (math.log10(Re) - 2) ** 2
-    form, C_R = 1.2, 0.004
+    form, C_R = 1.2, 0.012  # C_R: guess for a beamy semi-displacement hull at Fn = 0.35
     C_T = form * C_F + C_R
     R_top = half * S * C_T * U_top**2
     X_u = -0.1 * R_top / U_top
@@ -109,7 +109,8 @@ def derive_gretha() -> tuple[dict[str, float | str], dict[str, str]]:
         "Y_rdot": "strip theory, fore-aft symmetric strips: 0",
         "N_vdot": "strip theory, fore-aft symmetric strips: 0",
         "N_rdot": "strip theory: -a22 L^3/12",
-        "X_u": f"10 % of resistance {R_top:.1f} N at 2.5 m/s (ITTC-57 C_F, 1+k=1.2, C_R=0.004 guessed)",
+        "X_u": f"10 % of resistance {R_top:.1f} N at 2.5 m/s "
+        "(ITTC-57 C_F, 1+k=1.2, C_R=0.012 guessed for Fn=0.35)",
         "X_uu": "90 % of the same resistance, quadratic",
         "Y_v": "low-speed sway damping, time constant 3 s (otter.py approach, guessed T)",
         "Y_r": "0: no low-speed coupling assumed",
@@ -122,7 +123,8 @@ def derive_gretha() -> tuple[dict[str, float | str], dict[str, str]]:
         "Y_vv": "cross-flow drag, C_d = 1: -rho/2 T C_d L",
         "N_rr": "cross-flow drag, C_d = 1: -rho/2 T C_d L^4/32",
         "x_p": "stern propeller at -L/2",
-        "Y_uudelta": "lift of the steered drive leg: -rho/2 A C_L_alpha, A = 0.06 m^2, C_L_alpha = 3/rad (guess)",
+        "Y_uudelta": "lift of the steered drive leg: -rho/2 A C_L_alpha, "
+        "A = 0.06 m^2, C_L_alpha = 3/rad (guess)",
         "T_max": "thrust that gives the observed top speed 2.5 m/s (thesis: 4.9 kn with ballast)",
         "T_min": "0: the propeller can stop (standby)",
         "delta_max": "30 deg steering limit (guess, typical steerable drive)",

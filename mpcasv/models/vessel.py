@@ -62,9 +62,7 @@ def xdot_expr(x, u, c, p):
     Xud, Yvd, Yrd, Nvd, Nrd = P["X_udot"], P["Y_vdot"], P["Y_rdot"], P["N_vdot"], P["N_rdot"]
     eps = P["eps_abs"]
 
-    M_RB = ca.vertcat(
-        ca.horzcat(m, 0, 0), ca.horzcat(0, m, m * x_g), ca.horzcat(0, m * x_g, I_z)
-    )
+    M_RB = ca.vertcat(ca.horzcat(m, 0, 0), ca.horzcat(0, m, m * x_g), ca.horzcat(0, m * x_g, I_z))
     M_A = -ca.vertcat(ca.horzcat(Xud, 0, 0), ca.horzcat(0, Yvd, Yrd), ca.horzcat(0, Nvd, Nrd))
 
     # Coriolis-centripetal forces (Fossen 2021 eqs. 6.43 and 6.52 in 3 DOF)
@@ -137,7 +135,9 @@ class VesselModel:
             "f", [x, u, c], [xdot_expr(x, u, c, self.p)], ["x", "u", "c"], ["xdot"]
         )
         self._jac = ca.Function(
-            "jacobians", [x, u, c], [ca.jacobian(self.f(x, u, c), x), ca.jacobian(self.f(x, u, c), u)]
+            "jacobians",
+            [x, u, c],
+            [ca.jacobian(self.f(x, u, c), x), ca.jacobian(self.f(x, u, c), u)],
         )
 
     def rk4(self, dt: float, n_sub: int = 1) -> ca.Function:

@@ -1,0 +1,5 @@
+import sys
+
+from mpcasv.cli import main
+
+sys.exit(main())

@@ -1,0 +1,32 @@
+"""``mpcasv bench``: benchmarks that print figures (speed targets live here, not in tests)."""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import json
+from pathlib import Path
+
+#: benchmark name -> "module:function"; each function takes the parsed args, returns a dict
+BENCHES = {
+    "sim": "mpcasv.sim.bench:bench_sim",
+}
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("bench", help="benchmarks that print timing figures",
+                       description="Run a benchmark and print its figures.")  # fmt: skip
+    p.add_argument("which", choices=sorted(BENCHES), help="what to benchmark")
+    p.add_argument("--json", type=Path, help="also write the figures to this JSON file")
+    p.add_argument("--repeat", type=int, default=3, help="repetitions (best/median reported)")
+    p.add_argument("--suite", help="suite for 'compare' benchmarks")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    module, func = BENCHES[args.which].split(":")
+    figures = getattr(importlib.import_module(module), func)(args)
+    if args.json:
+        args.json.write_text(json.dumps(figures, indent=1) + "\n")
+        print(f"wrote {args.json}")
+    return 0

@@ -1,0 +1,1 @@
+"""Execution level (guidance, surge-speed reference model, yaw PID, speed loop) and tuning."""

@@ -1,0 +1,123 @@
+"""The execution level, written symbolically (CasADi) so that it runs inside the plant step.
+
+Between two supervisory decisions the command is constant, so guidance, the surge-speed
+reference model, the yaw PID, the speed loop and the vessel model are unrolled together into
+one compiled CasADi function per supervisory period (:func:`closed_loop`). That keeps the
+simulator fast (one call per second of simulated time) while the code below reads as plain
+control law. The same laws run in the tuning tools' nonlinear checks.
+
+Command vector ``cmd = [transit (0/1), N_wp, E_wp, U_cap]``; controller state
+``z = [I_psi, I_u, r_f]`` (yaw integrator output in rad, speed integrator output in N,
+filtered yaw rate in rad/s). Standby (transit = 0) commands zero thrust and zero steering
+and resets the integrators.
+"""
+
+from __future__ import annotations
+
+import math
+
+import casadi as ca
+import numpy as np
+
+from mpcasv.control.params import ExecutionParams
+from mpcasv.models.vessel import NC, NX, VesselModel, rk4_expr, sabs
+
+NZ = 3
+NCMD = 4
+Z_NAMES = ("I_psi", "I_u", "r_f")
+
+
+def wrap(a):
+    """Wrap an angle to (-pi, pi] (works on numbers and CasADi expressions)."""
+    return ca.atan2(ca.sin(a), ca.cos(a))
+
+
+def pwlinear(x, xs, ys):
+    """Piecewise-linear interpolation through (xs, ys), clamped outside [xs[0], xs[-1]]."""
+    if len(xs) == 1:
+        return ys[0]
+    xc = ca.fmin(ca.fmax(x, xs[0]), xs[-1])
+    y = ys[0]
+    for i in range(1, len(xs)):
+        slope = (ys[i] - ys[i - 1]) / (xs[i] - xs[i - 1])
+        y = y + slope * (ca.fmin(xc, xs[i]) - ca.fmin(xc, xs[i - 1]))
+    return y
+
+
+def guidance(x, wp):
+    """Desired heading: straight at the waypoint (line of sight)."""
+    return ca.atan2(wp[1] - x[1], wp[0] - x[0])
+
+
+def speed_reference(psi_e, u_ff, k_u):
+    """Thesis eq. 3.1: u_cmd = u_ff + k_u (pi/2 - |psi_e|) if |psi_e| < pi/2, else u_ff."""
+    return u_ff + k_u * ca.fmax(math.pi / 2 - ca.fabs(psi_e), 0)
+
+
+def execution_law(x, z, cmd, model: VesselModel, ep: ExecutionParams, dt: float):
+    """One sample of the execution level.
+
+    Returns ``(u, z_next, y)`` with ``u = [T_cmd, delta_cmd]`` for the plant and
+    ``y = [psi_d, u_ref]`` for logging.
+    """
+    P, ys = model.params, ep.yaw
+    transit = cmd[0]
+    psi, u_s, r = x[2], x[3], x[5]
+    I_psi, I_u, r_f = z[0], z[1], z[2]
+
+    psi_d = guidance(x, cmd[1:3])
+    e_psi = wrap(psi_d - psi)
+    # (3.1) with psi_e = psi_asv - psi_wp; capped by the command and the vessel's top speed
+    u_cap = ca.fmin(cmd[3], P.u_max)
+    u_ref = ca.fmin(speed_reference(e_psi, ep.reference.u_ff, ep.reference.k_u), u_cap)
+
+    # yaw PID, gains scheduled on measured surge speed, derivative on filtered yaw rate
+    Kp, Ki, Kd = (pwlinear(u_s, ys.speeds, g) for g in (ys.Kp, ys.Ki, ys.Kd))
+    d_unsat = Kp * e_psi + I_psi - Kd * r_f
+    d_sat = ca.fmin(ca.fmax(d_unsat, -P.delta_max), P.delta_max)
+    I_psi_next = I_psi + dt * (Ki * e_psi + (d_sat - d_unsat) / ep.T_aw)  # back-calculation
+
+    # surge speed loop with model-based feed-forward (trim thrust of eq. 2.6)
+    T_ff = -(P.X_u * u_ref + P.X_uu * sabs(u_ref, P.eps_abs) * u_ref)
+    e_u = u_ref - u_s
+    T_unsat = T_ff + ep.speed.Kp * e_u + I_u
+    T_sat = ca.fmin(ca.fmax(T_unsat, P.T_min), P.T_max)
+    I_u_next = I_u + dt * (ep.speed.Ki * e_u + (T_sat - T_unsat) / ep.T_aw)
+
+    r_f_next = r_f + dt / ys.T_f * (r - r_f)
+    on = transit > 0.5
+    u = ca.vertcat(ca.if_else(on, T_sat, 0), ca.if_else(on, d_sat, 0))
+    z_next = ca.vertcat(ca.if_else(on, I_psi_next, 0), ca.if_else(on, I_u_next, 0), r_f_next)
+    return u, z_next, ca.vertcat(psi_d, ca.if_else(on, u_ref, 0))
+
+
+def closed_loop(model: VesselModel, ep: ExecutionParams, dt: float, n_sub: int) -> ca.Function:
+    """Compile ``n_sub`` plant steps of ``dt`` with the execution level in the loop.
+
+    ``CL(x, z, cmd, c) -> (x_next, z_next, X, U, Y)`` where ``X`` (NX x n_sub), ``U``
+    (NU x n_sub) and ``Y`` (2 x n_sub) hold the state after, and the input and guidance
+    outputs during, each plant step. Inputs are held over each plant step (ZOH) and the
+    plant is integrated by RK4.
+    """
+    x0, z0 = ca.SX.sym("x", NX), ca.SX.sym("z", NZ)
+    cmd, c = ca.SX.sym("cmd", NCMD), ca.SX.sym("c", NC)
+    x, z, Xs, Us, Ys = x0, z0, [], [], []
+    for _ in range(n_sub):
+        u, z, y = execution_law(x, z, cmd, model, ep, dt)
+        x = rk4_expr(model.f, x, u, c, dt)
+        Xs.append(x)
+        Us.append(u)
+        Ys.append(y)
+    return ca.Function(
+        "closed_loop", [x0, z0, cmd, c], [x, z, ca.horzcat(*Xs), ca.horzcat(*Us), ca.horzcat(*Ys)],
+        ["x", "z", "cmd", "c"], ["x_next", "z_next", "X", "U", "Y"],
+    )  # fmt: skip
+
+
+def command_vector(command) -> np.ndarray:
+    """Turn a :class:`mpcasv.interface.Command` into the ``cmd`` vector of :func:`closed_loop`."""
+    from mpcasv.interface import Mode
+
+    if command.mode is Mode.STANDBY:
+        return np.zeros(NCMD)
+    return np.array([1.0, command.waypoint[0], command.waypoint[1], command.speed])

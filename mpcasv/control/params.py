@@ -1,0 +1,66 @@
+"""Parameters of the execution level, loaded from TOML (``mpcasv/data/execution``)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from pydantic import model_validator
+
+from mpcasv.config import Float, NonNeg, Pos, frozen, load, resolve
+
+
+@frozen
+class YawSchedule:
+    """Yaw PID gains scheduled on surge speed (linear interpolation, clamped at the ends).
+
+    delta = Kp (psi_d - psi) + Ki * integral(psi_d - psi) - Kd * r_f, with r_f the measured
+    yaw rate through a first-order filter of time constant ``T_f``.
+    """
+
+    speeds: tuple[Pos, ...]  # m/s, strictly increasing
+    Kp: tuple[NonNeg, ...]  # rad/rad
+    Ki: tuple[NonNeg, ...]  # rad/(rad s)
+    Kd: tuple[NonNeg, ...]  # rad/(rad/s)
+    T_f: Pos = 0.5  # derivative (yaw-rate) filter time constant (s)
+
+    @model_validator(mode="after")
+    def _check(self) -> YawSchedule:
+        n = len(self.speeds)
+        if n == 0 or any(len(g) != n for g in (self.Kp, self.Ki, self.Kd)):
+            raise ValueError("speeds, Kp, Ki and Kd must be non-empty and of equal length")
+        if any(b <= a for a, b in zip(self.speeds, self.speeds[1:], strict=False)):
+            raise ValueError("speeds must be strictly increasing")
+        return self
+
+
+@frozen
+class SpeedLoop:
+    """Surge speed loop: thrust = trim thrust(u_ref) + Kp (u_ref - u) + Ki integral."""
+
+    Kp: NonNeg  # N/(m/s)
+    Ki: NonNeg  # N/(m/s s)
+
+
+@frozen
+class SpeedReference:
+    """Surge-speed reference model, thesis eq. 3.1 (u_ff feed-forward, k_u gain)."""
+
+    u_ff: NonNeg = 0.6  # m/s
+    k_u: NonNeg = 1.59  # m/s
+
+
+@frozen
+class ExecutionParams:
+    """Everything the execution level needs besides the vessel model."""
+
+    yaw: YawSchedule
+    speed: SpeedLoop
+    reference: SpeedReference = SpeedReference()
+    T_aw: Pos = 1.0  # anti-windup back-calculation time constant (s)
+    propeller_on_threshold: Float = 0.02  # fraction of T_max above which n_p != 0
+    provenance: str = ""
+
+
+def load_execution(name_or_path: str | Path = "gretha") -> ExecutionParams:
+    """Load execution-level parameters: a shipped name or a TOML path."""
+    return load(ExecutionParams, resolve("execution", name_or_path))

@@ -1,0 +1,106 @@
+"""The estimator interface between the AUVs' truth (or the network) and the Observation.
+
+One estimator object per AUV. The simulator and the deploy loop feed it the same events:
+``on_fix`` (a USBL fix), ``on_report`` (an acoustic status report) and, in simulation only,
+``on_truth`` (ground truth, used by the ``perfect`` estimator alone). ``estimate(t)`` gives
+the belief at any time as an :class:`mpcasv.interface.AUVEstimate`.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from typing import Protocol
+
+import numpy as np
+
+from mpcasv.interface import AUVEstimate
+from mpcasv.models.acoustics import Fix, Report
+
+
+class AUVEstimator(Protocol):
+    """Belief about one AUV, updated by acoustic events."""
+
+    name: str
+
+    def on_truth(self, t: float, N: float, E: float, depth: float, v_N: float, v_E: float) -> None:
+        """Ground truth (simulation only; ignored by every estimator but ``perfect``)."""
+
+    def on_fix(self, fix: Fix) -> None:
+        """A USBL position fix measured by the ASV."""
+
+    def on_report(self, report: Report) -> None:
+        """An acoustic status report from the AUV (its own navigation estimate)."""
+
+    def estimate(self, t: float) -> AUVEstimate:
+        """Belief at time ``t``."""
+
+
+class PerfectEstimator:
+    """The true AUV state (the papers' simulations and field trials with simulated AUVs)."""
+
+    name = "perfect"
+
+    def __init__(self) -> None:
+        self._est = AUVEstimate(math.nan, math.nan, 0.0)
+
+    def on_truth(self, t, N, E, depth, v_N, v_E) -> None:
+        self._est = AUVEstimate(N, E, depth, v_N, v_E, (0.0, 0.0, 0.0, 0.0), t)
+
+    def on_fix(self, fix: Fix) -> None:
+        pass
+
+    def on_report(self, report: Report) -> None:
+        pass
+
+    def estimate(self, t: float) -> AUVEstimate:
+        return self._est
+
+
+class StationaryEstimator:
+    """The last fix or report, held constant in between (the thesis's field trial, Case 5).
+
+    The covariance is that of the last measurement; it does not grow, which is exactly the
+    weakness the Kalman filter addresses.
+    """
+
+    name = "acoustic"
+
+    def __init__(self, initial: AUVEstimate | None = None) -> None:
+        self._est = initial or AUVEstimate(math.nan, math.nan, 0.0)
+
+    def on_truth(self, t, N, E, depth, v_N, v_E) -> None:
+        pass
+
+    def on_fix(self, fix: Fix) -> None:
+        self._est = AUVEstimate(fix.N, fix.E, fix.depth, 0.0, 0.0, fix.cov, fix.t)
+
+    def on_report(self, report: Report) -> None:
+        s2 = report.nav_sigma**2
+        self._est = AUVEstimate(
+            report.N, report.E, report.depth, 0.0, 0.0, (s2, 0.0, 0.0, s2), report.t
+        )
+
+    def estimate(self, t: float) -> AUVEstimate:
+        return self._est
+
+
+#: name -> factory(initial AUVEstimate or None) -> estimator
+ESTIMATORS: dict[str, Callable[..., AUVEstimator]] = {
+    "perfect": lambda initial=None, **_: PerfectEstimator(),
+    "acoustic": lambda initial=None, **_: StationaryEstimator(initial),
+}
+
+
+def make_estimator(name: str, initial: AUVEstimate | None = None, **options) -> AUVEstimator:
+    """Build an estimator by name (see :data:`ESTIMATORS`)."""
+    try:
+        factory = ESTIMATORS[name]
+    except KeyError:
+        raise ValueError(f"unknown estimator {name!r}; known: {sorted(ESTIMATORS)}") from None
+    return factory(initial=initial, **options)
+
+
+def position_error(est: AUVEstimate, N: float, E: float) -> float:
+    """Horizontal distance between a belief and the truth (m)."""
+    return float(np.hypot(est.N - N, est.E - E))

@@ -1,0 +1,1 @@
+"""The papers' hybrid controllers: safety-domain geometry, hybrid-system form, controllers."""

@@ -1,0 +1,140 @@
+"""The controller interface shared by the simulator and the deploy loop.
+
+A controller never sees the simulator or the network: it gets an :class:`Observation` once
+per supervisory period and returns a :class:`Command`. Hybrid and MPC controllers implement
+the same :class:`Controller` protocol, so every experiment and the deploy loop treat them
+alike (DESIGN.md, "How data flows").
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from enum import StrEnum
+from typing import Protocol, runtime_checkable
+
+import numpy as np
+
+
+@dataclass(frozen=True, slots=True)
+class ASVState:
+    """The ASV's own navigation state (NED, body velocities)."""
+
+    N: float
+    E: float
+    psi: float
+    u: float = 0.0
+    v: float = 0.0
+    r: float = 0.0
+
+    @property
+    def position(self) -> np.ndarray:
+        return np.array([self.N, self.E])
+
+
+@dataclass(frozen=True, slots=True)
+class AUVEstimate:
+    """What the ASV believes about one AUV at the observation time.
+
+    ``cov`` is the 2x2 horizontal position covariance (m^2); ``t_last_fix`` the time of the
+    last acoustic fix or report that updated the estimate (``-inf`` if none yet).
+    """
+
+    N: float
+    E: float
+    depth: float
+    v_N: float = 0.0
+    v_E: float = 0.0
+    cov: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)
+    t_last_fix: float = -math.inf
+
+    @property
+    def position(self) -> np.ndarray:
+        return np.array([self.N, self.E])
+
+    @property
+    def sigma(self) -> float:
+        """1-sigma horizontal uncertainty (m): sqrt of the covariance's largest eigenvalue."""
+        a, b, _, d = self.cov
+        return math.sqrt(max(0.0, 0.5 * (a + d) + math.sqrt(0.25 * (a - d) ** 2 + b * b)))
+
+
+@dataclass(frozen=True, slots=True)
+class Observation:
+    """Everything a controller may use at time ``t`` (s)."""
+
+    t: float
+    asv: ASVState
+    propeller_on: bool
+    auvs: tuple[AUVEstimate, ...]
+
+
+class Mode(StrEnum):
+    """Supervisory mode: Q1 standby (propeller off) or Q2 transit."""
+
+    STANDBY = "standby"
+    TRANSIT = "transit"
+
+
+class Reason(StrEnum):
+    """Why the controller does what it does (reported and logged)."""
+
+    NOMINAL = "nominal"  # standby for a fix, or transit to the nominally chosen AUV
+    TRACKING = "tracking"  # transit because the ASV left through r_outer
+    AVOIDANCE = "avoidance"  # transit because the ASV entered r_inner / r_avoid
+    GOTO = "goto"  # plain go-to (trivial controller, manoeuvres)
+    FALLBACK = "fallback"  # MPC safety fallback took over this step
+
+
+@dataclass(frozen=True, slots=True)
+class Command:
+    """A supervisory command for the execution level.
+
+    ``waypoint`` is (N, E) in m; ``speed`` is the cruise speed cap in m/s (the surge-speed
+    reference model of thesis eq. 3.1 slows down in turns below it). Standby means zero
+    thrust; its waypoint and speed are ignored. ``auv`` is the index of the AUV served.
+    """
+
+    mode: Mode
+    waypoint: tuple[float, float] | None = None
+    speed: float = 0.0
+    auv: int | None = None
+    reason: Reason = Reason.NOMINAL
+
+    def __post_init__(self) -> None:
+        if self.mode is Mode.TRANSIT:
+            if self.waypoint is None or not all(map(math.isfinite, self.waypoint)):
+                raise ValueError(f"transit needs a finite waypoint, got {self.waypoint}")
+            if not (math.isfinite(self.speed) and self.speed > 0):
+                raise ValueError(f"transit needs a positive speed, got {self.speed}")
+
+    @classmethod
+    def standby(cls, auv: int | None = None, reason: Reason = Reason.NOMINAL) -> Command:
+        return cls(Mode.STANDBY, None, 0.0, auv, reason)
+
+
+@dataclass(frozen=True, slots=True)
+class PlannedTrajectory:
+    """An MPC's plan for plots: times (s) and NED positions (m) of the ASV."""
+
+    t: np.ndarray
+    N: np.ndarray
+    E: np.ndarray
+    extra: dict = field(default_factory=dict)
+
+
+@runtime_checkable
+class Controller(Protocol):
+    """A supervisory controller: one :meth:`step` per supervisory period.
+
+    Implementations may also expose ``plan`` (a :class:`PlannedTrajectory` or None),
+    ``fallbacks`` (int) and ``diagnostics()`` (a flat dict logged in the time series).
+    """
+
+    name: str
+
+    def reset(self, n_auv: int) -> None:
+        """Forget all internal state; ``n_auv`` AUVs will be observed."""
+
+    def step(self, obs: Observation) -> Command:
+        """Decide the command for the next supervisory period."""

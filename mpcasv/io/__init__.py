@@ -1,0 +1,1 @@
+"""IMC I/O: link to DUNE vehicles, logs, SITL."""

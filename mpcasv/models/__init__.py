@@ -1,0 +1,2 @@
+"""The vessel model (Fossen 3-DOF, CasADi), its parameters and identification; AUV motion
+and behaviours; the acoustic channel and INS drift."""

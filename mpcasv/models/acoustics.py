@@ -1,0 +1,153 @@
+"""Acoustic channel (USBL fixes, status reports) and the AUVs' INS drift.
+
+- USBL pings every ``T0`` per AUV. Success probability depends on slant range (near certain
+  below d1, sporadic to d2, none beyond; PAPER-FACTS §1) and drops while the ASV's propeller
+  runs (propeller noise).
+- A fix's position error grows with range: transverse error = bearing error x range
+  (thesis eq. 2.9), plus range noise along the line of sight.
+- Each AUV's own navigation drifts between fixes: dp = 1/2 eps_a t^2 (thesis eq. 2.7), as a
+  random constant acceleration bias per dead-reckoning interval, plus an optional drift per
+  distance travelled. A successful fix is sent to the AUV and resets its error to the fix
+  error; at the surface the AUV has GPS.
+- Acoustic status reports every ``T_report`` carry the AUV's own navigation estimate, depth,
+  heading and speed.
+
+All randomness comes from one ``numpy.random.Generator`` owned by the simulator.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from pydantic import model_validator
+
+from mpcasv.config import NonNeg, Pos, Prob, frozen
+
+
+@frozen
+class AcousticParams:
+    """Acoustic channel parameters (PAPER-FACTS §1; guesses marked)."""
+
+    T0: Pos = 5.0  # USBL fix period per AUV (s)
+    T_report: Pos = 30.0  # status report period (s)
+    usbl: bool = True  # USBL fixes available (False: only status reports, as in Case 5)
+    d1: Pos = 500.0  # slant range of good reception (m)
+    d2: Pos = 800.0  # slant range of sporadic reception (m)
+    p_good: Prob = 0.95  # success probability below d1 (guess)
+    p_sporadic: Prob = 0.3  # success probability in (d1, d2] (guess)
+    propeller_factor: Prob = 0.63  # multiplier while the propeller runs (Norgren et al.: 63 %)
+    sigma_bearing_deg: NonNeg = 1.0  # USBL bearing error, 1 sigma (deg; guess)
+    sigma_range: NonNeg = 0.5  # USBL range noise, 1 sigma (m; guess)
+    gps_sigma: NonNeg = 2.0  # AUV position error after a GPS fix at the surface (m)
+
+    @model_validator(mode="after")
+    def _order(self) -> AcousticParams:
+        if self.d2 < self.d1:
+            raise ValueError(f"d2 ({self.d2}) must be >= d1 ({self.d1})")
+        return self
+
+
+@frozen
+class NavParams:
+    """AUV inertial navigation drift between fixes (thesis eq. 2.7)."""
+
+    eps_a: NonNeg = 0.002  # accelerometer noise, RMS (m/s^2); MRU 5 value from the thesis
+    drift_per_distance: NonNeg = 0.0  # extra drift as a fraction of distance travelled
+
+
+def success_probability(slant, propeller_on, p: AcousticParams):
+    """Probability that one acoustic transmission gets through (vectorised)."""
+    slant = np.asarray(slant, float)
+    base = np.where(slant <= p.d1, p.p_good, np.where(slant <= p.d2, p.p_sporadic, 0.0))
+    return base * np.where(np.asarray(propeller_on, bool), p.propeller_factor, 1.0)
+
+
+def reliable_fix(r, r_t, epsilon, propeller_on, transmitted=True):
+    """Paper 2's reliable-fix rule: inside the outer limit of the target domain
+    (r < r_t + epsilon), propeller off, and a fix transmitted (vectorised)."""
+    return (
+        (np.asarray(r) < np.asarray(r_t) + epsilon)
+        & ~np.asarray(propeller_on, bool)
+        & (np.asarray(transmitted, bool))
+    )
+
+
+@dataclass(frozen=True, slots=True)
+class Fix:
+    """A USBL fix of AUV ``auv`` at time ``t``: measured position and its covariance."""
+
+    t: float
+    auv: int
+    N: float
+    E: float
+    depth: float
+    cov: tuple[float, float, float, float]
+    slant: float
+
+
+@dataclass(frozen=True, slots=True)
+class Report:
+    """An acoustic status report: the AUV's own navigation estimate and motion."""
+
+    t: float
+    auv: int
+    N: float
+    E: float
+    depth: float
+    psi: float
+    speed: float
+    nav_sigma: float  # the AUV's own estimate of its position error, 1 sigma (m)
+
+
+def usbl_fix(t, auv, asv_NE, auv_NEd, p: AcousticParams, rng: np.random.Generator) -> Fix:
+    """Measure an AUV from the ASV: range noise along the line of sight, bearing error
+    across it (eq. 2.9: transverse error = bearing error x range)."""
+    rel = np.asarray(auv_NEd[:2], float) - np.asarray(asv_NE, float)
+    r_h = float(np.hypot(*rel))
+    slant = math.hypot(r_h, auv_NEd[2])
+    los = rel / r_h if r_h > 1e-9 else np.array([1.0, 0.0])
+    perp = np.array([-los[1], los[0]])
+    s_t = math.radians(p.sigma_bearing_deg) * slant
+    e = los * p.sigma_range * rng.standard_normal() + perp * s_t * rng.standard_normal()
+    R = p.sigma_range**2 * np.outer(los, los) + s_t**2 * np.outer(perp, perp)
+    return Fix(
+        t, auv, float(auv_NEd[0] + e[0]), float(auv_NEd[1] + e[1]),
+        float(auv_NEd[2] + p.sigma_range * rng.standard_normal()),
+        (float(R[0, 0]), float(R[0, 1]), float(R[1, 0]), float(R[1, 1])), slant,
+    )  # fmt: skip
+
+
+class INSDrift:
+    """True navigation error of each AUV's own INS (the AUV believes truth + error)."""
+
+    def __init__(self, n_auv: int, p: NavParams, rng: np.random.Generator):
+        self.p, self.rng = p, rng
+        self.e0 = np.zeros((n_auv, 2))  # error at the last reset
+        self.a = np.zeros((n_auv, 2))  # acceleration bias of this DR interval
+        self.dirn = np.zeros((n_auv, 2))  # direction of distance-proportional drift
+        self.t0 = np.zeros(n_auv)
+        self.dist = np.zeros(n_auv)
+        for k in range(n_auv):
+            self.reset(k, 0.0, np.zeros(2))
+
+    def reset(self, k: int, t: float, error: np.ndarray) -> None:
+        """Start a new dead-reckoning interval for AUV ``k`` with the given error."""
+        self.e0[k] = error
+        self.a[k] = self.p.eps_a * self.rng.standard_normal(2) / math.sqrt(2)
+        ang = self.rng.uniform(0, 2 * math.pi)
+        self.dirn[k] = (math.cos(ang), math.sin(ang))
+        self.t0[k], self.dist[k] = t, 0.0
+
+    def advance(self, distance: np.ndarray) -> None:
+        """Add distance travelled (m) by each AUV since the last call."""
+        self.dist += distance
+
+    def error(self, t: float) -> np.ndarray:
+        """(n_auv, 2) navigation errors at time ``t`` (eq. 2.7 plus drift per distance)."""
+        dt = (t - self.t0)[:, None]
+        return (
+            self.e0 + 0.5 * self.a * dt**2
+            + self.p.drift_per_distance * self.dist[:, None] * self.dirn
+        )  # fmt: skip

@@ -1,0 +1,67 @@
+"""AUV motion: a kinematic vehicle limited in speed, acceleration, turn rate and depth rate.
+
+State per AUV ``[N, E, d, psi, U]`` (m, m, m down, rad, m/s over ground); set-point
+``[N_t, E_t, U_d, d_d]`` (a point to head for, a speed, a depth); limits
+``[U_max, r_max, w_max, a_max]``. The kinematics are unrolled over one supervisory period in
+CasADi and mapped over all AUVs, so moving every AUV costs one call per period.
+"""
+
+from __future__ import annotations
+
+import math
+from functools import lru_cache
+
+import casadi as ca
+import numpy as np
+
+from mpcasv.config import Pos, frozen
+
+NA = 5  # AUV state size
+K_PSI = 1.0  # heading P-gain (1/s) before the turn-rate limit
+K_DEPTH = 0.5  # depth P-gain (1/s) before the depth-rate limit
+T_SPEED = 2.0  # speed first-order lag (s) before the acceleration limit
+
+
+@frozen
+class AUVLimits:
+    """Motion limits of an AUV (defaults: OceanScan LAUV, PAPER-FACTS §1)."""
+
+    speed_max: Pos = 2.0  # m/s (thesis: max 2 m/s)
+    turn_rate_max_deg: Pos = 10.0  # deg/s (guess for a 1.8 m LAUV)
+    depth_rate_max: Pos = 0.5  # m/s (guess)
+    accel_max: Pos = 0.2  # m/s^2 (guess)
+
+    def vector(self) -> np.ndarray:
+        return np.array(
+            [self.speed_max, math.radians(self.turn_rate_max_deg), self.depth_rate_max,
+             self.accel_max]
+        )  # fmt: skip
+
+
+def _clip(x, lim):
+    return ca.fmin(ca.fmax(x, -lim), lim)
+
+
+@lru_cache(maxsize=16)
+def auv_step_function(dt: float, n_sub: int, n_auv: int) -> ca.Function:
+    """``F(S, SP, LIM) -> (S_next, S_traj)`` for ``n_auv`` AUVs (columns), ``n_sub`` steps."""
+    s0, sp, lim = ca.SX.sym("s", NA), ca.SX.sym("sp", 4), ca.SX.sym("lim", 4)
+    s, traj = s0, []
+    for _ in range(n_sub):
+        N, E, d, psi, U = s[0], s[1], s[2], s[3], s[4]
+        psi_d = ca.atan2(sp[1] - E, sp[0] - N)
+        e_psi = ca.atan2(ca.sin(psi_d - psi), ca.cos(psi_d - psi))
+        # do not turn when the target is (numerically) reached
+        far = ca.hypot(sp[1] - E, sp[0] - N) > 0.5
+        psi_dot = ca.if_else(far, _clip(K_PSI * e_psi, lim[1]), 0)
+        U_d = ca.fmin(ca.fmax(sp[2], 0), lim[0])
+        U_dot = _clip((U_d - U) / T_SPEED, lim[3])
+        d_dot = _clip(K_DEPTH * (sp[3] - d), lim[2])
+        U_next = U + dt * U_dot
+        s = ca.vertcat(
+            N + dt * U_next * ca.cos(psi), E + dt * U_next * ca.sin(psi),
+            ca.fmax(d + dt * d_dot, 0), psi + dt * psi_dot, U_next,
+        )  # fmt: skip
+        traj.append(s)
+    f = ca.Function("auv_step", [s0, sp, lim], [s, ca.horzcat(*traj)])
+    return f.map(n_auv)

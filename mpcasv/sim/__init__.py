@@ -1,0 +1,1 @@
+"""Closed-loop simulator: scenarios, the simulation loop, run records and plots."""

@@ -1,0 +1,113 @@
+"""Figures of one run, like the papers': North-East paths, range with the donut bands,
+fix ages. All functions take a :class:`~mpcasv.sim.simulator.RunResult` and a file path."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt
+import numpy as np
+
+AUV_COLOURS = ("tab:orange", "tab:green", "tab:purple", "tab:brown", "tab:pink")
+
+
+def _n_auv(ts) -> int:
+    return sum(1 for c in ts.columns if c.startswith("auv") and c.endswith("_N"))
+
+
+def plot_paths(result, path: str | Path) -> Path:
+    """North-East paths of the ASV (standby positions marked) and the AUVs, plus any MPC
+    plans recorded during the run (dashed)."""
+    ts = result.timeseries
+    fig, ax = plt.subplots(figsize=(7, 7))
+    ax.plot(ts["E"], ts["N"], color="tab:blue", lw=1.2, label="ASV")
+    sb = ts["mode"] == "standby"
+    ax.plot(ts["E"][sb], ts["N"][sb], ".", ms=2, color="tab:blue", alpha=0.4,
+            label="ASV in standby")  # fmt: skip
+    ax.plot(ts["E"].iloc[0], ts["N"].iloc[0], "o", color="tab:blue")
+    for k in range(_n_auv(ts)):
+        c = AUV_COLOURS[k % len(AUV_COLOURS)]
+        name = result.scenario.auv[k].name
+        ax.plot(ts[f"auv{k}_E"], ts[f"auv{k}_N"], color=c, lw=1, label=f"AUV {name}")
+        ax.plot(ts[f"auv{k}_E"].iloc[0], ts[f"auv{k}_N"].iloc[0], "s", color=c)
+    for i, (_, plan) in enumerate(result.plans):
+        ax.plot(plan.E, plan.N, "--", color="tab:red", lw=0.8,
+                label="MPC plan" if i == 0 else None)  # fmt: skip
+    ax.set_xlabel("East (m)")
+    ax.set_ylabel("North (m)")
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.grid(alpha=0.3)
+    ax.legend(loc="best", fontsize=8)
+    ax.set_title(f"{result.scenario.name}: paths ({result.controller}, seed {result.seed})")
+    return _save(fig, path)
+
+
+def plot_ranges(result, path: str | Path) -> Path:
+    """ASV-AUV horizontal range per AUV with r_inner, r_t +- eps and r_outer when known;
+    the believed (estimated) range dashed; standby shaded."""
+    ts = result.timeseries
+    n = _n_auv(ts)
+    fig, axes = plt.subplots(n, 1, figsize=(9, 2.6 * n + 0.6), sharex=True, squeeze=False)
+    t = ts["t"].to_numpy()
+    sb = (ts["mode"] == "standby").to_numpy()
+    for k, ax in enumerate(axes[:, 0]):
+        if f"r_inner{k}" in ts:
+            ax.fill_between(t, 0, ts[f"r_inner{k}"], color="tab:red", alpha=0.15,
+                            label="inside r_inner")  # fmt: skip
+            eps = getattr(getattr(result, "domain", None), "eps_plus", None)
+            ax.plot(t, ts[f"r_t{k}"], color="tab:green", lw=1, label="r_t")
+            if eps is not None:
+                ax.fill_between(t, ts[f"r_t{k}"] - eps, ts[f"r_t{k}"] + eps, color="tab:green",
+                                alpha=0.15, label="target domain")  # fmt: skip
+            ax.plot(t, ts[f"r_outer{k}"], color="tab:red", lw=1, ls=":", label="r_outer")
+        ax.plot(t, ts[f"range{k}"], color="tab:blue", lw=1.2, label="range (true)")
+        ax.plot(t, ts[f"est_range{k}"], color="k", lw=0.8, ls="--", alpha=0.7,
+                label="range (believed)")  # fmt: skip
+        ymax = ax.get_ylim()[1]
+        ax.fill_between(t, 0, ymax, where=sb, color="grey", alpha=0.12, step="mid",
+                        label="standby")  # fmt: skip
+        ax.set_ylim(0, ymax)
+        ax.set_ylabel(f"range to {result.scenario.auv[k].name} (m)")
+        ax.grid(alpha=0.3)
+    axes[0, 0].legend(loc="upper right", fontsize=7, ncol=3)
+    axes[-1, 0].set_xlabel("time (s)")
+    fig.suptitle(f"{result.scenario.name}: ASV-AUV range ({result.controller}, seed {result.seed})")
+    return _save(fig, path)
+
+
+def plot_fix_age(result, path: str | Path) -> Path:
+    """Time since each AUV's last successful USBL fix; reliable fixes marked."""
+    ts = result.timeseries
+    fig, ax = plt.subplots(figsize=(9, 3.2))
+    for k in range(_n_auv(ts)):
+        c = AUV_COLOURS[k % len(AUV_COLOURS)]
+        ax.plot(ts["t"], ts[f"fix_age{k}"], color=c, lw=1, label=result.scenario.auv[k].name)
+        rel = result.reliable_fix_times[k]
+        ax.plot(rel, np.zeros(len(rel)), "|", color=c, ms=8)
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel("fix age (s)")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    ax.set_title("Fix age per AUV (ticks: reliable fixes)")
+    return _save(fig, path)
+
+
+def _save(fig, path) -> Path:
+    path = Path(path)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def plot_run(result, out_dir: str | Path) -> list[Path]:
+    """All standard figures of a run into ``out_dir``."""
+    out = Path(out_dir)
+    return [
+        plot_paths(result, out / "paths.png"),
+        plot_ranges(result, out / "range.png"),
+        plot_fix_age(result, out / "fix_age.png"),
+    ]
