@@ -1,0 +1,194 @@
+"""The simulated world: the ASV (vessel model + execution level), the AUVs, the acoustic
+channel and the INS drift, advanced one supervisory period at a time.
+
+:func:`mpcasv.sim.simulator.simulate` drives it with a controller in-process; the SITL
+vehicles (``mpcasv sitl``) drive it with the References that arrive over IMC. Everything
+random comes from one seeded generator.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from mpcasv.control.execution import NZ, closed_loop
+from mpcasv.control.params import ExecutionParams, load_execution
+from mpcasv.estimation import make_estimator
+from mpcasv.interface import ASVState, AUVEstimate, Observation
+from mpcasv.models.acoustics import INSDrift, Report, success_probability, usbl_fix
+from mpcasv.models.auv import NA, auv_step_function
+from mpcasv.models.params import load_vessel
+from mpcasv.models.vessel import NX, VesselModel
+from mpcasv.sim.scenario import Scenario
+
+_PLANT_CACHE: dict = {}
+
+
+def build_plant(scenario: Scenario):
+    """(model, execution params, closed-loop function) for a scenario, cached per process."""
+    key = (scenario.asv.vessel, scenario.asv.execution, scenario.sim.dt, scenario.sim.n_sub)
+    if key not in _PLANT_CACHE:
+        model = VesselModel(load_vessel(scenario.asv.vessel))
+        ep: ExecutionParams = load_execution(scenario.asv.execution)
+        CL = closed_loop(model, ep, scenario.sim.dt, scenario.sim.n_sub)
+        _PLANT_CACHE[key] = (model, ep, CL)
+    return _PLANT_CACHE[key]
+
+
+@dataclass
+class Period:
+    """What happened during one supervisory period (plant-step resolution where useful)."""
+
+    t0: float
+    t1: float
+    X: np.ndarray  # ASV states after each plant step (NX x n_sub)
+    U: np.ndarray  # actuator set-points during each plant step (2 x n_sub)
+    Y: np.ndarray  # [psi_d, u_ref] during each plant step
+    ranges: np.ndarray  # horizontal ASV-AUV ranges (n_auv x n_sub)
+    slants: np.ndarray
+    fixes: np.ndarray  # successful USBL fixes per AUV in this period
+    reliable: np.ndarray  # of which reliable (Paper 2 rule)
+
+
+class World:
+    """ASV, AUVs and acoustics of one scenario; :meth:`advance` moves one period.
+
+    Parameters
+    ----------
+    scenario : Scenario
+    seed : int
+        Seed of the one random generator (acoustics, INS drift).
+    estimator : str, optional
+        AUV estimator name (default: the scenario's).
+    domain : DomainParams, optional
+        The controller's safety domain, for the reliable-fix rule (r < r_t + eps).
+    """
+
+    def __init__(self, scenario: Scenario, seed: int = 0, estimator: str | None = None,
+                 domain=None):  # fmt: skip
+        self.sc, self.ac = scenario, scenario.acoustics
+        self.rng = np.random.default_rng(seed)
+        self.model, self.ep, self.CL = build_plant(scenario)
+        self.n_auv, self.n_sub = len(scenario.auv), scenario.sim.n_sub
+        self.Tc, self.dt = scenario.sim.control_period, scenario.sim.dt
+        self.thr_on = self.ep.propeller_on_threshold * self.model.params.T_max
+        self.current = np.array(scenario.current, float)
+        self.domain = domain
+        self.t = 0.0
+
+        s0 = scenario.asv.start
+        self.x = np.zeros(NX)
+        self.x[[0, 1, 2, 3]] = s0.N, s0.E, math.radians(s0.psi_deg), s0.speed
+        self.x[6] = self.model.thrust_for_speed(s0.speed) if s0.speed > 0 else 0.0
+        self.z = np.zeros(NZ)
+        self.S = np.array(
+            [[a.start.N, a.start.E, a.start.depth, math.radians(a.start.psi_deg), a.start.speed]
+             for a in scenario.auv], float,
+        ).T  # fmt: skip
+        self.LIM = np.array([a.limits.vector() for a in scenario.auv]).T
+        self.behaviours = [a.build_behaviour() for a in scenario.auv]
+        self.auv_step = auv_step_function(self.dt, self.n_sub, self.n_auv)
+        name = estimator or scenario.estimator
+        self.estimators = [
+            make_estimator(name, initial=AUVEstimate(*self.S[:3, k], t_last_fix=0.0))
+            for k in range(self.n_auv)
+        ]
+        self.ins = INSDrift(self.n_auv, scenario.navigation, self.rng)
+        n, ac = self.n_auv, self.ac
+        # USBL polls the AUVs in turn: AUV k pings at k*T0/n + j*T0; reports likewise
+        self.next_ping = np.array([k * ac.T0 / n for k in range(n)]) + ac.T0
+        self.next_report = np.array([k * ac.T_report / n for k in range(n)]) + ac.T_report
+        self.last_fix = np.zeros(n)
+        self.fix_times: list[list[float]] = [[] for _ in range(n)]
+        self.reliable_times: list[list[float]] = [[] for _ in range(n)]
+        self.energy_J = 0.0
+        self.min_range = self.min_slant = math.inf
+
+    @property
+    def propeller_on(self) -> bool:
+        """n_p != 0: actual thrust above the configured fraction of T_max."""
+        return bool(self.x[6] > self.thr_on)
+
+    def asv_state(self) -> ASVState:
+        x = self.x
+        return ASVState(x[0], x[1], x[2], x[3], x[4], x[5])
+
+    def auv_truth(self, k: int) -> tuple[float, float, float, float, float]:
+        """(N, E, depth, v_N, v_E) of AUV ``k``."""
+        N, E, d, psi, U = self.S[:, k]
+        return N, E, d, U * math.cos(psi), U * math.sin(psi)
+
+    def observation(self) -> Observation:
+        """What a controller sees now (estimators fed with the truth for ``perfect``)."""
+        for k, est in enumerate(self.estimators):
+            est.on_truth(self.t, *self.auv_truth(k))
+        ests = tuple(e.estimate(self.t) for e in self.estimators)
+        return Observation(self.t, self.asv_state(), self.propeller_on, ests)
+
+    def advance(self, cmd: np.ndarray) -> Period:
+        """Move everything one supervisory period under execution-level command ``cmd``
+        (see :func:`mpcasv.control.execution.command_vector`)."""
+        t0, x0 = self.t, self.x
+        x_next, z, X, Uin, Y = self.CL(x0, self.z, cmd, self.current)
+        X, Uin, Y = np.array(X), np.array(Uin), np.array(Y)
+        SP = np.array([b.setpoint(t0, self.S[:, k], x0[:2]) for k, b in enumerate(self.behaviours)])
+        S_next, ST = self.auv_step(self.S, SP.T, self.LIM)
+        S_next = np.array(S_next)
+        ST = np.array(ST).reshape(NA, self.n_auv, self.n_sub, order="F")  # [:, k, j]
+        u_c = self.current[0] * np.cos(X[2]) + self.current[1] * np.sin(X[2])
+        self.energy_J += float(np.sum(X[6] * np.abs(X[3] - u_c)) * self.dt)  # thrust x speed
+        ranges = np.hypot(X[0][None, :] - ST[0], X[1][None, :] - ST[1])
+        slants = np.hypot(ranges, ST[2])
+        self.min_range = min(self.min_range, float(ranges.min()))
+        self.min_slant = min(self.min_slant, float(slants.min()))
+        self.ins.advance(np.hypot(S_next[0] - self.S[0], S_next[1] - self.S[1]))
+        self.x, self.z, self.S = np.array(x_next).ravel(), np.array(z).ravel(), S_next
+        self.t = t0 + self.Tc
+        fixes, reliable = self._acoustics()
+        return Period(t0, self.t, X, Uin, Y, ranges, slants, fixes, reliable)
+
+    def _acoustics(self) -> tuple[np.ndarray, np.ndarray]:
+        """USBL pings and status reports due in the period just ended (evaluated at its end)."""
+        ac, t1, S, rng = self.ac, self.t, self.S, self.rng
+        prop = self.propeller_on
+        fixes, reliable = np.zeros(self.n_auv, int), np.zeros(self.n_auv, int)
+        for k in range(self.n_auv):
+            at_surface = S[2, k] < 0.5
+            if at_surface:  # GPS at the surface
+                self.ins.reset(k, t1, ac.gps_sigma * rng.standard_normal(2) / math.sqrt(2))
+            modem_ok = not (at_surface and not self.sc.auv[k].modem_at_surface)
+            r_h = math.hypot(self.x[0] - S[0, k], self.x[1] - S[1, k])
+            slant = math.hypot(r_h, S[2, k])
+            p_ok = float(success_probability(slant, prop, ac)) if modem_ok else 0.0
+            while self.next_ping[k] <= t1 + 1e-9:
+                self.next_ping[k] += ac.T0
+                if ac.usbl and rng.random() < p_ok:
+                    fix = usbl_fix(t1, k, self.x[:2], S[:3, k], ac, rng)
+                    self.estimators[k].on_fix(fix)
+                    self.ins.reset(k, t1, np.array([fix.N - S[0, k], fix.E - S[1, k]]))
+                    fixes[k] += 1
+                    self.fix_times[k].append(t1)
+                    self.last_fix[k] = t1
+                    if self._reliable(r_h, S[2, k], prop):
+                        reliable[k] += 1
+                        self.reliable_times[k].append(t1)
+            while self.next_report[k] <= t1 + 1e-9:
+                self.next_report[k] += ac.T_report
+                if rng.random() < p_ok:
+                    e = self.ins.error(t1)[k]
+                    self.estimators[k].on_report(Report(
+                        t1, k, S[0, k] + e[0], S[1, k] + e[1], S[2, k], S[3, k], S[4, k],
+                        float(np.hypot(*e)) + 1.0,
+                    ))  # fmt: skip
+        return fixes, reliable
+
+    def _reliable(self, r_h: float, depth: float, propeller_on: bool) -> bool:
+        """Paper 2's reliable-fix rule for a fix that got through (r < r_t + eps, propeller
+        off); without a domain (e.g. the trivial controller): propeller off and within d1."""
+        if propeller_on:
+            return False
+        if self.domain is None:
+            return r_h <= self.ac.d1
+        return r_h < float(self.domain.target(depth)) + self.domain.eps_plus
