@@ -44,6 +44,20 @@ def pwlinear(x, xs, ys):
     return y
 
 
+def _integrate(I, dI, out_unsat, limit):
+    """Anti-windup by conditional integration (clamping): integrate unless the output is
+    saturated and the increment would push it further; keep |I| <= limit.
+
+    (Back-calculation was tried first: with heading errors near pi the proportional term
+    alone saturates, the tracking term then drives the integrator far negative, and the
+    rudder reverses as soon as the error shrinks.)
+    """
+    saturated = ca.fabs(out_unsat) >= limit
+    pushing = ca.sign(dI) == ca.sign(out_unsat)
+    I_next = ca.if_else(ca.logic_and(saturated, pushing), I, I + dI)
+    return ca.fmin(ca.fmax(I_next, -limit), limit)
+
+
 def guidance(x, wp):
     """Desired heading: straight at the waypoint (line of sight)."""
     return ca.atan2(wp[1] - x[1], wp[0] - x[0])
@@ -75,14 +89,19 @@ def execution_law(x, z, cmd, model: VesselModel, ep: ExecutionParams, dt: float)
     Kp, Ki, Kd = (pwlinear(u_s, ys.speeds, g) for g in (ys.Kp, ys.Ki, ys.Kd))
     d_unsat = Kp * e_psi + I_psi - Kd * r_f
     d_sat = ca.fmin(ca.fmax(d_unsat, -P.delta_max), P.delta_max)
-    I_psi_next = I_psi + dt * (Ki * e_psi + (d_sat - d_unsat) / ep.T_aw)  # back-calculation
+    I_psi_next = _integrate(I_psi, dt * Ki * e_psi, d_unsat, P.delta_max)
 
     # surge speed loop with model-based feed-forward (trim thrust of eq. 2.6)
     T_ff = -(P.X_u * u_ref + P.X_uu * sabs(u_ref, P.eps_abs) * u_ref)
     e_u = u_ref - u_s
     T_unsat = T_ff + ep.speed.Kp * e_u + I_u
-    T_sat = ca.fmin(ca.fmax(T_unsat, P.T_min), P.T_max)
-    I_u_next = I_u + dt * (ep.speed.Ki * e_u + (T_sat - T_unsat) / ep.T_aw)
+    # thrust floor: keep yaw authority in transit, more of it in hard turns (power turn)
+    turn = ca.fmin(ca.fmax((ca.fabs(e_psi) - math.pi / 4) / (math.pi / 4), 0), 1)
+    T_floor = ca.fmax(P.T_min, P.T_max * (ep.thrust_floor
+                                          + (ep.turn_thrust - ep.thrust_floor) * turn))  # fmt: skip
+    T_sat = ca.fmin(ca.fmax(T_unsat, T_floor), P.T_max)
+    I_u_next = _integrate(I_u, dt * ep.speed.Ki * e_u, T_unsat - (P.T_max + T_floor) / 2,
+                          (P.T_max - T_floor) / 2)  # fmt: skip
 
     r_f_next = r_f + dt / ys.T_f * (r - r_f)
     on = transit > 0.5

@@ -3,8 +3,9 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Annotated
 
-from pydantic import model_validator
+from pydantic import Field, Strict, model_validator
 
 from mpcasv.config import Float, NonNeg, Pos, frozen, load, resolve
 
@@ -56,8 +57,13 @@ class ExecutionParams:
     yaw: YawSchedule
     speed: SpeedLoop
     reference: SpeedReference = SpeedReference()
-    T_aw: Pos = 1.0  # anti-windup back-calculation time constant (s)
-    propeller_on_threshold: Float = 0.02  # fraction of T_max above which n_p != 0
+    propeller_on_threshold: Float = 0.05  # fraction of T_max above which n_p != 0 (~22 % rpm)
+    # Thrust floor in transit, as fractions of T_max: a steerable drive has no yaw authority
+    # without thrust, so the speed loop may not starve the yaw loop. ``thrust_floor`` always
+    # applies; it ramps up to ``turn_thrust`` as |psi_e| grows from pi/4 to pi/2 (a "power
+    # turn": without it a boat caught drifting towards an AUV turns away far too slowly).
+    thrust_floor: Annotated[float, Strict(), Field(ge=0, lt=1)] = 0.1
+    turn_thrust: Annotated[float, Strict(), Field(ge=0, le=1)] = 0.8
     provenance: str = ""
 
 

@@ -100,13 +100,24 @@ class Transit:
 
 @dataclass
 class Pursuer:
-    """Head for the ASV's true position at ``speed`` and ``depth`` (adversarial cases)."""
+    """Head for the ASV at ``speed`` and ``depth`` (the papers' adversarial cases).
+
+    With ``update_period = 0`` the AUV re-aims at the ASV's true position continuously (a
+    perfect pursuer); with ``update_period = P`` it heads for where the ASV was when its
+    waypoint was last set, re-set every P seconds (an operator changing waypoints by hand, as
+    in the papers' Cases 4 and 8).
+    """
 
     speed: float
     depth: float = 0.0
+    update_period: float = 0.0
+    _target: tuple[float, float] | None = field(default=None, repr=False)
+    _t_set: float = field(default=-math.inf, repr=False)
 
     def setpoint(self, t: float, s: np.ndarray, asv_NE: np.ndarray) -> tuple[float, ...]:
-        return asv_NE[0], asv_NE[1], self.speed, self.depth
+        if self._target is None or t - self._t_set >= self.update_period:
+            self._target, self._t_set = (float(asv_NE[0]), float(asv_NE[1])), t
+        return self._target[0], self._target[1], self.speed, self.depth
 
 
 @dataclass

@@ -90,7 +90,7 @@ def derive_gretha() -> tuple[dict[str, float | str], dict[str, str]]:
         "Y_vv": -half * T * C_d * L, "N_rr": -half * T * C_d * L**4 / 32,
         "x_p": x_p, "Y_uudelta": -half * A_leg * C_L_alpha, "T_max": R_top, "T_min": 0.0,
         "delta_max": math.radians(30.0), "delta_rate_max": math.radians(30.0),
-        "T_thrust": 1.0, "T_delta": 0.3, "eps_abs": 0.01, "u_max": U_top,
+        "T_thrust": 0.5, "T_delta": 0.3, "eps_abs": 0.01, "u_max": U_top,
     }  # fmt: skip
     clarke = "Clarke et al. (1982) regression, Fossen (2021) §6.4.1"
     fin = (
@@ -129,7 +129,7 @@ def derive_gretha() -> tuple[dict[str, float | str], dict[str, str]]:
         "T_min": "0: the propeller can stop (standby)",
         "delta_max": "30 deg steering limit (guess, typical steerable drive)",
         "delta_rate_max": "30 deg/s steering rate limit (guess)",
-        "T_thrust": "1 s thrust lag (guess)",
+        "T_thrust": "0.5 s thrust lag (guess: a small propeller spins up and down fast)",
         "T_delta": "0.3 s steering lag (guess)",
         "eps_abs": "smoothing of |.| (numerical choice, 0.01 m/s)",
         "u_max": "thesis: observed maximum 4.9 kn = 2.5 m/s with ballast",

@@ -85,6 +85,7 @@ class PlanSpec:
 class PursuerSpec:
     speed: Pos
     depth: NonNeg = 0.0
+    update_period: NonNeg = 0.0  # s between re-aims at the ASV (0: continuous pursuit)
 
 
 @frozen
@@ -115,7 +116,8 @@ class Behaviour:
             pts = [pt for seg in p.route for pt in seg.points()]
             return Plan(pts, p.speed, p.acceptance, p.yoyo, p.surface, p.surface_speed)
         if self.pursuer is not None:
-            return Pursuer(self.pursuer.speed, self.pursuer.depth)
+            p = self.pursuer
+            return Pursuer(p.speed, p.depth, p.update_period)
         return Transit(self.transit.heading_deg, self.transit.speed, self.transit.depth)
 
 

@@ -124,6 +124,7 @@ def _row(world: World, obs, cmd, period, step_ms: float) -> dict:
             f"slant{k}": math.hypot(r, S[2, k]),
             f"est_range{k}": math.hypot(x[0] - e.N, x[1] - e.E),
             f"fixes{k}": int(period.fixes[k]), f"reliable{k}": int(period.reliable[k]),
+            f"visit{k}": bool(period.visiting[k]),
             f"fix_age{k}": period.t1 - world.last_fix[k], f"nav_err{k}": nav_err[k],
         }  # fmt: skip
         if world.domain is not None:

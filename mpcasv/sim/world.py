@@ -15,7 +15,7 @@ import numpy as np
 
 from mpcasv.control.execution import NZ, closed_loop
 from mpcasv.control.params import ExecutionParams, load_execution
-from mpcasv.estimation import make_estimator
+from mpcasv.estimation import known_plan, make_estimator
 from mpcasv.interface import ASVState, AUVEstimate, Observation
 from mpcasv.models.acoustics import INSDrift, Report, success_probability, usbl_fix
 from mpcasv.models.auv import NA, auv_step_function
@@ -27,13 +27,17 @@ _PLANT_CACHE: dict = {}
 
 
 def build_plant(scenario: Scenario):
-    """(model, execution params, closed-loop function) for a scenario, cached per process."""
-    key = (scenario.asv.vessel, scenario.asv.execution, scenario.sim.dt, scenario.sim.n_sub)
+    """(model, execution params, closed-loop function) for a scenario.
+
+    The compiled closed loop is cached per process, keyed by the parameters' values (not the
+    file names), so a changed file is never served stale.
+    """
+    params = load_vessel(scenario.asv.vessel)
+    ep: ExecutionParams = load_execution(scenario.asv.execution)
+    key = (params.vector().tobytes(), repr(ep), scenario.sim.dt, scenario.sim.n_sub)
     if key not in _PLANT_CACHE:
-        model = VesselModel(load_vessel(scenario.asv.vessel))
-        ep: ExecutionParams = load_execution(scenario.asv.execution)
-        CL = closed_loop(model, ep, scenario.sim.dt, scenario.sim.n_sub)
-        _PLANT_CACHE[key] = (model, ep, CL)
+        model = VesselModel(params)
+        _PLANT_CACHE[key] = (model, ep, closed_loop(model, ep, scenario.sim.dt, scenario.sim.n_sub))
     return _PLANT_CACHE[key]
 
 
@@ -50,6 +54,7 @@ class Period:
     slants: np.ndarray
     fixes: np.ndarray  # successful USBL fixes per AUV in this period
     reliable: np.ndarray  # of which reliable (Paper 2 rule)
+    visiting: np.ndarray  # per AUV at the period's end: the ASV waits in its target domain
 
 
 class World:
@@ -92,7 +97,11 @@ class World:
         self.auv_step = auv_step_function(self.dt, self.n_sub, self.n_auv)
         name = estimator or scenario.estimator
         self.estimators = [
-            make_estimator(name, initial=AUVEstimate(*self.S[:3, k], t_last_fix=0.0))
+            make_estimator(
+                name,
+                initial=AUVEstimate(*self.S[:3, k], t_last_fix=0.0),
+                plan=known_plan(self.behaviours[k]),
+            )  # fmt: skip
             for k in range(self.n_auv)
         ]
         self.ins = INSDrift(self.n_auv, scenario.navigation, self.rng)
@@ -147,7 +156,8 @@ class World:
         self.x, self.z, self.S = np.array(x_next).ravel(), np.array(z).ravel(), S_next
         self.t = t0 + self.Tc
         fixes, reliable = self._acoustics()
-        return Period(t0, self.t, X, Uin, Y, ranges, slants, fixes, reliable)
+        visiting = np.array([self.visiting(k) for k in range(self.n_auv)])
+        return Period(t0, self.t, X, Uin, Y, ranges, slants, fixes, reliable, visiting)
 
     def _acoustics(self) -> tuple[np.ndarray, np.ndarray]:
         """USBL pings and status reports due in the period just ended (evaluated at its end)."""
@@ -171,7 +181,7 @@ class World:
                     fixes[k] += 1
                     self.fix_times[k].append(t1)
                     self.last_fix[k] = t1
-                    if self._reliable(r_h, S[2, k], prop):
+                    if self.visiting(k):
                         reliable[k] += 1
                         self.reliable_times[k].append(t1)
             while self.next_report[k] <= t1 + 1e-9:
@@ -184,11 +194,14 @@ class World:
                     ))  # fmt: skip
         return fixes, reliable
 
-    def _reliable(self, r_h: float, depth: float, propeller_on: bool) -> bool:
-        """Paper 2's reliable-fix rule for a fix that got through (r < r_t + eps, propeller
-        off); without a domain (e.g. the trivial controller): propeller off and within d1."""
-        if propeller_on:
+    def visiting(self, k: int) -> bool:
+        """The geometric part of Paper 2's reliable-fix rule (eq. 9) for AUV ``k``: propeller
+        off and r_k < r_t,k + eps (true range and depth). Without a domain (the trivial
+        controller): propeller off and within d1. A fix that gets through while visiting is
+        a reliable fix."""
+        if self.propeller_on:
             return False
+        r_h = math.hypot(self.x[0] - self.S[0, k], self.x[1] - self.S[1, k])
         if self.domain is None:
             return r_h <= self.ac.d1
-        return r_h < float(self.domain.target(depth)) + self.domain.eps_plus
+        return r_h < float(self.domain.target(self.S[2, k])) + self.domain.eps_plus
