@@ -1,0 +1,152 @@
+"""Surge speed loop and surge-speed reference model tuning (``mpcasv tune speed``).
+
+Speed loop (mpcasv/control/execution.py): ``T_cmd = T_ff(u_ref) + Kp e_u + Ki int(e_u)`` with
+the model's trim thrust as feed-forward. The surge dynamics linearised about the straight-line
+trim (:meth:`VesselModel.linearize`) are ``u_dot = -a u + b T``, ``T_dot = (T_cmd - T)/T_thrust``;
+the PI is placed on the first-order part, ``s^2 + (a + b Kp) s + b Ki = s^2 + 2 zeta w s + w^2``,
+at one design speed (the execution level has one pair of speed gains), and the margins and step
+figures are checked at every speed *with* the thrust lag, continuous and sampled.
+
+Surge-speed reference model, thesis eq. 3.1: ``u_cmd = u_ff + k_u (pi/2 - |psi_e|)``
+(``u_ff`` if ``|psi_e| >= pi/2``). It is checked on the nonlinear closed loop: starting at full
+speed, turns of 90 and 180 deg towards a waypoint at a fixed distance must converge without
+"pirouettes" (circling instead of settling on the new heading).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import warnings
+
+import control as ct
+import numpy as np
+
+from mpcasv.config import replace
+from mpcasv.control.params import ExecutionParams, SpeedLoop, SpeedReference
+from mpcasv.control.tuning import run_closed_loop, settling_time
+from mpcasv.models.vessel import IX, VesselModel
+
+#: heading band that counts as "turned" (rad), and how long it must hold (s)
+TURN_BAND = math.radians(10.0)
+#: total heading change beyond the commanded turn that counts as a pirouette (rad)
+PIROUETTE_EXCESS = math.radians(270.0)
+
+
+def surge_plant(model: VesselModel, u0: float) -> ct.StateSpace:
+    """Linearised surge dynamics at ``u0``: states ``u, T``; input ``T_cmd`` (N); output ``u``."""
+    A, B = model.linearize(*model.trim(u0))
+    idx = [IX["u"], IX["T"]]
+    return ct.ss(A[np.ix_(idx, idx)], B[np.ix_(idx, [0])], [[1.0, 0.0]], [[0.0]],
+                 states=["u", "T"], inputs=["T_cmd"], outputs=["u"])  # fmt: skip
+
+
+def place_speed_pi(model: VesselModel, u0: float, w: float, zeta: float) -> SpeedLoop:
+    """PI gains by pole placement on the first-order surge model at ``u0`` (lag neglected)."""
+    A, _ = model.linearize(*model.trim(u0))
+    a, b = -A[IX["u"], IX["u"]], A[IX["u"], IX["T"]]
+    return SpeedLoop(Kp=max((2 * zeta * w - a) / b, 0.0), Ki=w * w / b)
+
+
+def speed_figures(P: ct.StateSpace, g: SpeedLoop, dt: float | None = None,
+                  step: float = 0.5) -> dict[str, float]:  # fmt: skip
+    """Margins (``stability_margins``, balanced ``disk_margins``) and ``step`` m/s step figures.
+
+    With ``dt`` the plant is sampled (ZOH) and the integrator is forward Euler, as in
+    :func:`mpcasv.control.execution.execution_law`.
+    """
+    if dt is None:
+        C = ct.tf([g.Kp, g.Ki], [1.0, 0.0])
+    else:
+        C = ct.tf([g.Kp, g.Ki * dt - g.Kp], [1.0, -1.0], dt)
+        P = ct.c2d(P, dt, "zoh")
+    L = ct.ss(C) * P
+    with warnings.catch_warnings():  # 'frd' fallback notes
+        warnings.simplefilter("ignore", UserWarning)
+        gm, pm, _, _, wp, _ = ct.stability_margins(L)
+    omega = np.logspace(-3, math.log10(math.pi / dt if dt else 100.0) - 1e-6, 2000)
+    dm, dgm, dpm = ct.disk_margins(L, omega, skew=0.0)
+    t = np.arange(0.0, 120.0, dt or 0.05)
+    y = ct.step_response(ct.feedback(L, 1), t).outputs * step
+    info = ct.step_info(y, t, yfinal=step)
+    return {
+        "gain_margin_db": 20 * math.log10(gm) if np.isfinite(gm) else math.inf,
+        "phase_margin_deg": float(pm),
+        "w_gain_crossover": float(wp),
+        "disk_margin": float(dm),
+        "disk_gain_margin_db": float(dgm),  # python-control returns dB
+        "disk_phase_margin_deg": float(dpm),
+        "rise_s": float(info["RiseTime"]),
+        "settling_s": float(info["SettlingTime"]),
+        "overshoot_pct": float(info["Overshoot"]),
+    }
+
+
+def turn(model: VesselModel, ep: ExecutionParams, angle: float, distance: float,
+         t_end: float = 150.0):  # fmt: skip
+    """Turn by ``angle`` (rad) from full speed towards a waypoint ``distance`` m away.
+
+    Returns the run and ``{"turn_s", "turn_m", "pirouette", "total_turn_deg", "min_u"}``:
+    time and path length until the heading error stays within 10 deg (until the run ends or
+    the waypoint is within 5 m), the total heading change before that, and whether it
+    pirouetted (never settled, or turned more than 270 deg beyond the commanded turn).
+    """
+    u0 = min(model.top_speed, model.params.u_max)
+    x0, _ = model.trim(u0)
+    wp = (distance * math.cos(angle), distance * math.sin(angle))
+    run = run_closed_loop(model, ep, x0, wp, model.params.u_max, t_end)
+    reach = np.hypot(run.X[:, 0] - wp[0], run.X[:, 1] - wp[1]) < 5.0
+    n = int(np.argmax(reach)) if reach.any() else len(run.t)
+    err = run.psi_error[:n]
+    ts = settling_time(run.t[:n], err, TURN_BAND)
+    i = int(round(ts / (run.t[1] - run.t[0]))) if math.isfinite(ts) else n - 1
+    total = float(np.sum(np.abs(np.diff(np.unwrap(run.X[: i + 1, 2])))))
+    pirouette = (not math.isfinite(ts)) or total > abs(angle) + PIROUETTE_EXCESS
+    return run, {
+        "turn_s": ts,
+        "turn_m": float(run.distance[i]) if math.isfinite(ts) else math.inf,
+        "pirouette": bool(pirouette),
+        "total_turn_deg": float(np.degrees(total)),
+        "min_u": float(run.X[: i + 1, 3].min()),
+    }
+
+
+@dataclasses.dataclass(frozen=True)
+class TurnRow:
+    """One (u_ff, k_u) pair of the reference-model grid."""
+
+    u_ff: float
+    k_u: float
+    figures: dict  # angle_deg -> turn() figures
+
+    @property
+    def ok(self) -> bool:
+        return not any(f["pirouette"] for f in self.figures.values())
+
+    @property
+    def cost(self) -> float:
+        """Sum of the turn times (s): the recommendation minimises it among pirouette-free."""
+        return float(sum(f["turn_s"] for f in self.figures.values()))
+
+
+def turn_grid(model: VesselModel, ep: ExecutionParams, pairs, angles_deg=(90.0, 180.0),
+              distance: float = 50.0, progress: bool = False):  # fmt: skip
+    """Run :func:`turn` for each (u_ff, k_u) pair and angle; returns rows and runs."""
+    from tqdm import tqdm
+
+    rows, runs = [], {}
+    for u_ff, k_u in tqdm(list(pairs), desc="turn grid", disable=not progress):
+        epi = replace(ep, reference=SpeedReference(u_ff=u_ff, k_u=k_u))
+        figs = {}
+        for a in angles_deg:
+            runs[(u_ff, k_u, a)], figs[a] = turn(model, epi, math.radians(a), distance)
+        rows.append(TurnRow(u_ff=u_ff, k_u=k_u, figures=figs))
+    return rows, runs
+
+
+def recommend(rows: list[TurnRow]) -> TurnRow:
+    """The pirouette-free row with the shortest total turn time; ValueError if none."""
+    good = [r for r in rows if r.ok]
+    if not good:
+        raise ValueError("every (u_ff, k_u) pair pirouetted: no recommendation")
+    return min(good, key=lambda r: r.cost)
