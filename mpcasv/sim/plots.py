@@ -53,29 +53,34 @@ def plot_ranges(result, path: str | Path) -> Path:
     fig, axes = plt.subplots(n, 1, figsize=(9, 2.6 * n + 0.6), sharex=True, squeeze=False)
     t = ts["t"].to_numpy()
     sb = (ts["mode"] == "standby").to_numpy()
+    eps = getattr(getattr(result, "domain", None), "eps_plus", None)
     for k, ax in enumerate(axes[:, 0]):
+        top = 1.15 * float(np.nanmax([ts[f"range{k}"].max(), ts[f"est_range{k}"].max()]))
         if f"r_inner{k}" in ts:
+            top = max(top, 1.15 * float(ts[f"r_t{k}"].max() + (eps or 0)))
             ax.fill_between(t, 0, ts[f"r_inner{k}"], color="tab:red", alpha=0.15,
                             label="inside r_inner")  # fmt: skip
-            eps = getattr(getattr(result, "domain", None), "eps_plus", None)
             ax.plot(t, ts[f"r_t{k}"], color="tab:green", lw=1, label="r_t")
             if eps is not None:
                 ax.fill_between(t, ts[f"r_t{k}"] - eps, ts[f"r_t{k}"] + eps, color="tab:green",
                                 alpha=0.15, label="target domain")  # fmt: skip
-            ax.plot(t, ts[f"r_outer{k}"], color="tab:red", lw=1, ls=":", label="r_outer")
+            if ts[f"r_outer{k}"].min() < 2 * top:  # Paper 2 has no outer boundary
+                ax.plot(t, ts[f"r_outer{k}"], color="tab:red", lw=1, ls=":", label="r_outer")
+                top = max(top, 1.1 * float(ts[f"r_outer{k}"].max()))
         ax.plot(t, ts[f"range{k}"], color="tab:blue", lw=1.2, label="range (true)")
         ax.plot(t, ts[f"est_range{k}"], color="k", lw=0.8, ls="--", alpha=0.7,
                 label="range (believed)")  # fmt: skip
-        ymax = ax.get_ylim()[1]
-        ax.fill_between(t, 0, ymax, where=sb, color="grey", alpha=0.12, step="mid",
+        ax.fill_between(t, 0, top, where=sb, color="grey", alpha=0.12, step="mid",
                         label="standby")  # fmt: skip
-        ax.set_ylim(0, ymax)
+        ax.set_ylim(0, top)
         ax.set_ylabel(f"range to {result.scenario.auv[k].name} (m)")
         ax.grid(alpha=0.3)
-    axes[0, 0].legend(loc="upper right", fontsize=7, ncol=3)
+    handles, labels = axes[0, 0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="lower center", ncol=4, fontsize=8, frameon=False)
     axes[-1, 0].set_xlabel("time (s)")
     fig.suptitle(f"{result.scenario.name}: ASV-AUV range ({result.controller}, seed {result.seed})")
-    return _save(fig, path)
+    fig.tight_layout(rect=(0, 0.06 if n > 1 else 0.1, 1, 1))
+    return _save(fig, path, tight=False)
 
 
 def plot_fix_age(result, path: str | Path) -> Path:
@@ -95,9 +100,10 @@ def plot_fix_age(result, path: str | Path) -> Path:
     return _save(fig, path)
 
 
-def _save(fig, path) -> Path:
+def _save(fig, path, tight: bool = True) -> Path:
     path = Path(path)
-    fig.tight_layout()
+    if tight:
+        fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path
