@@ -7,11 +7,19 @@ from mpcasv.estimation.base import (
     StationaryEstimator,
     make_estimator,
 )
+from mpcasv.estimation.kalman import KalmanEstimator, KalmanParams
+from mpcasv.estimation.plan import KnownPlan, PlanEstimator, PlanParams, known_plan
 
 __all__ = [
     "ESTIMATORS",
     "AUVEstimator",
+    "KalmanEstimator",
+    "KalmanParams",
+    "KnownPlan",
+    "PlanEstimator",
+    "PlanParams",
     "PerfectEstimator",
     "StationaryEstimator",
+    "known_plan",
     "make_estimator",
 ]

@@ -85,15 +85,45 @@ class StationaryEstimator:
         return self._est
 
 
-#: name -> factory(initial AUVEstimate or None) -> estimator
+def _kalman(initial=None, kalman=None, **_):
+    from mpcasv.estimation.kalman import KalmanEstimator
+
+    return KalmanEstimator(initial, kalman)
+
+
+def _plan(initial=None, plan=None, plan_params=None, kalman=None, **_):
+    from mpcasv.estimation.plan import PlanEstimator
+
+    return PlanEstimator(initial, plan, plan_params, kalman)
+
+
+#: name -> factory(initial=AUVEstimate or None, **options) -> estimator. Options understood
+#: (others are ignored, so every estimator can be built with the same call): ``kalman``
+#: (:class:`~mpcasv.estimation.kalman.KalmanParams`), ``plan``
+#: (:class:`~mpcasv.estimation.plan.KnownPlan` or None), ``plan_params``
+#: (:class:`~mpcasv.estimation.plan.PlanParams`).
 ESTIMATORS: dict[str, Callable[..., AUVEstimator]] = {
     "perfect": lambda initial=None, **_: PerfectEstimator(),
     "acoustic": lambda initial=None, **_: StationaryEstimator(initial),
+    "kalman": _kalman,
+    "plan": _plan,
 }
 
 
 def make_estimator(name: str, initial: AUVEstimate | None = None, **options) -> AUVEstimator:
-    """Build an estimator by name (see :data:`ESTIMATORS`)."""
+    """Build an estimator by name (see :data:`ESTIMATORS`).
+
+    Parameters
+    ----------
+    name : str
+        ``"perfect"``, ``"acoustic"`` (stationary), ``"kalman"`` or ``"plan"``.
+    initial : AUVEstimate, optional
+        The AUV's known initial state.
+    **options
+        ``kalman=KalmanParams``, ``plan=KnownPlan`` (the AUV's plan as the ASV knows it, see
+        :func:`mpcasv.estimation.plan.known_plan`), ``plan_params=PlanParams``; ignored by
+        estimators that do not use them.
+    """
     try:
         factory = ESTIMATORS[name]
     except KeyError:

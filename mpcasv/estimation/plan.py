@@ -1,0 +1,374 @@
+"""A plan-aware predictor: the AUV follows its known survey plan, until it does not.
+
+Pre-planned surveys are the usual case: the ASV knows the AUV's waypoints, speed and planned
+surface intervals (in the field: the Neptus plan). Between fixes the AUV is then predicted
+*along the planned path* rather than along a straight line, which is right through turns,
+lawnmower ends and surface intervals, where a constant-velocity model is wrong.
+
+Path. The polyline ``xi(s)`` through the AUV's start and its waypoints, ``s`` the arc length
+(m), unit tangent ``T(s)`` on each segment. Planned along-track speed
+``u_p(t) = U`` (``U_s`` inside a planned surface interval; 0 once the plan is finished).
+
+State ``x = [s, e_u, b_N, b_E]``: along-track position, along-track speed error (m/s) and a
+horizontal offset from the path (cross-track error, navigation bias of the reports):
+
+    s(t + dt) = s + int_t^{t+dt} u_p + e_u dt,   e_u, b random walks                (P1)
+    position  = xi(clip(s, 0, S)) + b,           velocity = (u_p + e_u) T(s)         (P2)
+
+Fixes and reports update it as an (iterated) extended Kalman filter with
+``H = [[T, 0, I], [0, T, 0]]`` (velocity rows for reports only). Near a waypoint the AUV cuts
+or overshoots the corner by up to its turn radius ``U / r_max`` plus the acceptance radius,
+and its heading is anything in between (at the last waypoint it stops): a path-model error
+is added to ``R`` there.
+
+Departure. Every measurement is gated on the plan hypothesis: normalised innovation squared
+``nu^T S^-1 nu`` above the chi-square quantile ``gate_prob`` (2 or 4 degrees of freedom).
+A measurement that fails the gate is not applied to the plan filter and the estimate falls
+back to a :class:`~mpcasv.estimation.kalman.KalmanEstimator` that runs on every measurement;
+``n_miss`` consecutive failures declare a departure. The plan is re-acquired when the
+Kalman estimate lies on the path (within the gate) and moves along it, ``n_hit`` times in a
+row.
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.stats import chi2
+
+from mpcasv.config import NonNeg, Pos, PosInt, Prob, frozen
+from mpcasv.estimation.kalman import KalmanEstimator, KalmanParams, report_velocity
+from mpcasv.interface import AUVEstimate
+from mpcasv.models.acoustics import Fix, Report
+
+__all__ = ["KnownPlan", "PlanEstimator", "PlanParams", "Polyline", "known_plan"]
+
+
+@dataclass(frozen=True)
+class KnownPlan:
+    """What the ASV knows of an AUV's plan (a copy, never the live behaviour object).
+
+    ``waypoints`` rows ``(N, E[, depth])``; ``surface`` planned ``(t_start, t_end)`` surface
+    intervals during which the AUV moves at ``surface_speed``.
+    """
+
+    waypoints: np.ndarray
+    speed: float
+    acceptance: float = 5.0
+    surface: tuple[tuple[float, float], ...] = ()
+    surface_speed: float = 0.0
+
+    def __post_init__(self) -> None:
+        wp = np.atleast_2d(np.asarray(self.waypoints, float))
+        if wp.ndim != 2 or wp.shape[1] not in (2, 3) or len(wp) == 0:
+            raise ValueError("KnownPlan.waypoints: rows (N, E) or (N, E, depth) expected")
+        if not (self.speed > 0 and math.isfinite(self.speed)):
+            raise ValueError(f"KnownPlan.speed must be positive, got {self.speed}")
+        object.__setattr__(self, "waypoints", wp[:, :2].copy())
+
+    def speed_integral(self, t0: float, t1: float) -> float:
+        """``int_t0^t1 u_p dt`` (m) over the planned speed profile (P1), before clipping."""
+        d = self.speed * (t1 - t0)
+        for a, b in self.surface:
+            overlap = max(0.0, min(b, t1) - max(a, t0))
+            d -= (self.speed - self.surface_speed) * overlap
+        return d
+
+    def speed_at(self, t: float) -> float:
+        """Planned along-track speed at ``t`` (m/s)."""
+        return self.surface_speed if any(a <= t < b for a, b in self.surface) else self.speed
+
+
+def known_plan(behaviour) -> KnownPlan | None:
+    """The plan of a behaviour as the ASV would know it: a :class:`~mpcasv.models.behaviours.
+    Plan` (or the initial plan of a ``Scripted`` one: later changes are *not* known); None
+    for a pursuer, a transit or anything without waypoints."""
+    from mpcasv.models.behaviours import Plan, Scripted
+
+    if isinstance(behaviour, Scripted):
+        behaviour = behaviour.initial
+    if not isinstance(behaviour, Plan):
+        return None
+    return KnownPlan(
+        copy.deepcopy(behaviour.waypoints), float(behaviour.speed), float(behaviour.acceptance),
+        tuple(tuple(map(float, iv)) for iv in behaviour.surface), float(behaviour.surface_speed),
+    )  # fmt: skip
+
+
+class Polyline:
+    """A piecewise-linear path ``xi(s)`` with arc length ``s`` (zero-length segments dropped)."""
+
+    def __init__(self, vertices: np.ndarray):
+        v = np.asarray(vertices, float)[:, :2]
+        keep = np.concatenate([[True], np.hypot(*np.diff(v, axis=0).T) > 1e-6])
+        self.v = v[keep]
+        seg = np.diff(self.v, axis=0)
+        self.len = np.hypot(*seg.T) if len(seg) else np.zeros(0)
+        self.T = seg / self.len[:, None] if len(seg) else np.zeros((0, 2))
+        self.S = np.concatenate([[0.0], np.cumsum(self.len)])  # arc length at the vertices
+        self.length = float(self.S[-1])
+
+    def segment(self, s: float) -> int:
+        """Index of the segment containing arc length ``s`` (clipped to the path)."""
+        if len(self.len) == 0:
+            return -1
+        return int(np.clip(np.searchsorted(self.S, s, side="right") - 1, 0, len(self.len) - 1))
+
+    def point(self, s: float) -> tuple[np.ndarray, np.ndarray]:
+        """``(xi(s), T(s))`` with ``s`` clipped to ``[0, length]``; T = 0 past the end."""
+        if len(self.len) == 0:
+            return self.v[0].copy(), np.zeros(2)
+        i = self.segment(s)
+        sc = min(max(s, 0.0), self.length)
+        T = self.T[i] if s < self.length else np.zeros(2)
+        return self.v[i] + self.T[i] * (sc - self.S[i]), T
+
+    def corner_distance(self, s: float) -> float:
+        """Arc-length distance from ``s`` to the nearest vertex after the start (a turn, or
+        the stop at the end; inf if none)."""
+        ends = self.S[1:]
+        return float(np.min(np.abs(ends - s))) if len(ends) else math.inf
+
+    def project(self, p, s_lo: float = -math.inf, s_hi: float = math.inf) -> tuple[float, float]:
+        """Arc length of the point of the path nearest ``p`` with ``s`` in ``[s_lo, s_hi]``,
+        and its distance (m)."""
+        if len(self.len) == 0:
+            return 0.0, float(np.hypot(*(np.asarray(p) - self.v[0])))
+        lo, hi = max(s_lo, 0.0), min(s_hi, self.length)
+        if hi < lo:
+            lo = hi = min(max(lo, 0.0), self.length)
+        w = np.asarray(p, float) - self.v[:-1]
+        a = np.einsum("ij,ij->i", w, self.T)
+        a = np.clip(a, np.maximum(lo - self.S[:-1], 0.0), np.minimum(hi - self.S[:-1], self.len))
+        valid = (self.S[:-1] <= hi) & (self.S[1:] >= lo)
+        d = np.hypot(*(w - self.T * a[:, None]).T)
+        d = np.where(valid, d, np.inf)
+        i = int(np.argmin(d))
+        return float(self.S[i] + a[i]), float(d[i])
+
+
+@frozen
+class PlanParams:
+    """Tuning of :class:`PlanEstimator` (SI units).
+
+    Attributes
+    ----------
+    q_s : float
+        Random walk of the along-track position (m^2/s): speed transients.
+    q_u : float
+        Random walk of the along-track speed error (m^2/s^3).
+    q_b : float
+        Random walk of the offset from the path (m^2/s).
+    sigma_s0, sigma_u0, sigma_b0 : float
+        Initial 1-sigma of ``s`` (m), ``e_u`` (m/s) and each offset axis (m).
+    sigma_path : float
+        Path-model error away from waypoints, 1 sigma (m).
+    turn_rate_max_deg : float
+        The AUV's turn-rate limit (deg/s): near a waypoint the path-model error is
+        ``acceptance + U / r_max`` and the heading is free (velocity error ``U``).
+    gate_prob : float
+        Probability of the chi-square gate on the plan hypothesis.
+    n_miss, n_hit : int
+        Consecutive gate failures that declare a departure; consecutive on-path Kalman
+        estimates that re-acquire the plan.
+    """
+
+    q_s: NonNeg = 0.05
+    q_u: NonNeg = 1e-5
+    q_b: NonNeg = 0.01
+    sigma_s0: NonNeg = 5.0
+    sigma_u0: NonNeg = 0.1
+    sigma_b0: NonNeg = 2.0
+    sigma_path: Pos = 1.0
+    turn_rate_max_deg: Pos = 10.0
+    gate_prob: Prob = 0.999
+    n_miss: PosInt = 2
+    n_hit: PosInt = 2
+
+
+class PlanEstimator:
+    """Plan-aware predictor with a Kalman-filter fallback (see the module docstring).
+
+    Parameters
+    ----------
+    initial : AUVEstimate, optional
+        The AUV's start (the first vertex of the path); without it the path starts at the
+        first waypoint and the filter anchors on the first measurement.
+    plan : KnownPlan, optional
+        Without a plan the estimator is exactly its Kalman filter (``mode == "kalman"``).
+    params : PlanParams, optional
+    kalman : KalmanParams, optional
+        Tuning of the fallback filter.
+    """
+
+    name = "plan"
+
+    def __init__(self, initial: AUVEstimate | None = None, plan: KnownPlan | None = None,
+                 params: PlanParams | None = None, kalman: KalmanParams | None = None):  # fmt: skip
+        self.params = params or PlanParams()
+        self.kf = KalmanEstimator(initial, kalman)
+        self.plan = plan
+        self.x = np.full(4, math.nan)
+        self.P = np.full((4, 4), math.nan)
+        self.t = math.nan
+        self.on_plan = False  # the last measurement agreed with the plan
+        self.departed = plan is None
+        self.misses = self.hits = 0
+        self.nis = math.nan
+        self.departures: list[float] = []  # times a departure was declared
+        self.path: Polyline | None = None
+        if plan is not None:
+            start = [] if initial is None or not math.isfinite(initial.N) else [
+                [initial.N, initial.E]]  # fmt: skip
+            self.path = Polyline(np.vstack([*start, *plan.waypoints]) if start else plan.waypoints)
+            if start:
+                p = self.params
+                self.x = np.array([0.0, 0.0, 0.0, 0.0])
+                self.P = np.diag([p.sigma_s0**2, p.sigma_u0**2, p.sigma_b0**2, p.sigma_b0**2])
+                self.t = self.kf.t
+                self.on_plan = True
+
+    @property
+    def mode(self) -> str:
+        """``"plan"`` while the plan hypothesis holds, else ``"kalman"``."""
+        return "plan" if self.on_plan and not self.departed else "kalman"
+
+    # -- events ---------------------------------------------------------------------------
+
+    def on_truth(self, t, N, E, depth, v_N, v_E) -> None:
+        pass
+
+    def on_fix(self, fix: Fix) -> None:
+        self.kf.on_fix(fix)
+        self._plan_measure(fix.t, np.array([fix.N, fix.E]), np.reshape(fix.cov, (2, 2)))
+
+    def on_report(self, report: Report) -> None:
+        self.kf.on_report(report)
+        z, R = np.array([report.N, report.E]), report.nav_sigma**2 * np.eye(2)
+        kp = self.kf.params
+        if kp.report_velocity:
+            zv, Rv = report_velocity(report, kp.sigma_speed, math.radians(kp.sigma_heading_deg))
+            z = np.concatenate([z, zv])
+            R = np.block([[R, np.zeros((2, 2))], [np.zeros((2, 2)), Rv]])
+        self._plan_measure(report.t, z, R)
+
+    # -- plan filter ----------------------------------------------------------------------
+
+    def _predict(self, t: float) -> tuple[np.ndarray, np.ndarray]:
+        """Plan state and covariance at ``t`` (P1); pure."""
+        p, dt = self.params, t - self.t
+        F = np.eye(4)
+        F[0, 1] = dt
+        x = F @ self.x
+        x[0] += self.plan.speed_integral(self.t, t)
+        a = abs(dt)
+        Q = np.zeros((4, 4))
+        Q[:2, :2] = p.q_u * np.array([[a**3 / 3, dt * a / 2], [dt * a / 2, a]])
+        Q[0, 0] += p.q_s * a
+        Q[2, 2] = Q[3, 3] = p.q_b * a
+        return x, F @ self.P @ F.T + Q
+
+    def _h(self, x: np.ndarray, t: float, n: int):
+        """Measurement prediction and Jacobian (P2) for ``n`` = 2 (position) or 4 rows."""
+        xi, T = self.path.point(x[0])
+        H = np.zeros((n, 4))
+        H[0:2, 0] = T
+        H[0:2, 2:4] = np.eye(2)
+        h = xi + x[2:4]
+        if n == 4:
+            u = self.plan.speed_at(t) + x[1] if np.any(T) else 0.0
+            H[2:4, 1] = T
+            h = np.concatenate([h, u * T])
+        return h, H
+
+    def _model_noise(self, s: float, t: float, n: int) -> np.ndarray:
+        """Path-model error added to ``R`` (larger near waypoints: corner cutting, turns)."""
+        p, plan = self.params, self.plan
+        U = max(plan.speed_at(t), plan.speed)
+        r_turn = U / math.radians(p.turn_rate_max_deg)
+        near = self.path.corner_distance(s) < math.pi * r_turn + plan.acceptance
+        sig = plan.acceptance + r_turn if near else p.sigma_path
+        R = np.zeros((n, n))
+        R[:2, :2] = sig**2 * np.eye(2)
+        if n == 4:
+            R[2:, 2:] = (U**2 if near else 0.0) * np.eye(2)
+        return R
+
+    def _plan_measure(self, t: float, z: np.ndarray, R: np.ndarray) -> None:
+        if self.plan is None:
+            return
+        if self.departed or not np.isfinite(self.x).all():
+            self._try_acquire(t)
+            return
+        x0, P0 = self._predict(t)
+        n = len(z)
+        R = R + self._model_noise(x0[0], t, n)
+        x = x0.copy()
+        for _ in range(3):  # iterated EKF: re-linearise at the updated along-track position
+            h, H = self._h(x, t, n)
+            S = H @ P0 @ H.T + R
+            K = np.linalg.solve(S, H @ P0).T
+            nu = z - h - H @ (x0 - x)
+            x = x0 + K @ nu
+        h0, H0 = self._h(x0, t, n)
+        S0 = H0 @ P0 @ H0.T + R
+        nu0 = z - h0
+        self.nis = float(nu0 @ np.linalg.solve(S0, nu0))
+        if self.nis > chi2.ppf(self.params.gate_prob, n):
+            self.misses += 1
+            self.on_plan = False
+            if self.misses >= self.params.n_miss:
+                self.departed = True
+                self.departures.append(t)
+                self.hits = 0
+            return
+        IKH = np.eye(4) - K @ H
+        self.x, self.P, self.t = x, IKH @ P0 @ IKH.T + K @ R @ K.T, t
+        self.P = 0.5 * (self.P + self.P.T)
+        self.misses, self.on_plan = 0, True
+
+    def _try_acquire(self, t: float) -> None:
+        """Re-anchor on the plan when the Kalman estimate lies on the path and moves along it."""
+        p = self.params
+        est = self.kf.estimate(t)
+        if not math.isfinite(est.N):
+            return
+        s, d = self.path.project(est.position)
+        _, T = self.path.point(s)
+        sig = math.sqrt(max(est.sigma**2, 0.0) + (self.plan.acceptance + p.sigma_path) ** 2)
+        v = np.array([est.v_N, est.v_E])
+        u_p = self.plan.speed_at(t)
+        along = float(v @ T) if np.any(T) else 0.0
+        across = T[0] * v[1] - T[1] * v[0]
+        vel_ok = abs(along - u_p) < 0.5 * max(u_p, 0.5) and abs(across) < 0.5 * max(u_p, 0.5)
+        if d < math.sqrt(chi2.ppf(p.gate_prob, 2)) * sig and vel_ok:
+            self.hits += 1
+        else:
+            self.hits = 0
+        if self.hits >= p.n_hit:
+            xi, _ = self.path.point(s)
+            self.x = np.array([s, 0.0, est.N - xi[0], est.E - xi[1]])
+            self.P = np.zeros((4, 4))
+            self.P[0, 0], self.P[1, 1] = p.sigma_s0**2, p.sigma_u0**2
+            self.P[2:, 2:] = np.reshape(est.cov, (2, 2))
+            self.t, self.departed, self.on_plan, self.misses = t, False, True, 0
+
+    # -- output ---------------------------------------------------------------------------
+
+    def plan_estimate(self, t: float) -> AUVEstimate:
+        """The plan hypothesis's belief at ``t`` (whatever :attr:`mode` is)."""
+        x, P = self._predict(t)
+        h, H = self._h(x, t, 4)
+        C = H @ P @ H.T
+        return AUVEstimate(
+            float(h[0]), float(h[1]), float(self.kf.depth), float(h[2]), float(h[3]),
+            (float(C[0, 0]), float(C[0, 1]), float(C[1, 0]), float(C[1, 1])), self.kf.t_last,
+        )  # fmt: skip
+
+    def estimate(self, t: float) -> AUVEstimate:
+        if self.mode == "kalman":
+            return self.kf.estimate(t)
+        return self.plan_estimate(t)
