@@ -1,0 +1,65 @@
+"""``mpcasv compare``: run a suite of experiments and write the results table and the report."""
+
+from __future__ import annotations
+
+import argparse
+import os
+from pathlib import Path
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "compare", help="run a suite (scenarios x controllers x tunings x seeds) and report",
+        description="Expand SUITE into jobs, run them on a local process pool (or a Dask "
+        "cluster), write each finished job at once (run folder + results row) and finally "
+        "DIR/results.parquet, DIR/report.md and DIR/report.html. Rerunning the same command "
+        "resumes an interrupted sweep.",
+    )  # fmt: skip
+    p.add_argument(
+        "suite",
+        nargs="?",
+        default="paper",
+        help="suite name in experiments/suites (default: paper) or a TOML path",
+    )
+    p.add_argument("--out", type=Path,
+                   help="output folder DIR (default: results/<suite name>)")  # fmt: skip
+    p.add_argument("--workers", type=int, default=os.cpu_count() or 1,
+                   help="local worker processes (default: the number of cores; 1 runs in this "
+                   "process)")  # fmt: skip
+    p.add_argument("--dask", metavar="ADDRESS",
+                   help="run on an existing Dask scheduler (e.g. tcp://host:8786); DIR must "
+                   "be visible to the workers at the same path")  # fmt: skip
+    p.add_argument(
+        "--retry-errors",
+        action="store_true",
+        help="rerun jobs recorded with an error (default: keep them)",
+    )
+    p.add_argument("--no-report", action="store_true", help="skip report.md / report.html")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from mpcasv.config import ConfigError
+    from mpcasv.experiments.report import READ_LINE
+    from mpcasv.experiments.runner import run_suite
+    from mpcasv.experiments.suite import load_suite
+
+    if args.workers < 1:
+        raise ConfigError(f"--workers must be >= 1, got {args.workers}")
+    out = args.out or Path("results") / load_suite(args.suite)[0].name
+    stats, exp, results = run_suite(args.suite, out, args.workers, args.dask, args.quiet,
+                                    args.retry_errors, not args.no_report)  # fmt: skip
+    out = out.resolve()
+    ok = int((results["status"] == "ok").sum()) if len(results) else 0
+    print(f"{stats.ran} jobs run in {stats.jobs_wall_s:.1f} s on {stats.backend or 'nothing'} "
+          f"({stats.already_done} were done before); results: {ok} ok, {len(results) - ok} "
+          f"errors, of {len(exp.jobs)} jobs")  # fmt: skip
+    for name, err in stats.error_jobs:
+        print(f"  error in {name}: {err}")
+    if stats.lost:
+        print(f"  {stats.lost} jobs lost with their worker: rerun the same command to resume")
+    if not args.no_report:
+        print(f"report: {out / 'report.html'} (and report.md)")
+    print(f"results table: import pandas as pd; df = {READ_LINE.format(out=out)}")
+    return 0 if ok == len(exp.jobs) else 1

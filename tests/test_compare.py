@@ -1,0 +1,155 @@
+"""``mpcasv compare`` end to end on the quick suite: 1 worker, 2 local workers and a Dask
+LocalCluster give identical results; the results table and the report."""
+
+from __future__ import annotations
+
+import json
+import re
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from mpcasv.cli import main
+from mpcasv.experiments.metrics import METRIC_NAMES
+from mpcasv.experiments.report import BETTER, summary_table, win_loss
+from mpcasv.experiments.runner import run_suite
+from mpcasv.experiments.store import TIMING_COLUMNS
+from mpcasv.experiments.suite import expand
+
+QUICK = expand("quick")
+
+
+def _comparable(df: pd.DataFrame) -> pd.DataFrame:
+    """The results without the machine's timings (wall time, controller step times)."""
+    return df[[c for c in df.columns if c not in TIMING_COLUMNS]]
+
+
+@pytest.fixture(scope="module")
+def serial(tmp_path_factory):
+    out = tmp_path_factory.mktemp("serial")
+    rc = main(["compare", "quick", "--out", str(out), "--workers", "1", "--quiet"])
+    return rc, out, pd.read_parquet(out / "results.parquet")
+
+
+def test_quick_suite_runs_every_job_once_and_writes_its_run(serial):
+    rc, out, df = serial
+    assert rc == 0
+    assert list(df["job_id"]) == [j.job_id for j in QUICK.jobs]  # suite order, each once
+    assert (df["status"] == "ok").all()
+    for _, row in df.iterrows():
+        metrics = json.loads((out / row["run_dir"] / "metrics.json").read_text())
+        assert set(metrics) == set(METRIC_NAMES)
+        assert row["min_range_m"] == pytest.approx(metrics["min_range_m"])
+        for k, v in enumerate(metrics["fixes"]):  # per-AUV lists expanded
+            assert row[f"fixes_auv{k}"] == v
+    assert sorted(p.stem for p in (out / "parts").glob("*.parquet")) == sorted(df["job_id"])
+    # the grid, the currents and the seeds all reach the simulation
+    assert df.groupby("variant")["asv_distance_m"].mean().nunique() == 2
+    assert df.groupby("current")["energy_J"].mean().nunique() == 2
+    assert df.groupby("seed")["fixes_auv0"].apply(list).map(tuple).nunique() == 2
+
+
+@pytest.fixture(scope="module")
+def pool(tmp_path_factory):
+    out = tmp_path_factory.mktemp("pool")
+    return out, run_suite("quick", out, workers=2, quiet=True, report=False)[2]
+
+
+def test_two_local_workers_and_dask_give_identical_results(serial, pool, tmp_path):
+    distributed = pytest.importorskip("distributed")
+    _, _, ref = serial
+    pool_out, pool = pool
+    pd.testing.assert_frame_equal(_comparable(pool), _comparable(ref))
+    assert pool["worker"].nunique() == 2  # both workers did jobs
+    with distributed.LocalCluster(processes=True, n_workers=2, threads_per_worker=1,
+                                  dashboard_address=None) as cluster:  # fmt: skip
+        stats, _, dask = run_suite("quick", tmp_path / "dask", dask=cluster.scheduler_address,
+                                   quiet=True, report=False)  # fmt: skip
+    assert stats.workers == 2 and stats.ok == len(QUICK.jobs)
+    pd.testing.assert_frame_equal(_comparable(dask), _comparable(ref))
+    # rerunning a finished sweep runs nothing and changes nothing
+    stats, _, again = run_suite("quick", pool_out, workers=2, quiet=True, report=False)
+    assert stats.ran == 0 and stats.already_done == len(QUICK.jobs)
+    pd.testing.assert_frame_equal(again, pool)
+
+
+def test_report_has_every_metric_per_scenario_and_its_figures(serial):
+    _, out, df = serial
+    md = (out / "report.md").read_text()
+    page = (out / "report.html").read_text()
+    assert 'pd.read_parquet("' in md and str(out / "results.parquet") in md
+    for scenario in df["scenario"].unique():
+        assert f"## {scenario}" in md
+        for fig in (f"box-{scenario}.png", f"compare-{scenario}.png"):
+            assert (out / "figures" / fig).stat().st_size > 10_000
+            assert f"figures/{fig}" in md
+    assert page.count("data:image/png;base64,") == 2 * df["scenario"].nunique()
+    for m in METRIC_NAMES:
+        assert f"| {m} " in md, m
+    # one cell checked against pandas: case8, first variant, current off, min_range_m
+    v = df["variant"].iloc[0]
+    g = df[(df["scenario"] == "case8") & (df["variant"] == v) & (df["current"] == "off")]
+    mean, sd = g["min_range_m"].mean(), g["min_range_m"].std()
+    section = md.split("## case8")[1]
+    line = next(ln for ln in section.splitlines() if ln.startswith("| min_range_m "))
+    first = line.split("|")[2].strip()
+    assert re.fullmatch(r"[-\d.e+]+ ± [-\d.e+]+", first)
+    got_mean, got_sd = (float(x) for x in first.split(" ± "))
+    assert got_mean == pytest.approx(mean, rel=1e-3) and got_sd == pytest.approx(
+        sd, rel=1e-3, abs=1e-9
+    )
+    # per-AUV metrics have one row per AUV, named
+    for name in df.loc[df["scenario"] == "case8", "auv_names"].iloc[0].split(","):
+        assert f"| fixes [{name}] " in section
+
+
+def test_same_suite_and_seeds_give_the_same_report_numbers(serial, pool):
+    _, _, ref = serial
+    _, again = pool  # another sweep of the same suite (and another backend)
+    timing = {"controller_step_ms_median", "controller_step_ms_p99"}
+    a, b = summary_table(ref), summary_table(again)
+    a, b = a[~a["metric"].isin(timing)], b[~b["metric"].isin(timing)]
+    pd.testing.assert_frame_equal(a.reset_index(drop=True), b.reset_index(drop=True))
+    wa, wb = win_loss(ref), win_loss(again)
+    pd.testing.assert_frame_equal(
+        wa[~wa["metric"].isin(timing)].reset_index(drop=True),
+        wb[~wb["metric"].isin(timing)].reset_index(drop=True),
+    )
+
+
+def test_every_metric_has_a_direction():
+    assert set(BETTER) == set(METRIC_NAMES)
+    assert set(BETTER.values()) <= {"higher", "lower", None}
+
+
+def test_win_loss_counts_in_each_metrics_direction():
+    rows = []
+    # scenario s1: A has the larger min range (better) and the larger energy (worse);
+    # scenario s2: equal min range, A less energy
+    values = {("s1", "A"): (50.0, 9.0), ("s1", "B"): (40.0, 5.0),
+              ("s2", "A"): (30.0, 1.0), ("s2", "B"): (30.0, 2.0)}  # fmt: skip
+    for (s, v), (r, e) in values.items():
+        for seed, noise in enumerate((-1.0, 1.0)):
+            rows.append(
+                {
+                    "scenario": s,
+                    "variant": v,
+                    "current": "off",
+                    "estimator": "perfect",
+                    "seed": seed,
+                    "status": "ok",
+                    "min_range_m": r + noise,
+                    "energy_J": e + noise,
+                    "fixes_auv0": 3,
+                    "fixes_auv1": 1 + seed,
+                }
+            )
+    wl = win_loss(pd.DataFrame(rows)).set_index("metric")
+    assert tuple(wl.loc["min_range_m", ["A_wins", "B_wins", "ties"]]) == (1, 0, 1)
+    assert tuple(wl.loc["energy_J", ["A_wins", "B_wins", "ties"]]) == (1, 1, 0)
+    assert tuple(wl.loc["fixes", ["A_wins", "B_wins", "ties"]]) == (0, 0, 2)
+    summ = summary_table(pd.DataFrame(rows))
+    cell = summ[(summ["scenario"] == "s1") & (summ["variant"] == "A")
+                & (summ["metric"] == "min_range_m")].iloc[0]  # fmt: skip
+    assert cell["mean"] == 50.0 and cell["sd"] == pytest.approx(np.sqrt(2.0)) and cell["n"] == 2

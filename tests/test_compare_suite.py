@@ -1,0 +1,134 @@
+"""Suite files: expansion into jobs, job ids, and bad suites refused before any job starts."""
+
+from __future__ import annotations
+
+import importlib.util
+import textwrap
+
+import pytest
+
+from mpcasv.cli import main
+from mpcasv.config import ConfigError
+from mpcasv.experiments.suite import SCENARIOS_DIR, expand
+from mpcasv.sim import controllers
+
+GOOD = """
+name = "t"
+scenarios = ["case3", "case8"]
+seeds = [0, 1]
+current = ["off", [0.1, 0.0]]
+duration = 30.0
+
+[[controllers]]
+label = "hybrid"
+single = "hybrid-single"
+multi = "hybrid-multi"
+preset = "scenario"
+grid = { "domain.delta_r" = [20.0, 30.0, 40.0] }
+"""
+
+
+def write(tmp_path, text: str, name: str = "suite.toml"):
+    p = tmp_path / name
+    p.write_text(textwrap.dedent(text))
+    return p
+
+
+def test_expansion_is_the_cartesian_product_with_stable_distinct_ids(tmp_path):
+    exp = expand(write(tmp_path, GOOD))
+    assert len(exp.jobs) == 2 * 2 * 3 * 2  # scenarios x currents x grid x seeds
+    assert len({j.job_id for j in exp.jobs}) == len(exp.jobs)
+    assert [j.job_id for j in expand(write(tmp_path, GOOD, "copy.toml")).jobs] == [
+        j.job_id for j in exp.jobs
+    ]
+    j = exp.jobs[0]
+    assert (j.scenario, j.controller, j.preset, j.current) == (
+        "case3",
+        "hybrid-single",
+        "paper1-field",
+        (0.0, 0.0),
+    )
+    assert {k.controller for k in exp.jobs if k.scenario == "case8"} == {"hybrid-multi"}
+    assert {k.duration for k in exp.jobs} == {30.0}
+    assert {dict(k.overrides)["domain.delta_r"] for k in exp.jobs} == {20.0, 30.0, 40.0}
+    # a changed parameter changes the id (no stale results on resume)
+    other = expand(write(tmp_path, GOOD.replace("40.0]", "45.0]"), "other.toml"))
+    assert len({j.job_id for j in exp.jobs} & {j.job_id for j in other.jobs}) == 16
+
+
+BAD = {
+    "unknown scenario": (GOOD.replace('"case8"', '"case99"'), ["scenarios[1]", "case99"]),
+    "unknown controller": (GOOD.replace('multi = "hybrid-multi"', 'multi = "hybird-multi"'),
+                           ["controllers[0]", "hybird-multi", "unknown controller"]),
+    "empty grid": (GOOD.replace("[20.0, 30.0, 40.0]", "[]"), ["domain.delta_r", "empty"]),
+    "unknown key": (GOOD.replace("duration = 30.0", "duration = 30.0\nsede = [1]"), ["sede"]),
+    "unknown parameter": (GOOD.replace("domain.delta_r", "domain.delta_rr"), ["delta_rr"]),
+    "empty seeds": (GOOD.replace("seeds = [0, 1]", "seeds = []"), ["seeds", "empty"]),
+    "unknown estimator": (GOOD.replace("duration = 30.0", 'duration = 30.0\nestimator = '
+                                       '["kalmann"]'), ["estimator[0]", "kalmann"]),
+    "preset of another controller": (GOOD.replace('preset = "scenario"',
+                                     'preset = "scenario"\nscenarios = ["case3"]').replace(
+                                     'single = "hybrid-single"\nmulti = "hybrid-multi"',
+                                     'name = "hybrid-multi"'), ["paper1-field", "hybrid-single"]),
+    "single-AUV controller on three AUVs": (
+        GOOD.replace('single = "hybrid-single"\nmulti = "hybrid-multi"', 'name = "hybrid-single"')
+        .replace('preset = "scenario"', 'preset = "paper1-field"'), ["case8", "handles one AUV"]),
+}  # fmt: skip
+
+
+@pytest.mark.parametrize("case", sorted(BAD))
+def test_bad_suites_are_refused_before_any_job_starts(tmp_path, capsys, case):
+    text, words = BAD[case]
+    path = write(tmp_path, text)
+    with pytest.raises(ConfigError) as err:
+        expand(path)
+    for w in words:
+        assert w in str(err.value), (w, str(err.value))
+    assert str(path) in str(err.value)
+    out = tmp_path / "out"
+    assert main(["compare", str(path), "--out", str(out), "--workers", "1"]) == 2
+    assert not out.exists()  # nothing started
+    assert "error" in capsys.readouterr().err
+
+
+def test_unknown_suite_name_lists_the_shipped_ones():
+    with pytest.raises(ConfigError, match="quick"):
+        expand("no-such-suite")
+
+
+def test_optional_controller_that_is_not_available_is_skipped_and_said(tmp_path, monkeypatch):
+    monkeypatch.setitem(controllers.CONTROLLERS, "ghost", "mpcasv.no_such_module:KIND")
+    text = GOOD + '\n[[controllers]]\nlabel = "ghost"\nname = "ghost"\noptional = true\n'
+    exp = expand(write(tmp_path, text))
+    assert {j.label for j in exp.jobs} == {"hybrid"}
+    assert len(exp.skipped) == 1 and "ghost" in exp.skipped[0]
+    with pytest.raises(ConfigError, match="not available"):
+        expand(write(tmp_path, text.replace("optional = true", ""), "strict.toml"))
+
+
+def test_scenario_paths_are_relative_to_the_suite_file(tmp_path):
+    (tmp_path / "sc").mkdir()
+    (tmp_path / "sc" / "mine.toml").write_text((SCENARIOS_DIR / "case3.toml").read_text())
+    exp = expand(write(tmp_path, GOOD.replace('"case8"', '"sc/mine.toml"').replace(
+        '["case3", ', '[')))  # fmt: skip
+    assert {j.scenario_path for j in exp.jobs} == {str((tmp_path / "sc/mine.toml").resolve())}
+
+
+def test_paper_suite_covers_the_eight_cases_with_and_without_current():
+    exp = expand("paper")
+    assert sorted({j.scenario for j in exp.jobs}) == [f"case{i}" for i in range(1, 9)]
+    assert {j.current == (0.0, 0.0) for j in exp.jobs} == {True, False}
+    assert len({j.seed for j in exp.jobs}) >= 3
+    assert "hybrid" in {j.label for j in exp.jobs}
+
+
+@pytest.mark.skipif(
+    importlib.util.find_spec("mpcasv.mpc.controller") is None,
+    reason="the MPC controllers (mpcasv.mpc.controller) do not exist yet",
+)
+def test_paper_suite_runs_hybrid_against_mpc_once_the_mpc_exists():
+    exp = expand("paper")
+    assert not exp.skipped, exp.skipped
+    for scenario in {j.scenario for j in exp.jobs}:
+        labels = {j.label for j in exp.jobs if j.scenario == scenario}
+        assert labels == {"hybrid", "mpc"}, (scenario, labels)
