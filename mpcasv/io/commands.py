@@ -1,0 +1,149 @@
+"""``mpcasv deploy``, ``mpcasv sitl`` and ``mpcasv replay`` (docs/deploy.md)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import sys
+from pathlib import Path
+
+from mpcasv.config import ConfigError
+
+
+def _imc_id(text: str) -> int:
+    v = int(text, 0)
+    if not 0 <= v < 0xFFFF:
+        raise argparse.ArgumentTypeError(f"IMC id must be 0..0xFFFE, got {text}")
+    return v
+
+
+def _pair(text: str) -> tuple[float, float]:
+    try:
+        a, b = (float(x) for x in text.split(":" if ":" in text else ","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected two numbers, got {text!r}") from None
+    return a, b
+
+
+def _positive(text: str) -> float:
+    v = float(text)
+    if not v > 0:
+        raise argparse.ArgumentTypeError(f"must be > 0, got {text}")
+    return v
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "deploy", help="run a controller on live IMC vehicles (DUNE) or against mpcasv sitl",
+        description="Run the configured controller on the vehicles of CONFIG over IMC: "
+        "FollowReference on the ASV, one Reference per control period, watchdogs, logs "
+        "(imc.lsf + deploy.jsonl in log.dir). Ctrl-C / SIGTERM: standby + MANDONE, exit.",
+    )  # fmt: skip
+    p.add_argument("config", type=Path, help="deploy TOML (experiments/deploy/sitl-case3.toml)")
+    p.add_argument("--dry-run", action="store_true", help="compute and log, send no commands")
+    p.add_argument("--log-dir", type=Path, help="override log.dir of the config")
+    p.add_argument("--duration", type=_positive, help="stop after this many clock seconds")
+    p.add_argument("--quiet", action="store_true", help="no event lines on stderr")
+    p.set_defaults(func=run_deploy_cli)
+
+    s = sub.add_parser(
+        "sitl", help="simulated ASV and AUVs as IMC systems on loopback (rehearsal for deploy)",
+        description="Run SCENARIO's ASV and AUVs as separate DUNE-like IMC systems (Announce, "
+        "Heartbeat-gated EstimatedState at 2 Hz, PlanControl/FollowReference/Reference/"
+        "FollowRefState). SIGUSR1 kills the ASV's IMC system, SIGUSR2 restarts it.",
+    )  # fmt: skip
+    s.add_argument("scenario", type=Path, help="scenario TOML")
+    s.add_argument("--seed", type=int, default=0)
+    s.add_argument("--speedup", type=_positive, default=1.0,
+                   help="clock factor (deploy's clock.speedup must match)")  # fmt: skip
+    s.add_argument("--bind", default="127.0.0.1", help="local address (default 127.0.0.1)")
+    s.add_argument("--discovery-port", type=int, default=30100,
+                   help="port of the discovery socket (0: any free)")  # fmt: skip
+    s.add_argument("--base-port", type=int, default=6002,
+                   help="vehicle k binds base+k (ASV first); 0: any free ports")  # fmt: skip
+    s.add_argument("--origin", type=_pair, default=(63.4406, 10.3530),
+                   help="local frame origin 'lat,lon' in degrees")  # fmt: skip
+    s.add_argument("--duration", type=_positive, help="world seconds (default: the scenario's)")
+    s.add_argument("--hold", action="store_true",
+                   help="keep the world at t=0 until the first Reference")  # fmt: skip
+    s.add_argument(
+        "--reaction",
+        type=float,
+        default=0.9,
+        help="longest wait for the Reference answering a state, in periods (0.9)",
+    )
+    s.add_argument("--reanchor", type=_positive, default=1000.0,
+                   help="EstimatedState reference point moves every this many m")  # fmt: skip
+    s.add_argument("--asv-name", default="sitl-asv")
+    s.add_argument("--asv-id", type=_imc_id, default=0x2801)
+    s.add_argument("--auv-id-base", type=_imc_id, default=0x2811)
+    s.add_argument("--tcp", action="store_true", help="also serve DUNE-like TCP backseat ports")
+    s.add_argument("--asv-outage", type=_pair, help="kill the ASV at world time T0, restart at T1")
+    s.add_argument("--controller", help="controller whose domain the world uses (metrics)")
+    s.add_argument("--preset", help="its preset")
+    s.add_argument("--out", type=Path, default=Path("runs/sitl"))
+    s.add_argument("--plots", action="store_true", help="also write the PNG figures")
+    s.add_argument("--ready-file", type=Path, help="write the bound ports here (JSON)")
+    s.add_argument("--quiet", action="store_true")
+    s.set_defaults(func=run_sitl_cli)
+
+    r = sub.add_parser(
+        "replay", help="re-run a controller over a deploy log and show where decisions differ",
+        description="Feed the Observations logged in LOG (deploy.jsonl, or its folder) to a "
+        "controller (by default the logged one) and compare its commands with the logged ones.",
+    )  # fmt: skip
+    r.add_argument("log", type=Path)
+    r.add_argument("--controller", help="controller name (default: the logged one)")
+    r.add_argument("--preset", help="preset name or TOML (default: the logged one)")
+    r.add_argument("--tol", type=float, default=0.5, help="waypoint tolerance in m (0.5)")
+    r.add_argument("--show", type=int, default=20, help="differing steps to list (20)")
+    r.add_argument("--json", type=Path, help="write the comparison table here (JSON lines)")
+    r.set_defaults(func=run_replay_cli)
+
+
+def _logging(quiet: bool) -> None:
+    logging.basicConfig(level=logging.WARNING if quiet else logging.INFO, stream=sys.stderr,
+                        format="%(name)s: %(message)s")  # fmt: skip
+
+
+def run_deploy_cli(args: argparse.Namespace) -> int:
+    from mpcasv.io.deploy import run_deploy
+
+    _logging(args.quiet)
+    summary = run_deploy(args.config, args.dry_run, args.log_dir, args.duration)
+    print(json.dumps({"summary": summary}), flush=True)
+    return 0
+
+
+def run_sitl_cli(args: argparse.Namespace) -> int:
+    from mpcasv.io.sitl import SitlOptions, run_sitl
+    from mpcasv.sim.scenario import load_scenario
+
+    _logging(args.quiet)
+    if not 0 <= args.reaction < 1:
+        raise ConfigError(f"--reaction must be in [0, 1) periods, got {args.reaction}")
+    sc = load_scenario(args.scenario)
+    opt = SitlOptions(
+        seed=args.seed, speedup=args.speedup, bind=args.bind,
+        discovery_port=args.discovery_port, base_port=args.base_port, origin=args.origin,
+        duration=args.duration, hold=args.hold, reaction=args.reaction,
+        reanchor_m=args.reanchor, asv_name=args.asv_name, asv_id=args.asv_id,
+        auv_id_base=args.auv_id_base, tcp=args.tcp, asv_outage=args.asv_outage,
+        out=args.out, plots=args.plots, controller=args.controller, preset=args.preset,
+        ready_file=args.ready_file,
+    )  # fmt: skip
+    info = run_sitl(sc, opt)
+    print(json.dumps({"finished": {k: v for k, v in info.items() if k != "metrics"}}),
+          flush=True)  # fmt: skip
+    return 0
+
+
+def run_replay_cli(args: argparse.Namespace) -> int:
+    from mpcasv.io.replay import print_replay, replay
+
+    rep = replay(args.log, args.controller, args.preset, args.tol)
+    print_replay(rep, args.show)
+    if args.json:
+        rep.table.to_json(args.json, orient="records", lines=True)
+    return 0

@@ -1,0 +1,252 @@
+"""The deploy configuration (TOML), validated up front into frozen dataclasses.
+
+One file says who we are on the IMC network, which vehicles to talk to (by IMC id and/or
+system name, with their roles), the local frame's origin, the link (UDP or DUNE's TCP
+backseat port), the controller and its preset, the watchdog limits, the clock and the log
+folder. Unknown keys, missing fields, wrong types and impossible numbers are refused with
+the file and field named (:class:`mpcasv.config.ConfigError`). Example files:
+``experiments/deploy/sitl-case3.toml`` and ``sitl-case6.toml``; field by field in
+``docs/deploy.md``.
+"""
+
+from __future__ import annotations
+
+import ipaddress
+from pathlib import Path
+from typing import Annotated, Any, Literal
+
+from pydantic import Field, Strict, field_validator, model_validator
+
+from mpcasv.config import Float, NonNeg, Pos, frozen, load, parse
+
+__all__ = ["DeployConfig", "deploy_config_from_dict", "load_deploy_config", "parse_address"]
+
+#: An IMC system id (0xFFFF is broadcast, never a vehicle).
+ImcId = Annotated[int, Strict(), Field(ge=0, le=0xFFFE)]
+Port = Annotated[int, Strict(), Field(ge=0, le=65535)]
+
+
+def parse_address(text: str) -> tuple[str, int]:
+    """``"host:port"`` (IPv4 literal, port 1-65535) -> ``(host, port)``; ValueError if not."""
+    host, sep, port = text.rpartition(":")
+    if not sep or not port.isdigit():
+        raise ValueError(f"{text!r} is not 'IPv4:port'")
+    try:
+        ipaddress.IPv4Address(host)
+    except ValueError:
+        raise ValueError(f"{text!r}: {host!r} is not an IPv4 address") from None
+    if not 0 < int(port) < 65536:
+        raise ValueError(f"{text!r}: port must be 1-65535")
+    return host, int(port)
+
+
+def _check_address(v: str | None) -> str | None:
+    if v is not None:
+        parse_address(v)
+    return v
+
+
+@frozen
+class Identity:
+    """Who the deploy loop is on the IMC network (announced as a CCU)."""
+
+    name: str = "mpcasv-deploy"
+    id: ImcId = 0x4001
+
+
+@frozen
+class OriginSpec:
+    """Origin of the local NED frame the controller works in (degrees, metres)."""
+
+    lat_deg: Annotated[float, Strict(), Field(ge=-90, le=90)]
+    lon_deg: Annotated[float, Strict(), Field(ge=-180, le=180)]
+    height: Float = 0.0
+
+
+@frozen
+class Vehicle:
+    """One vehicle: its role and IMC id and/or system name (both given: both must match).
+
+    ``address`` (``"IPv4:port"`` of its IMC UDP service) is optional: by default it is learnt
+    from the vehicle's Announce. ``tcp`` is its backseat server for ``link.transport = "tcp"``.
+    """
+
+    role: Literal["asv", "auv"]
+    id: ImcId | None = None
+    name: str | None = None
+    address: str | None = None
+    tcp: str | None = None
+
+    @field_validator("address", "tcp")
+    @classmethod
+    def _addr(cls, v: str | None) -> str | None:
+        return _check_address(v)
+
+    @model_validator(mode="after")
+    def _named(self) -> Vehicle:
+        if self.id is None and not self.name:
+            raise ValueError("a vehicle needs an 'id' or a 'name' (or both)")
+        return self
+
+    @property
+    def label(self) -> str:
+        return self.name or f"0x{self.id:04X}"
+
+
+@frozen
+class LinkSpec:
+    """Transport, addresses and the IMC timing (seconds of the deploy clock)."""
+
+    transport: Literal["udp", "tcp"] = "udp"
+    bind: str = "127.0.0.1"  # the one local address we bind
+    port: Port = 6002  # 0: any free port (tests)
+    announce_to: tuple[str, ...] = (
+        "224.0.75.69:30100", "224.0.75.69:30101", "224.0.75.69:30102",
+        "224.0.75.69:30103", "224.0.75.69:30104",
+    )  # fmt: skip
+    announce_period: Pos = 10.0
+    heartbeat_period: Pos = 1.0
+    followref_timeout: Pos = 10.0  # FollowReference.timeout: DUNE ends the maneuver after it
+    plan_id: str = "mpcasv-followref"
+    plan_start_timeout: Pos = 5.0  # wait this long for PlanControl SUCCESS, then retry
+    reference_lead_m: NonNeg = 20.0  # push the Reference past DUNE's arrival tolerance
+    reference_radius_m: NonNeg = 0.0  # Reference.radius (DUNE arrives at |radius| + 15 m)
+
+    @field_validator("bind")
+    @classmethod
+    def _bind(cls, v: str) -> str:
+        ipaddress.IPv4Address(v)
+        return v
+
+    @field_validator("announce_to")
+    @classmethod
+    def _announce(cls, v: tuple[str, ...]) -> tuple[str, ...]:
+        for a in v:
+            parse_address(a)
+        return v
+
+
+@frozen
+class ControllerSpec:
+    """The supervisory controller, as in the simulator (same registry, same presets)."""
+
+    name: str
+    preset: str | None = None  # shipped preset name or TOML path (default: the kind's)
+    estimator: str = "perfect"
+    control_period: Pos = 1.0  # s between decisions (the papers' timers count seconds)
+    scenario: str | None = None  # optional scenario TOML: the AUVs' plans for "plan"
+    overrides: dict[str, Any] = Field(default_factory=dict)
+
+
+@frozen
+class WatchdogSpec:
+    """Limits (s of the deploy clock, m, m/s) and input plausibility checks."""
+
+    asv_stale_s: Pos = 3.0  # no ASV state for this long: stop commanding, report
+    auv_stale_s: Pos = 3.0  # AUV state older: uncertain (radius grows with its age)
+    auv_lost_s: Pos = 30.0  # AUV silent for longer: reported, ASV kept safe
+    auv_speed_max: Pos = 2.0  # how fast an AUV may move away from its last state
+    asv_speed_max: Pos = 6.0  # faster apparent motion is rejected as a jump
+    jump_margin_m: NonNeg = 50.0  # GPS/nav slack added to speed x dt in the jump check
+    max_distance_m: Pos = 20000.0  # states further from the origin are rejected
+    clock_slack_s: NonNeg = 5.0  # a timestamp may run ahead of the arrival clock by this
+    propeller: Literal["thruster", "command"] = "thruster"  # where propeller_on comes from
+    propeller_on_threshold: Annotated[float, Strict(), Field(gt=0, lt=1)] = 0.05
+    report_sigma_m: NonNeg = 1.0  # 1-sigma of an AUV's own navigation (Report.nav_sigma)
+    keep_out_m: Pos = 50.0  # guard radius at the surface for controllers without a domain
+    guard_margin_m: NonNeg = 10.0  # clearance beyond the grown radius when moving away
+    guard_speed: Pos = 1.5  # m/s of a guard transit when the controller commanded none
+
+    @model_validator(mode="after")
+    def _order(self) -> WatchdogSpec:
+        if self.auv_lost_s <= self.auv_stale_s:
+            raise ValueError("auv_lost_s must be longer than auv_stale_s")
+        return self
+
+
+@frozen
+class ClockSpec:
+    """``speedup`` > 1 only against a SITL started with the same ``--speedup``."""
+
+    speedup: Pos = 1.0
+
+
+@frozen
+class LogSpec:
+    dir: str = "runs/deploy"
+    flush_s: Annotated[float, Strict(), Field(gt=0, le=1.0)] = 0.5  # wall seconds
+    reject_log_per_s: Annotated[int, Strict(), Field(ge=1)] = 50  # detailed lines per reason
+
+
+@frozen
+class DeployConfig:
+    """A complete deploy configuration (see the module docstring)."""
+
+    origin: OriginSpec
+    controller: ControllerSpec
+    vehicle: tuple[Vehicle, ...]
+    identity: Identity = Identity()
+    link: LinkSpec = LinkSpec()
+    watchdog: WatchdogSpec = WatchdogSpec()
+    clock: ClockSpec = ClockSpec()
+    log: LogSpec = LogSpec()
+
+    @model_validator(mode="after")
+    def _vehicles(self) -> DeployConfig:
+        roles = [v.role for v in self.vehicle]
+        if roles.count("asv") != 1:
+            raise ValueError(f"exactly one vehicle with role 'asv' is needed, got {roles}")
+        if "auv" not in roles:
+            raise ValueError("at least one vehicle with role 'auv' is needed")
+        ids = [v.id for v in self.vehicle if v.id is not None]
+        names = [v.name for v in self.vehicle if v.name]
+        if len(set(ids)) != len(ids) or len(set(names)) != len(names):
+            raise ValueError("vehicle ids and names must be unique")
+        if self.identity.id in ids or self.identity.name in names:
+            raise ValueError("identity.id / identity.name clash with a vehicle")
+        if self.link.transport == "tcp" and any(v.tcp is None or v.id is None
+                                                for v in self.vehicle):  # fmt: skip
+            raise ValueError("link.transport = 'tcp' needs 'tcp' and 'id' for every vehicle")
+        return self
+
+    @property
+    def asv(self) -> Vehicle:
+        return next(v for v in self.vehicle if v.role == "asv")
+
+    @property
+    def auvs(self) -> tuple[Vehicle, ...]:
+        """The AUVs in file order: AUV k of the controller is the k-th ``role = "auv"``."""
+        return tuple(v for v in self.vehicle if v.role == "auv")
+
+
+def load_deploy_config(path: str | Path) -> DeployConfig:
+    """Load and validate a deploy TOML file; also checks controller, preset and estimator
+    names now, so that nothing fails after the vehicles have been contacted."""
+    cfg = load(DeployConfig, path)
+    check_controller(cfg, path)
+    return cfg
+
+
+def deploy_config_from_dict(data: dict, source: str = "<deploy config>") -> DeployConfig:
+    cfg = parse(DeployConfig, data, source)
+    check_controller(cfg, source)
+    return cfg
+
+
+def check_controller(cfg: DeployConfig, source: str | Path) -> None:
+    """Build the controller once (validates name, preset, overrides and the AUV count)."""
+    from mpcasv.config import ConfigError
+    from mpcasv.estimation import ESTIMATORS
+    from mpcasv.sim.controllers import make_controller
+
+    c = cfg.controller
+    if c.estimator not in ESTIMATORS:
+        raise ConfigError(
+            f"{source}: controller.estimator: unknown {c.estimator!r}; known {sorted(ESTIMATORS)}"
+        )
+    try:
+        make_controller(c.name, len(cfg.auvs), c.preset, c.overrides)
+    except ConfigError as exc:
+        raise ConfigError(f"{source}: controller: {exc}") from None
+    if c.scenario is not None and not Path(c.scenario).is_file():
+        raise ConfigError(f"{source}: controller.scenario: no such file {c.scenario!r}")

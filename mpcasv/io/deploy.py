@@ -1,0 +1,373 @@
+"""``mpcasv deploy``: the chosen controller on live IMC data.
+
+Per supervisory period (``controller.control_period``, stepped on the ASV's EstimatedState
+whose timestamp reaches the next tick, so a rehearsal follows the SITL's clock exactly):
+the AUVs' accepted EstimatedStates have fed their estimators (each state is a status
+report, and the truth for ``perfect``), the watchdogs classify every AUV (ok / uncertain /
+lost, :mod:`mpcasv.io.watchdog`), the controller steps on the Observation, the guard may
+override its command, and the command goes to the ASV as a Reference (``--dry-run``: logged
+only). Everything is logged (``imc.lsf``: every packet in and out; ``deploy.jsonl``: every
+decision with the Observation it was made on, and every event).
+
+Phases: ``waiting`` (for the ASV's and every AUV's first state) -> ``starting``
+(PlanControl START FollowReference sent; waits for the answer with the same request id;
+retried after ``plan_start_timeout``) -> ``running``. The ASV's state older than
+``asv_stale_s`` -> ``asv_stale``: no more References (DUNE then ends the maneuver on its
+timeout and stops), reported; when states come back -> ``waiting`` and FollowReference is
+started again. A FollowRefState TIMEOUT for our maneuver also restarts it. Ctrl-C / SIGTERM:
+a standby Reference (speed 0) then MANDONE, the counters, and the logs flushed and closed.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import dataclasses
+import logging
+import math
+import signal
+import time
+from pathlib import Path
+
+import imcpy
+
+from mpcasv.config import ConfigError
+from mpcasv.estimation import make_estimator
+from mpcasv.interface import ASVState, Command, Mode, Observation
+from mpcasv.io.config import DeployConfig, load_deploy_config
+from mpcasv.io.imc import RF, reference
+from mpcasv.io.link import ImcLink, Peer
+from mpcasv.io.logs import JsonlWriter, LsfWriter
+from mpcasv.io.records import cmd_to_dict, obs_to_dict
+from mpcasv.io.transport import Clock
+from mpcasv.io.watchdog import OK, GuardParams, auv_status, guard, inflate
+from mpcasv.models.acoustics import Report
+from mpcasv.sim.controllers import make_controller
+
+__all__ = ["Deploy", "guard_params", "run_deploy"]
+
+log = logging.getLogger("mpcasv.deploy")
+WAITING, STARTING, RUNNING, ASV_STALE = "waiting", "starting", "running", "asv_stale"
+_PC = imcpy.PlanControl
+
+
+def guard_params(cfg: DeployConfig, controller) -> GuardParams:
+    wd = cfg.watchdog
+    speed = float(getattr(getattr(controller, "params", None), "speed", wd.guard_speed))
+    return GuardParams(wd.auv_stale_s, wd.auv_lost_s, wd.auv_speed_max, wd.keep_out_m,
+                       wd.guard_margin_m, speed)  # fmt: skip
+
+
+def _known_plans(cfg: DeployConfig) -> list:
+    n = len(cfg.auvs)
+    if cfg.controller.scenario is None:
+        return [None] * n
+    from mpcasv.estimation import known_plan
+    from mpcasv.sim.scenario import load_scenario
+
+    sc = load_scenario(cfg.controller.scenario)
+    if len(sc.auv) != n:
+        raise ConfigError(f"controller.scenario {cfg.controller.scenario} has {len(sc.auv)} "
+                          f"AUVs, the config {n}")  # fmt: skip
+    return [known_plan(a.build_behaviour()) for a in sc.auv]
+
+
+class Deploy:
+    """The deploy loop (see the module docstring).
+
+    Parameters
+    ----------
+    cfg : DeployConfig
+    dry_run : bool
+        Compute and log the commands, send no PlanControl/Reference.
+    log_dir : Path, optional
+        Overrides ``cfg.log.dir``.
+    """
+
+    def __init__(self, cfg: DeployConfig, dry_run: bool = False, log_dir: Path | None = None):
+        self.cfg, self.dry_run = cfg, dry_run
+        self.clock = Clock(cfg.clock.speedup)
+        c = cfg.controller
+        self.n_auv = len(cfg.auvs)
+        self.controller = make_controller(c.name, self.n_auv, c.preset, c.overrides)
+        self.controller.reset(self.n_auv)
+        self.domain = getattr(self.controller, "domain", None)
+        plans = _known_plans(cfg)
+        self.estimators = [make_estimator(c.estimator, initial=None, plan=plans[k])
+                           for k in range(self.n_auv)]  # fmt: skip
+        self.log_dir = Path(log_dir or cfg.log.dir)
+        self.lsf = LsfWriter(self.log_dir / "imc.lsf")
+        self.jsonl = JsonlWriter(self.log_dir / "deploy.jsonl")
+        self.link = ImcLink(cfg, self.clock, self.lsf, self._on_state, self._on_message,
+                            self._on_event)  # fmt: skip
+        self.gp = guard_params(cfg, self.controller)
+        self.phase = WAITING
+        self.t_next = -math.inf  # next supervisory tick (ASV state time)
+        self.request_id = 0
+        self.pending: tuple[int, float] | None = None  # (request id, sent at)
+        self.retry_at = -math.inf
+        self.started = False  # FollowReference has been started at least once
+        self.status = ["missing"] * self.n_auv
+        self.thrust: tuple[float, float] | None = None  # (value, received)
+        self.followref: dict | None = None
+        self.steps = 0
+        self.overrides = 0
+        self.stale_events = 0
+        self._waiting_for: tuple = ()
+        self._thruster_warned = False
+        self.last_cmd: Command | None = None
+
+    # --- reports -------------------------------------------------------------------------
+    def _on_event(self, rec: dict) -> None:
+        self.jsonl.write(rec)
+        if rec.get("event") != "reject":
+            detail = {k: v for k, v in rec.items() if k not in ("kind", "event", "t")}
+            log.info("%s %s", rec["event"], detail)
+
+    def event(self, name: str, **info) -> None:
+        self.link.event(name, phase=self.phase, **info)
+
+    # --- input ---------------------------------------------------------------------------
+    def _on_state(self, p: Peer, nav, now: float) -> None:
+        if p.role == "asv":
+            if self.phase == ASV_STALE:
+                self.phase = WAITING
+                self.event("asv_resumed", vehicle=p.label)
+            self._advance(now)
+            if self.phase == RUNNING:
+                self._maybe_step(nav.t, now)
+            return
+        k = p.index
+        est = self.estimators[k]
+        est.on_truth(nav.t, nav.N, nav.E, nav.depth, nav.v_N, nav.v_E)
+        est.on_report(
+            Report(
+                nav.t,
+                k,
+                nav.N,
+                nav.E,
+                nav.depth,
+                nav.psi,
+                math.hypot(nav.v_N, nav.v_E),
+                self.cfg.watchdog.report_sigma_m,
+            )
+        )
+        if self.status[k] not in (OK, "missing"):
+            self.event("auv_fresh", vehicle=p.label, auv=k, was=self.status[k])
+        self.status[k] = OK
+
+    def _on_message(self, p: Peer, msg, now: float) -> None:
+        if isinstance(msg, imcpy.PlanControl):
+            self._plan_control(msg, now)
+        elif isinstance(msg, imcpy.FollowRefState):
+            state = getattr(msg.state, "name", str(msg.state))
+            self.followref = {"state": state, "proximity": int(msg.proximity), "recv": now}
+            if (state == "TIMEOUT" and msg.control_src == self.link.id
+                    and self.phase == RUNNING):  # fmt: skip
+                self.phase = WAITING
+                self.event("followref_timeout", vehicle=p.label)
+        elif isinstance(msg, imcpy.SetThrusterActuation) and msg.id == 0:
+            self.thrust = (float(msg.value), now)
+
+    def _plan_control(self, msg: imcpy.PlanControl, now: float) -> None:
+        ours = self.pending is not None and msg.request_id == self.pending[0]
+        info = {"type": int(msg.type), "op": int(msg.op), "request_id": msg.request_id,
+                "plan_id": msg.plan_id, "info": msg.info}  # fmt: skip
+        if not ours or self.phase != STARTING:
+            self.event("plan_control", ours=ours, **info)
+            return
+        if msg.type == _PC.TypeEnum.SUCCESS:
+            self.pending, self.phase, self.started = None, RUNNING, True
+            self.t_next = -math.inf
+            self.event("plan_started", **info)
+        elif msg.type == _PC.TypeEnum.FAILURE:
+            self.pending, self.phase = None, WAITING
+            self.retry_at = now + self.cfg.link.plan_start_timeout
+            self.event("plan_start_failed", **info)
+
+    # --- phases and watchdogs ------------------------------------------------------------
+    def _asv_fresh(self, now: float) -> bool:
+        return now - self.link.asv.nav_recv <= self.cfg.watchdog.asv_stale_s
+
+    def _advance(self, now: float) -> None:
+        if self.phase != WAITING or now < self.retry_at:
+            return
+        missing = []
+        if not self._asv_fresh(now) or self.link.asv.id is None:
+            missing.append(self.link.asv.label)
+        missing += [p.label for p in self.link.auvs if p.nav is None]
+        if missing:
+            if tuple(missing) != self._waiting_for:
+                self._waiting_for = tuple(missing)
+                self.event("waiting", missing=missing)
+            return
+        if self.dry_run:
+            self.phase, self.t_next = RUNNING, -math.inf
+            self.event("running", dry_run=True)
+            return
+        self.request_id = (self.request_id + 1) % 0x10000
+        pc = imcpy.PlanControl()
+        pc.type, pc.op = _PC.TypeEnum.REQUEST, _PC.OperationEnum.START
+        pc.request_id, pc.plan_id, pc.flags = self.request_id, self.cfg.link.plan_id, 0
+        fr = imcpy.FollowReference()
+        fr.control_src, fr.control_ent = self.link.id, 0xFF
+        fr.timeout, fr.loiter_radius, fr.altitude_interval = self.cfg.link.followref_timeout, 0, 0
+        pc.arg = fr
+        self.link.send(self.link.asv, pc)
+        self.pending, self.phase = (self.request_id, now), STARTING
+        self.event("plan_start_sent", request_id=self.request_id)
+
+    def watch(self) -> None:
+        """One pass of the watchdogs (called every 0.25 s of the deploy clock)."""
+        now = self.clock.now()
+        wd = self.cfg.watchdog
+        asv = self.link.asv
+        if asv.nav is not None and self.phase != ASV_STALE and not self._asv_fresh(now):
+            self.event("asv_stale", vehicle=asv.label, age_s=now - asv.nav_recv,
+                       limit_s=wd.asv_stale_s)  # fmt: skip
+            self.phase, self.pending = ASV_STALE, None
+            self.stale_events += 1
+        for k, p in enumerate(self.link.auvs):
+            if p.nav is None:
+                continue
+            st = auv_status(now - p.nav_recv, self.gp)
+            if st != self.status[k]:
+                if st != OK:
+                    self.event(f"auv_{st}", vehicle=p.label, auv=k, age_s=now - p.nav_recv)
+                self.status[k] = st
+        if self.phase == STARTING and now - self.pending[1] > self.cfg.link.plan_start_timeout:
+            self.event("plan_start_timeout", request_id=self.pending[0])
+            self.phase, self.pending = WAITING, None
+        self._advance(now)
+
+    # --- the supervisory step ------------------------------------------------------------
+    def _maybe_step(self, ts: float, now: float) -> None:
+        Tc = self.cfg.controller.control_period
+        if ts < self.t_next - 0.1 * Tc:
+            return
+        on_grid = math.isfinite(self.t_next) and ts < self.t_next + 0.5 * Tc
+        self.t_next = self.t_next + Tc if on_grid else ts + Tc
+        self.step(ts, now)
+
+    def _propeller_on(self, now: float) -> bool:
+        wd = self.cfg.watchdog
+        if wd.propeller == "thruster":
+            if self.thrust is not None and now - self.thrust[1] <= wd.asv_stale_s:
+                return self.thrust[0] > wd.propeller_on_threshold
+            if not self._thruster_warned:
+                self._thruster_warned = True
+                self.event("thruster_stale", note="propeller_on taken from our last command")
+        return self.last_cmd is not None and self.last_cmd.mode is Mode.TRANSIT
+
+    def observation(self, ts: float, now: float) -> tuple[Observation, list[str], list[float]]:
+        """The Observation at ASV-state time ``ts`` with the watchdogs' verdicts."""
+        ages = [now - p.nav_recv for p in self.link.auvs]
+        status = [auv_status(a, self.gp) for a in ages]
+        ests = []
+        for k, est in enumerate(self.estimators):
+            e = est.estimate(ts)
+            ests.append(e if status[k] == OK else inflate(e, ages[k], self.gp.v_max))
+        a = self.link.asv.nav
+        obs = Observation(ts, ASVState(a.N, a.E, a.psi, a.u, a.v, a.r), self._propeller_on(now),
+                          tuple(ests))  # fmt: skip
+        return obs, status, ages
+
+    def step(self, ts: float, now: float) -> Command:
+        obs, status, ages = self.observation(ts, now)
+        c0 = time.perf_counter()
+        raw = self.controller.step(obs)
+        step_ms = (time.perf_counter() - c0) * 1e3
+        cmd, override = guard(raw, obs, status, ages, self.domain, self.gp)
+        sent = False
+        if not self.dry_run:
+            lk = self.cfg.link
+            ref = reference(cmd, (obs.asv.N, obs.asv.E), self.link.origin, lk.reference_lead_m,
+                            lk.reference_radius_m)  # fmt: skip
+            sent = self.link.send(self.link.asv, ref)
+        self.last_cmd = cmd
+        self.steps += 1
+        self.overrides += override is not None
+        diag = getattr(self.controller, "diagnostics", None)
+        self.jsonl.write({
+            "kind": "step", "t": ts, "clock": now, "step": self.steps,
+            "obs": obs_to_dict(obs), "controller_cmd": cmd_to_dict(raw), "cmd": cmd_to_dict(cmd),
+            "override": override, "sent": sent, "status": status, "ages": ages,
+            "step_ms": step_ms, "followref": self.followref, "diag": diag() if diag else {},
+        })  # fmt: skip
+        return cmd
+
+    # --- run and stop --------------------------------------------------------------------
+    async def run(self, stop: asyncio.Event, duration: float | None = None) -> dict:
+        """Run until ``stop`` is set (or ``duration`` s of the deploy clock); return the
+        final counters."""
+        await self.link.start()
+        self.event(
+            "started",
+            controller=self.cfg.controller.name,
+            dry_run=self.dry_run,
+            speedup=self.cfg.clock.speedup,
+            log_dir=str(self.log_dir),
+            config=dataclasses.asdict(self.cfg),
+            guard=dataclasses.asdict(self.gp),
+        )
+        tasks = [asyncio.create_task(self._every_clock(0.25, self.watch)),
+                 asyncio.create_task(self._flush_loop())]  # fmt: skip
+        if duration is not None:
+            tasks.append(asyncio.create_task(self._stop_after(duration, stop)))
+        await stop.wait()
+        for t in tasks:
+            t.cancel()
+        for t in tasks:
+            with contextlib.suppress(asyncio.CancelledError):
+                await t
+        return await self.shutdown()
+
+    async def _every_clock(self, period: float, fn) -> None:
+        while True:
+            await self.clock.sleep(period)
+            fn()
+
+    async def _flush_loop(self) -> None:
+        while True:
+            await asyncio.sleep(self.cfg.log.flush_s)
+            self.jsonl.flush()
+            self.lsf.flush()
+
+    async def _stop_after(self, duration: float, stop: asyncio.Event) -> None:
+        await self.clock.sleep(duration)
+        stop.set()
+
+    async def shutdown(self) -> dict:
+        """Final standby + MANDONE (if we ever started FollowReference), counters, logs."""
+        asv = self.link.asv
+        if not self.dry_run and self.started and asv.id is not None:
+            here = (asv.nav.N, asv.nav.E) if asv.nav is not None else (0.0, 0.0)
+            self.link.send(asv, reference(Command.standby(), here, self.link.origin))
+            done = imcpy.Reference()
+            done.flags = RF.MANDONE
+            self.link.send(asv, done)
+            self.event("final_standby", mandone=True)
+        summary = {"steps": self.steps, "overrides": self.overrides,
+                   "asv_stale_events": self.stale_events, **self.link.counters()}  # fmt: skip
+        self.jsonl.write({"kind": "summary", "t": self.clock.now(), **summary})
+        await asyncio.sleep(0.05)  # let the last datagrams leave
+        await self.link.stop()
+        self.jsonl.close()
+        self.lsf.close()
+        return summary
+
+
+def run_deploy(config: str | Path, dry_run: bool = False, log_dir: Path | None = None,
+               duration: float | None = None) -> dict:  # fmt: skip
+    """Load ``config``, run the deploy loop until Ctrl-C / SIGTERM (or ``duration``)."""
+    cfg = load_deploy_config(config)
+    deploy = Deploy(cfg, dry_run, log_dir)
+
+    async def main() -> dict:
+        stop = asyncio.Event()
+        loop = asyncio.get_running_loop()
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            loop.add_signal_handler(sig, stop.set)
+        return await deploy.run(stop, duration)
+
+    return asyncio.run(main())

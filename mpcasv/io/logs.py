@@ -1,0 +1,109 @@
+"""Log files written while the link runs: every IMC packet in and out (LSF) and a JSON-lines
+file of decisions and events.
+
+LSF, as DUNE writes it (``Data.lsf``), is nothing but serialized IMC packets one after the
+other, so imcpy's ``LSFReader``, :func:`mpcasv.io.lsf.read_messages` and Neptus read it.
+Both files are flushed by :meth:`flush` (called every ``log.flush_s`` <= 1 s by the owner and
+on close), so a crash loses at most the last second.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from pathlib import Path
+from typing import IO, Any
+
+import numpy as np
+
+__all__ = ["JsonlWriter", "LsfWriter", "jsonable", "read_jsonl"]
+
+
+class LsfWriter:
+    """Append whole IMC packets to ``path`` (created, or truncated)."""
+
+    def __init__(self, path: str | Path) -> None:
+        self.path = Path(path)
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self._fh: IO[bytes] | None = self.path.open("wb")
+        self.packets = 0
+
+    def write(self, packet: bytes) -> None:
+        if self._fh is not None:
+            self._fh.write(packet)
+            self.packets += 1
+
+    def flush(self) -> None:
+        if self._fh is not None:
+            self._fh.flush()
+
+    def close(self) -> None:
+        if self._fh is not None:
+            self._fh.flush()
+            self._fh.close()
+            self._fh = None
+
+
+def jsonable(v: Any) -> Any:
+    """Plain JSON value: numpy scalars/arrays to Python, NaN/inf to None, enums to str."""
+    if isinstance(v, dict):
+        return {str(k): jsonable(x) for k, x in v.items()}
+    if isinstance(v, (list, tuple)):
+        return [jsonable(x) for x in v]
+    if isinstance(v, np.ndarray):
+        return jsonable(v.tolist())
+    if isinstance(v, (np.floating, float)):
+        f = float(v)
+        return f if math.isfinite(f) else None
+    if isinstance(v, (np.integer, np.bool_)):
+        return v.item()
+    if isinstance(v, (str, int, bool)) or v is None:
+        return v
+    return str(v)
+
+
+class JsonlWriter:
+    """One JSON object per line; every record gets ``wall`` (UNIX time of writing)."""
+
+    def __init__(self, path: str | Path) -> None:
+        self.path = Path(path)
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self._fh: IO[str] | None = self.path.open("w", encoding="utf-8")
+        self.lines = 0
+
+    def write(self, record: dict) -> None:
+        if self._fh is not None:
+            rec = {"wall": time.time()} | record
+            self._fh.write(json.dumps(jsonable(rec), allow_nan=False) + "\n")
+            self.lines += 1
+
+    def flush(self) -> None:
+        if self._fh is not None:
+            self._fh.flush()
+
+    def close(self) -> None:
+        if self._fh is not None:
+            self._fh.flush()
+            self._fh.close()
+            self._fh = None
+
+
+def read_jsonl(path: str | Path, kind: str | None = None) -> list[dict]:
+    """Records of a JSON-lines log (optionally only ``kind``); a last line cut by a crash is
+    skipped, any other bad line raises ValueError naming the file and line."""
+    path = Path(path)
+    lines = path.read_text(encoding="utf-8").splitlines()
+    out = []
+    for i, line in enumerate(lines, 1):
+        if not line.strip():
+            continue
+        try:
+            rec = json.loads(line)
+        except json.JSONDecodeError as exc:
+            if i == len(lines):
+                break
+            raise ValueError(f"{path}:{i}: not JSON ({exc})") from None
+        if kind is None or rec.get("kind") == kind:
+            out.append(rec)
+    return out

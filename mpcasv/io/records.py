@@ -1,0 +1,64 @@
+"""Observations and commands as plain dicts (the deploy JSONL) and back, exactly.
+
+Python floats survive a JSON round trip bit for bit, so :func:`obs_from_dict` rebuilds the
+very Observation the controller saw (``-inf`` ``t_last_fix`` is stored as None).
+"""
+
+from __future__ import annotations
+
+import math
+
+from mpcasv.interface import ASVState, AUVEstimate, Command, Mode, Observation, Reason
+
+__all__ = ["cmd_from_dict", "cmd_to_dict", "obs_from_dict", "obs_to_dict", "same_command"]
+
+
+def _f(v) -> float:
+    return -math.inf if v is None else float(v)
+
+
+def obs_to_dict(obs: Observation) -> dict:
+    a = obs.asv
+    return {
+        "t": obs.t,
+        "asv": {"N": a.N, "E": a.E, "psi": a.psi, "u": a.u, "v": a.v, "r": a.r},
+        "propeller_on": obs.propeller_on,
+        "auvs": [
+            {"N": e.N, "E": e.E, "depth": e.depth, "v_N": e.v_N, "v_E": e.v_E,
+             "cov": list(e.cov), "t_last_fix": e.t_last_fix if math.isfinite(e.t_last_fix)
+             else None}
+            for e in obs.auvs
+        ],
+    }  # fmt: skip
+
+
+def obs_from_dict(d: dict) -> Observation:
+    auvs = tuple(
+        AUVEstimate(
+            e["N"], e["E"], e["depth"], e["v_N"], e["v_E"], tuple(e["cov"]), _f(e["t_last_fix"])
+        )  # fmt: skip
+        for e in d["auvs"]
+    )
+    return Observation(d["t"], ASVState(**d["asv"]), bool(d["propeller_on"]), auvs)
+
+
+def cmd_to_dict(cmd: Command) -> dict:
+    return {
+        "mode": str(cmd.mode), "waypoint": list(cmd.waypoint) if cmd.waypoint else None,
+        "speed": cmd.speed, "auv": cmd.auv, "reason": str(cmd.reason),
+    }  # fmt: skip
+
+
+def cmd_from_dict(d: dict) -> Command:
+    wp = tuple(d["waypoint"]) if d["waypoint"] is not None else None
+    return Command(Mode(d["mode"]), wp, float(d["speed"]), d["auv"], Reason(d["reason"]))
+
+
+def same_command(a: Command, b: Command, tol_m: float = 0.5, tol_speed: float = 1e-6) -> bool:
+    """Same mode, AUV and reason; transit waypoints within ``tol_m`` and equal speeds."""
+    if (a.mode, a.auv, a.reason) != (b.mode, b.auv, b.reason):
+        return False
+    if a.mode is Mode.STANDBY:
+        return True
+    dist = math.hypot(a.waypoint[0] - b.waypoint[0], a.waypoint[1] - b.waypoint[1])
+    return dist <= tol_m and abs(a.speed - b.speed) <= tol_speed

@@ -1,0 +1,179 @@
+"""Metrics of a rehearsal (``mpcasv deploy`` against ``mpcasv sitl``), comparable with the
+in-process simulation of the same scenario and seed.
+
+The SITL writes the truth (``<sitl out>/run/``) but cannot know why the ASV was commanded
+what it was; the deploy log has the reasons. :func:`rehearsal_metrics` joins each SITL period
+with the decision that acted during it (deploy time = world time + ``ts_offset``) and
+computes every metric with :func:`mpcasv.experiments.metrics.compute_metrics`, the one
+definition. Periods with no decision (before the first one, during an ASV outage) keep the
+SITL's mode and get the reason ``"none"``.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from mpcasv.experiments.metrics import compute_metrics
+from mpcasv.io.logs import read_jsonl
+from mpcasv.sim.scenario import Scenario, scenario_with
+from mpcasv.sim.simulator import RunResult
+
+__all__ = ["COMPARABLE", "compare_metrics", "rehearsal_metrics"]
+
+#: Metrics a rehearsal and the in-process simulation of the same scenario, seed and duration
+#: should agree on (relative tolerance, with an absolute floor for values near zero: (m, s)).
+#: Left out: wall-clock figures (controller_step_ms_*), the estimator's belief metrics (the
+#: SITL world's estimator is not the deploy loop's) and counts of rare discrete events.
+COMPARABLE = {
+    "min_range_m": 1.0, "asv_distance_m": 5.0, "standby_s": 5.0, "transit_tracking_s": 5.0,
+    "transit_avoidance_s": 5.0, "propeller_on_s": 5.0, "energy_J": 2000.0,
+    "max_revisit_interval_s": 5.0, "time_inside_inner_s": 5.0, "time_outside_outer_s": 5.0,
+}  # fmt: skip
+
+
+def _fix_times(ts: pd.DataFrame, col: str) -> list[list[float]]:
+    out, k = [], 0
+    while f"{col}{k}" in ts:
+        n = ts[f"{col}{k}"].to_numpy(int)
+        out.append([float(t) for t, c in zip(ts["t"], n, strict=True) for _ in range(c)])
+        k += 1
+    return out
+
+
+def rehearsal_metrics(scenario: Scenario, sitl_out: str | Path, deploy_log: str | Path
+                      ) -> tuple[dict, pd.DataFrame]:  # fmt: skip
+    """(metrics, joined time series) of a rehearsal.
+
+    Parameters
+    ----------
+    scenario : Scenario
+        The scenario the SITL ran.
+    sitl_out : path
+        The SITL's ``--out`` folder.
+    deploy_log : path
+        The deploy's ``deploy.jsonl`` (or its folder).
+    """
+    run = Path(sitl_out) / "run"
+    ts = pd.read_parquet(run / "timeseries.parquet")
+    info = json.loads((run / "run.json").read_text())["sitl"]
+    exact = json.loads((run / "metrics.json").read_text())
+    log = Path(deploy_log)
+    steps = read_jsonl(log / "deploy.jsonl" if log.is_dir() else log, "step")
+    Tc = scenario.sim.control_period
+    dec = pd.DataFrame({
+        "t0": [s["t"] - info["ts_offset"] for s in steps],
+        "d_mode": [s["cmd"]["mode"] for s in steps],
+        "d_reason": [s["cmd"]["reason"] for s in steps],
+        "d_auv": [-1 if s["cmd"]["auv"] is None else s["cmd"]["auv"] for s in steps],
+    }).sort_values("t0")  # fmt: skip
+    ts = ts.sort_values("t").reset_index(drop=True)
+    ts["t0"] = ts["t"] - Tc
+    j = pd.merge_asof(ts, dec, on="t0", direction="nearest", tolerance=0.25 * Tc)
+    has = j["d_reason"].notna()
+    j["reason"] = np.where(has, j["d_reason"], "none")
+    j["auv_served"] = np.where(has, j["d_auv"], -1).astype(int)
+    j["mode_agrees"] = ~has | (j["d_mode"] == j["mode"])
+    sc = scenario_with(scenario, duration=len(ts) * Tc)
+    res = RunResult(sc, "rehearsal", 0, j, np.zeros(len(j)), _fix_times(j, "fixes"),
+                    _fix_times(j, "reliable"), 0, None, [], exact["energy_J"],
+                    exact["min_range_m"], exact["min_slant_range_m"])  # fmt: skip
+    metrics = compute_metrics(res)
+    metrics["decisions_joined"] = int(has.sum())
+    metrics["mode_disagreements"] = int((~j["mode_agrees"]).sum())
+    return metrics, j
+
+
+def compare_metrics(a: dict, b: dict, rel: float = 0.10, names=None) -> dict[str, dict]:
+    """Per metric: both values, the relative difference and whether it is within ``rel``
+    (or within the absolute floor of :data:`COMPARABLE`)."""
+    out = {}
+    for name in names or COMPARABLE:
+        x, y = float(a[name]), float(b[name])
+        diff = abs(x - y)
+        scale = max(abs(x), abs(y))
+        out[name] = {
+            "a": x, "b": y, "rel_diff": diff / scale if scale > 0 else 0.0,
+            "ok": diff <= rel * scale or diff <= COMPARABLE.get(name, 0.0),
+        }  # fmt: skip
+    return out
+
+
+# --- running a rehearsal as two processes (tests, scripts) ---------------------------------
+
+
+def free_udp_port(host: str = "127.0.0.1") -> int:
+    """A UDP port the OS says is free now (bind to port 0, read it, close)."""
+    import socket
+
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind((host, 0))
+        return s.getsockname()[1]
+
+
+def start_sitl(scenario: str | Path, out: str | Path, *args: str, discovery_port: int = 0,
+               wait: bool = True, timeout: float = 60.0):  # fmt: skip
+    """Start ``mpcasv sitl`` on loopback (vehicles on free ports); return (Popen, ready dict
+    or None if not ``wait``).
+
+    ``args`` are further ``mpcasv sitl`` options (``--speedup``, ``--duration``, ...).
+    Raises RuntimeError if the SITL does not report its ports within ``timeout`` s.
+    """
+    import subprocess
+    import sys
+
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    ready_file = out / "ready.json"
+    ready_file.unlink(missing_ok=True)
+    cmd = [sys.executable, "-m", "mpcasv", "sitl", str(scenario), "--discovery-port",
+           str(discovery_port), "--base-port", "0", "--out", str(out), "--ready-file",
+           str(ready_file), *args]  # fmt: skip
+    err = (out / "sitl.stderr").open("w")
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=err)
+    return proc, (wait_ready(proc, out, timeout) if wait else None)
+
+
+def wait_ready(proc, out: str | Path, timeout: float = 60.0) -> dict:
+    """The ready dict a SITL started by :func:`start_sitl` writes once its ports are bound."""
+    import time
+
+    out = Path(out)
+    ready_file = out / "ready.json"
+    t_end = time.monotonic() + timeout
+    while not ready_file.exists():
+        if proc.poll() is not None or time.monotonic() > t_end:
+            proc.kill()
+            raise RuntimeError(f"mpcasv sitl did not start: {(out / 'sitl.stderr').read_text()}")
+        time.sleep(0.05)
+    return json.loads(ready_file.read_text())
+
+
+def deploy_config_for(ready: dict, base: dict, log_dir: str | Path, speedup: float) -> dict:
+    """A deploy configuration (as a dict) for the SITL described by ``ready``: ``base`` with
+    the discovery address, a free port on 127.0.0.1, the clock and the log folder set."""
+    cfg = json.loads(json.dumps(base))
+    link = cfg.setdefault("link", {})
+    link |= {"bind": "127.0.0.1", "port": 0, "announce_to": [ready["discovery"]]}
+    cfg.setdefault("clock", {})["speedup"] = float(speedup)
+    cfg.setdefault("log", {})["dir"] = str(log_dir)
+    return cfg
+
+
+def start_deploy(config: dict, workdir: str | Path, *args: str):
+    """Write ``config`` as TOML into ``workdir`` and start ``mpcasv deploy`` on it."""
+    import subprocess
+    import sys
+
+    import tomli_w
+
+    workdir = Path(workdir)
+    workdir.mkdir(parents=True, exist_ok=True)
+    path = workdir / "deploy.toml"
+    path.write_text(tomli_w.dumps(config))
+    err = (workdir / "deploy.stderr").open("w")
+    return subprocess.Popen([sys.executable, "-m", "mpcasv", "deploy", str(path), *args],
+                            stdout=subprocess.DEVNULL, stderr=err)  # fmt: skip

@@ -1,0 +1,119 @@
+"""``mpcasv replay``: re-run a controller over a deploy log and show where it would differ.
+
+The deploy log (``deploy.jsonl``) holds, for every decision, the exact Observation the
+controller was given (estimates already inflated by the watchdogs), the watchdogs' verdicts
+and the command sent. Replay builds the controller named in the log (or another one / another
+preset), feeds it the same Observations in order, applies the same guard with the logged
+verdicts, and compares command by command (:func:`mpcasv.io.records.same_command`).
+Replaying with the logged controller must reproduce every decision; anything else points at
+non-determinism or a changed controller.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import pandas as pd
+
+from mpcasv.config import ConfigError
+from mpcasv.io.logs import read_jsonl
+from mpcasv.io.records import cmd_from_dict, obs_from_dict, same_command
+from mpcasv.io.watchdog import GuardParams, guard
+from mpcasv.sim.controllers import make_controller
+
+__all__ = ["ReplayReport", "print_replay", "replay"]
+
+
+@dataclass
+class ReplayReport:
+    """The comparison: one row per logged decision."""
+
+    log: Path
+    controller: str
+    preset: str | None
+    table: pd.DataFrame  # t, logged/replayed mode, reason, auv, waypoint distance, same
+
+    @property
+    def n_steps(self) -> int:
+        return len(self.table)
+
+    @property
+    def n_differ(self) -> int:
+        return int((~self.table["same"]).sum()) if len(self.table) else 0
+
+
+def _log_path(log: str | Path) -> Path:
+    p = Path(log)
+    if p.is_dir():
+        p = p / "deploy.jsonl"
+    if not p.is_file():
+        raise ConfigError(f"{log}: no deploy log (deploy.jsonl) there")
+    return p
+
+
+def replay(log: str | Path, controller: str | None = None, preset: str | None = None,
+           tol_m: float = 0.5) -> ReplayReport:  # fmt: skip
+    """Replay the decisions of a deploy log (see the module docstring)."""
+    path = _log_path(log)
+    started = [r for r in read_jsonl(path, "event") if r.get("event") == "started"]
+    steps = read_jsonl(path, "step")
+    if not started or "config" not in started[0]:
+        raise ConfigError(f"{path}: no 'started' record with the configuration")
+    if not steps:
+        raise ConfigError(f"{path}: no decisions logged")
+    cfg = started[0]["config"]
+    c = cfg["controller"]
+    name = controller or c["name"]
+    same_ctl = name == c["name"]
+    preset = preset or (c["preset"] if same_ctl else None)
+    n_auv = len(steps[0]["obs"]["auvs"])
+    ctl = make_controller(name, n_auv, preset, c["overrides"] if same_ctl else None)
+    ctl.reset(n_auv)
+    g = started[0]["guard"]
+    gp = GuardParams(**g) if same_ctl else GuardParams(**(g | {"speed": float(getattr(
+        getattr(ctl, "params", None), "speed", g["speed"]))}))  # fmt: skip
+    domain = getattr(ctl, "domain", None)
+    rows = []
+    for s in steps:
+        obs = obs_from_dict(s["obs"])
+        raw = ctl.step(obs)
+        cmd, override = guard(raw, obs, s["status"], s["ages"], domain, gp)
+        logged = cmd_from_dict(s["cmd"])
+        dist = float("nan")
+        if cmd.waypoint is not None and logged.waypoint is not None:
+            dist = ((cmd.waypoint[0] - logged.waypoint[0]) ** 2
+                    + (cmd.waypoint[1] - logged.waypoint[1]) ** 2) ** 0.5  # fmt: skip
+        rows.append({
+            "t": s["t"], "logged_mode": str(logged.mode), "replay_mode": str(cmd.mode),
+            "logged_reason": str(logged.reason), "replay_reason": str(cmd.reason),
+            "logged_auv": logged.auv, "replay_auv": cmd.auv, "waypoint_diff_m": dist,
+            "logged_override": s["override"], "replay_override": override,
+            "same": same_command(cmd, logged, tol_m),
+        })  # fmt: skip
+    return ReplayReport(path, name, preset, pd.DataFrame(rows))
+
+
+def print_replay(rep: ReplayReport, show: int = 20) -> None:
+    """Summary, the stretches where decisions differ, and the first ``show`` differing steps."""
+    t = rep.table
+    print(f"replayed {rep.n_steps} decisions of {rep.log} with {rep.controller} "
+          f"(preset {rep.preset}): {rep.n_differ} differ")  # fmt: skip
+    if rep.n_differ == 0:
+        return
+    t0 = t["t"].iloc[0]
+    diff = ~t["same"].to_numpy()
+    start = None
+    print("differing stretches (s after the first decision):")
+    for i, d in enumerate([*diff, False]):
+        if d and start is None:
+            start = i
+        elif not d and start is not None:
+            a, b = t["t"].iloc[start] - t0, t["t"].iloc[i - 1] - t0
+            print(f"  {a:8.1f} .. {b:8.1f}  ({i - start} steps)")
+            start = None
+    cols = ["t", "logged_mode", "replay_mode", "logged_reason", "replay_reason", "logged_auv",
+            "replay_auv", "waypoint_diff_m"]  # fmt: skip
+    sub = t.loc[diff, cols].head(show).copy()
+    sub["t"] = sub["t"] - t0
+    print(sub.to_string(index=False, float_format=lambda v: f"{v:.1f}"))

@@ -1,0 +1,565 @@
+"""``mpcasv sitl``: the simulator's ASV and AUVs as separate IMC systems on one host,
+behaving towards the network as DUNE does.
+
+Each vehicle has its own UDP socket (its ``imc+udp`` service) and IMC id. Like DUNE they
+
+- announce themselves (every 10 s of the SITL clock, and at once to a system they learn);
+  a shared discovery socket stands in for DUNE's multicast discovery group (parallel
+  tests cannot share 224.0.75.69:30100-30104, so discovery is unicast to ``--discovery``);
+- accept datagrams only from systems whose Announce they have heard, from the address it
+  names, and stream only to systems that sent a Heartbeat in the last 30 s;
+- send EstimatedState at 2 Hz (reference point re-anchored every ``--reanchor`` metres, as
+  DUNE moves it), the ASV also SetThrusterActuation (thrust / T_max);
+- the ASV answers PlanControl START with a FollowReference argument (SUCCESS to the sender;
+  FAILURE for anything else; ignored unless addressed to it or broadcast) and then runs
+  :class:`mpcasv.io.dune.FollowRefManeuver` (References, FollowRefState, MANDONE, timeout,
+  speed 0 = loops off).
+
+The physics is :class:`mpcasv.sim.world.World`, advanced one supervisory period at a time
+with the command vector of the ASV's maneuver (zeros when there is none). After publishing
+the states of a period boundary the SITL waits until the Reference answering them arrives
+(at most ``--reaction`` of a period; the mid-period state goes out late if the wait runs past
+it) and then advances with the latest Reference: the same zero-order hold as the in-process
+simulator, so that a rehearsal can be compared with it (a Reference that misses its window
+acts one period late and is counted in ``late_references``). A real DUNE does not wait: with
+``--reaction`` small the SITL shows what the deploy loop's latency does. ``--hold`` keeps the
+world at t = 0 until the first Reference (the deploy loop's first decision then sees the scenario's
+initial state, as in ``mpcasv simulate``).
+
+Timestamps are ``epoch + n h`` (integer epoch, h = half a period), so differences of
+timestamps are exact. ``--speedup`` runs the clock faster than the wall clock (the deploy
+side must use the same factor). SIGUSR1 kills the ASV's IMC system (its DUNE is gone: socket
+closed, loops off, the boat drifts) and SIGUSR2 restarts it (a fresh DUNE: no maneuver, no
+known systems); ``--asv-outage T0:T1`` does the same at world times T0 and T1.
+
+Output folder ``--out``: ``sitl.lsf`` (every packet in and out), ``sitl.jsonl`` (events)
+and, on exit (duration reached, SIGINT or SIGTERM), ``run/`` written as ``mpcasv simulate``
+writes a run (``timeseries.parquet``, ``metrics.json``, ``run.json``...; the mode comes
+from the References, the reasons are unknown to a vehicle: :mod:`mpcasv.io.rehearsal` joins
+them from the deploy log).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import json
+import logging
+import math
+import os
+import signal
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import imcpy
+import numpy as np
+
+from mpcasv.interface import Command, Mode, Reason
+from mpcasv.io.dune import FollowRefManeuver
+from mpcasv.io.geo import Origin, to_wgs84
+from mpcasv.io.imc import (
+    BROADCAST,
+    BadInput,
+    NavState,
+    announce,
+    decode,
+    estimated_state,
+    udp_services,
+)
+from mpcasv.io.imc import stamp as _stamp
+from mpcasv.io.logs import JsonlWriter, LsfWriter
+from mpcasv.io.transport import Clock, TcpStream, UdpEndpoint
+from mpcasv.sim.scenario import Scenario
+
+__all__ = ["Sitl", "SitlOptions"]
+
+log = logging.getLogger("mpcasv.sitl")
+Addr = tuple[str, int]
+_PC = imcpy.PlanControl
+HEARD_S = 30.0  # DUNE streams to systems heard from in the last 30 s
+ANNOUNCE_S = 10.0
+
+
+@dataclass(frozen=True)
+class SitlOptions:
+    """Everything ``mpcasv sitl`` takes besides the scenario (see its ``--help``)."""
+
+    seed: int = 0
+    speedup: float = 1.0
+    bind: str = "127.0.0.1"
+    discovery_port: int = 30100
+    base_port: int = 0  # vehicle k binds base_port + k (0: any free port)
+    origin: tuple[float, float] = (63.4406, 10.3530)  # deg
+    duration: float | None = None  # world seconds (default: the scenario's)
+    hold: bool = False
+    reaction: float = 0.9  # longest wait for a Reference, in periods
+    reanchor_m: float = 1000.0
+    asv_name: str = "sitl-asv"
+    asv_id: int = 0x2801
+    auv_id_base: int = 0x2811
+    tcp: bool = False
+    asv_outage: tuple[float, float] | None = None
+    out: Path = Path("runs/sitl")
+    plots: bool = False
+    controller: str | None = None  # for the world's domain (reliable-fix rule, metrics)
+    preset: str | None = None
+    ready_file: Path | None = None
+
+
+@dataclass
+class Node:
+    """A system a simulated vehicle knows from its Announce."""
+
+    id: int
+    name: str
+    services: list[Addr]
+    last_hb: float = -math.inf
+
+
+@dataclass
+class SimVehicle:
+    """One simulated vehicle as an IMC system."""
+
+    sitl: Sitl
+    name: str
+    id: int
+    role: str  # "asv" or "auv"
+    index: int
+    port: int = 0
+    endpoint: UdpEndpoint | None = None
+    nodes: dict[int, Node] = field(default_factory=dict)
+    anchor: Origin | None = None
+    alive: bool = False
+    tcp_server: asyncio.base_events.Server | None = None
+    tcp_port: int = 0
+    tcp_clients: list[TcpStream] = field(default_factory=list)
+
+    @property
+    def sys_type(self):
+        return imcpy.SystemType.USV if self.role == "asv" else imcpy.SystemType.UUV
+
+    async def open(self, host: str) -> None:
+        self.endpoint = await UdpEndpoint.open(host, self.port, self.on_datagram)
+        self.port = self.endpoint.address[1]
+        self.nodes.clear()
+        self.alive = True
+
+    def close(self) -> None:
+        self.alive = False
+        if self.endpoint is not None:
+            self.endpoint.close()
+            self.endpoint = None
+
+    def services(self) -> list[str]:
+        return [f"imc+udp://{self.sitl.opt.bind}:{self.port}/"]
+
+    def stamp(self, msg: imcpy.Message, dst: int = BROADCAST) -> imcpy.Message:
+        return _stamp(msg, self.id, dst, self.sitl.now(), src_ent=1)
+
+    def _send(self, msg: imcpy.Message, addr: Addr) -> None:
+        data = msg.serialize()
+        if self.endpoint is not None and self.endpoint.sendto(data, addr):
+            self.sitl.lsf.write(data)
+
+    def announce_to(self, addrs) -> None:
+        if not self.alive:
+            return
+        lat, lon = to_wgs84(*self.sitl.position(self), self.sitl.origin)
+        msg = self.stamp(announce(self.name, self.sys_type, self.services(), lat, lon))
+        for a in addrs:
+            self._send(msg, a)
+
+    def publish(self, msg: imcpy.Message) -> None:
+        """To every system heard from in the last 30 s (and every backseat client)."""
+        if not self.alive:
+            return
+        now = self.sitl.now()
+        self.stamp(msg)
+        for node in self.nodes.values():
+            if now - node.last_hb <= HEARD_S and node.services:
+                self._send(msg, node.services[0])
+        data = msg.serialize()
+        for c in list(self.tcp_clients):
+            if c.send(data):
+                self.sitl.lsf.write(data)
+
+    def reply(self, msg: imcpy.Message, node: Node | None, stream: TcpStream | None) -> None:
+        self.stamp(msg, node.id if node else BROADCAST)
+        if stream is not None:
+            stream.send(msg.serialize())
+            self.sitl.lsf.write(msg.serialize())
+        elif node is not None and node.services:
+            self._send(msg, node.services[0])
+
+    def learn(self, msg: imcpy.Announce) -> None:
+        if msg.src == self.id:
+            return
+        services = udp_services(msg.services)
+        node = self.nodes.get(msg.src)
+        new = node is None
+        if new:
+            node = self.nodes[msg.src] = Node(msg.src, msg.sys_name, services)
+        node.name, node.services = msg.sys_name, services
+        if new and services:
+            self.announce_to(services[:1])
+
+    def on_datagram(self, data: bytes, addr: Addr) -> None:
+        try:
+            msg, raw = decode(data)
+        except BadInput as bad:
+            self.sitl.count(f"drop_{bad.reason}")
+            return
+        self.sitl.lsf.write(raw)
+        if not self.alive or msg.dst not in (self.id, BROADCAST):
+            self.sitl.count("drop_not_for_me")
+            return
+        if isinstance(msg, imcpy.Announce):
+            self.learn(msg)
+            return
+        node = self.nodes.get(msg.src)
+        if node is None or addr not in node.services:  # DUNE: only announced systems
+            self.sitl.count("drop_unannounced")
+            return
+        self.on_message(msg, node, None)
+
+    def on_message(self, msg, node: Node | None, stream: TcpStream | None) -> None:
+        if isinstance(msg, imcpy.Heartbeat):
+            if node is not None:
+                node.last_hb = self.sitl.now()
+        elif self.role == "asv":
+            self.sitl.asv_message(self, msg, node, stream)
+
+    async def serve_tcp(self, host: str) -> None:
+        async def client(reader, writer):
+            stream = TcpStream(reader, writer, lambda m, raw: self._on_tcp(m, raw, stream))
+            self.tcp_clients.append(stream)
+            await stream.run()
+            self.tcp_clients.remove(stream)
+
+        self.tcp_server = await asyncio.start_server(client, host, self.tcp_port)
+        self.tcp_port = self.tcp_server.sockets[0].getsockname()[1]
+
+    def _on_tcp(self, msg, raw: bytes, stream: TcpStream) -> None:
+        self.sitl.lsf.write(raw)
+        if self.alive and msg.dst in (self.id, BROADCAST):
+            self.on_message(msg, self.nodes.get(msg.src), stream)
+
+
+class Sitl:
+    """The SITL runner (see the module docstring)."""
+
+    def __init__(self, scenario: Scenario, opt: SitlOptions) -> None:
+        from mpcasv.sim.controllers import make_controller
+        from mpcasv.sim.world import World
+
+        self.sc, self.opt = scenario, opt
+        self.clock = Clock(opt.speedup)
+        self.origin = Origin.from_degrees(*opt.origin)
+        name = opt.controller or scenario.controller
+        preset = opt.preset or (scenario.preset if name == scenario.controller else None)
+        self.domain = getattr(make_controller(name, len(scenario.auv), preset), "domain", None)
+        self.world = World(scenario, opt.seed, None, self.domain)
+        self.Tc = scenario.sim.control_period
+        self.h = self.Tc / 2 if scenario.sim.n_sub % 2 == 0 else self.Tc
+        opt.out.mkdir(parents=True, exist_ok=True)
+        self.lsf = LsfWriter(opt.out / "sitl.lsf")
+        self.jsonl = JsonlWriter(opt.out / "sitl.jsonl")
+        self.asv = SimVehicle(self, opt.asv_name, opt.asv_id, "asv", -1)
+        self.auvs = [SimVehicle(self, f"sitl-{a.name}", opt.auv_id_base + k, "auv", k)
+                     for k, a in enumerate(scenario.auv)]  # fmt: skip
+        self.vehicles = [self.asv, *self.auvs]
+        self.directory: dict[int, list[Addr]] = {}  # who announced to the discovery socket
+        self.maneuver: FollowRefManeuver | None = None
+        self.ref_event = asyncio.Event()
+        self.in_window = False
+        self.counts: dict[str, int] = {}
+        self.rows: list[dict] = []
+        self.period = None
+        self.prev_S = self.world.S.copy()
+        self.ts_offset: float | None = None  # timestamp of world t = 0
+        self.held = opt.hold
+        self.epoch = 0.0
+        self.n = 0
+
+    # --- clock and bookkeeping -----------------------------------------------------------
+    def now(self) -> float:
+        """Timestamp of the current tick (exact multiples of h after an integer epoch)."""
+        return self.epoch + self.n * self.h
+
+    def count(self, what: str) -> None:
+        self.counts[what] = self.counts.get(what, 0) + 1
+
+    def event(self, name: str, **info) -> None:
+        self.jsonl.write({"kind": "event", "event": name, "t": self.now(),
+                          "t_world": self.world.t} | info)  # fmt: skip
+        log.info("%s %s", name, info)
+
+    def position(self, v: SimVehicle) -> tuple[float, float]:
+        if v.role == "asv":
+            return float(self.world.x[0]), float(self.world.x[1])
+        return float(self.world.S[0, v.index]), float(self.world.S[1, v.index])
+
+    # --- the ASV's DUNE ------------------------------------------------------------------
+    def asv_message(self, v: SimVehicle, msg, node: Node | None, stream) -> None:
+        now = self.now()
+        if isinstance(msg, imcpy.PlanControl):
+            if msg.type != _PC.TypeEnum.REQUEST:
+                return
+            ans = imcpy.PlanControl()
+            ans.op, ans.request_id, ans.plan_id = msg.op, msg.request_id, msg.plan_id
+            if msg.op == _PC.OperationEnum.START and isinstance(msg.arg, imcpy.FollowReference):
+                self.maneuver = FollowRefManeuver(msg.arg, now, self.origin,
+                                                  self.world.model.params.u_max)  # fmt: skip
+                ans.type, ans.info = _PC.TypeEnum.SUCCESS, "plan started"
+                self.event("maneuver_started", src=msg.src, timeout=msg.arg.timeout)
+                v.reply(ans, node, stream)
+                v.publish(self.maneuver.state_message())
+            elif msg.op == _PC.OperationEnum.STOP:
+                self.maneuver = None
+                ans.type, ans.info = _PC.TypeEnum.SUCCESS, "plan stopped"
+                self.event("maneuver_stopped", src=msg.src)
+                v.reply(ans, node, stream)
+            else:
+                ans.type, ans.info = _PC.TypeEnum.FAILURE, "only START FollowReference / STOP"
+                v.reply(ans, node, stream)
+        elif isinstance(msg, imcpy.Reference):
+            m = self.maneuver
+            if m is None or m.done:
+                self.count("reference_without_maneuver")
+                return
+            if m.on_reference(msg, now, self.position(self.asv)):
+                self.count("references")
+                if not self.in_window and not self.held:
+                    self.count("late_references")
+                self.ref_event.set()
+                v.publish(m.state_message(msg))
+                if m.done:
+                    self.event("maneuver_done", how="MANDONE")
+
+    def command_vector(self) -> np.ndarray:
+        if not self.asv.alive or self.maneuver is None:
+            return np.zeros(4)
+        return self.maneuver.command_vector()
+
+    # --- states ----------------------------------------------------------------------------
+    def _nav_asv(self, x: np.ndarray) -> NavState:
+        N, E, psi, u, v, r = (float(a) for a in x[:6])
+        vN, vE = u * math.cos(psi) - v * math.sin(psi), u * math.sin(psi) + v * math.cos(psi)
+        return NavState(self.now(), N, E, 0.0, psi, u, v, r, vN, vE, math.nan, math.nan)
+
+    def _nav_auv(self, S: np.ndarray, k: int) -> NavState:
+        N, E, d, psi, U = (float(a) for a in S[:, k])
+        return NavState(self.now(), N, E, d, psi, U, 0.0, 0.0, U * math.cos(psi),
+                        U * math.sin(psi), math.nan, math.nan)  # fmt: skip
+
+    def _es(self, v: SimVehicle, nav: NavState) -> imcpy.EstimatedState:
+        if v.anchor is None or math.hypot(*self._offset(v, nav)) > self.opt.reanchor_m:
+            lat, lon = to_wgs84(nav.N, nav.E, self.origin)
+            v.anchor = Origin(lat, lon, self.origin.height)
+        return estimated_state(nav, v.anchor, self.origin)
+
+    def _offset(self, v: SimVehicle, nav: NavState) -> tuple[float, float]:
+        from mpcasv.io.geo import to_local
+
+        lat, lon = to_wgs84(nav.N, nav.E, self.origin)
+        n, e, _ = to_local(lat, lon, v.anchor.height, v.anchor)
+        return n, e
+
+    def publish_states(self, mid: bool) -> None:
+        """AUVs first, then the ASV's thrust and state (a deploy loop that steps on the ASV's
+        state then has the AUVs' of the same instant)."""
+        w, P = self.world, self.period
+        if mid and P is not None:
+            j = w.n_sub // 2 - 1
+            x = P.X[:, j]
+            S = 0.5 * (self.prev_S + w.S)
+            S[3] = w.S[3]
+        else:
+            x, S = w.x, w.S
+        for v in self.auvs:
+            v.publish(self._es(v, self._nav_auv(S, v.index)))
+        if self.asv.alive:
+            th = imcpy.SetThrusterActuation()
+            th.id, th.value = 0, float(np.clip(x[6] / w.model.params.T_max, -1.0, 1.0))
+            self.asv.publish(th)
+            self.asv.publish(self._es(self.asv, self._nav_asv(x)))
+
+    # --- outages -----------------------------------------------------------------------------
+    def kill_asv(self) -> None:
+        if self.asv.alive:
+            self.asv.close()
+            self.maneuver = None
+            self.event("asv_killed")
+
+    async def restart_asv(self) -> None:
+        if not self.asv.alive:
+            await self.asv.open(self.opt.bind)
+            self.event("asv_restarted", port=self.asv.port)
+            self.asv.announce_to([a[0] for a in self.directory.values() if a])
+
+    # --- main loop ---------------------------------------------------------------------------
+    def on_discovery(self, data: bytes, addr: Addr) -> None:
+        try:
+            msg, raw = decode(data)
+        except BadInput:
+            self.count("discovery_bad")
+            return
+        self.lsf.write(raw)
+        if not isinstance(msg, imcpy.Announce):
+            return
+        self.directory[msg.src] = udp_services(msg.services)
+        for v in self.vehicles:
+            if v.alive:
+                v.learn(msg)
+
+    async def start(self) -> None:
+        o = self.opt
+        self.discovery = await UdpEndpoint.open(o.bind, o.discovery_port, self.on_discovery)
+        for k, v in enumerate(self.vehicles):
+            v.port = o.base_port + k if o.base_port else 0
+            await v.open(o.bind)
+            if o.tcp:
+                await v.serve_tcp(o.bind)
+        self.epoch = float(math.ceil(self.clock.now()) + 1)
+        ready = {
+            "pid": os.getpid(), "discovery": f"{o.bind}:{self.discovery.address[1]}",
+            "vehicles": [{"name": v.name, "id": v.id, "role": v.role,
+                          "address": f"{o.bind}:{v.port}",
+                          "tcp": f"{o.bind}:{v.tcp_port}" if o.tcp else None}
+                         for v in self.vehicles],
+        }  # fmt: skip
+        self.event("ready", **ready)
+        if o.ready_file is not None:
+            tmp = Path(f"{o.ready_file}.tmp")
+            tmp.write_text(json.dumps(ready))
+            tmp.replace(o.ready_file)
+        print(json.dumps({"ready": ready}), flush=True)
+
+    async def run(self, stop: asyncio.Event) -> dict:
+        await self.start()
+        n_steps = int(math.ceil((self.opt.duration or self.sc.duration) / self.Tc - 1e-9))
+        per = round(self.Tc / self.h)
+        flusher = asyncio.create_task(self._flush_loop())
+        boundary = 0  # tick index of the next period boundary
+        next_announce = 0.0
+        outage = self.opt.asv_outage
+        wall0 = time.perf_counter()
+        overruns = 0
+        while not stop.is_set() and len(self.rows) < n_steps:
+            await self.clock.sleep_until(self.now())
+            if self.clock.now() > self.now() + self.h:
+                overruns += 1
+            if self.now() >= next_announce:
+                next_announce = self.now() + ANNOUNCE_S
+                for v in self.vehicles:
+                    v.announce_to([n.services[0] for n in v.nodes.values() if n.services])
+            if outage is not None and not self.held:
+                if self.asv.alive and outage[0] <= self.world.t < outage[1]:
+                    self.kill_asv()
+                elif not self.asv.alive and self.world.t >= outage[1]:
+                    await self.restart_asv()
+            if self.maneuver is not None and self.maneuver.check_timeout(self.now()):
+                self.event("maneuver_timeout")
+                self.asv.publish(self.maneuver.state_message())
+            at_boundary = self.n == boundary or self.held
+            if at_boundary:
+                self.ref_event.clear()  # only a Reference answering this state counts
+            self.publish_states(mid=not at_boundary)
+            if at_boundary:
+                await self._react()
+                if self.held and self.maneuver is not None and self.maneuver.got_reference:
+                    self.held = False
+                if not self.held:
+                    if self.ts_offset is None:
+                        self.ts_offset = self.now() - self.world.t
+                        self.event("world_started", ts_offset=self.ts_offset)
+                    self._advance()
+                    boundary = self.n + per
+            self.n += 1
+        flusher.cancel()
+        with contextlib.suppress(asyncio.CancelledError):
+            await flusher
+        return self.finish(time.perf_counter() - wall0, overruns)
+
+    async def _flush_loop(self) -> None:
+        while True:
+            await asyncio.sleep(0.5)
+            self.jsonl.flush()
+            self.lsf.flush()
+
+    async def _react(self) -> None:
+        """Wait (up to ``reaction`` of a period) for the Reference answering this state."""
+        m = self.maneuver
+        if m is None or m.done or not self.asv.alive:
+            return
+        self.in_window = True
+        try:
+            with contextlib.suppress(asyncio.TimeoutError):
+                await asyncio.wait_for(
+                    self.ref_event.wait(), self.clock.wall_seconds(self.opt.reaction * self.Tc)
+                )
+        finally:
+            self.in_window = False
+
+    def _advance(self) -> None:
+        from mpcasv.sim.simulator import _row
+
+        w = self.world
+        cmd_vec = self.command_vector()
+        self.prev_S = w.S.copy()
+        self.period = w.advance(cmd_vec)
+        if cmd_vec[0] > 0.5:
+            cmd = Command(Mode.TRANSIT, (float(cmd_vec[1]), float(cmd_vec[2])),
+                          float(cmd_vec[3]), None, Reason.NOMINAL)  # fmt: skip
+        else:
+            cmd = Command.standby()
+        row = _row(w, w.observation(), cmd, self.period, 0.0)
+        row["asv_alive"] = self.asv.alive
+        self.rows.append(row)
+
+    def finish(self, wall_s: float, overruns: int) -> dict:
+        """Close the sockets and write the run folder; return the run info."""
+        import pandas as pd
+
+        from mpcasv.sim.record import write_run
+        from mpcasv.sim.scenario import scenario_with
+        from mpcasv.sim.simulator import RunResult
+
+        for v in self.vehicles:
+            v.close()
+            if v.tcp_server is not None:
+                v.tcp_server.close()
+        self.discovery.close()
+        w = self.world
+        info = {"ts_offset": self.ts_offset, "periods": len(self.rows), "speedup":
+                self.opt.speedup, "overruns": overruns, "counts": self.counts,
+                "sitl_wall_s": wall_s}  # fmt: skip
+        self.event("finished", **info)
+        self.jsonl.close()
+        self.lsf.close()
+        if self.rows:
+            sc = scenario_with(self.sc, duration=len(self.rows) * self.Tc)
+            res = RunResult(sc, "sitl", self.opt.seed, pd.DataFrame(self.rows),
+                            np.zeros(len(self.rows)), w.fix_times, w.reliable_times, 0, None, [],
+                            w.energy_J, w.min_range, w.min_slant, wall_s, self.domain)  # fmt: skip
+            info["metrics"] = write_run(res, self.opt.out / "run", plots=self.opt.plots,
+                                        extra={"sitl": info})  # fmt: skip
+        return info
+
+
+def run_sitl(scenario: Scenario, opt: SitlOptions) -> dict:
+    """Run the SITL until its duration, SIGINT or SIGTERM (signals as in the module doc)."""
+
+    async def main() -> dict:
+        sitl = Sitl(scenario, opt)
+        stop = asyncio.Event()
+        loop = asyncio.get_running_loop()
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            loop.add_signal_handler(sig, stop.set)
+        loop.add_signal_handler(signal.SIGUSR1, sitl.kill_asv)
+        loop.add_signal_handler(signal.SIGUSR2,
+                                lambda: asyncio.ensure_future(sitl.restart_asv()))  # fmt: skip
+        return await sitl.run(stop)
+
+    return asyncio.run(main())

@@ -1,0 +1,118 @@
+"""Watchdogs of the deploy loop and the safety guard applied to the controller's command.
+
+AUV states age between messages. With ``age`` the time since the last accepted state
+(deploy clock):
+
+- ``age <= auv_stale_s``: **ok**.
+- ``auv_stale_s < age <= auv_lost_s``: **uncertain**. The AUV may have moved up to
+  ``v_max age`` (``v_max`` = ``watchdog.auv_speed_max``) from where it was last seen, so the
+  estimate handed to the controller gets its covariance inflated by ``(v_max age)^2`` on each
+  axis (:func:`inflate`), and ``t_last_fix`` stays the time of that last state: a controller
+  whose anti-collision domain grows with the estimate's sigma or fix age sees the growth
+  itself. For controllers that use a fixed radius (the papers' ``r_inner`` /
+  ``r_avoid``), :func:`guard` enforces the grown radius
+  ``r_g = r_avoid(d) + v_max age`` around the last position: it moves a transit waypoint
+  out of that disc, and if the ASV is inside it, replaces the command by a transit straight
+  away from the AUV to ``r_g + guard_margin_m`` ("guard_avoid").
+- ``age > auv_lost_s``: **lost**. Reported once; the ASV is kept safe by standing by
+  (propeller off: the papers' safe state, in which a surface vehicle drifts slowly and
+  predictably and makes no noise for the AUV's modem), after first leaving the grown disc
+  (age capped at ``auv_lost_s``) if it is inside it. Normal control resumes by itself when
+  the AUV's states return. Decided for every configured AUV: with one AUV lost the
+  multi-AUV controller does not go on serving the others (conservative; the operator can
+  reconfigure without the lost AUV).
+
+The ASV's own state going stale is handled by the deploy loop: it stops commanding (no
+References, so DUNE's FollowReference ends on its ``timeout`` and switches the loops off) and
+restarts FollowReference when the state returns.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+from mpcasv.interface import AUVEstimate, Command, Mode, Observation, Reason
+
+__all__ = ["OK", "UNCERTAIN", "LOST", "GuardParams", "auv_status", "guard", "inflate"]
+
+OK, UNCERTAIN, LOST = "ok", "uncertain", "lost"
+
+
+@dataclass(frozen=True)
+class GuardParams:
+    """What :func:`guard` needs (from the watchdog config and the controller's domain)."""
+
+    stale_s: float
+    lost_s: float
+    v_max: float  # m/s
+    keep_out_m: float  # anti-collision radius at the surface when there is no domain
+    margin_m: float  # clearance beyond the grown radius when moving away
+    speed: float  # m/s of a guard transit when the controller gave none
+
+
+def auv_status(age: float, p: GuardParams) -> str:
+    """``ok``, ``uncertain`` or ``lost`` for a state ``age`` seconds old."""
+    if age <= p.stale_s:
+        return OK
+    return UNCERTAIN if age <= p.lost_s else LOST
+
+
+def inflate(est: AUVEstimate, age: float, v_max: float) -> AUVEstimate:
+    """The estimate with ``(v_max age)^2`` added to both position variances."""
+    g2 = (v_max * max(age, 0.0)) ** 2
+    a, b, c, d = est.cov
+    return replace(est, cov=(a + g2, b, c, d + g2))
+
+
+def grown_radius(est: AUVEstimate, age: float, domain, p: GuardParams) -> float:
+    """``r_avoid(depth) + v_max min(age, lost_s)`` (m); ``keep_out_m`` without a domain."""
+    base = float(domain.avoid(est.depth)) if domain is not None else p.keep_out_m
+    return base + p.v_max * min(max(age, 0.0), p.lost_s)
+
+
+def guard(cmd: Command, obs: Observation, status: list[str], ages: list[float], domain,
+          p: GuardParams) -> tuple[Command, str | None]:  # fmt: skip
+    """Apply the stale/lost AUV policy of the module docstring to ``cmd``.
+
+    Returns the command to send and the name of the override (None: unchanged).
+    """
+    if all(s == OK for s in status):
+        return cmd, None
+    q = obs.asv.position
+    worst, worst_k, radii = 0.0, None, {}
+    for k, s in enumerate(status):
+        if s == OK:
+            continue
+        e = obs.auvs[k]
+        r_g = grown_radius(e, ages[k], domain, p)
+        radii[k] = r_g
+        depth_in = r_g - math.hypot(q[0] - e.N, q[1] - e.E)
+        if depth_in > worst:
+            worst, worst_k = depth_in, k
+    if worst_k is not None:  # inside a grown disc: straight away from that AUV
+        e = obs.auvs[worst_k]
+        dN, dE = q[0] - e.N, q[1] - e.E
+        d = math.hypot(dN, dE)
+        uN, uE = (dN / d, dE / d) if d > 1e-6 else (math.cos(obs.asv.psi), math.sin(obs.asv.psi))
+        r = radii[worst_k] + p.margin_m
+        speed = cmd.speed if cmd.mode is Mode.TRANSIT else p.speed
+        wp = (e.N + r * uN, e.E + r * uE)
+        return Command(Mode.TRANSIT, wp, speed, worst_k, Reason.AVOIDANCE), "guard_avoid"
+    if LOST in status:
+        lost = status.index(LOST)
+        return Command.standby(auv=lost, reason=Reason.FALLBACK), "auv_lost_standby"
+    if cmd.mode is Mode.TRANSIT:  # keep the waypoint out of every grown disc
+        wN, wE = cmd.waypoint
+        moved = False
+        for k, r_g in radii.items():
+            e = obs.auvs[k]
+            dN, dE = wN - e.N, wE - e.E
+            d = math.hypot(dN, dE)
+            if d < r_g:
+                uN, uE = (dN / d, dE / d) if d > 1e-6 else (1.0, 0.0)
+                wN, wE = e.N + (r_g + p.margin_m) * uN, e.E + (r_g + p.margin_m) * uE
+                moved = True
+        if moved:
+            return replace(cmd, waypoint=(wN, wE)), "guard_waypoint"
+    return cmd, None

@@ -1,0 +1,233 @@
+"""End-to-end: ``mpcasv sitl`` and ``mpcasv deploy`` as separate processes over UDP (and TCP)
+on 127.0.0.1 with ports chosen by the OS, compared with the in-process simulation.
+
+Rehearsals run at SPEEDUP x the wall clock with ``--hold`` (the world starts with the
+deploy's first decision, as ``mpcasv simulate`` does); the comparison covers the metrics of
+:data:`mpcasv.io.rehearsal.COMPARABLE` over the same scenario, seed and duration.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import signal
+import time
+from pathlib import Path
+
+import imcpy
+import psutil
+import pytest
+
+from mpcasv.config import load_toml
+from mpcasv.experiments.metrics import compute_metrics
+from mpcasv.io.logs import read_jsonl
+from mpcasv.io.lsf import read_messages
+from mpcasv.io.rehearsal import (
+    compare_metrics,
+    deploy_config_for,
+    free_udp_port,
+    rehearsal_metrics,
+    start_deploy,
+    start_sitl,
+    wait_ready,
+)
+from mpcasv.io.replay import replay
+from mpcasv.sim.controllers import make_controller
+from mpcasv.sim.scenario import load_scenario, scenario_with
+from mpcasv.sim.simulator import simulate
+
+ROOT = Path(__file__).resolve().parents[1]
+SCENARIOS = ROOT / "experiments" / "scenarios"
+CONFIGS = ROOT / "experiments" / "deploy"
+SPEEDUP = 20.0
+SEED = 3
+
+
+def _wait(pred, timeout: float, what: str, procs=()):
+    t_end = time.monotonic() + timeout
+    while time.monotonic() < t_end:
+        value = pred()
+        if value:
+            return value
+        for p in procs:
+            assert p.poll() is None, f"process exited early while waiting for {what}"
+        time.sleep(0.05)
+    raise AssertionError(f"timed out waiting for {what}")
+
+
+def _records(path: Path, kind: str | None = None) -> list[dict]:
+    return read_jsonl(path, kind) if path.exists() else []
+
+
+def _events(path: Path, name: str) -> list[dict]:
+    return [r for r in _records(path, "event") if r.get("event") == name]
+
+
+def _stop(proc, sig=signal.SIGTERM, timeout: float = 20.0) -> int:
+    if proc.poll() is None:
+        proc.send_signal(sig)
+    try:
+        return proc.wait(timeout)
+    except Exception:
+        proc.kill()
+        raise
+
+
+def _rehearse(tmp: Path, case: str, duration: float, base: dict, *sitl_args: str):
+    """Run a rehearsal to its end; return (scenario, deploy dir, sitl dir, deploy pid info)."""
+    port = free_udp_port()  # both processes start at once: the deploy needs the SITL's port
+    sitl, _ = start_sitl(SCENARIOS / f"{case}.toml", tmp / "sitl", "--speedup", str(SPEEDUP),
+                         "--duration", str(duration), "--hold", "--seed", str(SEED), "--quiet",
+                         *sitl_args, discovery_port=port, wait=False)  # fmt: skip
+    cfg = deploy_config_for({"discovery": f"127.0.0.1:{port}"}, base, tmp / "deploy", SPEEDUP)
+    deploy = start_deploy(cfg, tmp, "--quiet")
+    try:
+        wait_ready(sitl, tmp / "sitl")
+        log = tmp / "deploy" / "deploy.jsonl"
+        _wait(lambda: _events(log, "bound"), 30, "deploy to bind", [deploy])
+        sockets = [c for c in psutil.Process(deploy.pid).net_connections("inet")]
+        assert sitl.wait(duration / SPEEDUP + 60) == 0
+    finally:
+        code = _stop(deploy)
+        _stop(sitl)
+    assert code == 0, (tmp / "deploy.stderr").read_text()
+    return load_scenario(SCENARIOS / f"{case}.toml"), tmp / "deploy", tmp / "sitl", sockets
+
+
+def _compare(scenario, deploy_dir: Path, sitl_dir: Path) -> tuple[dict, dict]:
+    m_dep, joined = rehearsal_metrics(scenario, sitl_dir, deploy_dir)
+    sc = scenario_with(scenario, duration=m_dep["duration_s"])
+    res = simulate(sc, make_controller(sc.controller, len(sc.auv), sc.preset), SEED)
+    m_sim = compute_metrics(res)
+    return m_sim, m_dep
+
+
+def _check_logs(deploy_dir: Path, n_auv: int) -> list[dict]:
+    steps = read_jsonl(deploy_dir / "deploy.jsonl", "step")
+    refs = read_messages(deploy_dir / "imc.lsf", imcpy.Reference)
+    ours = refs[refs["src"] == 0x4001]
+    # one Reference per decision, then the final standby and MANDONE
+    assert len(ours) == len(steps) + 2
+    assert int(ours["flags"].iloc[-1]) & int(imcpy.Reference.FlagsBits.MANDONE)
+    assert ours["speed.value"].iloc[-2] == 0.0
+    es = read_messages(deploy_dir / "imc.lsf", imcpy.EstimatedState)
+    assert es["src"].nunique() == n_auv + 1
+    summary = read_jsonl(deploy_dir / "deploy.jsonl", "summary")[-1]
+    assert summary["rejects"] == {}, summary["rejects"]
+    return steps
+
+
+def _check_bind(sockets) -> None:
+    assert sockets, "deploy has no socket"
+    for c in sockets:
+        assert c.laddr.ip == "127.0.0.1", c
+
+
+def test_case3_rehearsal_matches_simulation(tmp_path):
+    base = load_toml(CONFIGS / "sitl-case3.toml")
+    base["watchdog"] |= {"asv_stale_s": 5.0, "auv_stale_s": 5.0}  # tolerate a loaded CI host
+    sc, deploy_dir, sitl_dir, sockets = _rehearse(tmp_path, "case3", 300.0, base)
+    _check_bind(sockets)
+    steps = _check_logs(deploy_dir, 1)
+    m_sim, m_dep = _compare(sc, deploy_dir, sitl_dir)
+    table = compare_metrics(m_sim, m_dep)
+    print(json.dumps(table, indent=1))
+    assert m_dep["duration_s"] == 300.0
+    assert m_dep["decisions_joined"] == 300 and m_dep["mode_disagreements"] == 0
+    assert m_dep["min_range_m"] >= 10.0
+    assert all(v["ok"] for v in table.values()), table
+    assert len(steps) == 300
+    # replaying the log with the logged controller reproduces every decision
+    rep = replay(deploy_dir)
+    assert rep.n_steps == len(steps) and rep.n_differ == 0
+    # and a different tuning would have decided differently somewhere
+    other = replay(deploy_dir, preset="paper1-sim")
+    assert other.n_differ > 0
+
+
+def test_case6_rehearsal_matches_simulation(tmp_path):
+    base = load_toml(CONFIGS / "sitl-case6.toml")
+    base["watchdog"] |= {"asv_stale_s": 5.0, "auv_stale_s": 5.0}
+    # the deploy's frame 400 m north-east of the SITL's and DUNE-like reference points moved
+    # every 100 m: positions must go through absolute lat/lon to agree
+    base["origin"] = {"lat_deg": 63.4406 + 400 / 111_000, "lon_deg": 10.3530 + 400 / 49_800}
+    sc, deploy_dir, sitl_dir, sockets = _rehearse(tmp_path, "case6", 300.0, base,
+                                                  "--reanchor", "100")  # fmt: skip
+    _check_bind(sockets)
+    _check_logs(deploy_dir, 3)
+    m_sim, m_dep = _compare(sc, deploy_dir, sitl_dir)
+    table = compare_metrics(m_sim, m_dep)
+    print(json.dumps(table, indent=1))
+    assert m_dep["decisions_joined"] == 300 and m_dep["mode_disagreements"] == 0
+    assert m_dep["min_range_m"] >= 10.0
+    assert all(v["ok"] for v in table.values()), table
+    assert m_dep["mode_switches"] > 4  # the ASV did visit the AUVs in turn
+    assert replay(deploy_dir).n_differ == 0
+
+
+def test_asv_killed_and_restarted(tmp_path):
+    """SIGUSR1 kills the SITL ASV's IMC system: deploy reports it within its limit, stops
+    commanding; SIGUSR2 brings it back: FollowReference is restarted and control resumes;
+    SIGTERM: final standby + MANDONE reach the ASV."""
+    base = load_toml(CONFIGS / "sitl-case3.toml")
+    limit = base["watchdog"]["asv_stale_s"]
+    sitl, ready = start_sitl(SCENARIOS / "case3.toml", tmp_path / "sitl", "--speedup",
+                             str(SPEEDUP), "--duration", "2000", "--quiet")  # fmt: skip
+    deploy = start_deploy(deploy_config_for(ready, base, tmp_path / "deploy", SPEEDUP), tmp_path)
+    log = tmp_path / "deploy" / "deploy.jsonl"
+    procs = [sitl, deploy]
+    try:
+        _wait(lambda: len(_records(log, "step")) >= 20, 60, "20 decisions", procs)
+        t_kill = time.time()
+        sitl.send_signal(signal.SIGUSR1)
+        stale = _wait(lambda: _events(log, "asv_stale"), 30, "asv_stale", procs)[0]
+        delay = (stale["wall"] - t_kill) * SPEEDUP  # deploy clock seconds
+        print(f"ASV outage noticed after {delay:.2f} s (limit {limit} s), age {stale['age_s']}")
+        assert limit <= stale["age_s"] <= limit + 0.5
+        assert delay <= limit + 1.0
+        n_at_stale = len(_records(log, "step"))
+        time.sleep(10 / SPEEDUP)  # 10 s of outage: no decision is made or sent
+        assert len(_records(log, "step")) <= n_at_stale + 1
+        sitl.send_signal(signal.SIGUSR2)
+        _wait(lambda: _events(log, "asv_resumed"), 30, "asv_resumed", procs)
+        _wait(lambda: len(_events(log, "plan_started")) >= 2, 30, "FollowReference again", procs)
+        _wait(lambda: len(_records(log, "step")) >= n_at_stale + 10, 30, "control again", procs)
+    finally:
+        code = _stop(deploy)
+        time.sleep(0.5)
+        _stop(sitl)
+    assert code == 0
+    sitl_events = [r["event"] for r in read_jsonl(tmp_path / "sitl" / "sitl.jsonl", "event")]
+    assert sitl_events.count("maneuver_started") == 2
+    assert "asv_killed" in sitl_events and "asv_restarted" in sitl_events
+    assert "maneuver_done" in sitl_events  # the deploy's MANDONE on SIGTERM
+    steps = read_jsonl(log, "step")
+    stale_t = _events(log, "asv_stale")[0]["t"]
+    resumed_t = _events(log, "asv_resumed")[0]["t"]
+    assert not any(stale_t < s["clock"] < resumed_t for s in steps)
+    ts = json.loads((tmp_path / "sitl" / "run" / "metrics.json").read_text())
+    assert ts["min_range_m"] >= 10.0
+
+
+@pytest.mark.parametrize("transport", ["tcp"])
+def test_tcp_backseat(tmp_path, transport):
+    """The same loop over DUNE's TCP backseat port (imcpy.Parser on the stream)."""
+    args = ("--speedup", str(SPEEDUP), "--duration", "60", "--hold", "--tcp", "--quiet")
+    sitl, ready = start_sitl(SCENARIOS / "case3.toml", tmp_path / "sitl", *args)
+    base = load_toml(CONFIGS / "sitl-case3.toml")
+    veh = {v["name"]: v for v in ready["vehicles"]}
+    base["vehicle"] = [{"role": v["role"], "id": v["id"], "tcp": v["tcp"]} for v in veh.values()]
+    cfg = deploy_config_for(ready, base, tmp_path / "deploy", SPEEDUP)
+    cfg["link"] |= {"transport": transport, "announce_to": []}
+    deploy = start_deploy(cfg, tmp_path, "--quiet")
+    try:
+        assert sitl.wait(60 / SPEEDUP + 60) == 0
+    finally:
+        code = _stop(deploy)
+        _stop(sitl)
+    assert code == 0, (tmp_path / "deploy.stderr").read_text()
+    steps = read_jsonl(tmp_path / "deploy" / "deploy.jsonl", "step")
+    info = json.loads((tmp_path / "sitl" / "run" / "run.json").read_text())["sitl"]
+    assert info["periods"] == 60 and len(steps) == 60
+    assert info["counts"].get("references", 0) == 60
+    assert math.isfinite(steps[-1]["obs"]["auvs"][0]["N"])
