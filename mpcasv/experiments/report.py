@@ -209,8 +209,8 @@ def compare_figure(out: Path, reps: pd.DataFrame, scenario: str, path: Path) -> 
     names = reps.iloc[0]["auv_names"].split(",")
     n = len(names)
     colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
-    fig = plt.figure(figsize=(15, 2.6 * max(n, 2) + 0.8))
-    gs = fig.add_gridspec(max(n, 2), 3, width_ratios=[1.2, 1.4, 1.4])
+    fig = plt.figure(figsize=(15, max(2.6 * n + 0.8, 5.0)))
+    gs = fig.add_gridspec(n, 3, width_ratios=[1.2, 1.4, 1.4])
     axp = fig.add_subplot(gs[:, 0])
     ts0 = series[0][1]
     for k in range(n):

@@ -196,6 +196,10 @@ def _run_pool(jobs, out: Path, stats: SweepStats, workers: int, bar) -> None:
                                    "resume (finished jobs are kept)") from None  # fmt: skip
             bar.set_postfix(errors=stats.errors, refresh=False)
             bar.update(1)
+    except BaseException:  # Ctrl-C or a failure: stop now, not after the queued jobs
+        for proc in list(getattr(pool, "_processes", {}).values()):  # kill_workers() in 3.14
+            proc.terminate()
+        raise
     finally:
         pool.shutdown(wait=True, cancel_futures=True)
 
@@ -253,6 +257,10 @@ def run_suite(suite: str | Path, out: str | Path, workers: int = 1, dask: str | 
     try:
         if todo:
             run_jobs(todo, out, stats, workers, dask, quiet)
+    except KeyboardInterrupt:
+        print(f"interrupted after {stats.ran} of {len(todo)} jobs; rerun the same command to "
+              "resume (finished jobs are kept)")  # fmt: skip
+        raise
     finally:
         results = write_results(out, exp.jobs)
         (out / "sweep.json").write_text(json.dumps(dataclasses.asdict(stats), indent=1) + "\n")
