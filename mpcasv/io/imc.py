@@ -40,6 +40,7 @@ HEADER_SIZE = _HDR_LE.size  # 20
 FOOTER_SIZE = 2
 _SYNC = imcpy.constants.SYNC  # 0xFE54 read little-endian
 RF = imcpy.Reference.FlagsBits
+_MAX_ITER = 8
 
 
 class BadInput(ValueError):
@@ -165,8 +166,14 @@ class NavState:
 
 
 def nav_state(es: imcpy.EstimatedState, origin: Origin) -> NavState:
-    """EstimatedState -> :class:`NavState` around ``origin`` through absolute lat/lon."""
-    lat, lon, h = absolute_latlon(es)
+    """EstimatedState -> :class:`NavState` around ``origin`` through absolute lat/lon.
+
+    The horizontal position is that of the reference point displaced by ``x``/``y`` only:
+    DUNE's ``toWGS84`` also moves lat/lon with ``z`` (by millimetres per metre of depth at a
+    kilometre's offset), and the vertical comes from ``depth``.
+    """
+    fields = {k: getattr(es, k) for k in ("lat", "lon", "height", "x", "y")} | {"z": 0.0}
+    lat, lon, h = absolute_latlon(fields)
     N, E, _ = to_local(lat, lon, h, origin)
     return NavState(es.timestamp, N, E, es.depth, es.psi, es.u, es.v, es.r, es.vx, es.vy, lat,
                     lon)  # fmt: skip
@@ -174,11 +181,20 @@ def nav_state(es: imcpy.EstimatedState, origin: Origin) -> NavState:
 
 def estimated_state(s: NavState, anchor: Origin, origin: Origin) -> imcpy.EstimatedState:
     """The EstimatedState DUNE would send for ``s`` (local to ``origin``) with its reference
-    point at ``anchor``: ``lat``/``lon``/``height`` = anchor, ``x``/``y`` = NED offsets."""
-    lat, lon = to_wgs84(s.N, s.E, origin)
-    x, y, _ = to_local(lat, lon, anchor.height, anchor)
+    point at ``anchor``: ``lat``/``lon``/``height`` = anchor, ``x``/``y`` = the offsets that
+    DUNE's own ``toWGS84`` maps back onto the position (solved by fixed-point iteration, the
+    map being the identity to a few mm per km), ``z`` = ``depth``."""
     es = imcpy.EstimatedState()
     es.lat, es.lon, es.height = anchor.lat, anchor.lon, anchor.height
+    lat, lon = to_wgs84(s.N, s.E, origin)
+    x, y, _ = to_local(lat, lon, anchor.height, anchor)
+    base = {"lat": anchor.lat, "lon": anchor.lon, "height": anchor.height, "z": 0.0}
+    for _ in range(_MAX_ITER):
+        N, E, _ = to_local(*absolute_latlon(base | {"x": x, "y": y}), origin)
+        dN, dE = s.N - N, s.E - E
+        x, y = x + dN, y + dE
+        if math.hypot(dN, dE) < 1e-5:
+            break
     es.x, es.y, es.z = x, y, s.depth
     es.depth, es.alt = s.depth, -1.0
     es.psi, es.u, es.v, es.r = s.psi, s.u, s.v, s.r

@@ -1,7 +1,8 @@
 """Observations and commands as plain dicts (the deploy JSONL) and back, exactly.
 
 Python floats survive a JSON round trip bit for bit, so :func:`obs_from_dict` rebuilds the
-very Observation the controller saw (``-inf`` ``t_last_fix`` is stored as None).
+very Observation the controller saw (the JSON log stores NaN and infinities as null: they come
+back as NaN, and as ``-inf`` for ``t_last_fix``).
 """
 
 from __future__ import annotations
@@ -13,8 +14,8 @@ from mpcasv.interface import ASVState, AUVEstimate, Command, Mode, Observation, 
 __all__ = ["cmd_from_dict", "cmd_to_dict", "obs_from_dict", "obs_to_dict", "same_command"]
 
 
-def _f(v) -> float:
-    return -math.inf if v is None else float(v)
+def _f(v, missing: float = math.nan) -> float:
+    return missing if v is None else float(v)
 
 
 def obs_to_dict(obs: Observation) -> dict:
@@ -35,8 +36,10 @@ def obs_to_dict(obs: Observation) -> dict:
 def obs_from_dict(d: dict) -> Observation:
     auvs = tuple(
         AUVEstimate(
-            e["N"], e["E"], e["depth"], e["v_N"], e["v_E"], tuple(e["cov"]), _f(e["t_last_fix"])
-        )  # fmt: skip
+            *(_f(e[k]) for k in ("N", "E", "depth", "v_N", "v_E")),
+            tuple(_f(c) for c in e["cov"]),
+            _f(e["t_last_fix"], -math.inf),
+        )
         for e in d["auvs"]
     )
     return Observation(d["t"], ASVState(**d["asv"]), bool(d["propeller_on"]), auvs)

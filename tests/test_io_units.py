@@ -1,0 +1,264 @@
+"""Pieces of the I/O layer on their own: configuration errors, IMC conversions, DUNE's
+FollowReference semantics as the SITL runs them, the watchdogs and guard, log records."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import imcpy
+import numpy as np
+import pytest
+
+from mpcasv.config import ConfigError
+from mpcasv.interface import ASVState, AUVEstimate, Command, Mode, Observation, Reason
+from mpcasv.io.config import deploy_config_from_dict
+from mpcasv.io.deploy import ASV_STALE, RUNNING, WAITING, Deploy
+from mpcasv.io.dune import FollowRefManeuver
+from mpcasv.io.geo import Origin, to_local, to_wgs84
+from mpcasv.io.imc import NavState, estimated_state, nav_state, reference, stamp, udp_services
+from mpcasv.io.logs import JsonlWriter, read_jsonl
+from mpcasv.io.records import obs_from_dict, obs_to_dict
+from mpcasv.io.watchdog import LOST, OK, UNCERTAIN, GuardParams, auv_status, guard, inflate
+
+ORIGIN = Origin.from_degrees(63.4406, 10.3530)
+BASE = {
+    "origin": {"lat_deg": 63.4406, "lon_deg": 10.3530},
+    "controller": {"name": "hybrid-single", "preset": "paper1-field"},
+    "vehicle": [{"role": "asv", "id": 0x2801}, {"role": "auv", "name": "a"}],
+}
+
+
+# --- configuration -----------------------------------------------------------------------------
+@pytest.mark.parametrize(
+    "change, field",
+    [
+        ({"link": {"bind": "localhost"}}, "link.bind"),
+        ({"link": {"port": 70000}}, "link.port"),
+        ({"link": {"announce_to": ["1.2.3.4"]}}, "link.announce_to"),
+        ({"link": {"transport": "serial"}}, "link.transport"),
+        ({"origin": {"lat_deg": 100.0, "lon_deg": 0.0}}, "origin.lat_deg"),
+        ({"watchdog": {"auv_stale_s": 10.0, "auv_lost_s": 5.0}}, "watchdog"),
+        ({"watchdog": {"asv_stale_s": "3"}}, "watchdog.asv_stale_s"),
+        ({"watchdog": {"propeller": "rpm"}}, "watchdog.propeller"),
+        ({"clock": {"speedup": 0.0}}, "clock.speedup"),
+        ({"typo": 1}, "typo"),
+        ({"vehicle": [{"role": "auv", "id": 1}]}, "exactly one vehicle with role 'asv'"),
+        ({"vehicle": [{"role": "asv", "id": 1}, {"role": "auv", "id": 1}]}, "unique"),
+        ({"vehicle": [{"role": "asv", "id": 1}, {"role": "auv"}]}, "vehicle[1]"),
+        ({"vehicle": [{"role": "asv", "id": 1}, {"role": "rov", "id": 2}]}, "vehicle[1].role"),
+        ({"controller": {"name": "nope"}}, "unknown controller 'nope'"),
+        ({"controller": {"name": "hybrid-single", "preset": "nope"}}, "unknown preset"),
+        ({"controller": {"name": "hybrid-single", "estimator": "x"}}, "controller.estimator"),
+        ({"link": {"transport": "tcp"}}, "'tcp' and 'id'"),
+    ],
+)
+def test_config_errors_name_the_field(change, field):
+    data = json.loads(json.dumps(BASE)) | change
+    with pytest.raises(ConfigError) as err:
+        deploy_config_from_dict(data, "deploy.toml")
+    assert "deploy.toml" in str(err.value) and field in str(err.value)
+
+
+def test_config_two_auvs_need_a_multi_controller():
+    data = BASE | {"vehicle": [*BASE["vehicle"], {"role": "auv", "id": 9}]}
+    with pytest.raises(ConfigError, match="handles one AUV"):
+        deploy_config_from_dict(data)
+    ok = deploy_config_from_dict(data | {"controller": {"name": "hybrid-multi"}})
+    assert [v.label for v in ok.auvs] == ["a", "0x0009"]
+
+
+# --- IMC conversions ---------------------------------------------------------------------------
+@pytest.mark.parametrize("anchor_NE", [(0.0, 0.0), (900.0, -700.0), (-5000.0, 3000.0)])
+@pytest.mark.parametrize("depth", [0.0, 3.5, 50.0])
+def test_estimated_state_round_trip_through_moving_reference_point(anchor_NE, depth):
+    anchor = Origin(*to_wgs84(*anchor_NE, ORIGIN), 0.0)
+    nav = NavState(1.7e9, 812.3, -645.9, depth, 1.1, 1.4, 0.1, 0.01, 0.6, 1.3, 0.0, 0.0)
+    es = estimated_state(nav, anchor, ORIGIN)
+    assert (es.lat, es.lon) == (anchor.lat, anchor.lon)
+    back = nav_state(stamp(es, 1, 2, nav.t), ORIGIN)
+    assert math.hypot(back.N - nav.N, back.E - nav.E) < 1e-3  # x/y are float32 on the wire
+    assert back.depth == pytest.approx(depth) and back.psi == pytest.approx(1.1)
+
+
+def test_reference_transit_keeps_line_of_sight_and_standby_is_speed_zero():
+    cmd = Command(Mode.TRANSIT, (300.0, 400.0), 2.5, 0, Reason.TRACKING)
+    ref = reference(cmd, (0.0, 0.0), ORIGIN, lead=20.0)
+    N, E, _ = to_local(ref.lat, ref.lon, 0.0, ORIGIN)
+    assert math.hypot(N, E) == pytest.approx(520.0, abs=1e-3)  # 500 m + the lead
+    assert math.atan2(E, N) == pytest.approx(math.atan2(400, 300), abs=1e-7)
+    assert ref.speed.value == 2.5 and ref.z.value == 0.0
+    flags = imcpy.Reference.FlagsBits
+    assert int(ref.flags) == int(flags.LOCATION | flags.SPEED | flags.Z)
+    stop = reference(Command.standby(), (12.0, -7.0), ORIGIN, lead=20.0)
+    assert stop.speed.value == 0.0
+    assert to_local(stop.lat, stop.lon, 0.0, ORIGIN)[:2] == pytest.approx((12.0, -7.0), abs=1e-6)
+
+
+def test_udp_services():
+    s = "imc+info://0.0.0.0/version/5.4;imc+udp://10.0.0.5:6002/;imc+udp://127.0.0.1:6003/;x"
+    assert udp_services(s) == [("10.0.0.5", 6002), ("127.0.0.1", 6003)]
+    assert udp_services("imc+udp://bad/;") == []
+
+
+# --- DUNE FollowReference semantics ------------------------------------------------------------
+def _followref(src=0xFFFF, timeout=5.0):
+    fr = imcpy.FollowReference()
+    fr.control_src, fr.control_ent, fr.timeout = src, 0xFF, timeout
+    return FollowRefManeuver(fr, 100.0, ORIGIN, top_speed=3.0)
+
+
+def _ref(N=None, E=None, speed=None, src=0x4001, flags=0):
+    r = imcpy.Reference()
+    F = imcpy.Reference.FlagsBits
+    if N is not None:
+        r.lat, r.lon = to_wgs84(N, E, ORIGIN)
+        flags |= F.LOCATION
+    if speed is not None:
+        sp = imcpy.DesiredSpeed()
+        sp.value, sp.speed_units = speed, imcpy.SpeedUnits.METERS_PS
+        r.speed = sp
+        flags |= F.SPEED
+    r.flags = flags
+    return stamp(r, src, 0x2801, 0.0)
+
+
+def test_followref_goto_hover_speed_zero_and_held_fields():
+    m = _followref()
+    S = imcpy.FollowRefState.StateEnum
+    assert m.state == S.WAIT and not np.any(m.command_vector())
+    assert m.on_reference(_ref(100.0, 0.0, 2.0), 101.0, (0.0, 0.0))
+    assert m.state == S.GOTO and list(m.command_vector()) == pytest.approx([1, 100, 0, 2], abs=1e-6)
+    assert m.on_reference(_ref(speed=1.0), 102.0, (0.0, 0.0))  # location kept
+    assert list(m.command_vector()) == pytest.approx([1, 100, 0, 1], abs=1e-6)
+    assert m.on_reference(_ref(speed=0.0), 103.0, (0.0, 0.0))  # speed 0: loops off
+    assert not np.any(m.command_vector())
+    assert m.on_reference(_ref(speed=2.0), 103.5, (0.0, 0.0))
+    assert m.command_vector()[0] == 1.0
+    assert m.on_reference(_ref(110.0, 0.0), 104.0, (96.0, 0.0))  # 14 m < 15 m: arrived
+    assert m.state == S.HOVER and not np.any(m.command_vector())
+    assert m.on_reference(_ref(140.0, 0.0), 105.0, (96.0, 0.0))
+    assert m.state == S.GOTO
+
+
+def test_followref_source_filter_mandone_and_timeout():
+    m = _followref(src=0x4001, timeout=5.0)
+    assert not m.on_reference(_ref(50.0, 0.0, 1.0, src=0x9999), 101.0, (0.0, 0.0))
+    assert m.ignored == 1 and m.state == imcpy.FollowRefState.StateEnum.WAIT
+    assert m.on_reference(_ref(50.0, 0.0, 1.0), 101.0, (0.0, 0.0))
+    assert not m.check_timeout(105.9)
+    assert m.check_timeout(106.1) and m.done and not np.any(m.command_vector())
+    assert not m.check_timeout(107.0)  # reported once
+    m2 = _followref()
+    m2.on_reference(_ref(50.0, 0.0, 1.0), 101.0, (0.0, 0.0))
+    assert m2.on_reference(_ref(flags=imcpy.Reference.FlagsBits.MANDONE), 102.0, (0.0, 0.0))
+    assert m2.done and not np.any(m2.command_vector())
+    assert not m2.on_reference(_ref(50.0, 0.0, 1.0), 103.0, (0.0, 0.0))  # over
+
+
+# --- watchdogs and guard -----------------------------------------------------------------------
+GP = GuardParams(stale_s=3.0, lost_s=30.0, v_max=2.0, keep_out_m=50.0, margin_m=10.0, speed=1.5)
+
+
+class _Domain:
+    def avoid(self, d):
+        return 50.0
+
+
+def _obs(asv=(0.0, 0.0), auvs=((60.0, 0.0),)):
+    ests = tuple(AUVEstimate(N, E, 0.0, t_last_fix=0.0) for N, E in auvs)
+    return Observation(10.0, ASVState(*asv, 0.0), False, ests)
+
+
+def test_status_and_inflation():
+    assert [auv_status(a, GP) for a in (0.0, 3.0, 3.1, 30.0, 30.1)] == [
+        OK,
+        OK,
+        UNCERTAIN,
+        UNCERTAIN,
+        LOST,
+    ]
+    e = inflate(AUVEstimate(0, 0, 0, cov=(4.0, 1.0, 1.0, 9.0)), 5.0, 2.0)
+    assert e.cov == (104.0, 1.0, 1.0, 109.0) and e.sigma > 10.0
+
+
+def test_guard_policy():
+    obs = _obs()  # ASV 60 m from the AUV
+    stand = Command.standby(auv=0)
+    assert guard(stand, obs, [OK], [1.0], _Domain(), GP) == (stand, None)
+    # uncertain for 4 s: grown radius 58 m < 60 m: nothing to do
+    assert guard(stand, obs, [UNCERTAIN], [4.0], _Domain(), GP) == (stand, None)
+    # for 10 s: 70 m > 60 m: move straight away to 70 + 10 m
+    cmd, why = guard(stand, obs, [UNCERTAIN], [10.0], _Domain(), GP)
+    assert why == "guard_avoid" and cmd.mode is Mode.TRANSIT and cmd.reason is Reason.AVOIDANCE
+    assert cmd.waypoint == pytest.approx((60.0 - 80.0, 0.0)) and cmd.speed == 1.5
+    # lost, outside its (capped) grown disc: stand by
+    far = _obs(asv=(0.0, 500.0))
+    cmd, why = guard(Command(Mode.TRANSIT, (0, 0), 2.0), far, [LOST], [100.0], _Domain(), GP)
+    assert why == "auv_lost_standby" and cmd.mode is Mode.STANDBY
+    assert cmd.reason is Reason.FALLBACK
+    # uncertain: a transit waypoint inside the grown disc is moved out of it
+    go = Command(Mode.TRANSIT, (60.0, 65.0), 2.0, 0, Reason.TRACKING)
+    cmd, why = guard(go, far, [UNCERTAIN], [10.0], _Domain(), GP)
+    assert why == "guard_waypoint"
+    assert math.hypot(cmd.waypoint[0] - 60.0, cmd.waypoint[1]) == pytest.approx(80.0)
+
+
+def test_deploy_watchdogs_in_the_decisions(tmp_path):
+    """Stale AUV -> inflated covariance and the guard in the logged decision; lost ->
+    standby; stale ASV -> phase asv_stale (no decisions) until its state returns."""
+    cfg = deploy_config_from_dict(BASE | {"log": {"dir": str(tmp_path)}})
+    dep = Deploy(cfg, dry_run=True)
+    asv, auv = dep.link.asv, dep.link.auvs[0]
+    now = 1000.0
+    dep.clock.now = lambda: now
+    asv.id, auv.id = 0x2801, 0x2811
+    nav = NavState(now, 0.0, 0.0, 0.0, 0.0, 0.0, 0, 0, 0, 0, 0, 0)
+    auv_nav = NavState(now, 60.0, 0.0, 0.0, 0.0, 0.0, 0, 0, 0, 0, 0, 0)
+    auv.nav, auv.nav_recv = auv_nav, now
+    dep._on_state(auv, auv_nav, now)
+    asv.nav, asv.nav_recv = nav, now
+    dep._on_state(asv, nav, now)
+    assert dep.phase == RUNNING and dep.steps == 1
+    for age in (2.0, 10.0, 40.0):
+        now = 1000.0 + age
+        asv.nav_recv = now
+        dep.watch()
+        dep.step(now, now)
+    dep.jsonl.flush()
+    steps = read_jsonl(tmp_path / "deploy.jsonl", "step")
+    assert [s["status"] for s in steps] == [["ok"], ["ok"], ["uncertain"], ["lost"]]
+    assert steps[2]["obs"]["auvs"][0]["cov"][0] == pytest.approx((2.0 * 10.0) ** 2)
+    assert steps[2]["override"] == "guard_avoid"  # 60 m < 50 + 2 x 10 m
+    assert steps[3]["override"] == "guard_avoid"  # still inside the capped disc
+    events = [r["event"] for r in read_jsonl(tmp_path / "deploy.jsonl", "event")]
+    assert "auv_uncertain" in events and "auv_lost" in events
+    now = 1000.0 + 40.0 + 3.5  # no ASV state for 3.5 s > asv_stale_s = 3
+    dep.watch()
+    assert dep.phase == ASV_STALE
+    asv.nav_recv = now
+    dep._on_state(asv, nav, now)
+    assert dep.phase in (WAITING, RUNNING)
+
+
+# --- records and logs --------------------------------------------------------------------------
+def test_observation_round_trip_is_exact(tmp_path):
+    obs = Observation(1.7e9 + 0.1, ASVState(1 / 3, -2 / 7, 0.1, 1.2, 0.0, -0.01), True, (
+        AUVEstimate(10.0 / 3, 5.5, 2.0, 0.1, 0.2, (1.0, 0.1, 0.1, 2.0), 1.7e9),
+        AUVEstimate(math.nan, 0.0, 0.0, t_last_fix=-math.inf)))  # fmt: skip
+    w = JsonlWriter(tmp_path / "x.jsonl")
+    w.write({"kind": "step", "obs": obs_to_dict(obs)})
+    w.close()
+    back = obs_from_dict(read_jsonl(tmp_path / "x.jsonl", "step")[0]["obs"])
+    assert back.t == obs.t and back.propeller_on is True
+    assert back.asv == obs.asv and back.auvs[0] == obs.auvs[0]  # bit for bit
+    assert math.isnan(back.auvs[1].N) and back.auvs[1].t_last_fix == -math.inf
+
+
+def test_read_jsonl_skips_a_torn_last_line(tmp_path):
+    p = tmp_path / "x.jsonl"
+    p.write_text('{"kind": "a"}\n{"kind": "b"}\n{"kind": "c", "x": 1')
+    assert [r["kind"] for r in read_jsonl(p)] == ["a", "b"]
+    p.write_text('{"kind": "a"}\nnot json\n{"kind": "c"}\n')
+    with pytest.raises(ValueError, match="x.jsonl:2"):
+        read_jsonl(p)
