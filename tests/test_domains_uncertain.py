@@ -196,3 +196,17 @@ def test_avoidance_params_validated():
         parse(AvoidanceParams, {"kind": "uncertainty", "k_sigma": -1.0}, "preset.toml")
     with pytest.raises(ValueError, match="r_keep"):
         AvoidanceParams(kind="uncertainty").sphere(None)
+    assert AvoidanceParams().sphere(DOM) == DOM.r_in
+
+
+@settings(max_examples=50, deadline=None)
+@given(st.floats(0.0, 70.0), st.floats(0.0, 30.0), st.floats(0.0, 60.0), st.floats(0.0, 2.0),
+       st.floats(-math.pi, math.pi), st.floats(-math.pi, math.pi))  # fmt: skip
+def test_default_options_are_never_smaller_than_fixed(d, sigma, age, U, psi, bearing):
+    """With r_keep = None (the papers' sphere) both options only add to the fixed radius."""
+    est = [_est(0.0, 0.0, d, U * math.cos(psi), U * math.sin(psi), sigma**2, 0.0)]
+    asv = 100.0 * np.array([math.cos(bearing), math.sin(bearing)])
+    fixed = avoidance_radii(AvoidanceParams(), DOM, est, age, asv)
+    for kind in ("uncertainty", "reachable"):
+        r = avoidance_radii(AvoidanceParams(kind=kind), DOM, est, age, asv)
+        assert r[0] >= fixed[0] - 1e-9

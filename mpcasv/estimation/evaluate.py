@@ -194,33 +194,33 @@ def acceptance_ratios(table: pd.DataFrame, candidate: str = "kalman",
 
 
 def plot_estimators(runs: dict, path: str | Path, auv: int = 0) -> Path:
-    """Position error and believed vs true range over time, one line per estimator."""
+    """Position error, and believed minus true ASV-AUV range, over time, one line per
+    estimator (each run has its own closed-loop ASV path, so ranges are compared per run)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(10, 7), sharex=True)
-    first = next(iter(runs.values())).timeseries
-    ax2.plot(first["t"], first[f"range{auv}"], "k", lw=2, label="true range")
+    first = next(iter(runs.values()))
     for name, res in runs.items():
         ts = res.timeseries
         err = np.hypot(ts[f"est{auv}_N"] - ts[f"auv{auv}_N"], ts[f"est{auv}_E"] - ts[f"auv{auv}_E"])
         ax1.plot(ts["t"], err, label=name)
-        ax2.plot(ts["t"], ts[f"est_range{auv}"], lw=1, label=f"believed ({name})")
-    surf = first[f"auv{auv}_depth"].to_numpy() < 0.5
+        ax2.plot(ts["t"], ts[f"est_range{auv}"] - ts[f"range{auv}"], lw=1, label=name)
+    ts = first.timeseries
+    surf = ts[f"auv{auv}_depth"].to_numpy() < 0.5
     for ax in (ax1, ax2):
         ax.fill_between(
-            first["t"], 0, 1, where=surf, color="0.9", transform=ax.get_xaxis_transform(),
+            ts["t"], 0, 1, where=surf, color="0.9", transform=ax.get_xaxis_transform(),
             label="AUV at surface",
         )  # fmt: skip
         ax.grid(True, alpha=0.3)
         ax.legend(fontsize=8)
     ax1.set_ylabel("position error (m)")
-    ax2.set_ylabel("ASV-AUV range (m)")
+    ax2.set_ylabel("believed - true range (m)")
     ax2.set_xlabel("t (s)")
-    name = next(iter(runs.values())).scenario.name
-    ax1.set_title(f"{name}: belief vs truth (seed {next(iter(runs.values())).seed})")
+    ax1.set_title(f"{first.scenario.name}: belief vs truth (seed {first.seed})")
     fig.tight_layout()
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)

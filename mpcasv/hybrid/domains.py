@@ -326,7 +326,11 @@ class AvoidanceParams:
         else used. ``uncertainty``: the disc (U1). ``reachable``: the polygon (R1) (+) (U1).
     r_keep : float or None
         Keep-out sphere radius around the AUV's *true* position (m); None: the
-        :class:`DomainParams` collision sphere ``alpha T0 rdot_max``.
+        :class:`DomainParams` collision sphere ``alpha T0 rdot_max``. With None the
+        ``uncertainty`` kind is the papers' radius grown by the uncertainty (never smaller
+        than ``fixed``), and so is ``reachable``. A less conservative ``reachable`` domain
+        replaces the sphere's ``alpha T0 rdot_max`` (a time margin at the top relative speed)
+        by the explicit reach set: then ``r_keep`` is only the clearance (e.g. 20 m).
     k_sigma : float
         Multiplier on the estimate's 1-sigma (2.45: 95 % for a circular 2-D Gaussian).
     u_age : float
@@ -336,7 +340,11 @@ class AvoidanceParams:
     w_max : float
         AUV depth-rate limit (m/s): it may have risen this fast since the last depth.
     T_reach : float
-        Reachable-set horizon (s): the USBL fix period T0 by default.
+        Reachable-set horizon (s): how far ahead the AUV's motion must be covered. Not the
+        fix period (the estimate already moves with the AUV) but the time the ASV needs to
+        get out of the way from standby (turn, spin up, accelerate past the AUV's speed).
+        ``r_keep = 20``, ``T_reach = 15`` kept ``min_range_m >= 10`` in Cases 4 and 8
+        (pursuers) where ``T_reach = 10`` did not (docs/estimation.md).
     U_max, turn_rate_max_deg, accel_max : float
         AUV motion limits (m/s, deg/s, m/s^2); defaults as :class:`mpcasv.models.auv.AUVLimits`.
     psi_margin_deg : float
@@ -352,7 +360,7 @@ class AvoidanceParams:
     k_sigma: NonNeg = 2.45
     u_age: NonNeg = 2.0
     w_max: NonNeg = 0.5
-    T_reach: NonNeg = 5.0
+    T_reach: NonNeg = 15.0
     U_max: Pos = 2.0
     turn_rate_max_deg: Pos = 10.0
     accel_max: Pos = 0.2
