@@ -3,8 +3,10 @@ FollowReference semantics as the SITL runs them, the watchdogs and guard, log re
 
 from __future__ import annotations
 
+import gzip
 import json
 import math
+from pathlib import Path
 
 import imcpy
 import numpy as np
@@ -15,11 +17,20 @@ from mpcasv.interface import ASVState, AUVEstimate, Command, Mode, Observation, 
 from mpcasv.io.config import deploy_config_from_dict
 from mpcasv.io.deploy import ASV_STALE, RUNNING, WAITING, Deploy
 from mpcasv.io.dune import FollowRefManeuver
-from mpcasv.io.geo import Origin, to_local, to_wgs84
+from mpcasv.io.geo import Origin, absolute_latlon, to_local, to_wgs84
 from mpcasv.io.imc import NavState, estimated_state, nav_state, reference, stamp, udp_services
 from mpcasv.io.logs import JsonlWriter, read_jsonl
 from mpcasv.io.records import obs_from_dict, obs_to_dict
-from mpcasv.io.watchdog import LOST, OK, UNCERTAIN, GuardParams, auv_status, guard, inflate
+from mpcasv.io.watchdog import (
+    LOST,
+    OK,
+    UNCERTAIN,
+    GuardParams,
+    auv_status,
+    grown_radius,
+    guard,
+    inflate,
+)
 
 ORIGIN = Origin.from_degrees(63.4406, 10.3530)
 BASE = {
@@ -157,12 +168,8 @@ def test_followref_source_filter_mandone_and_timeout():
 
 
 # --- watchdogs and guard -----------------------------------------------------------------------
-GP = GuardParams(stale_s=3.0, lost_s=30.0, v_max=2.0, keep_out_m=50.0, margin_m=10.0, speed=1.5)
-
-
-class _Domain:
-    def avoid(self, d):
-        return 50.0
+GP = GuardParams(stale_s=3.0, lost_s=30.0, v_max=2.0, w_max=0.5, r_keep=50.0, margin_m=10.0,
+                 speed=1.5)  # fmt: skip
 
 
 def _obs(asv=(0.0, 0.0), auvs=((60.0, 0.0),)):
@@ -182,24 +189,33 @@ def test_status_and_inflation():
     assert e.cov == (104.0, 1.0, 1.0, 109.0) and e.sigma > 10.0
 
 
+def test_grown_radius_uses_the_shared_uncertain_radius():
+    deep = AUVEstimate(0.0, 0.0, 45.0)
+    assert grown_radius(deep, 0.0, GP) == pytest.approx(math.sqrt(50**2 - 45**2))
+    # after 10 s it may have risen 5 m and moved 20 m
+    assert grown_radius(deep, 10.0, GP) == pytest.approx(math.sqrt(50**2 - 40**2) + 20.0)
+    assert grown_radius(AUVEstimate(0, 0, 80.0), 5.0, GP) == 0.0  # cannot reach the surface
+    assert grown_radius(AUVEstimate(0, 0, 0.0), 1e4, GP) == pytest.approx(50.0 + 2.0 * 30.0)
+
+
 def test_guard_policy():
     obs = _obs()  # ASV 60 m from the AUV
     stand = Command.standby(auv=0)
-    assert guard(stand, obs, [OK], [1.0], _Domain(), GP) == (stand, None)
+    assert guard(stand, obs, [OK], [1.0], GP) == (stand, None)
     # uncertain for 4 s: grown radius 58 m < 60 m: nothing to do
-    assert guard(stand, obs, [UNCERTAIN], [4.0], _Domain(), GP) == (stand, None)
+    assert guard(stand, obs, [UNCERTAIN], [4.0], GP) == (stand, None)
     # for 10 s: 70 m > 60 m: move straight away to 70 + 10 m
-    cmd, why = guard(stand, obs, [UNCERTAIN], [10.0], _Domain(), GP)
+    cmd, why = guard(stand, obs, [UNCERTAIN], [10.0], GP)
     assert why == "guard_avoid" and cmd.mode is Mode.TRANSIT and cmd.reason is Reason.AVOIDANCE
     assert cmd.waypoint == pytest.approx((60.0 - 80.0, 0.0)) and cmd.speed == 1.5
     # lost, outside its (capped) grown disc: stand by
     far = _obs(asv=(0.0, 500.0))
-    cmd, why = guard(Command(Mode.TRANSIT, (0, 0), 2.0), far, [LOST], [100.0], _Domain(), GP)
+    cmd, why = guard(Command(Mode.TRANSIT, (0, 0), 2.0), far, [LOST], [100.0], GP)
     assert why == "auv_lost_standby" and cmd.mode is Mode.STANDBY
     assert cmd.reason is Reason.FALLBACK
     # uncertain: a transit waypoint inside the grown disc is moved out of it
     go = Command(Mode.TRANSIT, (60.0, 65.0), 2.0, 0, Reason.TRACKING)
-    cmd, why = guard(go, far, [UNCERTAIN], [10.0], _Domain(), GP)
+    cmd, why = guard(go, far, [UNCERTAIN], [10.0], GP)
     assert why == "guard_waypoint"
     assert math.hypot(cmd.waypoint[0] - 60.0, cmd.waypoint[1]) == pytest.approx(80.0)
 
@@ -262,3 +278,52 @@ def test_read_jsonl_skips_a_torn_last_line(tmp_path):
     p.write_text('{"kind": "a"}\nnot json\n{"kind": "c"}\n')
     with pytest.raises(ValueError, match="x.jsonl:2"):
         read_jsonl(p)
+
+
+# --- a real DUNE log through the link ----------------------------------------------------------
+SHARED_LOG = Path(__file__).resolve().parents[2] / "shared" / "data" / "dune-lauv-followref.lsf.gz"
+
+
+@pytest.mark.skipif(not SHARED_LOG.exists(), reason="shared DUNE log not available")
+def test_real_dune_messages_through_the_deploy_link(tmp_path):
+    """DUNE's own EstimatedState, PlanControl answer, FollowRefState and thruster messages
+    (stock LAUV simulator driven by FollowReference) pass every check, give the positions
+    mpcasv.io.lsf.read_lsf gives, and move the deploy loop from 'starting' to 'running'."""
+    from imcpy.lsf import LSFReader
+
+    from mpcasv.io.deploy import STARTING
+    from mpcasv.io.lsf import read_lsf
+
+    data = gzip.decompress(SHARED_LOG.read_bytes())
+    types = [imcpy.EstimatedState, imcpy.PlanControl, imcpy.FollowRefState,
+             imcpy.SetThrusterActuation, imcpy.Announce]  # fmt: skip
+    with LSFReader(data, use_index=False, save_index=False) as reader:
+        msgs = [m for m in reader.read_message(types=types) if m.src == 0x00D1]
+    es0 = next(m for m in msgs if isinstance(m, imcpy.EstimatedState))
+    lat0, lon0 = (math.degrees(v) for v in absolute_latlon(es0)[:2])
+    cfg = deploy_config_from_dict({
+        "identity": {"id": 0x4001}, "origin": {"lat_deg": lat0, "lon_deg": lon0},
+        "vehicle": [{"role": "asv", "id": 0x00D1, "name": "lauv-simulator-1",
+                     "address": "127.0.0.1:6002"}, {"role": "auv", "id": 0x0AAA}],
+        "controller": {"name": "hybrid-single"}, "log": {"dir": str(tmp_path)},
+    })  # fmt: skip
+    dep = Deploy(cfg)
+    clock = {"t": msgs[0].timestamp}
+    dep.clock.now = lambda: clock["t"]
+    dep.phase, dep.pending = STARTING, (1, clock["t"])  # as if we had sent request 1
+    for m in msgs:
+        clock["t"] = m.timestamp
+        dep.link.handle_message(m, m.serialize(), ("127.0.0.1", 6002), None)
+    link = dep.link
+    n_es = sum(isinstance(m, imcpy.EstimatedState) for m in msgs)
+    assert dict(link.rejects) == {}
+    assert link.accepted["EstimatedState"] == n_es and link.accepted["PlanControl"] == 1
+    assert dep.phase == RUNNING and dep.started
+    assert dep.followref["state"] == "GOTO"
+    assert dep.thrust is not None and dep.thrust[0] > cfg.watchdog.propeller_on_threshold
+    table = read_lsf(SHARED_LOG, Origin.from_degrees(lat0, lon0))
+    last = table.iloc[-1]
+    assert link.asv.nav.t == last["t"]
+    assert math.hypot(link.asv.nav.N - last["N"], link.asv.nav.E - last["E"]) < 0.01
+    dep.jsonl.close()
+    dep.lsf.close()

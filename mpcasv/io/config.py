@@ -146,6 +146,7 @@ class WatchdogSpec:
     auv_stale_s: Pos = 3.0  # AUV state older: uncertain (radius grows with its age)
     auv_lost_s: Pos = 30.0  # AUV silent for longer: reported, ASV kept safe
     auv_speed_max: Pos = 2.0  # how fast an AUV may move away from its last state
+    auv_rise_rate: NonNeg = 0.5  # how fast it may rise (m/s) towards the surface
     asv_speed_max: Pos = 6.0  # faster apparent motion is rejected as a jump
     jump_margin_m: NonNeg = 50.0  # GPS/nav slack added to speed x dt in the jump check
     max_distance_m: Pos = 20000.0  # states further from the origin are rejected
@@ -153,7 +154,7 @@ class WatchdogSpec:
     propeller: Literal["thruster", "command"] = "thruster"  # where propeller_on comes from
     propeller_on_threshold: Annotated[float, Strict(), Field(gt=0, lt=1)] = 0.05
     report_sigma_m: NonNeg = 1.0  # 1-sigma of an AUV's own navigation (Report.nav_sigma)
-    keep_out_m: Pos = 50.0  # guard radius at the surface for controllers without a domain
+    keep_out_m: Pos = 50.0  # keep-out sphere for controllers without a domain (m)
     guard_margin_m: NonNeg = 10.0  # clearance beyond the grown radius when moving away
     guard_speed: Pos = 1.5  # m/s of a guard transit when the controller commanded none
 

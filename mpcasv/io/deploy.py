@@ -52,10 +52,20 @@ _PC = imcpy.PlanControl
 
 
 def guard_params(cfg: DeployConfig, controller) -> GuardParams:
+    """Guard parameters: watchdog limits, and the keep-out sphere of the controller's
+    ``avoid`` option (:class:`mpcasv.hybrid.domains.AvoidanceParams`), else its domain's
+    ``r_in``, else ``watchdog.keep_out_m``."""
     wd = cfg.watchdog
-    speed = float(getattr(getattr(controller, "params", None), "speed", wd.guard_speed))
-    return GuardParams(wd.auv_stale_s, wd.auv_lost_s, wd.auv_speed_max, wd.keep_out_m,
-                       wd.guard_margin_m, speed)  # fmt: skip
+    params = getattr(controller, "params", None)
+    domain = getattr(controller, "domain", None)
+    avoid = getattr(params, "avoid", None)
+    if avoid is not None:
+        r_keep = avoid.sphere(domain)
+    else:
+        r_keep = domain.r_in if domain is not None else wd.keep_out_m
+    speed = float(getattr(params, "speed", wd.guard_speed))
+    return GuardParams(wd.auv_stale_s, wd.auv_lost_s, wd.auv_speed_max, wd.auv_rise_rate,
+                       float(r_keep), wd.guard_margin_m, speed)  # fmt: skip
 
 
 def _known_plans(cfg: DeployConfig) -> list:
@@ -277,7 +287,7 @@ class Deploy:
         c0 = time.perf_counter()
         raw = self.controller.step(obs)
         step_ms = (time.perf_counter() - c0) * 1e3
-        cmd, override = guard(raw, obs, status, ages, self.domain, self.gp)
+        cmd, override = guard(raw, obs, status, ages, self.gp)
         sent = False
         if not self.dry_run:
             lk = self.cfg.link

@@ -12,7 +12,8 @@ Checks, in order (reason names in brackets):
 
 1. framing and decoding by imcpy [``truncated``, ``bad_sync``, ``trailing_bytes``,
    ``bad_crc``, ``malformed``];
-2. addressed to us or broadcast [``not_for_us``];
+2. addressed to us or broadcast (Announces: any destination, DUNE sends them with 0)
+   [``not_for_us``];
 3. sender is a configured vehicle: by IMC id, or by system name through its Announce
    [``unknown_sender``, ``id_mismatch``]; Announces of other systems are counted too;
 4. the datagram comes from the vehicle's address (static in the config, or its Announce's
@@ -271,10 +272,13 @@ class ImcLink:
             self.reject("internal_error", f"{type(exc).__name__}: {exc}", addr=addr, msg=name)
 
     def _check(self, msg, name: str, addr: Addr | None, stream_peer: Peer | None) -> Peer | None:
+        if name == "Announce":  # DUNE multicasts its Announce with dst 0: any dst is fine
+            bad = non_finite_fields(msg)
+            if bad:
+                raise BadInput("non_finite", ",".join(bad))
+            return self._announce_in(msg, addr, stream_peer)
         if msg.dst not in (self.id, BROADCAST):
             raise BadInput("not_for_us", f"dst 0x{msg.dst:04X}")
-        if name == "Announce":
-            return self._announce_in(msg, addr, stream_peer)
         p = stream_peer or self._peer_by_id(msg.src)
         if p is None:
             raise BadInput("unknown_sender", f"src 0x{msg.src:04X}")

@@ -73,12 +73,11 @@ def replay(log: str | Path, controller: str | None = None, preset: str | None = 
     g = started[0]["guard"]
     gp = GuardParams(**g) if same_ctl else GuardParams(**(g | {"speed": float(getattr(
         getattr(ctl, "params", None), "speed", g["speed"]))}))  # fmt: skip
-    domain = getattr(ctl, "domain", None)
     rows = []
     for s in steps:
         obs = obs_from_dict(s["obs"])
         raw = ctl.step(obs)
-        cmd, override = guard(raw, obs, s["status"], s["ages"], domain, gp)
+        cmd, override = guard(raw, obs, s["status"], s["ages"], gp)
         logged = cmd_from_dict(s["cmd"])
         dist = float("nan")
         if cmd.waypoint is not None and logged.waypoint is not None:

@@ -8,12 +8,14 @@ AUV states age between messages. With ``age`` the time since the last accepted s
   ``v_max age`` (``v_max`` = ``watchdog.auv_speed_max``) from where it was last seen, so the
   estimate handed to the controller gets its covariance inflated by ``(v_max age)^2`` on each
   axis (:func:`inflate`), and ``t_last_fix`` stays the time of that last state: a controller
-  whose anti-collision domain grows with the estimate's sigma or fix age sees the growth
-  itself. For controllers that use a fixed radius (the papers' ``r_inner`` /
-  ``r_avoid``), :func:`guard` enforces the grown radius
-  ``r_g = r_avoid(d) + v_max age`` around the last position: it moves a transit waypoint
-  out of that disc, and if the ASV is inside it, replaces the command by a transit straight
-  away from the AUV to ``r_g + guard_margin_m`` ("guard_avoid").
+  whose anti-collision domain grows with the estimate's sigma or fix age (the
+  ``uncertainty``/``reachable`` options of :mod:`mpcasv.hybrid.domains`) sees the growth
+  itself; with those options the growth is counted twice (sigma and age), which errs on
+  the safe side. Whatever the controller's domain, :func:`guard` enforces the grown radius
+  of :func:`mpcasv.hybrid.domains.r_avoid_uncertain` (keep-out sphere, the AUV may have
+  risen at ``w_max`` and moved at ``v_max`` since) around the last position: it moves a
+  transit waypoint out of that disc, and if the ASV is inside it, replaces the command by a
+  transit straight away from the AUV to ``r_g + guard_margin_m`` ("guard_avoid").
 - ``age > auv_lost_s``: **lost**. Reported once; the ASV is kept safe by standing by
   (propeller off: the papers' safe state, in which a surface vehicle drifts slowly and
   predictably and makes no noise for the AUV's modem), after first leaving the grown disc
@@ -32,6 +34,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, replace
 
+from mpcasv.hybrid.domains import r_avoid_uncertain
 from mpcasv.interface import AUVEstimate, Command, Mode, Observation, Reason
 
 __all__ = ["OK", "UNCERTAIN", "LOST", "GuardParams", "auv_status", "guard", "inflate"]
@@ -41,12 +44,13 @@ OK, UNCERTAIN, LOST = "ok", "uncertain", "lost"
 
 @dataclass(frozen=True)
 class GuardParams:
-    """What :func:`guard` needs (from the watchdog config and the controller's domain)."""
+    """What :func:`guard` needs (from the watchdog config and the controller)."""
 
     stale_s: float
     lost_s: float
-    v_max: float  # m/s
-    keep_out_m: float  # anti-collision radius at the surface when there is no domain
+    v_max: float  # m/s the AUV may move away from where it was last seen
+    w_max: float  # m/s the AUV may rise
+    r_keep: float  # keep-out sphere radius around the AUV (m)
     margin_m: float  # clearance beyond the grown radius when moving away
     speed: float  # m/s of a guard transit when the controller gave none
 
@@ -65,14 +69,17 @@ def inflate(est: AUVEstimate, age: float, v_max: float) -> AUVEstimate:
     return replace(est, cov=(a + g2, b, c, d + g2))
 
 
-def grown_radius(est: AUVEstimate, age: float, domain, p: GuardParams) -> float:
-    """``r_avoid(depth) + v_max min(age, lost_s)`` (m); ``keep_out_m`` without a domain."""
-    base = float(domain.avoid(est.depth)) if domain is not None else p.keep_out_m
-    return base + p.v_max * min(max(age, 0.0), p.lost_s)
+def grown_radius(est: AUVEstimate, age: float, p: GuardParams) -> float:
+    """The anti-collision radius of an AUV last seen ``age`` s ago (capped at ``lost_s``):
+    :func:`mpcasv.hybrid.domains.r_avoid_uncertain` with the keep-out sphere ``r_keep``, no
+    sigma term (the estimate is the last state itself), ``u_age = v_max`` and ``w_max``."""
+    a = min(max(age, 0.0), p.lost_s)
+    return float(r_avoid_uncertain(est.depth, p.r_keep, 0.0, a, 0.0, p.v_max, p.w_max))
 
 
-def guard(cmd: Command, obs: Observation, status: list[str], ages: list[float], domain,
-          p: GuardParams) -> tuple[Command, str | None]:  # fmt: skip
+def guard(
+    cmd: Command, obs: Observation, status: list[str], ages: list[float], p: GuardParams
+) -> tuple[Command, str | None]:
     """Apply the stale/lost AUV policy of the module docstring to ``cmd``.
 
     Returns the command to send and the name of the override (None: unchanged).
@@ -85,7 +92,7 @@ def guard(cmd: Command, obs: Observation, status: list[str], ages: list[float], 
         if s == OK:
             continue
         e = obs.auvs[k]
-        r_g = grown_radius(e, ages[k], domain, p)
+        r_g = grown_radius(e, ages[k], p)
         radii[k] = r_g
         depth_in = r_g - math.hypot(q[0] - e.N, q[1] - e.E)
         if depth_in > worst:
