@@ -21,7 +21,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from mpcasv.config import Pos, frozen
-from mpcasv.hybrid.domains import DomainParams, point_on_circle, range_bearing
+from mpcasv.hybrid.domains import (
+    AvoidanceParams,
+    DomainParams,
+    avoidance_radii,
+    point_on_circle,
+    range_bearing,
+)
 from mpcasv.hybrid.system import HybridAutomaton, Mode, Transition
 from mpcasv.interface import Command, Observation, Reason
 from mpcasv.interface import Mode as CmdMode
@@ -39,6 +45,8 @@ class HybridMultiParams:
     T_standby: Pos = 10.0  # T: minimum standby time at an AUV (s)
     speed: Pos = 2.5  # transit speed cap (m/s)
     require_fix: bool = False  # tau_k resets only if a fix was also observed (estimator)
+    # anti-collision domain: the papers' r_avoid,i (kind "fixed") or an uncertainty-aware one
+    avoidance: AvoidanceParams = AvoidanceParams()
 
 
 @dataclass(frozen=True, slots=True)
@@ -133,9 +141,10 @@ class HybridMulti:
         dt = 1.0 if self._t_prev is None else obs.t - self._t_prev
         self._t_prev = obs.t
         pos = np.array([a.position for a in obs.auvs])
-        depth = np.array([a.depth for a in obs.auvs])
         r, beta = range_bearing(obs.asv.position, pos)
-        r_avoid, r_t = self.domain.avoid(depth), self.domain.target(depth)
+        r_avoid = avoidance_radii(self.params.avoidance, self.domain, obs.auvs, obs.t,
+                                  obs.asv.position)  # fmt: skip
+        r_t = r_avoid + self.domain.delta_r  # eq. 6
         self.update_timers(obs, r, r_t, dt)
         if self.state.q == Q1 and self.state.tau <= 1e-9 and self.latch == self.standby_auv:
             self.latch = None  # waited for the fix at the avoided AUV: resume nominal choice

@@ -25,7 +25,13 @@ import math
 from dataclasses import dataclass
 
 from mpcasv.config import Pos, frozen
-from mpcasv.hybrid.domains import DomainParams, point_on_circle, range_bearing
+from mpcasv.hybrid.domains import (
+    AvoidanceParams,
+    DomainParams,
+    avoidance_radii,
+    point_on_circle,
+    range_bearing,
+)
 from mpcasv.hybrid.system import HybridAutomaton, Mode, Transition
 from mpcasv.interface import Command, Observation, Reason
 from mpcasv.interface import Mode as CmdMode
@@ -40,6 +46,8 @@ class HybridSingleParams:
 
     domain: DomainParams
     speed: Pos = 2.5  # transit speed cap handed to the execution level (m/s)
+    # inner boundary: the papers' r_inner (kind "fixed") or an uncertainty-aware domain
+    avoidance: AvoidanceParams = AvoidanceParams()
 
 
 @dataclass(frozen=True, slots=True)
@@ -126,13 +134,16 @@ class HybridSingle:
         self.state = SingleState(Q1, 0.0, 0.0)
 
     def observe(self, obs: Observation) -> SingleState:
-        """Refresh the measured part of the state (r, beta and the radii at the AUV's depth)."""
+        """Refresh the measured part of the state (r, beta and the radii at the AUV's depth;
+        r_inner from the configured anti-collision domain, the papers' by default)."""
         auv = obs.auvs[0]
         r, beta = range_bearing(obs.asv.position, auv.position)
-        d, dom = auv.depth, self.domain
+        dom = self.domain
+        r_inner = float(avoidance_radii(self.params.avoidance, dom, obs.auvs, obs.t,
+                                        obs.asv.position)[0])  # fmt: skip
         return dataclasses.replace(
-            self.state, r=float(r), beta=float(beta), r_inner=float(dom.inner(d)),
-            r_outer=float(dom.outer(d)), r_t=float(dom.target(d)),
+            self.state, r=float(r), beta=float(beta), r_inner=r_inner,
+            r_outer=float(dom.outer(auv.depth)), r_t=r_inner + dom.delta_r,
         )  # fmt: skip
 
     def step(self, obs: Observation) -> Command:
