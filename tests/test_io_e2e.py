@@ -96,6 +96,8 @@ def _rehearse(tmp: Path, case: str, duration: float, base: dict, *sitl_args: str
 
 def _compare(scenario, deploy_dir: Path, sitl_dir: Path) -> tuple[dict, dict]:
     m_dep, joined = rehearsal_metrics(scenario, sitl_dir, deploy_dir)
+    info = json.loads((sitl_dir / "run" / "run.json").read_text())["sitl"]
+    print("SITL:", {k: info[k] for k in ("counts", "overruns", "sitl_wall_s")})
     sc = scenario_with(scenario, duration=m_dep["duration_s"])
     res = simulate(sc, make_controller(sc.controller, len(sc.auv), sc.preset), SEED)
     m_sim = compute_metrics(res)

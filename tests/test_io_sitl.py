@@ -1,0 +1,162 @@
+"""The SITL's vehicles behave towards the network as DUNE does (in-process, loopback):
+Announce-gated input, Heartbeat-gated EstimatedState at 2 Hz, PlanControl answers,
+FollowReference timeout, speed 0 = loops off."""
+
+from __future__ import annotations
+
+import asyncio
+import time
+from pathlib import Path
+
+import imcpy
+import numpy as np
+import pytest
+
+from mpcasv.io.imc import BROADCAST, announce, decode, stamp
+from mpcasv.io.sitl import Sitl, SitlOptions
+from mpcasv.io.transport import UdpEndpoint
+from mpcasv.sim.scenario import load_scenario
+
+CASE3 = Path(__file__).resolve().parents[1] / "experiments" / "scenarios" / "case3.toml"
+ME = 0x4001
+PC = imcpy.PlanControl
+
+
+class Node:
+    def __init__(self):
+        self.got: list[imcpy.Message] = []
+
+    async def open(self):
+        self.ep = await UdpEndpoint.open("127.0.0.1", 0, lambda d, a: self.got.append(decode(d)[0]))
+        return self
+
+    def send(self, msg, to, dst=BROADCAST, src=ME):
+        stamp(msg, src, dst, time.time())
+        self.ep.sendto(msg.serialize(), to)
+
+    def announce(self, to):
+        h, p = self.ep.address
+        self.send(announce("tester", imcpy.SystemType.CCU, [f"imc+udp://{h}:{p}/"]), to)
+
+    def of(self, cls, src=None):
+        return [m for m in self.got if isinstance(m, cls) and (src is None or m.src == src)]
+
+
+async def _until(pred, timeout=5.0):
+    t_end = time.monotonic() + timeout
+    while time.monotonic() < t_end:
+        if pred():
+            return True
+        await asyncio.sleep(0.005)
+    return False
+
+
+def _run(tmp_path, body, **opt):
+    sc = load_scenario(CASE3)
+
+    async def main():
+        sitl = Sitl(sc, SitlOptions(speedup=20.0, discovery_port=0, out=tmp_path, **opt))
+        stop = asyncio.Event()
+        task = asyncio.create_task(sitl.run(stop))
+        assert await _until(lambda: sitl.epoch > 0)
+        try:
+            await body(sitl)
+        finally:
+            stop.set()
+            await task
+        return sitl
+
+    return asyncio.run(main())
+
+
+def test_streams_only_to_announced_heartbeating_systems(tmp_path):
+    async def body(sitl):
+        asv = ("127.0.0.1", sitl.asv.port)
+        disc = sitl.discovery.address
+        quiet, node = await Node().open(), await Node().open()
+        quiet.announce(disc)  # announced, never heartbeats
+        node.send(imcpy.Heartbeat(), asv, dst=sitl.asv.id)  # not announced yet: dropped
+        assert await _until(lambda: sitl.counts.get("drop_unannounced", 0) >= 1)
+        node.announce(disc)
+        assert await _until(lambda: node.of(imcpy.Announce, sitl.asv.id))  # answered at once
+        for _ in range(8):
+            node.send(imcpy.Heartbeat(), asv, dst=sitl.asv.id)
+            await asyncio.sleep(0.05)
+        es = node.of(imcpy.EstimatedState, sitl.asv.id)
+        assert len(es) >= 5
+        dt = np.diff([m.timestamp for m in es])
+        assert np.all(dt == 0.5)  # 2 Hz, exact timestamps
+        assert not quiet.of(imcpy.EstimatedState)
+        assert node.of(imcpy.SetThrusterActuation, sitl.asv.id)
+        # AUVs stream only to systems that heart-beat them, too
+        assert not node.of(imcpy.EstimatedState, sitl.auvs[0].id)
+
+    _run(tmp_path, body, duration=1000.0)
+
+
+def test_plan_control_followreference_timeout_and_speed_zero(tmp_path):
+    async def body(sitl):
+        asv = ("127.0.0.1", sitl.asv.port)
+        node = await Node().open()
+        node.announce(sitl.discovery.address)
+        assert await _until(lambda: node.of(imcpy.Announce, sitl.asv.id))
+        node.send(imcpy.Heartbeat(), asv, dst=sitl.asv.id)
+
+        def start(req, dst, arg=True):
+            pc = imcpy.PlanControl()
+            pc.type, pc.op, pc.request_id, pc.plan_id = (
+                PC.TypeEnum.REQUEST,
+                PC.OperationEnum.START,
+                req,
+                "p",
+            )
+            if arg:
+                fr = imcpy.FollowReference()
+                fr.control_src, fr.control_ent, fr.timeout = ME, 0xFF, 5.0
+                pc.arg = fr
+            node.send(pc, asv, dst=dst)
+
+        start(7, dst=0x1234)  # not for this vehicle: silently ignored (as DUNE)
+        start(8, dst=sitl.asv.id, arg=False)
+        assert await _until(lambda: node.of(imcpy.PlanControl))
+        await asyncio.sleep(0.05)
+        answers = node.of(imcpy.PlanControl)
+        assert [(a.request_id, a.type) for a in answers] == [(8, PC.TypeEnum.FAILURE)]
+        start(9, dst=sitl.asv.id)
+        assert await _until(lambda: len(node.of(imcpy.PlanControl)) == 2)
+        ok = node.of(imcpy.PlanControl)[-1]
+        assert (ok.request_id, ok.type, ok.plan_id) == (9, PC.TypeEnum.SUCCESS, "p")
+        assert sitl.maneuver is not None and not np.any(sitl.command_vector())  # WAIT
+
+        def ref(N, E, speed):
+            from mpcasv.interface import Command, Mode
+            from mpcasv.io.imc import reference
+
+            cmd = Command(Mode.TRANSIT, (N, E), speed) if speed > 0 else Command.standby()
+            x = sitl.world.x
+            node.send(reference(cmd, (x[0], x[1]), sitl.origin), asv, dst=sitl.asv.id)
+
+        ref(0.0, 0.0, 2.0)
+        assert await _until(lambda: sitl.command_vector()[0] == 1.0)
+        frs = node.of(imcpy.FollowRefState)
+        assert frs[-1].state == imcpy.FollowRefState.StateEnum.GOTO
+        ref(0.0, 0.0, 0.0)  # speed 0: loops off, the boat drifts
+        assert await _until(lambda: not np.any(sitl.command_vector()))
+        # no Reference for longer than the timeout (5 s = 0.25 s of wall clock at 20x)
+        assert await _until(lambda: sitl.maneuver.done, timeout=2.0)
+        last = node.of(imcpy.FollowRefState)[-1]
+        assert last.state == imcpy.FollowRefState.StateEnum.TIMEOUT
+        assert not np.any(sitl.command_vector())
+
+    sitl = _run(tmp_path, body, duration=1000.0)
+    assert sitl.counts.get("references", 0) == 2
+
+
+@pytest.mark.parametrize("hold", [True, False])
+def test_hold_keeps_the_world_still_until_the_first_reference(tmp_path, hold):
+    async def body(sitl):
+        await asyncio.sleep(0.3)  # 6 s of the SITL clock
+
+    sitl = _run(tmp_path, body, duration=1000.0, hold=hold)
+    assert (len(sitl.rows) == 0) == hold
+    assert (sitl.ts_offset is None) == hold
