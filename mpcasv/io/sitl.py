@@ -49,7 +49,7 @@ import math
 import os
 import signal
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 import imcpy
@@ -57,19 +57,11 @@ import numpy as np
 
 from mpcasv.interface import Command, Mode, Reason
 from mpcasv.io.dune import FollowRefManeuver
-from mpcasv.io.geo import Origin, to_wgs84
-from mpcasv.io.imc import (
-    BROADCAST,
-    BadInput,
-    NavState,
-    announce,
-    decode,
-    estimated_state,
-    udp_services,
-)
-from mpcasv.io.imc import stamp as _stamp
+from mpcasv.io.geo import Origin, to_local, to_wgs84
+from mpcasv.io.imc import BadInput, NavState, decode, estimated_state, udp_services
 from mpcasv.io.logs import JsonlWriter, LsfWriter
-from mpcasv.io.transport import Clock, TcpStream, UdpEndpoint
+from mpcasv.io.simvehicle import Node, SimVehicle
+from mpcasv.io.transport import Clock, UdpEndpoint
 from mpcasv.sim.scenario import Scenario
 
 __all__ = ["Sitl", "SitlOptions"]
@@ -77,7 +69,6 @@ __all__ = ["Sitl", "SitlOptions"]
 log = logging.getLogger("mpcasv.sitl")
 Addr = tuple[str, int]
 _PC = imcpy.PlanControl
-HEARD_S = 30.0  # DUNE streams to systems heard from in the last 30 s
 ANNOUNCE_S = 10.0
 
 
@@ -105,145 +96,6 @@ class SitlOptions:
     controller: str | None = None  # for the world's domain (reliable-fix rule, metrics)
     preset: str | None = None
     ready_file: Path | None = None
-
-
-@dataclass
-class Node:
-    """A system a simulated vehicle knows from its Announce."""
-
-    id: int
-    name: str
-    services: list[Addr]
-    last_hb: float = -math.inf
-
-
-@dataclass
-class SimVehicle:
-    """One simulated vehicle as an IMC system."""
-
-    sitl: Sitl
-    name: str
-    id: int
-    role: str  # "asv" or "auv"
-    index: int
-    port: int = 0
-    endpoint: UdpEndpoint | None = None
-    nodes: dict[int, Node] = field(default_factory=dict)
-    anchor: Origin | None = None
-    alive: bool = False
-    tcp_server: asyncio.base_events.Server | None = None
-    tcp_port: int = 0
-    tcp_clients: list[TcpStream] = field(default_factory=list)
-
-    @property
-    def sys_type(self):
-        return imcpy.SystemType.USV if self.role == "asv" else imcpy.SystemType.UUV
-
-    async def open(self, host: str) -> None:
-        self.endpoint = await UdpEndpoint.open(host, self.port, self.on_datagram)
-        self.port = self.endpoint.address[1]
-        self.nodes.clear()
-        self.alive = True
-
-    def close(self) -> None:
-        self.alive = False
-        if self.endpoint is not None:
-            self.endpoint.close()
-            self.endpoint = None
-
-    def services(self) -> list[str]:
-        return [f"imc+udp://{self.sitl.opt.bind}:{self.port}/"]
-
-    def stamp(self, msg: imcpy.Message, dst: int = BROADCAST) -> imcpy.Message:
-        return _stamp(msg, self.id, dst, self.sitl.now(), src_ent=1)
-
-    def _send(self, msg: imcpy.Message, addr: Addr) -> None:
-        data = msg.serialize()
-        if self.endpoint is not None and self.endpoint.sendto(data, addr):
-            self.sitl.lsf.write(data)
-
-    def announce_to(self, addrs) -> None:
-        if not self.alive:
-            return
-        lat, lon = to_wgs84(*self.sitl.position(self), self.sitl.origin)
-        msg = self.stamp(announce(self.name, self.sys_type, self.services(), lat, lon))
-        for a in addrs:
-            self._send(msg, a)
-
-    def publish(self, msg: imcpy.Message) -> None:
-        """To every system heard from in the last 30 s (and every backseat client)."""
-        if not self.alive:
-            return
-        now = self.sitl.now()
-        self.stamp(msg)
-        for node in self.nodes.values():
-            if now - node.last_hb <= HEARD_S and node.services:
-                self._send(msg, node.services[0])
-        data = msg.serialize()
-        for c in list(self.tcp_clients):
-            if c.send(data):
-                self.sitl.lsf.write(data)
-
-    def reply(self, msg: imcpy.Message, node: Node | None, stream: TcpStream | None) -> None:
-        self.stamp(msg, node.id if node else BROADCAST)
-        if stream is not None:
-            stream.send(msg.serialize())
-            self.sitl.lsf.write(msg.serialize())
-        elif node is not None and node.services:
-            self._send(msg, node.services[0])
-
-    def learn(self, msg: imcpy.Announce) -> None:
-        if msg.src == self.id:
-            return
-        services = udp_services(msg.services)
-        node = self.nodes.get(msg.src)
-        new = node is None
-        if new:
-            node = self.nodes[msg.src] = Node(msg.src, msg.sys_name, services)
-        node.name, node.services = msg.sys_name, services
-        if new and services:
-            self.announce_to(services[:1])
-
-    def on_datagram(self, data: bytes, addr: Addr) -> None:
-        try:
-            msg, raw = decode(data)
-        except BadInput as bad:
-            self.sitl.count(f"drop_{bad.reason}")
-            return
-        self.sitl.lsf.write(raw)
-        if not self.alive or msg.dst not in (self.id, BROADCAST):
-            self.sitl.count("drop_not_for_me")
-            return
-        if isinstance(msg, imcpy.Announce):
-            self.learn(msg)
-            return
-        node = self.nodes.get(msg.src)
-        if node is None or addr not in node.services:  # DUNE: only announced systems
-            self.sitl.count("drop_unannounced")
-            return
-        self.on_message(msg, node, None)
-
-    def on_message(self, msg, node: Node | None, stream: TcpStream | None) -> None:
-        if isinstance(msg, imcpy.Heartbeat):
-            if node is not None:
-                node.last_hb = self.sitl.now()
-        elif self.role == "asv":
-            self.sitl.asv_message(self, msg, node, stream)
-
-    async def serve_tcp(self, host: str) -> None:
-        async def client(reader, writer):
-            stream = TcpStream(reader, writer, lambda m, raw: self._on_tcp(m, raw, stream))
-            self.tcp_clients.append(stream)
-            await stream.run()
-            self.tcp_clients.remove(stream)
-
-        self.tcp_server = await asyncio.start_server(client, host, self.tcp_port)
-        self.tcp_port = self.tcp_server.sockets[0].getsockname()[1]
-
-    def _on_tcp(self, msg, raw: bytes, stream: TcpStream) -> None:
-        self.sitl.lsf.write(raw)
-        if self.alive and msg.dst in (self.id, BROADCAST):
-            self.on_message(msg, self.nodes.get(msg.src), stream)
 
 
 class Sitl:
@@ -360,8 +212,6 @@ class Sitl:
         return estimated_state(nav, v.anchor, self.origin)
 
     def _offset(self, v: SimVehicle, nav: NavState) -> tuple[float, float]:
-        from mpcasv.io.geo import to_local
-
         lat, lon = to_wgs84(nav.N, nav.E, self.origin)
         n, e, _ = to_local(lat, lon, v.anchor.height, v.anchor)
         return n, e
