@@ -48,6 +48,12 @@ def main(argv: list[str] | None = None) -> int:
     except ConfigError as exc:
         print(f"mpcasv {args.command}: error: {exc}", file=sys.stderr)
         return 2
+    except Exception as exc:  # a bad log (mpcasv.io.lsf.LogError) gets one line, too
+        lsf = sys.modules.get("mpcasv.io.lsf")  # loaded if it raised; not imported up front
+        if lsf is None or not isinstance(exc, lsf.LogError):
+            raise
+        print(f"mpcasv {args.command}: error: {exc}", file=sys.stderr)
+        return 2
     except KeyboardInterrupt:
         print(f"mpcasv {args.command}: interrupted", file=sys.stderr)
         return 130

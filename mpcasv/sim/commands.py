@@ -15,8 +15,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         "run.json and PNG plots (paths, range, fix age) into --out.",
     )  # fmt: skip
     p.add_argument(
-        "scenario", type=Path, help="scenario TOML (e.g. experiments/scenarios/case1.toml)"
-    )
+        "scenario", type=Path, nargs="?",
+        help="scenario TOML (e.g. experiments/scenarios/case1.toml); omit with --manoeuvre",
+    )  # fmt: skip
     p.add_argument("--controller", help="controller name (default: the scenario's)")
     p.add_argument("--params", help="controller preset: shipped name or TOML path")
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
@@ -26,10 +27,19 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--no-plots", action="store_true", help="skip the PNG figures")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
+    from mpcasv.control.manoeuvres import add_arguments  # identification manoeuvres (issue 6)
+
+    add_arguments(p)
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.manoeuvre:  # open-loop identification manoeuvre instead of a scenario
+        from mpcasv.control.manoeuvres import run_cli
+
+        return run_cli(args)
+    if args.scenario is None:
+        raise ConfigError("give a SCENARIO (TOML file) or --manoeuvre")
     from mpcasv.estimation import ESTIMATORS
     from mpcasv.sim.controllers import make_controller
     from mpcasv.sim.record import write_run

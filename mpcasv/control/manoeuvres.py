@@ -1,0 +1,156 @@
+"""Open-loop identification manoeuvres on the shared model (``mpcasv simulate --manoeuvre``).
+
+The plant is driven with actuator set-points only (no autopilot), integrated by
+:meth:`VesselModel.rk4`, and logged in the identification format of
+:mod:`mpcasv.models.identify` (``t, N, E, psi, u, v, r, T_cmd, delta_cmd``), with optional
+Gaussian measurement noise (seeded) on the measured columns and a constant current.
+
+- ``zigzag``: Kempf zig-zag (IMO MSC/Circ.1053): steady approach at ``u0``, then the steering
+  set-point switches between +-``delta_deg`` each time the heading passes +-``delta_deg`` from
+  the initial heading; thrust held at the trim value. Excites sway-yaw and the steering force.
+- ``turning-circle``: steady approach, then ``delta_deg`` to starboard, then to port; thrust at
+  trim. Excites the steady-turn balance (Coriolis, speed loss, drift angle).
+- ``speed-steps``: steps of thrust through fractions of ``T_max`` with small steering
+  doublets; excites surge mass and the resistance curve.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from mpcasv.models.vessel import IX, VesselModel
+
+MANOEUVRES = ("zigzag", "turning-circle", "speed-steps")
+#: columns of an identification log (see mpcasv.models.identify)
+COLUMNS = ("t", "N", "E", "psi", "u", "v", "r", "T_cmd", "delta_cmd")
+
+
+@dataclasses.dataclass(frozen=True)
+class Noise:
+    """Standard deviations of the measurement noise (SI units)."""
+
+    pos: float = 0.3  # N, E (m)
+    psi: float = math.radians(0.5)  # rad
+    vel: float = 0.03  # u, v (m/s)
+    r: float = math.radians(0.3)  # rad/s
+
+    @classmethod
+    def none(cls) -> Noise:
+        return cls(0.0, 0.0, 0.0, 0.0)
+
+
+def simulate_manoeuvre(model: VesselModel, name: str, u0: float = 1.5, delta_deg: float = 20.0,
+                       duration: float = 150.0, dt: float = 0.1, current=(0.0, 0.0),
+                       noise: Noise | None = None, seed: int = 0) -> pd.DataFrame:  # fmt: skip
+    """Simulate one manoeuvre; return the identification table (noise added if given).
+
+    Raises
+    ------
+    ValueError
+        Unknown manoeuvre name.
+    """
+    if name not in MANOEUVRES:
+        raise ValueError(f"unknown manoeuvre {name!r}; known: {', '.join(MANOEUVRES)}")
+    P = model.params
+    F = model.rk4(dt)
+    c = np.asarray(current, float)
+    x, _ = model.trim(u0)
+    T_trim = model.thrust_for_speed(u0)
+    d = math.radians(delta_deg)
+    n = int(round(duration / dt))
+    X, U = np.zeros((n + 1, len(x))), np.zeros((n + 1, 2))
+    X[0] = x
+    side, t_approach = 1.0, 10.0
+    for k in range(n):
+        t = k * dt
+        if name == "zigzag":
+            if t >= t_approach and side * (x[IX["psi"]]) >= d:
+                side = -side
+            u_cmd = (T_trim, 0.0 if t < t_approach else side * d)
+        elif name == "turning-circle":
+            steer = 0.0 if t < t_approach else (d if t < t_approach + (duration - t_approach) / 2
+                                                else -d)  # fmt: skip
+            u_cmd = (T_trim, steer)
+        else:  # speed-steps
+            levels = (0.3, 0.9, 0.05, 1.0, 0.15, 0.6)  # of T_max: ~0.4 to 2.5 m/s
+            i = min(int(t // (duration / len(levels))), len(levels) - 1)
+            doublet = 0.3 * d * math.copysign(1.0, math.sin(2 * math.pi * t / 20.0))
+            T_step = T_trim if t < t_approach else levels[i] * P.T_max
+            u_cmd = (T_step, doublet if (t % 20.0) < 8.0 and t >= t_approach else 0.0)
+        U[k] = u_cmd
+        x = np.array(F(x, np.array(u_cmd), c)).ravel()
+        X[k + 1] = x
+    U[n] = U[n - 1]
+    df = pd.DataFrame({"t": np.arange(n + 1) * dt})
+    for col in ("N", "E", "psi", "u", "v", "r"):
+        df[col] = X[:, IX[col]]
+    df["T_cmd"], df["delta_cmd"] = U[:, 0], U[:, 1]
+    if noise is not None:
+        rng = np.random.default_rng(seed)
+        sig = {"N": noise.pos, "E": noise.pos, "psi": noise.psi, "u": noise.vel, "v": noise.vel,
+               "r": noise.r}  # fmt: skip
+        for col, s in sig.items():
+            df[col] = df[col] + rng.normal(0.0, s, len(df)) if s > 0 else df[col]
+        df["psi"] = np.angle(np.exp(1j * df["psi"]))
+    return df
+
+
+def write_log(df: pd.DataFrame, path: Path) -> Path:
+    """Write an identification table as CSV or parquet (by the file suffix)."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    if path.suffix == ".parquet":
+        df.to_parquet(path, index=False)
+    else:
+        df.to_csv(path, index=False, float_format="%.6g")
+    return path
+
+
+def add_arguments(p) -> None:
+    """Options of ``mpcasv simulate --manoeuvre`` (``--seed`` and ``--out`` are shared)."""
+    g = p.add_argument_group("identification manoeuvre (open-loop, writes a CSV/parquet log)")
+    g.add_argument(
+        "--manoeuvre",
+        choices=MANOEUVRES,
+        help="simulate this manoeuvre instead of a scenario; --out FILE.csv|.parquet",
+    )
+    g.add_argument("--vessel", default="gretha", help="vessel parameters: name or TOML")
+    g.add_argument("--speed", type=float, default=1.5, help="approach speed, m/s (default 1.5)")
+    g.add_argument("--delta", type=float, default=20.0, help="steering angle, deg (default 20)")
+    g.add_argument("--duration", type=float, default=150.0, help="duration, s (default 150)")
+    g.add_argument(
+        "--current",
+        type=float,
+        nargs=2,
+        default=(0.0, 0.0),
+        metavar=("V_N", "V_E"),
+        help="constant current, m/s (default 0 0)",
+    )
+    g.add_argument(
+        "--noise",
+        action="store_true",
+        help="add measurement noise (0.3 m, 0.5 deg, 0.03 m/s, 0.3 deg/s; --seed)",
+    )
+
+
+def run_cli(args) -> int:
+    """``mpcasv simulate --manoeuvre NAME``: write one identification log."""
+    from mpcasv.models.params import load_vessel
+
+    model = VesselModel(load_vessel(args.vessel))
+    noise = Noise() if args.noise else None
+    df = simulate_manoeuvre(model, args.manoeuvre, u0=args.speed, delta_deg=args.delta,
+                            duration=args.duration, current=args.current, noise=noise,
+                            seed=args.seed)  # fmt: skip
+    out = args.out or Path("runs") / f"{args.manoeuvre}-{args.seed}.csv"
+    if out.suffix not in (".csv", ".parquet"):
+        out = out / f"{args.manoeuvre}-{args.seed}.csv"
+    write_log(df, out)
+    print(f"wrote {out} ({len(df)} samples, {df['t'].iloc[-1]:.0f} s, noise "
+          f"{'on' if noise else 'off'}, seed {args.seed})")  # fmt: skip
+    return 0

@@ -1,0 +1,162 @@
+"""Tests of identification (mpcasv.models.identify) and the simulator manoeuvres."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import imcpy
+import numpy as np
+import pandas as pd
+import pytest
+
+from mpcasv.cli import main
+from mpcasv.control.manoeuvres import Noise, simulate_manoeuvre
+from mpcasv.io.lsf import LogError
+from mpcasv.models.identify import (
+    DAMPING,
+    IDENTIFIED,
+    OUTPUTS,
+    REQUIRED,
+    identify,
+    load_log,
+    mass_terms,
+    write_params,
+)  # fmt: skip
+from mpcasv.models.params import load_vessel
+from mpcasv.models.vessel import VesselModel
+
+SHARED_LOG = Path(__file__).resolve().parents[2] / "shared" / "data" / "dune-lauv-followref.lsf.gz"
+CURRENT = (0.2, -0.1)
+PLAN = (("zigzag", 1.5, 20, 150), ("zigzag", 2.2, 20, 150), ("turning-circle", 2.0, 30, 150),
+        ("turning-circle", 1.0, 20, 150), ("speed-steps", 1.5, 20, 240))  # fmt: skip
+
+
+@pytest.fixture(scope="module")
+def prior():
+    return load_vessel("gretha")
+
+
+@pytest.fixture(scope="module")
+def case(prior):
+    """Truth = prior with every identified coefficient scaled by a random factor in [0.7, 1.3];
+    noisy simulator manoeuvres in a current; identification from the prior."""
+    rng = np.random.default_rng(5)
+    truth = prior.with_coeffs(**{c: getattr(prior, c) * rng.uniform(0.7, 1.3) for c in IDENTIFIED})
+    model = VesselModel(truth)
+    logs = [simulate_manoeuvre(model, name, u0=u, delta_deg=d, duration=T, current=CURRENT,
+                               noise=Noise(), seed=10 + i)
+            for i, (name, u, d, T) in enumerate(PLAN)]  # fmt: skip
+    return truth, identify(logs, prior)
+
+
+def test_identification_recovers_perturbed_model(prior, case):
+    truth, res = case
+    assert max(abs(getattr(truth, c) / getattr(prior, c) - 1) for c in IDENTIFIED) > 0.15
+    mt, mi = mass_terms(truth), mass_terms(res.params)
+    for k in mt:
+        assert mi[k] == pytest.approx(mt[k], rel=0.10), k
+    for c in DAMPING:
+        assert getattr(res.params, c) == pytest.approx(getattr(truth, c), rel=0.20), c
+    assert res.current == pytest.approx(CURRENT, abs=0.03)
+    # validation error is reported, and the identified model replays held-out data better
+    for c in OUTPUTS:
+        val = res.metrics["simulation_error"]["validation"][c]
+        assert np.isfinite(val["rmse"]) and val["fit_pct"] > res.metrics["prior"]["validation"][
+            c]["fit_pct"]  # fmt: skip
+    assert res.metrics["simulation_error"]["validation"]["r"]["fit_pct"] > 80
+
+
+def test_identified_params_file_loads(prior, case, tmp_path):
+    _, res = case
+    path = tmp_path / "id.toml"
+    write_params(path, res, prior, ["a.csv"])
+    p = load_vessel(path)  # strict loading: provenance for every number
+    assert p.vector() == pytest.approx(res.params.vector())
+    assert "identified by mpcasv identify from a.csv" in p.provenance["N_rdot"]
+    assert p.provenance["Y_v"].startswith("held at the prior")
+
+
+def test_manoeuvre_cli_writes_seeded_logs(tmp_path, prior):
+    paths = []
+    for i, seed in enumerate((1, 1, 2)):
+        out = tmp_path / f"zz{i}.csv"
+        assert main(["simulate", "--manoeuvre", "zigzag", "--noise", "--seed", str(seed),
+                     "--duration", "40", "--out", str(out)]) == 0  # fmt: skip
+        paths.append(out)
+    a, b, c = (pd.read_csv(p) for p in paths)
+    assert list(a.columns) == list(REQUIRED) and len(a) == 401
+    assert a.equals(b) and not a.equals(c)
+    assert set(np.round(np.abs(a["delta_cmd"]), 4)) == {0.0, round(math.radians(20), 4)}
+    df = load_log(paths[0], prior)  # the identification reader accepts what simulate writes
+    assert df["t"].iloc[1] == pytest.approx(0.1) and len(df) == 401
+
+
+@pytest.mark.parametrize(
+    "name, content, match",
+    [
+        ("short.csv", "t,N,E,psi,u,v,r,T_cmd,delta_cmd\n0,0,0,0,1,0,0,50,0\n", "too short"),
+        ("cols.csv", "t,N,E,psi\n" + "".join(f"{k},0,0,0\n" for k in range(200)),
+         r"missing columns \['u', 'v', 'r', 'T_cmd', 'delta_cmd'\]"),
+        ("text.csv", "t,N,E,psi,u,v,r,T_cmd,delta_cmd\n" + "a,b,c,d,e,f,g,h,i\n" * 200,
+         "non-numeric or missing values"),
+        ("log.txt", "whatever", "unknown log format"),
+        ("bad.parquet", "not parquet", "not a readable parquet"),
+        ("garbage.lsf", "not an lsf log at all, just text" * 10, "not an LSF"),
+    ],
+)  # fmt: skip
+def test_bad_logs_clear_errors(tmp_path, capsys, name, content, match):
+    path = tmp_path / name
+    path.write_text(content)
+    rc = main(["identify", str(path), "--out", str(tmp_path / "p.toml"), "--quiet"])
+    err = capsys.readouterr().err.strip()
+    assert rc == 2 and len(err.splitlines()) <= 2 and name in err
+    with pytest.raises(LogError, match=match):
+        load_log(path, load_vessel("gretha"))
+
+
+def test_time_going_backwards_is_refused(tmp_path, prior):
+    df = simulate_manoeuvre(VesselModel(prior), "zigzag", duration=20)
+    df.loc[50, "t"] = df.loc[10, "t"]
+    path = tmp_path / "back.csv"
+    df.to_csv(path, index=False)
+    with pytest.raises(LogError, match="not strictly increasing"):
+        load_log(path, prior)
+
+
+def test_shared_auv_log_is_refused_clearly(prior, capsys, tmp_path):
+    """The DUNE LAUV log loads through read_lsf, but it is a finned AUV: refused."""
+    if not SHARED_LOG.is_file():
+        pytest.skip(f"shared DUNE log not found at {SHARED_LOG}")
+    with pytest.raises(
+        LogError, match=r"4 steering servos \(fin_cmd_0.*'lauv-simulator-1'.*does not apply"
+    ):
+        load_log(SHARED_LOG, prior)
+    rc = main(["identify", str(SHARED_LOG), "--out", str(tmp_path / "p.toml"), "--quiet"])
+    assert rc == 2 and "steering servos" in capsys.readouterr().err
+
+
+def _stamp(msg, t):
+    msg.timestamp, msg.src, msg.src_ent, msg.dst, msg.dst_ent = t, 0x2801, 1, 0xFFFF, 0xFF
+    return msg
+
+
+def test_surface_vessel_lsf_is_mapped(tmp_path, prior):
+    """A DUNE log of a surface vessel (one thruster, one steering servo) is accepted."""
+    msgs, t0 = [], 1.7e9
+    for k in range(150):
+        es = _stamp(imcpy.EstimatedState(), t0 + 0.1 * k)
+        es.lat, es.lon, es.x, es.y, es.z = 0.7188, -0.1519, 0.15 * k, 0.0, 0.0
+        es.psi, es.u, es.v, es.r, es.vx, es.vy = 0.01 * k, 1.5, 0.02, 0.01, 1.5, 0.0
+        thr = _stamp(imcpy.SetThrusterActuation(), t0 + 0.1 * k - 0.01)
+        thr.id, thr.value = 0, 0.5
+        servo = _stamp(imcpy.SetServoPosition(), t0 + 0.1 * k - 0.01)
+        servo.id, servo.value = 0, 0.1
+        msgs += [thr, servo, es]
+    path = tmp_path / "Data.lsf"
+    path.write_bytes(b"".join(m.serialize() for m in msgs))
+    df = load_log(path, prior)
+    assert len(df) == 150 and df["t"].iloc[0] == 0.0
+    assert df["T_cmd"].to_numpy() == pytest.approx(0.5 * prior.T_max)
+    assert df["delta_cmd"].to_numpy() == pytest.approx(0.1)
+    assert df["u"].to_numpy() == pytest.approx(1.5) and df["psi"].iloc[-1] == pytest.approx(1.49)
