@@ -21,7 +21,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         default="paper",
         help="suite name in experiments/suites (default: paper) or a TOML path",
     )
-    p.add_argument("--out", type=Path,
+    p.add_argument("--out", type=Path, metavar="DIR",
                    help="output folder DIR (default: results/<suite name>)")  # fmt: skip
     p.add_argument("--workers", type=int, default=os.cpu_count() or 1,
                    help="local worker processes (default: the number of cores; 1 runs in this "
