@@ -342,3 +342,30 @@ def test_compare_metrics_tolerances():
         "time_outside_outer_s"]["ok"]  # fmt: skip
     assert not compare_metrics(base | {"min_range_m": 0.0}, base | {"min_range_m": 1.0})[
         "min_range_m"]["ok"]  # fmt: skip
+
+
+@pytest.mark.parametrize("estimator", ["perfect", "acoustic", "kalman", "plan"])
+def test_deploy_feeds_the_simulators_estimators(tmp_path, estimator):
+    """Each AUV EstimatedState reaches the estimator as in the simulator (a status report,
+    and the truth for 'perfect'); the belief follows a straight-running AUV."""
+    ctl = {"name": "hybrid-single", "preset": "paper1-field", "estimator": estimator}
+    if estimator == "plan":
+        ctl["scenario"] = str(Path(__file__).resolve().parents[1] / "experiments" / "scenarios"
+                              / "case3.toml")  # fmt: skip
+    cfg = deploy_config_from_dict(BASE | {"controller": ctl, "log": {"dir": str(tmp_path)}})
+    dep = Deploy(cfg, dry_run=True)
+    asv, auv = dep.link.asv, dep.link.auvs[0]
+    asv.id = 0x2801
+    for i in range(20):
+        now = 1000.0 + i
+        dep.clock.now = lambda now=now: now
+        a = NavState(now, -200.0 + 1.35 * i, 0.0, 0.0, 0.0, 1.35, 0, 0, 1.35, 0.0, 0, 0)
+        auv.nav, auv.nav_recv = a, now
+        dep._on_state(auv, a, now)
+        s = NavState(now, -250.0, -150.0, 0.0, 0.5, 0, 0, 0, 0, 0, 0, 0)
+        asv.nav, asv.nav_recv = s, now
+        dep._on_state(asv, s, now)
+    obs, status, _ = dep.observation(now, now)
+    assert dep.steps == 20 and status == ["ok"]
+    assert obs.auvs[0].N == pytest.approx(-200.0 + 1.35 * 19, abs=0.5)
+    assert obs.auvs[0].t_last_fix == pytest.approx(now)
