@@ -153,3 +153,18 @@ def test_win_loss_counts_in_each_metrics_direction():
     cell = summ[(summ["scenario"] == "s1") & (summ["variant"] == "A")
                 & (summ["metric"] == "min_range_m")].iloc[0]  # fmt: skip
     assert cell["mean"] == 50.0 and cell["sd"] == pytest.approx(np.sqrt(2.0)) and cell["n"] == 2
+
+
+def test_report_of_a_sweep_whose_jobs_all_failed_lists_the_errors(tmp_path):
+    from mpcasv.experiments.report import write_report
+
+    job = QUICK.jobs[0]
+    rows = pd.DataFrame([{"job_id": job.job_id, "index": 0, "scenario": job.scenario,
+                          "variant": job.variant, "seed": job.seed, "current": "off",
+                          "estimator": job.estimator, "status": "error",
+                          "error": "Traceback ...\nRuntimeError: solver exploded\n"}])  # fmt: skip
+    md, page = write_report(tmp_path, QUICK, rows)
+    text = md.read_text()
+    assert "1 errors" in text and "RuntimeError: solver exploded" in text
+    assert f"**Incomplete**: {len(QUICK.jobs) - 1} jobs have not run" in text
+    assert "solver exploded" in page.read_text()

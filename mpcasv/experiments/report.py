@@ -124,7 +124,7 @@ def summary_table(df: pd.DataFrame) -> pd.DataFrame:
 def win_loss(df: pd.DataFrame) -> pd.DataFrame:
     """Per metric and pair of variants (A, B): how often A's mean over seeds is better, worse
     or equal, over scenarios and conditions where both ran."""
-    ok = df[df["status"] == "ok"]
+    ok = df[df["status"] == "ok"] if len(df) else df
     if not len(ok):
         return pd.DataFrame()
     runs = per_run_values(ok)
