@@ -25,7 +25,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
-from pydantic import Strict, model_validator
+from pydantic import Field, Strict, model_validator
 
 from mpcasv.config import ConfigError, Float, Pos, frozen, load_toml, parse
 
@@ -34,7 +34,7 @@ EXPERIMENTS_DIR = Path(__file__).resolve().parents[2] / "experiments"
 SCENARIOS_DIR = EXPERIMENTS_DIR / "scenarios"
 SUITES_DIR = EXPERIMENTS_DIR / "suites"
 
-Int = Annotated[int, Strict()]
+Seed = Annotated[int, Strict(), Field(ge=0)]
 _LABEL = re.compile(r"^[A-Za-z0-9_.+-]+$")
 
 
@@ -116,7 +116,7 @@ class Suite:
     name: str
     scenarios: tuple[str, ...]
     controllers: tuple[ControllerEntry, ...]
-    seeds: tuple[Int, ...]
+    seeds: tuple[Seed, ...]
     description: str = ""
     current: tuple[Current, ...] = ("scenario",)  # "scenario", "off" or [V_N, V_E] (m/s)
     estimator: tuple[str, ...] = ("scenario",)  # "scenario" or an estimator name
