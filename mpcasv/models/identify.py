@@ -487,7 +487,7 @@ def plot_replay(res: Identification, out: Path) -> Path:
             ax.set_ylabel(f"{c} ({unit})")
             fit = res.metrics["simulation_error"][part][c]["fit_pct"]
             ax.set_title(f"{part}: {c}, fit {fit:.1f} %", fontsize=9)
-        axes[3, j].set_xlabel("replay windows, concatenated (samples x 0.1 s)")
+        axes[3, j].set_xlabel("time over the replay windows, concatenated (s)")
     axes[0, 0].legend(fontsize=8)
     fig.tight_layout()
     out.mkdir(parents=True, exist_ok=True)
