@@ -35,6 +35,9 @@ SCENARIOS_DIR = EXPERIMENTS_DIR / "scenarios"
 SUITES_DIR = EXPERIMENTS_DIR / "suites"
 
 Seed = Annotated[int, Strict(), Field(ge=0)]
+#: rough run time per simulated second relative to the hybrid controllers (for scheduling
+#: the longest jobs first, so that a sweep does not end with one worker on one long job)
+RELATIVE_COST = {"mpc-single": 10.0, "mpc-multi": 20.0}
 _LABEL = re.compile(r"^[A-Za-z0-9_.+-]+$")
 
 
@@ -381,7 +384,8 @@ def expand(name_or_path: str | Path) -> Expansion:
                             n_auv=len(sc.auv), auv_names=tuple(a.name for a in sc.auv),
                             plots=suite.plots == "all"
                             or (suite.plots == "representative" and seed == suite.seeds[0]),
-                            cost=float(sc.duration) * (1.0 + 0.2 * len(sc.auv)),
+                            cost=float(sc.duration) * (1.0 + 0.2 * len(sc.auv))
+                            * RELATIVE_COST.get(cname, 1.0),
                         ))  # fmt: skip
     if not jobs:
         raise ConfigError(f"{path}: the suite expands to no jobs (skipped: {skipped})")
