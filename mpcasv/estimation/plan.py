@@ -33,11 +33,11 @@ row.
 from __future__ import annotations
 
 import copy
+import functools
 import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.stats import chi2
 
 from mpcasv.config import NonNeg, Pos, PosInt, Prob, frozen
 from mpcasv.estimation.kalman import KalmanEstimator, KalmanParams, report_velocity
@@ -45,6 +45,14 @@ from mpcasv.interface import AUVEstimate
 from mpcasv.models.acoustics import Fix, Report
 
 __all__ = ["KnownPlan", "PlanEstimator", "PlanParams", "Polyline", "known_plan"]
+
+
+@functools.lru_cache(maxsize=32)
+def _chi2_ppf(prob: float, dof: int) -> float:
+    """Chi-square quantile (scipy.stats imported lazily: it costs ~1.5 s at start-up)."""
+    from scipy.stats import chi2
+
+    return float(chi2.ppf(prob, dof))
 
 
 @dataclass(frozen=True)
@@ -317,7 +325,7 @@ class PlanEstimator:
         S0 = H0 @ P0 @ H0.T + R
         nu0 = z - h0
         self.nis = float(nu0 @ np.linalg.solve(S0, nu0))
-        if self.nis > chi2.ppf(self.params.gate_prob, n):
+        if self.nis > _chi2_ppf(self.params.gate_prob, n):
             self.misses += 1
             self.on_plan = False
             if self.misses >= self.params.n_miss:
@@ -344,7 +352,7 @@ class PlanEstimator:
         along = float(v @ T) if np.any(T) else 0.0
         across = T[0] * v[1] - T[1] * v[0]
         vel_ok = abs(along - u_p) < 0.5 * max(u_p, 0.5) and abs(across) < 0.5 * max(u_p, 0.5)
-        if d < math.sqrt(chi2.ppf(p.gate_prob, 2)) * sig and vel_ok:
+        if d < math.sqrt(_chi2_ppf(p.gate_prob, 2)) * sig and vel_ok:
             self.hits += 1
         else:
             self.hits = 0

@@ -353,7 +353,7 @@ class Sitl:
             self.in_window = False
 
     def _advance(self) -> None:
-        from mpcasv.sim.simulator import _row
+        from mpcasv.sim.simulator import timeseries_row
 
         w = self.world
         cmd_vec = self.command_vector()
@@ -364,7 +364,7 @@ class Sitl:
                           float(cmd_vec[3]), None, Reason.NOMINAL)  # fmt: skip
         else:
             cmd = Command.standby()
-        row = _row(w, w.observation(), cmd, self.period, 0.0)
+        row = timeseries_row(w, w.observation(), cmd, self.period, 0.0)
         row["asv_alive"] = self.asv.alive
         self.rows.append(row)
 

@@ -76,7 +76,7 @@ def simulate(
             next_plan_t = obs.t + plan_every
         period = world.advance(command_vector(cmd))
         obs = world.observation()  # at the end of the period: logged, and used next step
-        row = _row(world, obs, cmd, period, step_ms[-1])
+        row = timeseries_row(world, obs, cmd, period, step_ms[-1])
         diag = getattr(controller, "diagnostics", None)
         if diag is not None:
             row |= diag()
@@ -97,7 +97,7 @@ def simulate(
     )  # fmt: skip
 
 
-def _row(world: World, obs, cmd, period, step_ms: float) -> dict:
+def timeseries_row(world: World, obs, cmd, period, step_ms: float) -> dict:
     """One row of the time series at the end of a period: ASV state, the command that acted
     during the period, each AUV's truth and the belief ``obs`` at the same time."""
     x, S = world.x, world.S
