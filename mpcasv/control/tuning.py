@@ -58,7 +58,7 @@ def run_closed_loop(model: VesselModel, ep: ExecutionParams, x0, wp, u_cap: floa
     The compiled closed loop is cached per (model, params, dt). Integrators start at zero
     (the speed loop has the trim thrust as feed-forward) and ``r_f`` at the initial yaw rate.
     """
-    key = (id(model), ep, dt)
+    key = (model.p.tobytes(), ep, dt)  # by value: an id() can be reused after GC
     if key not in _CL_CACHE:
         _CL_CACHE[key] = closed_loop(model, ep, dt, int(round(1.0 / dt)))
     CL = _CL_CACHE[key]
