@@ -113,3 +113,24 @@ def test_current_pushes_a_standing_asv():
     v_end = (N[-1] - N[-21]) / 20.0  # 1 row per second
     assert v_end == pytest.approx(0.2, abs=0.015)  # drifting with the current (surge lag ~90 s)
     assert math.isfinite(v_end) and abs(ts.timeseries["E"].iloc[-1]) < 1.0
+
+
+def test_multi_auv_ranges_pair_each_auv_with_the_asv_at_the_same_instant():
+    """range_min{k} is AUV k's own closest approach within the period, at plant resolution."""
+    data = json.loads(json.dumps(BASE))
+    data["auv"] = [
+        {"name": f"a{k}", "start": {"N": 100.0 * (k + 1), "psi_deg": 90.0},
+         "behaviour": {"transit": {"heading_deg": 90.0, "speed": 1.0 + 0.5 * k}}}
+        for k in range(3)
+    ]  # fmt: skip
+    sc = scenario_from_dict(data)
+    ts = simulate(sc, make_controller("goto", 3, None, overrides={"waypoint": [0.0, 0.0]}), 0)
+    df = ts.timeseries
+    for k in range(3):
+        # the ASV stands still at the origin; AUV k moves East at 1 + 0.5 k m/s from N = 100 (k+1)
+        t = df["t"].to_numpy()
+        east_prev = (1.0 + 0.5 * k) * np.maximum(t - 1.0 - 5.0, 0.0)  # crude lower bound
+        assert (df[f"range_min{k}"] <= df[f"range{k}"] + 1e-9).all()
+        assert (df[f"range_min{k}"] >= 100.0 * (k + 1) - 1.0).all()
+        assert (df[f"range_min{k}"] >= np.hypot(100.0 * (k + 1), east_prev) - 10.0).all()
+    assert ts.min_range_m == pytest.approx(df[[f"range_min{k}" for k in range(3)]].min().min())

@@ -11,6 +11,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import casadi as ca
 import numpy as np
 
 from mpcasv.control.execution import NZ, closed_loop
@@ -39,6 +40,15 @@ def build_plant(scenario: Scenario):
         model = VesselModel(params)
         _PLANT_CACHE[key] = (model, ep, closed_loop(model, ep, scenario.sim.dt, scenario.sim.n_sub))
     return _PLANT_CACHE[key]
+
+
+def _packed(f: ca.Function) -> ca.Function:
+    """``f`` with all outputs stacked into one column: one numpy conversion per call instead
+    of one per output (the conversions cost more than the evaluation here)."""
+    args = [ca.SX.sym(f.name_in(i), f.sparsity_in(i)) for i in range(f.n_in())]
+    outs = f(*args)
+    outs = outs if isinstance(outs, (list, tuple)) else [outs]
+    return ca.Function(f"{f.name()}_packed", args, [ca.vertcat(*[ca.vec(o) for o in outs])])
 
 
 @dataclass
@@ -76,6 +86,7 @@ class World:
         self.sc, self.ac = scenario, scenario.acoustics
         self.rng = np.random.default_rng(seed)
         self.model, self.ep, self.CL = build_plant(scenario)
+        self._CL = _packed(self.CL)
         self.n_auv, self.n_sub = len(scenario.auv), scenario.sim.n_sub
         self.Tc, self.dt = scenario.sim.control_period, scenario.sim.dt
         self.thr_on = self.ep.propeller_on_threshold * self.model.params.T_max
@@ -94,7 +105,7 @@ class World:
         ).T  # fmt: skip
         self.LIM = np.array([a.limits.vector() for a in scenario.auv]).T
         self.behaviours = [a.build_behaviour() for a in scenario.auv]
-        self.auv_step = auv_step_function(self.dt, self.n_sub, self.n_auv)
+        self._auv_step = _packed(auv_step_function(self.dt, self.n_sub, self.n_auv))
         name = estimator or scenario.estimator
         self.estimators = [
             make_estimator(
@@ -140,12 +151,18 @@ class World:
         """Move everything one supervisory period under execution-level command ``cmd``
         (see :func:`mpcasv.control.execution.command_vector`)."""
         t0, x0 = self.t, self.x
-        x_next, z, X, Uin, Y = self.CL(x0, self.z, cmd, self.current)
-        X, Uin, Y = np.array(X), np.array(Uin), np.array(Y)
+        n, m = self.n_sub, self.n_auv
+        v = self._CL(x0, self.z, cmd, self.current).full().ravel()
+        x_next, z = v[:NX], v[NX : NX + NZ]
+        i = NX + NZ
+        X = v[i : i + NX * n].reshape(NX, n, order="F")
+        Uin = v[i + NX * n : i + (NX + 2) * n].reshape(2, n, order="F")
+        Y = v[i + (NX + 2) * n :].reshape(2, n, order="F")
         SP = np.array([b.setpoint(t0, self.S[:, k], x0[:2]) for k, b in enumerate(self.behaviours)])
-        S_next, ST = self.auv_step(self.S, SP.T, self.LIM)
-        S_next = np.array(S_next)
-        ST = np.array(ST).reshape(NA, self.n_auv, self.n_sub, order="F")  # [:, k, j]
+        w = self._auv_step(self.S, SP.T, self.LIM).full().ravel()
+        S_next = w[: NA * m].reshape(NA, m, order="F")
+        # the mapped function stacks the AUVs' (NA x n) trajectories side by side
+        ST = w[NA * m :].reshape(NA, n, m, order="F").transpose(0, 2, 1)  # [:, k, j]
         u_c = self.current[0] * np.cos(X[2]) + self.current[1] * np.sin(X[2])
         self.energy_J += float(np.sum(X[6] * np.abs(X[3] - u_c)) * self.dt)  # thrust x speed
         ranges = np.hypot(X[0][None, :] - ST[0], X[1][None, :] - ST[1])
