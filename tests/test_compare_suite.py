@@ -132,3 +132,22 @@ def test_paper_suite_runs_hybrid_against_mpc_once_the_mpc_exists():
     for scenario in {j.scenario for j in exp.jobs}:
         labels = {j.label for j in exp.jobs if j.scenario == scenario}
         assert labels == {"hybrid", "mpc"}, (scenario, labels)
+
+
+def test_domain_from_scenario_gives_another_controller_the_cases_published_domain(tmp_path):
+    from mpcasv.config import load_toml, resolve
+
+    text = GOOD.replace("[[controllers]]", """[[controllers]]
+label = "other"
+name = "hybrid-multi"
+domain_from = "scenario"
+overrides = { "domain.eps_plus" = 12.0 }
+
+[[controllers]]""", 1)  # fmt: skip
+    exp = expand(write(tmp_path, text))
+    for scenario, preset in (("case3", "paper1-field"), ("case8", "paper2-field")):
+        job = next(j for j in exp.jobs if j.label == "other" and j.scenario == scenario)
+        domain = load_toml(resolve("presets", preset))["domain"]
+        want = {f"domain.{k}": v for k, v in domain.items()} | {"domain.eps_plus": 12.0}
+        assert dict(job.overrides) == want
+        assert job.preset is None  # hybrid-multi's own default preset, the domain replaced

@@ -62,8 +62,11 @@ class ControllerEntry:
     (the controller's default preset), ``"scenario"`` (the scenario's own preset, which must
     belong to the same controller) or a shipped name / TOML path; ``presets`` overrides it per
     scenario. ``overrides`` fix single parameters (dotted keys), ``grid`` lists values to
-    sweep (cartesian product). ``optional``: skip the entry, saying so, when the controller is
-    registered but cannot be imported (e.g. the MPC before it is installed).
+    sweep (cartesian product). ``domain_from = "scenario"``: take the ``domain`` table (the
+    donut: alpha_inner, alpha_outer, delta_r, eps) of the scenario's own preset as overrides,
+    so that a controller compared on a case uses the case's published domain (explicit
+    ``overrides`` and ``grid`` keys win). ``optional``: skip the entry, saying so, when the
+    controller is registered but cannot be imported (e.g. the MPC before it is installed).
     """
 
     label: str
@@ -75,6 +78,7 @@ class ControllerEntry:
     overrides: dict[str, Any] = dataclasses.field(default_factory=dict)
     grid: dict[str, Any] = dataclasses.field(default_factory=dict)
     scenarios: tuple[str, ...] | None = None
+    domain_from: Literal["preset", "scenario"] = "preset"
     optional: bool = False
 
     @model_validator(mode="after")
@@ -320,6 +324,19 @@ def _controller_and_preset(entry: ControllerEntry, sc, where: str, base: Path):
     return cname, (None if preset == "default" else _preset_ref(preset, base))
 
 
+def _scenario_domain(entry: ControllerEntry, sc, where: str) -> dict[str, Any]:
+    """``domain.*`` overrides from the scenario's own preset (``domain_from = "scenario"``)."""
+    from mpcasv.config import load_toml, resolve
+
+    if entry.domain_from != "scenario":
+        return {}
+    domain = load_toml(resolve("presets", sc.preset)).get("domain")
+    if not isinstance(domain, Mapping):
+        raise ConfigError(f"{where}: domain_from = 'scenario', but the scenario's preset "
+                          f"{sc.preset!r} has no [domain] table")  # fmt: skip
+    return _flatten(domain, "domain.")
+
+
 def _conditions(suite: Suite, sc0, path: Path, file: Path):
     """(scenario with the suite's current and duration, current, estimator) per condition."""
     from mpcasv.sim.scenario import scenario_with
@@ -361,7 +378,8 @@ def expand(name_or_path: str | Path) -> Expansion:
                 where = f"{path}: controllers[{i}] ({entry.label}) with scenario {sc.name!r}"
                 cname, preset = _controller_and_preset(entry, sc, where, path.parent)
                 for combo in entry.combinations():
-                    overrides = _flatten(entry.overrides) | combo
+                    overrides = _scenario_domain(entry, sc, where) | _flatten(entry.overrides)
+                    overrides |= combo
                     try:
                         params = load_preset(cname, preset, overrides)
                     except ConfigError as exc:
