@@ -11,7 +11,6 @@ import tempfile
 from pathlib import Path
 
 from mpcasv.experiments.metrics import compute_metrics
-from mpcasv.sim.plots import plot_run
 
 
 def _jsonable(v):
@@ -39,6 +38,8 @@ def write_run(result, out_dir: str | Path, plots: bool = True, extra: dict | Non
         if result.jumps is not None:
             result.jumps.to_csv(tmp / "jumps.csv", index=False)
         if plots:
+            from mpcasv.sim.plots import plot_run  # matplotlib only when drawing
+
             plot_run(result, tmp)
         if out.exists():
             shutil.rmtree(out)
