@@ -123,6 +123,7 @@ def timeseries_row(world: World, obs, cmd, period, step_ms: float) -> dict:
             f"range{k}": r, f"range_min{k}": float(period.ranges[k].min()),
             f"slant{k}": math.hypot(r, S[2, k]),
             f"est_range{k}": math.hypot(x[0] - e.N, x[1] - e.E),
+            f"est{k}_t_fix": e.t_last_fix,
             f"fixes{k}": int(period.fixes[k]), f"reliable{k}": int(period.reliable[k]),
             f"visit{k}": bool(period.visiting[k]),
             f"fix_age{k}": period.t1 - world.last_fix[k], f"nav_err{k}": nav_err[k],
