@@ -80,6 +80,42 @@ def run_closed_loop(model: VesselModel, ep: ExecutionParams, x0, wp, u_cap: floa
     return Run(t=np.arange(len(X)) * dt, X=X, U=U, Y=Y)
 
 
+def loop_margins(L) -> dict:
+    """Classical and balanced disk margins of an open loop ``L`` (continuous or sampled).
+
+    ``disk_*`` are the skew-0 disk margins of ``control.disk_margins`` (gain margin in dB, as
+    python-control returns it); frequencies in rad/s.
+    """
+    import warnings
+
+    import control as ct
+
+    with warnings.catch_warnings():  # 'frd' fallback notes
+        warnings.simplefilter("ignore", UserWarning)
+        gm, pm, _, wg, wp, _ = ct.stability_margins(L)
+    dt = L.dt if L.isdtime() else None
+    omega = np.logspace(-3, math.log10(math.pi / dt if dt else 100.0) - 1e-6, 2000)
+    dm, dgm, dpm = ct.disk_margins(L, omega, skew=0.0)
+    return {
+        "gain_margin_db": 20 * math.log10(gm) if np.isfinite(gm) else math.inf,
+        "phase_margin_deg": float(pm),
+        "w_gain_crossover": float(wp),  # |L| = 1 (phase margin frequency)
+        "w_phase_crossover": float(wg),
+        "disk_margin": float(dm),
+        "disk_gain_margin_db": float(dgm),
+        "disk_phase_margin_deg": float(dpm),
+    }
+
+
+def step_figures(info: dict) -> dict:
+    """Rise, settling time (s) and overshoot (%) from ``control.step_info``."""
+    return {
+        "rise_s": float(info["RiseTime"]),
+        "settling_s": float(info["SettlingTime"]),
+        "overshoot_pct": float(info["Overshoot"]),
+    }
+
+
 def settling_time(t: np.ndarray, err: np.ndarray, band: float) -> float:
     """First time after which ``|err| <= band`` until the end (``inf`` if never)."""
     outside = np.nonzero(np.abs(err) > band)[0]

@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import warnings
 
 import control as ct
 import numpy as np
@@ -60,26 +59,12 @@ def speed_figures(P: ct.StateSpace, g: SpeedLoop, dt: float | None = None,
     else:
         C = ct.tf([g.Kp, g.Ki * dt - g.Kp], [1.0, -1.0], dt)
         P = ct.c2d(P, dt, "zoh")
+    from mpcasv.control.tuning import loop_margins, step_figures
+
     L = ct.ss(C) * P
-    with warnings.catch_warnings():  # 'frd' fallback notes
-        warnings.simplefilter("ignore", UserWarning)
-        gm, pm, _, _, wp, _ = ct.stability_margins(L)
-    omega = np.logspace(-3, math.log10(math.pi / dt if dt else 100.0) - 1e-6, 2000)
-    dm, dgm, dpm = ct.disk_margins(L, omega, skew=0.0)
     t = np.arange(0.0, 120.0, dt or 0.05)
     y = ct.step_response(ct.feedback(L, 1), t).outputs * step
-    info = ct.step_info(y, t, yfinal=step)
-    return {
-        "gain_margin_db": 20 * math.log10(gm) if np.isfinite(gm) else math.inf,
-        "phase_margin_deg": float(pm),
-        "w_gain_crossover": float(wp),
-        "disk_margin": float(dm),
-        "disk_gain_margin_db": float(dgm),  # python-control returns dB
-        "disk_phase_margin_deg": float(dpm),
-        "rise_s": float(info["RiseTime"]),
-        "settling_s": float(info["SettlingTime"]),
-        "overshoot_pct": float(info["Overshoot"]),
-    }
+    return loop_margins(L) | step_figures(ct.step_info(y, t, yfinal=step))
 
 
 def turn(model: VesselModel, ep: ExecutionParams, angle: float, distance: float,

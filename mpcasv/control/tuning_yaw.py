@@ -31,7 +31,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import warnings
 
 import control as ct
 import numpy as np
@@ -196,16 +195,10 @@ def loop_figures(loop: YawLoop, step: float = math.radians(45.0)) -> dict[str, f
     ``dist_*``: response to a constant yaw moment equivalent to 5 deg of steering: peak
     heading deviation (deg) and the time after which it stays below 0.5 deg.
     """
-    from mpcasv.control.tuning import settling_time
+    from mpcasv.control.tuning import loop_margins, settling_time, step_figures
 
     L = loop.L
-    with warnings.catch_warnings():  # 'frd' fallback notes
-        warnings.simplefilter("ignore", UserWarning)
-        gm, pm, _, wg, wp, _ = ct.stability_margins(L)
     dt = L.dt if L.isdtime() else None
-    w_max = math.pi / dt if dt else 100.0
-    omega = np.logspace(-3, math.log10(w_max) - 1e-6, 2000)
-    dm, dgm, dpm = ct.disk_margins(L, omega, skew=0.0)
     T_ref = loop.T_ref
     poles = ct.poles(loop.T_dist)  # all the closed loop's states
     t = np.arange(0.0, 200.0, dt or 0.05)
@@ -213,17 +206,7 @@ def loop_figures(loop: YawLoop, step: float = math.radians(45.0)) -> dict[str, f
     info = ct.step_info(resp.outputs * step, t, yfinal=step,
                         SettlingTimeThreshold=SETTLE_BAND / step)  # fmt: skip
     dist = ct.step_response(loop.T_dist, t).outputs * math.radians(5.0)
-    return {
-        "gain_margin_db": 20 * math.log10(gm) if np.isfinite(gm) else math.inf,
-        "phase_margin_deg": float(pm),
-        "w_gain_crossover": float(wp),  # |L| = 1 (phase margin frequency)
-        "w_phase_crossover": float(wg),
-        "disk_margin": float(dm),
-        "disk_gain_margin_db": float(dgm),  # python-control returns dB
-        "disk_phase_margin_deg": float(dpm),
-        "rise_s": float(info["RiseTime"]),
-        "settling_s": float(info["SettlingTime"]),
-        "overshoot_pct": float(info["Overshoot"]),
+    return loop_margins(L) | step_figures(info) | {
         "dist_peak_deg": float(np.degrees(np.abs(dist).max())),
         "dist_recover_s": settling_time(t, dist, math.radians(0.5)),
         "stable": bool(np.all(np.abs(poles) < 1) if dt else np.all(poles.real < 0)),

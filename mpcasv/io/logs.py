@@ -20,19 +20,17 @@ import numpy as np
 __all__ = ["JsonlWriter", "LsfWriter", "jsonable", "read_jsonl"]
 
 
-class LsfWriter:
-    """Append whole IMC packets to ``path`` (created, or truncated)."""
+class _LogFile:
+    """A log file opened (created or truncated) at construction; flush and close are safe to
+    call repeatedly, writes after close are ignored."""
+
+    mode = "wb"
 
     def __init__(self, path: str | Path) -> None:
         self.path = Path(path)
         self.path.parent.mkdir(parents=True, exist_ok=True)
-        self._fh: IO[bytes] | None = self.path.open("wb")
-        self.packets = 0
-
-    def write(self, packet: bytes) -> None:
-        if self._fh is not None:
-            self._fh.write(packet)
-            self.packets += 1
+        enc = None if "b" in self.mode else "utf-8"
+        self._fh: IO | None = self.path.open(self.mode, encoding=enc)
 
     def flush(self) -> None:
         if self._fh is not None:
@@ -43,6 +41,19 @@ class LsfWriter:
             self._fh.flush()
             self._fh.close()
             self._fh = None
+
+
+class LsfWriter(_LogFile):
+    """Append whole IMC packets to ``path`` (created, or truncated)."""
+
+    def __init__(self, path: str | Path) -> None:
+        super().__init__(path)
+        self.packets = 0
+
+    def write(self, packet: bytes) -> None:
+        if self._fh is not None:
+            self._fh.write(packet)
+            self.packets += 1
 
 
 def jsonable(v: Any) -> Any:
@@ -63,13 +74,13 @@ def jsonable(v: Any) -> Any:
     return str(v)
 
 
-class JsonlWriter:
+class JsonlWriter(_LogFile):
     """One JSON object per line; every record gets ``wall`` (UNIX time of writing)."""
 
+    mode = "w"
+
     def __init__(self, path: str | Path) -> None:
-        self.path = Path(path)
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        self._fh: IO[str] | None = self.path.open("w", encoding="utf-8")
+        super().__init__(path)
         self.lines = 0
 
     def write(self, record: dict) -> None:
@@ -77,16 +88,6 @@ class JsonlWriter:
             rec = {"wall": time.time()} | record
             self._fh.write(json.dumps(jsonable(rec), allow_nan=False) + "\n")
             self.lines += 1
-
-    def flush(self) -> None:
-        if self._fh is not None:
-            self._fh.flush()
-
-    def close(self) -> None:
-        if self._fh is not None:
-            self._fh.flush()
-            self._fh.close()
-            self._fh = None
 
 
 def read_jsonl(path: str | Path, kind: str | None = None) -> list[dict]:
