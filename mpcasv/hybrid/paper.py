@@ -55,6 +55,12 @@ NOTES = """\
   turn) is ours; the papers used DUNE's LAUV simulator with Maritime Robotics' VCS simulator
   (Cases 1, 2, 6) or the real boat (Cases 3, 4, 7, 8). Our boat coasts after the propeller
   stops, which makes standby glide out of the target domain and adds transits.
+- **Coasting into the anti-collision radius (Cases 6-8).** The ASV reaches the target domain
+  at up to 2.5 m/s, stops the propeller and glides some 40 m; with r_t - r_avoid = delta_r =
+  20 m it then crosses r_avoid of the very AUV it came to serve, and transits again
+  (`transit_avoidance_s`). The published runs never entered it in Case 6: the real and VCS
+  boats evidently lost speed faster than our derived model, which has no propeller drag
+  when idle. Slowing down before the target circle would avoid it but is not in the papers.
 - **No wind or waves.** Field cases (3, 4, 7, 8) had environmental loads; Case 7 has a constant
   current as a stand-in.
 - **Case 5** used a different ASV (a Mariner with an asymmetric modem mount) and a real AUV;
