@@ -1,0 +1,95 @@
+"""Compiled NLP functions, cached on disk.
+
+The functions of :func:`mpcasv.mpc.derivatives.nlp_functions` are generated as C
+(``casadi.CodeGenerator``), compiled once into a shared library and kept in the cache folder
+(``$MPCASV_CACHE`` or ``~/.cache/mpcasv``), keyed by a SHA-256 of the functions' serialised
+definition, the solver, the compiler flags, the CasADi version and the CPU. Another process
+(or run) with the same problem loads the library without compiling; a changed weight, horizon
+or vessel parameter changes the key. Compilation writes to a temporary name and renames, so
+concurrent processes never load a half-written library.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import platform
+import shlex
+import shutil
+import subprocess
+import tempfile
+import time
+from pathlib import Path
+
+import casadi as ca
+
+_LOADED: dict[tuple[str, str, str], Path] = {}
+
+
+def cache_dir() -> Path:
+    """The folder holding compiled libraries (created if missing)."""
+    root = os.environ.get("MPCASV_CACHE") or Path.home() / ".cache" / "mpcasv"
+    path = Path(root) / "mpc"
+    path.mkdir(parents=True, exist_ok=True)
+    return path
+
+
+def _cpu() -> str:
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or platform.machine()
+
+
+def library_key(functions: dict[str, ca.Function], solver: str, cflags: str) -> str:
+    """SHA-256 (hex, 24 characters) of everything that determines the compiled library."""
+    h = hashlib.sha256()
+    for part in (ca.__version__, solver, cflags, _cpu(), platform.machine()):
+        h.update(part.encode())
+    for name in sorted(functions):
+        h.update(name.encode())
+        h.update(functions[name].serialize().encode())
+    return h.hexdigest()[:24]
+
+
+def compiled_library(functions: dict[str, ca.Function], solver: str, cflags: str,
+                     compiler: str = "gcc", log=print) -> Path:  # fmt: skip
+    """Path of the shared library with ``functions``: from the cache, or compiled now.
+
+    Raises
+    ------
+    RuntimeError
+        If no C compiler is found or compilation fails (the message says how to run without).
+    """
+    key = library_key(functions, solver, cflags)
+    memo = (key, solver, cflags)
+    if memo in _LOADED and _LOADED[memo].exists():
+        return _LOADED[memo]
+    folder = cache_dir()
+    target = folder / f"mpc_{solver}_{key}.so"
+    if not target.exists():
+        if shutil.which(compiler) is None:
+            raise RuntimeError(f"C compiler {compiler!r} not found: install it or set "
+                               "solver.compiled = false in the MPC preset")  # fmt: skip
+        t0 = time.perf_counter()
+        with tempfile.TemporaryDirectory(dir=folder) as tmp:
+            src = Path(tmp) / f"mpc_{solver}_{key}.c"
+            gen = ca.CodeGenerator(src.name)
+            for fun in functions.values():
+                gen.add(fun)
+            gen.generate(str(Path(tmp)) + os.sep)
+            out = Path(tmp) / target.name
+            cmd = [compiler, *shlex.split(cflags), "-fPIC", "-shared", str(src), "-o", str(out),
+                   "-lm"]  # fmt: skip
+            res = subprocess.run(cmd, capture_output=True, text=True)
+            if res.returncode != 0:
+                raise RuntimeError(f"compiling the MPC functions failed: {' '.join(cmd)}\n"
+                                   f"{res.stderr[-2000:]}")  # fmt: skip
+            os.replace(out, target)  # atomic: concurrent processes see all or nothing
+        log(f"mpc: compiled {target.name} ({solver}, {cflags}) in "
+            f"{time.perf_counter() - t0:.0f} s")  # fmt: skip
+    _LOADED[memo] = target
+    return target

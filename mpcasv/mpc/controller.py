@@ -1,0 +1,353 @@
+"""The MPC as a supervisory :class:`~mpcasv.interface.Controller` (``mpc-single``, ``mpc-multi``).
+
+Every step (docs/mpc.md, "Controller"):
+
+1. fix-age bookkeeping: each AUV's expected fix age ``tau_i`` is propagated over the elapsed
+   period with the same fix-rate model the plan uses (or read from the estimate);
+2. the parameters: the ASV state (thrust and steering estimated: the observation carries
+   only whether the propeller runs), the AUVs' positions over the horizon (constant velocity
+   from the estimate), their anti-collision radii along the planned bearing (the hybrid
+   controllers' domain functions, :func:`~mpcasv.hybrid.domains.estimate_shape`);
+3. a warm-started solve from the previous plan moved one control period ahead;
+   while the plan stands still, every ``explore_every`` s a second solve starts from a guess
+   heading for the AUV with the largest projected fix age (standing still is a local minimum:
+   at rest the rudder has no authority, so the gradient cannot say "turn and go");
+4. the safety check: a failed solve, a solve over the time budget, or a plan entering r_inner /
+   r_avoid within its first ``check_stages`` stages hands this step to the hybrid controller
+   (stepped on every observation so that its state is current), counted in ``fallbacks``;
+5. the command: STANDBY while the plan keeps the thrust below the propeller-on threshold for
+   ``standby_time``, else TRANSIT to the planned position ``lookahead`` seconds ahead (pushed
+   out to ``min_carrot`` m) at the planned speed.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from mpcasv.hybrid.domains import estimate_shape
+from mpcasv.hybrid.multi import HybridMulti, HybridMultiParams
+from mpcasv.hybrid.single import HybridSingle, HybridSingleParams
+from mpcasv.interface import Command, Mode, Observation, PlannedTrajectory, Reason
+from mpcasv.models.acoustics import AcousticParams
+from mpcasv.mpc.params import MPCParams
+from mpcasv.mpc.problem import NXV, OCP
+from mpcasv.mpc.solvers import make_solver
+from mpcasv.sim.controllers import ControllerKind
+
+R_HI_NONE = 1.0e5  # "no outer bound" (m)
+TAU_UNKNOWN = 600.0  # fix age used for an AUV never fixed (s)
+
+_OCP_CACHE: dict = {}
+
+
+@dataclass(frozen=True, slots=True)
+class FallbackEvent:
+    """One step handed to the hybrid controller, and why."""
+
+    t: float
+    reason: str
+    status: str
+    solve_ms: float
+
+
+def build_ocp(params: MPCParams, n_auv: int, multi: bool, log=print):
+    """(OCP, solver) for ``n_auv`` AUVs, shared by controllers with the same parameters in one
+    process (the compiled library is also cached on disk)."""
+    key = (repr(params), n_auv, multi)
+    if key not in _OCP_CACHE:
+        ocp = OCP(params, n_auv, outer=not multi)
+        _OCP_CACHE[key] = (ocp, make_solver(ocp, params.solver, log=log))
+    return _OCP_CACHE[key]
+
+
+class MPCController:
+    """Fix-age NMPC with donut constraints and a hybrid safety fallback.
+
+    Parameters
+    ----------
+    params : MPCParams
+    n_auv : int
+        AUVs served (the problem is built for this number; :meth:`reset` rebuilds if needed).
+    multi : bool
+        ``mpc-multi``: anti-collision radius only (Paper 2); else ``mpc-single`` with the donut
+        ``r_inner <= r <= r_outer``.
+
+    Attributes
+    ----------
+    plan : PlannedTrajectory or None
+        The current plan (stage times, positions; ``extra`` holds thrust, speed, fix ages).
+    domain : DomainParams
+    fallbacks : int
+        Steps whose command came from the hybrid controller.
+    fallback_log : list of FallbackEvent
+    """
+
+    def __init__(self, params: MPCParams, n_auv: int = 1, multi: bool = False):
+        self.params = params
+        self.domain = params.domain
+        self.multi = multi
+        self.name = "mpc-multi" if multi else "mpc-single"
+        self.acoustics = AcousticParams()
+        self._setup(n_auv)
+        self.reset(n_auv)
+
+    # ------------------------------------------------------------------ set-up
+    def _setup(self, n_auv: int) -> None:
+        P = self.params
+        self.ocp, self.solver = build_ocp(P, n_auv, self.multi)
+        if self.multi:
+            self.hybrid = HybridMulti(HybridMultiParams(P.domain, P.T_standby, P.speed,
+                                                        avoidance=P.avoidance))  # fmt: skip
+        else:
+            self.hybrid = HybridSingle(HybridSingleParams(P.domain, P.speed, P.avoidance))
+
+    def reset(self, n_auv: int) -> None:
+        if not self.multi and n_auv != 1:
+            raise ValueError(f"{self.name} serves one AUV, got {n_auv}")
+        if n_auv != self.ocp.dims.n_auv:
+            self._setup(n_auv)
+        self.hybrid.reset(n_auv)
+        self.tau = np.zeros(n_auv)  # expected fix ages (s)
+        self.t_prev: float | None = None
+        self.w_prev: np.ndarray | None = None
+        self.lam_prev: tuple | None = None
+        self.plan: PlannedTrajectory | None = None
+        self.fallbacks = 0
+        self.fallback_log: list[FallbackEvent] = []
+        self.t_explore: float | None = None
+        self.explored = 0
+        self.target = 0  # the AUV the terminal cost visits next
+        self._diag: dict = {}
+
+    # ------------------------------------------------------------------ per step
+    def _fix_ages(self, obs: Observation, elapsed: float) -> np.ndarray:
+        """Propagate (or read) the expected fix ages over ``elapsed`` s (eq. M2, exact for a
+        constant rate)."""
+        if self.params.fix_age_source == "estimate":
+            ages = np.array([obs.t - a.t_last_fix for a in obs.auvs])
+            return np.where(np.isfinite(ages), np.maximum(ages, 0.0), TAU_UNKNOWN)
+        if elapsed <= 0:
+            return self.tau
+        rho = self._rates(obs)
+        decay = np.exp(-rho * elapsed)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            relaxed = 1 / rho + (self.tau - 1 / rho) * decay
+        return np.where(rho > 1e-9, relaxed, self.tau + elapsed)
+
+    def _fix_geometry(self, obs: Observation, r_lo0: np.ndarray):
+        """(depth used in the slant range, d_fix) per AUV for the fix-rate model (M3)."""
+        K = len(obs.auvs)
+        if self.params.fix.range_kind == "acoustic":
+            depth = np.array([a.depth for a in obs.auvs])
+            return depth, np.full(K, self.acoustics.d1)
+        return np.zeros(K), r_lo0 + self.domain.delta_r + self.domain.eps_plus
+
+    def _rates(self, obs: Observation) -> np.ndarray:
+        """Fix rates now (1/s): propeller state as observed, geometry as in the plan."""
+        if obs.propeller_on:
+            return np.zeros(len(obs.auvs))
+        r_lo = self._radii(obs, 0.0, obs.asv.position)
+        depth, d_fix = self._fix_geometry(obs, r_lo)
+        x = np.array([obs.asv.N, obs.asv.E, 0, 0, 0, 0, 0.0, 0])
+        return np.array([float(self.ocp.rho_fun(x, a.position, depth[i], d_fix[i]))
+                         for i, a in enumerate(obs.auvs)])  # fmt: skip
+
+    def _radii(self, obs: Observation, lookahead: float, asv_NE) -> np.ndarray:
+        """Anti-collision radius (r_inner / r_avoid) of each AUV ``lookahead`` s ahead, along
+        the bearing from the AUV to ``asv_NE``."""
+        shape = estimate_shape(self.params.avoidance, self.domain, obs.auvs, obs.t, lookahead)
+        rel = np.asarray(asv_NE, float) - shape.center
+        return np.asarray(shape.radius(np.arctan2(rel[..., 1], rel[..., 0])), float)
+
+    def _x0(self, obs: Observation) -> np.ndarray:
+        """Plan initial state; thrust and steering are not observed: trim thrust for the
+        current speed while the propeller runs (at least the on-threshold), else 0; steering
+        from the previous plan."""
+        a, ocp = obs.asv, self.ocp
+        T0, d0 = 0.0, 0.0
+        if obs.propeller_on:
+            T0 = max(ocp.model.thrust_for_speed(max(a.u, 0.0)), 1.2 * ocp.T_on)
+            if self.plan is not None:
+                d0 = float(np.interp(obs.t, self.plan.t, self.plan.extra["delta"]))
+        return np.array([a.N, a.E, a.psi, a.u, a.v, a.r, min(T0, ocp.vessel.T_max), d0])
+
+    def parameters(self, obs: Observation) -> np.ndarray:
+        """The parameter vector of the OCP for this observation (after fix-age bookkeeping)."""
+        d, dt = self.ocp.dims, self.ocp.dt
+        K, N = d.n_auv, d.N
+        est = np.array([[a.N, a.E, a.v_N, a.v_E] for a in obs.auvs])
+        ts = dt * np.arange(N + 1)
+        pa = est[None, :, 0:2] + ts[:, None, None] * est[None, :, 2:4]  # constant velocity
+        # bearing of each stage from the previous plan (or the current position)
+        if self.w_prev is not None:
+            Z, _ = self.ocp.split(self.w_prev)
+            asv = Z[:, None, 0:2]
+        else:
+            asv = np.broadcast_to(obs.asv.position, (N + 1, 1, 2))
+        if self.params.avoidance.kind == "fixed":
+            r0 = self._radii(obs, 0.0, obs.asv.position)
+            r_lo = np.broadcast_to(r0, (N + 1, K)).copy()
+        else:
+            r_lo = np.stack([self._radii(obs, float(ts[k]), asv[k]) for k in range(N + 1)])
+        if self.multi:
+            r_hi = np.full((N + 1, K), R_HI_NONE)
+        else:
+            r_hi = np.broadcast_to(self.domain.outer(np.array([a.depth for a in obs.auvs])),
+                                   (N + 1, K)).copy()  # fmt: skip
+        depth, d_fix = self._fix_geometry(obs, r_lo[0])
+        r_t = r_lo[-1] + self.domain.delta_r
+        return self.ocp.pack(self._x0(obs), self.tau, (0.0, 0.0), pa, r_lo, r_hi, depth, d_fix,
+                             r_t, self.target)  # fmt: skip
+
+    def step(self, obs: Observation) -> Command:
+        ocp = self.ocp
+        elapsed = 0.0 if self.t_prev is None else obs.t - self.t_prev
+        self.t_prev = obs.t
+        self.tau = self._fix_ages(obs, elapsed)
+        self._choose_target(obs)
+        hybrid_cmd = self.hybrid.step(obs)  # always stepped: its state stays current
+        p = self.parameters(obs)
+        if self.w_prev is None:
+            w0, lam = ocp.rollout(p), (None, None)
+        else:
+            frac = elapsed / ocp.dt
+            Z, V = ocp.split(ocp.shift(self.w_prev, frac))
+            w0 = ocp.fill_slacks(Z, V, p)
+            lx, lg = self.lam_prev or (None, None)
+            lam = (None if lx is None else ocp.shift_lam_x(lx, frac),
+                   None if lg is None else ocp.shift_lam_g(lg, frac))  # fmt: skip
+        res = self.solver.solve(p, w0, *lam)
+        res = self._explore(obs, p, res)
+        reason = self._check(res, p)
+        if np.all(np.isfinite(res.w)):  # an unconverged iterate still warm-starts the next
+            self.w_prev = res.w
+            self.lam_prev = (res.lam_x, res.lam_g) if res.ok else None
+            if res.ok:
+                self._store_plan(obs.t, res.w)
+        else:
+            self.w_prev, self.lam_prev = None, None  # next step starts from a rollout
+        self._diag = {"mpc_ok": int(res.ok), "mpc_iter": res.iters, "mpc_ms": res.ms,
+                      "mpc_cost": res.f, "mpc_status": res.status,
+                      "mpc_fallback": int(reason is not None),
+                      "mpc_fallback_reason": reason or ""}  # fmt: skip
+        self._diag |= {f"mpc_tau{i}": float(v) for i, v in enumerate(self.tau)}
+        self._diag["mpc_target"] = self.target
+        if reason is not None:
+            self.fallbacks += 1
+            self.fallback_log.append(FallbackEvent(obs.t, reason, res.status, res.ms))
+            if hybrid_cmd.mode is Mode.STANDBY:
+                return Command.standby(hybrid_cmd.auv, Reason.FALLBACK)
+            return Command(Mode.TRANSIT, hybrid_cmd.waypoint, hybrid_cmd.speed, hybrid_cmd.auv,
+                           Reason.FALLBACK)  # fmt: skip
+        return self._command(obs, res.w, p)
+
+    def _choose_target(self, obs: Observation) -> None:
+        """The AUV the terminal cost sends the ASV to (M9): kept until it is served (its
+        expected fix age below ``tau_served``), then the one with the largest projected fix
+        age ``tau_i + t_go,i`` (Paper 2's eq. 8 on projected ages)."""
+        K = len(obs.auvs)
+        if K == 1 or self.tau[self.target] > self.params.tau_served:
+            return
+        pos = np.array([a.position for a in obs.auvs])
+        r_t = self._radii(obs, 0.0, obs.asv.position) + self.domain.delta_r
+        dist = np.hypot(*(pos - obs.asv.position).T)
+        t_go = np.maximum(dist - r_t, 0.0) / self.params.weights.U_go
+        proj = self.tau + t_go
+        proj[self.target] = -np.inf
+        self.target = int(np.argmax(proj))
+        self.t_explore = None  # new target: also try a guess heading there (_explore)
+
+    def _explore(self, obs: Observation, p: np.ndarray, res):
+        """Right after a target change, and while the plan stands still every ``explore_every``
+        s, also solve from a guess that heads for the target AUV's circle (standing still is a
+        local minimum: at rest the rudder has no authority); keep the cheaper plan."""
+        P, ocp = self.params, self.ocp
+        if P.explore_every <= 0:
+            return res
+        if self.t_explore is not None and obs.t - self.t_explore < P.explore_every - 1e-9:
+            return res
+        Z, _ = ocp.split(res.w)
+        if self.t_explore is not None and res.ok and np.max(Z[1:, 6]) >= ocp.T_on:
+            return res  # the plan moves already
+        self.t_explore = obs.t
+        par = ocp.unpack_par(p)
+        j = self.target
+        if np.hypot(*(obs.asv.position - par["pa"][0, j])) <= par["r_t"][j] + self.domain.eps_plus:
+            return res  # already there
+        alt = self.solver.solve(p, ocp.guided_rollout(p, j, P.speed))
+        self.explored += 1
+        best = alt if alt.ok and (not res.ok or alt.f < res.f) else res
+        return dataclasses.replace(best, ms=res.ms + alt.ms, iters=res.iters + alt.iters)
+
+    def _check(self, res, p) -> str | None:
+        """Why this step's plan may not be used (None: it may)."""
+        sp = self.params.solver
+        if not res.ok:
+            return f"solver: {res.status}"
+        if res.ms > sp.budget_ms:
+            return f"time budget: {res.ms:.0f} ms > {sp.budget_ms:g} ms"
+        Z, _ = self.ocp.split(res.w)
+        par = self.ocp.unpack_par(p)
+        n = min(sp.check_stages, self.ocp.dims.N) + 1
+        dist = np.hypot(Z[1:n, None, 0] - par["pa"][1:n, :, 0],
+                        Z[1:n, None, 1] - par["pa"][1:n, :, 1])  # fmt: skip
+        if np.any(dist < par["r_lo"][1:n] - sp.check_margin):
+            return "plan enters the anti-collision radius"
+        return None
+
+    def _store_plan(self, t: float, w: np.ndarray) -> None:
+        Z, V = self.ocp.split(w)
+        ts = t + self.ocp.dt * np.arange(Z.shape[0])
+        K = self.ocp.dims.n_auv
+        self.plan = PlannedTrajectory(ts, Z[:, 0].copy(), Z[:, 1].copy(), {
+            "T": Z[:, 6].copy(), "u": Z[:, 3].copy(), "delta": Z[:, 7].copy(),
+            "tau": Z[:, NXV:NXV + K].copy(),
+        })  # fmt: skip
+
+    def _command(self, obs: Observation, w: np.ndarray, p: np.ndarray) -> Command:
+        """STANDBY or TRANSIT from the plan (see the module docstring)."""
+        P, ocp = self.params, self.ocp
+        Z, _ = ocp.split(w)
+        ts = ocp.dt * np.arange(Z.shape[0])
+        par = ocp.unpack_par(p)
+        dist = np.hypot(Z[:, None, 0] - par["pa"][..., 0], Z[:, None, 1] - par["pa"][..., 1])
+        served = int(np.argmin(dist[-1] - par["r_t"]))
+        m = max(1, math.ceil(P.standby_time / ocp.dt - 1e-9))
+        if np.max(Z[1 : m + 1, 6]) < ocp.T_on:
+            return Command.standby(auv=served)
+        look = min(P.lookahead, ts[-1])
+        target = np.array([np.interp(look, ts, Z[:, 0]), np.interp(look, ts, Z[:, 1])])
+        here = obs.asv.position
+        delta = target - here
+        dn = float(np.hypot(*delta))
+        if dn < 1e-6:  # plan does not move: head along the current heading
+            delta, dn = np.array([math.cos(obs.asv.psi), math.sin(obs.asv.psi)]), 1.0
+        wp = here + delta / dn * max(dn, P.min_carrot)
+        sel = ts <= look + 1e-9
+        speed = float(np.clip(np.max(Z[sel, 3]), P.speed_min, ocp.vessel.u_max))
+        reason = Reason.NOMINAL
+        if np.any(dist[0] < par["r_lo"][0] + self.domain.eps_minus):
+            reason = Reason.AVOIDANCE
+        elif not self.multi and np.any(dist[0] > par["r_hi"][0] - self.domain.eps_plus):
+            reason = Reason.TRACKING
+        return Command(Mode.TRANSIT, (float(wp[0]), float(wp[1])), speed, served, reason)
+
+    def diagnostics(self) -> dict:
+        """Flat per-step record: solver status, iterations, solve time, cost, fallback."""
+        return dict(self._diag)
+
+
+def _build_single(params: MPCParams, n_auv: int) -> MPCController:
+    return MPCController(params, n_auv, multi=False)
+
+
+def _build_multi(params: MPCParams, n_auv: int) -> MPCController:
+    return MPCController(params, n_auv, multi=True)
+
+
+KIND_SINGLE = ControllerKind("mpc-single", MPCParams, _build_single, "mpc-single")
+KIND_MULTI = ControllerKind("mpc-multi", MPCParams, _build_multi, "mpc-multi", multi=True)

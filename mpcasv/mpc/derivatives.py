@@ -1,0 +1,117 @@
+"""Stage-wise derivatives of the OCP, assembled along the horizon (what the solvers evaluate).
+
+CasADi can differentiate the whole NLP, but for this stage-structured problem it is cheaper
+to differentiate one stage symbolically (SX: gradient, constraint Jacobian, Hessian of the
+stage Lagrangian, sharing the RK4 forward pass) and map it over the horizon: the Jacobian is
+block-bidiagonal (the gap-closing ``+I`` on ``z_{k+1}`` is a constant), the Hessian block
+diagonal. The resulting functions carry the names and signatures the solver plugins look
+for in a compiled library (``nlpsol(name, "fatrop", "lib.so")``).
+"""
+
+from __future__ import annotations
+
+import casadi as ca
+
+from mpcasv.mpc.problem import OCP
+
+
+def _stage_functions(ocp: OCP) -> dict[str, ca.Function]:
+    d = ocp.dims
+    nx = d.nx
+    z, v, z1 = ca.SX.sym("z", nx), ca.SX.sym("v", d.nu), ca.SX.sym("z1", nx)
+    sp, sp1 = ca.SX.sym("sp", d.n_stage_par), ca.SX.sym("sp1", d.n_stage_par)
+    gp = ca.SX.sym("gp", d.n_global_par)
+    lf, lg = ca.SX.sym("lf"), ca.SX.sym("lg", nx + d.nh)
+    L, g = ocp.stage(z, v, z1, sp, sp1, gp)
+    zv = ca.vertcat(z, v)
+    H, grad_lag = ca.hessian(lf * L + ca.dot(lg, g), zv)
+    LN = ocp.term(z, sp, gp)
+    HN, dLN = ca.hessian(LN, z)
+    a = [z, v, z1, sp, sp1, gp]
+    return {
+        "grad": ca.Function("st_grad", a, [L, ca.gradient(L, zv)]),
+        "jac": ca.Function("st_jac", a, [g, ca.jacobian(g, zv)]),
+        "hess": ca.Function("st_hess", [*a, lf, lg], [grad_lag, H]),
+        "all": ca.Function(
+            "st_all",
+            [*a, lg],
+            [L, ca.gradient(L, zv), g, ca.jacobian(g, zv), ca.substitute(H, lf, 1.0)],
+        ),  # fmt: skip
+        "term_grad": ca.Function("te_grad", [z, sp, gp], [LN, dLN]),
+        "term_hess": ca.Function("te_hess", [z, sp, gp], [HN]),
+    }
+
+
+def nlp_functions(ocp: OCP, solver: str) -> dict[str, ca.Function]:
+    """The functions a compiled library for ``solver`` must contain.
+
+    ``fatrop`` and ``ipopt``: ``nlp`` and the ``nlp_*`` oracle functions of their CasADi
+    plugins; ``qp``: ``qp_eval(x, p, lam_g) -> (f, grad_f, g, jac_g, hess_l)`` for the
+    linearise-and-solve variant (:mod:`mpcasv.mpc.qp`).
+    """
+    d = ocp.dims
+    N, nx, nb, nw = d.N, d.nx, d.nb, d.nw
+    ngk = nx + d.nh
+    S = _stage_functions(ocp)
+    x, p = ca.MX.sym("x", nw), ca.MX.sym("p", d.npar)
+    lam_f, lam_g = ca.MX.sym("lam_f"), ca.MX.sym("lam_g", d.ng)
+    args, zN, targs = ocp.horizon_args(x, p)
+    Ls, Gs = ocp.stage.map(N)(*args)
+    f = ca.sum2(Ls) + ocp.term(zN, *targs)
+    g = ca.vec(Gs)
+    # +I on z_{k+1} in the gap-closing rows: a constant block
+    rows = [k * ngk + i for k in range(N) for i in range(nx)]
+    cols = [(k + 1) * nb + i for k in range(N) for i in range(nx)]
+    E = ca.DM(ca.Sparsity.triplet(d.ng, nw, rows, cols), 1.0)
+
+    def jac_of(Js):
+        J = ca.diagcat(*[Js[:, k * nb : (k + 1) * nb] for k in range(N)])
+        return ca.horzcat(J, ca.MX(d.ng, nx)) + E
+
+    def hess_of(Hs, HN):
+        H = ca.diagcat(*[Hs[:, k * nb : (k + 1) * nb] for k in range(N)], HN)
+        return H + ca.DM(ca.Sparsity.diag(nw), 0.0)  # structural diagonal
+
+    LG = ca.reshape(lam_g, ngk, N)
+    out: dict[str, ca.Function] = {}
+    xp, xpl = ["x", "p"], ["x", "p", "lam_f", "lam_g"]
+    if solver in ("fatrop", "ipopt"):
+        _, dLs = S["grad"].map(N)(*args)
+        LN, dLN = S["term_grad"](zN, *targs)
+        grad_f = ca.vertcat(ca.vec(dLs), dLN)
+        g2, Js = S["jac"].map(N)(*args)
+        gls, Hs = S["hess"].map(N)(*args, ca.repmat(lam_f, 1, N), LG)
+        grad_lag = ca.vertcat(ca.vec(gls), lam_f * dLN) + ca.mtimes(E.T, lam_g)
+        H = hess_of(Hs, lam_f * S["term_hess"](zN, *targs))
+        out["nlp"] = ca.Function("nlp", [x, p], [f, g], xp, ["f", "g"])
+        out["nlp_f"] = ca.Function("nlp_f", [x, p], [f], xp, ["f"])
+        out["nlp_g"] = ca.Function("nlp_g", [x, p], [g], xp, ["g"])
+        out["nlp_jac_g"] = ca.Function("nlp_jac_g", [x, p], [ca.vec(g2), jac_of(Js)], xp,
+                                       ["g", "jac_g_x"])  # fmt: skip
+        # parameter sensitivities are not used (calc_lam_p = False): a zero placeholder
+        out["nlp_grad"] = ca.Function(
+            "nlp_grad", [x, p, lam_f, lam_g], [f, g, grad_lag, ca.MX(d.npar, 1)], xpl,
+            ["f", "g", "grad_gamma_x", "grad_gamma_p"],
+        )  # fmt: skip
+        if solver == "fatrop":
+            out["nlp_grad_f"] = ca.Function("nlp_grad_f", [x, p], [grad_f], xp, ["grad_f_x"])
+            out["nlp_hess_l"] = ca.Function("nlp_hess_l", [x, p, lam_f, lam_g], [grad_lag, H],
+                                            xpl, ["grad_gamma_x", "hess_gamma_x_x"])  # fmt: skip
+        else:
+            out["nlp_grad_f"] = ca.Function("nlp_grad_f", [x, p], [f, grad_f], xp,
+                                            ["f", "grad_f_x"])  # fmt: skip
+            out["nlp_hess_l"] = ca.Function("nlp_hess_l", [x, p, lam_f, lam_g], [ca.triu(H)],
+                                            xpl, ["triu_hess_gamma_x_x"])  # fmt: skip
+    elif solver == "qp":
+        Ls2, dLs, g2, Js, Hs = S["all"].map(N)(*args, LG)
+        LN, dLN = S["term_grad"](zN, *targs)
+        out["qp_eval"] = ca.Function(
+            "qp_eval", [x, p, lam_g],
+            [ca.sum2(Ls2) + LN, ca.vertcat(ca.vec(dLs), dLN), ca.vec(g2), jac_of(Js),
+             hess_of(Hs, S["term_hess"](zN, *targs))],
+            ["x", "p", "lam_g"], ["f", "grad_f", "g", "jac_g", "hess_l"],
+        )  # fmt: skip
+        out["qp_fg"] = ca.Function("qp_fg", [x, p], [f, g], xp, ["f", "g"])
+    else:
+        raise ValueError(f"no compiled functions for solver {solver!r}")
+    return out

@@ -1,0 +1,208 @@
+"""Parameters of the MPC (frozen, validated from the ``mpc-*.toml`` presets).
+
+Every weight, horizon and solver setting of :mod:`mpcasv.mpc` lives here; docs/mpc.md gives the
+equations each one enters. Units are SI; costs are per second of the horizon (the stage cost is
+multiplied by the stage length ``dt``).
+"""
+
+from __future__ import annotations
+
+from typing import Annotated, Literal
+
+from pydantic import Field, Strict
+
+from mpcasv.config import NonNeg, Pos, PosInt, frozen
+from mpcasv.hybrid.domains import AvoidanceParams, DomainParams
+
+SolverName = Literal["fatrop", "ipopt", "qp"]
+
+
+@frozen
+class HorizonParams:
+    """Prediction horizon: ``N`` stages of ``dt`` s, RK4 with ``n_sub`` sub-steps per stage.
+
+    RK4 is stable on the fast sway-yaw pole (about -2.4 1/s at 2.5 m/s) for sub-steps up to
+    about 1.1 s: keep ``dt / n_sub <= 1``.
+    """
+
+    N: PosInt = 15
+    dt: Pos = 4.0
+    n_sub: PosInt = 4
+
+
+@frozen
+class FixRateParams:
+    """Smooth fix-rate model (docs/mpc.md eq. M3).
+
+    ``rho = p_good / T0 * sig((d_fix - d) / w_range) * sig((T_quiet - T) / w_thrust)``
+
+    Attributes
+    ----------
+    range_kind : {"acoustic", "target"}
+        ``acoustic``: ``d`` is the slant range and ``d_fix`` the acoustic channel's good range
+        ``d1``. ``target``: ``d`` is the horizontal range and ``d_fix = r_t + eps_plus``, the
+        geometric part of Paper 2's reliable-fix rule (eq. 9): a "fix" is a visit.
+    w_range : float
+        Width of the range sigmoid (m).
+    T_quiet : float or None
+        Thrust below which the propeller counts as off (N); None: the execution level's
+        propeller-on threshold.
+    w_thrust : float
+        Width of the thrust sigmoid (N).
+    """
+
+    range_kind: Literal["acoustic", "target"] = "acoustic"
+    w_range: Pos = 10.0
+    T_quiet: Pos | None = None
+    w_thrust: Pos = 4.0
+
+
+@frozen
+class WeightParams:
+    """Cost weights (docs/mpc.md eq. M4); all per second of horizon.
+
+    Attributes
+    ----------
+    age : float
+        On the sum of the AUVs' expected fix ages, per ``tau_ref`` seconds of age.
+    worst : float
+        On the worst (largest) expected fix age (epigraph variable), per ``tau_ref``.
+    tau_ref : float
+        Fix age that costs ``age`` (s).
+    thrust : float
+        On thrust, per ``T_max``.
+    power : float
+        On thrust x surge speed, per ``T_max u_max``.
+    dT, ddelta : float
+        On the squared command rates, per rate limit.
+    slack : float
+        L1 (exact) penalty on the soft-constraint slacks, per metre.
+    tail : float
+        Length of the tail the terminal cost stands for (s).
+    terminal : {"projected", "visit"}
+        Terminal cost (docs/mpc.md eq. M7): ``projected`` values the tail on the target AUV's
+        projected fix age ``tau + t_go``; ``visit``: all ages grow through the tail except
+        the target's, whose visit saves ``(tail - t_go)+ (tau + t_go)`` (kept for comparison:
+        with ages beyond ``tail`` it rewards arriving late).
+    U_go : float
+        Speed used to turn the distance to an AUV's target circle into a time to go (m/s).
+    """
+
+    age: NonNeg = 1.0
+    worst: NonNeg = 0.0
+    tau_ref: Pos = 100.0
+    thrust: NonNeg = 0.3
+    power: NonNeg = 0.3
+    dT: NonNeg = 0.02
+    ddelta: NonNeg = 0.02
+    slack: Pos = 10.0
+    tail: NonNeg = 60.0
+    terminal: Literal["projected", "visit"] = "projected"
+    U_go: Pos = 2.5
+
+
+@frozen
+class SolverParams:
+    """Which solver, its limits, and the safety fallback's triggers.
+
+    Attributes
+    ----------
+    solver : {"fatrop", "ipopt", "qp"}
+        ``fatrop``: CasADi's structure-exploiting interior-point solver (default); ``ipopt``;
+        ``qp``: the model linearised along the previous plan, QPs solved by OSQP (qpsolvers).
+    compiled : bool
+        Generate C code for the NLP functions, compile it once and cache it on disk
+        (``$MPCASV_CACHE`` or ``~/.cache/mpcasv``); False evaluates CasADi's SX virtual
+        machine (slower, no compiler needed).
+    cflags : str
+        Compiler flags of the cached library (``-march=native``: the cache key includes the
+        CPU model).
+    max_iter : int
+        Iteration limit of the NLP solver (0 forces a failure: the fallback test).
+    tol : float
+        Convergence tolerance of the NLP solver.
+    mu_init : float
+        Initial barrier parameter (warm-started interior point).
+    qp_iters : int
+        SQP iterations of the ``qp`` variant per step (1 = real-time iteration).
+    budget_ms : float
+        Time budget of one solve (ms): a slower solve is not used for the command.
+    check_stages : int
+        Stages of the plan checked against r_inner / r_avoid before it is used.
+    check_margin : float
+        Tolerance of that check (m): the soft constraints may be violated by this much.
+    """
+
+    solver: SolverName = "fatrop"
+    compiled: bool = True
+    cflags: str = "-O3 -march=native"
+    max_iter: Annotated[int, Strict(), Field(ge=0)] = 50
+    tol: Pos = 1e-4
+    mu_init: Pos = 1e-3
+    qp_iters: PosInt = 2
+    budget_ms: Pos = 200.0
+    check_stages: PosInt = 2
+    check_margin: NonNeg = 2.0
+
+
+@frozen
+class MPCParams:
+    """Preset of ``mpc-single`` / ``mpc-multi``.
+
+    Attributes
+    ----------
+    domain : DomainParams
+        The donut (single AUV: ``r_inner <= r <= r_outer``) or the anti-collision radii (several
+        AUVs: ``r >= r_avoid``), from :mod:`mpcasv.hybrid.domains`.
+    avoidance : AvoidanceParams
+        Which anti-collision radius (the papers' fixed one, or uncertainty-aware); the MPC
+        evaluates it at every stage along the planned bearing.
+    vessel, execution : str
+        Vessel model and execution-level parameters (shipped names or TOML paths).
+    T_ramp : float
+        Time to ramp thrust from zero to ``T_max`` in the plan (s): the thrust rate limit.
+    standby_time : float
+        The command is STANDBY when the planned thrust stays below the propeller-on threshold
+        for this long (s).
+    lookahead : float
+        The TRANSIT waypoint is the planned position this far ahead (s) ...
+    min_carrot : float
+        ... pushed out to at least this distance from the ASV (m) so that line-of-sight
+        guidance has a well-defined bearing.
+    speed_min : float
+        Lowest speed cap handed to the execution level (m/s).
+    speed : float
+        Transit speed cap of the hybrid fallback controller (m/s).
+    T_standby : float
+        Minimum standby time of the hybrid fallback (multi-AUV) controller (s).
+    tau_served : float
+        Several AUVs: the target AUV (the one the terminal cost sends the ASV to) is kept until
+        its expected fix age falls below this (s); then the AUV with the largest projected fix
+        age becomes the target.
+    explore_every : float
+        While the plan stands still, also solve from a guess heading for the AUV with the
+        largest projected fix age this often (s; 0: never). Standing still is a local minimum.
+    fix_age_source : {"model", "estimate"}
+        Initial fix ages: ``model`` integrates the same expected-fix-age model (eq. M2) on the
+        observed states (works with any estimator, also ``perfect``); ``estimate`` takes
+        ``obs.t - t_last_fix`` of each AUV estimate (needs an estimator fed by fixes).
+    """
+
+    domain: DomainParams
+    avoidance: AvoidanceParams = AvoidanceParams()
+    horizon: HorizonParams = HorizonParams()
+    fix: FixRateParams = FixRateParams()
+    weights: WeightParams = WeightParams()
+    solver: SolverParams = SolverParams()
+    vessel: str = "gretha"
+    execution: str = "gretha"
+    T_ramp: Pos = 4.0
+    standby_time: Pos = 4.0
+    lookahead: Pos = 15.0
+    min_carrot: Pos = 25.0
+    speed_min: Pos = 0.5
+    speed: Pos = 2.5
+    T_standby: Pos = 10.0
+    tau_served: Pos = 10.0
+    explore_every: NonNeg = 5.0
+    fix_age_source: Literal["model", "estimate"] = "model"

@@ -1,0 +1,485 @@
+"""The MPC's optimal control problem (docs/mpc.md), built once as CasADi SX expressions.
+
+Stage-interleaved layout (what fatrop's structure detection and a Riccati recursion want):
+
+    w = [z_0, v_0, z_1, v_1, ..., z_{N-1}, v_{N-1}, z_N, v_N]
+    g = [z_1 - F(z_0, v_0), h_0, z_2 - F(z_1, v_1), h_1, ..., h_N]
+
+- state ``z = [N, E, psi, u, v, r, T, delta, tau_1..tau_K]`` (the vessel with thrust and
+  steering as states, plus each AUV's expected fix age);
+- control ``v = [Tdot, deltadot, s_1..s_K, m]`` (command rates, one L1 slack per AUV, the
+  worst-age epigraph variable ``m`` when its weight is positive); ``v_N = [s, m]``;
+- path constraints ``h_k``: ``d_i + s_i >= r_lo,i`` and (single AUV) ``d_i - s_i <= r_hi,i``,
+  ``m >= tau_i`` (at N: ``m >= tau_i + t_go,i``).
+
+The rigid-body part of the dynamics is the shared model's :func:`~mpcasv.models.vessel.xdot_expr`
+evaluated with the actuators at their set-points (``u = x[6:8]``), i.e. the actuator lags
+(0.3 s, 0.5 s) are removed by singular perturbation and the plan drives ``T`` and ``delta``
+through their rates.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import casadi as ca
+import numpy as np
+
+from mpcasv.control.params import load_execution
+from mpcasv.models.params import load_vessel
+from mpcasv.models.vessel import VesselModel, rk4_expr, xdot_expr
+from mpcasv.mpc.params import MPCParams
+
+NXV = 8  # vessel part of the plan state
+SOFTPLUS_M = 5.0  # smoothing length of the time-to-go softplus (m)
+SOFT_T = 5.0  # smoothing of (T_tail - t_go)+ (s)
+#: the cost weights are parameters (retuning needs no recompilation), in this order
+WEIGHT_NAMES = ("age", "worst", "thrust", "power", "dT", "ddelta", "slack", "tail", "inv_U_go")
+NW = len(WEIGHT_NAMES)
+D_EPS = 0.1  # smoothing of the range sqrt (m)
+
+
+def sigmoid(x):
+    """Logistic function (numerically safe for CasADi and numpy)."""
+    return 0.5 + 0.5 * np.tanh(0.5 * x) if not isinstance(x, (ca.SX, ca.MX)) else (
+        0.5 + 0.5 * ca.tanh(0.5 * x))  # fmt: skip
+
+
+def softplus(x):
+    """``log(1 + exp(x))`` without overflow (CasADi expression)."""
+    return ca.fmax(x, 0) + ca.log1p(ca.exp(-ca.fabs(x)))
+
+
+@dataclass(frozen=True)
+class Dims:
+    """Sizes of the stage-interleaved problem."""
+
+    N: int
+    n_auv: int
+    outer: bool  # single AUV: the donut's outer bound is a (soft) constraint
+    epi: bool  # worst-age epigraph variable present
+
+    @property
+    def nx(self) -> int:
+        return NXV + self.n_auv
+
+    @property
+    def nu(self) -> int:
+        return 2 + self.n_auv + int(self.epi)
+
+    @property
+    def nh(self) -> int:
+        return self.n_auv * (2 if self.outer else 1) + (self.n_auv if self.epi else 0)
+
+    @property
+    def nb(self) -> int:
+        return self.nx + self.nu
+
+    @property
+    def nw(self) -> int:
+        return self.N * self.nb + self.nx
+
+    @property
+    def ng(self) -> int:
+        return self.N * (self.nx + self.nh)
+
+    @property
+    def n_stage_par(self) -> int:
+        return 4 * self.n_auv  # AUV position (2), r_lo, r_hi per AUV
+
+    @property
+    def npar(self) -> int:
+        return self.nx + 2 + (self.N + 1) * self.n_stage_par + 4 * self.n_auv + NW
+
+    @property
+    def n_global_par(self) -> int:
+        return 2 + 4 * self.n_auv + NW
+
+
+class OCP:
+    """The problem for ``n_auv`` AUVs (built once; every per-step quantity is a parameter).
+
+    Parameters
+    ----------
+    params : MPCParams
+    n_auv : int
+    outer : bool
+        Whether the outer donut bound applies (single-AUV controller).
+
+    Attributes
+    ----------
+    nlp : dict
+        ``{x, p, f, g}`` of SX expressions.
+    lbx, ubx, lbg, ubg : ndarray
+        Bounds; ``lbx/ubx`` of stage 0 are set to the initial state per solve.
+    equality : list of bool
+        Which constraints are equalities (fatrop option).
+    """
+
+    def __init__(self, params: MPCParams, n_auv: int, outer: bool):
+        self.params = params
+        hz, wt = params.horizon, params.weights
+        self.vessel = load_vessel(params.vessel)
+        self.model = VesselModel(self.vessel)
+        ep = load_execution(params.execution)
+        vp = self.vessel
+        self.T_on = ep.propeller_on_threshold * vp.T_max  # execution level's threshold (N)
+        self.T_quiet = params.fix.T_quiet if params.fix.T_quiet is not None else self.T_on
+        self.dT_max = vp.T_max / params.T_ramp
+        self.dd_max = vp.delta_rate_max
+        self.dims = Dims(hz.N, n_auv, outer, wt.worst > 0)
+        self.dt = hz.dt
+        self._build()
+
+    # ------------------------------------------------------------------ dynamics
+    def rhs(self, z, w, q):
+        """Continuous dynamics of the augmented state ``[z; s]`` (``s``: time into the stage).
+
+        ``q = [c (2), pa_k (2K), va (2K), depth (K), d_fix (K)]``.
+        """
+        K, vp = self.dims.n_auv, self.vessel
+        x, tau, s = z[0:NXV], z[NXV : NXV + K], z[NXV + K]
+        c = q[0:2]
+        xd = xdot_expr(x, x[6:8], c, self.model.p)  # actuators at their set-points
+        rows = [xd[0:6], w[0], w[1]]
+        quiet = sigmoid((self.T_quiet - x[6]) / self.params.fix.w_thrust)
+        for i in range(K):
+            pa = q[2 + 2 * i : 4 + 2 * i] + s * q[2 + 2 * K + 2 * i : 4 + 2 * K + 2 * i]
+            depth, d_fix = q[2 + 4 * K + i], q[2 + 5 * K + i]
+            slant = ca.sqrt((x[0] - pa[0]) ** 2 + (x[1] - pa[1]) ** 2 + depth**2)
+            rho = self.rho0 * sigmoid((d_fix - slant) / self.params.fix.w_range) * quiet  # (M3)
+            rows.append(1 - rho * tau[i])  # (M2)
+        rows.append(ca.DM(1.0))
+        del vp
+        return ca.vertcat(*rows)
+
+    @property
+    def rho0(self) -> float:
+        """Fix rate with the propeller off in range, ``p_good / T0`` (1/s)."""
+        from mpcasv.models.acoustics import AcousticParams
+
+        ac = AcousticParams()
+        return ac.p_good / ac.T0
+
+    def _build(self) -> None:
+        d, hz, wt, vp = self.dims, self.params.horizon, self.params.weights, self.vessel
+        K, N, nx, dt = d.n_auv, d.N, d.nx, hz.dt
+        nq = 2 + 6 * K
+        za, wv, q = ca.SX.sym("z", nx + 1), ca.SX.sym("w", 2), ca.SX.sym("q", nq)
+        f = ca.Function("f_plan", [za, wv, q], [self.rhs(za, wv, q)])
+        z, qs = ca.SX.sym("z", nx), ca.SX.sym("q", nq)
+        zn = rk4_expr(f, ca.vertcat(z, 0), wv, qs, dt, hz.n_sub)[0:nx]
+        #: discrete plan dynamics F(z, [Tdot, deltadot], q) -> z_next
+        self.F = ca.Function("F", [z, wv, qs], [zn], ["z", "w", "q"], ["z_next"])
+
+        # one stage: L_k and g_k = [z_{k+1} - F(z_k, v_k), h_k]; the terminal stage: L_N, h_N
+        v, z1 = ca.SX.sym("v", d.nu), ca.SX.sym("z1", nx)
+        sp, sp1 = ca.SX.sym("sp", d.n_stage_par), ca.SX.sym("sp1", d.n_stage_par)
+        gp = ca.SX.sym("gp", d.n_global_par)  # current, depth, d_fix, r_t, target, weights
+        c, depth, d_fix = gp[0:2], gp[2 : 2 + K], gp[2 + K : 2 + 2 * K]
+        W = dict(zip(WEIGHT_NAMES, ca.vertsplit(gp[2 + 4 * K :]), strict=True))
+        target = gp[2 + 3 * K : 2 + 4 * K]  # one-hot: the AUV the tail visits next
+        qk = ca.vertcat(c, sp[0 : 2 * K], (sp1[0 : 2 * K] - sp[0 : 2 * K]) / dt, depth, d_fix)
+        h, lbh, ubh = self._path(z, v[2 : 2 + K], v[2 + K] if d.epi else None, sp)
+        T, u = z[6], z[3]
+        L = W["age"] * ca.sum1(z[NXV : NXV + K])  # (M4)
+        if d.epi:
+            L += W["worst"] * v[2 + K]
+        L += W["thrust"] * T + W["power"] * T * u
+        L += W["dT"] * v[0] ** 2 + W["ddelta"] * v[1] ** 2
+        L += W["slack"] * ca.sum1(v[2 : 2 + K])
+        #: stage k: (z_k, v_k, z_{k+1}, stage params k and k+1, global params) -> (dt L_k, g_k)
+        self.stage_phys = ca.Function(
+            "stage", [z, v, z1, sp, sp1, gp], [dt * L, ca.vertcat(z1 - self.F(z, v[0:2], qk), h)],
+            ["z", "v", "z1", "sp", "sp1", "gp"], ["L", "g"],
+        )  # fmt: skip
+        tau, t_go, T_tail = z[NXV : NXV + K], self._t_go(z, sp, gp), W["tail"]
+        if wt.terminal == "projected":  # (M7a) the target's projected fix age tau + t_go
+            LN = T_tail * W["age"] * ca.dot(target, tau + t_go)
+        else:  # (M7b) ages grow through the tail, minus what the visit of the target saves
+            reach = SOFT_T * softplus((T_tail - t_go) / SOFT_T)  # (T_tail - t_go)+, s
+            saved = reach * (tau + t_go)  # fix age-time saved by visiting that AUV, s^2
+            LN = W["age"] * (T_tail * ca.sum1(tau) - ca.dot(target, saved))
+        #: terminal stage: (z_N, stage params N, global params) -> L_N
+        self.term_phys = ca.Function("term", [z, sp, gp], [LN], ["z", "sp", "gp"], ["L"])
+
+        # the solvers see scaled variables w_s = w / s_w and constraints g_s = g / s_g (M8)
+        self.s_z, self.s_v, self.s_h = self._scales()
+        zs, vs, z1s = ca.SX.sym("z", nx), ca.SX.sym("v", d.nu), ca.SX.sym("z1", nx)
+        Ls, gs = self.stage_phys(self.s_z * zs, self.s_v * vs, self.s_z * z1s, sp, sp1, gp)
+        s_g = np.r_[self.s_z, self.s_h]
+        #: stage k in scaled variables: (z_k, v_k, z_{k+1}, sp_k, sp_{k+1}, gp) -> (dt L_k, g_k)
+        self.stage = ca.Function("stage_s", [zs, vs, z1s, sp, sp1, gp], [Ls, gs / s_g],
+                                 ["z", "v", "z1", "sp", "sp1", "gp"], ["L", "g"])  # fmt: skip
+        #: terminal cost in scaled variables
+        self.term = ca.Function("term_s", [zs, sp, gp], [self.term_phys(self.s_z * zs, sp, gp)],
+                                ["z", "sp", "gp"], ["L"])  # fmt: skip
+        self.s_w = np.concatenate([np.tile(np.r_[self.s_z, self.s_v], N), self.s_z])
+
+        # the whole NLP: MX over the stage functions mapped along the horizon (compact code)
+        p = ca.MX.sym("p", d.npar)
+        wx = ca.MX.sym("w", d.nw)
+        args, zN, targs = self.horizon_args(wx, p)
+        Ls, Gs = self.stage.map(N)(*args)
+        self.nlp = {"x": wx, "p": p, "f": ca.sum2(Ls) + self.term(zN, *targs), "g": ca.vec(Gs)}
+        self.lbg = np.tile(np.r_[np.zeros(nx), lbh], N)
+        self.ubg = np.tile(np.r_[np.zeros(nx), ubh], N)
+        self.equality = ([True] * nx + [False] * d.nh) * N
+
+        # loose "sanity" bounds on the velocities and fix ages, never active in a sensible plan:
+        # they keep a solver's trial points where the model cannot overflow
+        zlb = [-math.inf, -math.inf, -math.inf, -0.5, -1.0, -0.5, 0, 0] + [0.0] * K
+        zub = [math.inf, math.inf, math.inf, vp.u_max + 0.5, 1.0, 0.5, 0, 0] + [1e4] * K
+        zlb[6], zub[6] = vp.T_min, vp.T_max
+        zlb[7], zub[7] = -vp.delta_max, vp.delta_max
+        ulb = [-self.dT_max, -self.dd_max] + [0.0] * K + ([-math.inf] if d.epi else [])
+        uub = [self.dT_max, self.dd_max] + [math.inf] * K + ([math.inf] if d.epi else [])
+        lbx = (zlb + ulb) * N + zlb
+        ubx = (zub + uub) * N + zub
+        self.lbx, self.ubx = np.array(lbx, float) / self.s_w, np.array(ubx, float) / self.s_w
+        #: fix rate at a given vessel state (for the controller's bookkeeping)
+        xv, pa1, dep1, df1 = (ca.SX.sym(n, s) for n, s in
+                              (("x", NXV), ("pa", 2), ("depth", 1), ("d_fix", 1)))  # fmt: skip
+        slant = ca.sqrt(ca.sumsqr(xv[0:2] - pa1) + dep1**2)
+        rho = (self.rho0 * sigmoid((df1 - slant) / self.params.fix.w_range)
+               * sigmoid((self.T_quiet - xv[6]) / self.params.fix.w_thrust))  # fmt: skip
+        self.rho_fun = ca.Function("rho", [xv, pa1, dep1, df1], [rho])
+
+    def _scales(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Typical magnitudes of the state, control and path-constraint entries (M8)."""
+        d, vp, tr = self.dims, self.vessel, self.params.weights.tau_ref
+        K = d.n_auv
+        s_z = np.r_[100.0, 100.0, 1.0, 1.0, 0.5, 0.2, vp.T_max / 4, vp.delta_max, [tr] * K]
+        s_v = np.r_[self.dT_max, self.dd_max, [10.0] * K, [tr] * int(d.epi)]
+        s_h = np.r_[[10.0] * (K * (2 if d.outer else 1)), [tr] * (K if d.epi else 0)]
+        return s_z, s_v, s_h
+
+    def scaled(self, w: np.ndarray) -> np.ndarray:
+        """Primal vector in the solvers' scaled variables."""
+        return np.asarray(w, float) / self.s_w
+
+    def physical(self, ws: np.ndarray) -> np.ndarray:
+        """Inverse of :meth:`scaled`."""
+        return np.asarray(ws, float) * self.s_w
+
+    def horizon_args(self, wx, p):
+        """Split the MX primal and parameter vectors into the mapped stage arguments.
+
+        Returns ``(args, z_N, term_args)``: ``self.stage.map(N)(*args)`` evaluates all stages,
+        ``self.term(z_N, *term_args)`` the terminal cost.
+        """
+        d = self.dims
+        N, nx, K = d.N, d.nx, d.n_auv
+        B = ca.reshape(wx[: N * d.nb], d.nb, N)
+        Zs, Vs = B[:nx, :], B[nx:, :]
+        zN = wx[N * d.nb :]
+        o = nx + 2
+        SP = ca.reshape(p[o : o + (N + 1) * d.n_stage_par], d.n_stage_par, N + 1)
+        o += (N + 1) * d.n_stage_par
+        gpx = ca.vertcat(p[nx : nx + 2], p[o : o + 4 * K + NW])
+        args = [Zs, Vs, ca.horzcat(Zs[:, 1:], zN), SP[:, :N], SP[:, 1:], ca.repmat(gpx, 1, N)]
+        return args, zN, [SP[:, N], gpx]
+
+    def _dist(self, z, sp):
+        """Smooth horizontal ranges from the ASV to each AUV at one stage (m)."""
+        K = self.dims.n_auv
+        return [ca.sqrt((z[0] - sp[2 * i]) ** 2 + (z[1] - sp[2 * i + 1]) ** 2 + D_EPS**2)
+                for i in range(K)]  # fmt: skip
+
+    def _t_go(self, z, sp, gp):
+        """Time to reach each AUV's target circle from the stage's position (s, smooth)."""
+        K = self.dims.n_auv
+        r_t, inv_U = gp[2 + 2 * K : 2 + 3 * K], gp[2 + 4 * K + WEIGHT_NAMES.index("inv_U_go")]
+        return ca.vertcat(*[SOFTPLUS_M * softplus((d - r_t[i]) / SOFTPLUS_M) * inv_U
+                            for i, d in enumerate(self._dist(z, sp))])  # fmt: skip
+
+    def _path(self, z, slack, m, sp):
+        """Path constraints ``h`` of one stage and their bounds (M5, M6)."""
+        K, d = self.dims.n_auv, self.dims
+        r_lo, r_hi = sp[2 * K : 3 * K], sp[3 * K : 4 * K]
+        dist = self._dist(z, sp)
+        h, lb, ub = [], [], []
+        for i in range(K):
+            h.append(dist[i] + slack[i] - r_lo[i])
+            lb.append(0.0)
+            ub.append(math.inf)
+            if d.outer:
+                h.append(dist[i] - slack[i] - r_hi[i])
+                lb.append(-math.inf)
+                ub.append(0.0)
+        if d.epi:
+            for i in range(K):
+                h.append(m - z[NXV + i])
+                lb.append(0.0)
+                ub.append(math.inf)
+        return ca.vertcat(*h), np.array(lb), np.array(ub)
+
+    # ------------------------------------------------------------------ numbers
+    def pack(self, x0, tau0, current, pa, r_lo, r_hi, depth, d_fix, r_t,
+             target: int = 0) -> np.ndarray:  # fmt: skip
+        """Parameter vector from the per-step data.
+
+        Parameters
+        ----------
+        x0 : array (8,)
+            Vessel state ``[N, E, psi, u, v, r, T, delta]``.
+        tau0 : array (K,)
+            Expected fix ages now (s).
+        current : array (2,)
+            ``[V_N, V_E]`` (m/s).
+        pa : array (N+1, K, 2)
+            Predicted AUV positions at the stage times.
+        r_lo, r_hi : array (N+1, K)
+            Lower (r_inner / r_avoid) and upper (r_outer) range bounds per stage (m).
+        depth, d_fix, r_t : array (K,)
+            Depth used in the slant range, range of the fix-rate sigmoid, target radius (m).
+        target : int
+            The AUV the terminal cost has the ASV visit next.
+        """
+        d = self.dims
+        stage = np.concatenate(
+            [np.asarray(pa, float).reshape(d.N + 1, 2 * d.n_auv), np.asarray(r_lo, float),
+             np.asarray(r_hi, float)], axis=1,
+        )  # fmt: skip
+        return np.concatenate([np.asarray(x0, float), np.asarray(tau0, float),
+                               np.asarray(current, float), stage.ravel(), np.asarray(depth, float),
+                               np.asarray(d_fix, float), np.asarray(r_t, float),
+                               np.eye(d.n_auv)[target], self.weight_vector()])  # fmt: skip
+
+    def weight_vector(self) -> np.ndarray:
+        """The cost weights as they enter the parameter vector (normalised, M4)."""
+        wt, vp = self.params.weights, self.vessel
+        return np.array([wt.age / wt.tau_ref, wt.worst / wt.tau_ref, wt.thrust / vp.T_max,
+                         wt.power / (vp.T_max * vp.u_max), wt.dT / self.dT_max**2,
+                         wt.ddelta / self.dd_max**2, wt.slack, wt.tail, 1 / wt.U_go])  # fmt: skip
+
+    def unpack_par(self, p: np.ndarray) -> dict:
+        """Inverse of :meth:`pack` (arrays)."""
+        d = self.dims
+        K, N, nx = d.n_auv, d.N, d.nx
+        o = nx + 2
+        S = p[o : o + (N + 1) * d.n_stage_par].reshape(N + 1, d.n_stage_par)
+        o += (N + 1) * d.n_stage_par
+        return {
+            "z0": p[:nx], "current": p[nx:nx + 2], "pa": S[:, :2 * K].reshape(N + 1, K, 2),
+            "r_lo": S[:, 2 * K:3 * K], "r_hi": S[:, 3 * K:4 * K], "depth": p[o:o + K],
+            "d_fix": p[o + K:o + 2 * K], "r_t": p[o + 2 * K:o + 3 * K],
+            "target": int(np.argmax(p[o + 3 * K:o + 4 * K])),
+            "weights": p[o + 4 * K:o + 4 * K + NW],
+        }  # fmt: skip
+
+    def with_target(self, p: np.ndarray, target: int) -> np.ndarray:
+        """A copy of the parameter vector ``p`` with another target AUV."""
+        d = self.dims
+        o = d.nx + 2 + (d.N + 1) * d.n_stage_par + 3 * d.n_auv
+        q = np.array(p, float)
+        q[o : o + d.n_auv] = np.eye(d.n_auv)[target]
+        return q
+
+    def bounds(self, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Scaled ``lbx, ubx`` with stage 0 fixed to the initial state in ``p``."""
+        nx = self.dims.nx
+        lbx, ubx = self.lbx.copy(), self.ubx.copy()
+        lbx[:nx] = ubx[:nx] = p[:nx] / self.s_z
+        return lbx, ubx
+
+    def split(self, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``Z (N+1, nx), V (N, nu)`` from a primal vector."""
+        d = self.dims
+        w = np.asarray(w, float).ravel()
+        B = w[: d.N * d.nb].reshape(d.N, d.nb)
+        return np.vstack([B[:, : d.nx], w[d.N * d.nb :]]), B[:, d.nx :]
+
+    def join(self, Z: np.ndarray, V: np.ndarray) -> np.ndarray:
+        """Inverse of :meth:`split`."""
+        return np.concatenate([np.hstack([Z[:-1], V]).ravel(), Z[-1]])
+
+    def rollout(self, p: np.ndarray, rates: np.ndarray | None = None) -> np.ndarray:
+        """A dynamically consistent primal guess: the plan under ``rates`` (N, 2; default 0)
+        from the initial state, slacks and ``m`` at their smallest feasible values."""
+        d = self.dims
+        par = self.unpack_par(p)
+        rates = np.zeros((d.N, 2)) if rates is None else np.asarray(rates, float)
+        Z = np.zeros((d.N + 1, d.nx))
+        Z[0] = par["z0"]
+        for k in range(d.N):
+            Z[k + 1] = np.array(self.F(Z[k], rates[k], self._q(par, k))).ravel()
+        V = np.zeros((d.N, d.nu))
+        V[:, 0:2] = rates
+        return self.fill_slacks(Z, V, p)
+
+    def guided_rollout(self, p: np.ndarray, auv: int, speed: float) -> np.ndarray:
+        """A primal guess that heads for AUV ``auv``'s target circle at ``speed`` and stops
+        there: rates from a simple stage-wise steering and thrust law on the plan model.
+
+        Used to escape the local minimum of standing still (at rest the steering has no
+        authority, so first-order information cannot tell the solver to turn and go).
+        """
+        d, vp, dt = self.dims, self.vessel, self.dt
+        par = self.unpack_par(p)
+        Z = np.zeros((d.N + 1, d.nx))
+        Z[0] = par["z0"]
+        rates = np.zeros((d.N, 2))
+        T_go = self.model.thrust_for_speed(speed)
+        for k in range(d.N):
+            z, c = Z[k], par["pa"][k, auv]
+            rel = z[0:2] - c
+            r = max(float(np.hypot(*rel)), 1e-6)
+            goal = c + rel / r * par["r_t"][auv]  # closest point of the target circle
+            arrived = r <= par["r_t"][auv] + 5.0
+            e = math.atan2(goal[1] - z[1], goal[0] - z[0]) - z[2]
+            e = math.atan2(math.sin(e), math.cos(e))
+            T_des = 0.0 if arrived else T_go
+            delta_des = 0.0 if arrived else float(np.clip(e, -vp.delta_max, vp.delta_max))
+            rates[k, 0] = np.clip((T_des - z[6]) / dt, -self.dT_max, self.dT_max)
+            rates[k, 1] = np.clip((delta_des - z[7]) / dt, -self.dd_max, self.dd_max)
+            Z[k + 1] = np.array(self.F(z, rates[k], self._q(par, k))).ravel()
+        V = np.zeros((d.N, d.nu))
+        V[:, 0:2] = rates
+        return self.fill_slacks(Z, V, p)
+
+    def fill_slacks(self, Z: np.ndarray, V: np.ndarray, p: np.ndarray) -> np.ndarray:
+        """Primal vector with slacks and epigraph variables set to their smallest feasible
+        values (plus a small margin) for the states ``Z`` and rates ``V[:, :2]``."""
+        d, par = self.dims, self.unpack_par(p)
+        K = d.n_auv
+        dist = np.hypot(Z[:-1, None, 0] - par["pa"][:-1, :, 0],
+                        Z[:-1, None, 1] - par["pa"][:-1, :, 1])  # fmt: skip
+        s = np.maximum(par["r_lo"][:-1] - dist, 0.0)
+        if d.outer:
+            s = np.maximum(s, dist - par["r_hi"][:-1])
+        V = V.copy()
+        V[:, 2 : 2 + K] = s + 1e-3
+        if d.epi:
+            V[:, 2 + K] = Z[:-1, NXV : NXV + K].max(axis=1) + 1e-3
+        return self.join(Z, V)
+
+    def _q(self, par: dict, k: int) -> np.ndarray:
+        pa, pa1 = par["pa"][k].ravel(), par["pa"][k + 1].ravel()
+        return np.concatenate([par["current"], pa, (pa1 - pa) / self.dt, par["depth"],
+                               par["d_fix"]])  # fmt: skip
+
+    def shift(self, w: np.ndarray, frac: float) -> np.ndarray:
+        """Primal warm start moved ``frac`` stages ahead (linear interpolation, end held)."""
+        Z, V = self.split(w)
+        return self.join(interp_rows(Z, frac), interp_rows(V, frac))
+
+    def shift_lam_g(self, lam: np.ndarray, frac: float) -> np.ndarray:
+        """Constraint multipliers moved ``frac`` stages ahead (same rule as :meth:`shift`)."""
+        d = self.dims
+        return interp_rows(np.asarray(lam).reshape(d.N, d.nx + d.nh), frac).ravel()
+
+    def shift_lam_x(self, lam: np.ndarray, frac: float) -> np.ndarray:
+        """Bound multipliers moved ``frac`` stages ahead."""
+        return self.shift(lam, frac)
+
+
+def interp_rows(A: np.ndarray, frac: float) -> np.ndarray:
+    """Rows of ``A`` evaluated at ``k + frac`` by linear interpolation, the last row held."""
+    n = A.shape[0]
+    s = np.minimum(np.arange(n) + frac, n - 1)
+    i0 = np.floor(s).astype(int)
+    i1 = np.minimum(i0 + 1, n - 1)
+    a = (s - i0)[:, None]
+    return (1 - a) * A[i0] + a * A[i1]

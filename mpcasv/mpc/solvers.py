@@ -1,0 +1,106 @@
+"""Solving the OCP: a warm-started NLP solver (fatrop or IPOPT) behind one small interface.
+
+:class:`NLPSolver` is built once per problem (compiled functions loaded from the disk cache)
+and called every step with the parameter vector and the previous solution moved one control
+period ahead (:meth:`mpcasv.mpc.problem.OCP.shift`): primal for fatrop (its CasADi interface
+takes no dual start), primal and dual for IPOPT (``warm_start_init_point``). The QP variant
+(:class:`mpcasv.mpc.qp.QPSolver`) has the same interface.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import casadi as ca
+import numpy as np
+
+from mpcasv.mpc.codegen import compiled_library
+from mpcasv.mpc.derivatives import nlp_functions
+from mpcasv.mpc.params import SolverParams
+from mpcasv.mpc.problem import OCP
+
+
+@dataclass(frozen=True)
+class SolveResult:
+    """One solve: primal solution (physical units), multipliers (of the scaled problem),
+    cost, status, iterations and wall time."""
+
+    w: np.ndarray
+    lam_x: np.ndarray | None
+    lam_g: np.ndarray | None
+    f: float
+    ok: bool
+    status: str
+    iters: int
+    ms: float
+
+
+def solver_options(ocp: OCP, sp: SolverParams) -> dict:
+    """CasADi ``nlpsol`` options of the configured solver."""
+    base = {"print_time": False, "error_on_fail": False, "calc_lam_p": False}
+    if sp.solver == "fatrop":
+        return base | {
+            "structure_detection": "auto", "equality": ocp.equality,
+            "fatrop.print_level": 0, "fatrop.max_iter": sp.max_iter, "fatrop.tol": sp.tol,
+            "fatrop.mu_init": sp.mu_init,
+        }  # fmt: skip
+    if sp.solver == "ipopt":
+        return base | {
+            "ipopt.print_level": 0, "ipopt.sb": "yes", "ipopt.max_iter": sp.max_iter,
+            "ipopt.tol": sp.tol, "ipopt.warm_start_init_point": "yes",
+            "ipopt.mu_init": sp.mu_init, "ipopt.warm_start_bound_push": 1e-6,
+            "ipopt.warm_start_mult_bound_push": 1e-6,
+        }  # fmt: skip
+    raise ValueError(f"not an NLP solver: {sp.solver!r}")
+
+
+class NLPSolver:
+    """fatrop or IPOPT on the OCP, warm-started.
+
+    Parameters
+    ----------
+    ocp : OCP
+    sp : SolverParams
+    log : callable
+        Where the one-line compile notice goes.
+    """
+
+    def __init__(self, ocp: OCP, sp: SolverParams, log=print):
+        self.ocp, self.sp = ocp, sp
+        opts = solver_options(ocp, sp)
+        if sp.compiled:
+            lib = compiled_library(nlp_functions(ocp, sp.solver), sp.solver, sp.cflags, log=log)
+            self.solver = ca.nlpsol("mpc", sp.solver, str(lib), opts)
+        else:
+            self.solver = ca.nlpsol("mpc", sp.solver, ocp.nlp, opts | {"expand": True})
+        self.duals = sp.solver == "ipopt"
+
+    def solve(self, p: np.ndarray, w0: np.ndarray, lam_x0: np.ndarray | None = None,
+              lam_g0: np.ndarray | None = None) -> SolveResult:  # fmt: skip
+        """Solve for parameters ``p`` from the primal start ``w0`` (physical units) and the
+        dual start (the solver's scaled multipliers of a previous result)."""
+        lbx, ubx = self.ocp.bounds(p)
+        args = {"x0": np.clip(self.ocp.scaled(w0), lbx, ubx), "p": p, "lbx": lbx, "ubx": ubx,
+                "lbg": self.ocp.lbg, "ubg": self.ocp.ubg}  # fmt: skip
+        if self.duals and lam_x0 is not None and lam_g0 is not None:
+            args |= {"lam_x0": lam_x0, "lam_g0": lam_g0}
+        t0 = time.perf_counter()
+        r = self.solver(**args)
+        ms = (time.perf_counter() - t0) * 1e3
+        st = self.solver.stats()
+        return SolveResult(
+            self.ocp.physical(np.array(r["x"]).ravel()), np.array(r["lam_x"]).ravel(),
+            np.array(r["lam_g"]).ravel(), float(r["f"]), bool(st["success"]),
+            str(st.get("return_status", st.get("unified_return_status", "?"))),
+            int(st.get("iter_count", -1)), ms,
+        )  # fmt: skip
+
+
+def make_solver(ocp: OCP, sp: SolverParams, log=print):
+    """The configured solver: :class:`NLPSolver` or :class:`mpcasv.mpc.qp.QPSolver`."""
+    if sp.solver == "qp":
+        from mpcasv.mpc.qp import QPSolver
+
+        return QPSolver(ocp, sp, log=log)
+    return NLPSolver(ocp, sp, log=log)
