@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import importlib.util
 import textwrap
 
 import pytest
@@ -122,10 +121,6 @@ def test_paper_suite_covers_the_eight_cases_with_and_without_current():
     assert "hybrid" in {j.label for j in exp.jobs}
 
 
-@pytest.mark.skipif(
-    importlib.util.find_spec("mpcasv.mpc.controller") is None,
-    reason="the MPC controllers (mpcasv.mpc.controller) do not exist yet",
-)
 def test_paper_suite_runs_hybrid_against_mpc_once_the_mpc_exists():
     exp = expand("paper")
     assert not exp.skipped, exp.skipped
