@@ -200,8 +200,9 @@ class MPCController:
                                    (N + 1, K)).copy()  # fmt: skip
         depth, d_fix = self._fix_geometry(obs, r_lo[0])
         r_t = r_lo[-1] + self.domain.delta_r
-        return self.ocp.pack(self._x0(obs), self.tau, (0.0, 0.0), pa, r_lo, r_hi, depth, d_fix,
-                             r_t, self.target)  # fmt: skip
+        m = self.params.margin  # the plan keeps this far off the anti-collision radius
+        return self.ocp.pack(self._x0(obs), self.tau, (0.0, 0.0), pa, r_lo + m, r_hi - m, depth,
+                             d_fix, r_t, self.target)  # fmt: skip
 
     def step(self, obs: Observation) -> Command:
         ocp = self.ocp
@@ -295,7 +296,7 @@ class MPCController:
         n = min(sp.check_stages, self.ocp.dims.N) + 1
         dist = np.hypot(Z[1:n, None, 0] - par["pa"][1:n, :, 0],
                         Z[1:n, None, 1] - par["pa"][1:n, :, 1])  # fmt: skip
-        if np.any(dist < par["r_lo"][1:n] - sp.check_margin):
+        if np.any(dist < par["r_lo"][1:n] - self.params.margin - sp.check_margin):
             return "plan enters the anti-collision radius"
         return None
 
@@ -330,9 +331,10 @@ class MPCController:
         sel = ts <= look + 1e-9
         speed = float(np.clip(np.max(Z[sel, 3]), P.speed_min, ocp.vessel.u_max))
         reason = Reason.NOMINAL
-        if np.any(dist[0] < par["r_lo"][0] + self.domain.eps_minus):
+        if np.any(dist[0] < par["r_lo"][0] - self.params.margin + self.domain.eps_minus):
             reason = Reason.AVOIDANCE
-        elif not self.multi and np.any(dist[0] > par["r_hi"][0] - self.domain.eps_plus):
+        elif not self.multi and np.any(dist[0] > par["r_hi"][0] + self.params.margin
+                                       - self.domain.eps_plus):  # fmt: skip
             reason = Reason.TRACKING
         return Command(Mode.TRANSIT, (float(wp[0]), float(wp[1])), speed, served, reason)
 

@@ -164,6 +164,9 @@ class MPCParams:
     standby_time : float
         The command is STANDBY when the planned thrust stays below the propeller-on threshold
         for this long (s).
+    margin : float
+        The plan keeps this far inside the donut (m): ``r_inner + margin <= r`` (and
+        ``r <= r_outer - margin``); the fallback check uses the radii themselves.
     lookahead : float
         The TRANSIT waypoint is the planned position this far ahead (s) ...
     min_carrot : float
@@ -198,6 +201,7 @@ class MPCParams:
     execution: str = "gretha"
     T_ramp: Pos = 4.0
     standby_time: Pos = 4.0
+    margin: NonNeg = 5.0
     lookahead: Pos = 15.0
     min_carrot: Pos = 25.0
     speed_min: Pos = 0.5
