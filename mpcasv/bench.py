@@ -10,6 +10,7 @@ from pathlib import Path
 #: benchmark name -> "module:function"; each function takes the parsed args, returns a dict
 BENCHES = {
     "sim": "mpcasv.sim.bench:bench_sim",
+    "mpc": "mpcasv.mpc.bench:bench_mpc",
     "compare": "mpcasv.experiments.bench:bench_compare",
 }
 

@@ -121,6 +121,9 @@ class MPCController:
         self.t_explore: float | None = None
         self.explored = 0
         self.target = 0  # the AUV the terminal cost visits next
+        self.dwell = 0.0  # time spent in the target AUV's target domain (s)
+        #: if a list: (parameters, elapsed stages) of every step's main solve (benchmarks)
+        self.recorder: list | None = getattr(self, "recorder", None)
         self._diag: dict = {}
 
     # ------------------------------------------------------------------ per step
@@ -209,9 +212,11 @@ class MPCController:
         elapsed = 0.0 if self.t_prev is None else obs.t - self.t_prev
         self.t_prev = obs.t
         self.tau = self._fix_ages(obs, elapsed)
-        self._choose_target(obs)
+        self._choose_target(obs, elapsed)
         hybrid_cmd = self.hybrid.step(obs)  # always stepped: its state stays current
         p = self.parameters(obs)
+        if self.recorder is not None:
+            self.recorder.append((p.copy(), elapsed / ocp.dt))
         if self.w_prev is None:
             w0, lam = ocp.rollout(p), (None, None)
         else:
@@ -224,7 +229,8 @@ class MPCController:
         res = self.solver.solve(p, w0, *lam)
         res = self._explore(obs, p, res)
         reason = self._check(res, p)
-        if np.all(np.isfinite(res.w)):  # an unconverged iterate still warm-starts the next
+        keep = res.ok or getattr(self.solver, "warm_from_failures", False)
+        if keep and np.all(np.isfinite(res.w)):  # an unconverged NLP iterate warm-starts too
             self.w_prev = res.w
             self.lam_prev = (res.lam_x, res.lam_g) if res.ok else None
             if res.ok:
@@ -246,16 +252,23 @@ class MPCController:
                            Reason.FALLBACK)  # fmt: skip
         return self._command(obs, res.w, p)
 
-    def _choose_target(self, obs: Observation) -> None:
+    def _choose_target(self, obs: Observation, elapsed: float) -> None:
         """The AUV the terminal cost sends the ASV to (M9): kept until it is served (its
-        expected fix age below ``tau_served``), then the one with the largest projected fix
-        age ``tau_i + t_go,i`` (Paper 2's eq. 8 on projected ages)."""
+        expected fix age below ``tau_served``, or the ASV has been within its target domain for
+        ``dwell_max``), then the one with the largest projected fix age ``tau_i + t_go,i``
+        (Paper 2's eq. 8 on projected ages)."""
         K = len(obs.auvs)
-        if K == 1 or self.tau[self.target] > self.params.tau_served:
+        if K == 1:
             return
         pos = np.array([a.position for a in obs.auvs])
         r_t = self._radii(obs, 0.0, obs.asv.position) + self.domain.delta_r
         dist = np.hypot(*(pos - obs.asv.position).T)
+        if dist[self.target] <= r_t[self.target] + self.domain.eps_plus:
+            self.dwell += elapsed
+        served = self.tau[self.target] <= self.params.tau_served
+        if not (served or self.dwell >= self.params.dwell_max):
+            return
+        self.dwell = 0.0
         t_go = np.maximum(dist - r_t, 0.0) / self.params.weights.U_go
         proj = self.tau + t_go
         proj[self.target] = -np.inf

@@ -77,6 +77,13 @@ class WeightParams:
         On the squared command rates, per rate limit.
     slack : float
         L1 (exact) penalty on the soft-constraint slacks, per metre.
+    deadband : float
+        On thrusts between the propeller-on threshold and the execution level's transit thrust
+        floor (smooth bump): the execution level cannot hold them, and without this term the
+        plan "creeps" at a few newtons while counting as quiet.
+    running : float
+        Per second with the propeller running, whatever the thrust (noise, wear): favours
+        short brisk transits and long standby over slow economical ones.
     tail : float
         Length of the tail the terminal cost stands for (s).
     terminal : {"projected", "visit"}
@@ -96,6 +103,8 @@ class WeightParams:
     dT: NonNeg = 0.02
     ddelta: NonNeg = 0.02
     slack: Pos = 10.0
+    deadband: NonNeg = 1.0
+    running: NonNeg = 0.0
     tail: NonNeg = 60.0
     terminal: Literal["projected", "visit"] = "projected"
     U_go: Pos = 2.5
@@ -139,7 +148,7 @@ class SolverParams:
     max_iter: Annotated[int, Strict(), Field(ge=0)] = 50
     tol: Pos = 1e-4
     mu_init: Pos = 1e-3
-    qp_iters: PosInt = 2
+    qp_iters: PosInt = 10
     budget_ms: Pos = 200.0
     check_stages: PosInt = 2
     check_margin: NonNeg = 2.0
@@ -182,6 +191,9 @@ class MPCParams:
         Several AUVs: the target AUV (the one the terminal cost sends the ASV to) is kept until
         its expected fix age falls below this (s); then the AUV with the largest projected fix
         age becomes the target.
+    dwell_max : float
+        ... or once the ASV has spent this long within the target's target domain (s): a
+        moving AUV may keep the expected fix age above ``tau_served``.
     explore_every : float
         While the plan stands still, also solve from a guess heading for the AUV with the
         largest projected fix age this often (s; 0: never). Standing still is a local minimum.
@@ -208,5 +220,6 @@ class MPCParams:
     speed: Pos = 2.5
     T_standby: Pos = 10.0
     tau_served: Pos = 10.0
+    dwell_max: Pos = 45.0
     explore_every: NonNeg = 5.0
     fix_age_source: Literal["model", "estimate"] = "model"

@@ -35,7 +35,19 @@ NXV = 8  # vessel part of the plan state
 SOFTPLUS_M = 5.0  # smoothing length of the time-to-go softplus (m)
 SOFT_T = 5.0  # smoothing of (T_tail - t_go)+ (s)
 #: the cost weights are parameters (retuning needs no recompilation), in this order
-WEIGHT_NAMES = ("age", "worst", "thrust", "power", "dT", "ddelta", "slack", "tail", "inv_U_go")
+WEIGHT_NAMES = (
+    "age",
+    "worst",
+    "thrust",
+    "power",
+    "dT",
+    "ddelta",
+    "slack",
+    "tail",
+    "inv_U_go",
+    "deadband",
+    "running",
+)
 NW = len(WEIGHT_NAMES)
 D_EPS = 0.1  # smoothing of the range sqrt (m)
 
@@ -125,6 +137,7 @@ class OCP:
         ep = load_execution(params.execution)
         vp = self.vessel
         self.T_on = ep.propeller_on_threshold * vp.T_max  # execution level's threshold (N)
+        self.T_floor = ep.thrust_floor * vp.T_max  # its least thrust in transit (N)
         self.T_quiet = params.fix.T_quiet if params.fix.T_quiet is not None else self.T_on
         self.dT_max = vp.T_max / params.T_ramp
         self.dd_max = vp.delta_rate_max
@@ -189,6 +202,12 @@ class OCP:
         L += W["thrust"] * T + W["power"] * T * u
         L += W["dT"] * v[0] ** 2 + W["ddelta"] * v[1] ** 2
         L += W["slack"] * ca.sum1(v[2 : 2 + K])
+        # (M4b) thrusts the execution level cannot hold (between the propeller-on threshold and
+        # its transit thrust floor): without this the plan "creeps" quietly at a few newtons
+        w_T = self.params.fix.w_thrust
+        running = sigmoid((T - self.T_on) / w_T)  # ~1 while the propeller runs
+        L += W["deadband"] * running * sigmoid((self.T_floor - T) / w_T)
+        L += W["running"] * running  # (M4c) propeller time (noise, wear), whatever the thrust
         #: stage k: (z_k, v_k, z_{k+1}, stage params k and k+1, global params) -> (dt L_k, g_k)
         self.stage_phys = ca.Function(
             "stage", [z, v, z1, sp, sp1, gp], [dt * L, ca.vertcat(z1 - self.F(z, v[0:2], qk), h)],
@@ -352,7 +371,8 @@ class OCP:
         wt, vp = self.params.weights, self.vessel
         return np.array([wt.age / wt.tau_ref, wt.worst / wt.tau_ref, wt.thrust / vp.T_max,
                          wt.power / (vp.T_max * vp.u_max), wt.dT / self.dT_max**2,
-                         wt.ddelta / self.dd_max**2, wt.slack, wt.tail, 1 / wt.U_go])  # fmt: skip
+                         wt.ddelta / self.dd_max**2, wt.slack, wt.tail, 1 / wt.U_go,
+                         wt.deadband, wt.running])  # fmt: skip
 
     def unpack_par(self, p: np.ndarray) -> dict:
         """Inverse of :meth:`pack` (arrays)."""

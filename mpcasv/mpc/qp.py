@@ -3,17 +3,19 @@
 Sequential quadratic programming without line search (a real-time-iteration flavour): at the
 warm start ``w`` (the previous plan moved one control period ahead) one compiled call returns
 the cost, its gradient, the constraints, their Jacobian and the Hessian of the Lagrangian;
-each diagonal block of the Hessian is made positive definite by clipping its eigenvalues
-(``H_k = V max(Lambda, eps) V^T``), and the QP
+each diagonal block of the Hessian is made positive definite by reflecting its eigenvalues
+(``H_k = V max(|Lambda|, eps) V^T``: clipping them at eps instead leaves no curvature along the
+negative directions, and the steps then stall at the trust region), and the QP
 
     min_dw  1/2 dw' H dw + grad_f' dw
     s.t.    g + J dw = 0            (gap closing)
             lbg <= g + J dw <= ubg  (path constraints)
             lbx <= w + dw <= ubx
 
-is solved with OSQP through ``qpsolvers``. The step is taken in full; ``qp_iters`` such steps
-are made per control step (fewer if the step is already small). The QP's multipliers become
-the next Lagrangian weights.
+is solved with OSQP through ``qpsolvers``, the step bounded by a box trust region (``TRUST`` in
+scaled units: without it full steps can run away). The step is taken in full; ``qp_iters``
+such steps are made per control step (fewer if the step is already small). The QP's
+multipliers become the next Lagrangian weights.
 """
 
 from __future__ import annotations
@@ -31,15 +33,20 @@ from mpcasv.mpc.params import SolverParams
 from mpcasv.mpc.problem import OCP
 from mpcasv.mpc.solvers import SolveResult
 
-EIG_MIN = 1e-6  # smallest eigenvalue kept in a Hessian block
+EIG_MIN = 1e-4  # smallest eigenvalue of a convexified Hessian block
 STEP_TOL = 1e-3  # stop iterating when max |dw| is below this
-FEAS_TOL = 1e-3  # gap violation accepted as solved (scaled units)
+FEAS_TOL = 1e-3  # gap violation accepted as solved (scaled units: 0.1 m, 1e-3 m/s, ...)
+TRUST = 1.0  # step bound per SQP iteration, scaled units (100 m, 1 rad, 1 m/s, T_max / 4, ...)
 QP_EPS = 1e-5  # OSQP absolute and relative tolerances
 
 
 class QPSolver:
     """Linearise-and-solve with OSQP (see the module docstring); same interface as
     :class:`mpcasv.mpc.solvers.NLPSolver`."""
+
+    #: the iterate carries over to the next step even when its gaps are not yet closed (as in
+    #: a real-time iteration scheme); a non-finite one is replaced by a rollout
+    warm_from_failures = True
 
     def __init__(self, ocp: OCP, sp: SolverParams, log=print):
         self.ocp, self.sp = ocp, sp
@@ -61,7 +68,7 @@ class QPSolver:
         for b in self.blocks:
             B = Hd[b, b]
             lam, V = np.linalg.eigh(0.5 * (B + B.T))
-            out.append((V * np.maximum(lam, EIG_MIN)) @ V.T)
+            out.append((V * np.maximum(np.abs(lam), EIG_MIN)) @ V.T)  # eigenvalues reflected
         return sps.block_diag(out, format="csc")
 
     def solve(self, p: np.ndarray, w0: np.ndarray, lam_x0: np.ndarray | None = None,
@@ -81,6 +88,9 @@ class QPSolver:
                 break
             _, gf, g, J, H = self.eval(w, p, lam_g)
             g = np.array(g).ravel()
+            if not all(np.all(np.isfinite(np.array(a))) for a in (gf, g, J, H)):
+                status, ok = "non-finite linearisation", False
+                break
             J = sps.csc_matrix(J.sparse()) if hasattr(J, "sparse") else sps.csc_matrix(J)
             P = self._convexify(sps.csc_matrix(H.sparse()))
             Ji = J[~eq]
@@ -89,14 +99,15 @@ class QPSolver:
             G = sps.vstack([-Ji[fin_lo], Ji[fin_hi]], format="csc")
             h = np.concatenate([-lo[fin_lo], hi[fin_hi]])
             sol = qpsolvers.solve_problem(
-                qpsolvers.Problem(P, np.array(gf).ravel(), G, h, J[eq], -g[eq], lbx - w,
-                                  ubx - w),
+                qpsolvers.Problem(P, np.array(gf).ravel(), G, h, J[eq], -g[eq],
+                                  np.maximum(lbx - w, -TRUST), np.minimum(ubx - w, TRUST)),
                 solver="osqp", eps_abs=QP_EPS, eps_rel=QP_EPS, max_iter=10000, polish=True,
                 verbose=False,
             )  # fmt: skip
-            if not sol.found or sol.x is None:
+            if sol.x is None or not np.all(np.isfinite(sol.x)):
                 status, ok = "qp failed", False
                 break
+            inaccurate = not sol.found  # e.g. OSQP "solved inaccurate": the step is still used
             dw = sol.x
             w = w + dw
             lam_g = np.zeros(ocp.dims.ng)
@@ -109,6 +120,7 @@ class QPSolver:
             if np.max(np.abs(dw)) < STEP_TOL:
                 status = "converged"
                 break
+            status = "inaccurate qp" if inaccurate else "max_iter"
         f, g = self.fg(w, p)
         g = np.array(g).ravel()
         viol = max(np.max(np.abs(g[eq])), np.max(np.maximum(lbg - g, 0)[~eq]),

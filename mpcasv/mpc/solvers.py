@@ -58,6 +58,9 @@ def solver_options(ocp: OCP, sp: SolverParams) -> dict:
 class NLPSolver:
     """fatrop or IPOPT on the OCP, warm-started.
 
+    An unconverged iterate (iteration limit) still warm-starts the next solve
+    (``warm_from_failures``): its gaps are small and it is closer than a rollout.
+
     Parameters
     ----------
     ocp : OCP
@@ -65,6 +68,8 @@ class NLPSolver:
     log : callable
         Where the one-line compile notice goes.
     """
+
+    warm_from_failures = True
 
     def __init__(self, ocp: OCP, sp: SolverParams, log=print):
         self.ocp, self.sp = ocp, sp

@@ -1,0 +1,135 @@
+"""``mpcasv bench mpc``: the same receding-horizon problems solved three ways.
+
+The sequences are recorded from closed-loop MPC runs (Case 3 with one AUV, Case 6 with three;
+the parameters of every step's main solve). Each solver then replays a sequence on its own,
+warm-started from its own previous solution moved one control period ahead (as in the
+controller): the straightforward Opti + IPOPT formulation (:mod:`mpcasv.mpc.reference`, the
+cost reference), the default (the preset's solver: fatrop on compiled, cached functions), and
+the QP variant (linearised, OSQP). Figures: median and p99 wall time per solve, iterations,
+failures, and the cost relative to the reference.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import platform
+import time
+from pathlib import Path
+
+import numpy as np
+from tqdm import tqdm
+
+from mpcasv.mpc.controller import MPCController, build_ocp
+from mpcasv.mpc.qp import QPSolver
+from mpcasv.mpc.reference import OptiReference
+from mpcasv.sim.controllers import load_preset
+from mpcasv.sim.scenario import load_scenario, scenario_with
+from mpcasv.sim.simulator import simulate
+
+SCENARIOS = Path(__file__).resolve().parents[2] / "experiments" / "scenarios"
+CASES = (("case3", "mpc-single", False), ("case6", "mpc-multi", True))
+STEPS = 300  # control steps (s) per sequence
+
+
+def record(case: str, preset: str, multi: bool, steps: int = STEPS):
+    """(params, controller, [(p, elapsed stages)]) of a closed-loop MPC run of ``case``."""
+    sc = load_scenario(SCENARIOS / f"{case}.toml")
+    sc = scenario_with(sc, duration=float(steps))
+    params = load_preset(preset, preset)
+    ctrl = MPCController(params, len(sc.auv), multi)
+    ctrl.recorder = []
+    simulate(sc, ctrl, seed=0)
+    return params, ctrl, list(ctrl.recorder)
+
+
+def replay(solver, ocp, seq, desc: str) -> dict[str, np.ndarray]:
+    """Solve the sequence with ``solver``, each step warm-started from its previous solution."""
+    out = {k: [] for k in ("ms", "iters", "f", "ok")}
+    w_prev, lam = None, (None, None)
+    for p, frac in tqdm(seq, desc=desc, leave=False):
+        if w_prev is None:
+            w0, lam0 = ocp.rollout(p), (None, None)
+        else:
+            Z, V = ocp.split(ocp.shift(w_prev, frac))
+            w0 = ocp.fill_slacks(Z, V, p)
+            lam0 = (None if lam[0] is None else ocp.shift_lam_x(lam[0], frac),
+                    None if lam[1] is None else ocp.shift_lam_g(lam[1], frac))  # fmt: skip
+        r = solver.solve(p, w0, *lam0)
+        for k, v in (("ms", r.ms), ("iters", r.iters), ("f", r.f), ("ok", r.ok)):
+            out[k].append(v)
+        finite = np.all(np.isfinite(r.w))
+        keep = r.ok or getattr(solver, "warm_from_failures", False)
+        w_prev = r.w if (finite and keep) else None
+        lam = (r.lam_x, r.lam_g) if (finite and r.ok) else (None, None)
+    return {k: np.array(v) for k, v in out.items()}
+
+
+def summary(res: dict, ref: dict | None) -> dict:
+    """Median / p99 ms, iterations, failures and cost agreement with ``ref``."""
+    ms = res["ms"][1:]  # the first solve starts cold
+    row = {
+        "median_ms": round(float(np.median(ms)), 3),
+        "p99_ms": round(float(np.percentile(ms, 99)), 3),
+        "max_ms": round(float(np.max(ms)), 2),
+        "iters_median": float(np.median(res["iters"])),
+        "iters_max": int(np.max(res["iters"])),
+        "failures": int(np.sum(~res["ok"].astype(bool))),
+        "solves": int(len(res["ms"])),
+    }
+    if ref is not None:
+        both = res["ok"].astype(bool) & ref["ok"].astype(bool)
+        if not np.any(both):
+            return row | {"cost_rel_median": float("nan"), "cost_rel_p95_abs": float("nan"),
+                          "cost_rel_max_abs": float("nan"), "within_1pct": 0.0}  # fmt: skip
+        rel = (res["f"][both] - ref["f"][both]) / np.abs(ref["f"][both])
+        row |= {
+            "cost_rel_median": float(np.median(rel)),
+            "cost_rel_p95_abs": float(np.percentile(np.abs(rel), 95)),
+            "cost_rel_max_abs": float(np.max(np.abs(rel))),
+            "within_1pct": round(float(np.mean(np.abs(rel) <= 0.01)), 4),
+        }
+    return row
+
+
+def bench_mpc(args: argparse.Namespace) -> dict:
+    """Record the Case 3 / Case 6 sequences, replay them three ways, print and return figures."""
+    figures: dict = {"machine": platform.processor() or platform.machine(), "steps": STEPS,
+                     "cases": {}}  # fmt: skip
+    for case, preset, multi in CASES:
+        t0 = time.perf_counter()
+        params, ctrl, seq = record(case, preset, multi)
+        ocp, default = build_ocp(params, ctrl.ocp.dims.n_auv, multi)
+        qp = QPSolver(ocp, dataclasses.replace(params.solver, solver="qp"))
+        ref = OptiReference(ocp)
+        n = ocp.dims.n_auv
+        res_ref = replay(ref, ocp, seq, f"{case} opti+ipopt")
+        res_def = replay(default, ocp, seq, f"{case} {params.solver.solver}")
+        res_qp = replay(qp, ocp, seq, f"{case} qp/osqp")
+        rows = {
+            "opti_ipopt": summary(res_ref, None),
+            f"default_{params.solver.solver}": summary(res_def, res_ref),
+            "qp_osqp": summary(res_qp, res_ref),
+        }
+        speedup = rows["opti_ipopt"]["median_ms"] / rows[f"default_{params.solver.solver}"][
+            "median_ms"]  # fmt: skip
+        figures["cases"][f"{case}_{n}auv"] = {
+            "solvers": rows, "speedup_median": round(speedup, 1),
+            "wall_s": round(time.perf_counter() - t0, 1),
+        }  # fmt: skip
+        _print(case, n, rows, speedup)
+    return figures
+
+
+def _print(case: str, n: int, rows: dict, speedup: float) -> None:
+    print(f"\n{case}: {n} AUV(s), {STEPS} receding-horizon problems")
+    head = f"{'solver':<16}{'median ms':>10}{'p99 ms':>9}{'iters':>7}{'fail':>6}"
+    print(head + f"{'cost vs ref (median / p95 |rel|)':>36}{'<=1 %':>8}")
+    for name, r in rows.items():
+        line = f"{name:<16}{r['median_ms']:>10.2f}{r['p99_ms']:>9.2f}{r['iters_median']:>7.0f}"
+        line += f"{r['failures']:>6d}"
+        if "cost_rel_median" in r:
+            line += f"{r['cost_rel_median']:>+20.2e} / {r['cost_rel_p95_abs']:<13.2e}"
+            line += f"{100 * r['within_1pct']:>7.1f}%"
+        print(line)
+    print(f"default vs Opti + IPOPT: {speedup:.1f}x faster (median)")

@@ -1,0 +1,162 @@
+"""The MPC's optimal control problem: shared dynamics, fix-age model, derivatives, layout.
+
+Nothing here compiles C code: the derivative functions are evaluated by CasADi's virtual
+machine and compared with CasADi's own differentiation of the whole NLP.
+"""
+
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+import pytest
+
+from mpcasv.mpc.codegen import library_key
+from mpcasv.mpc.derivatives import nlp_functions
+from mpcasv.mpc.problem import NXV, OCP
+from mpcasv.sim.controllers import load_preset
+
+
+@pytest.fixture(scope="module")
+def single():
+    return OCP(load_preset("mpc-single", "mpc-single"), 1, outer=True)
+
+
+@pytest.fixture(scope="module")
+def multi():
+    return OCP(load_preset("mpc-multi", "mpc-multi"), 3, outer=False)
+
+
+def params_for(ocp: OCP, seed: int = 0, speed: float = 1.5, T: float | None = None):
+    """A parameter vector with the ASV under way and AUVs at random places."""
+    rng = np.random.default_rng(seed)
+    d = ocp.dims
+    K, N = d.n_auv, d.N
+    T = ocp.model.thrust_for_speed(speed) if T is None else T
+    x0 = np.array([0.0, 0.0, 0.3, speed, 0.05, 0.02, T, 0.05])
+    pa0 = rng.uniform(-250, 250, (K, 2))
+    va = rng.uniform(-1.5, 1.5, (K, 2))
+    pa = pa0[None] + ocp.dt * np.arange(N + 1)[:, None, None] * va[None]
+    return ocp.pack(x0, rng.uniform(0, 200, K), (0.1, -0.05), pa, np.full((N + 1, K), 55.0),
+                    np.full((N + 1, K), 195.0), np.zeros(K), np.full(K, 80.0),
+                    np.full(K, 70.0), target=K - 1)  # fmt: skip
+
+
+def test_plan_dynamics_are_the_shared_model_with_actuators_at_their_set_points(single):
+    """No second copy of the equations: with zero rates the plan's vessel part is the shared
+    model's RK4 with the input held at the current thrust and steering."""
+    p = params_for(single)
+    z0 = single.unpack_par(p)["z0"]
+    q = single._q(single.unpack_par(p), 0)
+    hz = single.params.horizon
+    shared = single.model.rk4(hz.dt, hz.n_sub)(z0[:NXV], z0[6:8], q[0:2])
+    plan = single.F(z0, [0.0, 0.0], q)
+    np.testing.assert_allclose(np.array(plan).ravel()[:NXV], np.array(shared).ravel(),
+                               rtol=1e-12, atol=1e-12)  # fmt: skip
+
+
+def test_thrust_and_steering_follow_their_rates(single):
+    p = params_for(single)
+    par = single.unpack_par(p)
+    z1 = np.array(single.F(par["z0"], [10.0, -0.02], single._q(par, 0))).ravel()
+    assert z1[6] == pytest.approx(par["z0"][6] + 10.0 * single.dt)
+    assert z1[7] == pytest.approx(par["z0"][7] - 0.02 * single.dt)
+
+
+def test_expected_fix_age_relaxes_when_quiet_in_range_and_grows_otherwise(single):
+    """Eq. M2-M3: propeller off next to the AUV, tau tends to 1 / rho0; at full thrust it grows
+    by the elapsed time."""
+    d = single.dims
+    N = d.N
+    x0 = np.zeros(NXV)
+    pa = np.tile([[[60.0, 0.0]]], (N + 1, 1, 1))
+    p = single.pack(x0, [300.0], (0, 0), pa, np.full((N + 1, 1), 50.0),
+                    np.full((N + 1, 1), 200.0), [0.0], [500.0], [70.0])  # fmt: skip
+    Z, _ = single.split(single.rollout(p))
+    assert Z[-1, NXV] == pytest.approx(1 / single.rho0, rel=0.05)
+    assert np.all(np.diff(Z[:, NXV]) < 0)
+    x0[6] = single.vessel.T_max
+    p = single.pack(x0, [300.0], (0, 0), pa, np.full((N + 1, 1), 50.0),
+                    np.full((N + 1, 1), 200.0), [0.0], [500.0], [70.0])  # fmt: skip
+    Z, _ = single.split(single.rollout(p))
+    np.testing.assert_allclose(np.diff(Z[:, NXV]), single.dt, rtol=0.02)
+
+
+@pytest.mark.parametrize("which", ["single", "multi"])
+@pytest.mark.parametrize("solver", ["fatrop", "ipopt", "qp"])
+def test_stagewise_derivatives_equal_casadis_differentiation_of_the_nlp(request, which, solver):
+    ocp: OCP = request.getfixturevalue(which)
+    rng = np.random.default_rng(1)
+    p = params_for(ocp, seed=2)
+    w = ocp.scaled(ocp.rollout(p, rates=rng.normal(0, 0.2, (ocp.dims.N, 2))))
+    w += rng.normal(0, 0.01, w.size)
+    lam = rng.normal(0, 1, ocp.dims.ng)
+    x, pp = ocp.nlp["x"], ocp.nlp["p"]
+    lag = 0.7 * ocp.nlp["f"] + ca.dot(ca.DM(lam), ocp.nlp["g"])
+    H_ref, g_ref = ca.hessian(lag, x)
+    ref = ca.Function("ref", [x, pp], [ocp.nlp["f"], ca.gradient(ocp.nlp["f"], x), ocp.nlp["g"],
+                                       ca.jacobian(ocp.nlp["g"], x), g_ref, H_ref])  # fmt: skip
+    f0, gf0, g0, J0, gl0, H0 = (np.array(a.full()) for a in ref(w, p))
+    funs = nlp_functions(ocp, solver)
+    if solver == "qp":
+        f, gf, g, J, H = funs["qp_eval"](w, p, lam)
+        H_lam1 = ca.Function(
+            "h", [x, pp], [ca.hessian(ocp.nlp["f"] + ca.dot(ca.DM(lam), ocp.nlp["g"]), x)[0]]
+        )
+        np.testing.assert_allclose(np.array(H.full()), np.array(H_lam1(w, p).full()),
+                                   rtol=1e-9, atol=1e-9)  # fmt: skip
+        np.testing.assert_allclose(float(f), f0.item(), rtol=1e-12)
+        np.testing.assert_allclose(np.array(gf.full()), gf0, rtol=1e-9, atol=1e-9)
+        np.testing.assert_allclose(np.array(g.full()), g0, rtol=1e-12, atol=1e-12)
+        np.testing.assert_allclose(np.array(J.full()), J0, rtol=1e-9, atol=1e-9)
+        return
+    g, J = funs["nlp_jac_g"](w, p)
+    np.testing.assert_allclose(np.array(g.full()), g0, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(np.array(J.full()), J0, rtol=1e-9, atol=1e-9)
+    out = funs["nlp_hess_l"](w, p, 0.7, lam)
+    if solver == "fatrop":
+        gl, H = out
+        np.testing.assert_allclose(np.array(gl.full()), gl0, rtol=1e-9, atol=1e-9)
+        np.testing.assert_allclose(np.array(H.full()), H0, rtol=1e-9, atol=1e-9)
+        gf = funs["nlp_grad_f"](w, p)
+    else:
+        np.testing.assert_allclose(np.array(out.full()), np.triu(H0), rtol=1e-9, atol=1e-9)
+        _, gf = funs["nlp_grad_f"](w, p)
+    np.testing.assert_allclose(np.array(gf.full()), gf0, rtol=1e-9, atol=1e-9)
+
+
+def test_layout_roundtrips(multi):
+    p = params_for(multi, seed=3)
+    w = multi.rollout(p)
+    np.testing.assert_allclose(multi.physical(multi.scaled(w)), w)
+    np.testing.assert_allclose(multi.join(*multi.split(w)), w)
+    np.testing.assert_allclose(multi.shift(w, 0.0), w)
+    Z, V = multi.split(w)
+    Z1, V1 = multi.split(multi.shift(w, 1.0))
+    np.testing.assert_allclose(Z1[:-1], Z[1:])
+    np.testing.assert_allclose(V1[:-1], V[1:])
+    par = multi.unpack_par(multi.with_target(p, 0))
+    assert par["target"] == 0
+    assert multi.unpack_par(p)["target"] == multi.dims.n_auv - 1
+
+
+def test_rollout_slacks_make_every_path_constraint_hold(single):
+    p = params_for(single, seed=4)
+    w = single.rollout(p)
+    g = np.array(ca.Function("g", [single.nlp["x"], single.nlp["p"]], [single.nlp["g"]])(
+        single.scaled(w), p)).ravel()  # fmt: skip
+    ineq = ~np.array(single.equality)
+    assert np.all(g[ineq] >= single.lbg[ineq] - 1e-9)
+    assert np.all(g[ineq] <= single.ubg[ineq] + 1e-9)
+    assert np.max(np.abs(g[~ineq])) < 1e-9  # a rollout closes every gap
+
+
+def test_cache_key_ignores_weights_but_not_the_horizon():
+    P = load_preset("mpc-single", "mpc-single")
+    a = nlp_functions(OCP(P, 1, True), "fatrop")
+    b = nlp_functions(OCP(load_preset("mpc-single", "mpc-single", {"weights.thrust": 0.9}),
+                          1, True), "fatrop")  # fmt: skip
+    c = nlp_functions(OCP(load_preset("mpc-single", "mpc-single", {"horizon.N": 14}), 1, True),
+                      "fatrop")  # fmt: skip
+    assert library_key(a, "fatrop", "-O1") == library_key(b, "fatrop", "-O1")
+    assert library_key(a, "fatrop", "-O1") != library_key(c, "fatrop", "-O1")
+    assert library_key(a, "fatrop", "-O1") != library_key(a, "fatrop", "-O2")
