@@ -21,6 +21,7 @@ multipliers become the next Lagrangian weights.
 from __future__ import annotations
 
 import time
+import warnings
 
 import casadi as ca
 import numpy as np
@@ -98,12 +99,14 @@ class QPSolver:
             fin_lo, fin_hi = np.isfinite(lo), np.isfinite(hi)
             G = sps.vstack([-Ji[fin_lo], Ji[fin_hi]], format="csc")
             h = np.concatenate([-lo[fin_lo], hi[fin_hi]])
-            sol = qpsolvers.solve_problem(
-                qpsolvers.Problem(P, np.array(gf).ravel(), G, h, J[eq], -g[eq],
-                                  np.maximum(lbx - w, -TRUST), np.minimum(ubx - w, TRUST)),
-                solver="osqp", eps_abs=QP_EPS, eps_rel=QP_EPS, max_iter=10000, polish=True,
-                verbose=False,
-            )  # fmt: skip
+            with warnings.catch_warnings():  # OSQP's status is in the result
+                warnings.simplefilter("ignore", UserWarning)
+                sol = qpsolvers.solve_problem(
+                    qpsolvers.Problem(P, np.array(gf).ravel(), G, h, J[eq], -g[eq],
+                                      np.maximum(lbx - w, -TRUST), np.minimum(ubx - w, TRUST)),
+                    solver="osqp", eps_abs=QP_EPS, eps_rel=QP_EPS, max_iter=10000, polish=True,
+                    verbose=False,
+                )  # fmt: skip
             if sol.x is None or not np.all(np.isfinite(sol.x)):
                 status, ok = "qp failed", False
                 break
