@@ -59,7 +59,8 @@ def test_forced_solver_failure_engages_the_fallback_and_stays_safe(scenarios_dir
 
 def test_the_safety_check_names_each_fallback_reason():
     """A failed solve, a solve over the time budget and a plan whose first stages enter
-    r_inner are each refused with their reason; a sound plan is accepted."""
+    r_inner (or, already inside, go deeper) are each refused with their reason; a sound plan
+    is accepted."""
     ctrl = make_controller("mpc-single", 1, "mpc-single")
     ctrl.reset(1)
     obs = Observation(0.0, ASVState(0.0, 0.0, 0.0, 1.0), True,
@@ -75,6 +76,15 @@ def test_the_safety_check_names_each_fallback_reason():
     Z[1:3, 0:2] = [100.0, 0.0]  # 20 m from the AUV: inside r_inner = 50 m
     bad = dataclasses.replace(good, w=ctrl.ocp.join(Z, V))
     assert ctrl._check(bad, p) == "plan enters the anti-collision radius"
+    # already inside (30 m from the AUV): a plan that gets out is used, one going deeper is not
+    obs_in = dataclasses.replace(obs, auvs=(AUVEstimate(30.0, 0.0, 0.0, 0.0, 0.0),))
+    p_in = ctrl.parameters(obs_in)
+    Z, V = ctrl.ocp.split(ctrl.ocp.rollout(p_in))
+    Z[1:3, 0:2] = [[-5.0, 0.0], [-12.0, 0.0]]  # 35 m, 42 m: still inside, but opening
+    assert ctrl._check(dataclasses.replace(good, w=ctrl.ocp.join(Z, V)), p_in) is None
+    Z[1:3, 0:2] = [[5.0, 0.0], [12.0, 0.0]]  # 25 m, 18 m: deeper
+    deeper = dataclasses.replace(good, w=ctrl.ocp.join(Z, V))
+    assert ctrl._check(deeper, p_in) == "plan enters the anti-collision radius"
 
 
 def test_qp_variant_and_default_agree_on_a_simple_case():

@@ -160,3 +160,27 @@ def test_cache_key_ignores_weights_but_not_the_horizon():
     assert library_key(a, "fatrop", "-O1") == library_key(b, "fatrop", "-O1")
     assert library_key(a, "fatrop", "-O1") != library_key(c, "fatrop", "-O1")
     assert library_key(a, "fatrop", "-O1") != library_key(a, "fatrop", "-O2")
+
+
+_COMPILE_ONE = """
+import sys, casadi as ca
+from mpcasv.mpc.codegen import compiled_library
+x = ca.SX.sym("x")
+compiled_library({"sq": ca.Function("sq", [x], [x * x])}, "locktest", "-O0",
+                 log=lambda m: print("COMPILED", m))
+"""
+
+
+def test_parallel_processes_compile_a_library_once(tmp_path):
+    """Two workers needing the same library at once: one compiles, the other waits and loads."""
+    import os
+    import subprocess
+    import sys
+
+    env = os.environ | {"MPCASV_CACHE": str(tmp_path)}
+    procs = [subprocess.Popen([sys.executable, "-c", _COMPILE_ONE], env=env,
+                              stdout=subprocess.PIPE, text=True) for _ in range(3)]  # fmt: skip
+    outs = [p.communicate(timeout=120)[0] for p in procs]
+    assert all(p.returncode == 0 for p in procs)
+    assert sum(o.count("COMPILED") for o in outs) == 1
+    assert len(list((tmp_path / "mpc").glob("mpc_locktest_*.so"))) == 1

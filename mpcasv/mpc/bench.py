@@ -6,9 +6,15 @@ warm-started from its own previous solution moved one control period ahead (as i
 controller): the straightforward Opti + IPOPT formulation (:mod:`mpcasv.mpc.reference`, the
 cost reference), the default (the preset's solver: fatrop on compiled, cached functions), and
 the QP variant (linearised, OSQP). Figures: median and p99 wall time per solve, iterations,
-failures, and the cost relative to the reference; and, since the problem is not convex and the
-solvers' warm-started sequences may follow different local minima, the default's cost
-relative to the reference started from the default's own solution ("polished").
+failures, and the cost relative to the reference. The problem is not convex and the solvers'
+warm-started sequences may follow different local minima, so two cost figures are given:
+
+- *sequences*: each solver on its own receding-horizon sequence, cost relative to the
+  reference's on the same problem (``<= +1 %``: the default is no worse than the reference);
+- *local*: the default's cost relative to IPOPT polishing the default's own solution
+  (tolerance 1e-8, warm-start settings that keep the start: IPOPT's default ``bound_push``
+  of 1e-2 moves a start off its active bounds, and from there it often finds another local
+  minimum, higher or lower, which says nothing about the default's accuracy).
 """
 
 from __future__ import annotations
@@ -32,6 +38,12 @@ from mpcasv.sim.simulator import simulate
 SCENARIOS = Path(__file__).resolve().parents[2] / "experiments" / "scenarios"
 CASES = (("case3", "mpc-single", False), ("case6", "mpc-multi", True))
 STEPS = 300  # control steps (s) per sequence
+#: IPOPT polishing a given solution: tight tolerance, the start kept where it is
+POLISH = {
+    "ipopt.tol": 1e-8, "ipopt.mu_init": 1e-6, "ipopt.bound_push": 1e-9, "ipopt.bound_frac": 1e-9,
+    "ipopt.warm_start_init_point": "yes", "ipopt.warm_start_bound_push": 1e-9,
+    "ipopt.warm_start_mult_bound_push": 1e-9,
+}  # fmt: skip
 
 
 def record(case: str, preset: str, multi: bool, steps: int = STEPS):
@@ -83,22 +95,23 @@ def summary(res: dict, ref: dict | None) -> dict:
         both = res["ok"].astype(bool) & ref["ok"].astype(bool)
         if not np.any(both):
             return row | {"cost_rel_median": float("nan"), "cost_rel_p95_abs": float("nan"),
-                          "cost_rel_max_abs": float("nan"), "within_1pct": 0.0}  # fmt: skip
+                          "cost_rel_max_abs": float("nan"), "within_1pct": 0.0,
+                          "not_worse_1pct": 0.0}  # fmt: skip
         rel = (res["f"][both] - ref["f"][both]) / np.abs(ref["f"][both])
         row |= {
             "cost_rel_median": float(np.median(rel)),
             "cost_rel_p95_abs": float(np.percentile(np.abs(rel), 95)),
             "cost_rel_max_abs": float(np.max(np.abs(rel))),
             "within_1pct": round(float(np.mean(np.abs(rel) <= 0.01)), 4),
+            "not_worse_1pct": round(float(np.mean(rel <= 0.01)), 4),
         }
     return row
 
 
 def polish(ref, seq, res: dict) -> dict:
-    """Cost of ``res`` relative to the reference solver started from ``res``'s own solution
-    of the same problem: 0 when ``res`` is a (local) optimum the reference agrees with, > 0
-    when the reference finds a lower cost nearby (the receding-horizon sequences of the two
-    solvers may follow different local minima of this non-convex problem)."""
+    """Cost of ``res`` relative to ``ref`` (IPOPT with :data:`POLISH` settings) started from
+    ``res``'s own solution of the same problem: about 0 when ``res`` is a local optimum the
+    reference agrees with, > 0 when the reference finds a lower cost nearby."""
     rel = []
     for (p, _), w, f, ok in tqdm(list(zip(seq, res["w"], res["f"], res["ok"], strict=True)),
                                  desc="polish", leave=False):  # fmt: skip
@@ -109,8 +122,9 @@ def polish(ref, seq, res: dict) -> dict:
             rel.append((f - r.f) / abs(r.f))
     rel = np.array(rel)
     return {"polished_rel_median": float(np.median(rel)),
-            "polished_rel_p95": float(np.percentile(rel, 95)),
-            "polished_within_1pct": round(float(np.mean(rel <= 0.01)), 4)}  # fmt: skip
+            "polished_rel_p95_abs": float(np.percentile(np.abs(rel), 95)),
+            "polished_rel_max_abs": float(np.max(np.abs(rel))),
+            "polished_within_1pct": round(float(np.mean(np.abs(rel) <= 0.01)), 4)}  # fmt: skip
 
 
 def bench_mpc(args: argparse.Namespace) -> dict:
@@ -132,7 +146,7 @@ def bench_mpc(args: argparse.Namespace) -> dict:
             f"default_{params.solver.solver}": summary(res_def, res_ref),
             "qp_osqp": summary(res_qp, res_ref),
         }
-        rows[f"default_{params.solver.solver}"] |= polish(ref, seq, res_def)
+        rows[f"default_{params.solver.solver}"] |= polish(OptiReference(ocp, POLISH), seq, res_def)
         speedup = rows["opti_ipopt"]["median_ms"] / rows[f"default_{params.solver.solver}"][
             "median_ms"]  # fmt: skip
         figures["cases"][f"{case}_{n}auv"] = {
@@ -146,18 +160,18 @@ def bench_mpc(args: argparse.Namespace) -> dict:
 def _print(case: str, n: int, rows: dict, speedup: float) -> None:
     print(f"\n{case}: {n} AUV(s), {STEPS} receding-horizon problems")
     head = f"{'solver':<16}{'median ms':>10}{'p99 ms':>9}{'iters':>7}{'fail':>6}"
-    print(head + f"{'cost vs ref (median / p95 |rel|)':>36}{'<=1 %':>8}")
+    print(head + f"{'cost vs ref (median / p95 |rel|)':>36}{'<=+1 %':>8}")
     for name, r in rows.items():
         line = f"{name:<16}{r['median_ms']:>10.2f}{r['p99_ms']:>9.2f}{r['iters_median']:>7.0f}"
         line += f"{r['failures']:>6d}"
         if "cost_rel_median" in r:
             line += f"{r['cost_rel_median']:>+20.2e} / {r['cost_rel_p95_abs']:<13.2e}"
-            line += f"{100 * r['within_1pct']:>7.1f}%"
+            line += f"{100 * r['not_worse_1pct']:>7.1f}%"
         print(line)
     print(f"default vs Opti + IPOPT: {speedup:.1f}x faster (median)")
     d = next(r for k, r in rows.items() if k.startswith("default"))
     print(
-        f"default's cost vs Opti + IPOPT started from the default's solution: median "
-        f"{d['polished_rel_median']:+.2e}, p95 {d['polished_rel_p95']:+.2e}, "
-        f"{100 * d['polished_within_1pct']:.1f}% within 1 %"
+        f"local: default's cost vs IPOPT polishing the default's solution: median "
+        f"{d['polished_rel_median']:+.2e}, p95 |rel| {d['polished_rel_p95_abs']:.2e}, max "
+        f"{d['polished_rel_max_abs']:.2e}, {100 * d['polished_within_1pct']:.1f}% within 1 %"
     )

@@ -5,12 +5,15 @@ The functions of :func:`mpcasv.mpc.derivatives.nlp_functions` are generated as C
 (``$MPCASV_CACHE`` or ``~/.cache/mpcasv``), keyed by a SHA-256 of the functions' serialised
 definition, the solver, the compiler flags, the CasADi version and the CPU. Another process
 (or run) with the same problem loads the library without compiling; a changed weight, horizon
-or vessel parameter changes the key. Compilation writes to a temporary name and renames, so
-concurrent processes never load a half-written library.
+or vessel parameter changes the key. Compilation holds an exclusive lock on
+``<library>.lock`` (``fcntl.flock``), so parallel workers needing the same library compile it
+once (the others wait, then load it), and writes to a temporary name and renames, so no process
+ever loads a half-written library.
 """
 
 from __future__ import annotations
 
+import fcntl
 import hashlib
 import os
 import platform
@@ -71,25 +74,35 @@ def compiled_library(functions: dict[str, ca.Function], solver: str, cflags: str
     folder = cache_dir()
     target = folder / f"mpc_{solver}_{key}.so"
     if not target.exists():
-        if shutil.which(compiler) is None:
-            raise RuntimeError(f"C compiler {compiler!r} not found: install it or set "
-                               "solver.compiled = false in the MPC preset")  # fmt: skip
-        t0 = time.perf_counter()
-        with tempfile.TemporaryDirectory(dir=folder) as tmp:
-            src = Path(tmp) / f"mpc_{solver}_{key}.c"
-            gen = ca.CodeGenerator(src.name)
-            for fun in functions.values():
-                gen.add(fun)
-            gen.generate(str(Path(tmp)) + os.sep)
-            out = Path(tmp) / target.name
-            cmd = [compiler, *shlex.split(cflags), "-fPIC", "-shared", str(src), "-o", str(out),
-                   "-lm"]  # fmt: skip
-            res = subprocess.run(cmd, capture_output=True, text=True)
-            if res.returncode != 0:
-                raise RuntimeError(f"compiling the MPC functions failed: {' '.join(cmd)}\n"
-                                   f"{res.stderr[-2000:]}")  # fmt: skip
-            os.replace(out, target)  # atomic: concurrent processes see all or nothing
-        log(f"mpc: compiled {target.name} ({solver}, {cflags}) in "
-            f"{time.perf_counter() - t0:.0f} s")  # fmt: skip
+        with open(folder / f"{target.name}.lock", "w") as lock:
+            fcntl.flock(lock, fcntl.LOCK_EX)  # one compile per library across processes
+            if not target.exists():  # another process may have compiled it meanwhile
+                _compile(functions, target, compiler, cflags, solver, log)
     _LOADED[memo] = target
     return target
+
+
+def _compile(functions: dict[str, ca.Function], target: Path, compiler: str, cflags: str,
+             solver: str, log) -> None:
+    """Generate C for ``functions`` and compile it into ``target`` (atomic rename)."""
+    folder, stem = target.parent, target.stem
+    if shutil.which(compiler) is None:
+        raise RuntimeError(f"C compiler {compiler!r} not found: install it or set "
+                           "solver.compiled = false in the MPC preset")  # fmt: skip
+    t0 = time.perf_counter()
+    with tempfile.TemporaryDirectory(dir=folder) as tmp:
+        src = Path(tmp) / f"{stem}.c"
+        gen = ca.CodeGenerator(src.name)
+        for fun in functions.values():
+            gen.add(fun)
+        gen.generate(str(Path(tmp)) + os.sep)
+        out = Path(tmp) / target.name
+        cmd = [compiler, *shlex.split(cflags), "-fPIC", "-shared", str(src), "-o", str(out),
+               "-lm"]  # fmt: skip
+        res = subprocess.run(cmd, capture_output=True, text=True)
+        if res.returncode != 0:
+            raise RuntimeError(f"compiling the MPC functions failed: {' '.join(cmd)}\n"
+                               f"{res.stderr[-2000:]}")  # fmt: skip
+        os.replace(out, target)  # atomic: concurrent processes see all or nothing
+    log(f"mpc: compiled {target.name} ({solver}, {cflags}) in "
+        f"{time.perf_counter() - t0:.0f} s")  # fmt: skip

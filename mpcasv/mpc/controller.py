@@ -13,11 +13,12 @@ Every step (docs/mpc.md, "Controller"):
    heading for the AUV with the largest projected fix age (standing still is a local minimum:
    at rest the rudder has no authority, so the gradient cannot say "turn and go");
 4. the safety check: a failed solve, a solve over the time budget, or a plan entering r_inner /
-   r_avoid within its first ``check_stages`` stages hands this step to the hybrid controller
+   r_avoid within its first ``check_stages`` stages (or, already inside, closing the range
+   further) hands this step to the hybrid controller
    (stepped on every observation so that its state is current), counted in ``fallbacks``;
 5. the command: STANDBY while the plan keeps the thrust below the propeller-on threshold for
    ``standby_time``, else TRANSIT to the planned position ``lookahead`` seconds ahead (pushed
-   out to ``min_carrot`` m) at the planned speed.
+   out to ``min_carrot`` m) at the planned speed, labelled AVOIDANCE or TRACKING (its reason).
 """
 
 from __future__ import annotations
@@ -307,9 +308,11 @@ class MPCController:
         Z, _ = self.ocp.split(res.w)
         par = self.ocp.unpack_par(p)
         n = min(sp.check_stages, self.ocp.dims.N) + 1
-        dist = np.hypot(Z[1:n, None, 0] - par["pa"][1:n, :, 0],
-                        Z[1:n, None, 1] - par["pa"][1:n, :, 1])  # fmt: skip
-        if np.any(dist < par["r_lo"][1:n] - self.params.margin - sp.check_margin):
+        dist = np.hypot(Z[:n, None, 0] - par["pa"][:n, :, 0], Z[:n, None, 1] - par["pa"][:n, :, 1])
+        inside = dist[1:] < par["r_lo"][1:n] - self.params.margin - sp.check_margin
+        # already inside (a pursuer caught up): a plan that gets out of the way is the best
+        # there is; one that goes deeper is not
+        if np.any(inside & (dist[1:] < dist[0] - sp.check_margin)):
             return "plan enters the anti-collision radius"
         return None
 
@@ -343,13 +346,17 @@ class MPCController:
         wp = here + delta / dn * max(dn, P.min_carrot)
         sel = ts <= look + 1e-9
         speed = float(np.clip(np.max(Z[sel, 3]), P.speed_min, ocp.vessel.u_max))
-        reason = Reason.NOMINAL
-        if np.any(dist[0] < par["r_lo"][0] - self.params.margin + self.domain.eps_minus):
-            reason = Reason.AVOIDANCE
-        elif not self.multi and np.any(dist[0] > par["r_hi"][0] + self.params.margin
-                                       - self.domain.eps_plus):  # fmt: skip
-            reason = Reason.TRACKING
+        reason = self._transit_reason(here, par)
         return Command(Mode.TRANSIT, (float(wp[0]), float(wp[1])), speed, served, reason)
+
+    def _transit_reason(self, here: np.ndarray, par: dict) -> Reason:
+        """Why the plan moves: AVOIDANCE when an AUV would come within its anti-collision
+        radius plus ``eps_minus`` of the ASV held where it is, at some stage of the horizon
+        (the predicted AUV positions); else TRACKING (following the AUV served, or going to
+        the next one: the MPC has no other reason to run the propeller)."""
+        still = np.hypot(here[0] - par["pa"][..., 0], here[1] - par["pa"][..., 1])
+        r_avoid = par["r_lo"] - self.params.margin + self.domain.eps_minus
+        return Reason.AVOIDANCE if np.any(still < r_avoid) else Reason.TRACKING
 
     def diagnostics(self) -> dict:
         """Flat per-step record: solver status, iterations, solve time, cost, fallback."""

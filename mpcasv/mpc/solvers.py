@@ -43,14 +43,16 @@ def solver_options(ocp: OCP, sp: SolverParams) -> dict:
         return base | {
             "structure_detection": "auto", "equality": ocp.equality,
             "fatrop.print_level": 0, "fatrop.max_iter": sp.max_iter, "fatrop.tol": sp.tol,
-            "fatrop.mu_init": sp.mu_init,
+            "fatrop.mu_init": sp.mu_init, "fatrop.bound_push": sp.bound_push,
+            "fatrop.bound_frac": sp.bound_push,
         }  # fmt: skip
     if sp.solver == "ipopt":
         return base | {
             "ipopt.print_level": 0, "ipopt.sb": "yes", "ipopt.max_iter": sp.max_iter,
             "ipopt.tol": sp.tol, "ipopt.warm_start_init_point": "yes",
-            "ipopt.mu_init": sp.mu_init, "ipopt.warm_start_bound_push": 1e-6,
-            "ipopt.warm_start_mult_bound_push": 1e-6,
+            "ipopt.mu_init": sp.mu_init, "ipopt.warm_start_bound_push": sp.bound_push,
+            "ipopt.warm_start_mult_bound_push": sp.bound_push, "ipopt.bound_push": sp.bound_push,
+            "ipopt.bound_frac": sp.bound_push,
         }  # fmt: skip
     raise ValueError(f"not an NLP solver: {sp.solver!r}")
 
