@@ -9,6 +9,7 @@ alike (DESIGN.md, "How data flows").
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from enum import StrEnum
 from typing import Protocol, runtime_checkable
@@ -38,6 +39,10 @@ class AUVEstimate:
 
     ``cov`` is the 2x2 horizontal position covariance (m^2); ``t_last_fix`` the time of the
     last acoustic fix or report that updated the estimate (``-inf`` if none yet).
+    ``forecast`` (optional) maps offsets ``dt`` (s, array) from the estimate's time to the
+    predicted horizontal positions ``(len(dt), 2)`` under the estimator's own motion model
+    (the plan-aware estimator: along the known plan); without it :meth:`predict` extrapolates
+    the velocity.
     """
 
     N: float
@@ -47,6 +52,16 @@ class AUVEstimate:
     v_E: float = 0.0
     cov: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)
     t_last_fix: float = -math.inf
+    forecast: Callable[[np.ndarray], np.ndarray] | None = field(default=None, compare=False,
+                                                                 repr=False)  # fmt: skip
+
+    def predict(self, dt) -> np.ndarray:
+        """Predicted horizontal positions ``(len(dt), 2)`` at offsets ``dt`` (s): the
+        estimator's forecast when it has one, else constant velocity."""
+        dt = np.atleast_1d(np.asarray(dt, float))
+        if self.forecast is not None:
+            return np.asarray(self.forecast(dt), float).reshape(len(dt), 2)
+        return self.position[None, :] + dt[:, None] * np.array([self.v_N, self.v_E])[None, :]
 
     @property
     def position(self) -> np.ndarray:

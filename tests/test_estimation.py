@@ -368,3 +368,19 @@ def test_case5_scenario_file_acceptance():
     r = acceptance_ratios(compare_estimators(sc, ("acoustic", "kalman"), (0, 1)))
     assert r["pos_error_rms_ratio"] <= 0.5
     assert r["range_jump_ratio"] <= 0.5
+
+
+def test_plan_forecast_follows_the_plan_through_its_turn():
+    """The plan-aware estimate predicts along the plan (the MPC's AUV prediction), the Kalman
+    one along its velocity; a forecast keeps the filter state of its estimate's time."""
+    plan = KnownPlan(np.array([[100.0, 0.0], [100.0, 100.0]]), 1.5)
+    est = make_estimator("plan", initial=AUVEstimate(0, 0, 10, t_last_fix=0.0), plan=plan)
+    a = est.estimate(0.0)
+    pred = a.predict([0.0, 40.0, 100.0])
+    np.testing.assert_allclose(pred, [[0.0, 0.0], [60.0, 0.0], [100.0, 50.0]], atol=1e-9)
+    np.testing.assert_allclose(est.estimate(40.0).position, pred[1], atol=1e-9)
+    rng = np.random.default_rng(0)
+    est.on_report(_report(30.0, np.array([40.0, 3.0]), 0.0, 1.5, rng, KalmanParams()))
+    np.testing.assert_allclose(a.predict([0.0, 40.0, 100.0]), pred)  # unchanged by later news
+    kf = make_estimator("kalman", initial=AUVEstimate(0, 0, 10, 1.0, 0.5, t_last_fix=0.0))
+    np.testing.assert_allclose(kf.estimate(0.0).predict([0.0, 100.0]), [[0, 0], [100, 50]])

@@ -112,3 +112,19 @@ def test_mpc_commands_standby_when_the_plan_keeps_the_propeller_off(scenarios_di
     tr = ts[ts["mode"] == str(Mode.TRANSIT)]
     assert np.isfinite(tr[["wp_N", "wp_E"]].to_numpy()).all()
     assert ((tr["cmd_speed"] > 0) & (tr["cmd_speed"] <= ctrl.ocp.vessel.u_max)).all()
+
+
+def test_mpc_predicts_the_auvs_with_the_estimators_forecast():
+    """An estimate with a forecast (the plan-aware estimator's) sets the AUV positions of the
+    plan's stages; without one they are extrapolated with the velocity."""
+    ctrl = make_controller("mpc-single", 1, "mpc-single")
+    ctrl.reset(1)
+    ts = ctrl.ocp.dt * np.arange(ctrl.ocp.dims.N + 1)
+    turn = np.stack([100.0 + np.minimum(ts, 20.0), np.maximum(ts - 20.0, 0.0)], axis=1)
+    auv = AUVEstimate(100.0, 0.0, 0.0, 1.0, 0.0, forecast=lambda dt: np.interp(
+        dt, ts, turn[:, 0])[:, None] * [1, 0] + np.interp(dt, ts, turn[:, 1])[:, None] * [0, 1])
+    obs = Observation(0.0, ASVState(0.0, 0.0, 0.0, 1.0), True, (auv,))
+    np.testing.assert_allclose(ctrl.ocp.unpack_par(ctrl.parameters(obs))["pa"][:, 0], turn)
+    cv = dataclasses.replace(auv, forecast=None)
+    pa = ctrl.ocp.unpack_par(ctrl.parameters(dataclasses.replace(obs, auvs=(cv,))))["pa"][:, 0]
+    np.testing.assert_allclose(pa, np.stack([100.0 + ts, 0 * ts], axis=1))

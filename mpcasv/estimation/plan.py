@@ -374,7 +374,18 @@ class PlanEstimator:
         return AUVEstimate(
             float(h[0]), float(h[1]), float(self.kf.depth), float(h[2]), float(h[3]),
             (float(C[0, 0]), float(C[0, 1]), float(C[1, 0]), float(C[1, 1])), self.kf.t_last,
+            forecast=functools.partial(self._forecast, self.x.copy(), self.t, t),
         )  # fmt: skip
+
+    def _forecast(self, x0: np.ndarray, t0: float, t: float, dt: np.ndarray) -> np.ndarray:
+        """Positions ``(len(dt), 2)`` at ``t + dt`` predicted along the plan (P1-P2) from the
+        filter state ``x0`` of time ``t0``: through the plan's turns and surface intervals,
+        held at its end (the MPC's AUV prediction)."""
+        out = np.empty((len(dt), 2))
+        for i, d in enumerate(np.asarray(dt, float)):
+            s = x0[0] + self.plan.speed_integral(t0, t + d) + x0[1] * (t + d - t0)
+            out[i] = self.path.point(s)[0] + x0[2:4]
+        return out
 
     def estimate(self, t: float) -> AUVEstimate:
         if self.mode == "kalman":

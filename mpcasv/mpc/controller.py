@@ -5,9 +5,10 @@ Every step (docs/mpc.md, "Controller"):
 1. fix-age bookkeeping: each AUV's expected fix age ``tau_i`` is propagated over the elapsed
    period with the same fix-rate model the plan uses (or read from the estimate);
 2. the parameters: the ASV state (thrust and steering estimated: the observation carries
-   only whether the propeller runs), the AUVs' positions over the horizon (constant velocity
-   from the estimate), their anti-collision radii along the planned bearing (the hybrid
-   controllers' domain functions, :func:`~mpcasv.hybrid.domains.estimate_shape`);
+   only whether the propeller runs), the AUVs' positions over the horizon (the estimator's
+   forecast: along the known plan with the plan-aware estimator, else constant velocity),
+   their anti-collision radii along the planned bearing (the hybrid controllers' domain
+   functions, :func:`~mpcasv.hybrid.domains.estimate_shape`);
 3. a warm-started solve from the previous plan moved one control period ahead;
    while the plan stands still, every ``explore_every`` s a second solve starts from a guess
    heading for the AUV with the largest projected fix age (standing still is a local minimum:
@@ -183,9 +184,9 @@ class MPCController:
         """The parameter vector of the OCP for this observation (after fix-age bookkeeping)."""
         d, dt = self.ocp.dims, self.ocp.dt
         K, N = d.n_auv, d.N
-        est = np.array([[a.N, a.E, a.v_N, a.v_E] for a in obs.auvs])
         ts = dt * np.arange(N + 1)
-        pa = est[None, :, 0:2] + ts[:, None, None] * est[None, :, 2:4]  # constant velocity
+        # the estimator's forecast (along the known plan) or constant velocity
+        pa = np.stack([a.predict(ts) for a in obs.auvs], axis=1)  # (N+1, K, 2)
         # bearing of each stage from the previous plan (or the current position)
         if self.w_prev is not None:
             Z, _ = self.ocp.split(self.w_prev)
