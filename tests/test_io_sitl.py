@@ -144,8 +144,9 @@ def test_plan_control_followreference_timeout_and_speed_zero(tmp_path):
         assert await _until(lambda: not np.any(sitl.command_vector()))
         # no Reference for longer than the timeout (5 s = 0.25 s of wall clock at 20x)
         assert await _until(lambda: sitl.maneuver.done, timeout=2.0)
-        last = node.of(imcpy.FollowRefState)[-1]
-        assert last.state == imcpy.FollowRefState.StateEnum.TIMEOUT
+        # the TIMEOUT state is announced (over UDP: wait for it to arrive, do not race it)
+        timeout = imcpy.FollowRefState.StateEnum.TIMEOUT
+        assert await _until(lambda: node.of(imcpy.FollowRefState)[-1].state == timeout)
         assert not np.any(sitl.command_vector())
 
     sitl = _run(tmp_path, body, duration=1000.0)
