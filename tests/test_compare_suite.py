@@ -8,7 +8,7 @@ import pytest
 
 from mpcasv.cli import main
 from mpcasv.config import ConfigError
-from mpcasv.experiments.suite import SCENARIOS_DIR, expand
+from mpcasv.experiments.suite import SCENARIOS_DIR, SUITES_DIR, expand
 from mpcasv.sim import controllers
 
 GOOD = """
@@ -146,3 +146,10 @@ overrides = { "domain.eps_plus" = 12.0 }
         want = {f"domain.{k}": v for k, v in domain.items()} | {"domain.eps_plus": 12.0}
         assert dict(job.overrides) == want
         assert job.preset is None  # hybrid-multi's own default preset, the domain replaced
+
+
+@pytest.mark.parametrize("path", sorted(SUITES_DIR.glob("*.toml")), ids=lambda p: p.stem)
+def test_every_shipped_suite_expands(path):
+    """A shipped suite that no longer validates (renamed preset key, bad label) fails here."""
+    exp = expand(path)
+    assert exp.jobs and len({j.job_id for j in exp.jobs}) == len(exp.jobs)

@@ -13,7 +13,8 @@ Every step (docs/mpc.md, "Controller"):
    while the plan stands still, every ``explore_every`` s a second solve starts from a guess
    heading for the AUV with the largest projected fix age (standing still is a local minimum:
    at rest the rudder has no authority, so the gradient cannot say "turn and go");
-4. the safety check: a failed solve, a solve over the time budget, or a plan entering r_inner /
+4. the safety check: the ASV more than ``max_violation`` outside the range bounds now (no
+   solve), a failed solve, a solve over the time budget, or a plan entering r_inner /
    r_avoid within its first ``check_stages`` stages (or, already inside, closing the range
    further) hands this step to the hybrid controller
    (stepped on every observation so that its state is current), counted in ``fallbacks``;
@@ -37,7 +38,7 @@ from mpcasv.interface import Command, Mode, Observation, PlannedTrajectory, Reas
 from mpcasv.models.acoustics import AcousticParams
 from mpcasv.mpc.params import MPCParams
 from mpcasv.mpc.problem import NXV, OCP
-from mpcasv.mpc.solvers import make_solver
+from mpcasv.mpc.solvers import SolveResult, make_solver
 from mpcasv.sim.controllers import ControllerKind
 
 R_HI_NONE = 1.0e5  # "no outer bound" (m)
@@ -228,10 +229,15 @@ class MPCController:
             lx, lg = self.lam_prev or (None, None)
             lam = (None if lx is None else ocp.shift_lam_x(lx, frac),
                    None if lg is None else ocp.shift_lam_g(lg, frac))  # fmt: skip
-        res = self.solver.solve(p, w0, *lam)
-        res = self._explore(obs, p, res)
-        reason = self._check(res, p)
-        keep = res.ok or getattr(self.solver, "warm_from_failures", False)
+        gap = self._violation_now(p)
+        if gap > self.params.solver.max_violation:  # badly scaled: no solve (see SolverParams)
+            reason = f"{gap:.0f} m outside the range bounds: not solved"
+            res = SolveResult(w0, None, None, math.nan, False, "not solved", 0, 0.0)
+        else:
+            res = self.solver.solve(p, w0, *lam)
+            res = self._explore(obs, p, res)
+            reason = self._check(res, p)
+        keep = res.ok or (res.iters > 0 and getattr(self.solver, "warm_from_failures", False))
         if keep and np.all(np.isfinite(res.w)):  # an unconverged NLP iterate warm-starts too
             self.w_prev = res.w
             self.lam_prev = (res.lam_x, res.lam_g) if res.ok else None
@@ -298,6 +304,16 @@ class MPCController:
         self.explored += 1
         best = alt if alt.ok and (not res.ok or alt.f < res.f) else res
         return dataclasses.replace(best, ms=res.ms + alt.ms, iters=res.iters + alt.iters)
+
+    def _violation_now(self, p: np.ndarray) -> float:
+        """How far (m) the ASV is outside the plan's range bounds now (0 inside)."""
+        par = self.ocp.unpack_par(p)
+        z0 = par["z0"]
+        d = np.hypot(z0[0] - par["pa"][0, :, 0], z0[1] - par["pa"][0, :, 1])
+        gap = np.maximum(par["r_lo"][0] - d, 0.0)
+        if not self.multi:
+            gap = np.maximum(gap, d - par["r_hi"][0])
+        return float(np.max(gap))
 
     def _check(self, res, p) -> str | None:
         """Why this step's plan may not be used (None: it may)."""

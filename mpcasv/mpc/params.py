@@ -146,6 +146,12 @@ class SolverParams:
         Stages of the plan checked against r_inner / r_avoid before it is used.
     check_margin : float
         Tolerance of that check (m): the soft constraints may be violated by this much.
+    max_violation : float
+        The ASV is this far (m) outside the plan's range bounds now (beyond r_outer, or inside
+        r_inner / r_avoid, margins included): the step goes to the hybrid controller without
+        a solve. Such a gap (an AUV estimate that jumped hundreds of metres when a report
+        arrived, Case 5) makes the exact-penalty problem badly scaled; fatrop then met NaNs and
+        never returned (``mpcasv compare mpc-dT``, Case 5, seed 1).
     """
 
     solver: SolverName = "fatrop"
@@ -159,6 +165,7 @@ class SolverParams:
     budget_ms: Pos = 200.0
     check_stages: PosInt = 2
     check_margin: NonNeg = 2.0
+    max_violation: Pos = 30.0
 
 
 @frozen
