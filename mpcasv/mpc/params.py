@@ -151,7 +151,11 @@ class SolverParams:
         r_inner / r_avoid, margins included): the step goes to the hybrid controller without
         a solve. Such a gap (an AUV estimate that jumped hundreds of metres when a report
         arrived, Case 5) makes the exact-penalty problem badly scaled; fatrop then met NaNs and
-        never returned (``mpcasv compare mpc-dT``, Case 5, seed 1).
+        never returned (``mpcasv compare mpc-dT``, Case 5, seed 1: 186 m beyond r_outer). With
+        30 m, Case 5 handed 90 steps per run to the hybrid controller and spent 46 s inside
+        r_inner on average; with 60 m, 15 steps and 18 s (as without the rule). Inside the
+        donut the gap cannot exceed r_inner + margin, so for the shipped domains (50 m) the
+        rule acts beyond r_outer only.
     """
 
     solver: SolverName = "fatrop"
@@ -165,7 +169,7 @@ class SolverParams:
     budget_ms: Pos = 200.0
     check_stages: PosInt = 2
     check_margin: NonNeg = 2.0
-    max_violation: Pos = 30.0
+    max_violation: Pos = 60.0
 
 
 @frozen
