@@ -58,8 +58,9 @@ def plot_ranges(result, path: str | Path) -> Path:
         top = 1.15 * float(np.nanmax([ts[f"range{k}"].max(), ts[f"est_range{k}"].max()]))
         if f"r_inner{k}" in ts:
             top = max(top, 1.15 * float(ts[f"r_t{k}"].max() + (eps or 0)))
+            inner = "r_avoid" if n > 1 else "r_inner"  # Paper 2's name with several AUVs
             ax.fill_between(t, 0, ts[f"r_inner{k}"], color="tab:red", alpha=0.15,
-                            label="inside r_inner")  # fmt: skip
+                            label=f"inside {inner}")  # fmt: skip
             ax.plot(t, ts[f"r_t{k}"], color="tab:green", lw=1, label="r_t")
             if eps is not None:
                 ax.fill_between(t, ts[f"r_t{k}"] - eps, ts[f"r_t{k}"] + eps, color="tab:green",
