@@ -67,6 +67,12 @@ def build_ocp(params: MPCParams, n_auv: int, multi: bool, log=print):
     return _OCP_CACHE[key]
 
 
+def ranges(asv_NE: np.ndarray, pa: np.ndarray) -> np.ndarray:
+    """Horizontal ranges (m) from ASV positions ``(..., 2)`` to AUV positions ``(..., K, 2)``
+    (shape ``(..., K)``)."""
+    return np.linalg.norm(np.asarray(asv_NE, float)[..., None, :] - pa, axis=-1)
+
+
 class MPCController:
     """Fix-age NMPC with donut constraints and a hybrid safety fallback.
 
@@ -230,14 +236,15 @@ class MPCController:
             lam = (None if lx is None else ocp.shift_lam_x(lx, frac),
                    None if lg is None else ocp.shift_lam_g(lg, frac))  # fmt: skip
         gap = self._violation_now(p)
-        if gap > self.params.solver.max_violation:  # badly scaled: no solve (see SolverParams)
-            reason = f"{gap:.0f} m outside the range bounds: not solved"
-            res = SolveResult(w0, None, None, math.nan, False, "not solved", 0, 0.0)
-        else:
+        solved = gap <= self.params.solver.max_violation  # else badly scaled (SolverParams)
+        if solved:
             res = self.solver.solve(p, w0, *lam)
             res = self._explore(obs, p, res)
             reason = self._check(res, p)
-        keep = res.ok or (res.iters > 0 and getattr(self.solver, "warm_from_failures", False))
+        else:
+            reason = f"{gap:.0f} m outside the range bounds: not solved"
+            res = SolveResult(w0, None, None, math.nan, False, "not solved", 0, 0.0)
+        keep = res.ok or (solved and getattr(self.solver, "warm_from_failures", False))
         if keep and np.all(np.isfinite(res.w)):  # an unconverged NLP iterate warm-starts too
             self.w_prev = res.w
             self.lam_prev = (res.lam_x, res.lam_g) if res.ok else None
@@ -309,7 +316,7 @@ class MPCController:
         """How far (m) the ASV is outside the plan's range bounds now (0 inside)."""
         par = self.ocp.unpack_par(p)
         z0 = par["z0"]
-        d = np.hypot(z0[0] - par["pa"][0, :, 0], z0[1] - par["pa"][0, :, 1])
+        d = ranges(z0[0:2], par["pa"][0])
         gap = np.maximum(par["r_lo"][0] - d, 0.0)
         if not self.multi:
             gap = np.maximum(gap, d - par["r_hi"][0])
@@ -325,7 +332,7 @@ class MPCController:
         Z, _ = self.ocp.split(res.w)
         par = self.ocp.unpack_par(p)
         n = min(sp.check_stages, self.ocp.dims.N) + 1
-        dist = np.hypot(Z[:n, None, 0] - par["pa"][:n, :, 0], Z[:n, None, 1] - par["pa"][:n, :, 1])
+        dist = ranges(Z[:n, 0:2], par["pa"][:n])
         inside = dist[1:] < par["r_lo"][1:n] - self.params.margin - sp.check_margin
         # already inside (a pursuer caught up): a plan that gets out of the way is the best
         # there is; one that goes deeper is not
@@ -348,7 +355,7 @@ class MPCController:
         Z, _ = ocp.split(w)
         ts = ocp.dt * np.arange(Z.shape[0])
         par = ocp.unpack_par(p)
-        dist = np.hypot(Z[:, None, 0] - par["pa"][..., 0], Z[:, None, 1] - par["pa"][..., 1])
+        dist = ranges(Z[:, 0:2], par["pa"])
         served = int(np.argmin(dist[-1] - par["r_t"]))
         m = max(1, math.ceil(P.standby_time / ocp.dt - 1e-9))
         if np.max(Z[1 : m + 1, 6]) < ocp.T_on:
@@ -371,7 +378,7 @@ class MPCController:
         radius plus ``eps_minus`` of the ASV held where it is, at some stage of the horizon
         (the predicted AUV positions); else TRACKING (following the AUV served, or going to
         the next one: the MPC has no other reason to run the propeller)."""
-        still = np.hypot(here[0] - par["pa"][..., 0], here[1] - par["pa"][..., 1])
+        still = ranges(here, par["pa"])
         r_avoid = par["r_lo"] - self.params.margin + self.domain.eps_minus
         return Reason.AVOIDANCE if np.any(still < r_avoid) else Reason.TRACKING
 
