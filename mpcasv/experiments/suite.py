@@ -27,7 +27,7 @@ from typing import Annotated, Any, Literal
 
 from pydantic import Field, Strict, model_validator
 
-from mpcasv.config import ConfigError, Float, Pos, frozen, load_toml, parse
+from mpcasv.config import ConfigError, Float, Pos, anchor, frozen, load_toml, parse
 
 #: the repository's ``experiments`` folder (scenarios and suites by name)
 EXPERIMENTS_DIR = Path(__file__).resolve().parents[2] / "experiments"
@@ -224,10 +224,8 @@ def _scenario_file(entry: str, base: Path, where: str) -> Path:
 
 
 def _preset_ref(preset: str, base: Path) -> str:
-    """Suite-relative preset paths made absolute; names kept."""
-    if preset.endswith(".toml") and not Path(preset).is_absolute():
-        return str((base / preset).resolve())
-    return preset
+    """Suite-relative preset paths made absolute (see :func:`mpcasv.config.anchor`); names kept."""
+    return anchor(preset, base)
 
 
 def _digest(obj) -> str:
