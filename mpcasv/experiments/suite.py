@@ -159,7 +159,7 @@ class Job:
     controller: str  # registered controller name
     preset: str | None  # shipped name or absolute TOML path (None: the controller's default)
     overrides: tuple[tuple[str, Any], ...]  # fixed overrides and grid values, sorted
-    current: tuple[float, float]  # (V_N, V_E) m/s
+    current: tuple[float, float]  # (V_N, V_E) m/s, nominal (an uncertain current is drawn)
     estimator: str
     seed: int
     duration: float  # s
@@ -167,6 +167,8 @@ class Job:
     auv_names: tuple[str, ...]
     plots: bool
     cost: float  # rough relative run time, for scheduling long jobs first
+    current_axis: str = "scenario"  # the suite's current value: "scenario", "off" or "V_N,V_E"
+    realisation: str = ""  # id of the drawn realisation (mpcasv.sim.uncertainty.Realisation)
 
     @property
     def run_name(self) -> str:
@@ -177,6 +179,29 @@ class Job:
 
     def scenario_changes(self) -> dict[str, Any]:
         return {"current": self.current, "duration": self.duration}
+
+    def realised_scenario(self):
+        """``(Scenario, Realisation)`` this job simulates: its scenario file with the suite's
+        current and duration, realised for its seed (the same function :func:`expand` used, so
+        the realisation id equals :attr:`realisation`).
+
+        Raises
+        ------
+        ConfigError
+            The file no longer validates, or the realisation does not match the expansion's
+            (the file changed since the suite was expanded).
+        """
+        from mpcasv.sim.scenario import load_scenario
+        from mpcasv.sim.uncertainty import realise
+
+        sc = condition_scenario(load_scenario(self.scenario_path), self.current_axis,
+                                self.current, self.duration)  # fmt: skip
+        scenario, real = realise(sc, self.seed)
+        if self.realisation and real.id != self.realisation:
+            raise ConfigError(f"{self.scenario_path}: realisation {real.id} of seed {self.seed} "
+                              f"differs from the suite's {self.realisation} (file changed since "
+                              "the expansion?)")  # fmt: skip
+        return scenario, real
 
 
 @dataclasses.dataclass(frozen=True)
@@ -335,19 +360,52 @@ def _scenario_domain(entry: ControllerEntry, sc, where: str) -> dict[str, Any]:
     return _flatten(domain, "domain.")
 
 
-def _conditions(suite: Suite, sc0, path: Path, file: Path):
-    """(scenario with the suite's current and duration, current, estimator) per condition."""
-    from mpcasv.sim.scenario import scenario_with
+def _axis_label(current: Current) -> str:
+    """A suite's current value as a string: ``scenario``, ``off`` or ``V_N,V_E``."""
+    if isinstance(current, str):
+        return current
+    return f"{current[0]:g},{current[1]:g}"
 
+
+def condition_scenario(sc0, current_axis: str, current: tuple[float, float], duration: float):
+    """Scenario ``sc0`` under one suite condition, before its realisation is drawn.
+
+    ``current_axis = "scenario"`` keeps the scenario's current and its uncertainty; ``off`` or
+    a value fixes the current to ``current`` (its uncertainty dropped: the suite says what the
+    current is). ``duration`` replaces the scenario's.
+    """
+    from mpcasv.sim.scenario import scenario_with
+    from mpcasv.sim.uncertainty import without_current
+
+    sc = scenario_with(sc0, current=current, duration=duration)
+    return sc if current_axis == "scenario" else without_current(sc)
+
+
+def _conditions(suite: Suite, sc0, path: Path, file: Path):
+    """(scenario under the condition, current, current axis label, estimator) per condition."""
     for current in suite.current:
         vc = {"scenario": sc0.current, "off": (0.0, 0.0)}.get(current, current)
         vc = (float(vc[0]), float(vc[1]))
+        axis = _axis_label(current)
         try:
-            sc = scenario_with(sc0, current=vc, duration=suite.duration or sc0.duration)
+            sc = condition_scenario(sc0, axis, vc, suite.duration or sc0.duration)
         except ConfigError as exc:
             raise ConfigError(f"{path}: current {current!r} with {file}: {exc}") from None
         for est in suite.estimator:
-            yield sc, vc, (sc0.estimator if est == "scenario" else est)
+            yield sc, vc, axis, (sc0.estimator if est == "scenario" else est)
+
+
+def _realisations(sc, seeds, where: str) -> dict:
+    """{seed: Realisation} of scenario ``sc`` (drawn here, so a bad draw stops the suite)."""
+    from mpcasv.sim.uncertainty import realise
+
+    out = {}
+    for seed in seeds:
+        try:
+            out[seed] = realise(sc, seed)[1]
+        except ConfigError as exc:
+            raise ConfigError(f"{where}: {exc}") from None
+    return out
 
 
 def expand(name_or_path: str | Path) -> Expansion:
@@ -368,8 +426,9 @@ def expand(name_or_path: str | Path) -> Expansion:
     jobs: list[Job] = []
     seen: dict[str, int] = {}
     for sc0, file in scenarios:
-        for sc, current, estimator in _conditions(suite, sc0, path, file):
+        for sc, current, axis, estimator in _conditions(suite, sc0, path, file):
             sc_digest = _digest(_plain(sc))
+            reals = _realisations(sc, suite.seeds, f"{path}: scenario {file}")
             for i, entry in usable:
                 if entry.scenarios is not None and sc.name not in entry.scenarios:
                     continue
@@ -386,7 +445,8 @@ def expand(name_or_path: str | Path) -> Expansion:
                     variant = f"{entry.label}[{grid}]" if grid else entry.label
                     p_digest = _digest(_plain(params))
                     for seed in suite.seeds:
-                        jid = _digest([sc_digest, cname, p_digest, seed, estimator, variant])
+                        real = reals[seed].id
+                        jid = _digest([sc_digest, cname, p_digest, seed, estimator, variant, real])
                         if jid in seen:
                             raise ConfigError(f"{where}: job duplicates job #{seen[jid]} "
                                               "(same scenario, parameters, seed)")  # fmt: skip
@@ -402,6 +462,7 @@ def expand(name_or_path: str | Path) -> Expansion:
                             or (suite.plots == "representative" and seed == suite.seeds[0]),
                             cost=float(sc.duration) * (1.0 + 0.2 * len(sc.auv))
                             * RELATIVE_COST.get(cname, 1.0),
+                            current_axis=axis, realisation=real,
                         ))  # fmt: skip
     if not jobs:
         raise ConfigError(f"{path}: the suite expands to no jobs (skipped: {skipped})")

@@ -29,6 +29,7 @@ from mpcasv.config import (
 from mpcasv.models.acoustics import AcousticParams, NavParams
 from mpcasv.models.auv import AUVLimits
 from mpcasv.models.behaviours import Plan, Pursuer, Scripted, Transit, lawnmower
+from mpcasv.sim.uncertainty import Uncertain, check_uncertain
 
 
 @frozen
@@ -214,6 +215,9 @@ class Scenario:
     sim: SimSpec = SimSpec()
     acoustics: AcousticParams = AcousticParams()
     navigation: NavParams = NavParams()
+    # what is uncertain about it, as distributions; a seed draws one realisation
+    # (mpcasv.sim.uncertainty.realise)
+    uncertain: Uncertain = Uncertain()
     # what is taken from the papers' text and what is our guess, per topic
     provenance: dict[str, str] = dataclasses.field(default_factory=dict)
 
@@ -226,6 +230,8 @@ class Scenario:
             raise ValueError(f"AUV names must be unique, got {names}")
         if math.hypot(*self.current) > 2.0:
             raise ValueError("current above 2 m/s is not supported (the ASV could not hold)")
+        if not self.uncertain.is_empty():
+            check_uncertain(self)
         return self
 
     @property
