@@ -191,6 +191,7 @@ class Job:
             The file no longer validates, or the realisation does not match the expansion's
             (the file changed since the suite was expanded).
         """
+        from mpcasv.experiments.conditions import condition_scenario
         from mpcasv.sim.scenario import load_scenario
         from mpcasv.sim.uncertainty import realise
 
@@ -360,54 +361,6 @@ def _scenario_domain(entry: ControllerEntry, sc, where: str) -> dict[str, Any]:
     return _flatten(domain, "domain.")
 
 
-def _axis_label(current: Current) -> str:
-    """A suite's current value as a string: ``scenario``, ``off`` or ``V_N,V_E``."""
-    if isinstance(current, str):
-        return current
-    return f"{current[0]:g},{current[1]:g}"
-
-
-def condition_scenario(sc0, current_axis: str, current: tuple[float, float], duration: float):
-    """Scenario ``sc0`` under one suite condition, before its realisation is drawn.
-
-    ``current_axis = "scenario"`` keeps the scenario's current and its uncertainty; ``off`` or
-    a value fixes the current to ``current`` (its uncertainty dropped: the suite says what the
-    current is). ``duration`` replaces the scenario's.
-    """
-    from mpcasv.sim.scenario import scenario_with
-    from mpcasv.sim.uncertainty import without_current
-
-    sc = scenario_with(sc0, current=current, duration=duration)
-    return sc if current_axis == "scenario" else without_current(sc)
-
-
-def _conditions(suite: Suite, sc0, path: Path, file: Path):
-    """(scenario under the condition, current, current axis label, estimator) per condition."""
-    for current in suite.current:
-        vc = {"scenario": sc0.current, "off": (0.0, 0.0)}.get(current, current)
-        vc = (float(vc[0]), float(vc[1]))
-        axis = _axis_label(current)
-        try:
-            sc = condition_scenario(sc0, axis, vc, suite.duration or sc0.duration)
-        except ConfigError as exc:
-            raise ConfigError(f"{path}: current {current!r} with {file}: {exc}") from None
-        for est in suite.estimator:
-            yield sc, vc, axis, (sc0.estimator if est == "scenario" else est)
-
-
-def _realisations(sc, seeds, where: str) -> dict:
-    """{seed: Realisation} of scenario ``sc`` (drawn here, so a bad draw stops the suite)."""
-    from mpcasv.sim.uncertainty import realise
-
-    out = {}
-    for seed in seeds:
-        try:
-            out[seed] = realise(sc, seed)[1]
-        except ConfigError as exc:
-            raise ConfigError(f"{where}: {exc}") from None
-    return out
-
-
 def expand(name_or_path: str | Path) -> Expansion:
     """Load, validate and expand a suite into its jobs (nothing runs).
 
@@ -417,6 +370,7 @@ def expand(name_or_path: str | Path) -> Expansion:
         Naming the suite file and the offending field: unknown scenario, unknown or unusable
         controller, bad preset or override key, empty list or grid, unknown estimator.
     """
+    from mpcasv.experiments.conditions import conditions, realisations
     from mpcasv.sim.controllers import load_preset
 
     suite, path = load_suite(name_or_path)
@@ -426,9 +380,9 @@ def expand(name_or_path: str | Path) -> Expansion:
     jobs: list[Job] = []
     seen: dict[str, int] = {}
     for sc0, file in scenarios:
-        for sc, current, axis, estimator in _conditions(suite, sc0, path, file):
+        for sc, current, axis, estimator in conditions(suite, sc0, path, file):
             sc_digest = _digest(_plain(sc))
-            reals = _realisations(sc, suite.seeds, f"{path}: scenario {file}")
+            reals = realisations(sc, suite.seeds, f"{path}: scenario {file}")
             for i, entry in usable:
                 if entry.scenarios is not None and sc.name not in entry.scenarios:
                     continue
