@@ -232,6 +232,9 @@ def test_the_runner_records_the_realisation_of_its_job(tmp_path):
     row = run_job(job, str(tmp_path / "out"))
     assert row["status"] == "ok", row["error"]
     assert row["realisation"] == job.realisation
+    sc, _ = job.realised_scenario()
+    assert sc.current != (0.1, 0.0)  # drawn, not the file's nominal current
+    assert (row["current_N"], row["current_E"]) == sc.current  # the current simulated
     run = json.loads((tmp_path / "out" / row["run_dir"] / "run.json").read_text())
     assert run["realisation"]["id"] == job.realisation
     assert run["realisation"]["seed"] == 2

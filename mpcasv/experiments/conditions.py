@@ -50,13 +50,15 @@ def conditions(suite: Suite, sc0, path: Path, file: Path):
 
 
 def realisations(sc, seeds, where: str) -> dict:
-    """{seed: Realisation} of scenario ``sc`` (drawn here, so a bad draw stops the suite)."""
+    """``{seed: (Realisation, realised current (V_N, V_E) m/s)}`` of scenario ``sc`` (drawn
+    here, so a bad draw stops the suite before any job starts)."""
     from mpcasv.sim.uncertainty import realise
 
     out = {}
     for seed in seeds:
         try:
-            out[seed] = realise(sc, seed)[1]
+            done, real = realise(sc, seed)
         except ConfigError as exc:
             raise ConfigError(f"{where}: {exc}") from None
+        out[seed] = (real, (float(done.current[0]), float(done.current[1])))
     return out

@@ -36,7 +36,8 @@ def _describe(job: Job) -> dict:
         "job_id": job.job_id, "index": job.index, "suite": job.suite, "scenario": job.scenario,
         "label": job.label, "variant": job.variant, "controller": job.controller,
         "preset": job.preset or "default", "overrides": json.dumps(dict(job.overrides)),
-        "current_N": job.current[0], "current_E": job.current[1],
+        "current_N": (job.current_realised or job.current)[0],  # simulated (drawn) current
+        "current_E": (job.current_realised or job.current)[1],
         "current": job.current_axis, "realisation": job.realisation,
         "estimator": job.estimator, "seed": job.seed, "n_auv": job.n_auv,
         "auv_names": ",".join(job.auv_names),

@@ -169,6 +169,7 @@ class Job:
     cost: float  # rough relative run time, for scheduling long jobs first
     current_axis: str = "scenario"  # the suite's current value: "scenario", "off" or "V_N,V_E"
     realisation: str = ""  # id of the drawn realisation (mpcasv.sim.uncertainty.Realisation)
+    current_realised: tuple[float, float] | None = None  # (V_N, V_E) m/s simulated (drawn)
 
     @property
     def run_name(self) -> str:
@@ -399,7 +400,7 @@ def expand(name_or_path: str | Path) -> Expansion:
                     variant = f"{entry.label}[{grid}]" if grid else entry.label
                     p_digest = _digest(_plain(params))
                     for seed in suite.seeds:
-                        real = reals[seed].id
+                        real, current_realised = reals[seed][0].id, reals[seed][1]
                         jid = _digest([sc_digest, cname, p_digest, seed, estimator, variant, real])
                         if jid in seen:
                             raise ConfigError(f"{where}: job duplicates job #{seen[jid]} "
@@ -417,6 +418,7 @@ def expand(name_or_path: str | Path) -> Expansion:
                             cost=float(sc.duration) * (1.0 + 0.2 * len(sc.auv))
                             * RELATIVE_COST.get(cname, 1.0),
                             current_axis=axis, realisation=real,
+                            current_realised=current_realised,
                         ))  # fmt: skip
     if not jobs:
         raise ConfigError(f"{path}: the suite expands to no jobs (skipped: {skipped})")
