@@ -91,19 +91,52 @@ def replace(obj: T, **changes: Any) -> T:
 DATA_DIR = Path(__file__).parent / "data"
 
 
-def resolve(kind: str, name_or_path: str | Path) -> Path:
+def is_path(name_or_path: str | Path) -> bool:
+    """Whether a file reference is a path (ends in ``.toml`` or has a folder part) rather than
+    the bare name of a shipped file such as ``"gretha"``."""
+    s = str(name_or_path)
+    return s.endswith(".toml") or "/" in s or "\\" in s
+
+
+def anchor(name_or_path: str, base: str | Path) -> str:
+    """A file reference made inside a configuration file, resolved against that file's folder.
+
+    Paths (see :func:`is_path`) that are relative are joined to ``base`` (the folder of the file
+    that names them) and returned absolute; absolute paths and bare shipped names are returned
+    unchanged. So a scenario saying ``vessel = "otter.toml"`` means the ``otter.toml`` beside
+    the scenario, whatever the working directory.
+    """
+    if not is_path(name_or_path):
+        return name_or_path
+    p = Path(name_or_path).expanduser()
+    return str(p if p.is_absolute() else (Path(base) / p).resolve())
+
+
+def resolve(kind: str, name_or_path: str | Path, base: str | Path | None = None) -> Path:
     """Find a shipped data file (``kind`` = ``vessels``, ``presets``, ...) or a user path.
 
-    A bare name such as ``"gretha"`` means ``mpcasv/data/<kind>/gretha.toml``; anything that
-    exists as a path is used as it is.
+    A bare name such as ``"gretha"`` means ``mpcasv/data/<kind>/gretha.toml``; a path (ending in
+    ``.toml`` or with a folder part) is taken relative to ``base`` when given (the folder of the
+    configuration file that names it, see :func:`anchor`), else as given (relative to the
+    working directory).
+
+    Raises
+    ------
+    ConfigError
+        The path does not exist, or the name is not a shipped file (the shipped names listed).
     """
+    if base is not None:
+        name_or_path = anchor(str(name_or_path), base)
     p = Path(name_or_path)
     if p.suffix == ".toml" and p.exists():
         return p
     shipped = DATA_DIR / kind / f"{name_or_path}.toml"
-    if shipped.exists():
+    if not is_path(name_or_path) and shipped.exists():
         return shipped
     known = sorted(f.stem for f in (DATA_DIR / kind).glob("*.toml"))
+    if is_path(name_or_path):
+        raise ConfigError(f"unknown {kind[:-1]} {str(name_or_path)!r}: no such file (looked at "
+                          f"{p.resolve()}; shipped names: {known})")  # fmt: skip
     raise ConfigError(
         f"unknown {kind[:-1]} {str(name_or_path)!r}: not a file, and not one of {known}"
     )

@@ -36,8 +36,9 @@ def _describe(job: Job) -> dict:
         "job_id": job.job_id, "index": job.index, "suite": job.suite, "scenario": job.scenario,
         "label": job.label, "variant": job.variant, "controller": job.controller,
         "preset": job.preset or "default", "overrides": json.dumps(dict(job.overrides)),
-        "current_N": job.current[0], "current_E": job.current[1],
-        "current": "off" if job.current == (0.0, 0.0) else f"{job.current[0]:g},{job.current[1]:g}",
+        "current_N": (job.current_realised or job.current)[0],  # simulated (drawn) current
+        "current_E": (job.current_realised or job.current)[1],
+        "current": job.current_axis, "realisation": job.realisation,
         "estimator": job.estimator, "seed": job.seed, "n_auv": job.n_auv,
         "auv_names": ",".join(job.auv_names),
     }  # fmt: skip
@@ -61,15 +62,15 @@ def simulate_job(job: Job, run_dir: Path) -> dict:
     """Simulate one job and write its run folder; return its metrics."""
     from mpcasv.sim.controllers import make_controller
     from mpcasv.sim.record import write_run
-    from mpcasv.sim.scenario import load_scenario, scenario_with
     from mpcasv.sim.simulator import simulate
 
-    scenario = scenario_with(load_scenario(job.scenario_path), **job.scenario_changes())
+    scenario, realisation = job.realised_scenario()  # the seed's draw of its [uncertain] table
     controller = make_controller(job.controller, job.n_auv, job.preset, dict(job.overrides))
     result = simulate(scenario, controller, job.seed, job.estimator)
     extra = {"job_id": job.job_id, "suite": job.suite, "variant": job.variant,
              "preset": job.preset, "overrides": dict(job.overrides),
-             "estimator": job.estimator, "current": job.current}  # fmt: skip
+             "estimator": job.estimator, "current": job.current,
+             "realisation": realisation.as_dict()}  # fmt: skip
     return write_run(result, run_dir, plots=job.plots, extra=extra)
 
 

@@ -27,7 +27,7 @@ from typing import Annotated, Any, Literal
 
 from pydantic import Field, Strict, model_validator
 
-from mpcasv.config import ConfigError, Float, Pos, frozen, load_toml, parse
+from mpcasv.config import ConfigError, Float, Pos, anchor, frozen, load_toml, parse
 
 #: the repository's ``experiments`` folder (scenarios and suites by name)
 EXPERIMENTS_DIR = Path(__file__).resolve().parents[2] / "experiments"
@@ -159,7 +159,7 @@ class Job:
     controller: str  # registered controller name
     preset: str | None  # shipped name or absolute TOML path (None: the controller's default)
     overrides: tuple[tuple[str, Any], ...]  # fixed overrides and grid values, sorted
-    current: tuple[float, float]  # (V_N, V_E) m/s
+    current: tuple[float, float]  # (V_N, V_E) m/s, nominal (an uncertain current is drawn)
     estimator: str
     seed: int
     duration: float  # s
@@ -167,6 +167,9 @@ class Job:
     auv_names: tuple[str, ...]
     plots: bool
     cost: float  # rough relative run time, for scheduling long jobs first
+    current_axis: str = "scenario"  # the suite's current value: "scenario", "off" or "V_N,V_E"
+    realisation: str = ""  # id of the drawn realisation (mpcasv.sim.uncertainty.Realisation)
+    current_realised: tuple[float, float] | None = None  # (V_N, V_E) m/s simulated (drawn)
 
     @property
     def run_name(self) -> str:
@@ -177,6 +180,30 @@ class Job:
 
     def scenario_changes(self) -> dict[str, Any]:
         return {"current": self.current, "duration": self.duration}
+
+    def realised_scenario(self):
+        """``(Scenario, Realisation)`` this job simulates: its scenario file with the suite's
+        current and duration, realised for its seed (the same function :func:`expand` used, so
+        the realisation id equals :attr:`realisation`).
+
+        Raises
+        ------
+        ConfigError
+            The file no longer validates, or the realisation does not match the expansion's
+            (the file changed since the suite was expanded).
+        """
+        from mpcasv.experiments.conditions import condition_scenario
+        from mpcasv.sim.scenario import load_scenario
+        from mpcasv.sim.uncertainty import realise
+
+        sc = condition_scenario(load_scenario(self.scenario_path), self.current_axis,
+                                self.current, self.duration)  # fmt: skip
+        scenario, real = realise(sc, self.seed)
+        if self.realisation and real.id != self.realisation:
+            raise ConfigError(f"{self.scenario_path}: realisation {real.id} of seed {self.seed} "
+                              f"differs from the suite's {self.realisation} (file changed since "
+                              "the expansion?)")  # fmt: skip
+        return scenario, real
 
 
 @dataclasses.dataclass(frozen=True)
@@ -224,10 +251,8 @@ def _scenario_file(entry: str, base: Path, where: str) -> Path:
 
 
 def _preset_ref(preset: str, base: Path) -> str:
-    """Suite-relative preset paths made absolute; names kept."""
-    if preset.endswith(".toml") and not Path(preset).is_absolute():
-        return str((base / preset).resolve())
-    return preset
+    """Suite-relative preset paths made absolute (see :func:`mpcasv.config.anchor`); names kept."""
+    return anchor(preset, base)
 
 
 def _digest(obj) -> str:
@@ -337,21 +362,6 @@ def _scenario_domain(entry: ControllerEntry, sc, where: str) -> dict[str, Any]:
     return _flatten(domain, "domain.")
 
 
-def _conditions(suite: Suite, sc0, path: Path, file: Path):
-    """(scenario with the suite's current and duration, current, estimator) per condition."""
-    from mpcasv.sim.scenario import scenario_with
-
-    for current in suite.current:
-        vc = {"scenario": sc0.current, "off": (0.0, 0.0)}.get(current, current)
-        vc = (float(vc[0]), float(vc[1]))
-        try:
-            sc = scenario_with(sc0, current=vc, duration=suite.duration or sc0.duration)
-        except ConfigError as exc:
-            raise ConfigError(f"{path}: current {current!r} with {file}: {exc}") from None
-        for est in suite.estimator:
-            yield sc, vc, (sc0.estimator if est == "scenario" else est)
-
-
 def expand(name_or_path: str | Path) -> Expansion:
     """Load, validate and expand a suite into its jobs (nothing runs).
 
@@ -361,6 +371,7 @@ def expand(name_or_path: str | Path) -> Expansion:
         Naming the suite file and the offending field: unknown scenario, unknown or unusable
         controller, bad preset or override key, empty list or grid, unknown estimator.
     """
+    from mpcasv.experiments.conditions import conditions, realisations
     from mpcasv.sim.controllers import load_preset
 
     suite, path = load_suite(name_or_path)
@@ -370,8 +381,9 @@ def expand(name_or_path: str | Path) -> Expansion:
     jobs: list[Job] = []
     seen: dict[str, int] = {}
     for sc0, file in scenarios:
-        for sc, current, estimator in _conditions(suite, sc0, path, file):
+        for sc, current, axis, estimator in conditions(suite, sc0, path, file):
             sc_digest = _digest(_plain(sc))
+            reals = realisations(sc, suite.seeds, f"{path}: scenario {file}")
             for i, entry in usable:
                 if entry.scenarios is not None and sc.name not in entry.scenarios:
                     continue
@@ -388,7 +400,8 @@ def expand(name_or_path: str | Path) -> Expansion:
                     variant = f"{entry.label}[{grid}]" if grid else entry.label
                     p_digest = _digest(_plain(params))
                     for seed in suite.seeds:
-                        jid = _digest([sc_digest, cname, p_digest, seed, estimator, variant])
+                        real, current_realised = reals[seed][0].id, reals[seed][1]
+                        jid = _digest([sc_digest, cname, p_digest, seed, estimator, variant, real])
                         if jid in seen:
                             raise ConfigError(f"{where}: job duplicates job #{seen[jid]} "
                                               "(same scenario, parameters, seed)")  # fmt: skip
@@ -404,6 +417,8 @@ def expand(name_or_path: str | Path) -> Expansion:
                             or (suite.plots == "representative" and seed == suite.seeds[0]),
                             cost=float(sc.duration) * (1.0 + 0.2 * len(sc.auv))
                             * RELATIVE_COST.get(cname, 1.0),
+                            current_axis=axis, realisation=real,
+                            current_realised=current_realised,
                         ))  # fmt: skip
     if not jobs:
         raise ConfigError(f"{path}: the suite expands to no jobs (skipped: {skipped})")

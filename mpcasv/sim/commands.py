@@ -20,7 +20,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     )  # fmt: skip
     p.add_argument("--controller", help="controller name (default: the scenario's)")
     p.add_argument("--params", help="controller preset: shipped name or TOML path")
-    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    p.add_argument("--seed", type=int, default=0,
+                   help="random seed (default 0): the world's acoustic draws and the realisation "
+                   "of the scenario's [uncertain] table")  # fmt: skip
+    p.add_argument("--nominal", action="store_true",
+                   help="simulate the scenario's nominal values (no draw from [uncertain])")
     p.add_argument("--estimator", help="AUV estimator (default: the scenario's)")
     p.add_argument(
         "--out", type=Path, help="output folder (default runs/<scenario>-<controller>-<seed>)"
@@ -45,8 +49,12 @@ def run(args: argparse.Namespace) -> int:
     from mpcasv.sim.record import write_run
     from mpcasv.sim.scenario import load_scenario
     from mpcasv.sim.simulator import simulate
+    from mpcasv.sim.uncertainty import nominal, realise
 
     scenario = load_scenario(args.scenario)
+    if args.seed < 0:
+        raise ConfigError(f"--seed {args.seed}: a seed is an integer >= 0")
+    scenario, real = nominal(scenario) if args.nominal else realise(scenario, args.seed)
     name = args.controller or scenario.controller
     preset = args.params or (scenario.preset if name == scenario.controller else None)
     controller = make_controller(name, len(scenario.auv), preset)
@@ -54,11 +62,13 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError(f"unknown estimator {args.estimator!r}; known: {sorted(ESTIMATORS)}")
     out = args.out or Path("runs") / f"{scenario.name}-{name}-{args.seed}"
     result = simulate(scenario, controller, args.seed, args.estimator, progress=not args.quiet)
-    extra = {"preset": preset, "estimator": args.estimator or scenario.estimator}
+    extra = {"preset": preset, "estimator": args.estimator or scenario.estimator,
+             "realisation": real.as_dict()}  # fmt: skip
     metrics = write_run(result, out, plots=not args.no_plots, extra=extra)
     keys = ("duration_s", "asv_distance_m", "distance_ratio", "standby_fraction", "min_range_m",
             "max_fix_age_overall_s", "fallbacks")  # fmt: skip
     print(f"wrote {out}/ (timeseries.parquet, metrics.json, plots) in {result.wall_s:.2f} s")
+    print(f"  realisation {real.id}: {len(real.values)} drawn values (run.json)")
     for k in keys:
         v = metrics[k]
         print(f"  {k:24s} {v:.3f}" if isinstance(v, float) else f"  {k:24s} {v}")

@@ -14,10 +14,22 @@ from typing import Literal
 
 from pydantic import model_validator
 
-from mpcasv.config import Float, NonNeg, Pos, PosInt, frozen, load, load_toml, parse
+from mpcasv.config import (
+    ConfigError,
+    Float,
+    NonNeg,
+    Pos,
+    PosInt,
+    anchor,
+    frozen,
+    is_path,
+    load_toml,
+    parse,
+)
 from mpcasv.models.acoustics import AcousticParams, NavParams
 from mpcasv.models.auv import AUVLimits
 from mpcasv.models.behaviours import Plan, Pursuer, Scripted, Transit, lawnmower
+from mpcasv.sim.uncertainty import Uncertain, check_uncertain
 
 
 @frozen
@@ -203,6 +215,9 @@ class Scenario:
     sim: SimSpec = SimSpec()
     acoustics: AcousticParams = AcousticParams()
     navigation: NavParams = NavParams()
+    # what is uncertain about it, as distributions; a seed draws one realisation
+    # (mpcasv.sim.uncertainty.realise)
+    uncertain: Uncertain = Uncertain()
     # what is taken from the papers' text and what is our guess, per topic
     provenance: dict[str, str] = dataclasses.field(default_factory=dict)
 
@@ -215,6 +230,8 @@ class Scenario:
             raise ValueError(f"AUV names must be unique, got {names}")
         if math.hypot(*self.current) > 2.0:
             raise ValueError("current above 2 m/s is not supported (the ASV could not hold)")
+        if not self.uncertain.is_empty():
+            check_uncertain(self)
         return self
 
     @property
@@ -224,8 +241,30 @@ class Scenario:
 
 
 def load_scenario(path: str | Path) -> Scenario:
-    """Load and validate a scenario TOML file."""
-    return load(Scenario, path)
+    """Load and validate a scenario TOML file.
+
+    File references inside it (``asv.vessel``, ``asv.execution``, ``preset``) that are paths are
+    resolved against the scenario file's folder (not the working directory) and must exist.
+
+    Raises
+    ------
+    ConfigError
+        One line per problem, naming the file and the field.
+    """
+    data = load_toml(path)
+    base = Path(path).resolve().parent
+    refs = [(data, "preset")]
+    if isinstance(data.get("asv"), dict):
+        refs += [(data["asv"], "vessel"), (data["asv"], "execution")]
+    for table, key in refs:
+        value = table.get(key)
+        if isinstance(value, str) and is_path(value):
+            table[key] = anchor(value, base)
+            if not Path(table[key]).is_file():
+                where = f"asv.{key}" if table is not data else key
+                raise ConfigError(f"{path}: {where}: no such file {value!r} (looked at "
+                                  f"{table[key]}, relative to the scenario's folder)")  # fmt: skip
+    return parse(Scenario, data, path)
 
 
 def scenario_from_dict(data: dict, source: str = "<scenario>") -> Scenario:

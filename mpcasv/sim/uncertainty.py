@@ -1,0 +1,393 @@
+"""What a scenario leaves uncertain (its ``[uncertain]`` table) and one realisation per seed.
+
+A scenario file states one nominal world. Its optional ``[uncertain]`` table declares, as
+distributions, what is not known about that world: the current, the ASV's start, the acoustic
+channel, and per AUV where its operation lies (offset, rotation), where it starts, how fast it
+goes and when its scripted events (pursuits) happen. A seed draws one realisation: one value per
+declared quantity. :func:`realise` gives the realised :class:`~mpcasv.sim.scenario.Scenario`
+(the nominal one with the drawn values put in, revalidated) and the :class:`Realisation`
+(the drawn values and a short id, recorded in ``run.json`` and the results table).
+
+Streams. Each quantity has its own random stream, derived from the seed, the scenario's name
+and the quantity's key (e.g. ``case6/auv.auv1.offset_N``) with :class:`numpy.random.SeedSequence`
+spawn keys; none is the world's stream (``default_rng(seed)``: acoustics, INS drift) and no
+controller draws from them. So (scenario, seed) gives the same realisation for every controller
+(paired comparisons), declaring one more uncertain quantity does not change the values drawn
+for the others, and two scenarios draw independently for the same seed.
+
+Distributions (``dist = ...``): ``uniform`` (``low``, ``high``), ``normal`` (``mean``, ``sd``
+and the bounds ``low``, ``high``: truncated, ``scipy.stats.truncnorm``), ``choice``
+(``values``, optional probabilities ``p``). The file format is in ``docs/experiments.md``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+import math
+from typing import Any
+
+from mpcasv.config import ConfigError, frozen
+from mpcasv.sim.distributions import Choice, Dist, Normal, Uniform, stream
+
+
+@frozen
+class CurrentUncertainty:
+    """The current: drawn speed and direction replace the nominal ones."""
+
+    speed: Dist | None = None  # m/s
+    direction_deg: Dist | None = None  # the direction it flows towards, from North (deg)
+
+
+@frozen
+class ASVUncertainty:
+    """Offsets added to the ASV's start."""
+
+    start_N: Dist | None = None  # m
+    start_E: Dist | None = None  # m
+    start_psi_deg: Dist | None = None  # deg
+
+
+#: acoustic channel parameters that may be uncertain (drawn values replace the nominal ones)
+ACOUSTIC_FIELDS = ("p_good", "p_sporadic", "propeller_factor", "sigma_bearing_deg",
+                   "sigma_range", "d1", "d2")  # fmt: skip
+
+
+@frozen
+class AcousticsUncertainty:
+    """Channel parameters (see :class:`~mpcasv.models.acoustics.AcousticParams`)."""
+
+    p_good: Dist | None = None
+    p_sporadic: Dist | None = None
+    propeller_factor: Dist | None = None
+    sigma_bearing_deg: Dist | None = None
+    sigma_range: Dist | None = None
+    d1: Dist | None = None
+    d2: Dist | None = None
+
+
+@frozen
+class AUVUncertainty:
+    """One AUV (or every AUV, each drawn independently: key ``all``)."""
+
+    offset_N: Dist | None = None  # m; moves its start and its routes together
+    offset_E: Dist | None = None  # m
+    rotation_deg: Dist | None = None  # turns its routes and headings about its nominal start
+    start_N: Dist | None = None  # m; moves its start only (relative to its routes)
+    start_E: Dist | None = None  # m
+    start_psi_deg: Dist | None = None  # deg
+    speed_factor: Dist | None = None  # multiplies every speed of its behaviours
+    event_time_s: Dist | None = None  # s; added to each scripted event's time (each drawn)
+    update_period_s: Dist | None = None  # s; replaces every pursuer's re-aim period
+
+
+@frozen
+class Uncertain:
+    """A scenario's ``[uncertain]`` table."""
+
+    current: CurrentUncertainty = CurrentUncertainty()
+    asv: ASVUncertainty = ASVUncertainty()
+    acoustics: AcousticsUncertainty = AcousticsUncertainty()
+    auv: dict[str, AUVUncertainty] = dataclasses.field(default_factory=dict)  # name or "all"
+
+    def is_empty(self) -> bool:
+        return not any(_given(t) for t in (self.current, self.asv, self.acoustics)) and not any(
+            _given(t) for t in self.auv.values()
+        )
+
+
+def _given(table) -> dict[str, Any]:
+    """The declared (not None) distributions of a table, in field order."""
+    return {f.name: getattr(table, f.name) for f in dataclasses.fields(table)
+            if getattr(table, f.name) is not None}  # fmt: skip
+
+
+def auv_uncertainty(unc: Uncertain, name: str) -> dict[str, Any]:
+    """The distributions that apply to AUV ``name`` (its own table and ``all``)."""
+    none = AUVUncertainty()
+    return _given(unc.auv.get("all", none)) | _given(unc.auv.get(name, none))
+
+
+def _behaviours(spec) -> list:
+    """An AUVSpec's behaviour specs: the initial one and each event's (plan/pursuer/transit)."""
+    return [b.plan or b.pursuer or b.transit for b in (spec.behaviour, *spec.events)]
+
+
+def check_uncertain(sc) -> None:
+    """Refuse an ``[uncertain]`` table that cannot be drawn or would change nothing.
+
+    ``sc`` is a :class:`~mpcasv.sim.scenario.Scenario` (validated otherwise).
+
+    Raises
+    ------
+    ValueError
+        ``uncertain.<field>: <cause>`` for the first problem found.
+    """
+    unc: Uncertain = sc.uncertain
+    names = [a.name for a in sc.auv]
+    for key in unc.auv:
+        if key != "all" and key not in names:
+            raise ValueError(f"uncertain.auv.{key}: no AUV of that name (AUVs: {names}; "
+                             "'all' means every AUV)")  # fmt: skip
+    if "all" in unc.auv:
+        for key, table in unc.auv.items():
+            both = set(_given(table)) & set(_given(unc.auv["all"])) if key != "all" else set()
+            if both:
+                raise ValueError(f"uncertain.auv.{key}: {sorted(both)} also given under "
+                                 "uncertain.auv.all (say it once)")  # fmt: skip
+    _check_current(sc, unc.current)
+    _check_acoustics(sc, unc.acoustics)
+    for spec in sc.auv:
+        _check_auv(spec, auv_uncertainty(unc, spec.name))
+
+
+def _check_current(sc, cu: CurrentUncertainty) -> None:
+    if cu.speed is not None:
+        lo, hi = cu.speed.support()
+        if lo < 0 or hi > 2.0:
+            raise ValueError(f"uncertain.current.speed: support [{lo}, {hi}] m/s must lie in "
+                             "[0, 2] (above 2 m/s the ASV could not hold)")  # fmt: skip
+        if cu.direction_deg is None and math.hypot(*sc.current) == 0.0:
+            raise ValueError("uncertain.current.speed: the nominal current is zero, so it has no "
+                             "direction: give uncertain.current.direction_deg too")  # fmt: skip
+    elif cu.direction_deg is not None and math.hypot(*sc.current) == 0.0:
+        raise ValueError("uncertain.current.direction_deg: the nominal current is zero, so a "
+                         "direction changes nothing: give uncertain.current.speed too")  # fmt: skip
+
+
+def _check_acoustics(sc, au: AcousticsUncertainty) -> None:
+    from mpcasv.config import parse
+    from mpcasv.models.acoustics import AcousticParams
+
+    nominal = dataclasses.asdict(sc.acoustics)
+    given = _given(au)
+    for name, dist in given.items():
+        if name in ("sigma_bearing_deg", "sigma_range") and not sc.acoustics.usbl:
+            raise ValueError(f"uncertain.acoustics.{name}: the scenario has no USBL fixes "
+                             "(acoustics.usbl = false), so it changes nothing")  # fmt: skip
+        for value in dist.support():
+            try:
+                parse(AcousticParams, nominal | {name: value}, "acoustics")
+            except ConfigError as exc:
+                cause = str(exc).splitlines()[-1].split(": ", 2)[-1]
+                raise ValueError(f"uncertain.acoustics.{name}: the value {value} of its support "
+                                 f"is not allowed: {cause}") from None  # fmt: skip
+    d1 = given["d1"].support()[1] if "d1" in given else sc.acoustics.d1
+    d2 = given["d2"].support()[0] if "d2" in given else sc.acoustics.d2
+    if d1 > d2:
+        raise ValueError(f"uncertain.acoustics: d1 may reach {d1} m, above d2's {d2} m "
+                         "(d2 >= d1 is required for every draw)")  # fmt: skip
+
+
+def _check_auv(spec, given: dict[str, Any]) -> None:
+    where = f"uncertain.auv ({spec.name})"
+    behaviours = [b for b in _behaviours(spec) if b is not None]
+    if "speed_factor" in given:
+        lo, hi = given["speed_factor"].support()
+        top = max(b.speed for b in behaviours)
+        if lo <= 0 or hi * top > spec.limits.speed_max:
+            raise ValueError(f"{where}.speed_factor: support [{lo}, {hi}] must be > 0 and keep "
+                             f"its fastest speed {top} m/s within limits.speed_max "
+                             f"{spec.limits.speed_max} m/s")  # fmt: skip
+    if "event_time_s" in given:
+        lo, hi = given["event_time_s"].support()
+        times = sorted(ev.t for ev in spec.events)
+        if not times:
+            raise ValueError(f"{where}.event_time_s: the AUV has no events, so it changes nothing")
+        gap = min((b - a for a, b in zip(times, times[1:], strict=False)), default=math.inf)
+        if times[0] + lo < 0 or hi - lo >= gap:
+            raise ValueError(f"{where}.event_time_s: support [{lo}, {hi}] s must keep the events "
+                             f"at t >= 0 and in order (first at {times[0]} s, closest two "
+                             f"{gap} s apart)")  # fmt: skip
+    if "update_period_s" in given:
+        if not any(hasattr(b, "update_period") for b in behaviours):
+            raise ValueError(f"{where}.update_period_s: the AUV never pursues, so it changes "
+                             "nothing")  # fmt: skip
+        if given["update_period_s"].support()[0] < 0:
+            raise ValueError(f"{where}.update_period_s: must be >= 0 s")
+
+
+# ----------------------------------------------------------------------------- drawing
+
+
+@dataclasses.dataclass(frozen=True)
+class Realisation:
+    """The values one seed drew for a scenario's uncertain quantities.
+
+    ``values`` maps keys such as ``current.speed``, ``acoustics.p_good``,
+    ``auv.auv1.offset_N``, ``auv.auv1.event_time_s.2`` (per event) to the drawn value (SI units,
+    degrees where the key says ``_deg``). ``world`` is a digest of the realised scenario (what
+    is simulated, e.g. a suite's fixed current and duration included). ``id`` is a short hash of
+    all three: equal ids, equal worlds (up to the world's own acoustic draws, from the seed).
+    """
+
+    scenario: str
+    seed: int | None
+    values: dict[str, float]
+    world: str = ""
+
+    @property
+    def id(self) -> str:
+        text = json.dumps({"scenario": self.scenario, "values": self.values,
+                           "world": self.world}, sort_keys=True)  # fmt: skip
+        return hashlib.sha256(text.encode()).hexdigest()[:10]
+
+    def as_dict(self) -> dict[str, Any]:
+        """JSON-ready form (``run.json``'s ``realisation``)."""
+        return {"id": self.id, "scenario": self.scenario, "seed": self.seed,
+                "values": dict(self.values), "world": self.world}  # fmt: skip
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> Realisation:
+        """Inverse of :meth:`as_dict` (the id is checked against the values)."""
+        values = {k: float(v) for k, v in data["values"].items()}
+        real = cls(data["scenario"], data["seed"], values, data.get("world", ""))
+        if "id" in data and data["id"] != real.id:
+            raise ConfigError(f"realisation {data['id']}: the values do not match the id "
+                              f"({real.id})")  # fmt: skip
+        return real
+
+
+def world_digest(sc) -> str:
+    """A digest of a (realised) scenario's every value."""
+    from mpcasv.sim.scenario import _to_plain
+
+    text = json.dumps(_to_plain(sc), sort_keys=True, default=str)
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+def distributions(sc) -> dict[str, Any]:
+    """Every uncertain quantity of scenario ``sc`` as ``{key: distribution}`` (draw order)."""
+    unc: Uncertain = sc.uncertain
+    out = {f"current.{k}": d for k, d in _given(unc.current).items()}
+    out |= {f"asv.{k}": d for k, d in _given(unc.asv).items()}
+    out |= {f"acoustics.{k}": d for k, d in _given(unc.acoustics).items()}
+    for spec in sc.auv:
+        for k, d in auv_uncertainty(unc, spec.name).items():
+            if k == "event_time_s":
+                out |= {f"auv.{spec.name}.{k}.{i}": d for i in range(len(spec.events))}
+            else:
+                out[f"auv.{spec.name}.{k}"] = d
+    return out
+
+
+def draw(sc, seed: int) -> Realisation:
+    """The realisation of scenario ``sc`` for ``seed`` (nothing is simulated)."""
+    return realise(sc, seed)[1]
+
+
+def realise(sc, seed: int):
+    """``(realised scenario, Realisation)`` of scenario ``sc`` for ``seed``.
+
+    Raises
+    ------
+    ConfigError
+        The drawn values make an invalid scenario (a combination the load-time checks cannot
+        rule out), naming the scenario, seed and cause.
+    """
+    values = {k: d.draw(stream(seed, f"{sc.name}/{k}")) for k, d in distributions(sc).items()}
+    done = apply(sc, Realisation(sc.name, seed, values))
+    return done, Realisation(sc.name, seed, values, world_digest(done))
+
+
+def nominal(sc):
+    """``(scenario without its uncertainty, the empty Realisation)``: the file's own values."""
+    done = apply(sc, Realisation(sc.name, None, {}))
+    return done, Realisation(sc.name, None, {}, world_digest(done))
+
+
+def without_current(sc):
+    """``sc`` with its current no longer uncertain (a suite that fixes the current)."""
+    from mpcasv.sim.scenario import scenario_with
+
+    if sc.uncertain.current == CurrentUncertainty():
+        return sc
+    return scenario_with(sc, uncertain=dataclasses.replace(sc.uncertain,
+                                                           current=CurrentUncertainty()))
+
+
+def apply(sc, real: Realisation):
+    """Scenario ``sc`` with the values of ``real`` put in; its ``[uncertain]`` table emptied.
+
+    Raises :class:`~mpcasv.config.ConfigError` when the result is invalid, or when ``real``
+    names a world digest and the result differs from it (``real`` was drawn from another
+    version of the scenario).
+
+    Current: speed and direction replace the nominal ones. ASV: start offsets. Acoustics: the
+    values replace the nominal ones. AUV ``a``: its routes (waypoints, lawnmower origins and
+    headings) and transit headings are turned by ``rotation_deg`` about its nominal start, then
+    moved by ``offset_N/E`` with its start; its start moves by ``start_N/E`` and turns by
+    ``rotation_deg + start_psi_deg``; ``speed_factor`` scales every behaviour speed;
+    ``event_time_s.i`` shifts event ``i``; ``update_period_s`` replaces pursuers' periods.
+    """
+    from mpcasv.sim.scenario import _to_plain, scenario_from_dict
+
+    v = real.values
+    data = _to_plain(sc)
+    data["uncertain"] = {}
+    if "current.speed" in v or "current.direction_deg" in v:
+        speed = v.get("current.speed", math.hypot(*sc.current))
+        chi = math.radians(v.get("current.direction_deg",
+                                 math.degrees(math.atan2(sc.current[1], sc.current[0]))))
+        data["current"] = [speed * math.cos(chi), speed * math.sin(chi)]  # (V_N, V_E)
+    start = data["asv"]["start"]
+    for k in ("N", "E", "psi_deg"):
+        start[k] += v.get(f"asv.start_{k}", 0.0)
+    for k in ACOUSTIC_FIELDS:
+        if f"acoustics.{k}" in v:
+            data["acoustics"][k] = v[f"acoustics.{k}"]
+    for a in data["auv"]:
+        _apply_auv(a, {k.split(".", 2)[2]: x for k, x in v.items()
+                       if k.startswith(f"auv.{a['name']}.")})  # fmt: skip
+    try:
+        done = scenario_from_dict(data, f"{sc.name} realisation of seed {real.seed}")
+    except ConfigError as exc:
+        raise ConfigError(f"scenario {sc.name!r}: the values drawn for seed {real.seed} make an "
+                          f"invalid scenario: {str(exc).splitlines()[-1].strip()}") from None
+    if real.world and world_digest(done) != real.world:
+        raise ConfigError(f"scenario {sc.name!r}: realisation {real.id} was drawn from another "
+                          "version of the scenario (its world digest differs)")  # fmt: skip
+    return done
+
+
+def _apply_auv(a: dict, v: dict[str, float]) -> None:
+    N0, E0 = a["start"]["N"], a["start"]["E"]
+    rot = math.radians(v.get("rotation_deg", 0.0))
+    dN, dE = v.get("offset_N", 0.0), v.get("offset_E", 0.0)
+    c, s = math.cos(rot), math.sin(rot)
+
+    def move(N: float, E: float) -> list[float]:  # turn about the nominal start, then offset
+        n, e = N - N0, E - E0
+        return [N0 + c * n - s * e + dN, E0 + s * n + c * e + dE]
+
+    a["start"]["N"] = N0 + dN + v.get("start_N", 0.0)
+    a["start"]["E"] = E0 + dE + v.get("start_E", 0.0)
+    a["start"]["psi_deg"] += v.get("rotation_deg", 0.0) + v.get("start_psi_deg", 0.0)
+    f = v.get("speed_factor", 1.0)
+    for i, ev in enumerate(a["events"]):
+        ev["t"] += v.get(f"event_time_s.{i}", 0.0)
+    for b in (a["behaviour"], *a["events"]):
+        if b.get("plan"):
+            p = b["plan"]
+            p["speed"] *= f
+            p["surface_speed"] *= f
+            for seg in p["route"]:
+                if seg.get("waypoints"):
+                    seg["waypoints"] = [[*move(w[0], w[1]), w[2]] for w in seg["waypoints"]]
+                if seg.get("lawnmower"):
+                    lm = seg["lawnmower"]
+                    lm["origin"] = move(*lm["origin"])
+                    lm["heading_deg"] += v.get("rotation_deg", 0.0)
+        if b.get("transit"):
+            b["transit"]["speed"] *= f
+            b["transit"]["heading_deg"] += v.get("rotation_deg", 0.0)
+        if b.get("pursuer"):
+            b["pursuer"]["speed"] *= f
+            if "update_period_s" in v:
+                b["pursuer"]["update_period"] = v["update_period_s"]
+
+
+__all__ = ["Uncertain", "Realisation", "Uniform", "Normal", "Choice", "draw", "realise",
+           "apply", "nominal", "without_current", "distributions", "stream",
+           "check_uncertain"]  # fmt: skip
