@@ -56,8 +56,9 @@ def run(args: argparse.Namespace) -> int:
     result = simulate(scenario, controller, args.seed, args.estimator, progress=not args.quiet)
     extra = {"preset": preset, "estimator": args.estimator or scenario.estimator}
     metrics = write_run(result, out, plots=not args.no_plots, extra=extra)
-    keys = ("duration_s", "asv_distance_m", "distance_ratio", "standby_fraction", "min_range_m",
-            "max_fix_age_overall_s", "fallbacks")  # fmt: skip
+    keys = ("duration_s", "asv_distance_m", "min_range_m", "collision_domain_s",
+            "reliable_fix_age_max_s", "reliable_fix_age_p95_s", "nav_error_rms_m",
+            "nav_error_p95_m", "propeller_on_s", "energy_J", "fallbacks")  # fmt: skip
     print(f"wrote {out}/ (timeseries.parquet, metrics.json, plots) in {result.wall_s:.2f} s")
     for k in keys:
         v = metrics[k]
