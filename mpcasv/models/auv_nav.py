@@ -96,7 +96,10 @@ class AUVNavFilter:
     def sigma(self, t: float) -> np.ndarray:
         """Each filter's own 1-sigma error radius (m, shape (n_auv,)): sqrt of the largest
         eigenvalue of :meth:`cov`."""
-        return np.sqrt(np.maximum(np.linalg.eigvalsh(self.cov(t))[:, -1], 0.0))
+        P = self.cov(t)
+        a, b, d = P[:, 0, 0], P[:, 0, 1], P[:, 1, 1]
+        lam = 0.5 * (a + d) + np.sqrt(0.25 * (a - d) ** 2 + b * b)  # 2x2 symmetric
+        return np.sqrt(np.maximum(lam, 0.0))
 
     def update(self, k: int, t: float, v: np.ndarray, R: np.ndarray) -> np.ndarray:
         """Aid AUV ``k`` at time ``t`` with a position measurement whose error is ``v``.
@@ -116,17 +119,42 @@ class AUVNavFilter:
         ndarray, shape (2,)
             How far the estimate moved, ``K (z - p_hat)`` (m).
         """
-        e = self.error(t)[k]
-        P = self.cov(t)[k]
-        R = np.asarray(R, float).reshape(2, 2)
-        S = P + R
-        if np.linalg.det(S) <= 0.0:  # both exact: nothing to fuse (only at t = 0)
-            K = np.zeros((2, 2))
-        else:
-            K = P @ np.linalg.inv(S)
-        move = K @ (np.asarray(v, float) - e)
-        IK = np.eye(2) - K
+        dt = t - self.t_u[k]
+        c = self.p.drift_per_distance * self.dist[k]
+        e = self.e_u[k] + 0.5 * self.a[k] * dt**2 + c * self.dirn[k]  # (N1)
+        g = self.p.eps_a**2 / 8.0 * dt**4 + 0.5 * c * c  # (N2)
+        (p00, p01), (_, p11) = self.P_u[k]
+        p00, p11 = p00 + g, p11 + g
+        (r00, r01), (_, r11) = np.asarray(R, float).reshape(2, 2)
+        s00, s01, s11 = p00 + r00, p01 + r01, p11 + r11
+        det = s00 * s11 - s01 * s01
+        if det <= 0.0:  # both exact: nothing to fuse (only at t = 0)
+            k00 = k01 = k10 = k11 = 0.0
+        else:  # K = P S^-1 (2x2, symmetric P and S)
+            i00, i01, i11 = s11 / det, -s01 / det, s00 / det
+            k00, k01 = p00 * i00 + p01 * i01, p00 * i01 + p01 * i11
+            k10, k11 = p01 * i00 + p11 * i01, p01 * i01 + p11 * i11
+        y0, y1 = float(v[0]) - e[0], float(v[1]) - e[1]
+        move = np.array([k00 * y0 + k01 * y1, k10 * y0 + k11 * y1])
         self.e_u[k] = e + move  # (N3): e+ = (I - K) e + K v
-        self.P_u[k] = IK @ P @ IK.T + K @ R @ K.T
+        self.P_u[k] = _joseph(((1.0 - k00, -k01), (-k10, 1.0 - k11)), (p00, p01, p11),
+                              ((k00, k01), (k10, k11)), (r00, r01, r11))  # fmt: skip
         self._new_interval(k, t)
         return move
+
+
+def _sandwich(A, S) -> tuple[float, float, float]:
+    """``A S A^T`` for a 2x2 ``A`` and a symmetric ``S = (s00, s01, s11)``: (00, 01, 11)."""
+    (a, b), (c, d) = A
+    s00, s01, s11 = S
+    u00, u01 = a * s00 + b * s01, a * s01 + b * s11  # row 0 of A S
+    u10, u11 = c * s00 + d * s01, c * s01 + d * s11  # row 1
+    return u00 * a + u01 * b, u00 * c + u01 * d, u10 * c + u11 * d
+
+
+def _joseph(IK, P, K, R) -> np.ndarray:
+    """Joseph-form posterior ``(I - K) P (I - K)^T + K R K^T`` (2x2, in floats: this runs
+    every period for every AUV at the surface)."""
+    a, b, c = _sandwich(IK, P)
+    x, y, z = _sandwich(K, R)
+    return np.array([[a + x, b + y], [b + y, c + z]])

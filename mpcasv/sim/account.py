@@ -21,7 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from mpcasv.config import load_toml, parse, resolve
-from mpcasv.hybrid.domains import DomainParams, in_target_domain
+from mpcasv.hybrid.domains import DomainParams, in_target_domain, r_inner, r_outer
 
 __all__ = ["StepAccount", "classify", "evaluation_domain", "stay_lengths", "unknown_seconds"]
 
@@ -74,17 +74,17 @@ class StepAccount:
         columns ``prop_on_s``, ``coll_s``, ``coll_stay_s`` (longest stay reached),
         ``beyond_s``, ``escape_s`` (propeller on inside a collision domain), ``track_s``
         (propeller on beyond every r_outer), and per AUV ``coll{k}_s``, ``target{k}_s``."""
-        dt = self.dt
+        dt, cnt = self.dt, np.count_nonzero
         prop, coll, beyond = self.prop[j], self.any_coll[j], self.all_beyond[j]
         out = {
-            "prop_on_s": float(prop.sum() * dt), "coll_s": float(coll.sum() * dt),
-            "coll_stay_s": float(self.stay[j].max()), "beyond_s": float(beyond.sum() * dt),
-            "escape_s": float((prop & coll).sum() * dt),
-            "track_s": float((prop & beyond).sum() * dt),
+            "prop_on_s": cnt(prop) * dt, "coll_s": cnt(coll) * dt,
+            "coll_stay_s": float(self.stay[j].max()), "beyond_s": cnt(beyond) * dt,
+            "escape_s": cnt(prop & coll) * dt, "track_s": cnt(prop & beyond) * dt,
         }  # fmt: skip
+        per_coll, per_target = cnt(self.coll[:, j], axis=1), cnt(self.target[:, j], axis=1)
         for k in range(self.coll.shape[0]):
-            out[f"coll{k}_s"] = float(self.coll[k, j].sum() * dt)
-            out[f"target{k}_s"] = float(self.target[k, j].sum() * dt)
+            out[f"coll{k}_s"] = float(per_coll[k] * dt)
+            out[f"target{k}_s"] = float(per_target[k] * dt)
         return out
 
 
@@ -116,9 +116,11 @@ def classify(domain: DomainParams, ranges: np.ndarray, depths: np.ndarray, prop:
     carry : float
         Continuous stay inside a collision domain (s) at the end of the previous period.
     """
-    coll = ranges < domain.inner(depths)
-    target = in_target_domain(ranges, domain.target(depths), domain.eps_minus, domain.eps_plus)
-    beyond = ranges > domain.outer(depths)
+    inner = r_inner(depths, domain.r_in)  # = r_avoid,k with several AUVs (Paper 2 eq. 5)
+    coll = ranges < inner
+    r_t = inner + domain.delta_r  # Paper 1 eq. 8; Paper 2 eq. 6
+    target = in_target_domain(ranges, r_t, domain.eps_minus, domain.eps_plus)
+    beyond = ranges > r_outer(depths, domain.r_out)
     inside = coll.any(axis=0)
     if inside.any() or carry > 0:
         stay = stay_lengths(inside, carry, dt)
