@@ -88,7 +88,7 @@ def plot_fix_age(result, path: str | Path) -> Path:
     """Per AUV: Paper 2's reliable-fix age tau_k (eq. 9, solid; reliable fixes ticked) and
     the age of the last fix that arrived at all (thin), from the simulator's ground truth."""
     ts = result.timeseries
-    fig, ax = plt.subplots(figsize=(9, 3.2))
+    fig, ax = plt.subplots(figsize=(11, 3.4))
     for k in range(_n_auv(ts)):
         c = AUV_COLOURS[k % len(AUV_COLOURS)]
         name = result.scenario.auv[k].name
@@ -102,7 +102,7 @@ def plot_fix_age(result, path: str | Path) -> Path:
     ax.set_xlabel("time (s)")
     ax.set_ylabel("age (s)")
     ax.grid(alpha=0.3)
-    ax.legend(fontsize=7, ncol=2)
+    ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0))
     ax.set_title("Fix ages per AUV (ticks: reliable fixes, Paper 2 eq. 9)")
     return _save(fig, path)
 
