@@ -64,6 +64,7 @@ class AUVNavFilter:
         self.p, self.rng = p, rng
         self.e_u = np.zeros((n_auv, 2))  # error right after the last update, m
         self.P_u = np.zeros((n_auv, 2, 2))  # its covariance, m^2
+        self.lam_u = np.zeros(n_auv)  # largest eigenvalue of P_u, m^2
         self.a = np.zeros((n_auv, 2))  # accelerometer error of this DR interval, m/s^2
         self.dirn = np.zeros((n_auv, 2))  # direction of the distance-proportional drift
         self.t_u = np.zeros(n_auv)  # time of the last update, s
@@ -87,19 +88,19 @@ class AUVNavFilter:
         drift = self.p.drift_per_distance * self.dist[:, None] * self.dirn
         return self.e_u + 0.5 * self.a * dt**2 + drift
 
+    def _grow(self, t: float) -> np.ndarray:
+        """Variance per axis added since each AUV's last update (m^2, shape (n_auv,)), N2."""
+        dt = t - self.t_u
+        return self.p.eps_a**2 / 8.0 * dt**4 + 0.5 * (self.p.drift_per_distance * self.dist) ** 2
+
     def cov(self, t: float) -> np.ndarray:
         """The filters' covariances at time ``t``: shape (n_auv, 2, 2), m^2 (N2)."""
-        dt = t - self.t_u
-        grow = self.p.eps_a**2 / 8.0 * dt**4 + 0.5 * (self.p.drift_per_distance * self.dist) ** 2
-        return self.P_u + grow[:, None, None] * np.eye(2)
+        return self.P_u + self._grow(t)[:, None, None] * np.eye(2)
 
     def sigma(self, t: float) -> np.ndarray:
         """Each filter's own 1-sigma error radius (m, shape (n_auv,)): sqrt of the largest
-        eigenvalue of :meth:`cov`."""
-        P = self.cov(t)
-        a, b, d = P[:, 0, 0], P[:, 0, 1], P[:, 1, 1]
-        lam = 0.5 * (a + d) + np.sqrt(0.25 * (a - d) ** 2 + b * b)  # 2x2 symmetric
-        return np.sqrt(np.maximum(lam, 0.0))
+        eigenvalue of :meth:`cov` (that of ``P_u`` plus the isotropic growth)."""
+        return np.sqrt(self.lam_u + self._grow(t))
 
     def update(self, k: int, t: float, v: np.ndarray, R: np.ndarray) -> np.ndarray:
         """Aid AUV ``k`` at time ``t`` with a position measurement whose error is ``v``.
@@ -137,8 +138,10 @@ class AUVNavFilter:
         y0, y1 = float(v[0]) - e[0], float(v[1]) - e[1]
         move = np.array([k00 * y0 + k01 * y1, k10 * y0 + k11 * y1])
         self.e_u[k] = e + move  # (N3): e+ = (I - K) e + K v
-        self.P_u[k] = _joseph(((1.0 - k00, -k01), (-k10, 1.0 - k11)), (p00, p01, p11),
-                              ((k00, k01), (k10, k11)), (r00, r01, r11))  # fmt: skip
+        a, b, d = _joseph(((1.0 - k00, -k01), (-k10, 1.0 - k11)), (p00, p01, p11),
+                          ((k00, k01), (k10, k11)), (r00, r01, r11))  # fmt: skip
+        self.P_u[k] = ((a, b), (b, d))
+        self.lam_u[k] = max(0.5 * (a + d) + math.sqrt(0.25 * (a - d) ** 2 + b * b), 0.0)
         self._new_interval(k, t)
         return move
 
@@ -152,9 +155,9 @@ def _sandwich(A, S) -> tuple[float, float, float]:
     return u00 * a + u01 * b, u00 * c + u01 * d, u10 * c + u11 * d
 
 
-def _joseph(IK, P, K, R) -> np.ndarray:
-    """Joseph-form posterior ``(I - K) P (I - K)^T + K R K^T`` (2x2, in floats: this runs
-    every period for every AUV at the surface)."""
+def _joseph(IK, P, K, R) -> tuple[float, float, float]:
+    """Joseph-form posterior ``(I - K) P (I - K)^T + K R K^T`` as (00, 01, 11) (2x2, in
+    floats: this runs every period for every AUV at the surface)."""
     a, b, c = _sandwich(IK, P)
     x, y, z = _sandwich(K, R)
-    return np.array([[a + x, b + y], [b + y, c + z]])
+    return a + x, b + y, c + z
