@@ -73,6 +73,9 @@ _BASE: dict[str, MetricInfo] = {
     "transit_reposition_s": _i("s", None, "the rest of the propeller-on time (the "
                                "controller's own choice to move)", "propeller_on_s minus the "
                                "two above"),
+    "target_domain_s_auv": _i("s", None, "per AUV: time the ASV is in that AUV's target "
+                              "domain r_t,k - eps_minus <= r_k <= r_t,k + eps_plus (where it "
+                              "waits; descriptive)", "Paper 1 eq. 10; Paper 2 eq. 7"),
     "label_avoidance_s": _i("s", None, "DIAGNOSTIC: periods commanded 'transit' with the "
                             "controller's reason 'avoidance' (meaning differs between "
                             "controllers; never a safety figure)", "Paper 1 §2.3 labels"),
@@ -294,6 +297,7 @@ def compute_metrics(result) -> dict:
         # per-AUV lists
         "auv_distance_m_auv": auv_d,
         "collision_domain_s_auv": coll_auv,
+        "target_domain_s_auv": [_sum(ts, f"target{k}_s") for k in range(n_auv)],
         "reliable_fix_age_max_s_auv": rel_auv["max"],
         "reliable_fix_age_p95_s_auv": rel_auv["p95"],
         "reliable_fix_age_mean_s_auv": rel_auv["mean"],

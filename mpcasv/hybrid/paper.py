@@ -90,8 +90,8 @@ def ours(case: str, m: dict, ts) -> dict[str, str]:
     """Our values for the rows of the table, from a run's metrics and time series."""
     n_auv = sum(1 for c in ts.columns if c.startswith("range_min"))
     r = ts[[f"range{k}" for k in range(n_auv)]]
-    inside = sum(int((ts[f"range{k}"] < ts[f"r_inner{k}"]).any()) for k in range(n_auv)
-                 if f"r_inner{k}" in ts)  # fmt: skip
+    # AUVs whose collision domain the ASV entered (ground-truth account, plant steps)
+    inside = sum(int(ts[f"coll{k}_s"].sum() > 0) for k in range(n_auv) if f"coll{k}_s" in ts)
     return {
         "auv_distance_m": _fmt(m["auv_distance_m"]),
         "asv_distance_m": _fmt(m["asv_distance_m"]),
