@@ -117,6 +117,7 @@ def timeseries_row(world: World, obs, cmd, period, step_ms: float) -> dict:
     acc = period.account
     row |= acc.step_seconds() if acc is not None else unknown_seconds(world.n_auv)
     row["prop_on_s"] = float(period.prop.sum() * world.dt)
+    radii = world.radii()
     for k, e in enumerate(obs.auvs):
         r = math.hypot(x[0] - S[0, k], x[1] - S[1, k])
         row |= {
@@ -134,13 +135,9 @@ def timeseries_row(world: World, obs, cmd, period, step_ms: float) -> dict:
             f"rfix_age{k}": period.t1 - world.last_reliable[k],
             f"nav_err{k}": nav_err[k], f"nav_sigma{k}": nav_sigma[k],
         }  # fmt: skip
-        if world.domain is not None:
-            d = S[2, k]
-            row |= {
-                f"r_inner{k}": float(world.domain.inner(d)),
-                f"r_outer{k}": float(world.domain.outer(d)),
-                f"r_t{k}": float(world.domain.target(d)),
-            }
+        if radii is not None:
+            row |= {f"r_inner{k}": float(radii[0][k]), f"r_outer{k}": float(radii[1][k]),
+                    f"r_t{k}": float(radii[2][k])}  # fmt: skip
     return row
 
 

@@ -26,6 +26,7 @@ import numpy as np
 from mpcasv.control.execution import NZ, closed_loop
 from mpcasv.control.params import ExecutionParams, load_execution
 from mpcasv.estimation import known_plan, make_estimator
+from mpcasv.hybrid.domains import r_inner, r_outer, r_target
 from mpcasv.interface import ASVState, AUVEstimate, Observation
 from mpcasv.models.acoustics import Report, success_probability, usbl_fix
 from mpcasv.models.auv import NA, auv_step_function
@@ -110,6 +111,8 @@ class World:
         self.thr_on = self.ep.propeller_on_threshold * self.model.params.T_max
         self.current = np.array(scenario.current, float)
         self.domain = evaluation_domain(scenario)
+        if self.domain is not None:  # the spheres' radii, once (Paper 1 eqs. 3-4)
+            self._r_in, self._r_out = self.domain.r_in, self.domain.r_out
         self.t = 0.0
 
         s0 = scenario.asv.start
@@ -197,18 +200,19 @@ class World:
         self.nav.advance(np.hypot(S_next[0] - self.S[0], S_next[1] - self.S[1]))
         self.x, self.z, self.S = np.array(x_next).ravel(), np.array(z).ravel(), S_next
         self.t = t0 + self.Tc
-        fixes, reliable = self._acoustics()
-        visiting = np.array([self.visiting(k) for k in range(self.n_auv)])
+        visiting = self.visiting()  # at the period's end, when its pings are evaluated
+        fixes, reliable = self._acoustics(visiting)
         return Period(t0, self.t, X, Uin, Y, ranges, slants, fixes, reliable, visiting, prop,
                       account)  # fmt: skip
 
-    def _acoustics(self) -> tuple[np.ndarray, np.ndarray]:
+    def _acoustics(self, visiting: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """USBL pings and status reports due in the period just ended (evaluated at its end).
 
         A successful fix goes to the ASV's estimator; the ASV then sends it to the AUV over
         the same acoustic link (success probability as the ping's, drawn from ``nav_rng``),
         whose navigation filter fuses it with the fix's covariance. A fix that arrives while
-        :meth:`visiting` holds is reliable (Paper 2 eq. 9). At the surface the AUV has GPS.
+        :meth:`visiting` holds (``visiting``, per AUV, now) is reliable (Paper 2 eq. 9). At
+        the surface the AUV has GPS.
         """
         ac, t1, S, rng, nav_rng = self.ac, self.t, self.S, self.rng, self.nav_rng
         prop = self.propeller_on
@@ -233,7 +237,7 @@ class World:
                     fixes[k] += 1
                     self.fix_times[k].append(t1)
                     self.last_fix[k] = t1
-                    if self.visiting(k):
+                    if visiting[k]:
                         reliable[k] += 1
                         self.reliable_times[k].append(t1)
                         self.last_reliable[k] = t1
@@ -247,13 +251,21 @@ class World:
                     ))  # fmt: skip
         return fixes, reliable
 
-    def visiting(self, k: int) -> bool:
-        """Paper 2's reliable-fix rule (eq. 9) for AUV ``k`` now, with the scenario's domain:
-        r_k < r_t,k + eps at the AUV's true range and depth, and the propeller off. A fix
-        that arrives while this holds is a reliable fix. Never without an evaluation domain.
-        """
+    def visiting(self) -> np.ndarray:
+        """Paper 2's reliable-fix rule (eq. 9) per AUV now, with the scenario's domain:
+        r_k < r_t,k + eps at the AUV's true range and depth, and the propeller off (shape
+        (n_auv,), bool). A fix that arrives while this holds is a reliable fix. Never true
+        without an evaluation domain."""
         if self.domain is None:
-            return False
-        r_h = math.hypot(self.x[0] - self.S[0, k], self.x[1] - self.S[1, k])
-        r_t = self.domain.target(self.S[2, k])
-        return bool(self.domain.reliable_fix_possible(r_h, r_t, self.propeller_on))
+            return np.zeros(self.n_auv, bool)
+        r_h = np.hypot(self.x[0] - self.S[0], self.x[1] - self.S[1])
+        r_t = r_target(self.S[2], self._r_in, self.domain.delta_r)  # Paper 2 eq. 6
+        return self.domain.reliable_fix_possible(r_h, r_t, self.propeller_on)
+
+    def radii(self) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+        """(r_inner = r_avoid,k, r_outer, r_t) of each AUV at its true depth now (m, shape
+        (n_auv,)), from the scenario's domain; None without one."""
+        if self.domain is None:
+            return None
+        inner = r_inner(self.S[2], self._r_in)
+        return inner, r_outer(self.S[2], self._r_out), inner + self.domain.delta_r
