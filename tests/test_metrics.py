@@ -231,3 +231,23 @@ def test_nothing_in_the_geometry_module_imports_upward():
     imports = [ln for ln in src.splitlines() if ln.startswith(("import ", "from "))]
     assert all("mpcasv" not in ln or "mpcasv.config" in ln for ln in imports), imports
     assert math.isfinite(FIELD.r_in)
+
+
+def test_revisit_interval_is_between_real_reliable_fixes_with_several_auvs():
+    """Paper 2's 'time between consecutive visits' (Cases 6-7): gaps between reliable fixes
+    only, not from t = 0 nor to the end; an AUV with fewer than two reliable fixes has no
+    finite interval (null)."""
+    sc = scenario_from_dict({
+        "name": "two", "duration": 60.0, "controller": "hybrid-multi", "preset": "paper2-field",
+        "auv": [{"name": n, "start": {"N": N}, "behaviour": {"transit": {
+            "heading_deg": 90.0, "speed": 1.0}}} for n, N in (("a", 60.0), ("b", -60.0))],
+    })  # fmt: skip
+    res = simulate(sc, make_controller("goto", 2, None, overrides={"waypoint": [0.0, 0.0]}), 0)
+    hand = dataclasses.replace(res, reliable_fix_times=[[10.0, 15.0, 40.0], [5.0, 40.0]])
+    m = compute_metrics(hand)
+    assert m["revisit_interval_max_s"] == 35.0  # AUV b: 5 -> 40 (AUV a: at most 25)
+    assert m["reliable_fix_age_max_s_auv"] == [25.0, 35.0]  # a: 0-10, 40-60 (end) count too
+    hand = dataclasses.replace(res, reliable_fix_times=[[10.0, 15.0, 50.0], [5.0]])
+    m = compute_metrics(hand)
+    assert m["revisit_interval_max_s"] == math.inf  # written as null in metrics.json
+    assert m["reliable_fix_age_max_s"] == 55.0  # b: 5 -> 60 (the end) without a fix
