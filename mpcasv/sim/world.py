@@ -11,8 +11,9 @@ SCENARIO's evaluation domain, and per AUV the fixes and reliable fixes (Paper 2 
 
 Randomness: two generators from the one seed, so that the AUVs' navigation never shifts the
 acoustic draws: ``rng`` (``default_rng(seed)``: USBL ping success and fix errors, status
-reports) and ``nav_rng`` (a spawned child of ``SeedSequence(seed)``: the fix sent back to the
-AUV getting through, INS errors, GPS noise). Draws happen in a fixed order per period.
+reports) and ``nav_rng`` (``SeedSequence(seed, spawn_key=(NAV_STREAM,))``: the fix sent back
+to the AUV getting through, INS errors, GPS noise; apart from the scenario-realisation streams,
+whose first spawn key is another tag). Draws happen in a fixed order per period.
 """
 
 from __future__ import annotations
@@ -41,6 +42,8 @@ _PLANT_CACHE: dict = {}
 #: sigma is 0 right after the known start, and a report of zero uncertainty would be trusted
 #: absolutely by the ASV's estimators
 REPORT_SIGMA_MIN = 1.0
+#: spawn key of the AUVs' navigation stream ("NAV")
+NAV_STREAM = 0x4E4156
 
 
 def build_plant(scenario: Scenario):
@@ -103,7 +106,7 @@ class World:
     def __init__(self, scenario: Scenario, seed: int = 0, estimator: str | None = None):
         self.sc, self.ac = scenario, scenario.acoustics
         self.rng = np.random.default_rng(seed)
-        self.nav_rng = np.random.default_rng(np.random.SeedSequence(seed).spawn(1)[0])
+        self.nav_rng = np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(NAV_STREAM,)))
         self.model, self.ep, self.CL = build_plant(scenario)
         self._CL = _packed(self.CL)
         self.n_auv, self.n_sub = len(scenario.auv), scenario.sim.n_sub
