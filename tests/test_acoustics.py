@@ -1,4 +1,5 @@
-"""Acoustic channel: success curve, range-dependent fix error, INS drift, reliable-fix rule."""
+"""Acoustic channel: success curve, range-dependent fix error. (INS drift and the AUV's own
+filter: tests/test_auv_nav.py; the reliable-fix rule: tests/test_metrics.py.)"""
 
 from __future__ import annotations
 
@@ -9,9 +10,6 @@ import pytest
 
 from mpcasv.models.acoustics import (
     AcousticParams,
-    INSDrift,
-    NavParams,
-    reliable_fix,
     success_probability,
     usbl_fix,
 )
@@ -60,23 +58,3 @@ def test_fix_error_grows_with_range_as_bearing_error_times_range():
         assert abs(across / (math.radians(1.0) * r) - 1) < 0.06  # eq. 2.9
         assert abs(along / 0.5 - 1) < 0.06
         assert abs(math.sqrt(fixes[0].cov[3]) - math.radians(1.0) * r) < 1e-9
-
-
-def test_ins_drift_grows_as_half_eps_a_t_squared():
-    eps_a = 0.002
-    errs = []
-    for seed in range(400):
-        ins = INSDrift(1, NavParams(eps_a=eps_a), np.random.default_rng(seed))
-        errs.append(np.hypot(*ins.error(100.0)[0]))
-    rms = math.sqrt(np.mean(np.square(errs)))
-    assert abs(rms / (0.5 * eps_a * 100.0**2) - 1) < 0.12  # eq. 2.7, RMS over seeds
-
-
-def test_reliable_fix_rule():
-    assert reliable_fix(50.0, 60.0, 10.0, False)
-    assert not reliable_fix(71.0, 60.0, 10.0, False)  # outside r_t + eps
-    assert not reliable_fix(50.0, 60.0, 10.0, True)  # propeller on
-    assert not reliable_fix(50.0, 60.0, 10.0, False, transmitted=False)
-    assert list(reliable_fix(np.array([50.0, 80.0]), 60.0, 10.0, np.array([False, False]))) == [
-        True, False,
-    ]  # fmt: skip

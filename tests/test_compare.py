@@ -41,13 +41,13 @@ def test_quick_suite_runs_every_job_once_and_writes_its_run(serial):
         metrics = json.loads((out / row["run_dir"] / "metrics.json").read_text())
         assert set(metrics) == set(METRIC_NAMES)
         assert row["min_range_m"] == pytest.approx(metrics["min_range_m"])
-        for k, v in enumerate(metrics["fixes"]):  # per-AUV lists expanded
-            assert row[f"fixes_auv{k}"] == v
+        for k, v in enumerate(metrics["fixes_auv"]):  # per-AUV lists expanded
+            assert row[f"fixes_auv_auv{k}"] == v
     assert sorted(p.stem for p in (out / "parts").glob("*.parquet")) == sorted(df["job_id"])
     # the grid, the currents and the seeds all reach the simulation
     assert df.groupby("variant")["asv_distance_m"].mean().nunique() == 2
     assert df.groupby("current")["energy_J"].mean().nunique() == 2
-    assert df.groupby("seed")["fixes_auv0"].apply(list).map(tuple).nunique() == 2
+    assert df.groupby("seed")["fixes_auv_auv0"].apply(list).map(tuple).nunique() == 2
 
 
 @pytest.fixture(scope="module")
@@ -101,7 +101,7 @@ def test_report_has_every_metric_per_scenario_and_its_figures(serial):
     )
     # per-AUV metrics have one row per AUV, named
     for name in df.loc[df["scenario"] == "case8", "auv_names"].iloc[0].split(","):
-        assert f"| fixes [{name}] " in section
+        assert f"| fixes_auv [{name}] " in section
 
 
 def test_same_suite_and_seeds_give_the_same_report_numbers(serial, pool):
@@ -141,14 +141,14 @@ def test_win_loss_counts_in_each_metrics_direction():
                     "status": "ok",
                     "min_range_m": r + noise,
                     "energy_J": e + noise,
-                    "fixes_auv0": 3,
-                    "fixes_auv1": 1 + seed,
+                    "fixes_auv_auv0": 3,
+                    "fixes_auv_auv1": 1 + seed,
                 }
             )
     wl = win_loss(pd.DataFrame(rows)).set_index("metric")
     assert tuple(wl.loc["min_range_m", ["A_wins", "B_wins", "ties"]]) == (1, 0, 1)
     assert tuple(wl.loc["energy_J", ["A_wins", "B_wins", "ties"]]) == (1, 1, 0)
-    assert tuple(wl.loc["fixes", ["A_wins", "B_wins", "ties"]]) == (0, 0, 2)
+    assert tuple(wl.loc["fixes_auv", ["A_wins", "B_wins", "ties"]]) == (0, 0, 2)
     summ = summary_table(pd.DataFrame(rows))
     cell = summ[(summ["scenario"] == "s1") & (summ["variant"] == "A")
                 & (summ["metric"] == "min_range_m")].iloc[0]  # fmt: skip

@@ -335,11 +335,11 @@ def test_compare_metrics_tolerances():
     base = {k: 100.0 for k in COMPARABLE}
     assert all(v["ok"] for v in compare_metrics(base, base | {"energy_J": 109.0}).values())
     assert not compare_metrics(base, base | {"energy_J": 112.0})["energy_J"]["ok"]
-    zero = base | {"time_outside_outer_s": 0.0}
+    zero = base | {"beyond_outer_s": 0.0}
     # sums of whole control periods may differ by one period, not more
-    assert compare_metrics(zero, zero | {"time_outside_outer_s": 1.0})["time_outside_outer_s"]["ok"]
-    assert not compare_metrics(zero, zero | {"time_outside_outer_s": 2.0})[
-        "time_outside_outer_s"]["ok"]  # fmt: skip
+    assert compare_metrics(zero, zero | {"beyond_outer_s": 1.0})["beyond_outer_s"]["ok"]
+    assert not compare_metrics(zero, zero | {"beyond_outer_s": 2.0})[
+        "beyond_outer_s"]["ok"]  # fmt: skip
     assert not compare_metrics(base | {"min_range_m": 0.0}, base | {"min_range_m": 1.0})[
         "min_range_m"]["ok"]  # fmt: skip
 

@@ -1,36 +1,191 @@
-"""Run metrics: the one definition of every number in ``metrics.json``.
+"""Run metrics: the one definition of every number in ``metrics.json`` (docs/metrics.md).
 
-Names are fixed (other tools read them). Lists hold one value per AUV. Times are in s,
-distances in m, energy in J (propulsive: thrust x speed through the water, integrated at
-the plant step).
+Every safety and liveness figure comes from the simulator's ground-truth account (true
+positions and depths, plant-step resolution, the SCENARIO's evaluation domain; see
+:mod:`mpcasv.sim.account`), the same for every controller whatever its labels. The
+controller's own reason labels appear only as diagnostics (``label_*``).
+
+Names are fixed (other tools read them). Scalars aggregate over AUVs as stated in
+:data:`METRIC_INFO`; the per-AUV lists carry the suffix ``_auv``. Times are in s, distances
+in m, energy in J (propulsive: thrust x speed through the water, integrated at the plant
+step). ``None`` (JSON null) means "not defined for this run" (e.g. a domain-based metric of a
+scenario without an evaluation domain).
 """
 
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
 
-METRIC_NAMES = (
-    "duration_s", "asv_distance_m", "auv_distance_m", "distance_ratio", "standby_s",
-    "transit_tracking_s", "transit_avoidance_s", "standby_fraction", "min_range_m",
-    "min_slant_range_m", "time_inside_inner_s", "time_outside_outer_s", "fixes",
-    "reliable_fixes", "max_fix_age_s", "max_fix_age_overall_s", "mean_fix_age_s",
-    "max_revisit_interval_s", "nav_error_rms_m", "nav_error_max_m", "belief_range_error_rms_m",
-    "belief_range_jump_max_m", "propeller_on_s", "energy_J", "mode_switches",
-    "controller_step_ms_median", "controller_step_ms_p99", "fallbacks",
+
+@dataclass(frozen=True)
+class MetricInfo:
+    """What a metric means: unit, which way is better (``"lower"``, ``"higher"`` or None for
+    a descriptive figure), definition and source (paper and equation)."""
+
+    unit: str
+    better: str | None
+    definition: str
+    source: str
+
+
+_P1, _P2 = "Paper 1", "Paper 2"
+_ACC = "ground-truth account, scenario's domain (mpcasv.sim.account)"
+
+
+def _i(unit, better, definition, source=""):
+    return MetricInfo(unit, better, definition, source)
+
+
+def _per_auv(info: MetricInfo) -> MetricInfo:
+    return MetricInfo(info.unit, info.better, f"per AUV: {info.definition}", info.source)
+
+
+_BASE: dict[str, MetricInfo] = {
+    # --- run -----------------------------------------------------------------------------
+    "duration_s": _i("s", None, "simulated time (end of the last period)"),
+    "asv_distance_m": _i("m", "lower", "path length of the ASV (period ends)"),
+    "auv_distance_m": _i("m", None, "path length of the AUVs, mean over AUVs"),
+    "distance_ratio": _i("1", "lower", "asv_distance_m / auv_distance_m",
+                         "thesis Table 4.1 (ASV/AUV distance)"),
+    # --- safety (ground truth) -----------------------------------------------------------
+    "min_range_m": _i("m", "higher", "minimum true horizontal ASV-AUV range over AUVs and "
+                      "plant steps", "Paper 1 eq. 6; Paper 2 eq. 3"),
+    "min_slant_range_m": _i("m", "higher", "minimum true 3-D ASV-AUV range (AUV depth "
+                            "included) over AUVs and plant steps", "thesis eq. 2.9 (slant)"),
+    "collision_domain_s": _i("s", "lower", "time the ASV is inside at least one AUV's "
+                             "collision domain, r_k < r_inner(d_k) (one AUV) / r_avoid,k "
+                             "(several), true range and depth, plant-step resolution; " + _ACC,
+                             "Paper 1 eq. 5; Paper 2 eqs. 4-5"),
+    "collision_domain_longest_s": _i("s", "lower", "longest single continuous stay inside "
+                                     "the collision domain(s), plant-step resolution",
+                                     "Paper 1 eq. 5; Paper 2 eqs. 4-5"),
+    "beyond_outer_s": _i("s", "lower", "time the ASV is beyond r_outer(d_k) of every AUV "
+                         "(Paper 2: r_outer of alpha_outer = 1, the modem's rated range)",
+                         "Paper 1 eqs. 3, 5"),
+    "transit_escape_s": _i("s", "lower", "propeller-on time while inside a collision domain",
+                           "geometric split of the papers' 'avoidance' transit"),
+    "transit_tracking_s": _i("s", "lower", "propeller-on time while beyond r_outer of every "
+                             "AUV", "geometric split of the papers' 'tracking' transit"),
+    "transit_reposition_s": _i("s", None, "the rest of the propeller-on time (the "
+                               "controller's own choice to move)", "propeller_on_s minus the "
+                               "two above"),
+    "target_domain_s_auv": _i("s", None, "per AUV: time the ASV is in that AUV's target "
+                              "domain r_t,k - eps_minus <= r_k <= r_t,k + eps_plus (where it "
+                              "waits; descriptive)", "Paper 1 eq. 10; Paper 2 eq. 7"),
+    "label_avoidance_s": _i("s", None, "DIAGNOSTIC: periods commanded 'transit' with the "
+                            "controller's reason 'avoidance' (meaning differs between "
+                            "controllers; never a safety figure)", "Paper 1 §2.3 labels"),
+    "label_tracking_s": _i("s", None, "DIAGNOSTIC: periods commanded 'transit' with reason "
+                           "'tracking'", "Paper 1 §2.3 labels"),
+    "standby_s": _i("s", None, "DIAGNOSTIC: periods commanded 'standby' (Q1); see "
+                    "propeller_on_s for the measured figure", "Paper 1 eq. 11 (Q1)"),
+    "standby_fraction": _i("1", None, "DIAGNOSTIC: standby_s / duration_s",
+                           "thesis Table 4.1"),
+    "mode_switches": _i("1", "lower", "changes of the commanded mode (standby <-> transit)"),
+    # --- liveness (Paper 2 eq. 9-10) ----------------------------------------------------
+    "reliable_fix_age_max_s": _i("s", "lower", "tau_k = time since AUV k's last reliable fix "
+                                 "(a fix that arrived while r_k < r_t,k + eps_plus with the "
+                                 "propeller off, true range and depth; t = 0 counts as a fix): "
+                                 "its largest value over the run, worst AUV", "Paper 2 eq. 9"),
+    "reliable_fix_age_p95_s": _i("s", "lower", "95th percentile over time of tau_k (exact "
+                                 "for the saw-tooth), worst AUV", "Paper 2 eq. 9"),
+    "reliable_fix_age_mean_s": _i("s", "lower", "time average of tau_k, worst AUV",
+                                  "Paper 2 eq. 9"),
+    "revisit_interval_max_s": _i("s", "lower", "longest time between two consecutive "
+                                 "reliable fixes of one AUV, worst AUV; several AUVs only "
+                                 "(null with one AUV, and infinite/null if an AUV had fewer "
+                                 "than two reliable fixes)",
+                                 "thesis §4.2 Cases 6-7 ('time between consecutive visits')"),
+    "fix_age_max_s": _i("s", "lower", "time since the last USBL fix that actually arrived "
+                        "(any range, propeller on or off): largest value, worst AUV",
+                        "acoustic channel (PAPER-FACTS §1)"),
+    "fix_age_p95_s": _i("s", "lower", "95th percentile over time of the fix age, worst AUV",
+                        "acoustic channel"),
+    "fixes": _i("1", "higher", "USBL fixes that arrived, all AUVs"),
+    "reliable_fixes": _i("1", "higher", "of which reliable (Paper 2 eq. 9), all AUVs",
+                         "Paper 2 eq. 9"),
+    # --- AUV navigation (the AUV's own filter vs truth) -----------------------------------
+    "nav_error_rms_m": _i("m", "lower", "RMS of the horizontal error of the AUVs' own "
+                          "navigation filters (dead reckoning + Kalman updates with the USBL "
+                          "fixes that reach them + GPS at the surface), all AUVs and period "
+                          "ends", "thesis §2.5 eq. 2.7, eq. 2.9 (mpcasv.models.auv_nav)"),
+    "nav_error_p95_m": _i("m", "lower", "95th percentile of that error, all AUVs and period "
+                          "ends", "thesis §2.5"),
+    "nav_error_max_m": _i("m", "lower", "largest value of that error", "thesis §2.5"),
+    # --- the ASV's belief about the AUVs -------------------------------------------------
+    "belief_range_error_rms_m": _i("m", "lower", "RMS of |believed range - true range| "
+                                   "(the ASV's estimator), all AUVs and period ends"),
+    "belief_range_jump_max_m": _i("m", "lower", "largest jump of the believed range at an "
+                                  "estimate update beyond the true range's change (first "
+                                  "acquisition left out)", "thesis Case 5 (387 m jump)"),
+    # --- effort --------------------------------------------------------------------------
+    "propeller_on_s": _i("s", "lower", "time with the actual thrust above the propeller-on "
+                         "threshold (n_p != 0), plant-step resolution", "Paper 2 eq. 9 (n_p)"),
+    "energy_J": _i("J", "lower", "propulsive energy: thrust x speed through the water, "
+                   "integrated at the plant step"),
+    # --- compute -------------------------------------------------------------------------
+    "controller_step_ms_median": _i("ms", "lower", "median wall time of a controller step "
+                                    "(machine-dependent)"),
+    "controller_step_ms_p99": _i("ms", "lower", "99th percentile of that time"),
+    "fallbacks": _i("1", "lower", "MPC steps handed to the fallback controller"),
+}
+
+#: per-AUV lists (suffix ``_auv``) of these scalars
+_PER_AUV = ("auv_distance_m", "collision_domain_s", "reliable_fix_age_max_s",
+            "reliable_fix_age_p95_s", "reliable_fix_age_mean_s", "fix_age_max_s",
+            "fix_age_p95_s", "fixes", "reliable_fixes", "nav_error_rms_m", "nav_error_p95_m",
+            "nav_error_max_m")  # fmt: skip
+
+#: every name in ``metrics.json`` with its meaning (docs/metrics.md is generated from this)
+METRIC_INFO: dict[str, MetricInfo] = _BASE | {
+    f"{m}_auv": _per_auv(_BASE[m]) for m in _PER_AUV
+}
+
+#: the headline metrics of the report, in order
+HEADLINE: tuple[str, ...] = (
+    "min_range_m", "collision_domain_s", "reliable_fix_age_p95_s", "reliable_fix_age_max_s",
+    "nav_error_rms_m", "nav_error_p95_m", "energy_J", "propeller_on_s",
 )  # fmt: skip
+
+METRIC_NAMES: tuple[str, ...] = tuple(METRIC_INFO)
 
 
 def _path_length(N: np.ndarray, E: np.ndarray) -> float:
     return float(np.sum(np.hypot(np.diff(N), np.diff(E))))
 
 
-def _max_gap(times, t_end: float) -> float:
-    """Longest interval without an event, counted from 0 to ``t_end``."""
-    edges = np.concatenate([[0.0], np.asarray(times, float), [t_end]])
-    return float(np.max(np.diff(edges)))
+def age_stats(event_times, t_end: float) -> tuple[float, float, float]:
+    """(max, p95, mean) over ``[0, t_end]`` of the age ``t - (last event <= t)``, with an
+    event at ``t = 0`` (the known start).
+
+    The age is a saw-tooth: over a gap ``g`` between events it runs uniformly through
+    ``[0, g)``. Hence max = the largest gap, mean = ``sum g^2 / (2 t_end)``, and the p95 is
+    exact: the ``x`` at which the fraction of time with age ``<= x``,
+    ``sum min(x, g_i) / t_end``, reaches 0.95.
+    """
+    t = np.asarray(event_times, float)
+    t = t[(t > 0) & (t <= t_end)]
+    g = np.diff(np.concatenate([[0.0], np.unique(t), [t_end]]))
+    g = g[g > 0]
+    if t_end <= 0 or not g.size:
+        return 0.0, 0.0, 0.0
+    return float(g.max()), _sawtooth_quantile(g, t_end, 0.95), float(np.sum(g**2) / (2 * t_end))
+
+
+def _sawtooth_quantile(gaps: np.ndarray, total: float, q: float) -> float:
+    """Smallest ``x`` with ``sum min(x, g_i) >= q total`` (time fraction of a saw-tooth)."""
+    g = np.sort(gaps)
+    target, done = q * total, 0.0  # done: sum of the gaps below the current level
+    for j, gj in enumerate(g):
+        n_above = len(g) - j  # gaps >= gj each contribute x
+        if done + n_above * gj >= target:
+            return float((target - done) / n_above)
+        done += gj
+    return float(g[-1])
 
 
 def _update_jumps(ts: pd.DataFrame, k: int) -> np.ndarray:
@@ -47,14 +202,18 @@ def _update_jumps(ts: pd.DataFrame, k: int) -> np.ndarray:
     return d_est[updated[1:]]
 
 
-def _visit_times(ts: pd.DataFrame, k: int) -> np.ndarray:
-    """Times at which the ASV waits in AUV k's target domain with the propeller off (the
-    condition that resets Paper 2's fix-age timer tau_k, eq. 9)."""
-    return ts["t"].to_numpy()[ts[f"visit{k}"].to_numpy(bool)]
+def _sum(ts: pd.DataFrame, col: str) -> float | None:
+    """Sum of an account column; None if the run has no evaluation domain (NaN) or the
+    column is missing (a time series from before the account existed)."""
+    if col not in ts:
+        return None
+    v = ts[col].to_numpy(float)
+    return None if np.isnan(v).any() else float(v.sum())
 
 
 def compute_metrics(result) -> dict:
-    """All metrics of a :class:`mpcasv.sim.simulator.RunResult` as a flat JSON-able dict."""
+    """All metrics of a :class:`mpcasv.sim.simulator.RunResult` as a flat JSON-able dict
+    (keys: :data:`METRIC_NAMES`; ``None`` where undefined)."""
     ts: pd.DataFrame = result.timeseries
     n_auv = len(result.scenario.auv)
     Tc = result.scenario.sim.control_period
@@ -69,48 +228,84 @@ def compute_metrics(result) -> dict:
              for k in range(n_auv)]  # fmt: skip
     mean_auv = float(np.mean(auv_d))
 
-    inside = outside = 0.0
-    if f"r_inner{0}" in ts:
-        for k in range(n_auv):
-            r = ts[f"range{k}"].to_numpy()
-            inside += float(np.sum(r < ts[f"r_inner{k}"].to_numpy()) * Tc)
-            outside += float(np.sum(r > ts[f"r_outer{k}"].to_numpy()) * Tc)
+    prop_s = _sum(ts, "prop_on_s")
+    if prop_s is None:  # older time series: period-end samples
+        prop_s = float(np.sum(ts["propeller_on"].to_numpy()) * Tc)
+    coll_s, escape, track = _sum(ts, "coll_s"), _sum(ts, "escape_s"), _sum(ts, "track_s")
+    longest = None if coll_s is None else float(ts["coll_stay_s"].max())
+    coll_auv = [_sum(ts, f"coll{k}_s") for k in range(n_auv)]
+    has_domain = coll_s is not None
 
-    fix_age = np.stack([ts[f"fix_age{k}"].to_numpy() for k in range(n_auv)])
+    rel = [age_stats(f, t_end) for f in result.reliable_fix_times]
+    fix = [age_stats(f, t_end) for f in result.fix_times]
+    rel_auv = {s: [r[i] if has_domain else None for r in rel]
+               for i, s in enumerate(("max", "p95", "mean"))}  # fmt: skip
+
+    def worst(values):
+        return None if any(v is None for v in values) else float(max(values))
+
+    revisit = None
+    if n_auv > 1 and has_domain:
+        gaps = [np.diff(np.unique(f)) if len(f) >= 2 else np.array([math.inf])
+                for f in result.reliable_fix_times]  # fmt: skip
+        revisit = float(max(g.max() if g.size else math.inf for g in gaps))
+
     nav = np.stack([ts[f"nav_err{k}"].to_numpy() for k in range(n_auv)])
     belief_err = np.stack(
         [np.abs(ts[f"est_range{k}"].to_numpy() - ts[f"range{k}"].to_numpy()) for k in range(n_auv)]
     )
     belief_jump = np.concatenate([_update_jumps(ts, k) for k in range(n_auv)])
     step_ms = np.asarray(result.step_ms, float)
+    n_fix = [len(f) for f in result.fix_times]
+    n_rel = [len(f) for f in result.reliable_fix_times]
     return {
         "duration_s": t_end,
         "asv_distance_m": asv_d,
-        "auv_distance_m": auv_d,
+        "auv_distance_m": mean_auv,
         "distance_ratio": asv_d / mean_auv if mean_auv > 0 else math.nan,
-        "standby_s": float(np.sum(standby) * Tc),
-        "transit_tracking_s": float(np.sum(transit & (reason == "tracking")) * Tc),
-        "transit_avoidance_s": float(np.sum(transit & (reason == "avoidance")) * Tc),
-        "standby_fraction": float(np.mean(standby)),
         "min_range_m": float(result.min_range_m),
         "min_slant_range_m": float(result.min_slant_range_m),
-        "time_inside_inner_s": inside,
-        "time_outside_outer_s": outside,
-        "fixes": [len(f) for f in result.fix_times],
-        "reliable_fixes": [len(f) for f in result.reliable_fix_times],
-        "max_fix_age_s": [float(a) for a in fix_age.max(axis=1)],
-        "max_fix_age_overall_s": float(fix_age.max()),
-        "mean_fix_age_s": float(fix_age.mean()),
-        # Paper 2's "time between consecutive visits": longest gap between visits, any AUV
-        "max_revisit_interval_s": max(_max_gap(_visit_times(ts, k), t_end) for k in range(n_auv)),
+        "collision_domain_s": coll_s,
+        "collision_domain_longest_s": longest,
+        "beyond_outer_s": _sum(ts, "beyond_s"),
+        "transit_escape_s": escape,
+        "transit_tracking_s": track,
+        "transit_reposition_s": None if not has_domain else prop_s - escape - track,
+        "label_avoidance_s": float(np.sum(transit & (reason == "avoidance")) * Tc),
+        "label_tracking_s": float(np.sum(transit & (reason == "tracking")) * Tc),
+        "standby_s": float(np.sum(standby) * Tc),
+        "standby_fraction": float(np.mean(standby)),
+        "mode_switches": int(np.sum(mode[1:] != mode[:-1])),
+        "reliable_fix_age_max_s": worst(rel_auv["max"]),
+        "reliable_fix_age_p95_s": worst(rel_auv["p95"]),
+        "reliable_fix_age_mean_s": worst(rel_auv["mean"]),
+        "revisit_interval_max_s": revisit,
+        "fix_age_max_s": float(max(f[0] for f in fix)),
+        "fix_age_p95_s": float(max(f[1] for f in fix)),
+        "fixes": int(sum(n_fix)),
+        "reliable_fixes": int(sum(n_rel)),
         "nav_error_rms_m": float(np.sqrt(np.mean(nav**2))),
+        "nav_error_p95_m": float(np.percentile(nav, 95)),
         "nav_error_max_m": float(nav.max()),
         "belief_range_error_rms_m": float(np.sqrt(np.mean(belief_err**2))),
         "belief_range_jump_max_m": float(belief_jump.max()) if belief_jump.size else 0.0,
-        "propeller_on_s": float(np.sum(ts["propeller_on"].to_numpy()) * Tc),
+        "propeller_on_s": prop_s,
         "energy_J": float(result.energy_J),
-        "mode_switches": int(np.sum(mode[1:] != mode[:-1])),
         "controller_step_ms_median": float(np.median(step_ms)),
         "controller_step_ms_p99": float(np.percentile(step_ms, 99)),
         "fallbacks": int(result.fallbacks),
+        # per-AUV lists
+        "auv_distance_m_auv": auv_d,
+        "collision_domain_s_auv": coll_auv,
+        "target_domain_s_auv": [_sum(ts, f"target{k}_s") for k in range(n_auv)],
+        "reliable_fix_age_max_s_auv": rel_auv["max"],
+        "reliable_fix_age_p95_s_auv": rel_auv["p95"],
+        "reliable_fix_age_mean_s_auv": rel_auv["mean"],
+        "fix_age_max_s_auv": [f[0] for f in fix],
+        "fix_age_p95_s_auv": [f[1] for f in fix],
+        "fixes_auv": n_fix,
+        "reliable_fixes_auv": n_rel,
+        "nav_error_rms_m_auv": [float(np.sqrt(np.mean(e**2))) for e in nav],
+        "nav_error_p95_m_auv": [float(np.percentile(e, 95)) for e in nav],
+        "nav_error_max_m_auv": [float(e.max()) for e in nav],
     }

@@ -34,7 +34,11 @@ __all__ = [
     "r_avoid_uncertain",
     "reach_support",
     "smooth_signed_distance",
+    "in_reliable_range",
     "in_target_domain",
+    "reliable_fix_possible",
+    "reliable_limit",
+    "target_reached",
     "point_on_circle",
     "r_avoid",
     "r_in",
@@ -156,6 +160,53 @@ def in_target_domain(
     return (r >= r_t - np.asarray(eps_minus, dtype=float)) & (
         r <= r_t + np.asarray(eps_plus, dtype=float)
     )
+
+
+def reliable_limit(r_t: ArrayLike, eps_plus: ArrayLike) -> NDArray | float:
+    """Outer limit of the target domain, ``r_t + eps_plus`` (m; Paper 2 eqs. 7 and 9)."""
+    return np.asarray(r_t, dtype=float) + np.asarray(eps_plus, dtype=float)
+
+
+def in_reliable_range(r: ArrayLike, r_t: ArrayLike, eps_plus: ArrayLike) -> NDArray | np.bool_:
+    """The range part of Paper 2's reliable-fix rule (eq. 9): ``r < r_t + eps_plus``.
+
+    Strict, as the paper writes it (``tau_k := 0 for r_k < r_t,k + eps``). Everything
+    inside the outer limit counts, the collision domain too (the rule has no lower limit).
+    """
+    return np.asarray(r, dtype=float) < reliable_limit(r_t, eps_plus)
+
+
+def reliable_fix_possible(
+    r: ArrayLike, r_t: ArrayLike, eps_plus: ArrayLike, propeller_on: ArrayLike
+) -> NDArray | np.bool_:
+    """Paper 2's reliable-fix rule (eq. 9): ``r_k < r_t,k + eps`` and ``n_p = 0``.
+
+    The ONE definition: the simulator (a fix that arrives while this holds is a reliable fix,
+    and restarts the AUV's reliable-fix age tau_k), the metrics and the controllers' own
+    fix-age timers call it (directly or via :meth:`DomainParams.reliable_fix_possible`).
+
+    Parameters
+    ----------
+    r : float or array_like
+        Horizontal ASV-AUV range (m).
+    r_t : float or array_like
+        Target-circle radius at the AUV's depth (m; Paper 2 eq. 6).
+    eps_plus : float or array_like
+        Outer tolerance of the target domain (m).
+    propeller_on : bool or array_like
+        ``n_p != 0``.
+    """
+    return in_reliable_range(r, r_t, eps_plus) & ~np.asarray(propeller_on, dtype=bool)
+
+
+def target_reached(
+    r: ArrayLike, r_t: ArrayLike, eps_minus: ArrayLike, eps_plus: ArrayLike
+) -> NDArray | np.bool_:
+    """The jump set D1 of the transit mode, ``|e| < eps`` with ``e = r - r_t`` (Paper 1
+    eqs. 9 and 11; Paper 2 eqs. 10-11): the OPEN interval ``r_t - eps_minus < r < r_t +
+    eps_plus``. (The target domain itself, :func:`in_target_domain`, is the closed one.)"""
+    e = np.asarray(r, dtype=float) - np.asarray(r_t, dtype=float)
+    return (e > -np.asarray(eps_minus, dtype=float)) & (e < np.asarray(eps_plus, dtype=float))
 
 
 def range_bearing(asv_NE: ArrayLike, auv_NE: ArrayLike) -> tuple[NDArray, NDArray]:
@@ -282,6 +333,23 @@ class DomainParams:
     def in_target(self, r: ArrayLike, d: ArrayLike) -> NDArray | np.bool_:
         """Whether range ``r`` from an AUV at depth ``d`` is in the target domain (eq. 10)."""
         return in_target_domain(r, self.target(d), self.eps_minus, self.eps_plus)
+
+    def reliable_limit(self, r_t: ArrayLike) -> NDArray | float:
+        """``r_t + eps_plus`` (m): see :func:`reliable_limit`."""
+        return reliable_limit(r_t, self.eps_plus)
+
+    def in_reliable_range(self, r: ArrayLike, r_t: ArrayLike) -> NDArray | np.bool_:
+        """``r < r_t + eps_plus`` (Paper 2 eq. 9): see :func:`in_reliable_range`."""
+        return in_reliable_range(r, r_t, self.eps_plus)
+
+    def reliable_fix_possible(self, r: ArrayLike, r_t: ArrayLike,
+                              propeller_on: ArrayLike) -> NDArray | np.bool_:  # fmt: skip
+        """Paper 2's reliable-fix rule (eq. 9): see :func:`reliable_fix_possible`."""
+        return reliable_fix_possible(r, r_t, self.eps_plus, propeller_on)
+
+    def target_reached(self, r: ArrayLike, r_t: ArrayLike) -> NDArray | np.bool_:
+        """Jump set D1, ``|r - r_t| < eps`` (open): see :func:`target_reached`."""
+        return target_reached(r, r_t, self.eps_minus, self.eps_plus)
 
 
 # --- uncertainty-aware anti-collision domains (issue 8) ----------------------------------------

@@ -121,7 +121,7 @@ class HybridMulti:
 
     def update_timers(self, obs: Observation, r: np.ndarray, r_t: np.ndarray, dt: float) -> None:
         """Eq. 9: tau_k += dt unless r_k < r_t,k + eps with the propeller off (then 0)."""
-        ok = (r < r_t + self.domain.eps_plus) & (not obs.propeller_on)
+        ok = self.domain.reliable_fix_possible(r, r_t, obs.propeller_on)  # eq. 9
         if self.params.require_fix:
             seen = np.array([a.t_last_fix for a in obs.auvs])
             ok &= seen > self.last_fix_seen

@@ -112,8 +112,7 @@ def build_automaton(domain: DomainParams) -> HybridAutomaton:
 
 def _in_target(x: SingleState, domain: DomainParams) -> bool:
     """|e| < eps with e = r - r_t (eqs. 9-10), eps_minus inside and eps_plus outside."""
-    e = x.r - x.r_t
-    return -domain.eps_minus < e < domain.eps_plus
+    return bool(domain.target_reached(x.r, x.r_t))
 
 
 class HybridSingle:

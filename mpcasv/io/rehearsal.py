@@ -30,14 +30,14 @@ __all__ = ["COMPARABLE", "compare_metrics", "rehearsal_metrics"]
 #: (``controller_step_ms_*``), the belief metrics (the SITL world's estimator is not the
 #: deploy loop's), and counts of discrete events that one period's shift can change by one.
 COMPARABLE = (
-    "min_range_m", "asv_distance_m", "standby_s", "transit_tracking_s", "transit_avoidance_s",
-    "propeller_on_s", "energy_J", "max_revisit_interval_s", "time_inside_inner_s",
-    "time_outside_outer_s",
+    "min_range_m", "asv_distance_m", "standby_s", "label_tracking_s", "label_avoidance_s",
+    "propeller_on_s", "energy_J", "reliable_fix_age_max_s", "collision_domain_s",
+    "beyond_outer_s",
 )  # fmt: skip
 #: Sums of whole control periods: they cannot agree better than one period.
 PERIOD_QUANTISED = frozenset(
-    {"standby_s", "transit_tracking_s", "transit_avoidance_s", "propeller_on_s",
-     "max_revisit_interval_s", "time_inside_inner_s", "time_outside_outer_s"}
+    {"standby_s", "label_tracking_s", "label_avoidance_s", "propeller_on_s",
+     "reliable_fix_age_max_s", "collision_domain_s", "beyond_outer_s"}
 )  # fmt: skip
 
 

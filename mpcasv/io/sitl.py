@@ -110,8 +110,9 @@ class Sitl:
         self.origin = Origin.from_degrees(*opt.origin)
         name = opt.controller or scenario.controller
         preset = opt.preset or (scenario.preset if name == scenario.controller else None)
-        self.domain = getattr(make_controller(name, len(scenario.auv), preset), "domain", None)
-        self.world = World(scenario, opt.seed, None, self.domain)
+        make_controller(name, len(scenario.auv), preset)  # validates --controller/--preset
+        self.world = World(scenario, opt.seed)  # judged by the scenario's domain (issue 12)
+        self.domain = self.world.domain
         self.Tc = scenario.sim.control_period
         self.h = self.Tc / 2 if scenario.sim.n_sub % 2 == 0 else self.Tc
         opt.out.mkdir(parents=True, exist_ok=True)

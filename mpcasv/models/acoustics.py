@@ -1,14 +1,16 @@
-"""Acoustic channel (USBL fixes, status reports) and the AUVs' INS drift.
+"""Acoustic channel (USBL fixes, status reports) and the AUVs' INS drift parameters.
 
 - USBL pings every ``T0`` per AUV. Success probability depends on slant range (near certain
   below d1, sporadic to d2, none beyond; PAPER-FACTS §1) and drops while the ASV's propeller
   runs (propeller noise).
 - A fix's position error grows with range: transverse error = bearing error x range
   (thesis eq. 2.9), plus range noise along the line of sight.
-- Each AUV's own navigation drifts between fixes: dp = 1/2 eps_a t^2 (thesis eq. 2.7), as a
-  random constant acceleration bias per dead-reckoning interval, plus an optional drift per
-  distance travelled. A successful fix is sent to the AUV and resets its error to the fix
-  error; at the surface the AUV has GPS.
+- Each AUV's own navigation (:class:`NavParams`: dp = 1/2 eps_a t^2 between fixes, thesis
+  eq. 2.7) is filtered by :class:`mpcasv.models.auv_nav.AUVNavFilter`: dead reckoning, and a
+  Kalman update with each USBL fix that reaches the AUV (weighted by the fix's covariance)
+  and with GPS at the surface.
+- The reliable-fix rule (Paper 2 eq. 9) is defined once, in
+  :func:`mpcasv.hybrid.domains.reliable_fix_possible`.
 - Acoustic status reports every ``T_report`` carry the AUV's own navigation estimate, depth,
   heading and speed.
 
@@ -64,16 +66,6 @@ def success_probability(slant, propeller_on, p: AcousticParams):
     return base * np.where(np.asarray(propeller_on, bool), p.propeller_factor, 1.0)
 
 
-def reliable_fix(r, r_t, epsilon, propeller_on, transmitted=True):
-    """Paper 2's reliable-fix rule: inside the outer limit of the target domain
-    (r < r_t + epsilon), propeller off, and a fix transmitted (vectorised)."""
-    return (
-        (np.asarray(r) < np.asarray(r_t) + epsilon)
-        & ~np.asarray(propeller_on, bool)
-        & (np.asarray(transmitted, bool))
-    )
-
-
 @dataclass(frozen=True, slots=True)
 class Fix:
     """A USBL fix of AUV ``auv`` at time ``t``: measured position and its covariance."""
@@ -117,37 +109,3 @@ def usbl_fix(t, auv, asv_NE, auv_NEd, p: AcousticParams, rng: np.random.Generato
         float(auv_NEd[2] + p.sigma_range * rng.standard_normal()),
         (float(R[0, 0]), float(R[0, 1]), float(R[1, 0]), float(R[1, 1])), slant,
     )  # fmt: skip
-
-
-class INSDrift:
-    """True navigation error of each AUV's own INS (the AUV believes truth + error)."""
-
-    def __init__(self, n_auv: int, p: NavParams, rng: np.random.Generator):
-        self.p, self.rng = p, rng
-        self.e0 = np.zeros((n_auv, 2))  # error at the last reset
-        self.a = np.zeros((n_auv, 2))  # acceleration bias of this DR interval
-        self.dirn = np.zeros((n_auv, 2))  # direction of distance-proportional drift
-        self.t0 = np.zeros(n_auv)
-        self.dist = np.zeros(n_auv)
-        for k in range(n_auv):
-            self.reset(k, 0.0, np.zeros(2))
-
-    def reset(self, k: int, t: float, error: np.ndarray) -> None:
-        """Start a new dead-reckoning interval for AUV ``k`` with the given error."""
-        self.e0[k] = error
-        self.a[k] = self.p.eps_a * self.rng.standard_normal(2) / math.sqrt(2)
-        ang = self.rng.uniform(0, 2 * math.pi)
-        self.dirn[k] = (math.cos(ang), math.sin(ang))
-        self.t0[k], self.dist[k] = t, 0.0
-
-    def advance(self, distance: np.ndarray) -> None:
-        """Add distance travelled (m) by each AUV since the last call."""
-        self.dist += distance
-
-    def error(self, t: float) -> np.ndarray:
-        """(n_auv, 2) navigation errors at time ``t`` (eq. 2.7 plus drift per distance)."""
-        dt = (t - self.t0)[:, None]
-        return (
-            self.e0 + 0.5 * self.a * dt**2
-            + self.p.drift_per_distance * self.dist[:, None] * self.dirn
-        )  # fmt: skip

@@ -156,7 +156,7 @@ class MPCController:
         if self.params.fix.range_kind == "acoustic":
             depth = np.array([a.depth for a in obs.auvs])
             return depth, np.full(K, self.acoustics.d1)
-        return np.zeros(K), r_lo0 + self.domain.delta_r + self.domain.eps_plus
+        return np.zeros(K), self.domain.reliable_limit(r_lo0 + self.domain.delta_r)
 
     def _rates(self, obs: Observation) -> np.ndarray:
         """Fix rates now (1/s): propeller state as observed, geometry as in the plan."""
@@ -278,7 +278,7 @@ class MPCController:
         pos = np.array([a.position for a in obs.auvs])
         r_t = self._radii(obs, 0.0, obs.asv.position) + self.domain.delta_r
         dist = np.hypot(*(pos - obs.asv.position).T)
-        if dist[self.target] <= r_t[self.target] + self.domain.eps_plus:
+        if self.domain.in_reliable_range(dist[self.target], r_t[self.target]):
             self.dwell += elapsed
         served = self.tau[self.target] <= self.params.tau_served
         if not (served or self.dwell >= self.params.dwell_max):
@@ -305,7 +305,8 @@ class MPCController:
         self.t_explore = obs.t
         par = ocp.unpack_par(p)
         j = self.target
-        if np.hypot(*(obs.asv.position - par["pa"][0, j])) <= par["r_t"][j] + self.domain.eps_plus:
+        if self.domain.in_reliable_range(np.hypot(*(obs.asv.position - par["pa"][0, j])),
+                                         par["r_t"][j]):  # fmt: skip
             return res  # already there
         alt = self.solver.solve(p, ocp.guided_rollout(p, j, P.speed))
         self.explored += 1

@@ -65,8 +65,9 @@ def run(args: argparse.Namespace) -> int:
     extra = {"preset": preset, "estimator": args.estimator or scenario.estimator,
              "realisation": real.as_dict()}  # fmt: skip
     metrics = write_run(result, out, plots=not args.no_plots, extra=extra)
-    keys = ("duration_s", "asv_distance_m", "distance_ratio", "standby_fraction", "min_range_m",
-            "max_fix_age_overall_s", "fallbacks")  # fmt: skip
+    keys = ("duration_s", "asv_distance_m", "min_range_m", "collision_domain_s",
+            "reliable_fix_age_max_s", "reliable_fix_age_p95_s", "nav_error_rms_m",
+            "nav_error_p95_m", "propeller_on_s", "energy_J", "fallbacks")  # fmt: skip
     print(f"wrote {out}/ (timeseries.parquet, metrics.json, plots) in {result.wall_s:.2f} s")
     print(f"  realisation {real.id}: {len(real.values)} drawn values (run.json)")
     for k in keys:

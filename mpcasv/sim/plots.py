@@ -85,19 +85,25 @@ def plot_ranges(result, path: str | Path) -> Path:
 
 
 def plot_fix_age(result, path: str | Path) -> Path:
-    """Time since each AUV's last successful USBL fix; reliable fixes marked."""
+    """Per AUV: Paper 2's reliable-fix age tau_k (eq. 9, solid; reliable fixes ticked) and
+    the age of the last fix that arrived at all (thin), from the simulator's ground truth."""
     ts = result.timeseries
-    fig, ax = plt.subplots(figsize=(9, 3.2))
+    fig, ax = plt.subplots(figsize=(11, 3.4))
     for k in range(_n_auv(ts)):
         c = AUV_COLOURS[k % len(AUV_COLOURS)]
-        ax.plot(ts["t"], ts[f"fix_age{k}"], color=c, lw=1, label=result.scenario.auv[k].name)
+        name = result.scenario.auv[k].name
+        if f"rfix_age{k}" in ts and result.domain is not None:
+            ax.plot(ts["t"], ts[f"rfix_age{k}"], color=c, lw=1.3,
+                    label=f"{name}: reliable-fix age tau")  # fmt: skip
+        ax.plot(ts["t"], ts[f"fix_age{k}"], color=c, lw=0.7, alpha=0.6,
+                label=f"{name}: fix age (any fix)")  # fmt: skip
         rel = result.reliable_fix_times[k]
         ax.plot(rel, np.zeros(len(rel)), "|", color=c, ms=8)
     ax.set_xlabel("time (s)")
-    ax.set_ylabel("fix age (s)")
+    ax.set_ylabel("age (s)")
     ax.grid(alpha=0.3)
-    ax.legend(fontsize=8)
-    ax.set_title("Fix age per AUV (ticks: reliable fixes)")
+    ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0))
+    ax.set_title("Fix ages per AUV (ticks: reliable fixes, Paper 2 eq. 9)")
     return _save(fig, path)
 
 

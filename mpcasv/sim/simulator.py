@@ -18,6 +18,7 @@ import pandas as pd
 
 from mpcasv.control.execution import command_vector
 from mpcasv.interface import Controller, Mode
+from mpcasv.sim.account import unknown_seconds
 from mpcasv.sim.scenario import Scenario
 from mpcasv.sim.world import World, build_plant
 
@@ -42,7 +43,7 @@ class RunResult:
     min_range_m: float = math.inf
     min_slant_range_m: float = math.inf
     wall_s: float = 0.0
-    domain: object = None  # the controller's DomainParams, if it has one
+    domain: object = None  # the scenario's evaluation DomainParams (None: it has none)
 
 
 def simulate(
@@ -54,8 +55,7 @@ def simulate(
     ``plan_every`` (s): how often an MPC's planned trajectory is kept for the plots.
     """
     wall0 = time.perf_counter()
-    domain = getattr(controller, "domain", None)
-    world = World(scenario, seed, estimator, domain)
+    world = World(scenario, seed, estimator)
     controller.reset(world.n_auv)
     rows, step_ms, plans = [], [], []
     next_plan_t = 0.0
@@ -93,7 +93,7 @@ def simulate(
         scenario, controller.name, seed, pd.DataFrame(rows), np.array(step_ms),
         world.fix_times, world.reliable_times, int(getattr(controller, "fallbacks", 0)),
         jumps() if callable(jumps) else None, plans, world.energy_J, world.min_range,
-        world.min_slant, time.perf_counter() - wall0, domain,
+        world.min_slant, time.perf_counter() - wall0, world.domain,
     )  # fmt: skip
 
 
@@ -112,7 +112,12 @@ def timeseries_row(world: World, obs, cmd, period, step_ms: float) -> dict:
         "cmd_speed": cmd.speed, "psi_d": period.Y[0, -1], "u_ref": period.Y[1, -1],
         "step_ms": step_ms,
     }  # fmt: skip
-    nav_err = np.hypot(*world.ins.error(period.t1).T)
+    nav_err = np.hypot(*world.nav.error(period.t1).T)
+    nav_sigma = world.nav.sigma(period.t1)
+    acc = period.account
+    row |= acc.step_seconds() if acc is not None else unknown_seconds(world.n_auv)
+    row["prop_on_s"] = float(period.prop.sum() * world.dt)
+    radii = world.radii()
     for k, e in enumerate(obs.auvs):
         r = math.hypot(x[0] - S[0, k], x[1] - S[1, k])
         row |= {
@@ -126,25 +131,27 @@ def timeseries_row(world: World, obs, cmd, period, step_ms: float) -> dict:
             f"est{k}_t_fix": e.t_last_fix,
             f"fixes{k}": int(period.fixes[k]), f"reliable{k}": int(period.reliable[k]),
             f"visit{k}": bool(period.visiting[k]),
-            f"fix_age{k}": period.t1 - world.last_fix[k], f"nav_err{k}": nav_err[k],
+            f"fix_age{k}": period.t1 - world.last_fix[k],
+            f"rfix_age{k}": period.t1 - world.last_reliable[k],
+            f"nav_err{k}": nav_err[k], f"nav_sigma{k}": nav_sigma[k],
         }  # fmt: skip
-        if world.domain is not None:
-            d = S[2, k]
-            row |= {
-                f"r_inner{k}": float(world.domain.inner(d)),
-                f"r_outer{k}": float(world.domain.outer(d)),
-                f"r_t{k}": float(world.domain.target(d)),
-            }
+        if radii is not None:
+            row |= {f"r_inner{k}": float(radii[0][k]), f"r_outer{k}": float(radii[1][k]),
+                    f"r_t{k}": float(radii[2][k])}  # fmt: skip
     return row
 
 
 def _substep_rows(row: dict, period) -> list[dict]:
-    """Expand one period's row into one row per plant step (identification data)."""
+    """Expand one period's row into one row per plant step (identification data); the
+    account's seconds become each plant step's own."""
     X, U = period.X, period.U
     dt = (period.t1 - period.t0) / X.shape[1]
     out = []
     for j in range(X.shape[1]):
         r = dict(row)
+        if period.account is not None:
+            r.update(period.account.step_seconds(slice(j, j + 1)))
+        r["prop_on_s"] = float(period.prop[j] * dt)
         r.update(
             t=period.t0 + (j + 1) * dt, N=X[0, j], E=X[1, j], psi=X[2, j], u=X[3, j],
             v=X[4, j], r=X[5, j], thrust=X[6, j], delta=X[7, j], T_cmd=U[0, j],

@@ -1,9 +1,19 @@
 """The simulated world: the ASV (vessel model + execution level), the AUVs, the acoustic
-channel and the INS drift, advanced one supervisory period at a time.
+channel and each AUV's own navigation filter, advanced one supervisory period at a time.
 
 :func:`mpcasv.sim.simulator.simulate` drives it with a controller in-process; the SITL
-vehicles (``mpcasv sitl``) drive it with the References that arrive over IMC. Everything
-random comes from one seeded generator.
+vehicles (``mpcasv sitl``) drive it with the References that arrive over IMC.
+
+The world also keeps the ground-truth account every controller is judged by (issue 12,
+docs/metrics.md): per plant step the geometric classes of :mod:`mpcasv.sim.account` with the
+SCENARIO's evaluation domain, and per AUV the fixes and reliable fixes (Paper 2 eq. 9, via
+:func:`mpcasv.hybrid.domains.reliable_fix_possible`) that define the fix ages.
+
+Randomness: two generators from the one seed, so that the AUVs' navigation never shifts the
+acoustic draws: ``rng`` (``default_rng(seed)``: USBL ping success and fix errors, status
+reports) and ``nav_rng`` (``SeedSequence(seed, spawn_key=(NAV_STREAM,))``: the fix sent back
+to the AUV getting through, INS errors, GPS noise; apart from the scenario-realisation streams,
+whose first spawn key is another tag). Draws happen in a fixed order per period.
 """
 
 from __future__ import annotations
@@ -17,14 +27,23 @@ import numpy as np
 from mpcasv.control.execution import NZ, closed_loop
 from mpcasv.control.params import ExecutionParams, load_execution
 from mpcasv.estimation import known_plan, make_estimator
+from mpcasv.hybrid.domains import r_inner, r_outer, r_target
 from mpcasv.interface import ASVState, AUVEstimate, Observation
-from mpcasv.models.acoustics import INSDrift, Report, success_probability, usbl_fix
+from mpcasv.models.acoustics import Report, success_probability, usbl_fix
 from mpcasv.models.auv import NA, auv_step_function
+from mpcasv.models.auv_nav import AUVNavFilter
 from mpcasv.models.params import load_vessel
 from mpcasv.models.vessel import NX, VesselModel
+from mpcasv.sim.account import StepAccount, classify, evaluation_domain
 from mpcasv.sim.scenario import Scenario
 
 _PLANT_CACHE: dict = {}
+#: floor of the 1-sigma a status report gives for the AUV's own navigation (m): the filter's
+#: sigma is 0 right after the known start, and a report of zero uncertainty would be trusted
+#: absolutely by the ASV's estimators
+REPORT_SIGMA_MIN = 1.0
+#: spawn key of the AUVs' navigation stream ("NAV")
+NAV_STREAM = 0x4E4156
 
 
 def build_plant(scenario: Scenario):
@@ -63,8 +82,10 @@ class Period:
     ranges: np.ndarray  # horizontal ASV-AUV ranges (n_auv x n_sub)
     slants: np.ndarray
     fixes: np.ndarray  # successful USBL fixes per AUV in this period
-    reliable: np.ndarray  # of which reliable (Paper 2 rule)
-    visiting: np.ndarray  # per AUV at the period's end: the ASV waits in its target domain
+    reliable: np.ndarray  # of which reliable (Paper 2 eq. 9)
+    visiting: np.ndarray  # per AUV at the period's end: a fix arriving now would be reliable
+    prop: np.ndarray  # propeller on at each plant step (n_sub,)
+    account: StepAccount | None  # ground-truth classes per plant step (None: no domain)
 
 
 class World:
@@ -74,24 +95,27 @@ class World:
     ----------
     scenario : Scenario
     seed : int
-        Seed of the one random generator (acoustics, INS drift).
+        Seed of the random generators (see the module docstring).
     estimator : str, optional
         AUV estimator name (default: the scenario's).
-    domain : DomainParams, optional
-        The controller's safety domain, for the reliable-fix rule (r < r_t + eps).
+
+    The evaluation domain (collision / target / outer classes, reliable-fix rule) is the
+    scenario's own (:func:`mpcasv.sim.account.evaluation_domain`), never a controller's.
     """
 
-    def __init__(self, scenario: Scenario, seed: int = 0, estimator: str | None = None,
-                 domain=None):  # fmt: skip
+    def __init__(self, scenario: Scenario, seed: int = 0, estimator: str | None = None):
         self.sc, self.ac = scenario, scenario.acoustics
         self.rng = np.random.default_rng(seed)
+        self.nav_rng = np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(NAV_STREAM,)))
         self.model, self.ep, self.CL = build_plant(scenario)
         self._CL = _packed(self.CL)
         self.n_auv, self.n_sub = len(scenario.auv), scenario.sim.n_sub
         self.Tc, self.dt = scenario.sim.control_period, scenario.sim.dt
         self.thr_on = self.ep.propeller_on_threshold * self.model.params.T_max
         self.current = np.array(scenario.current, float)
-        self.domain = domain
+        self.domain = evaluation_domain(scenario)
+        if self.domain is not None:  # the spheres' radii, once (Paper 1 eqs. 3-4)
+            self._r_in, self._r_out = self.domain.r_in, self.domain.r_out
         self.t = 0.0
 
         s0 = scenario.asv.start
@@ -115,12 +139,14 @@ class World:
             )  # fmt: skip
             for k in range(self.n_auv)
         ]
-        self.ins = INSDrift(self.n_auv, scenario.navigation, self.rng)
+        self.nav = AUVNavFilter(self.n_auv, scenario.navigation, self.nav_rng)
         n, ac = self.n_auv, self.ac
         # USBL polls the AUVs in turn: AUV k pings at k*T0/n + j*T0; reports likewise
         self.next_ping = np.array([k * ac.T0 / n for k in range(n)]) + ac.T0
         self.next_report = np.array([k * ac.T_report / n for k in range(n)]) + ac.T_report
-        self.last_fix = np.zeros(n)
+        self.last_fix = np.zeros(n)  # the AUVs start with a known position at t = 0
+        self.last_reliable = np.zeros(n)
+        self.stay = 0.0  # ongoing continuous stay inside a collision domain (s)
         self.fix_times: list[list[float]] = [[] for _ in range(n)]
         self.reliable_times: list[list[float]] = [[] for _ in range(n)]
         self.energy_J = 0.0
@@ -169,22 +195,36 @@ class World:
         slants = np.hypot(ranges, ST[2])
         self.min_range = min(self.min_range, float(ranges.min()))
         self.min_slant = min(self.min_slant, float(slants.min()))
-        self.ins.advance(np.hypot(S_next[0] - self.S[0], S_next[1] - self.S[1]))
+        prop = X[6] > self.thr_on  # n_p != 0 at each plant step
+        account = None
+        if self.domain is not None:
+            account = classify(self.domain, ranges, ST[2], prop, self.dt, self.stay)
+            self.stay = float(account.stay[-1])
+        self.nav.advance(np.hypot(S_next[0] - self.S[0], S_next[1] - self.S[1]))
         self.x, self.z, self.S = np.array(x_next).ravel(), np.array(z).ravel(), S_next
         self.t = t0 + self.Tc
-        fixes, reliable = self._acoustics()
-        visiting = np.array([self.visiting(k) for k in range(self.n_auv)])
-        return Period(t0, self.t, X, Uin, Y, ranges, slants, fixes, reliable, visiting)
+        visiting = self.visiting()  # at the period's end, when its pings are evaluated
+        fixes, reliable = self._acoustics(visiting)
+        return Period(t0, self.t, X, Uin, Y, ranges, slants, fixes, reliable, visiting, prop,
+                      account)  # fmt: skip
 
-    def _acoustics(self) -> tuple[np.ndarray, np.ndarray]:
-        """USBL pings and status reports due in the period just ended (evaluated at its end)."""
-        ac, t1, S, rng = self.ac, self.t, self.S, self.rng
+    def _acoustics(self, visiting: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """USBL pings and status reports due in the period just ended (evaluated at its end).
+
+        A successful fix goes to the ASV's estimator; the ASV then sends it to the AUV over
+        the same acoustic link (success probability as the ping's, drawn from ``nav_rng``),
+        whose navigation filter fuses it with the fix's covariance. A fix that arrives while
+        :meth:`visiting` holds (``visiting``, per AUV, now) is reliable (Paper 2 eq. 9). At
+        the surface the AUV has GPS.
+        """
+        ac, t1, S, rng, nav_rng = self.ac, self.t, self.S, self.rng, self.nav_rng
         prop = self.propeller_on
         fixes, reliable = np.zeros(self.n_auv, int), np.zeros(self.n_auv, int)
         for k in range(self.n_auv):
             at_surface = S[2, k] < 0.5
-            if at_surface:  # GPS at the surface
-                self.ins.reset(k, t1, ac.gps_sigma * rng.standard_normal(2) / math.sqrt(2))
+            if at_surface:  # GPS at the surface: R = gps_sigma^2 / 2 per axis
+                s2 = ac.gps_sigma**2 / 2
+                self.nav.update(k, t1, math.sqrt(s2) * nav_rng.standard_normal(2), s2 * np.eye(2))
             modem_ok = not (at_surface and not self.sc.auv[k].modem_at_surface)
             r_h = math.hypot(self.x[0] - S[0, k], self.x[1] - S[1, k])
             slant = math.hypot(r_h, S[2, k])
@@ -194,31 +234,41 @@ class World:
                 if ac.usbl and rng.random() < p_ok:
                     fix = usbl_fix(t1, k, self.x[:2], S[:3, k], ac, rng)
                     self.estimators[k].on_fix(fix)
-                    self.ins.reset(k, t1, np.array([fix.N - S[0, k], fix.E - S[1, k]]))
+                    if nav_rng.random() < p_ok:  # the fix reaches the AUV
+                        v = np.array([fix.N - S[0, k], fix.E - S[1, k]])
+                        self.nav.update(k, t1, v, np.reshape(fix.cov, (2, 2)))
                     fixes[k] += 1
                     self.fix_times[k].append(t1)
                     self.last_fix[k] = t1
-                    if self.visiting(k):
+                    if visiting[k]:
                         reliable[k] += 1
                         self.reliable_times[k].append(t1)
+                        self.last_reliable[k] = t1
             while self.next_report[k] <= t1 + 1e-9:
                 self.next_report[k] += ac.T_report
                 if rng.random() < p_ok:
-                    e = self.ins.error(t1)[k]
+                    e = self.nav.error(t1)[k]
+                    sigma = max(float(self.nav.sigma(t1)[k]), REPORT_SIGMA_MIN)
                     self.estimators[k].on_report(Report(
-                        t1, k, S[0, k] + e[0], S[1, k] + e[1], S[2, k], S[3, k], S[4, k],
-                        float(np.hypot(*e)) + 1.0,
+                        t1, k, S[0, k] + e[0], S[1, k] + e[1], S[2, k], S[3, k], S[4, k], sigma,
                     ))  # fmt: skip
         return fixes, reliable
 
-    def visiting(self, k: int) -> bool:
-        """The geometric part of Paper 2's reliable-fix rule (eq. 9) for AUV ``k``: propeller
-        off and r_k < r_t,k + eps (true range and depth). Without a domain (the trivial
-        controller): propeller off and within d1. A fix that gets through while visiting is
-        a reliable fix."""
-        if self.propeller_on:
-            return False
-        r_h = math.hypot(self.x[0] - self.S[0, k], self.x[1] - self.S[1, k])
+    def visiting(self) -> np.ndarray:
+        """Paper 2's reliable-fix rule (eq. 9) per AUV now, with the scenario's domain:
+        r_k < r_t,k + eps at the AUV's true range and depth, and the propeller off (shape
+        (n_auv,), bool). A fix that arrives while this holds is a reliable fix. Never true
+        without an evaluation domain."""
         if self.domain is None:
-            return r_h <= self.ac.d1
-        return r_h < float(self.domain.target(self.S[2, k])) + self.domain.eps_plus
+            return np.zeros(self.n_auv, bool)
+        r_h = np.hypot(self.x[0] - self.S[0], self.x[1] - self.S[1])
+        r_t = r_target(self.S[2], self._r_in, self.domain.delta_r)  # Paper 2 eq. 6
+        return self.domain.reliable_fix_possible(r_h, r_t, self.propeller_on)
+
+    def radii(self) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+        """(r_inner = r_avoid,k, r_outer, r_t) of each AUV at its true depth now (m, shape
+        (n_auv,)), from the scenario's domain; None without one."""
+        if self.domain is None:
+            return None
+        inner = r_inner(self.S[2], self._r_in)
+        return inner, r_outer(self.S[2], self._r_out), inner + self.domain.delta_r

@@ -1,0 +1,253 @@
+"""Metrics (issue 12): one ground-truth account for every controller, the reliable-fix age of
+Paper 2 eq. 9 by hand, the one reliable-fix / target-domain rule, the evaluation domain."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from mpcasv.experiments.metrics import (
+    HEADLINE,
+    METRIC_INFO,
+    METRIC_NAMES,
+    age_stats,
+    compute_metrics,
+)
+from mpcasv.hybrid.domains import (
+    DomainParams,
+    in_reliable_range,
+    in_target_domain,
+    reliable_fix_possible,
+    target_reached,
+)
+from mpcasv.interface import Reason
+from mpcasv.sim.account import evaluation_domain, stay_lengths
+from mpcasv.sim.controllers import make_controller
+from mpcasv.sim.scenario import load_scenario, scenario_from_dict, scenario_with
+from mpcasv.sim.simulator import simulate
+
+FIELD = DomainParams(alpha_outer=17.5, alpha_inner=5.0, delta_r=20.0, eps_minus=10.0,
+                     eps_plus=10.0)  # fmt: skip  # paper1-field: r_inner(0) = 50, r_t = 70
+
+
+def _pass_by(duration=400.0, **extra):
+    """The ASV stands still at the origin (propeller off); a surface AUV passes 60 m north of
+    it eastwards at exactly 1 m/s, from E = -200 m. Judged with paper1-field's domain
+    (r_t + eps = 80 m) and a channel that never loses a ping."""
+    return scenario_from_dict({
+        "name": "pass", "duration": duration, "controller": "hybrid-single",
+        "preset": "paper1-field", "acoustics": {"p_good": 1.0},
+        "auv": [{"name": "a", "start": {"N": 60.0, "E": -200.0, "psi_deg": 90.0, "speed": 1.0},
+                 "behaviour": {"transit": {"heading_deg": 90.0, "speed": 1.0}}}],
+    } | extra)  # fmt: skip
+
+
+def _standing():
+    return make_controller("goto", 1, None, overrides={"waypoint": [0.0, 0.0]})
+
+
+# --- the reliable-fix age tau_k (Paper 2 eq. 9) ----------------------------------------------
+
+
+def test_age_stats_of_hand_built_fix_times():
+    # gaps 100, 5, 295, 100 over 500 s
+    mx, p95, mean = age_stats([100.0, 105.0, 400.0], 500.0)
+    assert mx == 295.0
+    assert mean == pytest.approx((100**2 + 5**2 + 295**2 + 100**2) / (2 * 500))
+    # time with age <= x is 5 + 100 + 100 + x (x in [100, 295]); 95 % of 500 s at x = 270
+    assert p95 == pytest.approx(270.0)
+    assert age_stats([], 60.0) == (60.0, 57.0, 30.0)  # one ramp from the known start
+
+
+def test_reliable_fix_age_of_a_hand_built_trajectory():
+    """A fix is reliable while hypot(60, E) < r_t + eps = 80 m, i.e. |E| < 52.9 m: for
+    t in (147.1, 252.9) s. Pings every 5 s all arrive: reliable fixes at 150, 155, ..., 250 s;
+    tau_k is a saw-tooth with gaps 150, twenty of 5, 150 over 400 s."""
+    res = simulate(_pass_by(), _standing(), seed=3)
+    assert res.reliable_fix_times[0] == [150.0 + 5 * j for j in range(21)]
+    m = compute_metrics(res)
+    assert m["reliable_fix_age_max_s"] == 150.0
+    assert m["reliable_fix_age_mean_s"] == pytest.approx((2 * 150**2 + 20 * 5**2) / 800)
+    assert m["reliable_fix_age_p95_s"] == pytest.approx(140.0)  # 100 + 2 x = 380
+    assert m["reliable_fixes"] == 21 and m["fixes"] == 80
+    assert m["fix_age_max_s"] == 5.0
+    assert m["revisit_interval_max_s"] is None  # one AUV: Paper 1 has no such notion
+    ts = res.timeseries
+    np.testing.assert_allclose(ts["rfix_age0"].iloc[149], 0.0)  # t = 150: reset
+    np.testing.assert_allclose(ts["rfix_age0"].iloc[148], 149.0)
+
+
+def test_a_fix_is_reliable_only_with_the_propeller_off():
+    """The same pass with the ASV motoring slowly along it: fixes arrive, none is reliable."""
+    ctrl = make_controller("goto", 1, None, overrides={"waypoint": [0.0, 2000.0], "speed": 0.6})
+    res = simulate(_pass_by(duration=120.0), ctrl, seed=3)
+    assert res.timeseries["propeller_on"].iloc[20:].all()
+    assert len(res.fix_times[0]) > 10 and res.reliable_fix_times[0] == []
+    assert compute_metrics(res)["reliable_fix_age_max_s"] == 120.0
+
+
+# --- one geometric account, whatever the controller's labels --------------------------------
+
+
+class _Relabelled:
+    """The goto controller with another reason on every command and a domain of its own."""
+
+    def __init__(self, reason: Reason, domain: DomainParams | None):
+        self.inner = make_controller("goto", 1, None, overrides={"waypoint": [0.0, 300.0]})
+        self.name, self.reason, self.domain = f"goto-{reason}", reason, domain
+
+    def reset(self, n_auv: int) -> None:
+        self.inner.reset(n_auv)
+
+    def step(self, obs):
+        return dataclasses.replace(self.inner.step(obs), reason=self.reason)
+
+
+def test_same_trajectory_gives_the_same_geometric_metrics_whatever_the_labels():
+    """The ASV runs East through the collision domain of an AUV waiting 20 m off its track;
+    one controller calls it 'avoidance' and carries a huge domain of its own, the other
+    'tracking' and none. Safety, liveness and navigation metrics are those of the scenario's
+    domain for both."""
+    sc = scenario_from_dict({
+        "name": "through", "duration": 200.0, "controller": "hybrid-single",
+        "preset": "paper1-field", "estimator": "perfect",
+        "auv": [{"name": "a", "start": {"N": 20.0, "E": 150.0},
+                 "behaviour": {"plan": {"speed": 1.0, "route": [
+                     {"waypoints": [[20.0, 150.0, 0.0]]}]}}}],
+    })  # fmt: skip
+    huge = DomainParams(alpha_outer=2.0, alpha_inner=20.0, delta_r=50.0, eps_minus=10.0,
+                        eps_plus=10.0)  # fmt: skip
+    a = compute_metrics(simulate(sc, _Relabelled(Reason.AVOIDANCE, huge), seed=1))
+    b = compute_metrics(simulate(sc, _Relabelled(Reason.TRACKING, None), seed=1))
+    assert a["collision_domain_s"] > 5.0 and a["transit_escape_s"] > 5.0  # it did go through
+    assert a["label_avoidance_s"] > 100 and b["label_avoidance_s"] == 0.0  # labels differ
+    assert b["label_tracking_s"] == a["label_avoidance_s"]
+    labels = {"label_avoidance_s", "label_tracking_s", "controller_step_ms_median",
+              "controller_step_ms_p99"}  # fmt: skip
+    for name in METRIC_NAMES:
+        if name not in labels:
+            np.testing.assert_equal(a[name], b[name], err_msg=name)  # NaN == NaN here
+
+
+def test_collision_time_is_counted_at_plant_step_resolution():
+    """A stationary AUV; the ASV passes it. The account's time inside r_inner equals the
+    plant steps logged inside (an independent count from the per-step log), and a single
+    pass is one stay."""
+    sc = scenario_from_dict({
+        "name": "through", "duration": 150.0, "controller": "hybrid-single",
+        "preset": "paper1-field", "sim": {"log_every_step": True},
+        "auv": [{"name": "a", "start": {"N": 20.0, "E": 150.0},
+                 "behaviour": {"plan": {"speed": 1.0, "route": [
+                     {"waypoints": [[20.0, 150.0, 0.0]]}]}}}],
+    })  # fmt: skip
+    res = simulate(sc, make_controller("goto", 1, None, overrides={"waypoint": [0.0, 300.0]}),
+                   seed=0)  # fmt: skip
+    ts = res.timeseries
+    assert (ts["auv0_N"] == 20.0).all() and (ts["auv0_E"] == 150.0).all()
+    inside = np.hypot(ts["N"] - 20.0, ts["E"] - 150.0) < 50.0  # r_inner at the surface
+    m = compute_metrics(res)
+    assert m["collision_domain_s"] == pytest.approx(inside.sum() * 0.1)
+    assert 91.65 / 3.0 < m["collision_domain_s"] < 91.65 / 1.5  # chord 2 sqrt(50^2 - 20^2)
+    assert m["collision_domain_longest_s"] == pytest.approx(m["collision_domain_s"])
+    assert m["transit_escape_s"] == pytest.approx(m["collision_domain_s"])  # motoring through
+    assert m["propeller_on_s"] == pytest.approx(
+        m["transit_escape_s"] + m["transit_tracking_s"] + m["transit_reposition_s"])
+
+
+def test_stay_lengths_carry_across_periods():
+    x = np.array([True, True, False, True])
+    np.testing.assert_allclose(stay_lengths(x, 0.5, 0.1), [0.6, 0.7, 0.0, 0.1])
+
+
+# --- the evaluation domain is the scenario's ---------------------------------------------------
+
+
+def test_evaluation_domain_is_the_scenarios_published_one(scenarios_dir: Path):
+    case1 = load_scenario(scenarios_dir / "case1.toml")
+    dom = evaluation_domain(case1)
+    assert (dom.alpha_inner, dom.delta_r, dom.eps_plus) == (3.0, 125.0, 30.0)  # paper1-sim
+    res = simulate(scenario_with(case1, duration=5.0), _standing(), seed=0)
+    assert res.domain == dom  # the goto controller has no domain; the world has the case's
+    demo = load_scenario(scenarios_dir / "demo.toml")
+    assert evaluation_domain(demo) is None  # the goto preset has no [domain]
+
+
+def test_without_an_evaluation_domain_the_domain_metrics_are_null(scenarios_dir: Path):
+    demo = load_scenario(scenarios_dir / "demo.toml")
+    sc = scenario_with(demo, duration=20.0)
+    m = compute_metrics(simulate(sc, make_controller("goto", len(sc.auv), "goto"), seed=0))
+    for name in ("collision_domain_s", "beyond_outer_s", "transit_escape_s",
+                 "reliable_fix_age_max_s", "reliable_fix_age_p95_s"):  # fmt: skip
+        assert m[name] is None, name
+    assert m["fix_age_max_s"] is not None and m["nav_error_rms_m"] is not None
+
+
+# --- one reliable-fix / target-domain rule --------------------------------------------------
+
+
+def test_reliable_fix_rule_is_strict_at_r_t_plus_eps_and_needs_the_propeller_off():
+    r_t, eps = 70.0, 10.0
+    assert reliable_fix_possible(79.999, r_t, eps, False)
+    assert not reliable_fix_possible(80.0, r_t, eps, False)  # r_k < r_t,k + eps (eq. 9)
+    assert not reliable_fix_possible(50.0, r_t, eps, True)  # n_p != 0
+    assert reliable_fix_possible(5.0, r_t, eps, False)  # no lower limit in eq. 9
+    got = reliable_fix_possible(np.array([50.0, 85.0, 50.0]), r_t, eps,
+                                np.array([False, False, True]))  # fmt: skip
+    assert list(got) == [True, False, False]
+    assert FIELD.reliable_fix_possible(79.0, 70.0, False) and not FIELD.in_reliable_range(80, 70)
+    assert in_reliable_range(79.0, r_t, eps) and not in_reliable_range(80.0, r_t, eps)
+
+
+def test_target_domain_is_closed_and_the_jump_set_open():
+    r_t = 70.0
+    assert in_target_domain(60.0, r_t, 10.0, 10.0) and in_target_domain(80.0, r_t, 10.0, 10.0)
+    assert not target_reached(60.0, r_t, 10.0, 10.0) and not target_reached(80.0, r_t, 10, 10)
+    assert target_reached(60.001, r_t, 10.0, 10.0) and target_reached(79.999, r_t, 10, 10)
+
+
+# --- the definitions ----------------------------------------------------------------------------
+
+
+def test_every_metric_is_defined_once_with_unit_direction_and_definition():
+    res = simulate(_pass_by(duration=30.0), _standing(), seed=0)
+    assert set(compute_metrics(res)) == set(METRIC_INFO)
+    assert set(HEADLINE) <= set(METRIC_INFO)
+    for name, info in METRIC_INFO.items():
+        assert info.unit and info.definition, name
+        assert info.better in ("lower", "higher", None), name
+    doc = (Path(__file__).parents[1] / "docs" / "metrics.md").read_text()
+    for name in METRIC_INFO:
+        assert f"`{name}`" in doc, name
+
+
+def test_nothing_in_the_geometry_module_imports_upward():
+    import mpcasv.hybrid.domains as d
+
+    src = Path(d.__file__).read_text()
+    imports = [ln for ln in src.splitlines() if ln.startswith(("import ", "from "))]
+    assert all("mpcasv" not in ln or "mpcasv.config" in ln for ln in imports), imports
+    assert math.isfinite(FIELD.r_in)
+
+
+def test_revisit_interval_is_between_real_reliable_fixes_with_several_auvs():
+    """Paper 2's 'time between consecutive visits' (Cases 6-7): gaps between reliable fixes
+    only, not from t = 0 nor to the end; an AUV with fewer than two reliable fixes has no
+    finite interval (null)."""
+    sc = scenario_from_dict({
+        "name": "two", "duration": 60.0, "controller": "hybrid-multi", "preset": "paper2-field",
+        "auv": [{"name": n, "start": {"N": N}, "behaviour": {"transit": {
+            "heading_deg": 90.0, "speed": 1.0}}} for n, N in (("a", 60.0), ("b", -60.0))],
+    })  # fmt: skip
+    res = simulate(sc, make_controller("goto", 2, None, overrides={"waypoint": [0.0, 0.0]}), 0)
+    hand = dataclasses.replace(res, reliable_fix_times=[[10.0, 15.0, 40.0], [5.0, 40.0]])
+    m = compute_metrics(hand)
+    assert m["revisit_interval_max_s"] == 35.0  # AUV b: 5 -> 40 (AUV a: at most 25)
+    assert m["reliable_fix_age_max_s_auv"] == [25.0, 35.0]  # a: 0-10, 40-60 (end) count too
+    hand = dataclasses.replace(res, reliable_fix_times=[[10.0, 15.0, 50.0], [5.0]])
+    m = compute_metrics(hand)
+    assert m["revisit_interval_max_s"] == math.inf  # written as null in metrics.json
+    assert m["reliable_fix_age_max_s"] == 55.0  # b: 5 -> 60 (the end) without a fix
