@@ -261,8 +261,11 @@ def write_report(out: Path, exp, results: pd.DataFrame, stats=None) -> tuple[Pat
         ref = names[0]
         lines = [
             f"Reference: **{ref}** (the suite's first variant); "
-            + (f"each of {', '.join(names[1:])} is compared with it." if len(names) > 2
-               else f"compared with {names[1]}."),
+            + (
+                f"each of {', '.join(names[1:])} is compared with it."
+                if len(names) > 2
+                else f"compared with {names[1]}."
+            ),
             f"Pairs: runs equal on ({', '.join(key)}), pooled over the conditions of a case; "
             f"Δ = other − reference per pair. Median Δ with its {paired.CONFIDENCE:.0%} "
             f"bootstrap CI (scipy.stats.bootstrap, paired, percentile, "
@@ -282,19 +285,25 @@ def write_report(out: Path, exp, results: pd.DataFrame, stats=None) -> tuple[Pat
             if len(th):
                 d = headline_table(th)
                 both(_md_table(d) + "\n", d.to_html())
-                figure(rf.forest_figure(th, paired.HEADLINE,
-                                        figdir / f"forest-{_heading_id(other)}.png"))
+                figure(
+                    rf.forest_figure(
+                        th, paired.HEADLINE, figdir / f"forest-{_heading_id(other)}.png"
+                    )
+                )
         wl = paired.significant_win_loss(table)
-        note = ("Per metric with a direction: the number of cases in which each variant is "
-                "significantly better on the paired test above (per-AUV counts summed, fix "
-                "ages maxed per run). Unpaired or n/a comparisons are not counted as wins.")
-        both(f"\n## Significant wins and losses (paired)\n\n{note}\n",
-             f"<h2>Significant wins and losses (paired)</h2><p>{html.escape(note)}</p>")
+        note = (
+            "Per metric with a direction: the number of cases in which each variant is "
+            "significantly better on the paired test above (per-AUV counts summed, fix "
+            "ages maxed per run). Unpaired or n/a comparisons are not counted as wins."
+        )
+        both(
+            f"\n## Significant wins and losses (paired)\n\n{note}\n",
+            f"<h2>Significant wins and losses (paired)</h2><p>{html.escape(note)}</p>",
+        )
         for other, w in wl.groupby("other", sort=False):
             d = win_loss_table(w)
             sub = f"{other} vs {ref}"
-            both(f"\n### {sub}\n\n{_md_table(d)}\n",
-                 f"<h3>{html.escape(sub)}</h3>{d.to_html()}")
+            both(f"\n### {sub}\n\n{_md_table(d)}\n", f"<h3>{html.escape(sub)}</h3>{d.to_html()}")
     both("\n## The sweep\n", "<h2>The sweep</h2>")
     facts = [
         f"{suite.description}".strip(),

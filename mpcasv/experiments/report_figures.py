@@ -90,9 +90,11 @@ def forest_figure(table: pd.DataFrame, metrics: Sequence[HeadlineMetric], path: 
                             [r["ci_high"] - r["median"]]], fmt="o", color=c, ms=5,
                             capsize=3, lw=1.5)  # fmt: skip
                 p = "n/a" if not np.isfinite(r["p"]) else f"{r['p']:.2g}"
-                right.append(f"{num(r['median'])} [{num(r['ci_low'])}, {num(r['ci_high'])}]"
-                             f" p={p} n={r['n']}"
-                             + (" negligible" if r["verdict"].startswith("negl") else ""))
+                right.append(
+                    f"{num(r['median'])} [{num(r['ci_low'])}, {num(r['ci_high'])}]"
+                    f" p={p} n={r['n']}"
+                    + (" negligible" if r["verdict"].startswith("negl") else "")
+                )
             elif np.isfinite(r["median"]):
                 ax.plot(r["median"], yi, "o", mfc="none", color="0.5", ms=5)
                 right.append(f"{num(r['median'])} ({r['note']})")
@@ -116,7 +118,7 @@ def forest_figure(table: pd.DataFrame, metrics: Sequence[HeadlineMetric], path: 
         ax.set_xlabel(f"median paired difference, {other} − {ref} ({h.unit})", fontsize=8)
         ax.tick_params(axis="x", labelsize=7)
         ax.grid(axis="x", alpha=0.3)
-    for ax in list(axes.flat)[len(specs):]:
+    for ax in list(axes.flat)[len(specs) :]:
         ax.axis("off")
     fig.suptitle(f"Paired differences {other} − {ref} per case: median and 95 % bootstrap CI\n"
                  f"green: {other} significantly better, red: {ref} significantly better (CI "
@@ -238,7 +240,7 @@ def box_figure(ok: pd.DataFrame, scenario: str, metrics: Sequence[str],
         ax.grid(alpha=0.3)
     for row in axes:
         row[0].set_yticks(pos, labels, fontsize=8)
-    for ax in list(axes.flat)[len(metrics):]:
+    for ax in list(axes.flat)[len(metrics) :]:
         ax.axis("off")
     fig.suptitle(f"{scenario}: across seeds (n = {g['seed'].nunique()} per box)")
     fig.tight_layout()

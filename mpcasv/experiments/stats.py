@@ -224,7 +224,8 @@ def paired_table(results: pd.DataFrame, metrics: Sequence[str],
                     "n_unpaired": int(unpaired.get(case, 0)),
                     "ref_median": ref_median,
                     "median": s.median, "ci_low": s.ci_low, "ci_high": s.ci_high, "p": s.p,
-                    "note": s.note, "verdict": verdict(s, better.get(m), reference, other, ref_median),
+                    "note": s.note,
+                    "verdict": verdict(s, better.get(m), reference, other, ref_median),
                 })  # fmt: skip
     return pd.DataFrame(rows)
 
