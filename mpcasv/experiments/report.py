@@ -333,13 +333,20 @@ def write_report(out: Path, exp, results: pd.DataFrame, stats=None) -> tuple[Pat
         for n_ in notes:
             bullet(n_)
         reps = rf.representative_runs(ok, scenario)
-        cmp_ = rf.compare_figure(out, reps, scenario, figdir / f"compare-{scenario}.png")
-        box = rf.box_figure(ok, scenario, BOX_METRICS, better, figdir / f"box-{scenario}.png")
-        for fig in (ecdf, cmp_, box):
+        figs = [ecdf]
+        lost = [r["run_dir"] for _, r in reps.iterrows() if not rf.has_timeseries(out, r)]
+        if lost:
+            bullet(f"No figure of the representative runs: no time series in {', '.join(lost)}.")
+        else:
+            figs.append(rf.compare_figure(out, reps, scenario, figdir / f"compare-{scenario}.png"))
+        figs.append(
+            rf.box_figure(ok, scenario, BOX_METRICS, better, figdir / f"box-{scenario}.png")
+        )
+        for fig in figs:
             figure(fig)
         links_md, links_html = [], []
         for _, r in reps.iterrows():
-            pngs = sorted((out / r["run_dir"]).glob("*.png"))
+            pngs = sorted(rf.run_path(out, r["run_dir"]).glob("*.png"))
             if pngs:
                 links_md.append(f"{r['variant']}: " + ", ".join(
                     f"[{p.stem}]({p.relative_to(out)})" for p in pngs))  # fmt: skip

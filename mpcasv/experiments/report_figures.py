@@ -21,6 +21,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
+import pyarrow.parquet as pq
 
 from mpcasv.experiments.stats import ALPHA, COMPARE, HeadlineMetric
 
@@ -148,9 +149,16 @@ ECDF_SERIES = (
 )
 
 
-def _run_path(out: Path, run_dir: str) -> Path:
-    p = Path(run_dir)
+def run_path(out: Path, run_dir: str) -> Path:
+    """A run's folder: ``run_dir`` of the results table, relative to ``out`` or absolute."""
+    p = Path(str(run_dir))
     return p if p.is_absolute() else out / p
+
+
+def has_timeseries(out: Path, row) -> bool:
+    """Whether the run of results row ``row`` has its ``timeseries.parquet`` here."""
+    run_dir = row.get("run_dir")
+    return isinstance(run_dir, str) and (run_path(out, run_dir) / "timeseries.parquet").is_file()
 
 
 def ecdf_figure(out: Path, ok: pd.DataFrame, scenario: str, path: Path,
@@ -162,19 +170,23 @@ def ecdf_figure(out: Path, ok: pd.DataFrame, scenario: str, path: Path,
     names = list(dict.fromkeys(g[COMPARE]))
     n_auv = len(g.iloc[0]["auv_names"].split(","))
     found: dict[str, list[pd.DataFrame]] = {v: [] for v in names}
+    wanted = [f"{s.prefix}{k}" for s in series for k in range(n_auv)]
     n_missing = 0
     for _, r in g.iterrows():
-        f = _run_path(out, str(r.get("run_dir", ""))) / "timeseries.parquet"
-        if not f.is_file():
+        if not has_timeseries(out, r):
             n_missing += 1
             continue
-        found[r[COMPARE]].append(pd.read_parquet(f))
+        f = run_path(out, r["run_dir"]) / "timeseries.parquet"
+        have = set(pq.read_schema(f).names)
+        found[r[COMPARE]].append(pd.read_parquet(f, columns=[c for c in wanted if c in have]))
     notes = [f"{n_missing} of {len(g)} runs have no time series here"] if n_missing else []
     fig, axes = plt.subplots(1, len(series), figsize=(6.5 * len(series), 4.2), squeeze=False)
     colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
     for ax, s in zip(axes.flat, series, strict=True):
         cols = [f"{s.prefix}{k}" for k in range(n_auv)]
-        from_ts = any(found[v] for v in names)
+        from_ts = any(c in ts for v in names for ts in found[v] for c in cols)
+        if not from_ts and any(found[v] for v in names):
+            notes.append(f"{s.title}: the time series have no column {s.prefix}<k>")
         for i, v in enumerate(names):
             if from_ts:
                 vals = [ts[c].to_numpy(float) for ts in found[v] for c in cols if c in ts]
@@ -193,7 +205,7 @@ def ecdf_figure(out: Path, ok: pd.DataFrame, scenario: str, path: Path,
             what = f"{s.title} ({s.unit}), all runs, AUVs and time steps"
             ylabel = "fraction of time ≤ x"
         elif s.run_metric in g:
-            what = f"per-run {s.run_metric} ({s.unit}): no time series found"
+            what = f"per-run {s.run_metric} ({s.unit}): from no time series"
             ylabel = "fraction of runs ≤ x"
             notes.append(f"{s.title}: ECDF over runs of {s.run_metric} (no time series)")
         else:
@@ -276,7 +288,7 @@ def fix_age_trace(t: np.ndarray, age: np.ndarray) -> tuple[np.ndarray, np.ndarra
 def compare_figure(out: Path, reps: pd.DataFrame, scenario: str, path: Path) -> Path:
     """Paths, range (with r_inner / r_t / r_outer of the first variant) and fix age of the
     representative runs, one colour per variant (fix age: its envelope in long runs)."""
-    series = [(r[COMPARE], pd.read_parquet(_run_path(out, r["run_dir"]) / "timeseries.parquet"))
+    series = [(r[COMPARE], pd.read_parquet(run_path(out, r["run_dir"]) / "timeseries.parquet"))
               for _, r in reps.iterrows()]  # fmt: skip
     names = reps.iloc[0]["auv_names"].split(",")
     n = len(names)
