@@ -26,6 +26,7 @@ import pyarrow.parquet as pq
 from mpcasv.experiments.stats import ALPHA, COMPARE, HeadlineMetric
 
 CONDITION = ["current", "estimator"]
+SYMLOG_RATIO = 100.0  # forest panels whose nonzero |median| span more than this: symlog x
 VERDICT_COLOURS = {"other": "tab:green", "reference": "tab:red", "none": "0.35"}
 
 
@@ -110,13 +111,24 @@ def forest_figure(table: pd.DataFrame, metrics: Sequence[HeadlineMetric], path: 
         lo, hi = ax.get_xlim()
         span = max(abs(lo), abs(hi))
         ax.set_xlim(-span * 1.05, span * 1.05)  # zero in the middle: both sides labelled
+        scale = ""
+        med = np.abs(g["median"].to_numpy(float))
+        med = med[np.isfinite(med) & (med > 0)]
+        if len(med) and med.max() > SYMLOG_RATIO * med.min():  # cases of very different size
+            # linear within the smallest case (at most 3 decades below the largest)
+            lin = float(max(med.min(), med.max() / 1e3))
+            ax.set_xscale("symlog", linthresh=lin)
+            ax.set_xlim(-span * 2.0, span * 2.0)
+            dec = 10.0 ** np.arange(np.ceil(np.log10(lin)) + 1, np.floor(np.log10(span)) + 1)
+            ax.set_xticks(np.concatenate([-dec[::-1], [0.0], dec]))
+            scale = "; symlog scale"
         left_is_other = h.better == "lower"
         ax.text(0.01, 1.01, f"← {other if left_is_other else ref} better",
                 transform=ax.transAxes, fontsize=7, ha="left", va="bottom")  # fmt: skip
         ax.text(0.99, 1.01, f"{ref if left_is_other else other} better →",
                 transform=ax.transAxes, fontsize=7, ha="right", va="bottom")  # fmt: skip
         ax.set_title(f"{h.name} ({h.group}; {h.better} is better)", fontsize=9, pad=12)
-        ax.set_xlabel(f"median paired difference, {other} − {ref} ({h.unit})", fontsize=8)
+        ax.set_xlabel(f"median paired difference, {other} − {ref} ({h.unit}{scale})", fontsize=8)
         ax.tick_params(axis="x", labelsize=7)
         ax.grid(axis="x", alpha=0.3)
     for ax in list(axes.flat)[len(specs) :]:
@@ -269,7 +281,7 @@ def representative_runs(ok: pd.DataFrame, scenario: str) -> pd.DataFrame:
 
 #: above this many fix-age resets in a panel, the fix age is drawn as its upper envelope
 MAX_SAWTEETH = 40
-ENVELOPE_BINS = 150
+ENVELOPE_BINS = 60
 
 
 def fix_age_trace(t: np.ndarray, age: np.ndarray) -> tuple[np.ndarray, np.ndarray, str]:
@@ -282,7 +294,8 @@ def fix_age_trace(t: np.ndarray, age: np.ndarray) -> tuple[np.ndarray, np.ndarra
     edges = np.linspace(t[0], t[-1], ENVELOPE_BINS + 1)
     b = np.clip(np.searchsorted(edges, t, side="right") - 1, 0, ENVELOPE_BINS - 1)
     peak = pd.Series(age).groupby(b).max()
-    return edges[peak.index.to_numpy()], peak.to_numpy(), f", max per {num(edges[1] - edges[0])} s"
+    w = edges[1] - edges[0]
+    return edges[peak.index.to_numpy()], peak.to_numpy(), f", max per {w:.2g} s window"
 
 
 def compare_figure(out: Path, reps: pd.DataFrame, scenario: str, path: Path) -> Path:
