@@ -9,6 +9,7 @@ from types import SimpleNamespace
 import numpy as np
 import pandas as pd
 import pytest
+from scipy import stats as sps
 
 from mpcasv.experiments import stats
 from mpcasv.experiments.report import directions, write_report
@@ -212,3 +213,17 @@ def test_report_opens_with_the_headline_table_and_names_missing_metrics(tmp_path
     assert "48 of 48 runs have no time series here" in md
     page = html_path.read_text()
     assert page.index("Headline: paired differences") < page.index("The sweep")
+
+
+@pytest.mark.parametrize("d", [
+    [0, 0, 1, 2, 2, 3, -1, 4],  # zeros and ties: scipy's own (slow) permutation test
+    [1, 1, 1, 2, 2, -3, 5, 0, 0, 0, 7, 1, 1],  # n = 13, the largest exact case
+    [1, 2, 3, 4, 5, -6],  # no ties: exact distribution
+    [1, 1, 1, 1, 1, 1],
+    [3, -1, 2, 2, 0, 5, 1, 4, -2, 6, 7, 8, 1, 9],  # n = 14 with ties: normal approximation
+])  # fmt: skip
+def test_wilcoxon_p_equals_scipy_wilcoxon(d):
+    d = np.asarray(d, float)
+    assert stats.wilcoxon_p(d) == pytest.approx(
+        sps.wilcoxon(d, zero_method="wilcox").pvalue, rel=1e-12
+    )
