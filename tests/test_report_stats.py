@@ -227,3 +227,12 @@ def test_wilcoxon_p_equals_scipy_wilcoxon(d):
     assert stats.wilcoxon_p(d) == pytest.approx(
         sps.wilcoxon(d, zero_method="wilcox").pvalue, rel=1e-12
     )
+
+
+def test_report_says_why_when_the_table_cannot_be_paired(tmp_path):
+    df = results({"min_range_m": 2.0})
+    df = pd.concat([df, df.iloc[[0]].assign(index=999)])  # e.g. an axis not in PAIR_KEY
+    md, _ = write_report(tmp_path, _exp(df), df)
+    text = md.read_text()
+    assert "**No paired comparison**: ref: 1 rows share a pairing key" in text
+    assert "## c1" in text  # the rest of the report is still written

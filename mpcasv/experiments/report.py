@@ -249,13 +249,16 @@ def write_report(out: Path, exp, results: pd.DataFrame, stats=None) -> tuple[Pat
     md.append("")
     names = paired.variants(results) if len(ok) else []
     runs = with_list_summaries(results) if len(ok) else results
-    table = pd.DataFrame()
+    table, why = pd.DataFrame(), f"{len(names)} controller variant(s) with results"
     if len(names) > 1:
         rest = [m for m in better if better[m] and m not in headline]
-        table = paired.paired_table(runs, [*headline, *rest], better)
+        try:
+            table = paired.paired_table(runs, [*headline, *rest], better)
+        except ValueError as exc:  # a table whose columns do not identify the pairs
+            why = str(exc)
     both("\n## Headline: paired differences\n", "<h2>Headline: paired differences</h2>")
     if not len(table):
-        bullet(f"No paired comparison: {len(names)} controller variant(s) with results.")
+        bullet(f"**No paired comparison**: {why}.")
     else:
         key = paired.pair_key(results)
         ref = names[0]
