@@ -188,7 +188,7 @@ def _exp(df: pd.DataFrame) -> SimpleNamespace:
 
 
 def test_report_opens_with_the_headline_table_and_names_missing_metrics(tmp_path):
-    present = ["min_range_m", "energy_J", "nav_error_rms_m", "propeller_on_s"]
+    present = ["min_range_m", "energy_J", "nav_error_rms_m", "nav_error_p95_m", "propeller_on_s"]
     df = results({m: 2.0 for m in present}, variants=("hybrid", "mpc", "mpc2"))
     md_path, html_path = write_report(tmp_path, _exp(df), df)
     md = md_path.read_text()
@@ -211,6 +211,9 @@ def test_report_opens_with_the_headline_table_and_names_missing_metrics(tmp_path
     # no time series in the synthetic run folders: said, and the ECDF falls back visibly
     assert "No figure of the representative runs: no time series in runs/c1-" in md
     assert "48 of 48 runs have no time series here" in md
+    assert "AUV navigation error: ECDF over runs of nav_error_p95_m (no time series)" in md
+    assert "acoustic fix age: neither time series nor fix_age_p95_s available" in md
+    assert (tmp_path / "figures" / "ecdf-c1.png").stat().st_size > 10_000
     page = html_path.read_text()
     assert page.index("Headline: paired differences") < page.index("The sweep")
 

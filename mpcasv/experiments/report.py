@@ -297,7 +297,8 @@ def write_report(out: Path, exp, results: pd.DataFrame, stats=None) -> tuple[Pat
         note = (
             "Per metric with a direction: the number of cases in which each variant is "
             "significantly better on the paired test above (per-AUV counts summed, fix "
-            "ages maxed per run). Unpaired or n/a comparisons are not counted as wins."
+            "ages maxed per run). 'No significant difference' includes negligible and identical; "
+            "unpaired or n/a comparisons are never counted as wins."
         )
         both(
             f"\n## Significant wins and losses (paired)\n\n{note}\n",
@@ -336,7 +337,7 @@ def write_report(out: Path, exp, results: pd.DataFrame, stats=None) -> tuple[Pat
         for n_ in notes:
             bullet(n_)
         reps = rf.representative_runs(ok, scenario)
-        figs = [ecdf]
+        figs = [ecdf] if ecdf else []
         lost = [r["run_dir"] for _, r in reps.iterrows() if not rf.has_timeseries(out, r)]
         if lost:
             bullet(f"No figure of the representative runs: no time series in {', '.join(lost)}.")

@@ -173,11 +173,14 @@ def has_timeseries(out: Path, row) -> bool:
     return isinstance(run_dir, str) and (run_path(out, run_dir) / "timeseries.parquet").is_file()
 
 
-def ecdf_figure(out: Path, ok: pd.DataFrame, scenario: str, path: Path,
-                series: Sequence[EcdfSeries] = ECDF_SERIES) -> tuple[Path, list[str]]:  # fmt: skip
+def ecdf_figure(
+    out: Path, ok: pd.DataFrame, scenario: str, path: Path,
+    series: Sequence[EcdfSeries] = ECDF_SERIES,
+) -> tuple[Path | None, list[str]]:  # fmt: skip
     """ECDFs per variant of each of ``series`` in ``scenario``, pooled over its ok runs (every
-    condition and seed), AUVs and logged time steps. Returns the figure and notes on what
-    was missing (runs without a time series, quantities drawn from per-run metrics)."""
+    condition and seed), AUVs and logged time steps. Returns the figure (None if no panel has
+    data) and notes on what was missing (runs without a time series, quantities drawn from
+    per-run metrics)."""
     g = ok[ok["scenario"] == scenario]
     names = list(dict.fromkeys(g[COMPARE]))
     n_auv = len(g.iloc[0]["auv_names"].split(","))
@@ -231,6 +234,9 @@ def ecdf_figure(out: Path, ok: pd.DataFrame, scenario: str, path: Path,
         ax.grid(alpha=0.3)
         if ax.get_legend_handles_labels()[0]:
             ax.legend(fontsize=7, loc="lower right")
+    if not any(ax.get_legend_handles_labels()[0] for ax in axes.flat):
+        plt.close(fig)
+        return None, notes
     fig.suptitle(f"{scenario}: ECDF per controller variant (further left = smaller "
                  "values = better)", fontsize=10)  # fmt: skip
     fig.tight_layout()
