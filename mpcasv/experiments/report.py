@@ -24,6 +24,7 @@ from __future__ import annotations
 import base64
 import html
 import math
+import re
 from pathlib import Path
 
 import numpy as np
@@ -233,7 +234,9 @@ def write_report(out: Path, exp, results: pd.DataFrame, stats=None) -> tuple[Pat
         both(f"![{fig.stem}]({rel})\n", f'<img src="{_img_b64(fig)}" alt="{fig.stem}">')
 
     def bullet(text: str) -> None:
-        both(f"- {text}", f"<p>{html.escape(text).replace('`', '')}</p>")
+        page = re.sub(r"\*\*(.+?)\*\*", r"<b>\1</b>", html.escape(text).replace("`", ""))
+        page = re.sub(r"\*(.+?)\*", r"<i>\1</i>", page)
+        both(f"- {text}", f"<p>{page}</p>")
 
     title = f"Comparison: suite {suite.name}"
     both(f"# {title}\n", f"<h1>{html.escape(title)}</h1>")
