@@ -213,6 +213,7 @@ def test_report_opens_with_the_headline_table_and_names_missing_metrics(tmp_path
     assert "48 of 48 runs have no time series here" in md
     assert "AUV navigation error: ECDF over runs of nav_error_p95_m (no time series)" in md
     assert "acoustic fix age: neither time series nor fix_age_p95_s available" in md
+    assert "reliable-fix age τ: neither time series nor reliable_fix_age_p95_s" in md
     assert (tmp_path / "figures" / "ecdf-c1.png").stat().st_size > 10_000
     page = html_path.read_text()
     assert page.index("Headline: paired differences") < page.index("The sweep")
@@ -239,3 +240,39 @@ def test_report_says_why_when_the_table_cannot_be_paired(tmp_path):
     text = md.read_text()
     assert "**No paired comparison**: ref: 1 rows share a pairing key" in text
     assert "## c1" in text  # the rest of the report is still written
+
+
+def _write_timeseries(out, df: pd.DataFrame, n: int = 50) -> None:
+    """A small time series per run of ``df`` (one AUV) in its run folder."""
+    rng = np.random.default_rng(3)
+    t = np.arange(n, dtype=float)
+    for r in df.itertuples():
+        d = out / r.run_dir
+        d.mkdir(parents=True)
+        pd.DataFrame({
+            "t": t, "N": rng.normal(size=n), "E": rng.normal(size=n), "auv0_N": t, "auv0_E": t,
+            "range0": 100 + rng.normal(size=n), "r_inner0": 50.0, "r_t0": 90.0,
+            "r_outer0": 200.0, "fix_age0": t % 5, "rfix_age0": t % 11,
+            "nav_err0": rng.gamma(2.0, size=n),
+        }).to_parquet(d / "timeseries.parquet")  # fmt: skip
+
+
+def test_ecdfs_pool_every_run_auv_and_step_of_a_case_per_variant(tmp_path):
+    from mpcasv.experiments.report_figures import ecdf_panels
+
+    df = results({"min_range_m": 2.0})
+    _write_timeseries(tmp_path, df)
+    panels, notes = ecdf_panels(tmp_path, df, "c1")
+    assert notes == [] and [p[2].prefix for p in panels] == ["rfix_age", "fix_age", "nav_err"]
+    nav = panels[2][3]
+    for v in ("ref", "new"):
+        runs = df[(df["scenario"] == "c1") & (df["variant"] == v)]
+        expect = np.concatenate([pd.read_parquet(tmp_path / d / "timeseries.parquet")["nav_err0"]
+                                 for d in runs["run_dir"]])  # fmt: skip
+        assert len(runs) == 16 and np.array_equal(nav[v], np.sort(expect))
+    # the report draws them and the representative runs (no 'no time series' line)
+    md, _ = write_report(tmp_path, _exp(df), df)
+    text = md.read_text()
+    assert "no time series" not in text
+    for f in ("ecdf-c1.png", "compare-c1.png", "box-c1.png"):
+        assert (tmp_path / "figures" / f).stat().st_size > 10_000

@@ -156,6 +156,7 @@ class EcdfSeries:
 
 
 ECDF_SERIES = (
+    EcdfSeries("rfix_age", "reliable-fix age τ", "s", "reliable_fix_age_p95_s"),  # Paper 2 eq. 9
     EcdfSeries("fix_age", "acoustic fix age", "s", "fix_age_p95_s"),
     EcdfSeries("nav_err", "AUV navigation error", "m", "nav_error_p95_m"),
 )
@@ -173,14 +174,10 @@ def has_timeseries(out: Path, row) -> bool:
     return isinstance(run_dir, str) and (run_path(out, run_dir) / "timeseries.parquet").is_file()
 
 
-def ecdf_figure(
-    out: Path, ok: pd.DataFrame, scenario: str, path: Path,
-    series: Sequence[EcdfSeries] = ECDF_SERIES,
-) -> tuple[Path | None, list[str]]:  # fmt: skip
-    """ECDFs per variant of each of ``series`` in ``scenario``, pooled over its ok runs (every
-    condition and seed), AUVs and logged time steps. Returns the figure (None if no panel has
-    data) and notes on what was missing (runs without a time series, quantities drawn from
-    per-run metrics)."""
+def ecdf_panels(out: Path, ok: pd.DataFrame, scenario: str,
+                series: Sequence[EcdfSeries] = ECDF_SERIES) -> tuple[list, list[str]]:  # fmt: skip
+    """The data of :func:`ecdf_figure`: per series with data, (title, y label, series,
+    {variant: sorted values pooled over the runs, AUVs and time steps}), and the notes."""
     g = ok[ok["scenario"] == scenario]
     names = list(dict.fromkeys(g[COMPARE]))
     n_auv = len(g.iloc[0]["auv_names"].split(","))
@@ -195,14 +192,14 @@ def ecdf_figure(
         have = set(pq.read_schema(f).names)
         found[r[COMPARE]].append(pd.read_parquet(f, columns=[c for c in wanted if c in have]))
     notes = [f"{n_missing} of {len(g)} runs have no time series here"] if n_missing else []
-    fig, axes = plt.subplots(1, len(series), figsize=(6.5 * len(series), 4.2), squeeze=False)
-    colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
-    for ax, s in zip(axes.flat, series, strict=True):
+    panels = []  # (title, ylabel, series, {variant: sorted values}) of the series with data
+    for s in series:
         cols = [f"{s.prefix}{k}" for k in range(n_auv)]
         from_ts = any(c in ts for v in names for ts in found[v] for c in cols)
         if not from_ts and any(found[v] for v in names):
             notes.append(f"{s.title}: the time series have no column {s.prefix}<k>")
-        for i, v in enumerate(names):
+        data = {}
+        for v in names:
             if from_ts:
                 vals = [ts[c].to_numpy(float) for ts in found[v] for c in cols if c in ts]
                 x = np.concatenate(vals) if vals else np.empty(0)
@@ -210,33 +207,45 @@ def ecdf_figure(
                 x = g.loc[g[COMPARE] == v, s.run_metric].to_numpy(float)
             else:
                 x = np.empty(0)
-            x = np.sort(x[np.isfinite(x)])
+            data[v] = np.sort(x[np.isfinite(x)])
+        if from_ts:
+            panels.append((f"{s.title} ({s.unit}): all runs, AUVs and time steps",
+                           "fraction of time ≤ x", s, data))  # fmt: skip
+        elif s.run_metric in g:
+            notes.append(f"{s.title}: ECDF over runs of {s.run_metric} (no time series)")
+            panels.append((f"per-run {s.run_metric} ({s.unit}): no time series",
+                           "fraction of runs ≤ x", s, data))  # fmt: skip
+        else:
+            notes.append(f"{s.title}: neither time series nor {s.run_metric} available")
+    return [p for p in panels if any(len(x) for x in p[3].values())], notes
+
+
+def ecdf_figure(
+    out: Path, ok: pd.DataFrame, scenario: str, path: Path,
+    series: Sequence[EcdfSeries] = ECDF_SERIES,
+) -> tuple[Path | None, list[str]]:  # fmt: skip
+    """ECDFs per variant of each of ``series`` in ``scenario``, pooled over its ok runs (every
+    condition and seed), AUVs and logged time steps (:func:`ecdf_panels`). Returns the figure
+    (None if no series has data) and notes on what was missing (runs without a time series,
+    quantities drawn from per-run metrics)."""
+    panels, notes = ecdf_panels(out, ok, scenario, series)
+    if not panels:
+        return None, notes
+    fig, axes = plt.subplots(1, len(panels), figsize=(6.0 * len(panels), 4.2), squeeze=False)
+    colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    for ax, (title, ylabel, s, data) in zip(axes.flat, panels, strict=True):
+        for i, (v, x) in enumerate(data.items()):
             if not len(x):
                 continue
             idx = np.unique(np.linspace(0, len(x) - 1, min(len(x), 2000)).astype(int))
             ax.step(x[idx], (idx + 1) / len(x), where="post", color=colours[i % len(colours)],
                     lw=1.3, label=f"{v} (p95 {num(float(np.percentile(x, 95)))})")  # fmt: skip
-        if from_ts:
-            what = f"{s.title} ({s.unit}), all runs, AUVs and time steps"
-            ylabel = "fraction of time ≤ x"
-        elif s.run_metric in g:
-            what = f"per-run {s.run_metric} ({s.unit}): from no time series"
-            ylabel = "fraction of runs ≤ x"
-            notes.append(f"{s.title}: ECDF over runs of {s.run_metric} (no time series)")
-        else:
-            what = f"{s.title}: neither time series nor {s.run_metric} available"
-            notes.append(what)
-            ylabel = ""
-        ax.set_title(what, fontsize=9)
+        ax.set_title(title, fontsize=9)
         ax.set_xlabel(f"{s.title} ({s.unit})", fontsize=8)
         ax.set_ylabel(ylabel, fontsize=8)
         ax.set_ylim(0, 1.02)
         ax.grid(alpha=0.3)
-        if ax.get_legend_handles_labels()[0]:
-            ax.legend(fontsize=7, loc="lower right")
-    if not any(ax.get_legend_handles_labels()[0] for ax in axes.flat):
-        plt.close(fig)
-        return None, notes
+        ax.legend(fontsize=7, loc="lower right")
     fig.suptitle(f"{scenario}: ECDF per controller variant (further left = smaller "
                  "values = better)", fontsize=10)  # fmt: skip
     fig.tight_layout()
@@ -305,8 +314,9 @@ def fix_age_trace(t: np.ndarray, age: np.ndarray) -> tuple[np.ndarray, np.ndarra
 
 
 def compare_figure(out: Path, reps: pd.DataFrame, scenario: str, path: Path) -> Path:
-    """Paths, range (with r_inner / r_t / r_outer of the first variant) and fix age of the
-    representative runs, one colour per variant (fix age: its envelope in long runs)."""
+    """Paths, range (with r_inner / r_t / r_outer of the first variant) and the reliable-fix
+    age tau_k (column ``rfix_age<k>``; the fix age ``fix_age<k>`` in runs without it) of the
+    representative runs, one colour per variant (its envelope in long runs)."""
     series = [(r[COMPARE], pd.read_parquet(run_path(out, r["run_dir"]) / "timeseries.parquet"))
               for _, r in reps.iterrows()]  # fmt: skip
     names = reps.iloc[0]["auv_names"].split(",")
@@ -327,6 +337,9 @@ def compare_figure(out: Path, reps: pd.DataFrame, scenario: str, path: Path) -> 
     axp.legend(fontsize=7)
     axp.grid(alpha=0.3)
     axp.set_title("paths (AUVs grey)", fontsize=9)
+    # Paper 2's reliable-fix age tau_k (eq. 9) where the runs recorded it, else the fix age
+    rel = all(f"rfix_age{k}" in ts for _, ts in series for k in range(n))
+    age, age_name = ("rfix_age", "τ reliable-fix age") if rel else ("fix_age", "fix age")
     for k in range(n):
         axr, axf = fig.add_subplot(gs[k, 1]), fig.add_subplot(gs[k, 2])
         t0 = ts0["t"].to_numpy()
@@ -340,12 +353,14 @@ def compare_figure(out: Path, reps: pd.DataFrame, scenario: str, path: Path) -> 
             c = colours[i % len(colours)]
             axr.plot(ts["t"], ts[f"range{k}"], color=c, lw=1, label=v)
             tf, af, suffix = fix_age_trace(ts["t"].to_numpy(float),
-                                           ts[f"fix_age{k}"].to_numpy(float))  # fmt: skip
-            axf.step(tf, af, where="post", color=c, lw=1, label=v)
+                                           ts[f"{age}{k}"].to_numpy(float))  # fmt: skip
+            axf.plot(
+                tf, af, color=c, lw=1, label=v, drawstyle="steps-post" if suffix else "default"
+            )
         top = max(float(ts[f"range{k}"].max()) for _, ts in series) * 1.1
         axr.set_ylim(0, top)
         axr.set_ylabel(f"range {names[k]} (m)", fontsize=8)
-        axf.set_ylabel(f"fix age {names[k]} (s{suffix})", fontsize=8)
+        axf.set_ylabel(f"{age_name} {names[k]} (s{suffix})", fontsize=8)
         for ax in (axr, axf):
             ax.grid(alpha=0.3)
             ax.tick_params(labelsize=7)
