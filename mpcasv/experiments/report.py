@@ -254,7 +254,11 @@ def write_report(out: Path, exp, results: pd.DataFrame, stats=None) -> tuple[Pat
     runs = with_list_summaries(results) if len(ok) else results
     table, why = pd.DataFrame(), f"{len(names)} controller variant(s) with results"
     if len(names) > 1:
-        rest = [m for m in better if better[m] and m not in headline]
+        rest = [
+            m
+            for m in better
+            if better[m] and m not in headline and not (m.endswith("_auv") and m[:-4] in better)
+        ]  # lists of a scalar: once
         try:
             table = paired.paired_table(runs, [*headline, *rest], better)
         except ValueError as exc:  # a table whose columns do not identify the pairs
