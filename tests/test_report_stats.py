@@ -127,7 +127,7 @@ def test_tiny_n_and_missing_pairs_say_na_with_the_reason():
 def test_a_key_that_does_not_identify_the_job_is_refused():
     df = results({"min_range_m": 2.0})
     df = pd.concat([df, df.iloc[[0]]])
-    with pytest.raises(ValueError, match="share a pairing key"):
+    with pytest.raises(stats.PairingError, match="share a pairing key"):
         paired_table(df, ["min_range_m"], BETTER)
 
 
@@ -224,6 +224,7 @@ def test_report_opens_with_the_headline_table_and_names_missing_metrics(tmp_path
     [1, 1, 1, 2, 2, -3, 5, 0, 0, 0, 7, 1, 1],  # n = 13, the largest exact case
     [1, 2, 3, 4, 5, -6],  # no ties: exact distribution
     [1, 1, 1, 1, 1, 1],
+    [0, 0, 0, 0, 0, 0, 0, 0, 0, 3],  # one non-zero difference (a real Case 1 min range)
     [3, -1, 2, 2, 0, 5, 1, 4, -2, 6, 7, 8, 1, 9],  # n = 14 with ties: normal approximation
 ])  # fmt: skip
 def test_wilcoxon_p_equals_scipy_wilcoxon(d):
@@ -276,3 +277,13 @@ def test_ecdfs_pool_every_run_auv_and_step_of_a_case_per_variant(tmp_path):
     assert "no time series" not in text
     for f in ("ecdf-c1.png", "compare-c1.png", "box-c1.png"):
         assert (tmp_path / "figures" / f).stat().st_size > 10_000
+
+
+def test_one_nonzero_difference_is_no_crash_and_no_verdict():
+    # a real case: case1 min range, 10 pairs of which 9 identical (delta_r 40 vs 50 m)
+    ref = np.array([7.439196, 95.58, 41.66, 27.62, 19.15, 10.2, 81.6, 27.7, 15.4, 7.87])
+    other = ref.copy()
+    other[0] = 7.439086
+    s = paired_stat(ref, other)
+    assert s.n == 10 and s.p == 1.0 and s.note == ""
+    assert stats.verdict(s, "higher", "a", "b", 20.0) == "no significant difference"

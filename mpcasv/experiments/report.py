@@ -261,7 +261,7 @@ def write_report(out: Path, exp, results: pd.DataFrame, stats=None) -> tuple[Pat
         ]  # lists of a scalar: once
         try:
             table = paired.paired_table(runs, [*headline, *rest], better)
-        except ValueError as exc:  # a table whose columns do not identify the pairs
+        except paired.PairingError as exc:  # a table whose columns do not identify pairs
             why = str(exc)
     both("\n## Headline: paired differences\n", "<h2>Headline: paired differences</h2>")
     if not len(table):

@@ -49,6 +49,11 @@ N_RESAMPLES = 9999
 SEED = 20240601
 
 
+class PairingError(ValueError):
+    """The results table cannot be paired (a pairing column missing, or a key that does not
+    identify the job)."""
+
+
 @dataclass(frozen=True)
 class HeadlineMetric:
     """One metric of the headline table (names and directions: CONTRACT.md).
@@ -81,12 +86,12 @@ def pair_key(results: pd.DataFrame) -> list[str]:
 
     Raises
     ------
-    ValueError
+    PairingError
         If a column of :data:`PAIR_KEY` or :data:`COMPARE` is missing.
     """
     missing = [c for c in (*PAIR_KEY, COMPARE) if c not in results]
     if missing:
-        raise ValueError(f"results table lacks the pairing column(s) {missing}")
+        raise PairingError(f"results table lacks the pairing column(s) {missing}")
     return [*PAIR_KEY, *(c for c in OPTIONAL_KEY if c in results)]
 
 
@@ -109,8 +114,8 @@ def pairs(results: pd.DataFrame, metric: str, reference: str, other: str
 
     Only ``status == "ok"`` rows with a finite value count. Returns the pairs (key columns,
     ``ref``, ``other``; one row per pair) and, per case, how many rows of either variant
-    found no partner. Raises ``ValueError`` if a variant has two rows with the same key (the
-    key does not identify the job).
+    found no partner. Raises :class:`PairingError` if a variant has two rows with the same key
+    (the key does not identify the job).
     """
     key = pair_key(results)
     ok = results[(results["status"] == "ok") & results[COMPARE].isin([reference, other])]
@@ -122,7 +127,7 @@ def pairs(results: pd.DataFrame, metric: str, reference: str, other: str
         side = ok[ok[COMPARE] == v].drop(columns=COMPARE).rename(columns={metric: name})
         dup = side.duplicated(key)
         if dup.any():
-            raise ValueError(f"{v}: {int(dup.sum())} rows share a pairing key {key}; "
+            raise PairingError(f"{v}: {int(dup.sum())} rows share a pairing key {key}; "
                              "the key does not identify the job")  # fmt: skip
         sides[name] = side
     both = sides["ref"].merge(sides["other"], on=key, how="outer", indicator=True)
@@ -191,6 +196,8 @@ def wilcoxon_p(d: np.ndarray) -> float:
         return float(sps.wilcoxon(d, method="exact").pvalue)
     if len(d) > 13:
         return float(sps.wilcoxon(d, method="asymptotic").pvalue)
+    if len(nz) < 2:  # one non-zero difference: scipy's own test (p = 1), cheap here
+        return float(sps.wilcoxon(d, zero_method="wilcox").pvalue)
     ranks = sps.rankdata(np.abs(nz))
 
     def r_plus(x: np.ndarray, axis: int = -1) -> np.ndarray:  # sum of the positive ranks
