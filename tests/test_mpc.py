@@ -126,17 +126,8 @@ def test_mpc_predicts_the_auvs_with_the_estimators_forecast():
     ctrl.reset(1)
     ts = ctrl.ocp.dt * np.arange(ctrl.ocp.dims.N + 1)
     turn = np.stack([100.0 + np.minimum(ts, 20.0), np.maximum(ts - 20.0, 0.0)], axis=1)
-    auv = AUVEstimate(
-        100.0,
-        0.0,
-        0.0,
-        1.0,
-        0.0,
-        forecast=lambda dt: (
-            np.interp(dt, ts, turn[:, 0])[:, None] * [1, 0]
-            + np.interp(dt, ts, turn[:, 1])[:, None] * [0, 1]
-        ),
-    )
+    auv = AUVEstimate(100.0, 0.0, 0.0, 1.0, 0.0, forecast=lambda dt: np.interp(
+        dt, ts, turn[:, 0])[:, None] * [1, 0] + np.interp(dt, ts, turn[:, 1])[:, None] * [0, 1])
     obs = Observation(0.0, ASVState(0.0, 0.0, 0.0, 1.0), True, (auv,))
     np.testing.assert_allclose(ctrl.ocp.unpack_par(ctrl.parameters(obs))["pa"][:, 0], turn)
     cv = dataclasses.replace(auv, forecast=None)
