@@ -271,7 +271,14 @@ def box_figure(ok: pd.DataFrame, scenario: str, metrics: Sequence[str],
     pos = np.arange(len(labels))[::-1] + 1.0  # first group on top
     for ax, m in zip(axes.flat, metrics, strict=False):
         data = [g.loc[g["group"] == lab, m].astype(float).dropna().to_numpy() for lab in labels]
-        ax.boxplot(data, positions=pos, orientation="horizontal", showmeans=True, widths=0.6)
+        ax.boxplot(
+            data,
+            positions=pos,
+            orientation="horizontal",
+            showmeans=True,
+            widths=0.6,
+            showfliers=False,
+        )  # every run is drawn as a dot
         for p, d in zip(pos, data, strict=True):
             ax.plot(d, np.full(len(d), p), ".", color="k", alpha=0.5, ms=4)
         ax.set_title(f"{m} ({better.get(m) or 'no direction'} is better)", fontsize=9)
