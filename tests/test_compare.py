@@ -12,8 +12,9 @@ import pytest
 
 from mpcasv.cli import main
 from mpcasv.experiments.metrics import METRIC_NAMES
-from mpcasv.experiments.report import BETTER, summary_table, win_loss
+from mpcasv.experiments.report import BETTER, directions, summary_table
 from mpcasv.experiments.runner import run_suite
+from mpcasv.experiments.stats import paired_table
 from mpcasv.experiments.store import TIMING_COLUMNS
 from mpcasv.experiments.suite import expand
 
@@ -42,12 +43,12 @@ def test_quick_suite_runs_every_job_once_and_writes_its_run(serial):
         assert set(metrics) == set(METRIC_NAMES)
         assert row["min_range_m"] == pytest.approx(metrics["min_range_m"])
         for k, v in enumerate(metrics["fixes_auv"]):  # per-AUV lists expanded
-            assert row[f"fixes_auv_auv{k}"] == v
+            assert row[f"fixes_auv{k}"] == v
     assert sorted(p.stem for p in (out / "parts").glob("*.parquet")) == sorted(df["job_id"])
     # the grid, the currents and the seeds all reach the simulation
     assert df.groupby("variant")["asv_distance_m"].mean().nunique() == 2
     assert df.groupby("current")["energy_J"].mean().nunique() == 2
-    assert df.groupby("seed")["fixes_auv_auv0"].apply(list).map(tuple).nunique() == 2
+    assert df.groupby("seed")["fixes_auv0"].apply(list).map(tuple).nunique() == 2
 
 
 @pytest.fixture(scope="module")
@@ -84,7 +85,11 @@ def test_report_has_every_metric_per_scenario_and_its_figures(serial):
         for fig in (f"box-{scenario}.png", f"compare-{scenario}.png"):
             assert (out / "figures" / fig).stat().st_size > 10_000
             assert f"figures/{fig}" in md
-    assert page.count("data:image/png;base64,") == 2 * df["scenario"].nunique()
+    for scenario in df["scenario"].unique():  # ECDFs of fix age and navigation error
+        assert (out / "figures" / f"ecdf-{scenario}.png").stat().st_size > 10_000
+    # per scenario: ECDF, representative runs, box plots; one forest plot per compared pair
+    n_pairs = df["variant"].nunique() - 1
+    assert page.count("data:image/png;base64,") == 3 * df["scenario"].nunique() + n_pairs
     for m in METRIC_NAMES:
         assert f"| {m} " in md, m
     # one cell checked against pandas: case8, first variant, current off, min_range_m
@@ -111,11 +116,9 @@ def test_same_suite_and_seeds_give_the_same_report_numbers(serial, pool):
     a, b = summary_table(ref), summary_table(again)
     a, b = a[~a["metric"].isin(timing)], b[~b["metric"].isin(timing)]
     pd.testing.assert_frame_equal(a.reset_index(drop=True), b.reset_index(drop=True))
-    wa, wb = win_loss(ref), win_loss(again)
-    pd.testing.assert_frame_equal(
-        wa[~wa["metric"].isin(timing)].reset_index(drop=True),
-        wb[~wb["metric"].isin(timing)].reset_index(drop=True),
-    )
+    metrics = [m for m in BETTER if BETTER[m] and m in ref and m not in timing]
+    pa, pb = paired_table(ref, metrics, directions()), paired_table(again, metrics, directions())
+    pd.testing.assert_frame_equal(pa, pb)  # the bootstrap is seeded
 
 
 def test_every_metric_has_a_direction():
@@ -123,10 +126,9 @@ def test_every_metric_has_a_direction():
     assert set(BETTER.values()) <= {"higher", "lower", None}
 
 
-def test_win_loss_counts_in_each_metrics_direction():
+def test_summary_table_gives_mean_sd_and_n_over_seeds():
+    # the paired statistics and their win/loss counts: tests/test_report_stats.py
     rows = []
-    # scenario s1: A has the larger min range (better) and the larger energy (worse);
-    # scenario s2: equal min range, A less energy
     values = {("s1", "A"): (50.0, 9.0), ("s1", "B"): (40.0, 5.0),
               ("s2", "A"): (30.0, 1.0), ("s2", "B"): (30.0, 2.0)}  # fmt: skip
     for (s, v), (r, e) in values.items():
@@ -141,18 +143,17 @@ def test_win_loss_counts_in_each_metrics_direction():
                     "status": "ok",
                     "min_range_m": r + noise,
                     "energy_J": e + noise,
-                    "fixes_auv_auv0": 3,
-                    "fixes_auv_auv1": 1 + seed,
+                    "fixes_auv0": 3,
+                    "fixes_auv1": 1 + seed,
                 }
             )
-    wl = win_loss(pd.DataFrame(rows)).set_index("metric")
-    assert tuple(wl.loc["min_range_m", ["A_wins", "B_wins", "ties"]]) == (1, 0, 1)
-    assert tuple(wl.loc["energy_J", ["A_wins", "B_wins", "ties"]]) == (1, 1, 0)
-    assert tuple(wl.loc["fixes_auv", ["A_wins", "B_wins", "ties"]]) == (0, 0, 2)
     summ = summary_table(pd.DataFrame(rows))
     cell = summ[(summ["scenario"] == "s1") & (summ["variant"] == "A")
                 & (summ["metric"] == "min_range_m")].iloc[0]  # fmt: skip
     assert cell["mean"] == 50.0 and cell["sd"] == pytest.approx(np.sqrt(2.0)) and cell["n"] == 2
+    cell = summ[(summ["scenario"] == "s2") & (summ["variant"] == "B")
+                & (summ["column"] == "fixes_auv1")].iloc[0]  # fmt: skip
+    assert cell["mean"] == 1.5 and cell["auv"] == 1 and cell["n"] == 2
 
 
 def test_report_of_a_sweep_whose_jobs_all_failed_lists_the_errors(tmp_path):

@@ -154,6 +154,12 @@ HEADLINE: tuple[str, ...] = (
 METRIC_NAMES: tuple[str, ...] = tuple(METRIC_INFO)
 
 
+def auv_column(name: str, k: int) -> str:
+    """Results-table column of AUV ``k``'s value of the per-AUV list metric ``name``
+    (``fixes_auv`` -> ``fixes_auv0``; a list name without the ``_auv`` suffix gets it)."""
+    return f"{name}{k}" if name.endswith("_auv") else f"{name}_auv{k}"
+
+
 def _path_length(N: np.ndarray, E: np.ndarray) -> float:
     return float(np.sum(np.hypot(np.diff(N), np.diff(E))))
 

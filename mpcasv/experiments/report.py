@@ -1,17 +1,20 @@
 """The sweep report: ``DIR/report.md`` and ``DIR/report.html`` from the results table.
 
+- **Headline** (first): every controller variant against the reference variant (the first of
+  the suite) on the same (scenario, realisation) pairs, per headline metric
+  (:data:`mpcasv.experiments.stats.HEADLINE`: safety, liveness, AUV navigation, effort) and
+  case: the median paired difference with its 95 % bootstrap CI, the Wilcoxon signed-rank
+  p-value and which variant is significantly better (:mod:`mpcasv.experiments.stats`), and a
+  forest plot per pair. Metrics missing from the table are named, never filled in.
+- **Significant wins and losses**: per metric with a direction (:data:`BETTER` and the
+  headline's), in how many cases each variant is significantly better on the paired test
+  (per-AUV lists first summarised per run by :data:`LIST_SUMMARY`).
 - **Summary** per scenario: every metric of ``metrics.json`` (per-AUV lists expanded, one row
   per AUV) as mean ± sd over seeds, one column per controller variant and condition (current,
-  estimator).
-- **Wins and losses** per metric between every pair of controller variants: for each scenario
-  and condition the means over seeds are compared in the direction of :data:`BETTER`; per-AUV
-  lists are first summarised per run by :data:`LIST_SUMMARY`. Equal means (within 1e-9
-  relative) are ties; metrics without a direction are not counted.
-- **Figures**: per scenario, box plots across seeds of :data:`BOX_METRICS`, and one figure of
-  the representative runs (first seed, first condition) of every variant drawn from their
-  time series: paths, range with the domain bands, fix age. The per-run figures of
-  :mod:`mpcasv.sim.plots` are linked from each run folder. The HTML embeds its own figures
-  (base64) and links the run figures; the Markdown links both.
+  estimator); ECDFs of fix age and navigation error per variant; box plots across seeds of
+  :data:`BOX_METRICS`; the representative runs (first seed, first condition) drawn from their
+  time series; links to the per-run figures of :mod:`mpcasv.sim.plots`. The HTML embeds its
+  own figures (base64) and links the run figures; the Markdown links both.
 
 Only ``status == "ok"`` rows enter the numbers; errors are listed.
 """
@@ -20,18 +23,17 @@ from __future__ import annotations
 
 import base64
 import html
-import itertools
 import math
+import re
 from pathlib import Path
 
-import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
 
-from mpcasv.experiments.metrics import METRIC_INFO, METRIC_NAMES
+from mpcasv.experiments import report_figures as rf
+from mpcasv.experiments import stats as paired
+from mpcasv.experiments.metrics import METRIC_INFO, METRIC_NAMES, auv_column
+from mpcasv.experiments.report_figures import CONDITION, num
 
 #: which way is better, per metric: "higher", "lower", or None (defined once, in
 #: :data:`mpcasv.experiments.metrics.METRIC_INFO`)
@@ -45,7 +47,6 @@ LIST_SUMMARY = {"fixes_auv": "sum", "reliable_fixes_auv": "sum",
 BOX_METRICS = ("min_range_m", "reliable_fix_age_max_s", "reliable_fix_age_p95_s",
                "nav_error_rms_m", "propeller_on_s", "energy_J")  # fmt: skip
 
-CONDITION = ["current", "estimator"]
 READ_LINE = 'pd.read_parquet("{out}/results.parquet")'
 
 
@@ -57,23 +58,27 @@ def metric_columns(df: pd.DataFrame) -> list[tuple[str, str, int | None]]:
         if m in df:
             out.append((m, m, None))
         k = 0
-        while f"{m}_auv{k}" in df:
-            out.append((f"{m}_auv{k}", m, k))
+        while auv_column(m, k) in df:
+            out.append((auv_column(m, k), m, k))
             k += 1
     return out
 
 
-def per_run_values(df: pd.DataFrame) -> pd.DataFrame:
-    """One value per run and metric (per-AUV lists summarised by :data:`LIST_SUMMARY`)."""
-    out = df[["scenario", *CONDITION, "variant", "seed"]].copy()
-    for m in METRIC_NAMES:
-        if m in df:
-            out[m] = df[m].astype(float)
-        elif m in LIST_SUMMARY:
-            cols = [c for c, name, k in metric_columns(df) if name == m and k is not None]
-            if cols:
-                out[m] = getattr(df[cols].astype(float), LIST_SUMMARY[m])(axis=1, skipna=True)
+def with_list_summaries(df: pd.DataFrame) -> pd.DataFrame:
+    """``df`` plus one column per per-AUV list metric of :data:`LIST_SUMMARY` (summed or
+    maxed over the per-AUV columns of each run) where it has no scalar column."""
+    out = df.copy()
+    for m, how in LIST_SUMMARY.items():
+        cols = [c for c, name, k in metric_columns(df) if name == m and k is not None]
+        if m not in df and cols:
+            out[m] = getattr(df[cols].astype(float), how)(axis=1, skipna=True)
     return out
+
+
+def directions() -> dict[str, str | None]:
+    """Which way is better for every metric the report knows (:data:`BETTER` and the
+    headline's)."""
+    return {**BETTER, **{h.name: h.better for h in paired.HEADLINE}}
 
 
 def summary_table(df: pd.DataFrame) -> pd.DataFrame:
@@ -93,166 +98,15 @@ def summary_table(df: pd.DataFrame) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
-def win_loss(df: pd.DataFrame) -> pd.DataFrame:
-    """Per metric and pair of variants (A, B): how often A's mean over seeds is better, worse
-    or equal, over scenarios and conditions where both ran."""
-    ok = df[df["status"] == "ok"] if len(df) else df
-    if not len(ok):
-        return pd.DataFrame()
-    runs = per_run_values(ok)
-    keys = ["scenario", *CONDITION]
-    means = runs.groupby([*keys, "variant"], sort=False).mean(numeric_only=True)
-    variants = list(dict.fromkeys(ok["variant"]))
-    rows = []
-    for a, b in itertools.combinations(variants, 2):
-        for m in METRIC_NAMES:
-            direction = BETTER[m]
-            if direction is None or m not in means:
-                continue
-            w = l_ = t = 0
-            for cond in ok[keys].drop_duplicates().itertuples(index=False):
-                try:
-                    va, vb = means.loc[(*cond, a), m], means.loc[(*cond, b), m]
-                except KeyError:
-                    continue
-                if not (np.isfinite(va) and np.isfinite(vb)):
-                    continue
-                if abs(va - vb) <= 1e-9 * max(1.0, abs(va), abs(vb)):
-                    t += 1
-                elif (va > vb) == (direction == "higher"):
-                    w += 1
-                else:
-                    l_ += 1
-            rows.append({"A": a, "B": b, "metric": m, "better": direction, "A_wins": w,
-                         "B_wins": l_, "ties": t})  # fmt: skip
-    return pd.DataFrame(rows)
-
-
-# ----------------------------------------------------------------------------- figures
-
-
-def _groups(ok: pd.DataFrame) -> list[str]:
-    """Column labels: variant, plus the condition where the suite has several."""
-    multi = [c for c in CONDITION if ok[c].nunique() > 1]
-    return [_group(r, multi) for _, r in ok.iterrows()]
-
-
-def _group(r, conditions: list[str]) -> str:
-    """``variant``, or ``variant (current off, estimator perfect)`` when conditions vary."""
-    extra = ", ".join(f"{c} {r[c]}" for c in conditions)
-    return f"{r['variant']} ({extra})" if extra else str(r["variant"])
-
-
-def box_figure(ok: pd.DataFrame, scenario: str, path: Path) -> Path:
-    g = ok[ok["scenario"] == scenario].copy()
-    g["group"] = _groups(g)
-    labels = list(dict.fromkeys(g["group"]))
-    metrics = [m for m in BOX_METRICS if m in g]
-    ncol = 3
-    nrow = math.ceil(len(metrics) / ncol)
-    fig, axes = plt.subplots(nrow, ncol, figsize=(4.2 * ncol, 3.2 * nrow), squeeze=False)
-    for ax, m in zip(axes.flat, metrics, strict=False):
-        data = [g.loc[g["group"] == lab, m].astype(float).dropna().to_numpy() for lab in labels]
-        ax.boxplot(data, tick_labels=[lab.replace(" (", "\n(") for lab in labels], showmeans=True)
-        for i, d in enumerate(data):
-            ax.plot(np.full(len(d), i + 1.0), d, ".", color="k", alpha=0.5, ms=4)
-        ax.set_title(f"{m} ({BETTER[m] or 'no direction'} is better)", fontsize=9)
-        ax.tick_params(axis="x", labelsize=7)
-        ax.grid(alpha=0.3)
-    for ax in list(axes.flat)[len(metrics) :]:
-        ax.axis("off")
-    fig.suptitle(f"{scenario}: across seeds (n = {g['seed'].nunique()})")
-    return _save(fig, path)
-
-
-def representative_runs(ok: pd.DataFrame, scenario: str) -> pd.DataFrame:
-    """Per variant, the run with the first condition and the lowest seed."""
-    g = ok[ok["scenario"] == scenario]
-    first = g.iloc[0]
-    g = g[(g["current"] == first["current"]) & (g["estimator"] == first["estimator"])]
-    return g.sort_values(["index"]).groupby("variant", sort=False).head(1)
-
-
-def compare_figure(out: Path, reps: pd.DataFrame, scenario: str, path: Path) -> Path:
-    """Paths, range (with r_inner / r_t / r_outer of the first variant) and fix age of the
-    representative runs, one colour per variant."""
-    series = [(r["variant"], pd.read_parquet(out / r["run_dir"] / "timeseries.parquet"))
-              for _, r in reps.iterrows()]  # fmt: skip
-    names = reps.iloc[0]["auv_names"].split(",")
-    n = len(names)
-    colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
-    fig = plt.figure(figsize=(15, max(2.6 * n + 0.8, 5.0)))
-    gs = fig.add_gridspec(n, 3, width_ratios=[1.2, 1.4, 1.4])
-    axp = fig.add_subplot(gs[:, 0])
-    ts0 = series[0][1]
-    for k in range(n):
-        axp.plot(ts0[f"auv{k}_E"], ts0[f"auv{k}_N"], color="0.5", lw=0.8)
-        axp.text(ts0[f"auv{k}_E"].iloc[0], ts0[f"auv{k}_N"].iloc[0], names[k], fontsize=7)
-    for i, (v, ts) in enumerate(series):
-        axp.plot(ts["E"], ts["N"], color=colours[i % len(colours)], lw=1.1, label=f"ASV {v}")
-    axp.set_aspect("equal", adjustable="datalim")
-    axp.set_xlabel("East (m)")
-    axp.set_ylabel("North (m)")
-    axp.legend(fontsize=7)
-    axp.grid(alpha=0.3)
-    axp.set_title("paths (AUVs grey)", fontsize=9)
-    for k in range(n):
-        axr, axf = fig.add_subplot(gs[k, 1]), fig.add_subplot(gs[k, 2])
-        t0 = ts0["t"].to_numpy()
-        if f"r_inner{k}" in ts0:
-            axr.fill_between(t0, 0, ts0[f"r_inner{k}"], color="tab:red", alpha=0.12,
-                             label="inside r_inner")  # fmt: skip
-            axr.plot(t0, ts0[f"r_t{k}"], color="tab:green", lw=0.8, ls="--", label="r_t")
-            axr.plot(t0, ts0[f"r_outer{k}"], color="tab:red", lw=0.8, ls=":", label="r_outer")
-        for i, (v, ts) in enumerate(series):
-            c = colours[i % len(colours)]
-            axr.plot(ts["t"], ts[f"range{k}"], color=c, lw=1, label=v)
-            axf.plot(ts["t"], ts[f"fix_age{k}"], color=c, lw=1, label=v)
-        top = max(float(ts[f"range{k}"].max()) for _, ts in series) * 1.1
-        axr.set_ylim(0, top)
-        axr.set_ylabel(f"range {names[k]} (m)", fontsize=8)
-        axf.set_ylabel(f"fix age {names[k]} (s)", fontsize=8)
-        for ax in (axr, axf):
-            ax.grid(alpha=0.3)
-            ax.tick_params(labelsize=7)
-        if k == 0:
-            axr.legend(fontsize=6, ncol=2)
-            axf.legend(fontsize=6)
-        if k == n - 1:
-            axr.set_xlabel("time (s)")
-            axf.set_xlabel("time (s)")
-    r0 = reps.iloc[0]
-    fig.suptitle(f"{scenario}: representative runs (seed {r0['seed']}, current {r0['current']}, "
-                 f"estimator {r0['estimator']}); domain bands of {series[0][0]}")  # fmt: skip
-    return _save(fig, path)
-
-
-def _save(fig, path: Path) -> Path:
-    fig.tight_layout()
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
-    return path
-
-
 # ----------------------------------------------------------------------------- text
-
-
-def _num(x: float) -> str:
-    if not np.isfinite(x):
-        return "nan" if np.isnan(x) else str(x)
-    if x == 0:
-        return "0"
-    if abs(x) >= 1e5 or abs(x) < 1e-3:
-        return f"{x:.3e}"
-    return f"{x:.4g}" if abs(x) < 1000 else f"{x:.0f}"
 
 
 def scenario_table(summ: pd.DataFrame, scenario: str, auv_names: list[str]) -> pd.DataFrame:
     """Rows: metrics (per AUV expanded); columns: variant (| condition); cells mean ± sd."""
     s = summ[summ["scenario"] == scenario].copy()
     multi = [c for c in CONDITION if s[c].nunique() > 1]
-    s["group"] = [_group(r, multi) for _, r in s.iterrows()]
-    s["cell"] = [_num(m) if not np.isfinite(sd) else f"{_num(m)} ± {_num(sd)}"
+    s["group"] = [rf.group_label(r, multi) for _, r in s.iterrows()]
+    s["cell"] = [num(m) if not np.isfinite(sd) else f"{num(m)} ± {num(sd)}"
                  for m, sd in zip(s["mean"], s["sd"], strict=True)]  # fmt: skip
     s["row"] = [m if pd.isna(k) else f"{m} [{auv_names[int(k)]}]"
                 for m, k in zip(s["metric"], s["auv"], strict=True)]  # fmt: skip
@@ -260,25 +114,6 @@ def scenario_table(summ: pd.DataFrame, scenario: str, auv_names: list[str]) -> p
     table = s.pivot(index="row", columns="group", values="cell").reindex(rows)
     table = table[list(dict.fromkeys(s["group"]))]
     table.index.name = "metric"
-    table.columns.name = None
-    return table
-
-
-def win_loss_table(wl: pd.DataFrame) -> pd.DataFrame:
-    """Rows: metrics; one column per pair ``A vs B`` with "A wins / B wins / ties"."""
-    if not len(wl):
-        return pd.DataFrame()
-    wl = wl.copy()
-    wl["pair"] = wl["A"] + " vs " + wl["B"]
-    wl["cell"] = [f"{a} / {b} / {t}" for a, b, t in
-                  zip(wl["A_wins"], wl["B_wins"], wl["ties"], strict=True)]  # fmt: skip
-    table = wl.pivot(index="metric", columns="pair", values="cell")
-    table = table.reindex([m for m in METRIC_NAMES if m in table.index])
-    better = wl.drop_duplicates("metric").set_index("metric")["better"]
-    table.insert(0, "better", better.reindex(table.index))
-    total = wl.groupby("pair", sort=False)[["A_wins", "B_wins", "ties"]].sum()
-    total = total.reindex(table.columns[1:])
-    table.loc["total"] = ["", *(f"{r.A_wins} / {r.B_wins} / {r.ties}" for r in total.itertuples())]
     table.columns.name = None
     return table
 
@@ -303,36 +138,166 @@ td:first-child,th:first-child{text-align:left}img{max-width:100%}
 code{background:#f4f4f4;padding:1px 4px}"""
 
 
+def headline_table(t: pd.DataFrame) -> pd.DataFrame:
+    """Display form of one (reference, other) pair of :func:`stats.paired_table` for the
+    headline: one row per metric and case; the metric named on its first row only."""
+    ref, other = t["reference"].iloc[0], t["other"].iloc[0]
+    units = {h.name: h.unit for h in paired.HEADLINE}
+    rows, last = [], None
+    for _, r in t.iterrows():
+        n = f"{r['n']}" + (f" (+{r['n_unpaired']} unpaired)" if r["n_unpaired"] else "")
+        if np.isfinite(r["ci_low"]):
+            diff = f"{num(r['median'])} [{num(r['ci_low'])}, {num(r['ci_high'])}]"
+        else:
+            diff = num(r["median"]) if np.isfinite(r["median"]) else ""
+        p = f"{r['p']:.2g}" if np.isfinite(r["p"]) else (r["note"] or "n/a")
+        if r["note"] and np.isfinite(r["p"]):
+            p += f" ({r['note']})"
+        elif r["note"] and p != r["note"]:
+            p = f"n/a ({r['note']})"
+        unit = units.get(r["metric"], "")
+        first = r["metric"] != last
+        rows.append({
+            "metric": f"{r['metric']} ({unit}, {r['better']} better)" if first else "",
+            "case": r["case"], "pairs": n, f"{ref} median": num(r["ref_median"]),
+            f"Δ = {other} − {ref}: median [95 % CI]": diff, "Wilcoxon p": p,
+            "verdict": r["verdict"],
+        })  # fmt: skip
+        last = r["metric"]
+    return pd.DataFrame(rows).set_index("metric")
+
+
+def win_loss_table(wl: pd.DataFrame) -> pd.DataFrame:
+    """Display form of :func:`stats.significant_win_loss` for one (reference, other) pair."""
+    ref, other = wl["reference"].iloc[0], wl["other"].iloc[0]
+    t = wl.set_index("metric")[["better", "other_better", "reference_better",
+                                "not_significant", "n/a"]].copy()  # fmt: skip
+    t.columns = ["better", f"{other} better", f"{ref} better", "no significant difference",
+                 "n/a"]  # fmt: skip
+    return t
+
+
+def _heading_id(text: str) -> str:
+    return "".join(c if c.isalnum() else "-" for c in text.lower())
+
+
 def write_report(out: Path, exp, results: pd.DataFrame, stats=None) -> tuple[Path, Path]:
-    """Write ``report.md``, ``report.html`` and ``figures/`` into ``out``."""
+    """Write ``report.md``, ``report.html`` and ``figures/`` into ``out``.
+
+    ``exp``: the expanded suite (:func:`mpcasv.experiments.suite.expand`); ``results``: the
+    results table; ``stats``: the sweep's run statistics (unused here)."""
     out = Path(out)
     figdir = out / "figures"
     figdir.mkdir(exist_ok=True)
     ok = results[results["status"] == "ok"] if len(results) else results
     errors = results[results["status"] != "ok"] if len(results) else results
     summ = summary_table(results) if len(ok) else pd.DataFrame()
-    wl = win_loss(results)
     suite = exp.suite
+    better = directions()
+    headline = [h.name for h in paired.HEADLINE]
     md, h = [], []  # markdown and HTML bodies
 
     def both(text_md: str, text_html: str) -> None:
         md.append(text_md)
         h.append(text_html)
 
+    def figure(fig: Path) -> None:
+        rel = fig.relative_to(out)
+        both(f"![{fig.stem}]({rel})\n", f'<img src="{_img_b64(fig)}" alt="{fig.stem}">')
+
+    def bullet(text: str) -> None:
+        page = re.sub(r"\*\*(.+?)\*\*", r"<b>\1</b>", html.escape(text).replace("`", ""))
+        page = re.sub(r"\*(.+?)\*", r"<i>\1</i>", page)
+        both(f"- {text}", f"<p>{page}</p>")
+
     title = f"Comparison: suite {suite.name}"
     both(f"# {title}\n", f"<h1>{html.escape(title)}</h1>")
+    if len(results) < len(exp.jobs):
+        bullet(f"**Incomplete**: {len(exp.jobs) - len(results)} jobs have not run "
+               "(rerun the same command to resume).")  # fmt: skip
+    if len(errors):
+        bullet(f"**{len(errors)} errors** (listed below): their pairs are left out.")
+    missing = paired.missing_metrics(results, headline) if len(ok) else []
+    if missing:
+        bullet("**Missing headline metrics** (no column in this results table, e.g. written by "
+               f"an older version; left out, not replaced): {', '.join(missing)}.")  # fmt: skip
+    md.append("")
+    names = paired.variants(results) if len(ok) else []
+    runs = with_list_summaries(results) if len(ok) else results
+    table, why = pd.DataFrame(), f"{len(names)} controller variant(s) with results"
+    if len(names) > 1:
+        rest = [
+            m
+            for m in better
+            if better[m] and m not in headline and not (m.endswith("_auv") and m[:-4] in better)
+        ]  # lists of a scalar: once
+        try:
+            table = paired.paired_table(runs, [*headline, *rest], better)
+        except paired.PairingError as exc:  # a table whose columns do not identify pairs
+            why = str(exc)
+    both("\n## Headline: paired differences\n", "<h2>Headline: paired differences</h2>")
+    if not len(table):
+        bullet(f"**No paired comparison**: {why}.")
+    else:
+        key = paired.pair_key(results)
+        ref = names[0]
+        lines = [
+            f"Reference: **{ref}** (the suite's first variant); "
+            + (
+                f"each of {', '.join(names[1:])} is compared with it."
+                if len(names) > 2
+                else f"compared with {names[1]}."
+            ),
+            f"Pairs: runs equal on ({', '.join(key)}), pooled over the conditions of a case; "
+            f"Δ = other − reference per pair. Median Δ with its {paired.CONFIDENCE:.0%} "
+            f"bootstrap CI (scipy.stats.bootstrap, paired, percentile, "
+            f"{paired.N_RESAMPLES} resamples, seed {paired.SEED}) and the two-sided Wilcoxon "
+            f"signed-rank p (zero differences dropped). A variant is *better* only if the CI "
+            f"excludes 0 and p < {paired.ALPHA}. n/a: fewer than {paired.MIN_PAIRS} pairs "
+            f"(the Wilcoxon test cannot reach p < 0.05 below 6 non-zero differences), or all "
+            f"differences zero.",
+        ]
+        for line in lines:
+            bullet(line)
+        md.append("")
+        for other, t in table.groupby("other", sort=False):
+            th = t[t["metric"].isin(headline)]
+            sub = f"{other} vs {ref}"
+            both(f"\n### {sub}\n", f"<h3>{html.escape(sub)}</h3>")
+            if len(th):
+                d = headline_table(th)
+                both(_md_table(d) + "\n", d.to_html())
+                figure(
+                    rf.forest_figure(
+                        th, paired.HEADLINE, figdir / f"forest-{_heading_id(other)}.png"
+                    )
+                )
+        wl = paired.significant_win_loss(table)
+        note = (
+            "Per metric with a direction: the number of cases in which each variant is "
+            "significantly better on the paired test above (per-AUV counts summed, fix "
+            "ages maxed per run). 'No significant difference' includes negligible and identical; "
+            "unpaired or n/a comparisons are never counted as wins."
+        )
+        both(
+            f"\n## Significant wins and losses (paired)\n\n{note}\n",
+            f"<h2>Significant wins and losses (paired)</h2><p>{html.escape(note)}</p>",
+        )
+        for other, w in wl.groupby("other", sort=False):
+            d = win_loss_table(w)
+            sub = f"{other} vs {ref}"
+            both(f"\n### {sub}\n\n{_md_table(d)}\n", f"<h3>{html.escape(sub)}</h3>{d.to_html()}")
+    both("\n## The sweep\n", "<h2>The sweep</h2>")
     facts = [
         f"{suite.description}".strip(),
         f"Jobs: {len(exp.jobs)} in the suite, {len(results)} with results "
-        f"({len(ok)} ok, {len(errors)} errors); seeds {list(suite.seeds)}; means ± sd over seeds.",
+        f"({len(ok)} ok, {len(errors)} errors); seeds {list(suite.seeds)}; the per-scenario "
+        "tables give means ± sd over seeds.",
         f"Whole results table: `{READ_LINE.format(out=out)}` (one row per job).",
     ]
-    if len(results) < len(exp.jobs):
-        facts.append(f"**Incomplete**: {len(exp.jobs) - len(results)} jobs have not run "
-                     "(rerun the same command to resume).")  # fmt: skip
     facts += [f"Skipped (optional controller not available): {s}" for s in exp.skipped]
     for f in filter(None, facts):
-        both(f"- {f}", f"<p>{html.escape(f).replace('`', '')}</p>")
+        bullet(f)
     md.append("")
     if len(errors):
         both("\n## Errors\n", "<h2>Errors</h2>")
@@ -341,28 +306,30 @@ def write_report(out: Path, exp, results: pd.DataFrame, stats=None) -> tuple[Pat
             t = f"{r['scenario']} / {r['variant']} / seed {r['seed']} / current {r['current']}"
             both(f"- {t}: `{last[0]}`", f"<p>{html.escape(t)}: <code>{html.escape(last[0])}"
                  "</code></p>")  # fmt: skip
-    if len(wl):
-        t = win_loss_table(wl)
-        note = ("Per metric, over scenarios x conditions: A wins / B wins / ties of the means "
-                "over seeds ('better': the direction that counts as better; per-AUV metrics "
-                "summed (counts) or maxed (fix ages) per run).")  # fmt: skip
-        both(f"\n## Wins and losses\n\n{note}\n\n{_md_table(t)}\n",
-             f"<h2>Wins and losses</h2><p>{html.escape(note)}</p>{t.to_html()}")  # fmt: skip
     for scenario in dict.fromkeys(ok["scenario"]) if len(ok) else []:
         g = ok[ok["scenario"] == scenario]
-        names = g.iloc[0]["auv_names"].split(",")
+        auv_names = g.iloc[0]["auv_names"].split(",")
         both(f"\n## {scenario}\n", f"<h2>{html.escape(scenario)}</h2>")
-        t = scenario_table(summ, scenario, names)
+        t = scenario_table(summ, scenario, auv_names)
         both(_md_table(t) + "\n", t.to_html())
-        box = box_figure(ok, scenario, figdir / f"box-{scenario}.png")
-        reps = representative_runs(ok, scenario)
-        cmp_ = compare_figure(out, reps, scenario, figdir / f"compare-{scenario}.png")
-        for fig in (cmp_, box):
-            rel = fig.relative_to(out)
-            both(f"![{fig.stem}]({rel})\n", f'<img src="{_img_b64(fig)}" alt="{fig.stem}">')
+        ecdf, notes = rf.ecdf_figure(out, ok, scenario, figdir / f"ecdf-{scenario}.png")
+        for n_ in notes:
+            bullet(n_)
+        reps = rf.representative_runs(ok, scenario)
+        figs = [ecdf] if ecdf else []
+        lost = [r["run_dir"] for _, r in reps.iterrows() if not rf.has_timeseries(out, r)]
+        if lost:
+            bullet(f"No figure of the representative runs: no time series in {', '.join(lost)}.")
+        else:
+            figs.append(rf.compare_figure(out, reps, scenario, figdir / f"compare-{scenario}.png"))
+        figs.append(
+            rf.box_figure(ok, scenario, BOX_METRICS, better, figdir / f"box-{scenario}.png")
+        )
+        for fig in figs:
+            figure(fig)
         links_md, links_html = [], []
         for _, r in reps.iterrows():
-            pngs = sorted((out / r["run_dir"]).glob("*.png"))
+            pngs = sorted(rf.run_path(out, r["run_dir"]).glob("*.png"))
             if pngs:
                 links_md.append(f"{r['variant']}: " + ", ".join(
                     f"[{p.stem}]({p.relative_to(out)})" for p in pngs))  # fmt: skip

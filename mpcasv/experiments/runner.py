@@ -26,6 +26,7 @@ from multiprocessing import get_context
 from pathlib import Path
 
 from mpcasv.config import ConfigError
+from mpcasv.experiments.metrics import auv_column
 from mpcasv.experiments.store import done_ids, write_part, write_results
 from mpcasv.experiments.suite import Expansion, Job, expand
 
@@ -48,11 +49,11 @@ def _describe(job: Job) -> dict:
 
 
 def _metric_columns(metrics: dict) -> dict:
-    """metrics.json values as columns; per-AUV lists expanded to ``<name>_auv<k>``."""
+    """metrics.json values as columns; per-AUV lists expanded by :func:`auv_column`."""
     out = {}
     for k, v in metrics.items():
         if isinstance(v, list):
-            out |= {f"{k}_auv{i}": (float("nan") if x is None else x) for i, x in enumerate(v)}
+            out |= {auv_column(k, i): (float("nan") if x is None else x) for i, x in enumerate(v)}
         else:
             out[k] = float("nan") if v is None else v
     return out

@@ -1,0 +1,279 @@
+"""Paired statistics of a comparison: controllers on the same (scenario, realisation) pairs.
+
+Two controller variants ran on the same worlds when their jobs agree on every column of
+:data:`PAIR_KEY` (every column that identifies a job except the controller; ``realisation``
+too when the results table has it). For each metric, each case (scenario) and each variant
+against the reference variant, the paired differences ``d_i = x_other,i - x_reference,i``
+give:
+
+- the median of ``d`` and its 95 % bootstrap confidence interval
+  (:func:`scipy.stats.bootstrap`, ``paired=True``, percentile method, :data:`N_RESAMPLES`
+  resamples, generator seeded with :data:`SEED`: the same table gives the same interval);
+- the two-sided Wilcoxon signed-rank p-value (:func:`scipy.stats.wilcoxon`, zero differences
+  dropped, exact distribution for small n);
+- a verdict: a variant is *better* only when the interval excludes 0 **and** p < :data:`ALPHA`,
+  in the metric's direction (:class:`HeadlineMetric.better`), and the interval is not
+  *negligible*: inside +-:data:`NEGLIGIBLE` times the reference's median (differences of
+  1e-4 m in a 140 m minimum range are significant for a deterministic simulator, and of no
+  consequence). All differences zero: "no difference".
+
+Pairs are pooled over the conditions of a case (current, estimator): each pair is matched
+within its condition. With fewer than :data:`MIN_PAIRS` pairs, all differences zero, or no
+direction, the statistic is "n/a" with the reason (the Wilcoxon test cannot reach p < 0.05
+with fewer than 6 non-zero differences anyway). Rows of one variant without a partner in the
+other (failed job, missing value) are excluded and counted (``n_unpaired``).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+from scipy import stats as sps
+
+#: column naming the compared controller (label plus grid values, e.g. "hybrid[dT=0.2]")
+COMPARE = "variant"
+#: columns that identify a job apart from the controller: rows equal on these are one pair
+PAIR_KEY = ("scenario", "current", "estimator", "seed")
+#: identity columns used too when the table has them (the drawn scenario realisation)
+OPTIONAL_KEY = ("realisation",)
+CASE = "scenario"  # one line of the headline table and forest plot per case
+ALPHA = 0.05
+CONFIDENCE = 0.95
+MIN_PAIRS = 5
+NEGLIGIBLE = 1e-3  # relative to |reference median|: smaller differences are no verdict
+N_RESAMPLES = 9999
+SEED = 20240601
+
+
+class PairingError(ValueError):
+    """The results table cannot be paired (a pairing column missing, or a key that does not
+    identify the job)."""
+
+
+@dataclass(frozen=True)
+class HeadlineMetric:
+    """One metric of the headline table (names and directions: CONTRACT.md).
+
+    At merge: the unit and direction come from ``mpcasv.experiments.metrics.METRIC_INFO``
+    (the one definition); this spec only adds the group and the order.
+    """
+
+    name: str
+    group: str  # "safety", "liveness", "navigation", "effort"
+    unit: str
+    better: str  # "lower" | "higher"
+
+
+#: the headline table's metrics, in order (CONTRACT.md, ``HEADLINE``)
+HEADLINE: tuple[HeadlineMetric, ...] = (
+    HeadlineMetric("min_range_m", "safety", "m", "higher"),
+    HeadlineMetric("collision_domain_s", "safety", "s", "lower"),
+    HeadlineMetric("reliable_fix_age_p95_s", "liveness", "s", "lower"),
+    HeadlineMetric("reliable_fix_age_max_s", "liveness", "s", "lower"),
+    HeadlineMetric("nav_error_rms_m", "navigation", "m", "lower"),
+    HeadlineMetric("nav_error_p95_m", "navigation", "m", "lower"),
+    HeadlineMetric("energy_J", "effort", "J", "lower"),
+    HeadlineMetric("propeller_on_s", "effort", "s", "lower"),
+)
+
+
+def pair_key(results: pd.DataFrame) -> list[str]:
+    """The pairing columns of this table: :data:`PAIR_KEY` plus the present optional ones.
+
+    Raises
+    ------
+    PairingError
+        If a column of :data:`PAIR_KEY` or :data:`COMPARE` is missing.
+    """
+    missing = [c for c in (*PAIR_KEY, COMPARE) if c not in results]
+    if missing:
+        raise PairingError(f"results table lacks the pairing column(s) {missing}")
+    return [*PAIR_KEY, *(c for c in OPTIONAL_KEY if c in results)]
+
+
+def variants(results: pd.DataFrame) -> list[str]:
+    """The compared variants in table order (suite order); the first is the reference."""
+    ok = results[results["status"] == "ok"]
+    if "index" in ok:
+        ok = ok.sort_values("index", kind="stable")
+    return list(dict.fromkeys(ok[COMPARE]))
+
+
+def missing_metrics(results: pd.DataFrame, metrics: Sequence[str]) -> list[str]:
+    """The metrics of ``metrics`` without a column in ``results`` (e.g. an older table)."""
+    return [m for m in metrics if m not in results]
+
+
+def pairs(results: pd.DataFrame, metric: str, reference: str, other: str
+          ) -> tuple[pd.DataFrame, pd.Series]:  # fmt: skip
+    """The paired values of ``metric``: ``reference`` vs ``other`` on equal :func:`pair_key`.
+
+    Only ``status == "ok"`` rows with a finite value count. Returns the pairs (key columns,
+    ``ref``, ``other``; one row per pair) and, per case, how many rows of either variant
+    found no partner. Raises :class:`PairingError` if a variant has two rows with the same key
+    (the key does not identify the job).
+    """
+    key = pair_key(results)
+    ok = results[(results["status"] == "ok") & results[COMPARE].isin([reference, other])]
+    ok = ok[[*key, COMPARE, metric]].copy()
+    ok[metric] = pd.to_numeric(ok[metric], errors="coerce").astype(float)
+    ok = ok[np.isfinite(ok[metric])]
+    sides = {}
+    for name, v in (("ref", reference), ("other", other)):
+        side = ok[ok[COMPARE] == v].drop(columns=COMPARE).rename(columns={metric: name})
+        dup = side.duplicated(key)
+        if dup.any():
+            raise PairingError(f"{v}: {int(dup.sum())} rows share a pairing key {key}; "
+                             "the key does not identify the job")  # fmt: skip
+        sides[name] = side
+    both = sides["ref"].merge(sides["other"], on=key, how="outer", indicator=True)
+    paired = both[both["_merge"] == "both"].drop(columns="_merge")
+    unpaired = both[both["_merge"] != "both"].groupby(CASE, sort=False).size()
+    return paired.reset_index(drop=True), unpaired
+
+
+@dataclass(frozen=True)
+class PairedStat:
+    """Median paired difference (other - reference) with its CI and Wilcoxon p-value.
+
+    ``ci_low``/``ci_high``/``p`` are NaN where not computed; ``note`` then says why.
+    """
+
+    n: int  # pairs
+    median: float
+    ci_low: float
+    ci_high: float
+    p: float
+    note: str  # "" or the reason a value is n/a
+
+
+def _median_difference(other: np.ndarray, ref: np.ndarray, axis: int = -1) -> np.ndarray:
+    return np.median(other - ref, axis=axis)
+
+
+def paired_stat(ref: np.ndarray, other: np.ndarray, seed: int = SEED) -> PairedStat:
+    """Statistics of the pairs ``(ref[i], other[i])`` (shape (n,) each, units of the metric):
+    the pairs are resampled together (``paired=True``)."""
+    ref, other = np.asarray(ref, float), np.asarray(other, float)
+    d = other - ref
+    n = len(d)
+    if n == 0:
+        return PairedStat(0, math.nan, math.nan, math.nan, math.nan, "no pairs")
+    med = float(np.median(d))
+    if n < MIN_PAIRS:
+        return PairedStat(n, med, math.nan, math.nan, math.nan,
+                          f"n/a: {n} pairs < {MIN_PAIRS}")  # fmt: skip
+    if np.all(d == d[0]):  # every resample has the same median: the interval is that point
+        if d[0] == 0:
+            return PairedStat(n, 0.0, 0.0, 0.0, math.nan,
+                              f"all {n} differences zero: no test")  # fmt: skip
+        lo = hi = float(d[0])
+    else:
+        ci = sps.bootstrap(
+            (other, ref), _median_difference, vectorized=True, paired=True, n_resamples=N_RESAMPLES,
+            confidence_level=CONFIDENCE, method="percentile", rng=np.random.default_rng(seed),
+        ).confidence_interval  # fmt: skip
+        lo, hi = float(ci.low), float(ci.high)
+    return PairedStat(n, med, lo, hi, wilcoxon_p(d), "")
+
+
+def wilcoxon_p(d: np.ndarray) -> float:
+    """Two-sided Wilcoxon signed-rank p-value of the differences ``d`` (zeros dropped), as
+    :func:`scipy.stats.wilcoxon` with ``method="auto"`` gives it: exact without ties or
+    zeros; with them, an exact sign-flip permutation test for n <= 13, else the normal
+    approximation. scipy runs that permutation test with an unvectorised statistic (0.2 to
+    0.7 s per call here, minutes for a report); the same test is run here through
+    :func:`scipy.stats.permutation_test` with the statistic vectorised (equal p-values:
+    tests/test_report_stats.py)."""
+    d = np.asarray(d, float)
+    nz = d[d != 0]
+    ties = len(np.unique(np.abs(nz))) < len(nz)
+    if not ties and len(nz) == len(d):
+        return float(sps.wilcoxon(d, method="exact").pvalue)
+    if len(d) > 13:
+        return float(sps.wilcoxon(d, method="asymptotic").pvalue)
+    if len(nz) < 2:  # one non-zero difference: scipy's own test (p = 1), cheap here
+        return float(sps.wilcoxon(d, zero_method="wilcox").pvalue)
+    ranks = sps.rankdata(np.abs(nz))
+
+    def r_plus(x: np.ndarray, axis: int = -1) -> np.ndarray:  # sum of the positive ranks
+        return np.sum(ranks * (x > 0), axis=axis)
+
+    return float(sps.permutation_test((nz,), r_plus, permutation_type="samples",
+                                      vectorized=True, alternative="two-sided").pvalue)  # fmt: skip
+
+
+def verdict(s: PairedStat, better: str | None, reference: str, other: str,
+            ref_median: float = math.nan) -> str:  # fmt: skip
+    """Which variant is significantly better (CI excludes 0 and p < ALPHA, and the CI is not
+    inside +-NEGLIGIBLE x |ref_median|), in words."""
+    if s.n and s.ci_low == 0 and s.ci_high == 0 and not np.isfinite(s.p):
+        return "no difference"
+    if s.note or better is None or not np.isfinite(s.p):
+        return "n/a"
+    if not (s.p < ALPHA and (s.ci_low > 0 or s.ci_high < 0)):
+        return "no significant difference"
+    if max(abs(s.ci_low), abs(s.ci_high)) < NEGLIGIBLE * abs(ref_median):
+        return "negligible difference"
+    other_better = (s.median > 0) == (better == "higher")
+    return f"{other if other_better else reference} better"
+
+
+def paired_table(results: pd.DataFrame, metrics: Sequence[str],
+                 better: Mapping[str, str | None], reference: str | None = None,
+                 seed: int = SEED) -> pd.DataFrame:  # fmt: skip
+    """Long table, one row per (other variant, metric, case): every variant against
+    ``reference`` (default: the first variant, :func:`variants`).
+
+    Columns: ``reference``, ``other``, ``metric``, ``better``, ``case``, ``n``,
+    ``n_unpaired``, ``ref_median`` (the reference's median over the paired runs),
+    ``median``, ``ci_low``, ``ci_high``, ``p``, ``note``, ``verdict``. Metrics without a
+    column in ``results`` are left out (see :func:`missing_metrics`).
+    """
+    names = variants(results)
+    if not names:
+        return pd.DataFrame()
+    reference = names[0] if reference is None else reference
+    ok = results[results["status"] == "ok"]
+    cases = list(dict.fromkeys(ok[CASE]))
+    rows = []
+    for other in (v for v in names if v != reference):
+        for m in (m for m in metrics if m in results):
+            p_, unpaired = pairs(results, m, reference, other)
+            for case in cases:
+                g = p_[p_[CASE] == case]
+                s = paired_stat(g["ref"].to_numpy(), g["other"].to_numpy(), seed)
+                ref_median = float(g["ref"].median()) if len(g) else math.nan
+                rows.append({
+                    "reference": reference, "other": other, "metric": m,
+                    "better": better.get(m), "case": case, "n": s.n,
+                    "n_unpaired": int(unpaired.get(case, 0)),
+                    "ref_median": ref_median,
+                    "median": s.median, "ci_low": s.ci_low, "ci_high": s.ci_high, "p": s.p,
+                    "note": s.note,
+                    "verdict": verdict(s, better.get(m), reference, other, ref_median),
+                })  # fmt: skip
+    return pd.DataFrame(rows)
+
+
+NOT_SIGNIFICANT = ("no significant difference", "negligible difference", "no difference")
+
+
+def significant_win_loss(table: pd.DataFrame) -> pd.DataFrame:
+    """Per (other, metric): cases where ``other`` / the reference is significantly better,
+    with no significant difference, and n/a (from :func:`paired_table`)."""
+    if not len(table):
+        return pd.DataFrame()
+    rows = []
+    for (ref, other, m), g in table.groupby(["reference", "other", "metric"], sort=False):
+        rows.append({"reference": ref, "other": other, "metric": m,
+                     "better": g["better"].iloc[0],
+                     "other_better": int((g["verdict"] == f"{other} better").sum()),
+                     "reference_better": int((g["verdict"] == f"{ref} better").sum()),
+                     "not_significant": int(g["verdict"].isin(NOT_SIGNIFICANT).sum()),
+                     "n/a": int((g["verdict"] == "n/a").sum())})  # fmt: skip
+    return pd.DataFrame(rows)
