@@ -34,6 +34,9 @@ import numpy as np
 import pandas as pd
 from scipy import stats as sps
 
+from mpcasv.experiments.metrics import HEADLINE as METRIC_HEADLINE
+from mpcasv.experiments.metrics import METRIC_INFO
+
 #: column naming the compared controller (label plus grid values, e.g. "hybrid[dT=0.2]")
 COMPARE = "variant"
 #: columns that identify a job apart from the controller: rows equal on these are one pair
@@ -56,11 +59,9 @@ class PairingError(ValueError):
 
 @dataclass(frozen=True)
 class HeadlineMetric:
-    """One metric of the headline table (names and directions: CONTRACT.md).
-
-    At merge: the unit and direction come from ``mpcasv.experiments.metrics.METRIC_INFO``
-    (the one definition); this spec only adds the group and the order.
-    """
+    """One metric of the headline table: its name, unit and direction come from
+    :data:`mpcasv.experiments.metrics.METRIC_INFO` (the one definition); the group is the
+    headline table's section."""
 
     name: str
     group: str  # "safety", "liveness", "navigation", "effort"
@@ -68,16 +69,16 @@ class HeadlineMetric:
     better: str  # "lower" | "higher"
 
 
-#: the headline table's metrics, in order (CONTRACT.md, ``HEADLINE``)
-HEADLINE: tuple[HeadlineMetric, ...] = (
-    HeadlineMetric("min_range_m", "safety", "m", "higher"),
-    HeadlineMetric("collision_domain_s", "safety", "s", "lower"),
-    HeadlineMetric("reliable_fix_age_p95_s", "liveness", "s", "lower"),
-    HeadlineMetric("reliable_fix_age_max_s", "liveness", "s", "lower"),
-    HeadlineMetric("nav_error_rms_m", "navigation", "m", "lower"),
-    HeadlineMetric("nav_error_p95_m", "navigation", "m", "lower"),
-    HeadlineMetric("energy_J", "effort", "J", "lower"),
-    HeadlineMetric("propeller_on_s", "effort", "s", "lower"),
+#: the headline table's section of each headline metric
+_GROUP = {"min_range_m": "safety", "collision_domain_s": "safety",
+          "reliable_fix_age_p95_s": "liveness", "reliable_fix_age_max_s": "liveness",
+          "nav_error_rms_m": "navigation", "nav_error_p95_m": "navigation",
+          "energy_J": "effort", "propeller_on_s": "effort"}  # fmt: skip
+
+#: the headline table's metrics, in :data:`mpcasv.experiments.metrics.HEADLINE` order
+HEADLINE: tuple[HeadlineMetric, ...] = tuple(
+    HeadlineMetric(m, _GROUP[m], METRIC_INFO[m].unit, METRIC_INFO[m].better)
+    for m in METRIC_HEADLINE
 )
 
 
