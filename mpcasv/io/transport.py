@@ -8,6 +8,7 @@ into packets by ``imcpy.Parser``.
 from __future__ import annotations
 
 import asyncio
+import socket
 import time
 from collections.abc import Callable
 
@@ -72,6 +73,30 @@ class UdpEndpoint:
             lambda: _UdpProtocol(on_datagram), local_addr=(host, port),
             reuse_port=reuse_port or None,
         )  # fmt: skip
+        return cls(transport, protocol)
+
+    @classmethod
+    async def open_discovery(cls, host: str, port: int, group: str, iface: str,
+                             on_datagram: Callable[[bytes, Addr], None]) -> UdpEndpoint:
+        """A discovery socket as DUNE's peers use them: ``host:port`` with SO_REUSEADDR,
+        joined to the multicast ``group`` on the interface of address ``iface`` (when bound
+        to 0.0.0.0; a socket bound to a unicast address gets only unicast Announces, such as
+        DUNE's loopback copies to 127.0.0.1:3010x). Raises OSError (port busy: a DUNE on this
+        host binds its discovery port without SO_REUSEADDR)."""  # fmt: skip
+        sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM, socket.IPPROTO_UDP)
+        try:
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+            sock.bind((host, port))
+            if host == "0.0.0.0":
+                mreq = socket.inet_aton(group) + socket.inet_aton(iface)
+                sock.setsockopt(socket.IPPROTO_IP, socket.IP_ADD_MEMBERSHIP, mreq)
+            sock.setblocking(False)
+        except OSError:
+            sock.close()
+            raise
+        loop = asyncio.get_running_loop()
+        transport, protocol = await loop.create_datagram_endpoint(
+            lambda: _UdpProtocol(on_datagram), sock=sock)
         return cls(transport, protocol)
 
     def sendto(self, data: bytes, addr: Addr) -> bool:
