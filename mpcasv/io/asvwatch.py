@@ -69,9 +69,9 @@ class SpeedWatch:
     def command(self, t: float, speed: float | None) -> None:
         """The command just sent at ASV-state time ``t`` (None / 0: standby)."""
         speed = speed if speed and speed > 0 else None
-        if speed != self.commanded:
+        if speed != self.commanded:  # a new commanded speed gets a verdict of its own
             self.commanded, self.since = speed, t
-            self.short_since = None
+            self.short_since, self.persistent = None, False
             self.samples.clear()
 
     def state(self, t: float, sog: float, stw: float) -> dict | None:

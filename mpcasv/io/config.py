@@ -207,10 +207,10 @@ class SpeedSpec:
     achieved one, and ``controller.speed_feedback`` caps the controller's speed with it.
     """
 
-    window_s: Pos = 15.0
+    window_s: Pos = 10.0
     ratio: Annotated[float, Strict(), Field(gt=0, le=1)] = 0.8
-    persist_s: Pos = 20.0
-    settle_s: NonNeg = 10.0  # after a change of commanded speed, before the window opens
+    persist_s: Pos = 10.0
+    settle_s: NonNeg = 5.0  # after a change of commanded speed, before the window opens
 
 
 @frozen

@@ -93,6 +93,7 @@ class Peer:
     id: int | None = None
     name: str | None = None
     addresses: set[Addr] = field(default_factory=set)
+    hosts: set[str] = field(default_factory=set)  # hosts its Announces came from / name
     static: bool = False  # address from the config, not learnt
     last_heard: float = -math.inf  # deploy clock of the last accepted message
     track: StateTrack = field(default_factory=StateTrack)  # last accepted state, checks
@@ -157,6 +158,7 @@ class ImcLink:
             k += v.role == "auv"
             if v.address:
                 p.addresses.add(parse_address(v.address))
+                p.hosts.add(p.spec.address.rpartition(":")[0])
                 p.static = True
             self.peers.append(p)
         self.asv = next(p for p in self.peers if p.role == "asv")
@@ -399,16 +401,17 @@ class ImcLink:
                stream_peer: Peer | None) -> Peer | None:  # fmt: skip
         """Checks 2-4 on header fields: the sending vehicle, or None for a relay (counted)."""
         via = stream_peer or (self._peer_by_addr(addr) if addr is not None else None)
-        if src == self.id:
-            if via is None:
+        early = via is None and addr is not None and self._awaiting(addr[0])
+        if src == self.id or dst not in (self.id, BROADCAST):
+            if via is not None:
+                self.relayed["echo" if src == self.id else "not_for_us"] += 1
+                return None
+            if early:
+                self.relayed["pre_discovery"] += 1
+                return None
+            if src == self.id:
                 raise BadInput("own_id", f"{name} with our id 0x{src:04X} as src")
-            self.relayed["echo"] += 1
-            return None
-        if dst not in (self.id, BROADCAST):
-            if via is None:
-                raise BadInput("not_for_us", f"dst 0x{dst:04X}")
-            self.relayed["not_for_us"] += 1
-            return None
+            raise BadInput("not_for_us", f"dst 0x{dst:04X}")
         if via is not None and via.id is not None and src != via.id:
             if stream_peer is not None and self._peer_by_id(src) is None:
                 raise BadInput("id_mismatch", f"src 0x{src:04X} on {via.label}'s stream")
@@ -418,6 +421,9 @@ class ImcLink:
         if p is None:
             raise BadInput("unknown_sender", f"src 0x{src:04X}")
         if addr is not None:
+            if not p.addresses and early:
+                self.relayed["pre_discovery"] += 1
+                return None
             if not p.addresses:
                 raise BadInput("not_announced", f"{p.label} has not announced itself")
             if addr not in p.addresses:
@@ -426,6 +432,14 @@ class ImcLink:
 
     def _peer_by_addr(self, addr: Addr) -> Peer | None:
         return next((p for p in self.peers if addr in p.addresses), None)
+
+    def _awaiting(self, host: str) -> bool:
+        """A vehicle known from an Announce without ``imc+udp`` service (DUNE's first at
+        start-up), from this host, whose data address is not known yet: DUNE streams from
+        the moment it has heard our Announce, possibly before its next Announce (10 s)
+        names its address. Its datagrams (and relays) until then are ``pre_discovery``."""
+        return any(not p.addresses and p.id is not None and host in p.hosts
+                   for p in self.peers)  # fmt: skip
 
     def _peer_by_id(self, src: int) -> Peer | None:
         return next((p for p in self.peers if p.id == src), None)
@@ -447,10 +461,12 @@ class ImcLink:
         if addr is not None and p.static:
             if addr[0] not in {h for h, _ in p.addresses}:
                 raise BadInput("address_mismatch", f"{p.label} announced from {addr}")
+        elif addr is not None and not services:
+            # DUNE's first Announce at start-up, or its multicast copy on a loopback-only
+            # host: who it is (and from which host) but not where its data comes from
+            if addr[0] != "0.0.0.0":
+                p.hosts.add(addr[0])
         elif addr is not None:
-            if not services:  # DUNE's first Announce, or a multicast copy on loopback only
-                self.ignored["Announce_without_imc_udp"] += 1
-                return None
             if addr[0] not in {h for h, _ in services}:  # any port: DUNE's Announce socket
                 raise BadInput("address_mismatch", f"{p.label} from {addr[0]}:{addr[1]}, "
                                f"services {sorted(services)}")  # fmt: skip
@@ -461,6 +477,7 @@ class ImcLink:
                            addresses=[f"{h}:{q}" for h, q in sorted(services)],
                            announced_from=f"{addr[0]}:{addr[1]}")  # fmt: skip
             p.addresses = services
+            p.hosts |= {h for h, _ in services}
         if p.id != msg.src:
             p.id = msg.src
         p.name = msg.sys_name
