@@ -307,6 +307,7 @@ def controller_overrides(cfg: DeployConfig, speed: float | None = None) -> dict[
 def build_controller(cfg: DeployConfig, speed: float | None = None, log=print):
     """The deploy's controller (compiles an MPC's library now if it is not cached: progress
     on ``log``)."""
+    import threading
     import time
 
     from mpcasv.sim.controllers import make_controller
@@ -316,7 +317,17 @@ def build_controller(cfg: DeployConfig, speed: float | None = None, log=print):
     log(f"preparing controller {c.name} (preset {c.preset or 'default'}"
         f"{', vessel ' + c.vessel if c.vessel else ''}): an MPC compiles its library now "
         "if it is not cached (about a minute the first time)")  # fmt: skip
-    ctl = make_controller(c.name, len(cfg.auvs), c.preset, controller_overrides(cfg, speed))
+    done = threading.Event()
+
+    def progress() -> None:  # a line every 10 s while building (compiling)
+        while not done.wait(10.0):
+            log(f"still preparing {c.name}: {time.perf_counter() - t0:.0f} s")
+
+    threading.Thread(target=progress, daemon=True).start()
+    try:
+        ctl = make_controller(c.name, len(cfg.auvs), c.preset, controller_overrides(cfg, speed))
+    finally:
+        done.set()
     log(f"controller {c.name} ready in {time.perf_counter() - t0:.1f} s")
     return ctl
 

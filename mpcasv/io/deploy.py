@@ -482,7 +482,7 @@ def run_deploy(config: str | Path, dry_run: bool = False, log_dir: Path | None =
     if prepare:
         t0 = time.perf_counter()
         build_controller(cfg, log=log.warning)
-        return {"prepared": cfg.controller.name, "seconds": time.perf_counter() - t0}
+        return {"controller": cfg.controller.name, "seconds": time.perf_counter() - t0}
     deploy = Deploy(cfg, dry_run, log_dir)
 
     async def main() -> dict:
