@@ -9,7 +9,11 @@ Each vehicle has its own UDP socket (its ``imc+udp`` service) and IMC id. Like D
 - accept datagrams only from systems whose Announce they have heard, from the address it
   names, and stream only to systems that sent a Heartbeat in the last 30 s;
 - send EstimatedState at 2 Hz (reference point re-anchored every ``--reanchor`` metres, as
-  DUNE moves it), the ASV also SetThrusterActuation (thrust / T_max);
+  DUNE moves it), the ASV also SetThrusterActuation (thrust / T_max) while its control loops
+  run (a transit Reference), one 0.0 when they stop, and none while they are off (as DUNE's
+  Otter in HOVER or standby);
+- announce from a socket of their own (not the ``imc+udp`` port) and relay Heartbeats and
+  PlanControls back to the systems they stream to, our own included (as DUNE);
 - the ASV answers PlanControl START with a FollowReference argument (SUCCESS to the sender;
   FAILURE for anything else; ignored unless addressed to it or broadcast) and then runs
   :class:`mpcasv.io.dune.FollowRefManeuver` (References, FollowRefState, MANDONE, timeout,
@@ -131,6 +135,7 @@ class Sitl:
         self.prev_S = self.world.S.copy()
         self.ts_offset: float | None = None  # timestamp of world t = 0
         self.held = opt.hold
+        self.loops_on = False  # the ASV's control loops ran at the last published state
         self.epoch = 0.0
         self.n = 0
 
@@ -230,9 +235,13 @@ class Sitl:
         for v in self.auvs:
             v.publish(self._es(v, self._nav_auv(S, v.index)))
         if self.asv.alive:
-            th = imcpy.SetThrusterActuation()
-            th.id, th.value = 0, float(np.clip(x[6] / w.model.params.T_max, -1.0, 1.0))
-            self.asv.publish(th)
+            loops = bool(self.command_vector()[0] > 0.5)
+            if loops or self.loops_on:  # as DUNE: one 0.0 when the loops stop, then none
+                th = imcpy.SetThrusterActuation()
+                value = x[6] / w.model.params.T_max if loops else 0.0
+                th.id, th.value = 0, float(np.clip(value, -1.0, 1.0))
+                self.asv.publish(th)
+            self.loops_on = loops
             self.asv.publish(self._es(self.asv, self._nav_asv(x)))
 
     # --- outages -----------------------------------------------------------------------------
