@@ -71,15 +71,19 @@ class CaptureClock:
         return s
 
 
-def _cfg(tmp_path, **log):
+PINNED = [{"role": "asv", "name": "otter", "id": OTTER, "address": "127.0.0.1:6002"},
+          {"role": "auv", "name": "lauv-simulator-1", "id": LAUV, "address": "127.0.0.1:6003"}]
+
+
+def _cfg(tmp_path, vehicles=None, **log):
     return deploy_config_from_dict({
         "identity": {"id": US, "name": "mpcasv-capture"},
         "origin": {"lat_deg": 41.1850, "lon_deg": -8.7062},
         "link": {"bind": "127.0.0.1", "port": 6010, "announce_to": [],
                  "plan_start_timeout": 20.0},
         # names only, as the issue's failing field configuration had them
-        "vehicle": [{"role": "asv", "name": "otter"},
-                    {"role": "auv", "name": "lauv-simulator-1"}],
+        "vehicle": vehicles or [{"role": "asv", "name": "otter"},
+                                {"role": "auv", "name": "lauv-simulator-1"}],
         "controller": {"name": "hybrid-single", "preset": "paper1-field"},
         "log": {"dir": str(tmp_path / "log")} | log,
     })  # fmt: skip
@@ -148,9 +152,6 @@ def test_recorded_dune_through_the_link(path):
                                   "pre_discovery": exp["early"]}  # fmt: skip
     assert link.accepted["EstimatedState"] == exp["es"]
     received = sum(not d[1] for d in data)
-    handled = (sum(link.accepted.values()) + sum(link.ignored.values())
-               + sum(link.relayed.values()))  # fmt: skip
-    assert handled == received
     if path == FULL:  # the README's figures (dune-traffic/README.md, "Counts")
         assert received == 215_556  # 813 EstimatedStates, 10 of them before discovery
         assert exp["es"] + sum(1 for d in data if not d[1] and HDR.unpack_from(d[3])[1]
@@ -158,6 +159,32 @@ def test_recorded_dune_through_the_link(path):
                                and d[2] not in {("127.0.0.1", 6002), ("127.0.0.1", 6003)}
                                ) + 10 == 813  # fmt: skip
         assert link.relayed["own_announce"] == 72
+    _all_handled(link, received)
+
+
+def _all_handled(link, received):
+    handled = (sum(link.accepted.values()) + sum(link.ignored.values())
+               + sum(link.relayed.values()))  # fmt: skip
+    assert handled == received
+
+
+@pytest.mark.parametrize("path", SOURCES)
+def test_recorded_dune_through_the_link_pinned(path):
+    """The same with ids and addresses pinned (the advice for untrusted networks): no
+    reject, nothing before discovery, every EstimatedState accepted, every relay counted."""
+    data = capture(path)
+    clock = CaptureClock(data[0][0])
+    link = ImcLink(_cfg(Path("/nonexistent"), PINNED), clock)
+    for t, sent, peer, raw in data:
+        if not sent:
+            clock.t = t
+            link.handle_datagram(raw, peer)
+    es_id = imcpy.Factory.id_from_abbrev("EstimatedState")
+    assert dict(link.rejects) == {}
+    assert link.accepted["EstimatedState"] == sum(
+        1 for d in data if not d[1] and HDR.unpack_from(d[3])[1] == es_id)
+    assert "pre_discovery" not in link.relayed
+    _all_handled(link, sum(not d[1] for d in data))
 
 
 def _run_deploy(path, tmp_path, lsf="used"):

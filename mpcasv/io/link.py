@@ -459,6 +459,10 @@ class ImcLink:
             raise BadInput("id_mismatch", f"{p.label} is 0x{p.id:04X}, not 0x{msg.src:04X}")
         services = set(udp_services(msg.services))
         if addr is not None and p.static:
+            if addr[0] == "0.0.0.0" and services <= p.addresses:
+                # no source address: DUNE's multicast copy on a host with loopback only
+                self.ignored["Announce_from_0.0.0.0"] += 1
+                return None
             if addr[0] not in {h for h, _ in p.addresses}:
                 raise BadInput("address_mismatch", f"{p.label} announced from {addr}")
         elif addr is not None and not services:
