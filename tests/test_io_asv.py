@@ -129,3 +129,42 @@ def test_shutdown_order_and_plan_done_timeout(tmp_path):
     steps = dep.steps
     dep._on_state(asv, NavState(9.0, 5.0, 5.0, 0, 0, 0, 0, 0, 0, 0, 0, 0), 9.0)
     assert dep.steps == steps
+
+
+def test_config_names_the_vessel(tmp_path):
+    """``controller.vessel`` reaches controllers that plan with a vessel model (MPC presets
+    have a ``vessel`` field), not the hybrid ones; an unknown vessel is refused up front."""
+    from mpcasv.config import ConfigError
+    from mpcasv.io.config import controller_overrides
+
+    mpc = _cfg(tmp_path, controller={"name": "mpc-single", "preset": "mpc-single",
+                                     "vessel": "gretha"})  # fmt: skip
+    assert controller_overrides(mpc) == {"vessel": "gretha"}
+    hyb = _cfg(tmp_path, controller={"vessel": "gretha"})
+    assert controller_overrides(hyb) == {}
+    with pytest.raises(ConfigError, match="controller: unknown vessel 'no-such-boat'"):
+        _cfg(tmp_path, controller={"vessel": "no-such-boat"})
+
+
+def test_deploy_prepare_builds_and_contacts_nobody(tmp_path, capsys):
+    """``mpcasv deploy CONFIG --prepare``: the controller is built (with progress lines),
+    nothing is bound, no log is written, exit 0."""
+    import json
+
+    import tomli_w
+
+    from mpcasv.cli import main
+
+    cfg = {
+        "origin": {"lat_deg": 63.4406, "lon_deg": 10.3530},
+        "controller": {"name": "hybrid-single", "preset": "paper1-field"},
+        "vehicle": [{"role": "asv", "id": 0x2801, "address": "127.0.0.1:6002"},
+                    {"role": "auv", "id": 0x2811, "address": "127.0.0.1:6003"}],
+        "log": {"dir": str(tmp_path / "log")},
+    }  # fmt: skip
+    path = tmp_path / "deploy.toml"
+    path.write_text(tomli_w.dumps(cfg))
+    assert main(["deploy", str(path), "--prepare"]) == 0
+    out = capsys.readouterr()
+    assert json.loads(out.out)["prepared"]["controller"] == "hybrid-single"
+    assert not (tmp_path / "log").exists()
