@@ -30,7 +30,9 @@ def _cfg(tmp_path, speedup=1.0, **watchdog):
     return deploy_config_from_dict({
         "identity": {"id": DEPLOY_ID},
         "origin": {"lat_deg": ORIGIN_DEG[0], "lon_deg": ORIGIN_DEG[1]},
-        "link": {"bind": "127.0.0.1", "port": 0, "announce_to": []},
+        # the fakes announce to our data port; no discovery ports (parallel tests, other
+        # programs on this host): test_discovery_socket_* opens one on a free port
+        "link": {"bind": "127.0.0.1", "port": 0, "announce_to": [], "discovery_ports": []},
         "vehicle": [{"role": "asv", "name": "fake-asv", "id": ASV_ID},
                     {"role": "auv", "name": "fake-auv"}],
         "controller": {"name": "hybrid-single", "preset": "paper1-field"},
@@ -385,3 +387,36 @@ def test_header_layout_matches_imcpy():
     stamp(hb, 1, 2, 3.0)
     sync, mgid, size = struct.unpack_from("<HHH", hb.serialize())
     assert (sync, mgid, size) == (imcpy.constants.SYNC, hb.msg_id, 0)
+
+
+def test_discovery_socket_learns_a_name_only_vehicle(tmp_path):
+    """As with DUNE: the vehicle announces on the discovery port (here a free one on
+    127.0.0.1), from a socket that is not its data socket; the link learns the data address
+    from the imc+udp service and then takes the vehicle's states from there."""
+    import dataclasses
+
+    cfg = _cfg(tmp_path)
+    cfg = dataclasses.replace(cfg, link=dataclasses.replace(cfg.link, discovery_ports=(0,)))
+
+    async def main():
+        dep, stop, task = await _start(cfg, tmp_path)
+        link = dep.link
+        assert await _until(lambda: link.discovery)
+        disc = link.discovery[0].address
+        assert disc[0] == "127.0.0.1" and disc != link.endpoint.address
+        auv = await Fake("fake-auv", AUV_ID).open()  # its data socket
+        announcer = await Fake("fake-auv", AUV_ID).open()  # DUNE's Announce task socket
+        host, port = auv.ep.address
+        announcer.send(announce("fake-auv", imcpy.SystemType.UUV, [f"imc+udp://{host}:{port}/"]),
+                       disc, dep.clock.now())  # fmt: skip
+        assert await _until(lambda: link.auvs[0].addresses == {(host, port)})
+        t = dep.clock.now()
+        auv.send(auv.es(t, 10.0, 20.0), link.endpoint.address, t)
+        assert await _until(lambda: link.accepted["EstimatedState"] == 1)
+        assert dict(link.rejects) == {}
+        stop.set()
+        await task
+        events = [r["event"] for r in read_jsonl(tmp_path / "log" / "deploy.jsonl", "event")]
+        assert "discovery" in events and "discovered" in events
+
+    asyncio.run(main())
