@@ -135,6 +135,8 @@ class ImcLink(PeerDirectory):
         link = self.cfg.link
         if link.transport == "udp":
             self.endpoint = await UdpEndpoint.open(link.bind, link.port, self.handle_datagram)
+            if link.bind != "0.0.0.0":
+                self.endpoint.multicast_from(link.bind)
             self.event("bound", address=f"{self.endpoint.address[0]}:{self.endpoint.address[1]}")
             if any(not p.static for p in self.peers):
                 await self._open_discovery()

@@ -99,6 +99,12 @@ class UdpEndpoint:
             lambda: _UdpProtocol(on_datagram), sock=sock)
         return cls(transport, protocol)
 
+    def multicast_from(self, iface: str) -> None:
+        """Send multicast (our Announce to 224.0.75.69) out of the interface of address
+        ``iface`` (the one we are bound to), not wherever the routing table points."""
+        sock = self._transport.get_extra_info("socket")
+        sock.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_IF, socket.inet_aton(iface))
+
     def sendto(self, data: bytes, addr: Addr) -> bool:
         """Send one datagram; False (counted in ``send_errors``) if the OS refused it."""
         if self._transport.is_closing():
