@@ -135,9 +135,11 @@ def test_plan_control_followreference_timeout_and_speed_zero(tmp_path):
         echoes = node.of(imcpy.PlanControl, ME)  # DUNE echoes every PlanControl it takes in
         assert [(e.request_id, e.dst) for e in echoes] == [(7, 0x1234), (8, sitl.asv.id)]
         start(9, dst=sitl.asv.id)
-        assert await _until(lambda: len(node.of(imcpy.PlanControl, sitl.asv.id)) == 2)
-        ok = node.of(imcpy.PlanControl, sitl.asv.id)[-1]
-        assert (ok.request_id, ok.type, ok.plan_id) == (9, PC.TypeEnum.SUCCESS, "p")
+        assert await _until(lambda: len(node.of(imcpy.PlanControl, sitl.asv.id)) == 3)
+        ok = node.of(imcpy.PlanControl, sitl.asv.id)[1:]  # answered twice, as recorded DUNE
+        assert [(a.request_id, a.type, a.plan_id, a.info) for a in ok] == [
+            (9, PC.TypeEnum.SUCCESS, "p", "plan loaded"),
+            (9, PC.TypeEnum.SUCCESS, "p", "FollowReference: executing maneuver")]
         assert sitl.maneuver is not None and not np.any(sitl.command_vector())  # WAIT
 
         def ref(N, E, speed):
