@@ -14,6 +14,7 @@ from mpcasv.io.config import deploy_config_from_dict
 from mpcasv.io.geo import Origin, to_wgs84
 from mpcasv.io.imc import NavState, estimated_state, stamp
 from mpcasv.io.link import ImcLink
+from mpcasv.io.logs import read_jsonl
 
 CASES = Path("/work/shared/cases")
 CASE_DIR = Path(__file__).parent / "data" / "cases"  # copies of the case inputs (CI)
@@ -25,6 +26,9 @@ class FakeClock:  # the deploy clock, advanced by hand
 
     def now(self) -> float:
         return self.t
+
+    def wall_seconds(self, s: float) -> float:
+        return s
 
 
 def _link(vehicles, port=0):
@@ -133,17 +137,20 @@ def _clock_step_run(step: float, n: int = 40, at: int = 10, N_of=lambda k: 0.5 *
 def test_case_vehicle_clock_step_recovered(step, reason):
     """Case vehicle-clock-step, forward and backward: after 3 self-consistent states on the
     new time base the link re-anchors (event clock_step with the offset) and accepts the
-    states again; only the 2 states before the proof are rejected."""
+    states again; only the 2 states before the proof are rejected; a second step later is
+    recovered the same way."""
     link, accepted, steps = _clock_step_run(step)
     assert len(accepted) == 38
     assert dict(link.rejects) == {reason: 2}
     assert len(steps) == 1
     assert steps[0]["offset_s"] == pytest.approx(step, abs=1e-6)
     assert steps[0]["states"] == 3
-    old, new = accepted[:10], accepted[10:]  # each time base strictly increasing
-    assert all(b - a == pytest.approx(0.5) for a, b in zip(old[:-1], old[1:], strict=True))
-    assert all(b - a == pytest.approx(0.5) for a, b in zip(new[:-1], new[1:], strict=True))
-    assert new[0] - old[-1] == pytest.approx(step + 0.5 * 3, abs=1e-6)
+    # re-anchored onto the old time base: the timestamps handed on never step (the deploy's
+    # decision grid and the estimators see one continuous clock)
+    gaps = [b - a for a, b in zip(accepted[:-1], accepted[1:], strict=True)]
+    assert gaps[9] == pytest.approx(1.5, abs=1e-6)  # the two rejected states' place
+    assert all(g == pytest.approx(0.5, abs=1e-6) for g in gaps[:9] + gaps[10:])
+    assert link.auvs[0].track.offset == pytest.approx(step, abs=1e-6)
 
 
 def test_case_vehicle_clock_step_single_outlier_is_not_a_step():
@@ -180,3 +187,43 @@ def test_case_replay_given_binary_log(name, tmp_path, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1
     assert "not a deploy log" in err[0] and name in err[0] and "LSF" in err[0]
+
+
+def test_case_vehicle_clock_step_twice_and_asv_grid(tmp_path):
+    """Case vehicle-clock-step on the ASV, backward then forward: the deploy keeps deciding
+    once per control period on the re-anchored timestamps (a backward step would otherwise
+    stop its decision grid until the vehicle clock caught up)."""
+    from mpcasv.io.deploy import RUNNING, Deploy
+
+    cfg = deploy_config_from_dict({
+        "identity": {"id": 0x4001},
+        "origin": {"lat_deg": 41.18, "lon_deg": -8.70},
+        "link": {"bind": "127.0.0.1", "port": 0, "announce_to": []},
+        "vehicle": [{"role": "asv", "id": 0x2801, "address": "10.0.10.50:6002"},
+                    {"role": "auv", "id": 0x2811, "address": "10.0.10.60:6002"}],
+        "controller": {"name": "hybrid-single", "preset": "paper1-field"},
+        "log": {"dir": str(tmp_path)},
+    })  # fmt: skip
+    dep = Deploy(cfg, dry_run=True)
+    clock = FakeClock()
+    dep.clock = dep.link.clock = clock
+    vclock = clock.t
+    for k in range(120):  # 60 s at 2 Hz
+        clock.t += 0.5
+        vclock += 0.5
+        if k == 30:
+            vclock -= 600.0
+        if k == 80:
+            vclock += 3600.0
+        link = dep.link
+        link.handle_datagram(_es(clock, 0x2811, vclock - 5.0, 100.0), ("10.0.10.60", 6002))
+        link.handle_datagram(_es(clock, 0x2801, vclock, 0.5 * k), ("10.0.10.50", 6002))
+        if k % 2:
+            dep.watch()
+    assert dep.phase == RUNNING
+    offsets = [round(r["offset_s"]) for r in read_jsonl(tmp_path / "deploy.jsonl", "event")
+               if r["event"] == "clock_step"]  # fmt: skip
+    assert sorted(offsets) == [-600, -600, 3600, 3600]  # both vehicles, both steps
+    ts = [r["t"] for r in read_jsonl(tmp_path / "deploy.jsonl", "step")]
+    assert len(ts) >= 55 and all(0.5 <= b - a <= 2.0 for a, b in zip(ts[:-1], ts[1:],
+                                                                      strict=True))

@@ -16,10 +16,16 @@ elapsed. When ``clock_step_states`` states form such a chain, the link re-anchor
 time base: the last of them is accepted and :class:`ClockStep` (with the offset, new minus
 old time base) is reported. The states before it stay rejected (counted); a chain broken by
 an inconsistent state starts again from that state.
+
+Re-anchoring maps the new time base back onto the old one: from then on the vehicle's
+timestamps are handed on minus the (accumulated) offset, so that the deploy's decision grid
+(stepped on the ASV's timestamps) and the AUV estimators (which compare the AUVs' times with
+the ASV's) never see the step; ``StateTrack.offset`` holds it.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 
@@ -49,6 +55,7 @@ class StateTrack:
     nav: NavState | None = None  # last accepted state
     recv: float = -math.inf  # deploy clock when it arrived
     chain: list[tuple[NavState, float]] = field(default_factory=list)  # (state, arrival)
+    offset: float = 0.0  # s subtracted from the vehicle's timestamps (its clock steps)
 
 
 def _consistent(a: NavState, a_recv: float, b: NavState, b_recv: float, vmax: float,
@@ -78,6 +85,8 @@ def check_state(es: imcpy.EstimatedState, track: StateTrack, now: float, origin:
     if abs(es.lat) > math.pi / 2 or abs(es.lon) > math.pi or es.depth > 12000:
         raise BadInput("out_of_range", f"lat {es.lat} lon {es.lon} depth {es.depth}")
     nav = nav_state(es, origin)
+    if track.offset:
+        nav = dataclasses.replace(nav, t=nav.t - track.offset)
     if not all(map(math.isfinite, (nav.N, nav.E))):
         raise BadInput("non_finite", "position after conversion")
     if math.hypot(nav.N, nav.E) > wd.max_distance_m:
@@ -96,6 +105,8 @@ def check_state(es: imcpy.EstimatedState, track: StateTrack, now: float, origin:
                 detail = (f"t {nav.t:.3f} <= last {prev.t:.3f}" if bad == "out_of_order"
                           else f"+{dt:.1f} s after {now - track.recv:.1f} s")  # fmt: skip
                 raise BadInput(bad, detail)
+            track.offset += step.offset
+            nav = dataclasses.replace(nav, t=nav.t - step.offset)
     track.nav, track.recv = nav, now
     track.chain.clear()
     return nav, step
