@@ -114,8 +114,16 @@ def _check_logs(deploy_dir: Path, n_auv: int) -> list[dict]:
     assert ours["speed.value"].iloc[-2] == 0.0
     es = read_messages(deploy_dir / "imc.lsf", imcpy.EstimatedState)
     assert es["src"].nunique() == n_auv + 1
-    summary = read_jsonl(deploy_dir / "deploy.jsonl", "summary")[-1]
+    records = read_jsonl(deploy_dir / "deploy.jsonl")
+    summary = records[-1]
+    assert summary["kind"] == "summary"  # the last record
     assert summary["rejects"] == {}, summary["rejects"]
+    # the SITL echoes our Heartbeats and PlanControls as DUNE does; it has ended when the
+    # deploy is stopped: MANDONE gets no answer and the wait ends on its timeout
+    assert summary["relayed"].get("echo", 0) > 0
+    assert not summary["plan_completed"]
+    names = [r.get("event") for r in records]
+    assert names.index("final_standby") < names.index("plan_done_timeout")
     return steps
 
 
@@ -203,6 +211,9 @@ def test_asv_killed_and_restarted(tmp_path):
     assert sitl_events.count("maneuver_started") == 2
     assert "asv_killed" in sitl_events and "asv_restarted" in sitl_events
     assert "maneuver_done" in sitl_events  # the deploy's MANDONE on SIGTERM
+    summary = read_jsonl(log)[-1]  # answered "plan completed", as DUNE does; summary last
+    assert summary["kind"] == "summary" and summary["plan_completed"]
+    assert _events(log, "plan_completed")[0]["info"] == "plan completed"
     steps = read_jsonl(log, "step")
     stale_t = _events(log, "asv_stale")[0]["t"]
     resumed_t = _events(log, "asv_resumed")[0]["t"]

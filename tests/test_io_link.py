@@ -30,7 +30,9 @@ def _cfg(tmp_path, speedup=1.0, **watchdog):
     return deploy_config_from_dict({
         "identity": {"id": DEPLOY_ID},
         "origin": {"lat_deg": ORIGIN_DEG[0], "lon_deg": ORIGIN_DEG[1]},
-        "link": {"bind": "127.0.0.1", "port": 0, "announce_to": []},
+        # the fakes announce to our data port; no discovery ports (parallel tests, other
+        # programs on this host): test_discovery_socket_* opens one on a free port
+        "link": {"bind": "127.0.0.1", "port": 0, "announce_to": [], "discovery_ports": []},
         "vehicle": [{"role": "asv", "name": "fake-asv", "id": ASV_ID},
                     {"role": "auv", "name": "fake-auv"}],
         "controller": {"name": "hybrid-single", "preset": "paper1-field"},
@@ -141,8 +143,16 @@ def test_bad_input_rejected_counted_logged(tmp_path):
         await expect("unknown_sender", lambda: other.announce(to, t0))
         await expect("address_mismatch", lambda: other.send(auv.es(t0 + 0.2, 100, 50), to,
                                                             t0 + 0.2, src=AUV_ID))  # fmt: skip
-        await expect("not_for_us", lambda: auv.send(auv.es(t0 + 0.2, 100, 50), to, t0 + 0.2,
-                                                    dst=0x1234))  # fmt: skip
+        await expect("not_for_us", lambda: other.send(other.es(t0 + 0.2, 100, 50), to,
+                                                      t0 + 0.2, dst=0x1234))  # fmt: skip
+        await expect("own_id", lambda: other.send(imcpy.Heartbeat(), to, t0, dst=ASV_ID,
+                                                  src=DEPLOY_ID))  # fmt: skip
+        # DUNE's relays from a vehicle's own address are not rejects: counted apart, silent
+        auv.send(auv.es(t0 + 0.2, 100, 50), to, t0 + 0.2, dst=0x1234)
+        auv.send(imcpy.Heartbeat(), to, t0, dst=AUV_ID, src=DEPLOY_ID)  # echo of ours
+        auv.send(imcpy.Heartbeat(), to, t0, src=0x0999)  # another system's, relayed
+        assert await _until(lambda: dict(link.relayed) == {"not_for_us": 1, "echo": 1,
+                                                           "third_party": 1}), link.relayed
         nan = auv.es(t0 + 0.3, 100, 50)
         nan.x = float("nan")
         await expect("non_finite", lambda: auv.send(nan, to, t0 + 0.3))
@@ -243,8 +253,11 @@ def _fuzz_datagram(rng, from_vehicle: bool, t: float) -> bytes:
 
 
 def test_fuzz_10000_datagrams(tmp_path):
-    """10 000 random datagrams: every one rejected with a reason, nothing sent to the ASV
-    but Heartbeats and Announces, the loop alive at the end."""
+    """10 000 random datagrams: every one rejected with a reason, or (from a vehicle's own
+    address only) counted as a relay or as a message the deploy does not use (those are
+    checked on their header alone); nothing accepted but Heartbeats, nothing sent to the ASV
+    but Heartbeats and Announces, the loop alive at the end; then 1000 from the intruder
+    alone are all rejected."""
     n = 10_000
     rng = np.random.default_rng(12345)
 
@@ -258,6 +271,11 @@ def test_fuzz_10000_datagrams(tmp_path):
             v.announce(to, dep.clock.now())
         assert await _until(lambda: dep.link.auvs[0].id == AUV_ID and dep.link.asv.addresses)
         link, sent = dep.link, 0
+
+        def handled():
+            return (sum(link.rejects.values()) + sum(link.relayed.values())
+                    + sum(link.ignored.values()))  # fmt: skip
+
         for batch in range(n // 50):
             for v in (asv, auv):  # stay fresh (an address can only be re-bound when stale)
                 v.send(imcpy.Heartbeat(), to, dep.clock.now(), dst=DEPLOY_ID)
@@ -266,10 +284,18 @@ def test_fuzz_10000_datagrams(tmp_path):
                 data = _fuzz_datagram(rng, sender is not intruder, dep.clock.now())
                 sender.send_raw(data, to)
                 sent += 1
-            ok = await _until(lambda n=sent: sum(link.rejects.values()) == n)
-            assert ok, f"batch {batch}: {sum(link.rejects.values())} rejected of {sent}: " \
+            ok = await _until(lambda n=sent: handled() == n)
+            assert ok, f"batch {batch}: {handled()} handled of {sent}: {dict(link.rejects)} " \
                 f"{dict(link.accepted)} accepted, {dict(link.ignored)} ignored"  # fmt: skip
         assert sent == n
+        assert set(link.accepted) == {"Announce", "Heartbeat"}, link.accepted
+        assert link.accepted["Announce"] == 2
+        before = sum(link.rejects.values())
+        for i in range(1000):
+            intruder.send_raw(_fuzz_datagram(rng, False, dep.clock.now()), to)
+            if i % 50 == 49:
+                assert await _until(lambda b=before + i + 1: sum(link.rejects.values()) == b)
+        assert set(link.accepted) == {"Announce", "Heartbeat"}, link.accepted
         assert dep.phase == WAITING and dep.steps == 0
         assert not {"PlanControl", "Reference"} & asv.kinds(), asv.kinds()
         assert link.accepted["EstimatedState"] == 0
@@ -278,8 +304,9 @@ def test_fuzz_10000_datagrams(tmp_path):
         assert await _until(lambda: link.accepted["EstimatedState"] == 1)
         stop.set()
         summary = await task
-        print("fuzz rejects:", summary["rejects"])
-        assert sum(summary["rejects"].values()) == n
+        print("fuzz rejects:", summary["rejects"], "relayed", summary["relayed"], "ignored",
+              summary["ignored"])  # fmt: skip
+        assert handled() == n + 1000 and sum(summary["rejects"].values()) > 0.8 * n
         assert len(summary["rejects"]) >= 8
         lines = [r for r in read_jsonl(tmp_path / "log" / "deploy.jsonl", "event")
                  if r["event"] == "reject"]  # fmt: skip
@@ -360,3 +387,36 @@ def test_header_layout_matches_imcpy():
     stamp(hb, 1, 2, 3.0)
     sync, mgid, size = struct.unpack_from("<HHH", hb.serialize())
     assert (sync, mgid, size) == (imcpy.constants.SYNC, hb.msg_id, 0)
+
+
+def test_discovery_socket_learns_a_name_only_vehicle(tmp_path):
+    """As with DUNE: the vehicle announces on the discovery port (here a free one on
+    127.0.0.1), from a socket that is not its data socket; the link learns the data address
+    from the imc+udp service and then takes the vehicle's states from there."""
+    import dataclasses
+
+    cfg = _cfg(tmp_path)
+    cfg = dataclasses.replace(cfg, link=dataclasses.replace(cfg.link, discovery_ports=(0,)))
+
+    async def main():
+        dep, stop, task = await _start(cfg, tmp_path)
+        link = dep.link
+        assert await _until(lambda: link.discovery)
+        disc = link.discovery[0].address
+        assert disc[0] == "127.0.0.1" and disc != link.endpoint.address
+        auv = await Fake("fake-auv", AUV_ID).open()  # its data socket
+        announcer = await Fake("fake-auv", AUV_ID).open()  # DUNE's Announce task socket
+        host, port = auv.ep.address
+        announcer.send(announce("fake-auv", imcpy.SystemType.UUV, [f"imc+udp://{host}:{port}/"]),
+                       disc, dep.clock.now())  # fmt: skip
+        assert await _until(lambda: link.auvs[0].addresses == {(host, port)})
+        t = dep.clock.now()
+        auv.send(auv.es(t, 10.0, 20.0), link.endpoint.address, t)
+        assert await _until(lambda: link.accepted["EstimatedState"] == 1)
+        assert dict(link.rejects) == {}
+        stop.set()
+        await task
+        events = [r["event"] for r in read_jsonl(tmp_path / "log" / "deploy.jsonl", "event")]
+        assert "discovery" in events and "discovered" in events
+
+    asyncio.run(main())

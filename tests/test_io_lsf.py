@@ -15,7 +15,10 @@ from imcpy.coordinates import WGS84
 from mpcasv.io.geo import Origin, absolute_latlon, to_local, to_wgs84
 from mpcasv.io.lsf import LogError, read_lsf, read_messages
 
-SHARED_LOG = Path(__file__).resolve().parents[2] / "shared" / "data" / "dune-lauv-followref.lsf.gz"
+SHARED_LOG = next((d / "dune-lauv-followref.lsf.gz" for d in (
+    Path(__file__).resolve().parents[2] / "shared" / "data", Path("/work/shared/data"))
+    if (d / "dune-lauv-followref.lsf.gz").is_file()),
+    Path(__file__).resolve().parents[2] / "shared" / "data" / "dune-lauv-followref.lsf.gz")
 ORIGIN = Origin.from_degrees(41.185, -8.7062, 10.0)
 T0 = 1.7e9
 

@@ -25,10 +25,16 @@ PC = imcpy.PlanControl
 class Node:
     def __init__(self):
         self.got: list[imcpy.Message] = []
+        self.sources: dict[str, set] = {}  # message name -> (host, port) it came from
 
     async def open(self):
-        self.ep = await UdpEndpoint.open("127.0.0.1", 0, lambda d, a: self.got.append(decode(d)[0]))
+        self.ep = await UdpEndpoint.open("127.0.0.1", 0, self._recv)
         return self
+
+    def _recv(self, data, addr):
+        m = decode(data)[0]
+        self.got.append(m)
+        self.sources.setdefault(type(m).__name__, set()).add(addr)
 
     def send(self, msg, to, dst=BROADCAST, src=ME):
         stamp(msg, src, dst, time.time())
@@ -87,7 +93,11 @@ def test_streams_only_to_announced_heartbeating_systems(tmp_path):
         dt = np.diff([m.timestamp for m in es])
         assert np.all(dt == 0.5)  # 2 Hz, exact timestamps
         assert not quiet.of(imcpy.EstimatedState)
-        assert node.of(imcpy.SetThrusterActuation, sitl.asv.id)
+        # as DUNE: no thruster messages while the loops are off (no maneuver yet); the
+        # Announce from a socket of its own; our Heartbeats relayed back to us
+        assert not node.of(imcpy.SetThrusterActuation, sitl.asv.id)
+        assert ("127.0.0.1", sitl.asv.port) not in node.sources["Announce"]
+        assert len(node.of(imcpy.Heartbeat, ME)) >= 7
         # AUVs stream only to systems that heart-beat them, too
         assert not node.of(imcpy.EstimatedState, sitl.auvs[0].id)
 
@@ -116,16 +126,20 @@ def test_plan_control_followreference_timeout_and_speed_zero(tmp_path):
                 pc.arg = fr
             node.send(pc, asv, dst=dst)
 
-        start(7, dst=0x1234)  # not for this vehicle: silently ignored (as DUNE)
+        start(7, dst=0x1234)  # not for this vehicle: not answered (as DUNE), but relayed
         start(8, dst=sitl.asv.id, arg=False)
-        assert await _until(lambda: node.of(imcpy.PlanControl))
+        assert await _until(lambda: node.of(imcpy.PlanControl, sitl.asv.id))
         await asyncio.sleep(0.05)
-        answers = node.of(imcpy.PlanControl)
+        answers = node.of(imcpy.PlanControl, sitl.asv.id)
         assert [(a.request_id, a.type) for a in answers] == [(8, PC.TypeEnum.FAILURE)]
+        echoes = node.of(imcpy.PlanControl, ME)  # DUNE echoes every PlanControl it takes in
+        assert [(e.request_id, e.dst) for e in echoes] == [(7, 0x1234), (8, sitl.asv.id)]
         start(9, dst=sitl.asv.id)
-        assert await _until(lambda: len(node.of(imcpy.PlanControl)) == 2)
-        ok = node.of(imcpy.PlanControl)[-1]
-        assert (ok.request_id, ok.type, ok.plan_id) == (9, PC.TypeEnum.SUCCESS, "p")
+        assert await _until(lambda: len(node.of(imcpy.PlanControl, sitl.asv.id)) == 3)
+        ok = node.of(imcpy.PlanControl, sitl.asv.id)[1:]  # answered twice, as recorded DUNE
+        assert [(a.request_id, a.type, a.plan_id, a.info) for a in ok] == [
+            (9, PC.TypeEnum.SUCCESS, "p", "plan loaded"),
+            (9, PC.TypeEnum.SUCCESS, "p", "FollowReference: executing maneuver")]
         assert sitl.maneuver is not None and not np.any(sitl.command_vector())  # WAIT
 
         def ref(N, E, speed):
@@ -140,8 +154,17 @@ def test_plan_control_followreference_timeout_and_speed_zero(tmp_path):
         assert await _until(lambda: sitl.command_vector()[0] == 1.0)
         frs = node.of(imcpy.FollowRefState)
         assert frs[-1].state == imcpy.FollowRefState.StateEnum.GOTO
+        assert await _until(lambda: any(m.value > 0 for m in node.of(
+            imcpy.SetThrusterActuation, sitl.asv.id)))  # fmt: skip
+        n_on = len(node.of(imcpy.SetThrusterActuation))
         ref(0.0, 0.0, 0.0)  # speed 0: loops off, the boat drifts
         assert await _until(lambda: not np.any(sitl.command_vector()))
+        # one 0.0 per thruster when the loops stop, then none (as DUNE's Otter in HOVER)
+        assert await _until(lambda: len(node.of(imcpy.SetThrusterActuation)) > n_on
+                            and node.of(imcpy.SetThrusterActuation)[-1].value == 0.0)
+        n_th = len(node.of(imcpy.SetThrusterActuation))
+        await asyncio.sleep(0.1)  # 2 s of the SITL clock
+        assert len(node.of(imcpy.SetThrusterActuation)) == n_th
         # no Reference for longer than the timeout (5 s = 0.25 s of wall clock at 20x)
         assert await _until(lambda: sitl.maneuver.done, timeout=2.0)
         # the TIMEOUT state is announced (over UDP: wait for it to arrive, do not race it)

@@ -45,6 +45,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--log-dir", type=Path, help="override log.dir of the config")
     p.add_argument("--duration", type=_positive, help="stop after this many clock seconds")
     p.add_argument("--quiet", action="store_true", help="no event lines on stderr")
+    p.add_argument("--prepare", action="store_true",
+                   help="validate CONFIG and build the controller (compiling an MPC's library "
+                   "if it is not cached), then exit without contacting any vehicle")  # fmt: skip
     p.set_defaults(func=run_deploy_cli)
 
     s = sub.add_parser(
@@ -111,8 +114,8 @@ def run_deploy_cli(args: argparse.Namespace) -> int:
     from mpcasv.io.deploy import run_deploy
 
     _logging(args.quiet)
-    summary = run_deploy(args.config, args.dry_run, args.log_dir, args.duration)
-    print(json.dumps({"summary": summary}), flush=True)
+    summary = run_deploy(args.config, args.dry_run, args.log_dir, args.duration, args.prepare)
+    print(json.dumps({"prepared" if args.prepare else "summary": summary}), flush=True)
     return 0
 
 

@@ -19,7 +19,10 @@ from pydantic import Field, Strict, field_validator, model_validator
 
 from mpcasv.config import Float, NonNeg, Pos, frozen, load, parse
 
-__all__ = ["DeployConfig", "deploy_config_from_dict", "load_deploy_config", "parse_address"]
+__all__ = [
+    "DeployConfig", "build_controller", "controller_overrides", "deploy_config_from_dict",
+    "load_deploy_config", "parse_address",
+]  # fmt: skip
 
 #: An IMC system id (0xFFFF is broadcast, never a vehicle).
 ImcId = Annotated[int, Strict(), Field(ge=0, le=0xFFFE)]
@@ -111,12 +114,33 @@ class LinkSpec:
     plan_start_timeout: Pos = 5.0  # wait this long for PlanControl SUCCESS, then retry
     reference_lead_m: NonNeg = 20.0  # push the Reference past DUNE's arrival tolerance
     reference_radius_m: NonNeg = 0.0  # Reference.radius (DUNE arrives at |radius| + 15 m)
+    # DUNE announces only to its discovery ports (multicast and loopback), never to our data
+    # port: a vehicle without 'address' is learnt there. Opened only if such a vehicle exists.
+    # On the vehicles' own host leave DUNE its ports (it binds the first free of 30100-30104
+    # without SO_REUSEADDR): e.g. [30103, 30104] with two DUNEs. () = data port only.
+    discovery_ports: tuple[Port, ...] = (30100, 30101, 30102, 30103, 30104)
+    discovery_group: str = "224.0.75.69"  # joined on the interface of 'bind'
+    discovery_bind: str | None = None  # None: 0.0.0.0, or 'bind' if that is a loopback address
+    plan_done_timeout: Pos = 3.0  # at shutdown, wait this long for PlanControl "plan completed"
 
-    @field_validator("bind")
+    @field_validator("bind", "discovery_group")
     @classmethod
     def _bind(cls, v: str) -> str:
         ipaddress.IPv4Address(v)
         return v
+
+    @field_validator("discovery_bind")
+    @classmethod
+    def _dbind(cls, v: str | None) -> str | None:
+        if v is not None:
+            ipaddress.IPv4Address(v)
+        return v
+
+    @property
+    def discovery_host(self) -> str:
+        if self.discovery_bind is not None:
+            return self.discovery_bind
+        return self.bind if ipaddress.IPv4Address(self.bind).is_loopback else "0.0.0.0"
 
     @field_validator("announce_to")
     @classmethod
@@ -136,6 +160,11 @@ class ControllerSpec:
     control_period: Pos = 1.0  # s between decisions (the papers' timers count seconds)
     scenario: str | None = None  # optional scenario TOML: the AUVs' plans for "plan"
     overrides: dict[str, Any] = Field(default_factory=dict)
+    # the boat in the water (shipped vessel name or TOML path): controllers that plan with a
+    # vessel model (preset field 'vessel', the MPCs) get it as an override; None: the preset's
+    vessel: str | None = None
+    # feed the learned achievable speed back into the controller's 'speed' (see SpeedSpec)
+    speed_feedback: bool = False
 
 
 @frozen
@@ -151,6 +180,8 @@ class WatchdogSpec:
     jump_margin_m: NonNeg = 50.0  # GPS/nav slack added to speed x dt in the jump check
     max_distance_m: Pos = 20000.0  # states further from the origin are rejected
     clock_slack_s: NonNeg = 5.0  # a timestamp may run ahead of the arrival clock by this
+    # self-consistent states on a new time base that prove a vehicle clock step (re-anchor)
+    clock_step_states: Annotated[int, Strict(), Field(ge=2)] = 3
     propeller: Literal["thruster", "command"] = "thruster"  # where propeller_on comes from
     propeller_on_threshold: Annotated[float, Strict(), Field(gt=0, lt=1)] = 0.05
     report_sigma_m: NonNeg = 1.0  # 1-sigma of an AUV's own navigation (Report.nav_sigma)
@@ -166,6 +197,23 @@ class WatchdogSpec:
 
 
 @frozen
+class SpeedSpec:
+    """Achieved vs commanded speed of the ASV (:mod:`mpcasv.io.speedwatch`).
+
+    While the same transit speed has been commanded for ``window_s``, the achieved speed is
+    the mean over that window of the speed over ground (``|(vx, vy)|``) and through the
+    water (``u``); a shortfall is ``achieved < ratio x commanded``. ``persist_s`` of shortfall
+    in a row make it persistent (event ``speed_shortfall``); the achievable speed is then the
+    achieved one, and ``controller.speed_feedback`` caps the controller's speed with it.
+    """
+
+    window_s: Pos = 10.0
+    ratio: Annotated[float, Strict(), Field(gt=0, le=1)] = 0.8
+    persist_s: Pos = 10.0
+    settle_s: NonNeg = 5.0  # after a change of commanded speed, before the window opens
+
+
+@frozen
 class ClockSpec:
     """``speedup`` > 1 only against a SITL started with the same ``--speedup``."""
 
@@ -177,6 +225,10 @@ class LogSpec:
     dir: str = "runs/deploy"
     flush_s: Annotated[float, Strict(), Field(gt=0, le=1.0)] = 0.5  # wall seconds
     reject_log_per_s: Annotated[int, Strict(), Field(ge=1)] = 50  # detailed lines per reason
+    # imc.lsf: "used" = the packets the deploy decodes and everything it sends; "all" = also
+    # every other datagram received (DUNE's bus traffic: about 2.5 MB/min from two vehicles)
+    lsf: Literal["all", "used"] = "used"
+    load_report_s: Pos = 60.0  # a 'load' event (datagrams/s, CPU) this often (deploy clock)
 
 
 @frozen
@@ -189,6 +241,7 @@ class DeployConfig:
     identity: Identity = Identity()
     link: LinkSpec = LinkSpec()
     watchdog: WatchdogSpec = WatchdogSpec()
+    speed: SpeedSpec = SpeedSpec()
     clock: ClockSpec = ClockSpec()
     log: LogSpec = LogSpec()
 
@@ -234,11 +287,57 @@ def deploy_config_from_dict(data: dict, source: str = "<deploy config>") -> Depl
     return cfg
 
 
-def check_controller(cfg: DeployConfig, source: str | Path) -> None:
-    """Build the controller once (validates name, preset, overrides and the AUV count)."""
-    from mpcasv.config import ConfigError
-    from mpcasv.estimation import ESTIMATORS
+def controller_overrides(cfg: DeployConfig, speed: float | None = None) -> dict[str, Any]:
+    """The preset overrides the deploy builds its controller with: ``controller.overrides``,
+    plus ``vessel`` = ``controller.vessel`` for presets that have a vessel field (the MPCs;
+    the hybrid controllers plan without a vessel model), plus ``speed`` when the learned
+    achievable speed caps it (``controller.speed_feedback``)."""
+    from mpcasv.sim.controllers import load_preset
+
+    c = cfg.controller
+    out = dict(c.overrides)
+    params = load_preset(c.name, c.preset, out)
+    if c.vessel is not None and hasattr(params, "vessel"):
+        out["vessel"] = c.vessel
+    if speed is not None:
+        out["speed"] = float(speed)
+    return out
+
+
+def build_controller(cfg: DeployConfig, speed: float | None = None, log=print):
+    """The deploy's controller (compiles an MPC's library now if it is not cached: progress
+    on ``log``)."""
+    import threading
+    import time
+
     from mpcasv.sim.controllers import make_controller
+
+    c = cfg.controller
+    t0 = time.perf_counter()
+    log(f"preparing controller {c.name} (preset {c.preset or 'default'}"
+        f"{', vessel ' + c.vessel if c.vessel else ''}): an MPC compiles its library now "
+        "if it is not cached (about a minute the first time)")  # fmt: skip
+    done = threading.Event()
+
+    def progress() -> None:  # a line every 10 s while building (compiling)
+        while not done.wait(10.0):
+            log(f"still preparing {c.name}: {time.perf_counter() - t0:.0f} s")
+
+    threading.Thread(target=progress, daemon=True).start()
+    try:
+        ctl = make_controller(c.name, len(cfg.auvs), c.preset, controller_overrides(cfg, speed))
+    finally:
+        done.set()
+    log(f"controller {c.name} ready in {time.perf_counter() - t0:.1f} s")
+    return ctl
+
+
+def check_controller(cfg: DeployConfig, source: str | Path) -> None:
+    """Validate the controller's name, preset, overrides, vessel and the AUV count (the
+    controller itself is built by :func:`build_controller`, before any vehicle is contacted)."""
+    from mpcasv.config import ConfigError, resolve
+    from mpcasv.estimation import ESTIMATORS
+    from mpcasv.sim.controllers import controller_kind, load_preset
 
     c = cfg.controller
     if c.estimator not in ESTIMATORS:
@@ -246,8 +345,17 @@ def check_controller(cfg: DeployConfig, source: str | Path) -> None:
             f"{source}: controller.estimator: unknown {c.estimator!r}; known {sorted(ESTIMATORS)}"
         )
     try:
-        make_controller(c.name, len(cfg.auvs), c.preset, c.overrides)
+        kind = controller_kind(c.name)
+        if len(cfg.auvs) > 1 and not kind.multi:
+            raise ConfigError(f"controller {c.name!r} handles one AUV, the config has "
+                              f"{len(cfg.auvs)}")  # fmt: skip
+        if c.vessel is not None:
+            resolve("vessels", c.vessel)
+        params = load_preset(c.name, c.preset, controller_overrides(cfg))
     except ConfigError as exc:
         raise ConfigError(f"{source}: controller: {exc}") from None
+    if c.speed_feedback and not hasattr(params, "speed"):
+        raise ConfigError(f"{source}: controller.speed_feedback: {c.name!r} has no 'speed' "
+                          "to cap")  # fmt: skip
     if c.scenario is not None and not Path(c.scenario).is_file():
         raise ConfigError(f"{source}: controller.scenario: no such file {c.scenario!r}")

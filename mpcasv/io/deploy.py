@@ -14,8 +14,16 @@ Phases: ``waiting`` (for the ASV's and every AUV's first state) -> ``starting``
 retried after ``plan_start_timeout``) -> ``running``. The ASV's state older than
 ``asv_stale_s`` -> ``asv_stale``: no more References (DUNE then ends the maneuver on its
 timeout and stops), reported; when states come back -> ``waiting`` and FollowReference is
-started again. A FollowRefState TIMEOUT for our maneuver also restarts it. Ctrl-C / SIGTERM:
-a standby Reference (speed 0) then MANDONE, the counters, and the logs flushed and closed.
+started again. A FollowRefState TIMEOUT for our maneuver also restarts it.
+
+Shutdown (Ctrl-C / SIGTERM, or ``duration``): stop deciding (states are no longer used),
+stop announcing, heart-beating and listening for discovery; a standby Reference (speed 0)
+then MANDONE; wait (at most ``link.plan_done_timeout``) for DUNE's answer to MANDONE
+(PlanControl SUCCESS "plan completed" with our request id); close the socket; ``summary``
+(counters, CPU use) is the last record written.
+
+The controller is built (an MPC's library compiled if it is not cached) before any socket is
+opened: ``mpcasv deploy CONFIG --prepare`` does only that, at the quay.
 """
 
 from __future__ import annotations
@@ -34,7 +42,9 @@ import imcpy
 from mpcasv.config import ConfigError
 from mpcasv.estimation import make_estimator
 from mpcasv.interface import ASVState, Command, Mode, Observation
-from mpcasv.io.config import DeployConfig, load_deploy_config
+from mpcasv.io.asvwatch import SpeedWatch, Thrusters
+from mpcasv.io.config import DeployConfig, build_controller, load_deploy_config
+from mpcasv.io.deployfeedback import BoatFeedback
 from mpcasv.io.imc import RF, reference
 from mpcasv.io.link import ImcLink, Peer
 from mpcasv.io.logs import JsonlWriter, LsfWriter
@@ -42,7 +52,6 @@ from mpcasv.io.records import cmd_to_dict, obs_to_dict
 from mpcasv.io.transport import Clock
 from mpcasv.io.watchdog import OK, GuardParams, auv_status, guard, inflate
 from mpcasv.models.acoustics import Report
-from mpcasv.sim.controllers import make_controller
 
 __all__ = ["Deploy", "guard_params", "run_deploy"]
 
@@ -82,7 +91,7 @@ def _known_plans(cfg: DeployConfig) -> list:
     return [known_plan(a.build_behaviour()) for a in sc.auv]
 
 
-class Deploy:
+class Deploy(BoatFeedback):
     """The deploy loop (see the module docstring).
 
     Parameters
@@ -99,7 +108,7 @@ class Deploy:
         self.clock = Clock(cfg.clock.speedup)
         c = cfg.controller
         self.n_auv = len(cfg.auvs)
-        self.controller = make_controller(c.name, self.n_auv, c.preset, c.overrides)
+        self.controller = build_controller(cfg, log=log.info)
         self.controller.reset(self.n_auv)
         self.domain = getattr(self.controller, "domain", None)
         plans = _known_plans(cfg)
@@ -118,13 +127,22 @@ class Deploy:
         self.retry_at = -math.inf
         self.started = False  # FollowReference has been started at least once
         self.status = ["missing"] * self.n_auv
-        self.thrust: tuple[float, float] | None = None  # (value, received)
+        wd = cfg.watchdog
+        self.thrusters = Thrusters(wd.asv_stale_s, wd.propeller_on_threshold)
+        self.speed = SpeedWatch(cfg.speed)
+        self.speed_cap: float | None = None  # applied to the controller (speed_feedback)
+        self.closing = False  # shutdown begun: no more decisions
+        self.plan_request: int | None = None  # request id of the running FollowReference
+        self.plan_done = asyncio.Event()
+        self._propeller_note: str | None = None
+        self._cpu0, self._wall0 = time.process_time(), time.monotonic()
+        self._load_mark = (self._cpu0, self._wall0, 0)
         self.followref: dict | None = None
         self.steps = 0
         self.overrides = 0
         self.stale_events = 0
         self._waiting_for: tuple = ()
-        self._thruster_warned = False
+        self._propeller_source = "command"
         self.last_cmd: Command | None = None
 
     # --- reports -------------------------------------------------------------------------
@@ -139,7 +157,13 @@ class Deploy:
 
     # --- input ---------------------------------------------------------------------------
     def _on_state(self, p: Peer, nav, now: float) -> None:
+        if self.closing:
+            return
         if p.role == "asv":
+            ev = self.speed.state(nav.t, math.hypot(nav.v_N, nav.v_E), nav.u)
+            if ev is not None:
+                self.event(ev.pop("event"), **ev)
+                self._speed_feedback()
             if self.phase == ASV_STALE:
                 self.phase = WAITING
                 self.event("asv_resumed", vehicle=p.label)
@@ -169,6 +193,8 @@ class Deploy:
     def _on_message(self, p: Peer, msg, now: float) -> None:
         if isinstance(msg, imcpy.PlanControl):
             self._plan_control(msg, now)
+        elif self.closing:
+            return
         elif isinstance(msg, imcpy.FollowRefState):
             state = getattr(msg.state, "name", str(msg.state))
             self.followref = {"state": state, "proximity": int(msg.proximity), "recv": now}
@@ -176,17 +202,23 @@ class Deploy:
                     and self.phase == RUNNING):  # fmt: skip
                 self.phase = WAITING
                 self.event("followref_timeout", vehicle=p.label)
-        elif isinstance(msg, imcpy.SetThrusterActuation) and msg.id == 0:
-            self.thrust = (float(msg.value), now)
+        elif isinstance(msg, imcpy.SetThrusterActuation):
+            self.thrusters.update(msg.id, msg.value, now)
 
     def _plan_control(self, msg: imcpy.PlanControl, now: float) -> None:
         ours = self.pending is not None and msg.request_id == self.pending[0]
         info = {"type": int(msg.type), "op": int(msg.op), "request_id": msg.request_id,
                 "plan_id": msg.plan_id, "info": msg.info}  # fmt: skip
+        answer = msg.type in (_PC.TypeEnum.SUCCESS, _PC.TypeEnum.FAILURE)
+        if self.closing and answer and msg.request_id == self.plan_request:
+            self.event("plan_completed", **info)  # DUNE's answer to our MANDONE
+            self.plan_done.set()
+            return
         if not ours or self.phase != STARTING:
             self.event("plan_control", ours=ours, **info)
             return
         if msg.type == _PC.TypeEnum.SUCCESS:
+            self.plan_request = self.pending[0]
             self.pending, self.phase, self.started = None, RUNNING, True
             self.t_next = -math.inf
             self.event("plan_started", **info)
@@ -249,6 +281,10 @@ class Deploy:
             self.event("plan_start_timeout", request_id=self.pending[0])
             self.phase, self.pending = WAITING, None
         self._advance(now)
+        if time.monotonic() - self._load_mark[1] >= self.clock.wall_seconds(
+                self.cfg.log.load_report_s):  # fmt: skip
+            self.event("load", **self.load(since=self._load_mark))
+            self._load_mark = (time.process_time(), time.monotonic(), self.link.datagrams)
 
     # --- the supervisory step ------------------------------------------------------------
     def _maybe_step(self, ts: float, now: float) -> None:
@@ -259,16 +295,6 @@ class Deploy:
         self.t_next = self.t_next + Tc if on_grid else ts + Tc
         self.step(ts, now)
 
-    def _propeller_on(self, now: float) -> bool:
-        wd = self.cfg.watchdog
-        if wd.propeller == "thruster":
-            if self.thrust is not None and now - self.thrust[1] <= wd.asv_stale_s:
-                return self.thrust[0] > wd.propeller_on_threshold
-            if not self._thruster_warned:
-                self._thruster_warned = True
-                self.event("thruster_stale", note="propeller_on taken from our last command")
-        return self.last_cmd is not None and self.last_cmd.mode is Mode.TRANSIT
-
     def observation(self, ts: float, now: float) -> tuple[Observation, list[str], list[float]]:
         """The Observation at ASV-state time ``ts`` with the watchdogs' verdicts."""
         ages = [now - p.nav_recv for p in self.link.auvs]
@@ -278,8 +304,8 @@ class Deploy:
             e = est.estimate(ts)
             ests.append(e if status[k] == OK else inflate(e, ages[k], self.gp.v_max))
         a = self.link.asv.nav
-        obs = Observation(ts, ASVState(a.N, a.E, a.psi, a.u, a.v, a.r), self._propeller_on(now),
-                          tuple(ests))  # fmt: skip
+        on, self._propeller_source = self._propeller_on(now)
+        obs = Observation(ts, ASVState(a.N, a.E, a.psi, a.u, a.v, a.r), on, tuple(ests))
         return obs, status, ages
 
     def step(self, ts: float, now: float) -> Command:
@@ -295,6 +321,7 @@ class Deploy:
                             lk.reference_radius_m)  # fmt: skip
             sent = self.link.send(self.link.asv, ref)
         self.last_cmd = cmd
+        self.speed.command(ts, cmd.speed if cmd.mode is Mode.TRANSIT else None)
         self.steps += 1
         self.overrides += override is not None
         diag = getattr(self.controller, "diagnostics", None)
@@ -303,6 +330,8 @@ class Deploy:
             "obs": obs_to_dict(obs), "controller_cmd": cmd_to_dict(raw), "cmd": cmd_to_dict(cmd),
             "override": override, "sent": sent, "status": status, "ages": ages,
             "step_ms": step_ms, "followref": self.followref, "diag": diag() if diag else {},
+            "propeller_source": self._propeller_source, "thrusters": self.thrusters.values(),
+            "speed": self.speed.status(),
         })  # fmt: skip
         return cmd
 
@@ -347,30 +376,57 @@ class Deploy:
         await self.clock.sleep(duration)
         stop.set()
 
-    async def shutdown(self) -> dict:
-        """Final standby + MANDONE (if we ever started FollowReference), counters, logs."""
+    def begin_shutdown(self) -> bool:
+        """Stop deciding and listening for vehicles, then the final standby and MANDONE (if
+        we ever started FollowReference). True if MANDONE was sent."""
+        self.closing = True
+        self.link.stop_receiving()
         asv = self.link.asv
-        if not self.dry_run and self.started and asv.id is not None:
-            here = (asv.nav.N, asv.nav.E) if asv.nav is not None else (0.0, 0.0)
-            self.link.send(asv, reference(Command.standby(), here, self.link.origin))
-            done = imcpy.Reference()
-            done.flags = RF.MANDONE
-            self.link.send(asv, done)
-            self.event("final_standby", mandone=True)
-        summary = {"steps": self.steps, "overrides": self.overrides,
-                   "asv_stale_events": self.stale_events, **self.link.counters()}  # fmt: skip
-        self.jsonl.write({"kind": "summary", "t": self.clock.now(), **summary})
+        if self.dry_run or not self.started or asv.id is None:
+            return False
+        here = (asv.nav.N, asv.nav.E) if asv.nav is not None else (0.0, 0.0)
+        self.link.send(asv, reference(Command.standby(), here, self.link.origin))
+        done = imcpy.Reference()
+        done.flags = RF.MANDONE
+        self.link.send(asv, done)
+        self.event("final_standby", mandone=True, request_id=self.plan_request)
+        return True
+
+    async def finish(self) -> dict:
+        """Close the link, then write ``summary`` (the last record) and close the logs."""
         await asyncio.sleep(0.05)  # let the last datagrams leave
         await self.link.stop()
+        summary = {"steps": self.steps, "overrides": self.overrides,
+                   "asv_stale_events": self.stale_events,
+                   "plan_completed": self.plan_done.is_set(), "load": self.load(),
+                   **self.link.counters()}  # fmt: skip
+        self.jsonl.write({"kind": "summary", "t": self.clock.now(), **summary})
         self.jsonl.close()
         self.lsf.close()
         return summary
 
+    async def shutdown(self) -> dict:
+        """:meth:`begin_shutdown`, wait for DUNE's "plan completed" (at most
+        ``link.plan_done_timeout``), :meth:`finish`."""
+        if self.begin_shutdown():
+            wait = self.clock.wall_seconds(self.cfg.link.plan_done_timeout)
+            try:
+                await asyncio.wait_for(self.plan_done.wait(), wait)
+            except TimeoutError:
+                self.event("plan_done_timeout", timeout_s=self.cfg.link.plan_done_timeout)
+        return await self.finish()
+
 
 def run_deploy(config: str | Path, dry_run: bool = False, log_dir: Path | None = None,
-               duration: float | None = None) -> dict:  # fmt: skip
-    """Load ``config``, run the deploy loop until Ctrl-C / SIGTERM (or ``duration``)."""
+               duration: float | None = None, prepare: bool = False) -> dict:  # fmt: skip
+    """Load ``config``, build the controller (compiling what it needs), and run the deploy
+    loop until Ctrl-C / SIGTERM (or ``duration``). ``prepare``: stop after building, before
+    any socket is opened."""
     cfg = load_deploy_config(config)
+    if prepare:
+        t0 = time.perf_counter()
+        build_controller(cfg, log=log.warning)
+        return {"controller": cfg.controller.name, "seconds": time.perf_counter() - t0}
     deploy = Deploy(cfg, dry_run, log_dir)
 
     async def main() -> dict:

@@ -25,6 +25,7 @@ __all__ = [
     "announce",
     "decode",
     "estimated_state",
+    "header",
     "nav_state",
     "non_finite_fields",
     "reference",
@@ -80,6 +81,24 @@ def packet_length(data: bytes) -> int:
     if len(data) < n:
         raise BadInput("truncated", f"{len(data)} bytes, header announces {n}")
     return n
+
+
+def header(data: bytes) -> tuple[int, int, int]:
+    """(message id, src, dst) from the header of a datagram holding exactly one packet,
+    without decoding the payload (imcpy 1.1.2 has no header-only parse; the layout is
+    checked against imcpy's in tests/test_io_link.py).
+
+    Raises
+    ------
+    BadInput
+        ``truncated``, ``bad_sync`` or ``trailing_bytes``.
+    """
+    n = packet_length(data)
+    if len(data) > n:
+        raise BadInput("trailing_bytes", f"{len(data) - n} bytes after a {n}-byte packet")
+    h = _HDR_LE.unpack_from(data) if _HDR_LE.unpack_from(data)[0] == _SYNC else \
+        _HDR_BE.unpack_from(data)  # fmt: skip
+    return h[1], h[4], h[6]
 
 
 def decode(data: bytes) -> tuple[imcpy.Message, bytes]:

@@ -10,20 +10,33 @@ per reason); the loop carries on.
 
 Checks, in order (reason names in brackets):
 
-1. framing and decoding by imcpy [``truncated``, ``bad_sync``, ``trailing_bytes``,
-   ``bad_crc``, ``malformed``];
-2. addressed to us or broadcast (Announces: any destination, DUNE sends them with 0)
-   [``not_for_us``];
+1. framing from the header [``truncated``, ``bad_sync``, ``trailing_bytes``]. Only the
+   messages the deploy uses (:data:`USED`) are decoded by imcpy [``bad_crc``,
+   ``malformed``]; the others (DUNE's bus traffic, 97 % of what a vehicle streams) go
+   through checks 2-4 on their header alone and are counted in ``ignored`` by name;
+2. relays, silent (counted in ``relayed``, not rejects): DUNE forwards every message of its
+   ``Transports`` list on its bus to every active node, whatever its ``dst``, our own
+   Heartbeats and PlanControls included. From a configured vehicle's address, a message with
+   our own id as ``src`` is an ``echo``, one addressed to another system ``not_for_us``, one
+   from a system other than that vehicle ``third_party``. From any other address these are
+   rejects [``own_id``, ``not_for_us``];
 3. sender is a configured vehicle: by IMC id, or by system name through its Announce
    [``unknown_sender``, ``id_mismatch``]; Announces of other systems are counted too;
-4. the datagram comes from the vehicle's address (static in the config, or its Announce's
-   ``imc+udp`` services) [``not_announced``, ``address_mismatch``]; a vehicle silent for
-   longer than its stale limit may re-announce from a new address (a DUNE restart);
+4. the datagram comes from the vehicle's address (static in the config, or the ``imc+udp``
+   service of its Announce) [``not_announced``, ``address_mismatch``]. DUNE writes its
+   Announce from its own socket (an ephemeral port), so an Announce is accepted from any
+   port of a host its ``imc+udp`` services name (of the configured address's host); one
+   without an ``imc+udp`` service (DUNE's first Announce at start-up, or the multicast copy
+   on a host with loopback only) teaches nothing and is counted in ``ignored``. A vehicle
+   silent for longer than its stale limit may re-announce a new address (a DUNE restart);
 5. no NaN/inf in any float field [``non_finite``];
-6. EstimatedState only: lat/lon in range [``out_of_range``], within ``max_distance_m`` of the
-   origin [``out_of_area``], newer than the last accepted one [``out_of_order``], not ahead
-   of it by more than the arrival clock allows [``time_jump``], and not further from it
-   than the vehicle's top speed allows [``jump``].
+6. EstimatedState only: :mod:`mpcasv.io.statecheck` [``out_of_range``, ``out_of_area``,
+   ``out_of_order``, ``time_jump``, ``jump``], with recovery from a vehicle clock step
+   (event ``clock_step`` with the offset).
+
+Announces are heard on the data socket and, when a vehicle has no configured ``address``,
+on DUNE's discovery ports (``link.discovery_ports``, multicast group
+``link.discovery_group``): DUNE never announces to a data port.
 
 Accepted EstimatedStates go to ``on_state(vehicle, NavState, recv_time)``; other accepted
 messages to ``on_message(vehicle, msg, recv_time)``.
@@ -33,31 +46,29 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import math
 import time
 from collections import Counter
 from collections.abc import Callable
-from dataclasses import dataclass, field
 
 import imcpy
 
-from mpcasv.io.config import DeployConfig, Vehicle, parse_address
+from mpcasv.io.config import DeployConfig, parse_address
 from mpcasv.io.geo import Origin
 from mpcasv.io.imc import (
     BROADCAST,
     BadInput,
-    NavState,
     announce,
     decode,
-    nav_state,
+    header,
     non_finite_fields,
     stamp,
-    udp_services,
 )
 from mpcasv.io.logs import LsfWriter
+from mpcasv.io.peers import Peer, PeerDirectory
+from mpcasv.io.statecheck import check_state
 from mpcasv.io.transport import Clock, TcpStream, UdpEndpoint
 
-__all__ = ["ImcLink", "Peer"]
+__all__ = ["USED", "ImcLink", "Peer"]
 
 Addr = tuple[str, int]
 _ACCEPTED = {
@@ -65,34 +76,12 @@ _ACCEPTED = {
             "SetThrusterActuation"},
     "auv": {"EstimatedState", "Heartbeat"},
 }  # fmt: skip
+#: IMC message ids the deploy decodes (imcpy's ids); every other id is handled on its header.
+USED = {imcpy.Factory.id_from_abbrev(n): n for n in
+        set().union(*_ACCEPTED.values()) | {"Announce"}}  # fmt: skip
 
 
-@dataclass
-class Peer:
-    """A configured vehicle as the link knows it at run time."""
-
-    spec: Vehicle
-    index: int  # AUV index k (file order), -1 for the ASV
-    id: int | None = None
-    name: str | None = None
-    addresses: set[Addr] = field(default_factory=set)
-    static: bool = False  # address from the config, not learnt
-    last_heard: float = -math.inf  # deploy clock of the last accepted message
-    nav: NavState | None = None  # last accepted state
-    nav_recv: float = -math.inf  # deploy clock when it arrived
-    stream: TcpStream | None = None
-    announces: int = 0
-
-    @property
-    def role(self) -> str:
-        return self.spec.role
-
-    @property
-    def label(self) -> str:
-        return self.name or self.spec.label
-
-
-class ImcLink:
+class ImcLink(PeerDirectory):
     """See the module docstring.
 
     Parameters
@@ -123,6 +112,7 @@ class ImcLink:
             k += v.role == "auv"
             if v.address:
                 p.addresses.add(parse_address(v.address))
+                p.hosts.add(p.spec.address.rpartition(":")[0])
                 p.static = True
             self.peers.append(p)
         self.asv = next(p for p in self.peers if p.role == "asv")
@@ -130,9 +120,13 @@ class ImcLink:
         self.rejects: Counter[str] = Counter()
         self.accepted: Counter[str] = Counter()
         self.ignored: Counter[str] = Counter()
+        self.relayed: Counter[str] = Counter()
         self.sent: Counter[str] = Counter()
+        self.datagrams = 0  # received, all sockets
+        self._names: dict[int, str] = {}  # message id -> name (imcpy.Factory), memoised
         self._reject_window: dict[str, tuple[float, int]] = {}
         self.endpoint: UdpEndpoint | None = None
+        self.discovery: list[UdpEndpoint] = []
         self._tasks: list[asyncio.Task] = []
 
     # --- life cycle ------------------------------------------------------------------------
@@ -141,7 +135,11 @@ class ImcLink:
         link = self.cfg.link
         if link.transport == "udp":
             self.endpoint = await UdpEndpoint.open(link.bind, link.port, self.handle_datagram)
+            if link.bind != "0.0.0.0":
+                self.endpoint.multicast_from(link.bind)
             self.event("bound", address=f"{self.endpoint.address[0]}:{self.endpoint.address[1]}")
+            if any(not p.static for p in self.peers):
+                await self._open_discovery()
         else:
             for p in self.peers:
                 self._tasks.append(asyncio.create_task(self._tcp_keep(p)))
@@ -160,6 +158,38 @@ class ImcLink:
                 p.stream.close()
         if self.endpoint is not None:
             self.endpoint.close()
+        for ep in self.discovery:
+            ep.close()
+        self.discovery.clear()
+
+    def stop_receiving(self) -> None:
+        """Close the discovery sockets and stop the Announce/Heartbeat tasks (shutdown: the
+        data socket stays open for the answer to MANDONE)."""
+        for t in self._tasks:
+            t.cancel()
+        for ep in self.discovery:
+            ep.close()
+        self.discovery.clear()
+
+    async def _open_discovery(self) -> None:
+        """Listen on DUNE's discovery ports for vehicles configured without an address."""
+        link = self.cfg.link
+        host = link.discovery_host
+        iface = link.bind if host == "0.0.0.0" else host
+        bound, busy = [], []
+        for port in link.discovery_ports:
+            try:
+                self.discovery.append(await UdpEndpoint.open_discovery(
+                    host, port, link.discovery_group, iface, self.handle_datagram))  # fmt: skip
+                bound.append(port)
+            except OSError as exc:
+                busy.append(f"{port}: {exc.strerror or exc}")
+        self.event("discovery", host=host, group=link.discovery_group, ports=bound, busy=busy)
+        if not bound:
+            names = [p.label for p in self.peers if not p.static]
+            self.event("discovery_unavailable", vehicles=names,
+                       note="no discovery port: these vehicles are learnt only from an "
+                       "Announce sent to our data port, which DUNE never does")  # fmt: skip
 
     async def _every(self, period: float, fn: Callable[[], None]) -> None:
         while True:
@@ -238,6 +268,18 @@ class ImcLink:
     # --- input -----------------------------------------------------------------------------
     def handle_datagram(self, data: bytes, addr: Addr) -> None:
         """Entry point of every UDP datagram (never raises)."""
+        self.datagrams += 1
+        try:
+            mgid, src, dst = header(data)
+        except BadInput as bad:
+            self.reject(bad.reason, bad.detail, addr=addr, size=len(data),
+                        head=bytes(data[:24]).hex())  # fmt: skip
+            return
+        if mgid not in USED:
+            name = self._name(mgid)
+            if name is not None:
+                self._unused(data, name, src, dst, addr)
+                return
         try:
             msg, raw = decode(data)
         except BadInput as bad:
@@ -245,6 +287,25 @@ class ImcLink:
                         head=bytes(data[:24]).hex())  # fmt: skip
             return
         self.handle_message(msg, raw, addr, None)
+
+    def _name(self, mgid: int) -> str | None:
+        if mgid not in self._names:
+            try:
+                self._names[mgid] = imcpy.Factory.abbrev_from_id(mgid)
+            except RuntimeError:  # unknown id: imcpy's decode names it (malformed)
+                return None
+        return self._names[mgid]
+
+    def _unused(self, data: bytes, name: str, src: int, dst: int, addr: Addr) -> None:
+        """A message the deploy does not use: header checks 2-4, then counted in ``ignored``
+        (and logged with ``log.lsf = "all"``)."""
+        if self.lsf is not None and self.cfg.log.lsf == "all":
+            self.lsf.write(data)
+        try:
+            if self._route(name, src, dst, addr, None) is not None:
+                self.ignored[name] += 1
+        except BadInput as bad:
+            self.reject(bad.reason, bad.detail, addr=addr, src=src, msg=name)
 
     def handle_message(self, msg: imcpy.Message, raw: bytes, addr: Addr | None,
                        stream_peer: Peer | None) -> None:  # fmt: skip
@@ -258,8 +319,12 @@ class ImcLink:
                 return
             now = self.clock.now()
             if name == "EstimatedState":
-                nav = self._check_state(msg, p, now)
-                p.nav, p.nav_recv = nav, now
+                wd = self.cfg.watchdog
+                vmax = wd.asv_speed_max if p.role == "asv" else wd.auv_speed_max
+                nav, step = check_state(msg, p.track, now, self.origin, vmax, wd)
+                if step is not None:
+                    self.event("clock_step", vehicle=p.label, offset_s=step.offset,
+                               states=step.states, t_old=step.t_old, t_new=step.t_new)  # fmt: skip
             p.last_heard = now
             self.accepted[name] += 1
             if name == "EstimatedState":
@@ -277,18 +342,9 @@ class ImcLink:
             if bad:
                 raise BadInput("non_finite", ",".join(bad))
             return self._announce_in(msg, addr, stream_peer)
-        if msg.dst not in (self.id, BROADCAST):
-            raise BadInput("not_for_us", f"dst 0x{msg.dst:04X}")
-        p = stream_peer or self._peer_by_id(msg.src)
+        p = self._route(name, msg.src, msg.dst, addr, stream_peer)
         if p is None:
-            raise BadInput("unknown_sender", f"src 0x{msg.src:04X}")
-        if stream_peer is not None and p.id is not None and msg.src != p.id:
-            raise BadInput("id_mismatch", f"src 0x{msg.src:04X} on {p.label}'s stream")
-        if addr is not None:
-            if not p.addresses:
-                raise BadInput("not_announced", f"{p.label} has not announced itself")
-            if addr not in p.addresses:
-                raise BadInput("address_mismatch", f"{p.label} from {addr[0]}:{addr[1]}")
+            return None
         if name not in _ACCEPTED[p.role]:
             self.ignored[name] += 1
             return None
@@ -296,63 +352,6 @@ class ImcLink:
         if bad:
             raise BadInput("non_finite", ",".join(bad))
         return p
-
-    def _peer_by_id(self, src: int) -> Peer | None:
-        return next((p for p in self.peers if p.id == src), None)
-
-    def _announce_in(self, msg: imcpy.Announce, addr: Addr | None, stream_peer) -> Peer | None:
-        p = stream_peer or next((q for q in self.peers if q.spec.name == msg.sys_name), None)
-        if p is None:
-            p = self._peer_by_id(msg.src)
-            if p is None or p.spec.name:  # unknown id, or a configured name that differs
-                raise BadInput("unknown_sender", f"Announce of {msg.sys_name!r} 0x{msg.src:04X}")
-        if p.spec.id is not None and msg.src != p.spec.id:
-            raise BadInput("id_mismatch", f"{msg.sys_name!r} announces 0x{msg.src:04X}")
-        if p.id is not None and msg.src != p.id and self._fresh(p):
-            raise BadInput("id_mismatch", f"{p.label} is 0x{p.id:04X}, not 0x{msg.src:04X}")
-        services = set(udp_services(msg.services))
-        if addr is not None and not p.static:
-            if p.addresses and addr not in p.addresses and self._fresh(p):
-                raise BadInput("address_mismatch", f"{p.label} re-announced from {addr}")
-            if addr not in services:  # DUNE sends from its service port
-                raise BadInput("address_mismatch", f"{p.label} from {addr}, services {services}")
-            if services != p.addresses:
-                self.event("discovered", vehicle=p.label, id=msg.src,
-                           addresses=[f"{h}:{q}" for h, q in sorted(services)])  # fmt: skip
-            p.addresses = services
-        elif addr is not None and addr not in p.addresses:
-            raise BadInput("address_mismatch", f"{p.label} announced from {addr}")
-        if p.id != msg.src:
-            p.id = msg.src
-        p.name = msg.sys_name
-        p.announces += 1
-        return p
-
-    def _fresh(self, p: Peer) -> bool:
-        limit = self.cfg.watchdog.asv_stale_s if p.role == "asv" else self.cfg.watchdog.auv_stale_s
-        return self.clock.now() - p.last_heard < limit
-
-    def _check_state(self, es: imcpy.EstimatedState, p: Peer, now: float) -> NavState:
-        wd = self.cfg.watchdog
-        if abs(es.lat) > math.pi / 2 or abs(es.lon) > math.pi or es.depth > 12000:
-            raise BadInput("out_of_range", f"lat {es.lat} lon {es.lon} depth {es.depth}")
-        nav = nav_state(es, self.origin)
-        if not all(map(math.isfinite, (nav.N, nav.E))):
-            raise BadInput("non_finite", "position after conversion")
-        if math.hypot(nav.N, nav.E) > wd.max_distance_m:
-            raise BadInput("out_of_area", f"{math.hypot(nav.N, nav.E):.0f} m from the origin")
-        prev = p.nav
-        if prev is not None:
-            dt = nav.t - prev.t
-            if dt <= 0:
-                raise BadInput("out_of_order", f"t {nav.t:.3f} <= last {prev.t:.3f}")
-            if dt > (now - p.nav_recv) + wd.clock_slack_s:
-                raise BadInput("time_jump", f"+{dt:.1f} s after {now - p.nav_recv:.1f} s")
-            vmax = wd.asv_speed_max if p.role == "asv" else wd.auv_speed_max
-            dist = math.hypot(nav.N - prev.N, nav.E - prev.E)
-            if dist > vmax * dt + wd.jump_margin_m:
-                raise BadInput("jump", f"{dist:.0f} m in {dt:.2f} s")
-        return nav
 
     def reject(self, reason: str, detail: str = "", **info) -> None:
         """Count a rejected input and report it (at most ``log.reject_log_per_s`` per reason
@@ -374,6 +373,7 @@ class ImcLink:
     def counters(self) -> dict:
         return {
             "rejects": dict(self.rejects), "accepted": dict(self.accepted),
-            "ignored": dict(self.ignored), "sent": dict(self.sent),
+            "ignored": dict(self.ignored), "relayed": dict(self.relayed),
+            "sent": dict(self.sent), "datagrams": self.datagrams,
             "send_errors": self.endpoint.send_errors if self.endpoint else 0,
         }  # fmt: skip

@@ -161,10 +161,13 @@ def wait_ready(proc, out: str | Path, timeout: float = 60.0) -> dict:
 
 def deploy_config_for(ready: dict, base: dict, log_dir: str | Path, speedup: float) -> dict:
     """A deploy configuration (as a dict) for the SITL described by ``ready``: ``base`` with
-    the discovery address, a free port on 127.0.0.1, the clock and the log folder set."""
+    the discovery address, a free port on 127.0.0.1, no discovery ports of our own (the SITL
+    answers our Announce at our data port; parallel tests cannot share DUNE's), the clock
+    and the log folder set."""
     cfg = json.loads(json.dumps(base))
     link = cfg.setdefault("link", {})
-    link |= {"bind": "127.0.0.1", "port": 0, "announce_to": [ready["discovery"]]}
+    link |= {"bind": "127.0.0.1", "port": 0, "announce_to": [ready["discovery"]],
+             "discovery_ports": []}  # fmt: skip
     cfg.setdefault("clock", {})["speedup"] = float(speedup)
     cfg.setdefault("log", {})["dir"] = str(log_dir)
     return cfg

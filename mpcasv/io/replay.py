@@ -49,6 +49,16 @@ def _log_path(log: str | Path) -> Path:
         p = p / "deploy.jsonl"
     if not p.is_file():
         raise ConfigError(f"{log}: no deploy log (deploy.jsonl) there")
+    with p.open("rb") as fh:
+        head = fh.read(4096)
+    binary = head[:2] in (b"\x1f\x8b", b"\x54\xfe", b"\xfe\x54")  # gzip, IMC sync
+    try:
+        head.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        binary = binary or exc.start < len(head) - 4  # not a multi-byte char cut at 4096
+    if binary:
+        raise ConfigError(f"{log}: not a deploy log (deploy.jsonl, JSON lines); an IMC/LSF "
+                          "log? (replay reads the deploy.jsonl beside imc.lsf)")  # fmt: skip
     return p
 
 

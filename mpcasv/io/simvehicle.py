@@ -4,6 +4,11 @@ It has its own UDP socket (its ``imc+udp`` service) and IMC id, learns other sys
 their Announce (and answers a new one with its own Announce at once), takes datagrams only
 from systems it has learnt, from the address their Announce names, and streams only to
 systems that sent it a Heartbeat in the last 30 s (and to every TCP backseat client).
+As DUNE does (recorded: ../shared/data/dune-traffic/README.md, 1 and 5), its Announces
+leave from a socket of their own (an ephemeral port, not the ``imc+udp`` service), and it
+relays every Heartbeat and PlanControl it takes in, whatever their ``dst`` and ours
+included, to every system it streams to (DUNE's ``Transports`` list with ``Local Messages
+Only = false``).
 What the vehicle does with a message is up to its owner, :class:`mpcasv.io.sitl.Sitl`.
 """
 
@@ -28,6 +33,7 @@ __all__ = ["HEARD_S", "Node", "SimVehicle"]
 
 Addr = tuple[str, int]
 HEARD_S = 30.0  # DUNE streams to systems heard from in the last 30 s
+RELAYED = (imcpy.Heartbeat, imcpy.PlanControl)  # relayed back as DUNE's UDP transport does
 
 
 @dataclass
@@ -51,6 +57,7 @@ class SimVehicle:
     index: int
     port: int = 0
     endpoint: UdpEndpoint | None = None
+    announcer: UdpEndpoint | None = None  # DUNE's Announce task writes from its own socket
     nodes: dict[int, Node] = field(default_factory=dict)
     anchor: Origin | None = None
     alive: bool = False
@@ -65,6 +72,7 @@ class SimVehicle:
     async def open(self, host: str) -> None:
         self.endpoint = await UdpEndpoint.open(host, self.port, self.on_datagram)
         self.port = self.endpoint.address[1]
+        self.announcer = await UdpEndpoint.open(host, 0, lambda data, addr: None)
         self.nodes.clear()
         self.alive = True
 
@@ -73,6 +81,9 @@ class SimVehicle:
         if self.endpoint is not None:
             self.endpoint.close()
             self.endpoint = None
+        if self.announcer is not None:
+            self.announcer.close()
+            self.announcer = None
 
     def services(self) -> list[str]:
         return [f"imc+udp://{self.sitl.opt.bind}:{self.port}/"]
@@ -90,8 +101,10 @@ class SimVehicle:
             return
         lat, lon = to_wgs84(*self.sitl.position(self), self.sitl.origin)
         msg = self.stamp(announce(self.name, self.sys_type, self.services(), lat, lon))
+        data = msg.serialize()
         for a in addrs:
-            self._send(msg, a)
+            if self.announcer is not None and self.announcer.sendto(data, a):
+                self.sitl.lsf.write(data)
 
     def publish(self, msg: imcpy.Message) -> None:
         """To every system heard from in the last 30 s (and every backseat client)."""
@@ -134,17 +147,33 @@ class SimVehicle:
             self.sitl.count(f"drop_{bad.reason}")
             return
         self.sitl.lsf.write(raw)
-        if not self.alive or msg.dst not in (self.id, BROADCAST):
-            self.sitl.count("drop_not_for_me")
+        if not self.alive:
             return
         if isinstance(msg, imcpy.Announce):
-            self.learn(msg)
+            if msg.dst in (self.id, BROADCAST):
+                self.learn(msg)
             return
         node = self.nodes.get(msg.src)
         if node is None or addr not in node.services:  # DUNE: only announced systems
             self.sitl.count("drop_unannounced")
             return
+        if isinstance(msg, imcpy.Heartbeat):
+            node.last_hb = self.sitl.now()
+        if isinstance(msg, RELAYED):  # on DUNE's bus, so relayed back, whatever its dst
+            self.relay(raw)
+        if msg.dst not in (self.id, BROADCAST):
+            self.sitl.count("drop_not_for_me")
+            return
         self.on_message(msg, node, None)
+
+    def relay(self, raw: bytes) -> None:
+        """A packet as received, unchanged, to every system heard from in the last 30 s."""
+        now = self.sitl.now()
+        for node in self.nodes.values():
+            if now - node.last_hb <= HEARD_S and node.services and self.endpoint is not None:
+                if self.endpoint.sendto(raw, node.services[0]):
+                    self.sitl.lsf.write(raw)
+                    self.sitl.count("relayed")
 
     def on_message(self, msg, node: Node | None, stream: TcpStream | None) -> None:
         if isinstance(msg, imcpy.Heartbeat):

@@ -9,8 +9,14 @@ Each vehicle has its own UDP socket (its ``imc+udp`` service) and IMC id. Like D
 - accept datagrams only from systems whose Announce they have heard, from the address it
   names, and stream only to systems that sent a Heartbeat in the last 30 s;
 - send EstimatedState at 2 Hz (reference point re-anchored every ``--reanchor`` metres, as
-  DUNE moves it), the ASV also SetThrusterActuation (thrust / T_max);
-- the ASV answers PlanControl START with a FollowReference argument (SUCCESS to the sender;
+  DUNE moves it), the ASV also SetThrusterActuation (thrust / T_max) while its control loops
+  run (a transit Reference), one 0.0 when they stop, and none while they are off (as DUNE's
+  Otter in HOVER or standby);
+- announce from a socket of their own (not the ``imc+udp`` port) and relay Heartbeats and
+  PlanControls back to the systems they stream to, our own included (as DUNE);
+- the ASV answers PlanControl START with a FollowReference argument (SUCCESS "plan loaded"
+  and "FollowReference: executing maneuver" to the sender, and "plan completed" after
+  MANDONE, as recorded DUNE;
   FAILURE for anything else; ignored unless addressed to it or broadcast) and then runs
   :class:`mpcasv.io.dune.FollowRefManeuver` (References, FollowRefState, MANDONE, timeout,
   speed 0 = loops off).
@@ -124,6 +130,7 @@ class Sitl:
         self.vehicles = [self.asv, *self.auvs]
         self.directory: dict[int, list[Addr]] = {}  # who announced to the discovery socket
         self.maneuver: FollowRefManeuver | None = None
+        self.plan_owner: tuple | None = None  # (request id, plan id, node, stream) of START
         self.ref_event = asyncio.Event()
         self.in_window = False
         self.counts: dict[str, int] = {}
@@ -132,6 +139,7 @@ class Sitl:
         self.prev_S = self.world.S.copy()
         self.ts_offset: float | None = None  # timestamp of world t = 0
         self.held = opt.hold
+        self.loops_on = False  # the ASV's control loops ran at the last published state
         self.epoch = 0.0
         self.n = 0
 
@@ -164,9 +172,11 @@ class Sitl:
             if msg.op == _PC.OperationEnum.START and isinstance(msg.arg, imcpy.FollowReference):
                 self.maneuver = FollowRefManeuver(msg.arg, now, self.origin,
                                                   self.world.model.params.u_max)  # fmt: skip
-                ans.type, ans.info = _PC.TypeEnum.SUCCESS, "plan started"
+                self.plan_owner = (msg.request_id, msg.plan_id, node, stream)
                 self.event("maneuver_started", src=msg.src, timeout=msg.arg.timeout)
-                v.reply(ans, node, stream)
+                for info in ("plan loaded", "FollowReference: executing maneuver"):  # DUNE's
+                    ans.type, ans.info = _PC.TypeEnum.SUCCESS, info
+                    v.reply(ans, node, stream)
                 v.publish(self.maneuver.state_message())
             elif msg.op == _PC.OperationEnum.STOP:
                 self.maneuver = None
@@ -189,6 +199,19 @@ class Sitl:
                 v.publish(m.state_message(msg))
                 if m.done:
                     self.event("maneuver_done", how="MANDONE")
+                    self._plan_completed(v)
+
+    def _plan_completed(self, v: SimVehicle) -> None:
+        """DUNE answers MANDONE with PlanControl SUCCESS "plan completed" (op START, the
+        request id of the start) to the system that started the plan."""
+        if self.plan_owner is None:
+            return
+        req, plan_id, node, stream = self.plan_owner
+        ans = imcpy.PlanControl()
+        ans.type, ans.op, ans.request_id = _PC.TypeEnum.SUCCESS, _PC.OperationEnum.START, req
+        ans.plan_id, ans.info = plan_id, "plan completed"
+        v.reply(ans, node, stream)
+        self.plan_owner = None
 
     def command_vector(self) -> np.ndarray:
         if not self.asv.alive or self.maneuver is None:
@@ -231,9 +254,13 @@ class Sitl:
         for v in self.auvs:
             v.publish(self._es(v, self._nav_auv(S, v.index)))
         if self.asv.alive:
-            th = imcpy.SetThrusterActuation()
-            th.id, th.value = 0, float(np.clip(x[6] / w.model.params.T_max, -1.0, 1.0))
-            self.asv.publish(th)
+            loops = bool(self.command_vector()[0] > 0.5)
+            if loops or self.loops_on:  # as DUNE: one 0.0 when the loops stop, then none
+                th = imcpy.SetThrusterActuation()
+                value = x[6] / w.model.params.T_max if loops else 0.0
+                th.id, th.value = 0, float(np.clip(value, -1.0, 1.0))
+                self.asv.publish(th)
+            self.loops_on = loops
             self.asv.publish(self._es(self.asv, self._nav_asv(x)))
 
     # --- outages -----------------------------------------------------------------------------

@@ -8,6 +8,7 @@ into packets by ``imcpy.Parser``.
 from __future__ import annotations
 
 import asyncio
+import socket
 import time
 from collections.abc import Callable
 
@@ -73,6 +74,36 @@ class UdpEndpoint:
             reuse_port=reuse_port or None,
         )  # fmt: skip
         return cls(transport, protocol)
+
+    @classmethod
+    async def open_discovery(cls, host: str, port: int, group: str, iface: str,
+                             on_datagram: Callable[[bytes, Addr], None]) -> UdpEndpoint:
+        """A discovery socket as DUNE's peers use them: ``host:port`` with SO_REUSEADDR,
+        joined to the multicast ``group`` on the interface of address ``iface`` (when bound
+        to 0.0.0.0; a socket bound to a unicast address gets only unicast Announces, such as
+        DUNE's loopback copies to 127.0.0.1:3010x). Raises OSError (port busy: a DUNE on this
+        host binds its discovery port without SO_REUSEADDR)."""  # fmt: skip
+        sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM, socket.IPPROTO_UDP)
+        try:
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+            sock.bind((host, port))
+            if host == "0.0.0.0":
+                mreq = socket.inet_aton(group) + socket.inet_aton(iface)
+                sock.setsockopt(socket.IPPROTO_IP, socket.IP_ADD_MEMBERSHIP, mreq)
+            sock.setblocking(False)
+        except OSError:
+            sock.close()
+            raise
+        loop = asyncio.get_running_loop()
+        transport, protocol = await loop.create_datagram_endpoint(
+            lambda: _UdpProtocol(on_datagram), sock=sock)
+        return cls(transport, protocol)
+
+    def multicast_from(self, iface: str) -> None:
+        """Send multicast (our Announce to 224.0.75.69) out of the interface of address
+        ``iface`` (the one we are bound to), not wherever the routing table points."""
+        sock = self._transport.get_extra_info("socket")
+        sock.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_IF, socket.inet_aton(iface))
 
     def sendto(self, data: bytes, addr: Addr) -> bool:
         """Send one datagram; False (counted in ``send_errors``) if the OS refused it."""

@@ -1,0 +1,77 @@
+"""The deploy's view of the boat it drives, and of itself: propeller state from the
+thrusters (or assumed from the command), the speed actually achieved fed back into the
+controller, and the deploy's own CPU use (:class:`BoatFeedback`, a mixin of
+:class:`mpcasv.io.deploy.Deploy`; the watches themselves are :mod:`mpcasv.io.asvwatch`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+
+from mpcasv.interface import Mode
+
+__all__ = ["BoatFeedback"]
+
+
+class BoatFeedback:
+    """Mixin of :class:`mpcasv.io.deploy.Deploy` (uses its ``cfg``, ``link``, ``controller``,
+    ``thrusters``, ``speed``, ``last_cmd`` and ``event``)."""
+
+    def load(self, since: tuple[float, float, int] | None = None) -> dict:
+        """The deploy's own CPU use and input rate since ``since`` (default: the start):
+        process CPU seconds, wall seconds, CPU fraction of one core, datagrams/s."""
+        cpu0, wall0, n0 = since or (self._cpu0, self._wall0, 0)
+        cpu, wall = time.process_time() - cpu0, time.monotonic() - wall0
+        n = self.link.datagrams - n0
+        return {"cpu_s": cpu, "wall_s": wall, "cpu_fraction": cpu / wall if wall > 0 else None,
+                "datagrams": n, "datagrams_per_s": n / wall if wall > 0 else None}  # fmt: skip
+
+    def _propeller_on(self, now: float) -> tuple[bool, str]:
+        """(propeller on, source): :class:`mpcasv.io.asvwatch.Thrusters`; reported once per
+        stretch: ``thruster_stale`` (a transit commanded, the thrusters silent) and
+        ``propeller_assumed`` (no thruster message: propeller-off assumed from our command,
+        as in standby, when DUNE's loops are off and it sends none)."""
+        transit = self.last_cmd is not None and self.last_cmd.mode is Mode.TRANSIT
+        if self.cfg.watchdog.propeller == "command":
+            return transit, "command"
+        on, source, stale = self.thrusters.propeller(now, transit)
+        note = None
+        if stale:
+            note = "thruster_stale"
+        elif source == "command":
+            note = "propeller_assumed"
+        if note != self._propeller_note:
+            self._propeller_note = note
+            if note == "thruster_stale":
+                self.event("thruster_stale", thrusters=self.thrusters.values(),
+                           note="a transit is commanded and no thruster message is fresh: "
+                           "propeller_on taken from our command")  # fmt: skip
+            elif note == "propeller_assumed":
+                self.event("propeller_assumed", on=on, thrusters=self.thrusters.values(),
+                           note="no thruster message (none yet, or DUNE's loops are off in "
+                           "standby): propeller state assumed from our command")  # fmt: skip
+        return on, source
+
+    def _speed_feedback(self) -> None:
+        """``controller.speed_feedback``: cap the controller's transit speed with the learned
+        achievable speed (:meth:`set_controller_speed`) when it is more than 10 % lower."""
+        cap = self.speed.achievable
+        if not self.cfg.controller.speed_feedback or cap is None:
+            return
+        current = float(getattr(self.controller.params, "speed", math.inf))
+        if cap < 0.9 * current:
+            self.set_controller_speed(round(cap, 2))
+
+    def set_controller_speed(self, speed: float) -> None:
+        """Replace ``speed`` in the controller's parameters (and in those of its hybrid
+        fallback, for the MPCs) without rebuilding it: its state (modes, timers, warm start)
+        is kept. Logged as ``controller_speed_cap``."""
+        old = float(self.controller.params.speed)
+        self.controller.params = dataclasses.replace(self.controller.params, speed=speed)
+        fallback = getattr(self.controller, "hybrid", None)
+        if fallback is not None and hasattr(getattr(fallback, "params", None), "speed"):
+            fallback.params = dataclasses.replace(fallback.params, speed=speed)
+        self.speed_cap = speed
+        self.event("controller_speed_cap", old=old, new=speed)

@@ -1,0 +1,170 @@
+"""What the deploy learns about the boat it drives: thrusters, achieved speed (and the
+controller's speed capped with it), and the clean shutdown."""
+
+from __future__ import annotations
+
+import asyncio
+import math
+
+import imcpy
+import pytest
+
+from mpcasv.interface import ASVState, AUVEstimate, Command, Mode, Observation
+from mpcasv.io.asvwatch import SpeedWatch, Thrusters
+from mpcasv.io.config import SpeedSpec, deploy_config_from_dict
+from mpcasv.io.deploy import Deploy
+from mpcasv.io.imc import NavState
+from mpcasv.io.logs import read_jsonl
+
+
+def _cfg(tmp_path, **extra):
+    base = {
+        "origin": {"lat_deg": 63.4406, "lon_deg": 10.3530},
+        "controller": {"name": "hybrid-single", "preset": "paper1-field"},
+        "vehicle": [{"role": "asv", "id": 0x2801, "address": "127.0.0.1:6002"},
+                    {"role": "auv", "id": 0x2811, "address": "127.0.0.1:6003"}],
+        "link": {"port": 0, "announce_to": [], "plan_done_timeout": 0.3},
+        "log": {"dir": str(tmp_path)},
+    }  # fmt: skip
+    for k, v in extra.items():
+        base[k] = base.get(k, {}) | v
+    return deploy_config_from_dict(base)
+
+
+def test_thrusters_all_ids_no_stale_before_the_first_message():
+    th = Thrusters(stale_s=3.0, threshold=0.05)
+    assert th.propeller(0.0, transit_commanded=True) == (True, "command", False)  # none yet
+    assert th.propeller(0.0, transit_commanded=False) == (False, "command", False)
+    th.update(0, 0.0, 1.0)
+    th.update(1, -0.6, 1.0)  # differential thrust: one motor backwards is still "on"
+    assert th.propeller(2.0, False) == (True, "thruster", False)
+    th.update(0, 0.0, 2.0)
+    th.update(1, 0.0, 2.0)
+    assert th.propeller(3.0, True) == (False, "thruster", False)
+    assert th.propeller(9.0, False) == (False, "command", False)  # standby: DUNE sends none
+    assert th.propeller(9.0, True) == (True, "command", True)  # transit, silent: a fault
+    assert th.values() == {"0": 0.0, "1": 0.0}
+
+
+def test_speed_watch_shortfall_recovery_and_cap():
+    w = SpeedWatch(SpeedSpec(window_s=10.0, ratio=0.8, persist_s=10.0, settle_s=5.0))
+    w.command(0.0, 2.5)
+    events = []
+    for k in range(0, 601):  # 60 s at 10 Hz: the boat makes 1.2 m/s
+        t = 0.1 * k
+        ev = w.state(t, 1.25, 1.2)
+        if ev:
+            events.append((t, ev))
+    assert len(events) == 1 and events[0][1]["event"] == "speed_shortfall"
+    assert events[0][0] == pytest.approx(25.0, abs=0.11)  # settle + window + persist
+    assert w.achievable == pytest.approx(1.2) and w.status()["sog"] == pytest.approx(1.25)
+    w.command(60.0, 1.0)  # within what it can do: no shortfall, the cap stays
+    for k in range(1, 400):
+        assert w.state(60.0 + 0.1 * k, 1.0, 0.98) is None
+    assert w.achievable == pytest.approx(1.2)
+    w.command(100.0, None)  # standby: no verdict at all
+    assert w.state(200.0, 0.0, 0.0) is None and w.status()["commanded"] is None
+
+
+def _obs(t, asv_N=0.0, auv_N=1000.0):
+    auv = AUVEstimate(auv_N, 0.0, 0.0, 0.0, 0.0, (1.0, 0.0, 0.0, 1.0), t)
+    return Observation(t, ASVState(asv_N, 0.0, 0.0, 1.2), True, (auv,))
+
+
+def test_speed_feedback_caps_the_controllers_speed(tmp_path):
+    """A persistent shortfall (commanded 2.5, made 1.2) caps the controller's speed with the
+    achievable one, in place (its state kept); off by default."""
+    for feedback in (False, True):
+        dep = Deploy(_cfg(tmp_path / str(feedback), controller={"speed_feedback": feedback}))
+        first = dep.controller.step(_obs(0.0))
+        assert first.mode is Mode.TRANSIT
+        v0 = first.speed
+        dep.speed.command(0.0, v0)
+        asv = dep.link.asv
+        asv.id = 0x2801
+        for k in range(1, 400):
+            t = 0.1 * k
+            nav = NavState(t, 0.12 * k, 0.0, 0.0, 0.0, 1.2, 0, 0, 1.2, 0.0, 0, 0)
+            dep._on_state(asv, nav, t)
+        later = dep.controller.step(_obs(40.0, 48.0))
+        dep.jsonl.flush()
+        names = [r["event"] for r in read_jsonl(dep.jsonl.path) if r["kind"] == "event"]
+        assert "speed_shortfall" in names
+        if feedback:
+            assert dep.speed_cap == pytest.approx(1.2) and later.speed == pytest.approx(1.2)
+            assert "controller_speed_cap" in names
+        else:
+            assert dep.speed_cap is None and later.speed == v0 > 1.2
+        dep.jsonl.close()
+        dep.lsf.close()
+
+
+def test_shutdown_order_and_plan_done_timeout(tmp_path):
+    """Standby then MANDONE; without DUNE's answer the wait ends at plan_done_timeout;
+    nothing is decided after the shutdown began; ``summary`` is the last record."""
+    dep = Deploy(_cfg(tmp_path))
+    sent = []
+    dep.link._send_raw = lambda data, addr, p=None: sent.append(data) or True
+    asv = dep.link.asv
+    asv.id = 0x2801
+    asv.nav, asv.nav_recv = NavState(0.0, 5.0, 5.0, 0, 0, 0, 0, 0, 0, 0, 0, 0), 0.0
+    dep.started, dep.plan_request = True, 7
+    dep.last_cmd = Command(Mode.TRANSIT, (100.0, 0.0), 1.5, 0)
+
+    async def main():
+        summary = await dep.shutdown()
+        return summary
+
+    summary = asyncio.run(main())
+    msgs = [imcpy.Packet.deserialize(d) for d in sent]
+    assert [type(m).__name__ for m in msgs] == ["Reference", "Reference"]
+    assert msgs[0].speed.value == 0.0
+    assert msgs[1].flags == int(imcpy.Reference.FlagsBits.MANDONE)
+    recs = read_jsonl(tmp_path / "deploy.jsonl")
+    names = [r.get("event") for r in recs]
+    assert names.index("final_standby") < names.index("plan_done_timeout")
+    assert recs[-1]["kind"] == "summary" and summary["plan_completed"] is False
+    assert summary["load"]["cpu_s"] >= 0 and math.isfinite(summary["load"]["wall_s"])
+    # closing: states no longer decide anything
+    steps = dep.steps
+    dep._on_state(asv, NavState(9.0, 5.0, 5.0, 0, 0, 0, 0, 0, 0, 0, 0, 0), 9.0)
+    assert dep.steps == steps
+
+
+def test_config_names_the_vessel(tmp_path):
+    """``controller.vessel`` reaches controllers that plan with a vessel model (MPC presets
+    have a ``vessel`` field), not the hybrid ones; an unknown vessel is refused up front."""
+    from mpcasv.config import ConfigError
+    from mpcasv.io.config import controller_overrides
+
+    mpc = _cfg(tmp_path, controller={"name": "mpc-single", "preset": "mpc-single",
+                                     "vessel": "gretha"})  # fmt: skip
+    assert controller_overrides(mpc) == {"vessel": "gretha"}
+    hyb = _cfg(tmp_path, controller={"vessel": "gretha"})
+    assert controller_overrides(hyb) == {}
+    with pytest.raises(ConfigError, match="controller: unknown vessel 'no-such-boat'"):
+        _cfg(tmp_path, controller={"vessel": "no-such-boat"})
+
+
+def test_deploy_prepare_builds_and_contacts_nobody(tmp_path, capsys):
+    """``mpcasv deploy CONFIG --prepare``: the controller is built (with progress lines),
+    nothing is bound, no log is written, exit 0."""
+    import json
+
+    import tomli_w
+
+    from mpcasv.cli import main
+
+    cfg = {
+        "origin": {"lat_deg": 63.4406, "lon_deg": 10.3530},
+        "controller": {"name": "hybrid-single", "preset": "paper1-field"},
+        "vehicle": [{"role": "asv", "id": 0x2801, "address": "127.0.0.1:6002"},
+                    {"role": "auv", "id": 0x2811, "address": "127.0.0.1:6003"}],
+        "log": {"dir": str(tmp_path / "log")},
+    }  # fmt: skip
+    path = tmp_path / "deploy.toml"
+    path.write_text(tomli_w.dumps(cfg))
+    assert main(["deploy", str(path), "--prepare"]) == 0
+    out = capsys.readouterr()
+    assert json.loads(out.out)["prepared"]["controller"] == "hybrid-single"
+    assert not (tmp_path / "log").exists()
