@@ -59,18 +59,22 @@ def _metric_columns(metrics: dict) -> dict:
 
 def simulate_job(job: Job, run_dir: Path) -> dict:
     """Simulate one job and write its run folder; return its metrics."""
-    from mpcasv.sim.controllers import make_controller
+    from mpcasv.controllers import Boat, make_controller
+    from mpcasv.experiments.metrics import compute_metrics
     from mpcasv.sim.record import write_run
     from mpcasv.sim.scenario import load_scenario, scenario_with
     from mpcasv.sim.simulator import simulate
 
     scenario = scenario_with(load_scenario(job.scenario_path), **job.scenario_changes())
-    controller = make_controller(job.controller, job.n_auv, job.preset, dict(job.overrides))
+    boat = Boat.of_scenario(scenario)  # one vessel per run: the simulator's and the MPC's
+    controller = make_controller(job.controller, job.n_auv, job.preset, dict(job.overrides),
+                                 boat=boat)  # fmt: skip
     result = simulate(scenario, controller, job.seed, job.estimator)
     extra = {"job_id": job.job_id, "suite": job.suite, "variant": job.variant,
              "preset": job.preset, "overrides": dict(job.overrides),
-             "estimator": job.estimator, "current": job.current}  # fmt: skip
-    return write_run(result, run_dir, plots=job.plots, extra=extra)
+             "estimator": job.estimator, "current": job.current,
+             "boat": boat.describe()}  # fmt: skip
+    return write_run(result, run_dir, compute_metrics(result), plots=job.plots, extra=extra)
 
 
 def run_job(job: Job, out: str) -> dict:

@@ -95,8 +95,3 @@ def write_results(out: str | Path, jobs) -> pd.DataFrame:
         df = df.sort_values("index", kind="stable").reset_index(drop=True)
     _atomic_parquet(pa.Table.from_pandas(df, preserve_index=False), Path(out) / "results.parquet")
     return df
-
-
-def read_results(out: str | Path) -> pd.DataFrame:
-    """The whole results table: ``pd.read_parquet("DIR/results.parquet")``."""
-    return pd.read_parquet(Path(out) / "results.parquet")

@@ -40,8 +40,9 @@ def run(args: argparse.Namespace) -> int:
         return run_cli(args)
     if args.scenario is None:
         raise ConfigError("give a SCENARIO (TOML file) or --manoeuvre")
+    from mpcasv.controllers import Boat, make_controller
     from mpcasv.estimation import ESTIMATORS
-    from mpcasv.sim.controllers import make_controller
+    from mpcasv.experiments.metrics import compute_metrics
     from mpcasv.sim.record import write_run
     from mpcasv.sim.scenario import load_scenario
     from mpcasv.sim.simulator import simulate
@@ -49,13 +50,16 @@ def run(args: argparse.Namespace) -> int:
     scenario = load_scenario(args.scenario)
     name = args.controller or scenario.controller
     preset = args.params or (scenario.preset if name == scenario.controller else None)
-    controller = make_controller(name, len(scenario.auv), preset)
+    boat = Boat.of_scenario(scenario)  # one vessel per run: the simulator's and the MPC's
+    controller = make_controller(name, len(scenario.auv), preset, boat=boat)
     if args.estimator and args.estimator not in ESTIMATORS:
         raise ConfigError(f"unknown estimator {args.estimator!r}; known: {sorted(ESTIMATORS)}")
     out = args.out or Path("runs") / f"{scenario.name}-{name}-{args.seed}"
     result = simulate(scenario, controller, args.seed, args.estimator, progress=not args.quiet)
-    extra = {"preset": preset, "estimator": args.estimator or scenario.estimator}
-    metrics = write_run(result, out, plots=not args.no_plots, extra=extra)
+    extra = {"preset": preset, "estimator": args.estimator or scenario.estimator,
+             "boat": boat.describe()}  # fmt: skip
+    metrics = write_run(result, out, compute_metrics(result), plots=not args.no_plots,
+                        extra=extra)  # fmt: skip
     keys = ("duration_s", "asv_distance_m", "distance_ratio", "standby_fraction", "min_range_m",
             "max_fix_age_overall_s", "fallbacks")  # fmt: skip
     print(f"wrote {out}/ (timeseries.parquet, metrics.json, plots) in {result.wall_s:.2f} s")
