@@ -92,6 +92,9 @@ class ControllerKind:
 
     ``build(params, n_auv, boat)`` returns the controller; ``boat`` is the run's
     :class:`Boat` (None: the controller's own default, for use outside a run).
+    ``libraries(params, n_auv, boat)``, when given, lists the compiled libraries the
+    controller loads (cached on disk), so that they can be compiled before a sweep starts
+    (:mod:`mpcasv.controllers.prepare`).
     """
 
     name: str
@@ -99,6 +102,7 @@ class ControllerKind:
     build: Callable[[Any, int, Boat | None], Controller]
     default_preset: str
     multi: bool = False  # handles several AUVs
+    libraries: Callable[[Any, int, Boat | None], list] | None = None
 
 
 def controller_kind(name: str) -> ControllerKind:

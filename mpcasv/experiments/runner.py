@@ -156,6 +156,39 @@ def runs_location(out: Path, suite: str, runs_dir: str | None, dask: str | None)
     return f"mpcasv-runs/{suite}" if dask else str(out / "runs")
 
 
+def prepare_controllers(jobs: list[Job], quiet: bool = False, dask: str | None = None) -> list:
+    """Before the workers start: compile the libraries the jobs' controllers need that are not
+    in the cache, saying which, that it happens once, and how long (issue 12 item 8); the
+    workers then load them. With Dask, the workers' machines have their own caches: only the
+    message is given. Returns the libraries compiled here."""
+    from mpcasv.controllers import Boat, controller_kind
+    from mpcasv.controllers.prepare import needed_libraries, prepare
+    from mpcasv.sim.scenario import load_scenario, scenario_with
+
+    builds, seen = [], set()
+    for job in jobs:
+        if controller_kind(job.controller).libraries is None:
+            continue
+        key = (job.controller, job.n_auv, job.preset, job.overrides, job.scenario_path,
+               repr(job.scenario_changes()))  # fmt: skip
+        if key in seen:
+            continue
+        seen.add(key)
+        scenario = scenario_with(load_scenario(job.scenario_path), **job.scenario_changes())
+        builds.append((job.controller, job.n_auv, job.preset, dict(job.overrides),
+                       Boat.of_scenario(scenario)))  # fmt: skip
+    if not builds:
+        return []
+    libs = needed_libraries(builds)
+    if dask:
+        if libs and not quiet:
+            est = ", ".join(sorted({f"{lib.label}: about {lib.estimate_s:.0f} s" for lib in libs}))
+            print(f"MPC libraries: each Dask worker machine compiles the {len(libs)} it needs "
+                  f"once, at its first MPC job, unless its cache has them ({est})")  # fmt: skip
+        return []
+    return prepare(libs, quiet=quiet)
+
+
 def _watch_parent(parent_pid: int) -> None:  # pragma: no cover - runs in pool workers
     """Pool worker initializer: exit when the runner process is gone (killed)."""
 
@@ -327,6 +360,7 @@ def run_suite(suite: str | Path, out: str | Path, workers: int = 1, dask: str | 
               f"{len(todo)} to run on {where}; output {out}; runs: {stats.runs}")  # fmt: skip
     try:
         if todo:
+            prepare_controllers(todo, quiet, dask)
             run_jobs(todo, out, stats, workers, dask, quiet, runs)
     except KeyboardInterrupt:
         print(f"interrupted after {stats.ran} of {len(todo)} jobs; rerun the same command to "

@@ -401,5 +401,16 @@ def _build_multi(params: MPCParams, n_auv: int, boat: Boat | None) -> MPCControl
     return MPCController(params, n_auv, multi=True, boat=boat)
 
 
-KIND_SINGLE = ControllerKind("mpc-single", MPCParams, _build_single, "mpc-single")
-KIND_MULTI = ControllerKind("mpc-multi", MPCParams, _build_multi, "mpc-multi", multi=True)
+def _libraries(multi: bool):
+    def needed(params: MPCParams, n_auv: int, boat: Boat | None) -> list:
+        from mpcasv.mpc.prepare import libraries
+
+        return libraries(params, n_auv, multi, boat)
+
+    return needed
+
+
+KIND_SINGLE = ControllerKind("mpc-single", MPCParams, _build_single, "mpc-single",
+                             libraries=_libraries(False))  # fmt: skip
+KIND_MULTI = ControllerKind("mpc-multi", MPCParams, _build_multi, "mpc-multi", multi=True,
+                            libraries=_libraries(True))  # fmt: skip

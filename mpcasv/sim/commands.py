@@ -41,6 +41,7 @@ def run(args: argparse.Namespace) -> int:
     if args.scenario is None:
         raise ConfigError("give a SCENARIO (TOML file) or --manoeuvre")
     from mpcasv.controllers import Boat, make_controller
+    from mpcasv.controllers.prepare import needed_libraries, prepare
     from mpcasv.estimation import ESTIMATORS
     from mpcasv.experiments.metrics import compute_metrics
     from mpcasv.sim.record import write_run
@@ -51,6 +52,7 @@ def run(args: argparse.Namespace) -> int:
     name = args.controller or scenario.controller
     preset = args.params or (scenario.preset if name == scenario.controller else None)
     boat = Boat.of_scenario(scenario)  # one vessel per run: the simulator's and the MPC's
+    prepare(needed_libraries([(name, len(scenario.auv), preset, None, boat)]), args.quiet)
     controller = make_controller(name, len(scenario.auv), preset, boat=boat)
     if args.estimator and args.estimator not in ESTIMATORS:
         raise ConfigError(f"unknown estimator {args.estimator!r}; known: {sorted(ESTIMATORS)}")
