@@ -15,6 +15,7 @@ import time
 from collections.abc import Iterable
 from typing import Any
 
+from mpcasv.config import resolve
 from mpcasv.controllers.registry import Boat, check_boat, controller_kind, load_preset
 
 
@@ -28,7 +29,7 @@ def needed_libraries(builds: Iterable[tuple[str, int, Any, Any, Boat | None]]) -
             continue
         params = load_preset(name, preset, overrides)
         if boat is not None:
-            check_boat(params, boat, str(preset or kind.default_preset))
+            check_boat(params, boat, str(resolve("presets", preset or kind.default_preset)))
         for lib in kind.libraries(params, n_auv, boat):
             seen.setdefault(lib.path, lib)
     return list(seen.values())
