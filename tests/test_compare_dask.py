@@ -21,9 +21,10 @@ from mpcasv.experiments.suite import SCENARIOS_DIR
 
 distributed = pytest.importorskip("distributed")
 
+CASE3 = SCENARIOS_DIR / "case3.toml"
 SUITE = f"""
 name = "tiny"
-scenarios = ["{SCENARIOS_DIR / 'case3.toml'}"]
+scenarios = ["{CASE3}"]
 duration = 15.0
 seeds = [0, 1, 2]
 current = ["off"]

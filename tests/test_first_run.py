@@ -18,9 +18,10 @@ from mpcasv.mpc.derivatives import nlp_functions
 from mpcasv.mpc.prepare import RUNTIME_WEIGHTS, Library, compile_estimate, structure_key
 from mpcasv.mpc.problem import OCP
 
+CASE3, CASE6 = SCENARIOS_DIR / "case3.toml", SCENARIOS_DIR / "case6.toml"
 SUITE = f"""
 name = "tiny-mpc"
-scenarios = ["{SCENARIOS_DIR / 'case3.toml'}", "{SCENARIOS_DIR / 'case6.toml'}"]
+scenarios = ["{CASE3}", "{CASE6}"]
 duration = 10.0
 seeds = [0, 1]
 current = ["off"]

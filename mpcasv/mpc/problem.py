@@ -395,6 +395,7 @@ class OCP:
             "target": int(np.argmax(p[o + 3 * K:o + 4 * K])),
             "weights": p[o + 4 * K:o + 4 * K + NW],
         }  # fmt: skip
+
     def bounds(self, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Scaled ``lbx, ubx`` with stage 0 fixed to the initial state in ``p``."""
         nx = self.dims.nx
