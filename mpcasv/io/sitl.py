@@ -372,6 +372,7 @@ class Sitl:
         """Close the sockets and write the run folder; return the run info."""
         import pandas as pd
 
+        from mpcasv.experiments.metrics import compute_metrics
         from mpcasv.sim.record import write_run
         from mpcasv.sim.scenario import scenario_with
         from mpcasv.sim.simulator import RunResult
@@ -393,8 +394,8 @@ class Sitl:
             res = RunResult(sc, "sitl", self.opt.seed, pd.DataFrame(self.rows),
                             np.zeros(len(self.rows)), w.fix_times, w.reliable_times, 0, None, [],
                             w.energy_J, w.min_range, w.min_slant, wall_s, self.domain)  # fmt: skip
-            info["metrics"] = write_run(res, self.opt.out / "run", plots=self.opt.plots,
-                                        extra={"sitl": info})  # fmt: skip
+            info["metrics"] = write_run(res, self.opt.out / "run", compute_metrics(res),
+                                        plots=self.opt.plots, extra={"sitl": info})  # fmt: skip
         return info
 
 
