@@ -163,20 +163,18 @@ def prepare_controllers(jobs: list[Job], quiet: bool = False, dask: str | None =
     message is given. Returns the libraries compiled here."""
     from mpcasv.controllers import Boat, controller_kind
     from mpcasv.controllers.prepare import needed_libraries, prepare
-    from mpcasv.sim.scenario import load_scenario, scenario_with
+    from mpcasv.sim.scenario import load_scenario
 
     builds, seen = [], set()
     for job in jobs:
         if controller_kind(job.controller).libraries is None:
             continue
-        key = (job.controller, job.n_auv, job.preset, job.overrides, job.scenario_path,
-               repr(job.scenario_changes()))  # fmt: skip
+        key = (job.controller, job.n_auv, job.preset, job.overrides, job.scenario_path)
         if key in seen:
             continue
         seen.add(key)
-        scenario = scenario_with(load_scenario(job.scenario_path), **job.scenario_changes())
-        builds.append((job.controller, job.n_auv, job.preset, dict(job.overrides),
-                       Boat.of_scenario(scenario)))  # fmt: skip
+        boat = Boat.of_scenario(load_scenario(job.scenario_path))  # the suite changes no boat
+        builds.append((job.controller, job.n_auv, job.preset, dict(job.overrides), boat))
     if not builds:
         return []
     libs = needed_libraries(builds)
