@@ -13,6 +13,7 @@ import sys
 
 from mpcasv import __version__
 from mpcasv.config import ConfigError
+from mpcasv.errors import LogError
 
 COMMAND_MODULES = (
     "mpcasv.sim.commands",  # simulate
@@ -42,13 +43,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     try:
         return int(args.func(args) or 0)
-    except ConfigError as exc:
-        print(f"mpcasv {args.command}: error: {exc}", file=sys.stderr)
-        return 2
-    except Exception as exc:  # a bad log (mpcasv.io.lsf.LogError) gets one line, too
-        lsf = sys.modules.get("mpcasv.io.lsf")  # loaded if it raised; not imported up front
-        if lsf is None or not isinstance(exc, lsf.LogError):
-            raise
+    except (ConfigError, LogError) as exc:  # bad input: one line, exit 2
         print(f"mpcasv {args.command}: error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:

@@ -8,12 +8,12 @@ import math
 import numpy as np
 import pytest
 
+from mpcasv.controllers import make_controller
 from mpcasv.models.acoustics import (
     AcousticParams,
     success_probability,
     usbl_fix,
 )
-from mpcasv.sim.controllers import make_controller
 from mpcasv.sim.scenario import scenario_from_dict
 from mpcasv.sim.simulator import simulate
 

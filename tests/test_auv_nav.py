@@ -9,9 +9,9 @@ import math
 import numpy as np
 import pytest
 
+from mpcasv.controllers import make_controller
 from mpcasv.models.acoustics import AcousticParams, NavParams, usbl_fix
 from mpcasv.models.auv_nav import AUVNavFilter
-from mpcasv.sim.controllers import make_controller
 from mpcasv.sim.scenario import scenario_from_dict
 from mpcasv.sim.simulator import simulate
 

@@ -66,7 +66,8 @@ def test_two_local_workers_and_dask_give_identical_results(serial, pool, tmp_pat
     with distributed.LocalCluster(processes=True, n_workers=2, threads_per_worker=1,
                                   dashboard_address=None) as cluster:  # fmt: skip
         stats, _, dask = run_suite("quick", tmp_path / "dask", dask=cluster.scheduler_address,
-                                   quiet=True, report=False)  # fmt: skip
+                                   quiet=True, report=False,
+                                   runs_dir=tmp_path / "dask" / "runs")  # fmt: skip
     assert stats.workers == 2 and stats.ok == len(QUICK.jobs)
     pd.testing.assert_frame_equal(_comparable(dask), _comparable(ref))
     # rerunning a finished sweep runs nothing and changes nothing

@@ -8,8 +8,8 @@ import pytest
 
 from mpcasv.cli import main
 from mpcasv.config import ConfigError
+from mpcasv.controllers import registry as controllers
 from mpcasv.experiments.suite import SCENARIOS_DIR, SUITES_DIR, expand
-from mpcasv.sim import controllers
 
 GOOD = """
 name = "t"

@@ -354,7 +354,7 @@ def test_case5_scenario_file_acceptance():
     from pathlib import Path
 
     from mpcasv.config import ConfigError
-    from mpcasv.sim.controllers import make_controller
+    from mpcasv.controllers import make_controller
     from mpcasv.sim.scenario import load_scenario
 
     path = Path(__file__).parents[1] / "experiments" / "scenarios" / "case5.toml"

@@ -10,9 +10,9 @@ from hybrid_helpers import obs_at
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from mpcasv.controllers import make_controller
 from mpcasv.hybrid.multi import Q1, Q2
 from mpcasv.interface import Mode, Reason
-from mpcasv.sim.controllers import make_controller
 
 AUVS = [(0.0, 0.0, 0.0), (400.0, 0.0, 0.0), (0.0, 400.0, 0.0)]
 

@@ -10,9 +10,9 @@ from hybrid_helpers import obs_at, polar
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from mpcasv.controllers import load_preset, make_controller
 from mpcasv.hybrid.single import Q1, Q2
 from mpcasv.interface import Mode, Reason
-from mpcasv.sim.controllers import load_preset, make_controller
 
 AUV = (100.0, -50.0)
 

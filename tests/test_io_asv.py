@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import asyncio
 import math
+from pathlib import Path
 
 import imcpy
 import pytest
@@ -132,16 +133,23 @@ def test_shutdown_order_and_plan_done_timeout(tmp_path):
 
 
 def test_config_names_the_vessel(tmp_path):
-    """``controller.vessel`` reaches controllers that plan with a vessel model (MPC presets
-    have a ``vessel`` field), not the hybrid ones; an unknown vessel is refused up front."""
+    """``controller.vessel`` is the run's boat (one vessel per run): the controller is built
+    for it, not handed it as a preset override; an unknown vessel is refused up front."""
     from mpcasv.config import ConfigError
-    from mpcasv.io.config import controller_overrides
+    from mpcasv.io.config import controller_overrides, deploy_boat
+    from mpcasv.models.params import load_vessel
 
+    otter = "/work/shared/cases/vessels/otter.toml"
+    shared = Path(__file__).resolve().parents[2] / "shared" / "cases" / "vessels" / "otter.toml"
+    otter = str(shared) if shared.is_file() else otter
+    if not Path(otter).is_file():
+        pytest.skip("shared/cases/vessels/otter.toml not found (optional resource)")
     mpc = _cfg(tmp_path, controller={"name": "mpc-single", "preset": "mpc-single",
-                                     "vessel": "gretha"})  # fmt: skip
-    assert controller_overrides(mpc) == {"vessel": "gretha"}
-    hyb = _cfg(tmp_path, controller={"vessel": "gretha"})
-    assert controller_overrides(hyb) == {}
+                                     "vessel": otter})  # fmt: skip
+    assert controller_overrides(mpc) == {}
+    assert deploy_boat(mpc).vessel == load_vessel(otter)
+    hyb = _cfg(tmp_path, controller={})
+    assert deploy_boat(hyb).vessel == load_vessel("gretha")
     with pytest.raises(ConfigError, match="controller: unknown vessel 'no-such-boat'"):
         _cfg(tmp_path, controller={"vessel": "no-such-boat"})
 

@@ -19,6 +19,7 @@ import psutil
 import pytest
 
 from mpcasv.config import load_toml
+from mpcasv.controllers import make_controller
 from mpcasv.experiments.metrics import compute_metrics
 from mpcasv.io.logs import read_jsonl
 from mpcasv.io.lsf import read_messages
@@ -32,7 +33,6 @@ from mpcasv.io.rehearsal import (
     wait_ready,
 )
 from mpcasv.io.replay import replay
-from mpcasv.sim.controllers import make_controller
 from mpcasv.sim.scenario import load_scenario, scenario_with
 from mpcasv.sim.simulator import simulate
 

@@ -12,12 +12,12 @@ import dataclasses
 import numpy as np
 import pytest
 
+from mpcasv.controllers import make_controller
 from mpcasv.experiments.metrics import compute_metrics
 from mpcasv.interface import ASVState, AUVEstimate, Mode, Observation, Reason
 from mpcasv.mpc.bench import record, replay
 from mpcasv.mpc.qp import QPSolver
 from mpcasv.mpc.solvers import SolveResult
-from mpcasv.sim.controllers import make_controller
 from mpcasv.sim.scenario import load_scenario, scenario_with
 from mpcasv.sim.simulator import simulate
 
@@ -152,7 +152,7 @@ def test_far_outside_the_bounds_the_hybrid_drives_without_a_solve(monkeypatch):
 _CASE5_HANG = """
 import sys
 from mpcasv.experiments.metrics import compute_metrics
-from mpcasv.sim.controllers import make_controller
+from mpcasv.controllers import make_controller
 from mpcasv.sim.scenario import load_scenario
 from mpcasv.sim.simulator import simulate
 sc = load_scenario(sys.argv[1])

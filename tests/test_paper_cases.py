@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import pytest
 
+from mpcasv.controllers import make_controller
 from mpcasv.experiments.metrics import compute_metrics
-from mpcasv.sim.controllers import make_controller
 from mpcasv.sim.scenario import load_scenario
 from mpcasv.sim.simulator import simulate
 

@@ -11,7 +11,7 @@ import pytest
 
 from mpcasv.cli import main
 from mpcasv.config import ConfigError
-from mpcasv.sim.controllers import make_controller
+from mpcasv.controllers import make_controller
 from mpcasv.sim.scenario import load_scenario, scenario_from_dict
 from mpcasv.sim.simulator import simulate
 

@@ -12,8 +12,6 @@ import math
 from collections.abc import Callable
 from typing import Protocol
 
-import numpy as np
-
 from mpcasv.interface import AUVEstimate
 from mpcasv.models.acoustics import Fix, Report
 
@@ -129,8 +127,3 @@ def make_estimator(name: str, initial: AUVEstimate | None = None, **options) -> 
     except KeyError:
         raise ValueError(f"unknown estimator {name!r}; known: {sorted(ESTIMATORS)}") from None
     return factory(initial=initial, **options)
-
-
-def position_error(est: AUVEstimate, N: float, E: float) -> float:
-    """Horizontal distance between a belief and the truth (m)."""
-    return float(np.hypot(est.N - N, est.E - E))

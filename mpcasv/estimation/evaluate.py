@@ -60,7 +60,7 @@ def run_estimators(
     seed : int
     controller, preset : str, optional
         Controller name and preset (default: the scenario's); ``overrides`` as in
-        :func:`mpcasv.sim.controllers.make_controller`.
+        :func:`mpcasv.controllers.make_controller`.
 
     Returns
     -------
@@ -68,7 +68,7 @@ def run_estimators(
         estimator name -> :class:`mpcasv.sim.simulator.RunResult`, with an added attribute
         ``update_times`` (per AUV, the times a fix or report reached the estimator).
     """
-    from mpcasv.sim.controllers import make_controller
+    from mpcasv.controllers import Boat, make_controller
     from mpcasv.sim.simulator import simulate
 
     unknown = [e for e in estimators if e not in ESTIMATORS]
@@ -78,7 +78,9 @@ def run_estimators(
     preset = preset or (scenario.preset if name == scenario.controller else None)
     out = {}
     for est in estimators:
-        ctrl = make_controller(name, len(scenario.auv), preset, overrides)
+        ctrl = make_controller(
+            name, len(scenario.auv), preset, overrides, boat=Boat.of_scenario(scenario)
+        )
         with _recording(est) as (key, made):
             res = simulate(scenario, ctrl, seed, key)
         res.update_times = [m.updates for m in made]  # per AUV, s

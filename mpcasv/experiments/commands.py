@@ -27,8 +27,13 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="local worker processes (default: the number of cores; 1 runs in this "
                    "process)")  # fmt: skip
     p.add_argument("--dask", metavar="ADDRESS",
-                   help="run on an existing Dask scheduler (e.g. tcp://host:8786); DIR must "
-                   "be visible to the workers at the same path")  # fmt: skip
+                   help="run on an existing Dask scheduler (e.g. tcp://host:8786); the workers "
+                   "need no file system shared with this machine: each job's row comes back "
+                   "here and DIR is written here")  # fmt: skip
+    p.add_argument("--runs-dir", metavar="PATH|URL",
+                   help="where the run folders go: a path the workers can write or an fsspec "
+                   "URL (e.g. s3://bucket/runs); default DIR/runs, and with --dask "
+                   "mpcasv-runs/SUITE in each worker's working directory")  # fmt: skip
     p.add_argument(
         "--retry-errors",
         action="store_true",
@@ -49,12 +54,14 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError(f"--workers must be >= 1, got {args.workers}")
     out = args.out or Path("results") / load_suite(args.suite)[0].name
     stats, exp, results = run_suite(args.suite, out, args.workers, args.dask, args.quiet,
-                                    args.retry_errors, not args.no_report)  # fmt: skip
+                                    args.retry_errors, not args.no_report,
+                                    runs_dir=args.runs_dir)  # fmt: skip
     out = out.resolve()
     ok = int((results["status"] == "ok").sum()) if len(results) else 0
     print(f"{stats.ran} jobs run in {stats.jobs_wall_s:.1f} s on {stats.backend or 'nothing'} "
           f"({stats.already_done} were done before); results: {ok} ok, {len(results) - ok} "
           f"errors, of {len(exp.jobs)} jobs")  # fmt: skip
+    print(f"run folders: {stats.runs}")
     for name, err in stats.error_jobs:
         print(f"  error in {name}: {err}")
     if stats.lost:

@@ -1,10 +1,18 @@
 """Running a suite's jobs: in this process (1 worker), on a local process pool, or on a Dask
 distributed cluster; each finished job is written at once (run folder, then its results part).
 
+A worker runs a job, writes its run folder under the runs location and returns the job's row
+(description, outcome, metrics); this process (the client) writes the row as the job's part
+in ``DIR/parts`` and, at the end, ``DIR/results.parquet``. So the workers need no file system
+shared with the client: the results table is complete and resumable from the client alone.
+The runs location (:func:`runs_location`) is ``DIR/runs`` for local workers; on Dask it is
+the ``--runs-dir`` the user names (a path the workers can write, or an fsspec URL such as
+``s3://bucket/runs``), else ``mpcasv-runs/<suite>`` in each worker's working directory (the
+run folders stay where the worker is; the row's ``run_dir`` and ``worker`` say where).
+
 Local pool workers are started with ``spawn`` (fresh interpreters: each builds its own CasADi
 functions, which are cached per process, and nothing half-initialised is inherited) and exit
-by themselves if the runner dies. On Dask the workers write into ``DIR`` themselves, so ``DIR``
-must be on a file system the workers share with the client, at the same path.
+by themselves if the runner dies.
 
 A job that raises is recorded (``status = "error"``, the traceback in ``error``) and the others
 go on; a failure of the machinery itself (a worker process killed, the cluster lost) writes no
@@ -61,33 +69,64 @@ def _metric_columns(metrics: dict) -> dict:
 
 def simulate_job(job: Job, run_dir: Path) -> dict:
     """Simulate one job and write its run folder; return its metrics."""
-    from mpcasv.sim.controllers import make_controller
+    from mpcasv.controllers import Boat, make_controller
+    from mpcasv.experiments.metrics import compute_metrics
     from mpcasv.sim.record import write_run
     from mpcasv.sim.simulator import simulate
 
     scenario, realisation = job.realised_scenario()  # the seed's draw of its [uncertain] table
-    controller = make_controller(job.controller, job.n_auv, job.preset, dict(job.overrides))
+    boat = Boat.of_scenario(scenario)  # one vessel per run: the simulator's and the MPC's
+    controller = make_controller(job.controller, job.n_auv, job.preset, dict(job.overrides),
+                                 boat=boat)  # fmt: skip
     result = simulate(scenario, controller, job.seed, job.estimator)
     extra = {"job_id": job.job_id, "suite": job.suite, "variant": job.variant,
              "preset": job.preset, "overrides": dict(job.overrides),
              "estimator": job.estimator, "current": job.current,
-             "realisation": realisation.as_dict()}  # fmt: skip
-    return write_run(result, run_dir, plots=job.plots, extra=extra)
+             "realisation": realisation.as_dict(), "boat": boat.describe()}  # fmt: skip
+    return write_run(result, run_dir, compute_metrics(result), plots=job.plots, extra=extra)
 
 
-def run_job(job: Job, out: str) -> dict:
-    """Run one job and write its run folder and its results part; return the row.
+def is_url(location: str) -> bool:
+    """Whether a runs location is an fsspec URL (``s3://...``, ``file://...``), not a path."""
+    return "://" in str(location)
 
+
+def _run_into(job: Job, runs: str) -> tuple[dict, str]:
+    """Simulate ``job`` and write its run folder under ``runs``; (metrics, where it is).
+
+    A local ``runs`` (relative: to this worker's working directory) gets the folder directly
+    (written atomically by :func:`mpcasv.sim.record.write_run`); a URL gets a folder written
+    here in a temporary directory and then uploaded with fsspec (replacing an old one).
+    """
+    if not is_url(runs):
+        run_dir = Path(runs).expanduser().resolve() / job.run_name
+        return simulate_job(job, run_dir), str(run_dir)
+    import tempfile
+
+    import fsspec
+
+    fs, root = fsspec.core.url_to_fs(runs)
+    target = f"{root.rstrip('/')}/{job.run_name}"
+    with tempfile.TemporaryDirectory(prefix="mpcasv-run-") as tmp:
+        metrics = simulate_job(job, Path(tmp) / job.run_name)
+        if fs.exists(target):
+            fs.rm(target, recursive=True)
+        fs.put(str(Path(tmp) / job.run_name), target, recursive=True)
+    return metrics, fs.unstrip_protocol(target)
+
+
+def run_job(job: Job, runs: str) -> dict:
+    """Run one job on a worker: write its run folder under ``runs`` and return its row.
+
+    Writes nothing else: the caller (the client) writes the row (:func:`finish_job`).
     Exceptions of the job are caught and recorded in the row (``status = "error"``);
     ``KeyboardInterrupt`` and other ``BaseException`` propagate (no row: rerun on resume).
     """
-    out_p = Path(out)
     t0 = time.perf_counter()
     row = _describe(job)
-    run_dir = out_p / "runs" / job.run_name
     try:
-        metrics = simulate_job(job, run_dir)
-        row |= {"status": "ok", "error": None, "run_dir": str(run_dir.relative_to(out_p))}
+        metrics, where = _run_into(job, runs)
+        row |= {"status": "ok", "error": None, "run_dir": where}
         row |= _metric_columns(metrics)
     except Exception:
         row |= {"status": "error", "error": traceback.format_exc(), "run_dir": None}
@@ -96,8 +135,57 @@ def run_job(job: Job, out: str) -> dict:
         "finished_at": datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds"),
         "worker": f"{socket.gethostname()}:{os.getpid()}",
     }
-    write_part(out_p, row)
     return row
+
+
+def finish_job(out: Path, row: dict) -> dict:
+    """Client side: write a returned row as the job's part in ``out`` (atomically); a run
+    folder inside ``out`` is recorded relative to it (``runs/<run name>``)."""
+    run_dir = row.get("run_dir")
+    if run_dir and not is_url(run_dir) and Path(run_dir).is_relative_to(out):
+        row = row | {"run_dir": str(Path(run_dir).relative_to(out))}
+    write_part(out, row)
+    return row
+
+
+def runs_location(out: Path, suite: str, runs_dir: str | None, dask: str | None) -> str:
+    """Where the run folders go: ``runs_dir`` as given (a local path made absolute here, or a
+    URL), else ``DIR/runs`` for local workers and ``mpcasv-runs/<suite>`` relative to each Dask
+    worker's working directory."""
+    if runs_dir:
+        return str(runs_dir) if is_url(runs_dir) else str(Path(runs_dir).expanduser().resolve())
+    return f"mpcasv-runs/{suite}" if dask else str(out / "runs")
+
+
+def prepare_controllers(jobs: list[Job], quiet: bool = False, dask: str | None = None) -> list:
+    """Before the workers start: compile the libraries the jobs' controllers need that are not
+    in the cache, saying which, that it happens once, and how long (issue 12 item 8); the
+    workers then load them. With Dask, the workers' machines have their own caches: only the
+    message is given. Returns the libraries compiled here."""
+    from mpcasv.controllers import Boat, controller_kind
+    from mpcasv.controllers.prepare import needed_libraries, prepare
+    from mpcasv.sim.scenario import load_scenario
+
+    builds, seen = [], set()
+    for job in jobs:
+        if controller_kind(job.controller).libraries is None:
+            continue
+        key = (job.controller, job.n_auv, job.preset, job.overrides, job.scenario_path)
+        if key in seen:
+            continue
+        seen.add(key)
+        boat = Boat.of_scenario(load_scenario(job.scenario_path))  # the suite changes no boat
+        builds.append((job.controller, job.n_auv, job.preset, dict(job.overrides), boat))
+    if not builds:
+        return []
+    libs = needed_libraries(builds)
+    if dask:
+        if libs and not quiet:
+            est = ", ".join(sorted({f"{lib.label}: about {lib.estimate_s:.0f} s" for lib in libs}))
+            print(f"MPC libraries: each Dask worker machine compiles the {len(libs)} it needs "
+                  f"once, at its first MPC job, unless its cache has them ({est})")  # fmt: skip
+        return []
+    return prepare(libs, quiet=quiet)
 
 
 def _watch_parent(parent_pid: int) -> None:  # pragma: no cover - runs in pool workers
@@ -125,6 +213,7 @@ class SweepStats:
     lost: int = 0  # jobs whose worker failed (no row: rerun on resume)
     backend: str = ""
     workers: int = 1
+    runs: str = ""  # where the run folders are (see runs_location)
     jobs_wall_s: float = 0.0
     interrupted: bool = False
     error_jobs: list = dataclasses.field(default_factory=list)  # (run name, last error line)
@@ -155,24 +244,28 @@ def pending_jobs(exp: Expansion, out: Path, retry_errors: bool = False) -> list[
 
 
 def run_jobs(jobs: list[Job], out: Path, stats: SweepStats, workers: int = 1,
-             dask: str | None = None, quiet: bool = False) -> None:  # fmt: skip
-    """Run ``jobs`` (serially, on a process pool, or on Dask), updating ``stats``."""
+             dask: str | None = None, quiet: bool = False,
+             runs: str | None = None) -> None:  # fmt: skip
+    """Run ``jobs`` (serially, on a process pool, or on Dask), updating ``stats``; run folders
+    under ``runs`` (default: :func:`runs_location`), rows written into ``out`` here."""
     out = out.resolve()
+    runs = runs or runs_location(out, stats.suite, None, dask)
+    stats.runs = stats.runs or runs
     bar = _bar(len(jobs), stats.suite, quiet)
     t0 = time.perf_counter()
     try:
         if dask:
             stats.backend = f"dask {dask}"
-            _run_dask(jobs, out, stats, dask, bar)
+            _run_dask(jobs, out, runs, stats, dask, bar)
         elif workers <= 1:
             stats.backend, stats.workers = "serial (this process)", 1
             for job in jobs:
-                _record(stats, job, run_job(job, str(out)))
+                _record(stats, job, finish_job(out, run_job(job, runs)))
                 bar.set_postfix(errors=stats.errors, refresh=False)
                 bar.update(1)
         else:
             stats.backend, stats.workers = f"local process pool ({workers} workers)", workers
-            _run_pool(jobs, out, stats, workers, bar)
+            _run_pool(jobs, out, runs, stats, workers, bar)
     except KeyboardInterrupt:
         stats.interrupted = True
         raise
@@ -181,18 +274,18 @@ def run_jobs(jobs: list[Job], out: Path, stats: SweepStats, workers: int = 1,
         bar.close()
 
 
-def _run_pool(jobs, out: Path, stats: SweepStats, workers: int, bar) -> None:
+def _run_pool(jobs, out: Path, runs: str, stats: SweepStats, workers: int, bar) -> None:
     from concurrent.futures.process import BrokenProcessPool
 
     ctx = get_context("spawn")
     pool = ProcessPoolExecutor(workers, mp_context=ctx, initializer=_watch_parent,
                                initargs=(os.getpid(),))  # fmt: skip
     try:
-        futures = {pool.submit(run_job, job, str(out)): job for job in jobs}
+        futures = {pool.submit(run_job, job, runs): job for job in jobs}
         for fut in as_completed(futures):
             job = futures[fut]
             try:
-                _record(stats, job, fut.result())
+                _record(stats, job, finish_job(out, fut.result()))
             except BrokenProcessPool as exc:
                 raise RuntimeError(f"a worker process died ({exc}); rerun the same command to "
                                    "resume (finished jobs are kept)") from None  # fmt: skip
@@ -206,7 +299,7 @@ def _run_pool(jobs, out: Path, stats: SweepStats, workers: int, bar) -> None:
         pool.shutdown(wait=True, cancel_futures=True)
 
 
-def _run_dask(jobs, out: Path, stats: SweepStats, address: str, bar) -> None:
+def _run_dask(jobs, out: Path, runs: str, stats: SweepStats, address: str, bar) -> None:
     from dask.distributed import Client
     from dask.distributed import as_completed as dask_completed
 
@@ -216,15 +309,17 @@ def _run_dask(jobs, out: Path, stats: SweepStats, address: str, bar) -> None:
         raise ConfigError(f"--dask {address}: cannot connect to a Dask scheduler: {exc}") from None
     try:
         stats.workers = len(client.nthreads())
-        futures = {client.submit(run_job, job, str(out), pure=False, retries=0): job
+        futures = {client.submit(run_job, job, runs, pure=False, retries=0): job
                    for job in jobs}  # fmt: skip
         for fut in dask_completed(list(futures)):
             job = futures[fut]
             try:
-                _record(stats, job, fut.result())
+                row = fut.result()  # the row comes back through Dask: written here
             except Exception as exc:  # the machinery failed (e.g. KilledWorker): no row
                 stats.lost += 1
                 bar.write(f"lost {job.run_name}: {type(exc).__name__}: {exc} (rerun to resume)")
+            else:
+                _record(stats, job, finish_job(out, row))
             bar.set_postfix(errors=stats.errors, refresh=False)
             bar.update(1)
     finally:
@@ -232,8 +327,12 @@ def _run_dask(jobs, out: Path, stats: SweepStats, address: str, bar) -> None:
 
 
 def run_suite(suite: str | Path, out: str | Path, workers: int = 1, dask: str | None = None,
-              quiet: bool = False, retry_errors: bool = False, report: bool = True):  # fmt: skip
+              quiet: bool = False, retry_errors: bool = False, report: bool = True,
+              runs_dir: str | None = None):  # fmt: skip
     """Expand ``suite``, run its pending jobs, consolidate ``results.parquet``, write the report.
+
+    ``runs_dir``: where the run folders go (a path or an fsspec URL; see
+    :func:`runs_location` for the default).
 
     Returns
     -------
@@ -246,6 +345,8 @@ def run_suite(suite: str | Path, out: str | Path, workers: int = 1, dask: str | 
     (out / "suite.toml").write_bytes(exp.path.read_bytes())
     todo = pending_jobs(exp, out, retry_errors)
     stats = SweepStats(exp.suite.name, len(exp.jobs), len(exp.jobs) - len(todo), workers=workers)
+    runs = runs_location(out, exp.suite.name, runs_dir, dask)
+    stats.runs = runs if (runs_dir or not dask) else f"{runs} in each Dask worker's directory"
     if not quiet:
         for s in exp.skipped:
             print(f"skipped (optional controller not available): {s}")
@@ -255,10 +356,11 @@ def run_suite(suite: str | Path, out: str | Path, workers: int = 1, dask: str | 
             else ("this process" if workers <= 1 else f"{workers} local worker processes")
         )
         print(f"suite {exp.suite.name}: {len(exp.jobs)} jobs, {stats.already_done} already done, "
-              f"{len(todo)} to run on {where}; output {out}")  # fmt: skip
+              f"{len(todo)} to run on {where}; output {out}; runs: {stats.runs}")  # fmt: skip
     try:
         if todo:
-            run_jobs(todo, out, stats, workers, dask, quiet)
+            prepare_controllers(todo, quiet, dask)
+            run_jobs(todo, out, stats, workers, dask, quiet, runs)
     except KeyboardInterrupt:
         print(f"interrupted after {stats.ran} of {len(todo)} jobs; rerun the same command to "
               "resume (finished jobs are kept)")  # fmt: skip

@@ -3,8 +3,10 @@ and the consolidated ``results.parquet``.
 
 Layout of a sweep folder ``DIR``::
 
-    DIR/runs/<run name>/      one run folder per job (timeseries.parquet, metrics.json, ...)
-    DIR/parts/<job id>.parquet  one row per finished job (ok or error), written atomically
+    DIR/runs/<run name>/      one run folder per job (timeseries.parquet, metrics.json, ...);
+                              elsewhere with --runs-dir or on Dask (mpcasv.experiments.runner)
+    DIR/parts/<job id>.parquet  one row per finished job (ok or error), written atomically by
+                              the client (Dask workers return their rows)
     DIR/results.parquet       all rows of the suite's jobs, in suite order (rewritten at the end)
     DIR/report.md, report.html, figures/
 
@@ -16,7 +18,8 @@ Columns of the results table (one row per job): the job's description (``job_id`
 ``suite``, ``scenario``, ``label``, ``variant``, ``controller``, ``preset``, ``overrides``
 (JSON), ``param.<key>`` per overridden parameter, ``current_N``, ``current_E``, ``current``
 (``"off"`` or ``"V_N,V_E"``), ``estimator``, ``seed``, ``n_auv``, ``auv_names``), the outcome
-(``status`` ``"ok"``/``"error"``, ``error`` with the traceback, ``run_dir`` relative to DIR,
+(``status`` ``"ok"``/``"error"``, ``error`` with the traceback, ``run_dir`` relative to DIR
+or, outside DIR, the worker's absolute path or the URL,
 ``wall_s``, ``finished_at``, ``worker``) and every metric of ``metrics.json`` under its name,
 per-AUV lists expanded into ``<metric>_auv<k>`` columns.
 """
@@ -95,8 +98,3 @@ def write_results(out: str | Path, jobs) -> pd.DataFrame:
         df = df.sort_values("index", kind="stable").reset_index(drop=True)
     _atomic_parquet(pa.Table.from_pandas(df, preserve_index=False), Path(out) / "results.parquet")
     return df
-
-
-def read_results(out: str | Path) -> pd.DataFrame:
-    """The whole results table: ``pd.read_parquet("DIR/results.parquet")``."""
-    return pd.read_parquet(Path(out) / "results.parquet")

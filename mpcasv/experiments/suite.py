@@ -301,7 +301,7 @@ def _load_scenarios(suite: Suite, path: Path) -> list:
 
 def _usable_controllers(suite: Suite, path: Path, names: list[str]):
     """[(i, entry)] whose controllers exist, and the optional entries skipped (with why)."""
-    from mpcasv.sim.controllers import controller_kind
+    from mpcasv.controllers import controller_kind
 
     usable, skipped = [], []
     for i, entry in enumerate(suite.controllers):
@@ -329,7 +329,7 @@ def _usable_controllers(suite: Suite, path: Path, names: list[str]):
 
 def _controller_and_preset(entry: ControllerEntry, sc, where: str, base: Path):
     """The registered controller name and preset reference of ``entry`` on scenario ``sc``."""
-    from mpcasv.sim.controllers import controller_kind
+    from mpcasv.controllers import controller_kind
 
     n_auv = len(sc.auv)
     cname = entry.controller_for(n_auv)
@@ -371,8 +371,8 @@ def expand(name_or_path: str | Path) -> Expansion:
         Naming the suite file and the offending field: unknown scenario, unknown or unusable
         controller, bad preset or override key, empty list or grid, unknown estimator.
     """
+    from mpcasv.controllers import load_preset
     from mpcasv.experiments.conditions import conditions, realisations
-    from mpcasv.sim.controllers import load_preset
 
     suite, path = load_suite(name_or_path)
     _check_estimators(suite, path)

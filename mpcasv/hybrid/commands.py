@@ -26,8 +26,9 @@ def run(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
     from mpcasv.config import ConfigError
+    from mpcasv.controllers import Boat, make_controller
+    from mpcasv.experiments.metrics import compute_metrics
     from mpcasv.hybrid.paper import metrics_of, write_table
-    from mpcasv.sim.controllers import make_controller
     from mpcasv.sim.record import write_run
     from mpcasv.sim.scenario import load_scenario
     from mpcasv.sim.simulator import simulate
@@ -40,10 +41,13 @@ def run(args: argparse.Namespace) -> int:
     scenarios = [load_scenario(p) for p in paths]  # validate all before running any
     results = {}
     for sc in tqdm(scenarios, desc="paper cases", unit="case"):
-        ctrl = make_controller(sc.controller, len(sc.auv), sc.preset)
+        boat = Boat.of_scenario(sc)
+        ctrl = make_controller(sc.controller, len(sc.auv), sc.preset, boat=boat)
         res = simulate(sc, ctrl, args.seed)
         out = args.out / sc.name
-        write_run(res, out, extra={"preset": sc.preset})
+        write_run(
+            res, out, compute_metrics(res), extra={"preset": sc.preset, "boat": boat.describe()}
+        )
         results[sc.name] = (metrics_of(out), pd.read_parquet(out / "timeseries.parquet"),
                             f"{sc.controller} / {sc.preset}")  # fmt: skip
     path = write_table(results, args.out / "paper_table.md")

@@ -21,6 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from mpcasv.config import Pos, frozen
+from mpcasv.controllers import ControllerKind
 from mpcasv.hybrid.domains import (
     AvoidanceParams,
     DomainParams,
@@ -31,7 +32,6 @@ from mpcasv.hybrid.domains import (
 from mpcasv.hybrid.system import HybridAutomaton, Mode, Transition
 from mpcasv.interface import Command, Observation, Reason
 from mpcasv.interface import Mode as CmdMode
-from mpcasv.sim.controllers import ControllerKind
 
 Q1, Q2 = 1, 2  # standby, transit
 
@@ -172,5 +172,5 @@ class HybridMulti:
 
 
 KIND = ControllerKind(
-    "hybrid-multi", HybridMultiParams, lambda p, n: HybridMulti(p), "paper2-field", multi=True
+    "hybrid-multi", HybridMultiParams, lambda p, n, boat: HybridMulti(p), "paper2-field", multi=True
 )

@@ -25,6 +25,7 @@ import math
 from dataclasses import dataclass
 
 from mpcasv.config import Pos, frozen
+from mpcasv.controllers import ControllerKind
 from mpcasv.hybrid.domains import (
     AvoidanceParams,
     DomainParams,
@@ -35,7 +36,6 @@ from mpcasv.hybrid.domains import (
 from mpcasv.hybrid.system import HybridAutomaton, Mode, Transition
 from mpcasv.interface import Command, Observation, Reason
 from mpcasv.interface import Mode as CmdMode
-from mpcasv.sim.controllers import ControllerKind
 
 Q1, Q2 = 1, 2  # standby, transit
 
@@ -162,5 +162,5 @@ class HybridSingle:
 
 
 KIND = ControllerKind(
-    "hybrid-single", HybridSingleParams, lambda p, n: HybridSingle(p), "paper1-sim"
+    "hybrid-single", HybridSingleParams, lambda p, n, boat: HybridSingle(p), "paper1-sim"
 )

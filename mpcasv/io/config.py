@@ -289,19 +289,21 @@ def deploy_config_from_dict(data: dict, source: str = "<deploy config>") -> Depl
 
 def controller_overrides(cfg: DeployConfig, speed: float | None = None) -> dict[str, Any]:
     """The preset overrides the deploy builds its controller with: ``controller.overrides``,
-    plus ``vessel`` = ``controller.vessel`` for presets that have a vessel field (the MPCs;
-    the hybrid controllers plan without a vessel model), plus ``speed`` when the learned
-    achievable speed caps it (``controller.speed_feedback``)."""
-    from mpcasv.sim.controllers import load_preset
-
-    c = cfg.controller
-    out = dict(c.overrides)
-    params = load_preset(c.name, c.preset, out)
-    if c.vessel is not None and hasattr(params, "vessel"):
-        out["vessel"] = c.vessel
+    plus ``speed`` when the learned achievable speed caps it (``controller.speed_feedback``).
+    The vessel is not an override: it is the run's :class:`~mpcasv.controllers.Boat`
+    (:func:`deploy_boat`)."""
+    out = dict(cfg.controller.overrides)
     if speed is not None:
         out["speed"] = float(speed)
     return out
+
+
+def deploy_boat(cfg: DeployConfig):
+    """The boat the deploy drives (``controller.vessel``, default Gretha): the one vessel the
+    controller plans with; a preset that names another vessel is refused in one line."""
+    from mpcasv.controllers import Boat
+
+    return Boat.load(cfg.controller.vessel or "gretha")
 
 
 def build_controller(cfg: DeployConfig, speed: float | None = None, log=print):
@@ -310,7 +312,7 @@ def build_controller(cfg: DeployConfig, speed: float | None = None, log=print):
     import threading
     import time
 
-    from mpcasv.sim.controllers import make_controller
+    from mpcasv.controllers import make_controller
 
     c = cfg.controller
     t0 = time.perf_counter()
@@ -325,7 +327,8 @@ def build_controller(cfg: DeployConfig, speed: float | None = None, log=print):
 
     threading.Thread(target=progress, daemon=True).start()
     try:
-        ctl = make_controller(c.name, len(cfg.auvs), c.preset, controller_overrides(cfg, speed))
+        ctl = make_controller(c.name, len(cfg.auvs), c.preset, controller_overrides(cfg, speed),
+                              boat=deploy_boat(cfg))  # fmt: skip
     finally:
         done.set()
     log(f"controller {c.name} ready in {time.perf_counter() - t0:.1f} s")
@@ -336,8 +339,8 @@ def check_controller(cfg: DeployConfig, source: str | Path) -> None:
     """Validate the controller's name, preset, overrides, vessel and the AUV count (the
     controller itself is built by :func:`build_controller`, before any vehicle is contacted)."""
     from mpcasv.config import ConfigError, resolve
+    from mpcasv.controllers import check_boat, controller_kind, load_preset
     from mpcasv.estimation import ESTIMATORS
-    from mpcasv.sim.controllers import controller_kind, load_preset
 
     c = cfg.controller
     if c.estimator not in ESTIMATORS:
@@ -352,6 +355,7 @@ def check_controller(cfg: DeployConfig, source: str | Path) -> None:
         if c.vessel is not None:
             resolve("vessels", c.vessel)
         params = load_preset(c.name, c.preset, controller_overrides(cfg))
+        check_boat(params, deploy_boat(cfg), str(c.preset or c.name))
     except ConfigError as exc:
         raise ConfigError(f"{source}: controller: {exc}") from None
     if c.speed_feedback and not hasattr(params, "speed"):

@@ -39,6 +39,7 @@ import numpy as np
 import pandas as pd
 from imcpy.lsf import LSFReader
 
+from mpcasv.errors import LogError
 from mpcasv.io.geo import Origin, absolute_latlon, to_local
 
 __all__ = ["LogError", "read_lsf", "read_messages"]
@@ -48,10 +49,6 @@ _FOOTER = 2
 _SYNC = imcpy.constants.SYNC
 _BROADCAST = 0xFFFF
 _RF = imcpy.Reference.FlagsBits
-
-
-class LogError(ValueError):
-    """A log that cannot be read; the message names the file and the problem."""
 
 
 def _load(path: str | Path) -> tuple[Path, bytes, dict[int, int]]:

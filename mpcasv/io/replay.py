@@ -17,10 +17,10 @@ from pathlib import Path
 import pandas as pd
 
 from mpcasv.config import ConfigError
+from mpcasv.controllers import make_controller
 from mpcasv.io.logs import read_jsonl
 from mpcasv.io.records import cmd_from_dict, obs_from_dict, same_command
 from mpcasv.io.watchdog import GuardParams, guard
-from mpcasv.sim.controllers import make_controller
 
 __all__ = ["ReplayReport", "print_replay", "replay"]
 

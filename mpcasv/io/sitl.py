@@ -108,7 +108,7 @@ class Sitl:
     """The SITL runner (see the module docstring)."""
 
     def __init__(self, scenario: Scenario, opt: SitlOptions) -> None:
-        from mpcasv.sim.controllers import make_controller
+        from mpcasv.controllers import make_controller
         from mpcasv.sim.world import World
 
         self.sc, self.opt = scenario, opt
@@ -400,6 +400,7 @@ class Sitl:
         """Close the sockets and write the run folder; return the run info."""
         import pandas as pd
 
+        from mpcasv.experiments.metrics import compute_metrics
         from mpcasv.sim.record import write_run
         from mpcasv.sim.scenario import scenario_with
         from mpcasv.sim.simulator import RunResult
@@ -421,8 +422,8 @@ class Sitl:
             res = RunResult(sc, "sitl", self.opt.seed, pd.DataFrame(self.rows),
                             np.zeros(len(self.rows)), w.fix_times, w.reliable_times, 0, None, [],
                             w.energy_J, w.min_range, w.min_slant, wall_s, self.domain)  # fmt: skip
-            info["metrics"] = write_run(res, self.opt.out / "run", plots=self.opt.plots,
-                                        extra={"sitl": info})  # fmt: skip
+            info["metrics"] = write_run(res, self.opt.out / "run", compute_metrics(res),
+                                        plots=self.opt.plots, extra={"sitl": info})  # fmt: skip
         return info
 
 

@@ -63,7 +63,7 @@ import pandas as pd
 from scipy.optimize import least_squares
 from scipy.signal import savgol_filter
 
-from mpcasv.io.lsf import LogError
+from mpcasv.errors import LogError
 from mpcasv.models.params import MODEL_COEFFS, VesselParams
 from mpcasv.models.vessel import IX, NX, VesselModel, rk4_expr
 

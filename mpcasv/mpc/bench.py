@@ -28,10 +28,10 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
+from mpcasv.controllers import Boat, load_preset
 from mpcasv.mpc.controller import MPCController, build_ocp
 from mpcasv.mpc.qp import QPSolver
 from mpcasv.mpc.reference import OptiReference
-from mpcasv.sim.controllers import load_preset
 from mpcasv.sim.scenario import load_scenario, scenario_with
 from mpcasv.sim.simulator import simulate
 
@@ -51,7 +51,7 @@ def record(case: str, preset: str, multi: bool, steps: int = STEPS):
     sc = load_scenario(SCENARIOS / f"{case}.toml")
     sc = scenario_with(sc, duration=float(steps))
     params = load_preset(preset, preset)
-    ctrl = MPCController(params, len(sc.auv), multi)
+    ctrl = MPCController(params, len(sc.auv), multi, boat=Boat.of_scenario(sc))
     ctrl.recorder = []
     simulate(sc, ctrl, seed=0)
     return params, ctrl, list(ctrl.recorder)
@@ -134,7 +134,7 @@ def bench_mpc(args: argparse.Namespace) -> dict:
     for case, preset, multi in CASES:
         t0 = time.perf_counter()
         params, ctrl, seq = record(case, preset, multi)
-        ocp, default = build_ocp(params, ctrl.ocp.dims.n_auv, multi)
+        ocp, default = build_ocp(params, ctrl.ocp.dims.n_auv, multi, boat=ctrl.boat)
         qp = QPSolver(ocp, dataclasses.replace(params.solver, solver="qp"))
         ref = OptiReference(ocp)
         n = ocp.dims.n_auv

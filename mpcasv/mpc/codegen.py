@@ -58,6 +58,15 @@ def library_key(functions: dict[str, ca.Function], solver: str, cflags: str) -> 
     return h.hexdigest()[:24]
 
 
+def library_path(functions: dict[str, ca.Function], solver: str, cflags: str) -> Path:
+    """Where the library with ``functions`` is (or will be) in the cache."""
+    return _library_file(solver, library_key(functions, solver, cflags))
+
+
+def _library_file(solver: str, key: str) -> Path:
+    return cache_dir() / f"mpc_{solver}_{key}.so"
+
+
 def compiled_library(functions: dict[str, ca.Function], solver: str, cflags: str,
                      compiler: str = "gcc", log=print) -> Path:  # fmt: skip
     """Path of the shared library with ``functions``: from the cache, or compiled now.
@@ -71,8 +80,8 @@ def compiled_library(functions: dict[str, ca.Function], solver: str, cflags: str
     memo = (key, solver, cflags)
     if memo in _LOADED and _LOADED[memo].exists():
         return _LOADED[memo]
-    folder = cache_dir()
-    target = folder / f"mpc_{solver}_{key}.so"
+    target = _library_file(solver, key)
+    folder = target.parent
     if not target.exists():
         with open(folder / f"{target.name}.lock", "w") as lock:
             fcntl.flock(lock, fcntl.LOCK_EX)  # one compile per library across processes

@@ -31,6 +31,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from mpcasv.controllers import Boat, ControllerKind
 from mpcasv.hybrid.domains import estimate_shape
 from mpcasv.hybrid.multi import HybridMulti, HybridMultiParams
 from mpcasv.hybrid.single import HybridSingle, HybridSingleParams
@@ -39,7 +40,6 @@ from mpcasv.models.acoustics import AcousticParams
 from mpcasv.mpc.params import MPCParams
 from mpcasv.mpc.problem import NXV, OCP
 from mpcasv.mpc.solvers import SolveResult, make_solver
-from mpcasv.sim.controllers import ControllerKind
 
 R_HI_NONE = 1.0e5  # "no outer bound" (m)
 TAU_UNKNOWN = 600.0  # fix age used for an AUV never fixed (s)
@@ -57,12 +57,13 @@ class FallbackEvent:
     solve_ms: float
 
 
-def build_ocp(params: MPCParams, n_auv: int, multi: bool, log=print):
-    """(OCP, solver) for ``n_auv`` AUVs, shared by controllers with the same parameters in one
-    process (the compiled library is also cached on disk)."""
-    key = (repr(params), n_auv, multi)
+def build_ocp(params: MPCParams, n_auv: int, multi: bool, log=print, boat: Boat | None = None):
+    """(OCP, solver) for ``n_auv`` AUVs planning on ``boat`` (None: the preset's, see
+    :class:`MPCParams`), shared by controllers with the same parameters in one process (the
+    compiled library is also cached on disk)."""
+    key = (repr(params), n_auv, multi, repr(boat))
     if key not in _OCP_CACHE:
-        ocp = OCP(params, n_auv, outer=not multi)
+        ocp = OCP(params, n_auv, outer=not multi, boat=boat)
         _OCP_CACHE[key] = (ocp, make_solver(ocp, params.solver, log=log))
     return _OCP_CACHE[key]
 
@@ -84,6 +85,9 @@ class MPCController:
     multi : bool
         ``mpc-multi``: anti-collision radius only (Paper 2); else ``mpc-single`` with the donut
         ``r_inner <= r <= r_outer``.
+    boat : Boat, optional
+        The run's vessel and execution level, the ones the simulator integrates (one vessel
+        per run); None: the preset's ``vessel`` / ``execution`` (Gretha when it names none).
 
     Attributes
     ----------
@@ -95,8 +99,10 @@ class MPCController:
     fallback_log : list of FallbackEvent
     """
 
-    def __init__(self, params: MPCParams, n_auv: int = 1, multi: bool = False):
+    def __init__(self, params: MPCParams, n_auv: int = 1, multi: bool = False,
+                 boat: Boat | None = None):  # fmt: skip
         self.params = params
+        self.boat = boat
         self.domain = params.domain
         self.multi = multi
         self.name = "mpc-multi" if multi else "mpc-single"
@@ -107,7 +113,7 @@ class MPCController:
     # ------------------------------------------------------------------ set-up
     def _setup(self, n_auv: int) -> None:
         P = self.params
-        self.ocp, self.solver = build_ocp(P, n_auv, self.multi)
+        self.ocp, self.solver = build_ocp(P, n_auv, self.multi, boat=self.boat)
         if self.multi:
             self.hybrid = HybridMulti(HybridMultiParams(P.domain, P.T_standby, P.speed,
                                                         avoidance=P.avoidance))  # fmt: skip
@@ -388,13 +394,24 @@ class MPCController:
         return dict(self._diag)
 
 
-def _build_single(params: MPCParams, n_auv: int) -> MPCController:
-    return MPCController(params, n_auv, multi=False)
+def _build_single(params: MPCParams, n_auv: int, boat: Boat | None) -> MPCController:
+    return MPCController(params, n_auv, multi=False, boat=boat)
 
 
-def _build_multi(params: MPCParams, n_auv: int) -> MPCController:
-    return MPCController(params, n_auv, multi=True)
+def _build_multi(params: MPCParams, n_auv: int, boat: Boat | None) -> MPCController:
+    return MPCController(params, n_auv, multi=True, boat=boat)
 
 
-KIND_SINGLE = ControllerKind("mpc-single", MPCParams, _build_single, "mpc-single")
-KIND_MULTI = ControllerKind("mpc-multi", MPCParams, _build_multi, "mpc-multi", multi=True)
+def _libraries(multi: bool):
+    def needed(params: MPCParams, n_auv: int, boat: Boat | None) -> list:
+        from mpcasv.mpc.prepare import libraries
+
+        return libraries(params, n_auv, multi, boat)
+
+    return needed
+
+
+KIND_SINGLE = ControllerKind("mpc-single", MPCParams, _build_single, "mpc-single",
+                             libraries=_libraries(False))  # fmt: skip
+KIND_MULTI = ControllerKind("mpc-multi", MPCParams, _build_multi, "mpc-multi", multi=True,
+                            libraries=_libraries(True))  # fmt: skip

@@ -184,8 +184,12 @@ class MPCParams:
     avoidance : AvoidanceParams
         Which anti-collision radius (the papers' fixed one, or uncertainty-aware); the MPC
         evaluates it at every stage along the planned bearing.
-    vessel, execution : str
-        Vessel model and execution-level parameters (shipped names or TOML paths).
+    vessel, execution : str or None
+        Vessel model and execution-level parameters (shipped names or TOML paths, relative to
+        the preset's folder). None (the shipped presets): the run's, i.e. the scenario's
+        ``asv.vessel`` / ``asv.execution`` or the deploy configuration's; a preset that names
+        another boat than the run's is refused (one vessel per run). Outside a run (an
+        ``MPCController`` built directly) None means the shipped Gretha.
     T_ramp : float
         Time to ramp thrust from zero to ``T_max`` in the plan (s): the thrust rate limit.
     standby_time : float
@@ -227,8 +231,8 @@ class MPCParams:
     fix: FixRateParams = FixRateParams()
     weights: WeightParams = WeightParams()
     solver: SolverParams = SolverParams()
-    vessel: str = "gretha"
-    execution: str = "gretha"
+    vessel: str | None = None
+    execution: str | None = None
     T_ramp: Pos = 4.0
     standby_time: Pos = 4.0
     margin: NonNeg = 5.0

@@ -118,6 +118,9 @@ class OCP:
     n_auv : int
     outer : bool
         Whether the outer donut bound applies (single-AUV controller).
+    boat : mpcasv.controllers.Boat, optional
+        The run's vessel and execution level; None: ``params.vessel`` / ``params.execution``
+        (Gretha when None).
 
     Attributes
     ----------
@@ -129,12 +132,16 @@ class OCP:
         Which constraints are equalities (fatrop option).
     """
 
-    def __init__(self, params: MPCParams, n_auv: int, outer: bool):
+    def __init__(self, params: MPCParams, n_auv: int, outer: bool, boat=None):
         self.params = params
         hz, wt = params.horizon, params.weights
-        self.vessel = load_vessel(params.vessel)
+        if boat is None:
+            self.vessel = load_vessel(params.vessel or "gretha")
+            ep = load_execution(params.execution or "gretha")
+        else:
+            self.vessel, ep = boat.vessel, boat.execution
         self.model = VesselModel(self.vessel)
-        ep = load_execution(params.execution)
+        self.execution = ep
         vp = self.vessel
         self.T_on = ep.propeller_on_threshold * vp.T_max  # execution level's threshold (N)
         self.T_floor = ep.thrust_floor * vp.T_max  # its least thrust in transit (N)
@@ -388,14 +395,6 @@ class OCP:
             "target": int(np.argmax(p[o + 3 * K:o + 4 * K])),
             "weights": p[o + 4 * K:o + 4 * K + NW],
         }  # fmt: skip
-
-    def with_target(self, p: np.ndarray, target: int) -> np.ndarray:
-        """A copy of the parameter vector ``p`` with another target AUV."""
-        d = self.dims
-        o = d.nx + 2 + (d.N + 1) * d.n_stage_par + 3 * d.n_auv
-        q = np.array(p, float)
-        q[o : o + d.n_auv] = np.eye(d.n_auv)[target]
-        return q
 
     def bounds(self, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Scaled ``lbx, ubx`` with stage 0 fixed to the initial state in ``p``."""

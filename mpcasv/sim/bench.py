@@ -9,7 +9,7 @@ import numpy as np
 
 def bench_sim(args) -> dict:
     from mpcasv.config import DATA_DIR  # noqa: F401  (package data present)
-    from mpcasv.sim.controllers import make_controller
+    from mpcasv.controllers import make_controller
     from mpcasv.sim.scenario import scenario_from_dict
     from mpcasv.sim.simulator import build_plant, simulate
 

@@ -44,8 +44,10 @@ def run(args: argparse.Namespace) -> int:
         return run_cli(args)
     if args.scenario is None:
         raise ConfigError("give a SCENARIO (TOML file) or --manoeuvre")
+    from mpcasv.controllers import Boat, make_controller
+    from mpcasv.controllers.prepare import needed_libraries, prepare
     from mpcasv.estimation import ESTIMATORS
-    from mpcasv.sim.controllers import make_controller
+    from mpcasv.experiments.metrics import compute_metrics
     from mpcasv.sim.record import write_run
     from mpcasv.sim.scenario import load_scenario
     from mpcasv.sim.simulator import simulate
@@ -57,14 +59,17 @@ def run(args: argparse.Namespace) -> int:
     scenario, real = nominal(scenario) if args.nominal else realise(scenario, args.seed)
     name = args.controller or scenario.controller
     preset = args.params or (scenario.preset if name == scenario.controller else None)
-    controller = make_controller(name, len(scenario.auv), preset)
+    boat = Boat.of_scenario(scenario)  # one vessel per run: the simulator's and the MPC's
+    prepare(needed_libraries([(name, len(scenario.auv), preset, None, boat)]), args.quiet)
+    controller = make_controller(name, len(scenario.auv), preset, boat=boat)
     if args.estimator and args.estimator not in ESTIMATORS:
         raise ConfigError(f"unknown estimator {args.estimator!r}; known: {sorted(ESTIMATORS)}")
     out = args.out or Path("runs") / f"{scenario.name}-{name}-{args.seed}"
     result = simulate(scenario, controller, args.seed, args.estimator, progress=not args.quiet)
     extra = {"preset": preset, "estimator": args.estimator or scenario.estimator,
-             "realisation": real.as_dict()}  # fmt: skip
-    metrics = write_run(result, out, plots=not args.no_plots, extra=extra)
+             "realisation": real.as_dict(), "boat": boat.describe()}  # fmt: skip
+    metrics = write_run(result, out, compute_metrics(result), plots=not args.no_plots,
+                        extra=extra)  # fmt: skip
     keys = ("duration_s", "asv_distance_m", "min_range_m", "collision_domain_s",
             "reliable_fix_age_max_s", "reliable_fix_age_p95_s", "nav_error_rms_m",
             "nav_error_p95_m", "propeller_on_s", "energy_J", "fallbacks")  # fmt: skip

@@ -1,6 +1,9 @@
 """Writing a run to its folder: ``timeseries.parquet``, ``metrics.json``, ``run.json``,
 ``jumps.csv`` (hybrid controllers) and the figures. Written into a temporary folder and
-renamed at the end, so a failed run leaves no partial output."""
+renamed at the end, so a failed run leaves no partial output.
+
+The metrics are computed by the caller (:func:`mpcasv.experiments.metrics.compute_metrics`)
+and handed in: the simulator's package does not import the experiments'."""
 
 from __future__ import annotations
 
@@ -9,8 +12,6 @@ import math
 import shutil
 import tempfile
 from pathlib import Path
-
-from mpcasv.experiments.metrics import compute_metrics
 
 
 def _jsonable(v):
@@ -21,11 +22,17 @@ def _jsonable(v):
     return v
 
 
-def write_run(result, out_dir: str | Path, plots: bool = True, extra: dict | None = None) -> dict:
-    """Write the run files into ``out_dir`` (replaced if present); return the metrics."""
+def write_run(result, out_dir: str | Path, metrics: dict, plots: bool = True,
+              extra: dict | None = None) -> dict:  # fmt: skip
+    """Write the run files into ``out_dir`` (replaced if present); return the metrics as
+    written (non-finite numbers as None).
+
+    ``run.json`` holds the scenario, controller, seed, wall time, ``extra`` and the boat
+    (``boat``: :meth:`mpcasv.controllers.Boat.describe`, when ``extra`` carries it).
+    """
     out = Path(out_dir)
     out.parent.mkdir(parents=True, exist_ok=True)
-    metrics = {k: _jsonable(v) for k, v in compute_metrics(result).items()}
+    metrics = {k: _jsonable(v) for k, v in metrics.items()}
     tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
     try:
         result.timeseries.to_parquet(tmp / "timeseries.parquet", index=False)

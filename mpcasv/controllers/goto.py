@@ -5,8 +5,8 @@ from __future__ import annotations
 import math
 
 from mpcasv.config import Float, Pos, frozen
+from mpcasv.controllers.registry import ControllerKind
 from mpcasv.interface import Command, Mode, Observation, Reason
-from mpcasv.sim.controllers import ControllerKind
 
 
 @frozen
@@ -40,4 +40,4 @@ class GoTo:
         return Command(Mode.TRANSIT, wp, self.params.speed, None, Reason.GOTO)
 
 
-KIND = ControllerKind("goto", GoToParams, lambda p, n: GoTo(p), "goto", multi=True)
+KIND = ControllerKind("goto", GoToParams, lambda p, n, boat: GoTo(p), "goto", multi=True)

@@ -1,0 +1,195 @@
+"""Registry of supervisory controllers, built by name from TOML presets for one boat.
+
+Every controller the simulator, the experiment runner and the deploy loop can use is listed
+in :data:`CONTROLLERS` as ``name -> "module:attribute"``; the attribute is a
+:class:`ControllerKind`. Presets are TOML files in ``mpcasv/data/presets/`` (or any path)
+validated into the kind's parameter dataclass; suites may override single fields.
+
+This module sits below the simulator, the experiments and the I/O layer: it imports none of
+them (``tests/test_dependencies.py`` checks it), so controllers can import it.
+
+One vessel per run (issue 13): a controller is built for the run's :class:`Boat` (the vessel
+model's and the execution level's parameters that the simulator integrates or the boat at sea
+has). A preset may not name another vessel or execution level; it is refused with one line.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import importlib
+import json
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from mpcasv.config import ConfigError, load_toml, parse, resolve
+from mpcasv.control.params import ExecutionParams, load_execution
+from mpcasv.interface import Controller
+from mpcasv.models.params import VesselParams, load_vessel
+
+CONTROLLERS: dict[str, str] = {
+    "goto": "mpcasv.controllers.goto:KIND",
+    "hybrid-single": "mpcasv.hybrid.single:KIND",
+    "hybrid-multi": "mpcasv.hybrid.multi:KIND",
+    "mpc-single": "mpcasv.mpc.controller:KIND_SINGLE",
+    "mpc-multi": "mpcasv.mpc.controller:KIND_MULTI",
+}
+
+#: preset fields that name a file: resolved relative to the preset file that names them
+PATH_FIELDS = ("vessel", "execution")
+
+
+def parameter_hash(params: Any) -> str:
+    """SHA-256 (hex, 16 characters) of a parameter dataclass's values, without its ``name``
+    and ``provenance`` (renaming a file or rewording a source does not change the boat)."""
+    data = {k: v for k, v in dataclasses.asdict(params).items() if k not in ("name", "provenance")}
+    return hashlib.sha256(json.dumps(data, sort_keys=True).encode()).hexdigest()[:16]
+
+
+@dataclass(frozen=True)
+class Boat:
+    """The boat of one run: what the simulator integrates and every controller plans with.
+
+    Attributes
+    ----------
+    vessel : VesselParams
+        The Fossen 3-DOF model's parameters (:mod:`mpcasv.models.params`).
+    execution : ExecutionParams
+        The execution level's parameters (:mod:`mpcasv.control.params`).
+    """
+
+    vessel: VesselParams
+    execution: ExecutionParams
+
+    @classmethod
+    def load(cls, vessel: str | Path = "gretha", execution: str | Path = "gretha") -> Boat:
+        """Load from shipped names or TOML paths (:func:`mpcasv.config.resolve`).
+
+        Raises
+        ------
+        ConfigError
+            Unknown name, missing or invalid file.
+        """
+        return cls(load_vessel(vessel), load_execution(execution))
+
+    @classmethod
+    def of_scenario(cls, scenario) -> Boat:
+        """The boat a scenario names (``scenario.asv.vessel`` / ``scenario.asv.execution``),
+        loaded as the simulator loads it (:func:`mpcasv.sim.world.build_plant`)."""
+        return cls.load(scenario.asv.vessel, scenario.asv.execution)
+
+    def describe(self) -> dict[str, str]:
+        """What ``run.json`` records: the vessel's name and the parameter hashes."""
+        return {"vessel": self.vessel.name, "vessel_sha256": parameter_hash(self.vessel),
+                "execution_sha256": parameter_hash(self.execution)}  # fmt: skip
+
+
+@dataclass(frozen=True)
+class ControllerKind:
+    """How to build one kind of controller: its parameter class, factory and default preset.
+
+    ``build(params, n_auv, boat)`` returns the controller; ``boat`` is the run's
+    :class:`Boat` (None: the controller's own default, for use outside a run).
+    ``libraries(params, n_auv, boat)``, when given, lists the compiled libraries the
+    controller loads (cached on disk), so that they can be compiled before a sweep starts
+    (:mod:`mpcasv.controllers.prepare`).
+    """
+
+    name: str
+    params_cls: type
+    build: Callable[[Any, int, Boat | None], Controller]
+    default_preset: str
+    multi: bool = False  # handles several AUVs
+    libraries: Callable[[Any, int, Boat | None], list] | None = None
+
+
+def controller_kind(name: str) -> ControllerKind:
+    """Look up a controller kind by name, with a clear error for unknown names."""
+    if name not in CONTROLLERS:
+        raise ConfigError(f"unknown controller {name!r}; known: {sorted(CONTROLLERS)}")
+    module, attr = CONTROLLERS[name].split(":")
+    try:
+        return getattr(importlib.import_module(module), attr)
+    except (ImportError, AttributeError) as exc:
+        raise ConfigError(f"controller {name!r} is not available: {exc}") from None
+
+
+def _preset_data(name: str, preset: str | Path | None) -> tuple[Path, dict]:
+    kind = controller_kind(name)
+    path = resolve("presets", preset or kind.default_preset)
+    data = load_toml(path)
+    for key in PATH_FIELDS:  # a path inside the preset is relative to the preset's folder
+        value = data.get(key)
+        if isinstance(value, str) and (value.endswith(".toml") or "/" in value):
+            p = Path(value).expanduser()
+            data[key] = str(p if p.is_absolute() else (path.parent / p))
+    return path, data
+
+
+def load_preset(
+    name: str, preset: str | Path | None = None, overrides: Mapping[str, Any] | None = None
+):
+    """Validate a preset (shipped name or TOML path) for controller ``name``.
+
+    ``overrides`` replace top-level or dotted (``"domain.delta_r"``) fields before validation.
+    Paths inside the preset (``vessel``, ``execution``) are relative to the preset's folder.
+    """
+    kind = controller_kind(name)
+    path, data = _preset_data(name, preset)
+    for key, value in (overrides or {}).items():
+        target, *rest = key.split(".")
+        node = data
+        parts = [target, *rest]
+        for part in parts[:-1]:
+            node = node.setdefault(part, {})
+        node[parts[-1]] = value
+    source = f"{path}" + (f" with overrides {dict(overrides)}" if overrides else "")
+    return parse(kind.params_cls, data, source)
+
+
+def check_boat(params: Any, boat: Boat, source: str) -> None:
+    """Refuse parameters that name another vessel or execution level than the run's.
+
+    Raises
+    ------
+    ConfigError
+        One line naming ``source`` (the preset), the field and both boats.
+    """
+    for field, loader, mine in (("vessel", load_vessel, boat.vessel),
+                                ("execution", load_execution, boat.execution)):  # fmt: skip
+        named = getattr(params, field, None)
+        if named is None:
+            continue
+        other = loader(named)
+        if parameter_hash(other) != parameter_hash(mine):
+            raise ConfigError(
+                f"{source}: {field} = {named!r} is not the run's {field} ({mine.name!r}, "
+                f"parameters {parameter_hash(mine)} vs {parameter_hash(other)}): one vessel per "
+                f"run; remove '{field}' from the preset or name the run's file"
+            )
+
+
+def make_controller(
+    name: str, n_auv: int, preset: str | Path | None = None,
+    overrides: Mapping[str, Any] | None = None, *, boat: Boat | None = None,
+) -> Controller:  # fmt: skip
+    """Build controller ``name`` for ``n_auv`` AUVs from a preset, for the run's ``boat``.
+
+    ``boat`` is the scenario's (or the deploy configuration's) vessel and execution level;
+    None only outside a run (unit tests): the controller's own default.
+
+    Raises
+    ------
+    ConfigError
+        Unknown controller or preset, invalid preset, too many AUVs for the kind, or a preset
+        that names another vessel than ``boat``'s.
+    """
+    kind = controller_kind(name)
+    if n_auv > 1 and not kind.multi:
+        raise ConfigError(f"controller {name!r} handles one AUV, the scenario has {n_auv}")
+    params = load_preset(name, preset, overrides)
+    if boat is not None:
+        check_boat(params, boat, str(resolve("presets", preset or kind.default_preset)))
+    return kind.build(params, n_auv, boat)

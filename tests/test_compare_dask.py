@@ -1,0 +1,125 @@
+"""Dask without a shared file system (issue 12 item 7): each job's row comes back through Dask
+and the client writes the parts and the results table; the run folders go where the user says
+(a path or an fsspec URL) or stay in the worker's working directory.
+
+The cluster is a local ``distributed.LocalCluster`` of worker processes (Nannies) whose
+working directory is another folder (a worker preload changes it), and which cannot write
+results parts (the preload makes :func:`mpcasv.experiments.store.write_part` raise in the
+worker): a complete table can then only come from the client.
+"""
+
+from __future__ import annotations
+
+import textwrap
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+from mpcasv.experiments.runner import run_suite
+from mpcasv.experiments.suite import SCENARIOS_DIR
+
+distributed = pytest.importorskip("distributed")
+
+CASE3 = SCENARIOS_DIR / "case3.toml"
+SUITE = f"""
+name = "tiny"
+scenarios = ["{CASE3}"]
+duration = 15.0
+seeds = [0, 1, 2]
+current = ["off"]
+estimator = ["scenario"]
+plots = "none"
+
+[[controllers]]
+label = "hybrid"
+name = "hybrid-single"
+preset = "scenario"
+"""
+
+PRELOAD = """
+import os
+import mpcasv.experiments.runner as runner
+import mpcasv.experiments.store as store
+
+def _refuse(*args, **kwargs):
+    raise RuntimeError("a worker wrote a results part")
+
+def dask_setup(worker):
+    os.makedirs({where!r}, exist_ok=True)
+    os.chdir({where!r})
+    store.write_part = runner.write_part = _refuse
+"""
+
+
+@pytest.fixture(scope="module")
+def cluster(tmp_path_factory):
+    where = tmp_path_factory.mktemp("worker-cwd")
+    preload = textwrap.dedent(PRELOAD).format(where=str(where))
+    with distributed.LocalCluster(processes=True, n_workers=1, threads_per_worker=1,
+                                  dashboard_address=None, preload=[preload]) as c:  # fmt: skip
+        yield c, where
+
+
+def _write_a_part(out):
+    from mpcasv.experiments import runner
+
+    runner.write_part(out, {"job_id": "x", "status": "ok"})
+
+
+def _suite(tmp_path: Path) -> Path:
+    path = tmp_path / "tiny.toml"
+    path.write_text(SUITE)
+    return path
+
+
+def test_dask_workers_in_another_directory_give_a_complete_resumable_table(cluster, tmp_path):
+    c, worker_cwd = cluster
+    with distributed.Client(c.scheduler_address) as client:  # the preload really ran
+        assert client.run(lambda: __import__("os").getcwd()) == {
+            w: str(worker_cwd) for w in client.scheduler_info()["workers"]
+        }
+        with pytest.raises(RuntimeError, match="a worker wrote a results part"):
+            client.submit(_write_a_part, tmp_path, pure=False).result()
+    out = tmp_path / "out"
+    stats, exp, df = run_suite(_suite(tmp_path), out, dask=c.scheduler_address, quiet=True,
+                               report=False)  # fmt: skip
+    jobs = [j.job_id for j in exp.jobs]
+    assert stats.ok == len(jobs) == 3 and stats.lost == 0
+    assert list(df["job_id"]) == jobs and (df["status"] == "ok").all()
+    assert df["min_range_m"].notna().all()
+    assert sorted(p.stem for p in (out / "parts").glob("*.parquet")) == sorted(jobs)
+    # the run folders stayed in the worker's working directory; nothing of them in DIR
+    assert not (out / "runs").exists()
+    for job, run_dir in zip(exp.jobs, df["run_dir"], strict=True):
+        assert Path(run_dir) == worker_cwd / "mpcasv-runs" / "tiny" / job.run_name
+        assert (Path(run_dir) / "metrics.json").is_file()
+    assert "worker's directory" in stats.runs
+
+    # resumable: a finished sweep runs nothing; a lost part is rerun, the table is whole again
+    stats, _, again = run_suite(_suite(tmp_path), out, dask=c.scheduler_address, quiet=True,
+                                report=False)  # fmt: skip
+    assert stats.ran == 0 and stats.already_done == 3
+    pd.testing.assert_frame_equal(again, df)
+    (out / "parts" / f"{jobs[1]}.parquet").unlink()
+    stats, _, again = run_suite(_suite(tmp_path), out, dask=c.scheduler_address, quiet=True,
+                                report=False)  # fmt: skip
+    assert stats.ran == 1 and stats.already_done == 2
+    assert list(again["job_id"]) == jobs and (again["status"] == "ok").all()
+    cols = ["job_id", "seed", "min_range_m", "energy_J", "run_dir"]
+    pd.testing.assert_frame_equal(again[cols], df[cols])
+
+
+def test_run_folders_go_to_the_named_fsspec_url(tmp_path):
+    """``--runs-dir file://...``: the folder is written locally, then put through fsspec; the
+    row records the URL."""
+    remote = tmp_path / "remote"
+    out = tmp_path / "out"
+    stats, exp, df = run_suite(_suite(tmp_path), out, workers=1, quiet=True, report=False,
+                               runs_dir=f"file://{remote}")  # fmt: skip
+    assert stats.runs == f"file://{remote}" and (df["status"] == "ok").all()
+    for job, run_dir in zip(exp.jobs, df["run_dir"], strict=True):
+        assert run_dir == f"file://{remote / job.run_name}"
+        assert {p.name for p in (remote / job.run_name).iterdir()} >= {
+            "metrics.json", "run.json", "timeseries.parquet"}  # fmt: skip
+    assert not (out / "runs").exists()
