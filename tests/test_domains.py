@@ -217,8 +217,6 @@ def test_params_methods_use_the_functions(d):
     assert p.outer(d) == r_outer(d, r_out(3500, 17.5))
     assert p.target(d) == r_target(d, r_in(5, 5, 2), 20)
     assert p.avoid(d) == r_avoid(d, r_in(5, 5, 2))  # Paper 2: r_avoid = alpha T0 rdot_max
-    r = np.linspace(0, 120, 13)
-    np.testing.assert_array_equal(p.in_target(r, d), in_target_domain(r, p.target(d), 10, 10))
 
 
 def test_params_methods_vectorise():

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import math
 
-import casadi as ca
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -19,7 +18,6 @@ from mpcasv.hybrid.domains import (
     estimate_shape,
     r_avoid,
     r_avoid_uncertain,
-    smooth_signed_distance,
 )
 from mpcasv.interface import AUVEstimate
 from mpcasv.models.auv import AUVLimits, auv_step_function
@@ -168,25 +166,6 @@ def test_lookahead_moves_the_centre_and_grows_the_domain():
 
 
 # --- the smooth (MPC) form ----------------------------------------------------------------------
-
-
-@settings(max_examples=30, deadline=None)
-@given(st.floats(-80, 80), st.floats(-80, 80))
-def test_smooth_distance_is_conservative_and_close(qN, qE):
-    q = np.array([qN, qE])
-    for kind in ("uncertainty", "reachable"):
-        av = AvoidanceParams(kind=kind, r_keep=20.0)
-        shape = estimate_shape(av, DOM, [_est(1.0, 2.0, 5.0, 1.2, -0.5, 4.0, 0.0)], 3.0)
-        c, rho = shape.center[0], float(shape.rho[0])
-        N = None if shape.normals is None else shape.normals[0]
-        h = None if shape.h is None else shape.h[0]
-        sd = float(shape.signed_distance(q)[0])
-        sm = float(smooth_signed_distance(q, c, rho, N, h, kappa=2.0))
-        slack = 0.1 if N is None else math.log(len(h)) / 2.0
-        assert sd - slack - 1e-9 <= sm <= sd + 1e-9
-        qs = ca.SX.sym("q", 2)
-        f = ca.Function("f", [qs], [smooth_signed_distance(qs, c, rho, N, h, kappa=2.0)])
-        assert float(f(q)) == pytest.approx(sm, abs=1e-9)
 
 
 def test_avoidance_params_validated():

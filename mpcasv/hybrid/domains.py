@@ -33,7 +33,6 @@ __all__ = [
     "estimate_shape",
     "r_avoid_uncertain",
     "reach_support",
-    "smooth_signed_distance",
     "in_reliable_range",
     "in_target_domain",
     "reliable_fix_possible",
@@ -330,10 +329,6 @@ class DomainParams:
         """Anti-collision radius ``r_avoid,i`` at depth ``d`` (m, Paper 2 eq. 5)."""
         return r_avoid(d, self.r_in)
 
-    def in_target(self, r: ArrayLike, d: ArrayLike) -> NDArray | np.bool_:
-        """Whether range ``r`` from an AUV at depth ``d`` is in the target domain (eq. 10)."""
-        return in_target_domain(r, self.target(d), self.eps_minus, self.eps_plus)
-
     def reliable_limit(self, r_t: ArrayLike) -> NDArray | float:
         """``r_t + eps_plus`` (m): see :func:`reliable_limit`."""
         return reliable_limit(r_t, self.eps_plus)
@@ -379,8 +374,7 @@ class DomainParams:
 #
 # Signed distance. For a convex set K given by support values, sd(q) = max_j n_j.(q - c) - h_j
 # is the exact signed distance inside and a lower bound outside (conservative); minus r_U for
-# the disc. The MPC's smooth version replaces the max by log-sum-exp minus log(M)/kappa
-# (a smooth lower bound of the max, so still conservative): see smooth_signed_distance.
+# the disc.
 
 
 @frozen
@@ -633,34 +627,3 @@ def avoidance_radii(avoid: AvoidanceParams, domain: DomainParams | None, auvs, t
     shape = estimate_shape(avoid, domain, auvs, t)
     _, beta = range_bearing(asv_NE, shape.center)
     return shape.radius(beta)
-
-
-def smooth_signed_distance(q, center, rho, normals=None, h=None, kappa: float = 2.0,
-                           eps: float = 0.1):  # fmt: skip
-    """Smooth, conservative version of :meth:`AvoidanceShape.signed_distance` for one AUV.
-
-    Works on numpy arrays and on CasADi symbols (``q`` a 2x1 SX/MX; ``center``, ``rho``,
-    ``normals`` (M x 2), ``h`` (M) numbers or symbols/parameters): the MPC constraint is
-    ``smooth_signed_distance(xi_asv, ...) >= margin``.
-
-    - disc: ``sqrt(|q - c|^2 + eps^2) - eps - rho`` (<= the exact distance);
-    - polygon: ``logsumexp(kappa (N (q - c) - h)) / kappa - log(M) / kappa - rho``
-      (<= the max: at most ``log(M) / kappa`` m more conservative).
-    """
-    import casadi as ca
-
-    if isinstance(q, (ca.SX, ca.MX, ca.DM)):
-        rel = q - ca.reshape(center, 2, 1)
-        if normals is None:
-            return ca.sqrt(ca.sumsqr(rel) + eps**2) - eps - rho
-        M = normals.shape[0]
-        z = kappa * (ca.mtimes(normals, rel) - ca.reshape(h, M, 1))
-        return ca.logsumexp(z) / kappa - math.log(M) / kappa - rho
-    rel = np.asarray(q, float) - np.asarray(center, float)
-    if normals is None:
-        return np.sqrt(np.sum(rel**2, axis=-1) + eps**2) - eps - np.asarray(rho)
-    normals = np.asarray(normals, float)
-    z = kappa * (np.einsum("...mj,...j->...m", normals, rel) - np.asarray(h, float))
-    zmax = np.max(z, axis=-1, keepdims=True)
-    lse = (zmax[..., 0] + np.log(np.sum(np.exp(z - zmax), axis=-1))) / kappa
-    return lse - math.log(normals.shape[-2]) / kappa - np.asarray(rho)
