@@ -28,7 +28,18 @@ from mpcasv.config import (
 )
 from mpcasv.models.acoustics import AcousticParams, NavParams
 from mpcasv.models.auv import AUVLimits
-from mpcasv.models.behaviours import Plan, Pursuer, Scripted, Transit, lawnmower
+from mpcasv.models.behaviours import (
+    Abort,
+    Loiter,
+    Pause,
+    Plan,
+    Pursuer,
+    Scripted,
+    SetLimits,
+    Transit,
+    lawnmower,
+)
+from mpcasv.models.current import V_MAX, CurrentField
 from mpcasv.sim.uncertainty import Uncertain, check_uncertain
 
 
@@ -108,19 +119,35 @@ class TransitSpec:
 
 
 @frozen
+class LoiterSpec:
+    """Hold position at ``at`` (default: where the AUV is when it starts loitering) and
+    ``depth`` (default: its depth then), moving back at up to ``speed`` when pushed away."""
+
+    at: tuple[Float, Float] | None = None  # (N, E), m
+    depth: NonNeg | None = None  # m
+    speed: Pos = 0.5  # m/s
+
+
+@frozen
 class Behaviour:
-    """Exactly one of ``plan``, ``pursuer``, ``transit``."""
+    """Exactly one of ``plan``, ``pursuer``, ``transit``, ``loiter``."""
 
     plan: PlanSpec | None = None
     pursuer: PursuerSpec | None = None
     transit: TransitSpec | None = None
+    loiter: LoiterSpec | None = None
 
     @model_validator(mode="after")
     def _one(self) -> Behaviour:
-        given = [k for k in ("plan", "pursuer", "transit") if getattr(self, k) is not None]
+        given = [k for k in BEHAVIOURS if getattr(self, k) is not None]
         if len(given) != 1:
-            raise ValueError(f"give exactly one of plan, pursuer, transit (got {given or 'none'})")
+            raise ValueError(f"give exactly one of {', '.join(BEHAVIOURS)} "
+                             f"(got {given or 'none'})")  # fmt: skip
         return self
+
+    @property
+    def spec(self):
+        return self.plan or self.pursuer or self.transit or self.loiter
 
     def build(self):
         if self.plan is not None:
@@ -130,20 +157,88 @@ class Behaviour:
         if self.pursuer is not None:
             p = self.pursuer
             return Pursuer(p.speed, p.depth, p.update_period)
+        if self.loiter is not None:
+            return Loiter(self.loiter.at, self.loiter.depth, self.loiter.speed)
         return Transit(self.transit.heading_deg, self.transit.speed, self.transit.depth)
+
+
+BEHAVIOURS = ("plan", "pursuer", "transit", "loiter")
+#: the fields each event kind may give (besides ``t`` and ``kind``)
+EVENT_FIELDS = {
+    "switch": ("plan", "pursuer", "transit"),
+    "abort": ("rise_rate",),
+    "loiter": ("at", "depth", "speed", "duration"),
+    "limits": ("speed_max", "turn_rate_max_deg", "depth_rate_max", "accel_max"),
+}
+#: index of each limit in :meth:`AUVLimits.vector` (turn rate converted to rad/s)
+LIMIT_INDEX = {"speed_max": 0, "turn_rate_max_deg": 1, "depth_rate_max": 2, "accel_max": 3}
 
 
 @frozen
 class Event:
-    """At time ``t`` the AUV switches to another behaviour (scripted waypoint changes)."""
+    """What happens to an AUV at time ``t`` (s), by ``kind``:
+
+    - ``switch`` (default): it switches to the behaviour given (exactly one of ``plan``,
+      ``pursuer``, ``transit``);
+    - ``abort``: it stops where it is and rises to the surface, at ``rise_rate`` m/s if given
+      (replacing its depth-rate limit while the abort lasts), and stays there;
+    - ``loiter``: it holds position (``at``, ``depth``, ``speed`` as in ``[behaviour.loiter]``)
+      for ``duration`` s and then resumes what it was doing (no ``duration``: until the next
+      event or the end);
+    - ``limits``: the limits given (``speed_max``, ``turn_rate_max_deg``, ``depth_rate_max``,
+      ``accel_max``) replace the ones in force from then on.
+    """
 
     t: NonNeg
+    kind: Literal["switch", "abort", "loiter", "limits"] = "switch"
     plan: PlanSpec | None = None
     pursuer: PursuerSpec | None = None
     transit: TransitSpec | None = None
+    rise_rate: Pos | None = None  # m/s (abort)
+    at: tuple[Float, Float] | None = None  # (N, E) m (loiter)
+    depth: NonNeg | None = None  # m (loiter)
+    speed: Pos | None = None  # m/s (loiter)
+    duration: Pos | None = None  # s (loiter)
+    speed_max: Pos | None = None  # m/s (limits)
+    turn_rate_max_deg: Pos | None = None  # deg/s (limits)
+    depth_rate_max: Pos | None = None  # m/s (limits)
+    accel_max: Pos | None = None  # m/s^2 (limits)
+
+    @model_validator(mode="after")
+    def _kind(self) -> Event:
+        allowed = EVENT_FIELDS[self.kind]
+        for kind, names in EVENT_FIELDS.items():
+            for name in names:
+                if name not in allowed and getattr(self, name) is not None:
+                    raise ValueError(f"{name} belongs to kind = {kind!r} events, not to "
+                                     f"kind = {self.kind!r}")  # fmt: skip
+        if self.kind == "switch":
+            given = [k for k in allowed if getattr(self, k) is not None]
+            if len(given) != 1:
+                raise ValueError("a switch event (no kind, or kind = 'switch') needs exactly one "
+                                 "of plan, pursuer, transit (or give kind = 'abort', 'loiter' "
+                                 f"or 'limits'); got {given or 'none'}")  # fmt: skip
+        if self.kind == "limits" and not any(getattr(self, k) is not None for k in allowed):
+            raise ValueError(f"a limits event needs at least one of {', '.join(allowed)}")
+        return self
 
     def behaviour(self) -> Behaviour:
+        """The behaviour a switch event switches to."""
         return Behaviour(self.plan, self.pursuer, self.transit)
+
+    def action(self):
+        """What :class:`~mpcasv.models.behaviours.Scripted` does at ``t``."""
+        if self.kind == "switch":
+            return self.behaviour().build()
+        if self.kind == "abort":
+            return Abort(self.rise_rate)
+        if self.kind == "loiter":
+            loiter = Loiter(self.at, self.depth, 0.5 if self.speed is None else self.speed)
+            return Pause(loiter, self.duration)
+        return SetLimits(tuple(
+            (i, math.radians(v) if name == "turn_rate_max_deg" else v)
+            for name, i in LIMIT_INDEX.items() if (v := getattr(self, name)) is not None
+        ))  # fmt: skip
 
 
 @frozen
@@ -157,21 +252,30 @@ class AUVSpec:
 
     @model_validator(mode="after")
     def _speeds(self) -> AUVSpec:
-        for ev in (self.behaviour, *self.events):
-            spec = ev.plan or ev.pursuer or ev.transit
-            if spec is not None and spec.speed > self.limits.speed_max:
-                raise ValueError(
-                    f"behaviour speed {spec.speed} exceeds limits.speed_max {self.limits.speed_max}"
-                )
-        for ev in self.events:
-            ev.behaviour()  # validates exactly-one
+        """Every behaviour's speed within the speed_max in force when it starts (a later limits
+        event may lower it: the kinematics then clip the speed)."""
+        u_max, where = self.limits.speed_max, "limits.speed_max"
+        spec = self.behaviour.spec
+        if spec.speed > u_max:
+            raise ValueError(f"behaviour speed {spec.speed} exceeds {where} {u_max}")
+        for i, ev in sorted(enumerate(self.events), key=lambda iev: iev[1].t):
+            if ev.kind == "limits" and ev.speed_max is not None:
+                u_max, where = ev.speed_max, f"speed_max of events[{i}] (t = {ev.t} s)"
+            speed = ev.speed if ev.kind == "loiter" else (
+                ev.behaviour().spec.speed if ev.kind == "switch" else None)  # fmt: skip
+            if speed is not None and speed > u_max:
+                raise ValueError(f"events[{i}] (t = {ev.t} s): speed {speed} exceeds {where} "
+                                 f"{u_max} in force then")  # fmt: skip
         return self
 
     def build_behaviour(self):
+        """The behaviour object (:mod:`mpcasv.models.behaviours`); a ``Scripted`` one, which
+        also gives the limits in force, when the AUV has events."""
         initial = self.behaviour.build()
         if not self.events:
             return initial
-        return Scripted(initial, [(ev.t, ev.behaviour().build()) for ev in self.events])
+        return Scripted(initial, [(ev.t, ev.action()) for ev in self.events],
+                        limits=self.limits.vector())  # fmt: skip
 
 
 @frozen
@@ -211,6 +315,9 @@ class Scenario:
     preset: str = "default"  # default preset of that controller
     estimator: str = "perfect"
     current: tuple[Float, Float] = (0.0, 0.0)  # (V_N, V_E), m/s
+    # optional: a time profile and spatial gradient added to it, carrying the AUVs too
+    # (mpcasv.models.current)
+    current_field: CurrentField | None = None
     asv: ASVSpec = ASVSpec()
     sim: SimSpec = SimSpec()
     acoustics: AcousticParams = AcousticParams()
@@ -228,8 +335,14 @@ class Scenario:
         names = [a.name for a in self.auv]
         if len(set(names)) != len(names):
             raise ValueError(f"AUV names must be unique, got {names}")
-        if math.hypot(*self.current) > 2.0:
+        if math.hypot(*self.current) > V_MAX:
             raise ValueError("current above 2 m/s is not supported (the ASV could not hold)")
+        if self.current_field is not None:
+            top = math.hypot(*self.current) + self.current_field.extra_max()
+            if top > V_MAX:
+                raise ValueError(f"current_field: the current may reach {top:.3g} m/s (|current| "
+                                 "+ largest knot + ||gradient|| x radius), above 2 m/s (the ASV "
+                                 "could not hold)")  # fmt: skip
         if not self.uncertain.is_empty():
             check_uncertain(self)
         return self
