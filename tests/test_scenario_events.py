@@ -4,10 +4,12 @@ space and carries the AUVs. Driven through the simulated World with the ASV stan
 
 from __future__ import annotations
 
+import json
 import math
 import textwrap
 
 import numpy as np
+import pandas as pd
 import pytest
 
 from mpcasv.cli import main
@@ -290,3 +292,52 @@ def test_every_shipped_scenario_still_loads_and_the_abort_example_rises_under_th
         w.advance(STANDBY)
     assert w.S[2, 0] < 0.5  # surfaced within 200 s of the abort
     assert math.hypot(w.S[0, 0] - w.x[0], w.S[1, 0] - w.x[1]) < 30.0  # under the ASV
+
+
+def test_scripted_loiter_resumes_the_interrupted_behaviour_and_a_switch_cancels_the_resume():
+    from mpcasv.models.behaviours import Loiter, Pause, Scripted, Transit
+
+    s = np.array([0.0, 0.0, 10.0, 0.0, 1.0])
+    north, east = Transit(0.0, 1.0, 10.0), Transit(90.0, 1.0, 10.0)
+    b = Scripted(north, [(10.0, Pause(Loiter(), 20.0)), (15.0, Pause(Loiter(), 10.0))])
+    assert isinstance(b.current, Transit)
+    b.setpoint(10.0, s, np.zeros(2))
+    b.setpoint(15.0, s, np.zeros(2))  # a second loiter inside the first
+    assert isinstance(b.current, Loiter)
+    b.setpoint(25.0, s, np.zeros(2))
+    assert b.current is north  # the behaviour interrupted first, not the first loiter
+    b = Scripted(north, [(10.0, Pause(Loiter(), 20.0)), (15.0, east)])
+    for t in (10.0, 15.0, 40.0):
+        b.setpoint(t, s, np.zeros(2))
+    assert b.current is east and b.switches == [10.0, 15.0]
+
+
+def test_uncertain_rotation_and_offset_move_loiter_points_with_the_routes():
+    data = scenario({"start": {"N": 0.0, "E": 0.0, "depth": 20.0},
+                     "behaviour": {"loiter": {"at": [100.0, 0.0]}},
+                     "events": [{"t": 10.0, "kind": "loiter", "at": [0.0, 50.0]}]},
+                    duration=10.0,
+                    uncertain={"auv": {"a": {
+                        "rotation_deg": {"dist": "uniform", "low": 80.0, "high": 100.0},
+                        "offset_N": {"dist": "uniform", "low": 5.0, "high": 10.0}}}})  # fmt: skip
+    done, real = realise(scenario_from_dict(data), 2)
+    rot = math.radians(real.values["auv.a.rotation_deg"])
+    dN = real.values["auv.a.offset_N"]
+    a = done.auv[0]
+    assert a.behaviour.loiter.at == pytest.approx((100 * math.cos(rot) + dN, 100 * math.sin(rot)))
+    assert a.events[0].at == pytest.approx((-50 * math.sin(rot) + dN, 50 * math.cos(rot)))
+
+
+def test_hybrid_single_on_abort_under_asv_is_caught_inside_then_escapes(tmp_path, scenarios_dir):
+    """Pins today's behaviour on the example: the standing-by ASV (10 m off) is inside the
+    rising AUV's collision domain for a few seconds, then the avoidance transit leaves it."""
+    out = tmp_path / "run"
+    assert main(["simulate", str(scenarios_dir / "abort-under-asv.toml"), "--out", str(out),
+                 "--quiet", "--no-plots"]) == 0  # fmt: skip
+    m = json.loads((out / "metrics.json").read_text())
+    assert m["min_range_m"] == pytest.approx(10.0, abs=0.01)
+    assert 0.0 < m["collision_domain_s"] < 30.0  # measured 9.5 s (seed 0)
+    ts = pd.read_parquet(out / "timeseries.parquet")
+    rising = ts[(ts["t"] > 300) & (ts["t"] < 362)]
+    assert (rising["reason"] == "avoidance").any()
+    assert ts["range0"].iloc[-1] > ts["r_inner0"].iloc[-1]  # outside the domain at the end
