@@ -341,3 +341,14 @@ def test_hybrid_single_on_abort_under_asv_is_caught_inside_then_escapes(tmp_path
     rising = ts[(ts["t"] > 300) & (ts["t"] < 362)]
     assert (rising["reason"] == "avoidance").any()
     assert ts["range0"].iloc[-1] > ts["r_inner0"].iloc[-1]  # outside the domain at the end
+
+
+def test_the_ground_truth_velocity_includes_the_drift_from_the_start():
+    data = scenario({"start": {"depth": 40.0, "speed": 1.5}}, duration=10.0, current=[0.0, 0.3],
+                    current_field={"auv_factor": 0.5})  # fmt: skip
+    w = World(scenario_from_dict(data), seed=0)
+    assert w.auv_truth(0)[3:] == pytest.approx((1.5, 0.15))
+    w.advance(STANDBY)  # (the transit's heading corrects the drift a little)
+    assert w.auv_truth(0)[3:] == pytest.approx((1.5, 0.15), abs=1e-4)
+    plain = World(scenario_from_dict(dict(data, current_field=None)), seed=0)
+    assert plain.auv_truth(0)[3:] == pytest.approx((1.5, 0.0))

@@ -134,6 +134,8 @@ class World:
             [[a.start.N, a.start.E, a.start.depth, math.radians(a.start.psi_deg), a.start.speed]
              for a in scenario.auv], float,
         ).T  # fmt: skip
+        if self._carry:  # the drift before the first period (the perfect estimator's velocity)
+            self.C_auv = self.flow.auv_factor * self.flow(0.0, self.S[:2])
         self.LIM = np.array([a.limits.vector() for a in scenario.auv]).T
         self.behaviours = [a.build_behaviour() for a in scenario.auv]
         # AUVs whose limits may change (limit events, an abort's rise rate)
