@@ -1,9 +1,11 @@
 """AUV motion: a kinematic vehicle limited in speed, acceleration, turn rate and depth rate.
 
-State per AUV ``[N, E, d, psi, U]`` (m, m, m down, rad, m/s over ground); set-point
-``[N_t, E_t, U_d, d_d]`` (a point to head for, a speed, a depth); limits
-``[U_max, r_max, w_max, a_max]``. The kinematics are unrolled over one supervisory period in
-CasADi and mapped over all AUVs, so moving every AUV costs one call per period.
+State per AUV ``[N, E, d, psi, U]`` (m, m, m down, rad, m/s: over ground without a current,
+through the water with one); set-point ``[N_t, E_t, U_d, d_d]`` (a point to head for, a speed,
+a depth); limits ``[U_max, r_max, w_max, a_max]`` (changeable per period: limit events, an
+abort's rise rate); optionally a water current carrying each AUV. The kinematics are unrolled
+over one supervisory period in CasADi and mapped over all AUVs, so moving every AUV costs one
+call per period.
 """
 
 from __future__ import annotations
@@ -43,9 +45,15 @@ def _clip(x, lim):
 
 
 @lru_cache(maxsize=16)
-def auv_step_function(dt: float, n_sub: int, n_auv: int) -> ca.Function:
-    """``F(S, SP, LIM) -> (S_next, S_traj)`` for ``n_auv`` AUVs (columns), ``n_sub`` steps."""
+def auv_step_function(dt: float, n_sub: int, n_auv: int, drift: bool = False) -> ca.Function:
+    """``F(S, SP, LIM) -> (S_next, S_traj)`` for ``n_auv`` AUVs (columns), ``n_sub`` steps.
+
+    With ``drift``: ``F(S, SP, LIM, C)``, where ``C`` (2 x n_auv, m/s) is the water current
+    ``(V_N, V_E)`` carrying each AUV during the period (added to its velocity through the water;
+    ``U`` and ``psi`` then describe that velocity, the position moves over ground).
+    """
     s0, sp, lim = ca.SX.sym("s", NA), ca.SX.sym("sp", 4), ca.SX.sym("lim", 4)
+    c = ca.SX.sym("c", 2) if drift else ca.SX.zeros(2)
     s, traj = s0, []
     for _ in range(n_sub):
         N, E, d, psi, U = s[0], s[1], s[2], s[3], s[4]
@@ -59,9 +67,10 @@ def auv_step_function(dt: float, n_sub: int, n_auv: int) -> ca.Function:
         d_dot = _clip(K_DEPTH * (sp[3] - d), lim[2])
         U_next = U + dt * U_dot
         s = ca.vertcat(
-            N + dt * U_next * ca.cos(psi), E + dt * U_next * ca.sin(psi),
+            N + dt * (U_next * ca.cos(psi) + c[0]), E + dt * (U_next * ca.sin(psi) + c[1]),
             ca.fmax(d + dt * d_dot, 0), psi + dt * psi_dot, U_next,
         )  # fmt: skip
         traj.append(s)
-    f = ca.Function("auv_step", [s0, sp, lim], [s, ca.horzcat(*traj)])
+    ins = [s0, sp, lim, c] if drift else [s0, sp, lim]
+    f = ca.Function("auv_step", ins, [s, ca.horzcat(*traj)])
     return f.map(n_auv)

@@ -3,7 +3,8 @@
 A behaviour turns (time, AUV state, ASV position) into a set-point ``(N_t, E_t, U_d, d_d)``
 for the kinematics in :mod:`mpcasv.models.auv`. Behaviours: a waypoint plan (optionally built
 from lawnmower patterns, with a depth yoyo and surface intervals), straight transit, a pursuer
-that heads for the ASV (the papers' adversarial cases), and scripted switches at given times.
+that heads for the ASV (the papers' adversarial cases), loitering in place, and events at given
+times: behaviour switches, an abort (stop and rise), a loiter that resumes, limit changes.
 """
 
 from __future__ import annotations
@@ -120,23 +121,132 @@ class Pursuer:
         return self._target[0], self._target[1], self.speed, self.depth
 
 
+#: the AUV holds its loiter point to within this horizontal distance (m), without moving
+LOITER_RADIUS = 2.0
+#: speed set-point per metre outside the loiter radius (1/s), before the loiter speed cap
+LOITER_GAIN = 0.1
+
+
+def _latched_heading_point(s: np.ndarray, psi: float) -> tuple[float, float]:
+    """A point far ahead along heading ``psi`` from ``s`` (no turn while the AUV stops)."""
+    return s[0] + 1e4 * math.cos(psi), s[1] + 1e4 * math.sin(psi)
+
+
+@dataclass
+class Loiter:
+    """Hold position: go back to ``at`` (N, E), or to where the AUV is when the loiter starts,
+    and stay within :data:`LOITER_RADIUS` at ``depth`` (or its depth then).
+
+    Outside the radius it heads for the point at ``min(speed, LOITER_GAIN * excess)`` (a
+    current carrying the AUV is thus fought back); inside, it stops without turning.
+    """
+
+    at: tuple[float, float] | None = None
+    depth: float | None = None
+    speed: float = 0.5  # m/s, the fastest it moves back to its point
+    _hold: tuple[float, float, float] | None = field(default=None, repr=False)
+    _psi: float = field(default=0.0, repr=False)
+
+    def setpoint(self, t: float, s: np.ndarray, asv_NE: np.ndarray) -> tuple[float, ...]:
+        if self._hold is None:  # latched at the first call (the loiter's start)
+            N, E = self.at if self.at is not None else (float(s[0]), float(s[1]))
+            self._hold = (N, E, float(s[2]) if self.depth is None else self.depth)
+            self._psi = float(s[3])
+        N, E, d = self._hold
+        excess = math.hypot(N - s[0], E - s[1]) - LOITER_RADIUS
+        if excess <= 0.0:
+            return (*_latched_heading_point(s, float(s[3])), 0.0, d)
+        return N, E, min(self.speed, LOITER_GAIN * excess), d
+
+
+@dataclass
+class Abort:
+    """Abort: stop where you are (speed 0, keeping the heading) and rise to the surface.
+
+    ``rise_rate`` (m/s) replaces the AUV's depth-rate limit while the abort lasts (None: keep
+    the limit in force); the depth loop of :mod:`mpcasv.models.auv` then rises at that rate
+    until the last ``rise_rate / K_DEPTH`` metres, which it closes exponentially.
+    """
+
+    rise_rate: float | None = None
+    _psi: float | None = field(default=None, repr=False)
+
+    def setpoint(self, t: float, s: np.ndarray, asv_NE: np.ndarray) -> tuple[float, ...]:
+        if self._psi is None:
+            self._psi = float(s[3])
+        return (*_latched_heading_point(s, self._psi), 0.0, 0.0)
+
+
+@dataclass(frozen=True)
+class SetLimits:
+    """Event action: replace some of the AUV's limits ``{index: value}`` (indices of
+    :meth:`mpcasv.models.auv.AUVLimits.vector`: 0 speed, 1 turn rate (rad/s), 2 depth rate,
+    3 acceleration) from the event's time on."""
+
+    values: tuple[tuple[int, float], ...]
+
+
+@dataclass(frozen=True)
+class Pause:
+    """Event action: run ``behaviour`` for ``duration`` s, then resume the one it interrupted
+    (``duration`` None: until the next event or the end)."""
+
+    behaviour: object
+    duration: float | None
+
+
 @dataclass
 class Scripted:
-    """Switch to another behaviour at given times: ``events = [(t, behaviour), ...]``."""
+    """Events at given times: ``events = [(t, action), ...]``.
+
+    An action is a behaviour (switch to it), a :class:`Pause` (a loiter that may resume the
+    interrupted behaviour) or a :class:`SetLimits`. ``limits`` (shape (4,), see
+    :meth:`mpcasv.models.auv.AUVLimits.vector`) are the AUV's limits at t = 0; :meth:`limits_now`
+    gives the ones in force (an :class:`Abort`'s rise rate included). Events at equal times
+    apply in the order given.
+    """
 
     initial: object
     events: list[tuple[float, object]]
     switches: list[float] = field(default_factory=list)
+    limits: np.ndarray | None = None
 
     def __post_init__(self) -> None:
-        self.events = sorted(self.events, key=lambda ev: ev[0])
+        self.events = sorted(self.events, key=lambda ev: ev[0])  # stable: file order on ties
         self.current = self.initial
+        self._lim = None if self.limits is None else np.array(self.limits, float)
+        self._resume: tuple[float, object] | None = None
 
     def setpoint(self, t: float, s: np.ndarray, asv_NE: np.ndarray) -> tuple[float, ...]:
+        if self._resume is not None and t >= self._resume[0]:
+            self.current, self._resume = self._resume[1], None
         while self.events and t >= self.events[0][0]:
-            t_ev, self.current = self.events.pop(0)
+            t_ev, action = self.events.pop(0)
+            if isinstance(action, SetLimits):
+                if self._lim is None:
+                    raise ValueError("a limits event needs Scripted(limits=...)")
+                for i, value in action.values:
+                    self._lim[i] = value
+                continue
             self.switches.append(t_ev)
+            if isinstance(action, Pause):
+                end = None if action.duration is None else t_ev + action.duration
+                interrupted = self._resume[1] if self._resume is not None else self.current
+                self._resume = None if end is None else (end, interrupted)
+                self.current = action.behaviour
+            else:
+                self.current, self._resume = action, None
         return self.current.setpoint(t, s, asv_NE)
+
+    def limits_now(self) -> np.ndarray | None:
+        """The limits in force after the last :meth:`setpoint` (None without ``limits``)."""
+        if self._lim is None:
+            return None
+        if isinstance(self.current, Abort) and self.current.rise_rate is not None:
+            lim = self._lim.copy()
+            lim[2] = self.current.rise_rate
+            return lim
+        return self._lim
 
     @property
     def plan(self) -> Plan | None:

@@ -10,168 +10,25 @@ from __future__ import annotations
 import dataclasses
 import math
 from pathlib import Path
-from typing import Literal
 
 from pydantic import model_validator
 
-from mpcasv.config import (
-    ConfigError,
-    Float,
-    NonNeg,
-    Pos,
-    PosInt,
-    anchor,
-    frozen,
-    is_path,
-    load_toml,
-    parse,
-)
+from mpcasv.config import ConfigError, Float, Pos, anchor, frozen, is_path, load_toml, parse
 from mpcasv.models.acoustics import AcousticParams, NavParams
-from mpcasv.models.auv import AUVLimits
-from mpcasv.models.behaviours import Plan, Pursuer, Scripted, Transit, lawnmower
+from mpcasv.models.current import V_MAX, CurrentField
+from mpcasv.sim.auv_spec import (  # noqa: F401  (re-exported: the format's one namespace)
+    AUVSpec,
+    Behaviour,
+    Event,
+    LawnmowerSpec,
+    LoiterSpec,
+    PlanSpec,
+    PursuerSpec,
+    Segment,
+    Start,
+    TransitSpec,
+)
 from mpcasv.sim.uncertainty import Uncertain, check_uncertain
-
-
-@frozen
-class Start:
-    N: Float = 0.0  # m
-    E: Float = 0.0  # m
-    psi_deg: Float = 0.0
-    depth: NonNeg = 0.0  # m
-    speed: NonNeg = 0.0  # m/s
-
-
-@frozen
-class LawnmowerSpec:
-    origin: tuple[Float, Float]
-    length: Pos
-    spacing: NonNeg
-    legs: PosInt
-    heading_deg: Float = 0.0
-    depth: NonNeg = 0.0
-    turn: Literal["right", "left"] = "right"
-
-
-@frozen
-class Segment:
-    """One piece of a route: explicit waypoints ``[[N, E, depth], ...]`` or a lawnmower."""
-
-    waypoints: tuple[tuple[Float, Float, NonNeg], ...] | None = None
-    lawnmower: LawnmowerSpec | None = None
-
-    @model_validator(mode="after")
-    def _one(self) -> Segment:
-        if (self.waypoints is None) == (self.lawnmower is None):
-            raise ValueError("a route segment needs exactly one of 'waypoints' or 'lawnmower'")
-        return self
-
-    def points(self):
-        if self.lawnmower is not None:
-            lm = self.lawnmower
-            return lawnmower(lm.origin, lm.heading_deg, lm.length, lm.spacing, lm.legs,
-                             lm.depth, lm.turn)  # fmt: skip
-        return list(self.waypoints)
-
-
-@frozen
-class PlanSpec:
-    speed: Pos
-    route: tuple[Segment, ...]
-    acceptance: Pos = 5.0
-    yoyo: tuple[NonNeg, NonNeg] | None = None
-    surface: tuple[tuple[NonNeg, NonNeg], ...] = ()
-    surface_speed: NonNeg = 0.0
-
-    @model_validator(mode="after")
-    def _check(self) -> PlanSpec:
-        if not self.route:
-            raise ValueError("a plan needs a non-empty route")
-        if self.yoyo is not None and self.yoyo[0] >= self.yoyo[1]:
-            raise ValueError("yoyo must be [d_min, d_max] with d_min < d_max")
-        if any(b <= a for a, b in self.surface):
-            raise ValueError("surface intervals must be [t_start, t_end] with t_end > t_start")
-        return self
-
-
-@frozen
-class PursuerSpec:
-    speed: Pos
-    depth: NonNeg = 0.0
-    update_period: NonNeg = 0.0  # s between re-aims at the ASV (0: continuous pursuit)
-
-
-@frozen
-class TransitSpec:
-    heading_deg: Float
-    speed: Pos
-    depth: NonNeg = 0.0
-
-
-@frozen
-class Behaviour:
-    """Exactly one of ``plan``, ``pursuer``, ``transit``."""
-
-    plan: PlanSpec | None = None
-    pursuer: PursuerSpec | None = None
-    transit: TransitSpec | None = None
-
-    @model_validator(mode="after")
-    def _one(self) -> Behaviour:
-        given = [k for k in ("plan", "pursuer", "transit") if getattr(self, k) is not None]
-        if len(given) != 1:
-            raise ValueError(f"give exactly one of plan, pursuer, transit (got {given or 'none'})")
-        return self
-
-    def build(self):
-        if self.plan is not None:
-            p = self.plan
-            pts = [pt for seg in p.route for pt in seg.points()]
-            return Plan(pts, p.speed, p.acceptance, p.yoyo, p.surface, p.surface_speed)
-        if self.pursuer is not None:
-            p = self.pursuer
-            return Pursuer(p.speed, p.depth, p.update_period)
-        return Transit(self.transit.heading_deg, self.transit.speed, self.transit.depth)
-
-
-@frozen
-class Event:
-    """At time ``t`` the AUV switches to another behaviour (scripted waypoint changes)."""
-
-    t: NonNeg
-    plan: PlanSpec | None = None
-    pursuer: PursuerSpec | None = None
-    transit: TransitSpec | None = None
-
-    def behaviour(self) -> Behaviour:
-        return Behaviour(self.plan, self.pursuer, self.transit)
-
-
-@frozen
-class AUVSpec:
-    name: str
-    behaviour: Behaviour
-    start: Start = Start()
-    limits: AUVLimits = AUVLimits()
-    events: tuple[Event, ...] = ()
-    modem_at_surface: bool = True  # False: no acoustics while at the surface (Case 5)
-
-    @model_validator(mode="after")
-    def _speeds(self) -> AUVSpec:
-        for ev in (self.behaviour, *self.events):
-            spec = ev.plan or ev.pursuer or ev.transit
-            if spec is not None and spec.speed > self.limits.speed_max:
-                raise ValueError(
-                    f"behaviour speed {spec.speed} exceeds limits.speed_max {self.limits.speed_max}"
-                )
-        for ev in self.events:
-            ev.behaviour()  # validates exactly-one
-        return self
-
-    def build_behaviour(self):
-        initial = self.behaviour.build()
-        if not self.events:
-            return initial
-        return Scripted(initial, [(ev.t, ev.behaviour().build()) for ev in self.events])
 
 
 @frozen
@@ -211,6 +68,9 @@ class Scenario:
     preset: str = "default"  # default preset of that controller
     estimator: str = "perfect"
     current: tuple[Float, Float] = (0.0, 0.0)  # (V_N, V_E), m/s
+    # optional: a time profile and spatial gradient added to it, carrying the AUVs too
+    # (mpcasv.models.current)
+    current_field: CurrentField | None = None
     asv: ASVSpec = ASVSpec()
     sim: SimSpec = SimSpec()
     acoustics: AcousticParams = AcousticParams()
@@ -228,8 +88,14 @@ class Scenario:
         names = [a.name for a in self.auv]
         if len(set(names)) != len(names):
             raise ValueError(f"AUV names must be unique, got {names}")
-        if math.hypot(*self.current) > 2.0:
+        if math.hypot(*self.current) > V_MAX:
             raise ValueError("current above 2 m/s is not supported (the ASV could not hold)")
+        if self.current_field is not None:
+            top = math.hypot(*self.current) + self.current_field.extra_max()
+            if top > V_MAX:
+                raise ValueError(f"current_field: the current may reach {top:.3g} m/s (|current| "
+                                 "+ largest knot + ||gradient|| x radius), above 2 m/s (the ASV "
+                                 "could not hold)")  # fmt: skip
         if not self.uncertain.is_empty():
             check_uncertain(self)
         return self

@@ -110,7 +110,8 @@ def auv_uncertainty(unc: Uncertain, name: str) -> dict[str, Any]:
 
 
 def _behaviours(spec) -> list:
-    """An AUVSpec's behaviour specs: the initial one and each event's (plan/pursuer/transit)."""
+    """An AUVSpec's behaviour specs that have a speed to scale: the initial one and each
+    switch event's (plan/pursuer/transit; a loiter's speed is a station-keeping cap, kept)."""
     return [b.plan or b.pursuer or b.transit for b in (spec.behaviour, *spec.events)]
 
 
@@ -145,9 +146,11 @@ def check_uncertain(sc) -> None:
 def _check_current(sc, cu: CurrentUncertainty) -> None:
     if cu.speed is not None:
         lo, hi = cu.speed.support()
-        if lo < 0 or hi > 2.0:
+        extra = 0.0 if sc.current_field is None else sc.current_field.extra_max()
+        if lo < 0 or hi + extra > 2.0:
+            field = f" minus the current_field's {extra:.3g} m/s" if extra else ""
             raise ValueError(f"uncertain.current.speed: support [{lo}, {hi}] m/s must lie in "
-                             "[0, 2] (above 2 m/s the ASV could not hold)")  # fmt: skip
+                             f"[0, 2{field}] (above 2 m/s the ASV could not hold)")  # fmt: skip
         if cu.direction_deg is None and math.hypot(*sc.current) == 0.0:
             raise ValueError("uncertain.current.speed: the nominal current is zero, so it has no "
                              "direction: give uncertain.current.direction_deg too")  # fmt: skip
@@ -185,7 +188,10 @@ def _check_auv(spec, given: dict[str, Any]) -> None:
     behaviours = [b for b in _behaviours(spec) if b is not None]
     if "speed_factor" in given:
         lo, hi = given["speed_factor"].support()
-        top = max(b.speed for b in behaviours)
+        top = max((b.speed for b in behaviours), default=0.0)
+        if not behaviours:
+            raise ValueError(f"{where}.speed_factor: the AUV has no plan, pursuer or transit, so "
+                             "it changes nothing")  # fmt: skip
         if lo <= 0 or hi * top > spec.limits.speed_max:
             raise ValueError(f"{where}.speed_factor: support [{lo}, {hi}] must be > 0 and keep "
                              f"its fastest speed {top} m/s within limits.speed_max "
@@ -298,13 +304,19 @@ def nominal(sc):
 
 
 def without_current(sc):
-    """``sc`` with its current no longer uncertain (a suite that fixes the current)."""
+    """``sc`` with its current no longer uncertain nor varying (a suite that fixes the current
+    to its ``current``): the ``[uncertain.current]`` table and the ``[current_field]``'s knots
+    and gradient are dropped (its ``auv_factor``, whether the current carries the AUVs, is
+    kept)."""
     from mpcasv.sim.scenario import scenario_with
 
-    if sc.uncertain.current == CurrentUncertainty():
-        return sc
-    return scenario_with(sc, uncertain=dataclasses.replace(sc.uncertain,
-                                                           current=CurrentUncertainty()))
+    changes = {}
+    if sc.uncertain.current != CurrentUncertainty():
+        changes["uncertain"] = dataclasses.replace(sc.uncertain, current=CurrentUncertainty())
+    cf = sc.current_field
+    if cf is not None and (cf.knots or cf.gradient is not None):
+        changes["current_field"] = dataclasses.replace(cf, knots=(), gradient=None)
+    return scenario_with(sc, **changes) if changes else sc
 
 
 def apply(sc, real: Realisation):
@@ -314,11 +326,12 @@ def apply(sc, real: Realisation):
     names a world digest and the result differs from it (``real`` was drawn from another
     version of the scenario).
 
-    Current: speed and direction replace the nominal ones. ASV: start offsets. Acoustics: the
-    values replace the nominal ones. AUV ``a``: its routes (waypoints, lawnmower origins and
-    headings) and transit headings are turned by ``rotation_deg`` about its nominal start, then
-    moved by ``offset_N/E`` with its start; its start moves by ``start_N/E`` and turns by
-    ``rotation_deg + start_psi_deg``; ``speed_factor`` scales every behaviour speed;
+    Current: speed and direction replace the nominal ones (a ``[current_field]`` is kept and
+    added). ASV: start offsets. Acoustics: the values replace the nominal ones. AUV ``a``: its
+    routes (waypoints, lawnmower origins and headings), loiter points and transit headings are
+    turned by ``rotation_deg`` about its nominal start, then moved by ``offset_N/E`` with its
+    start; its start moves by ``start_N/E`` and turns by ``rotation_deg + start_psi_deg``;
+    ``speed_factor`` scales every plan, pursuer and transit speed;
     ``event_time_s.i`` shifts event ``i``; ``update_period_s`` replaces pursuers' periods.
     """
     from mpcasv.sim.scenario import _to_plain, scenario_from_dict
@@ -368,6 +381,10 @@ def _apply_auv(a: dict, v: dict[str, float]) -> None:
     for i, ev in enumerate(a["events"]):
         ev["t"] += v.get(f"event_time_s.{i}", 0.0)
     for b in (a["behaviour"], *a["events"]):
+        if b.get("at") is not None:  # a loiter event's point
+            b["at"] = move(*b["at"])
+        if b.get("loiter") and b["loiter"].get("at") is not None:
+            b["loiter"]["at"] = move(*b["loiter"]["at"])
         if b.get("plan"):
             p = b["plan"]
             p["speed"] *= f

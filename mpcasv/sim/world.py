@@ -32,6 +32,7 @@ from mpcasv.interface import ASVState, AUVEstimate, Observation
 from mpcasv.models.acoustics import Report, success_probability, usbl_fix
 from mpcasv.models.auv import NA, auv_step_function
 from mpcasv.models.auv_nav import AUVNavFilter
+from mpcasv.models.behaviours import Scripted
 from mpcasv.models.params import load_vessel
 from mpcasv.models.vessel import NX, VesselModel
 from mpcasv.sim.account import StepAccount, classify, evaluation_domain
@@ -112,7 +113,13 @@ class World:
         self.n_auv, self.n_sub = len(scenario.auv), scenario.sim.n_sub
         self.Tc, self.dt = scenario.sim.control_period, scenario.sim.dt
         self.thr_on = self.ep.propeller_on_threshold * self.model.params.T_max
+        # the current acting on the ASV during the current period (V_N, V_E), m/s; with a
+        # [current_field] also the one carrying each AUV (2 x n_auv), see mpcasv.models.current
         self.current = np.array(scenario.current, float)
+        cf = scenario.current_field
+        self.flow = None if cf is None else cf.evaluator(scenario.current)
+        self._carry = cf is not None and cf.auv_factor > 0.0
+        self.C_auv = np.zeros((2, len(scenario.auv)))
         self.domain = evaluation_domain(scenario)
         if self.domain is not None:  # the spheres' radii, once (Paper 1 eqs. 3-4)
             self._r_in, self._r_out = self.domain.r_in, self.domain.r_out
@@ -127,9 +134,14 @@ class World:
             [[a.start.N, a.start.E, a.start.depth, math.radians(a.start.psi_deg), a.start.speed]
              for a in scenario.auv], float,
         ).T  # fmt: skip
+        if self._carry:  # the drift before the first period (the perfect estimator's velocity)
+            self.C_auv = self.flow.auv_factor * self.flow(0.0, self.S[:2])
         self.LIM = np.array([a.limits.vector() for a in scenario.auv]).T
         self.behaviours = [a.build_behaviour() for a in scenario.auv]
-        self._auv_step = _packed(auv_step_function(self.dt, self.n_sub, self.n_auv))
+        # AUVs whose limits may change (limit events, an abort's rise rate)
+        self._scripted = [k for k, b in enumerate(self.behaviours) if isinstance(b, Scripted)]
+        self._auv_step = _packed(auv_step_function(self.dt, self.n_sub, self.n_auv,
+                                                   drift=self._carry))  # fmt: skip
         name = estimator or scenario.estimator
         self.estimators = [
             make_estimator(
@@ -162,9 +174,11 @@ class World:
         return ASVState(x[0], x[1], x[2], x[3], x[4], x[5])
 
     def auv_truth(self, k: int) -> tuple[float, float, float, float, float]:
-        """(N, E, depth, v_N, v_E) of AUV ``k``."""
+        """(N, E, depth, v_N, v_E) of AUV ``k`` (velocity over ground: with the current
+        carrying it during the last period)."""
         N, E, d, psi, U = self.S[:, k]
-        return N, E, d, U * math.cos(psi), U * math.sin(psi)
+        c = self.C_auv[:, k]
+        return N, E, d, U * math.cos(psi) + c[0], U * math.sin(psi) + c[1]
 
     def observation(self) -> Observation:
         """What a controller sees now (estimators fed with the truth for ``perfect``)."""
@@ -178,6 +192,11 @@ class World:
         (see :func:`mpcasv.control.execution.command_vector`)."""
         t0, x0 = self.t, self.x
         n, m = self.n_sub, self.n_auv
+        if self.flow is not None:  # at the period's middle, at the positions at its start
+            t_mid = t0 + 0.5 * self.Tc
+            self.current = self.flow(t_mid, x0[:2])
+            if self._carry:
+                self.C_auv = self.flow.auv_factor * self.flow(t_mid, self.S[:2])
         v = self._CL(x0, self.z, cmd, self.current).full().ravel()
         x_next, z = v[:NX], v[NX : NX + NZ]
         i = NX + NZ
@@ -185,7 +204,14 @@ class World:
         Uin = v[i + NX * n : i + (NX + 2) * n].reshape(2, n, order="F")
         Y = v[i + (NX + 2) * n :].reshape(2, n, order="F")
         SP = np.array([b.setpoint(t0, self.S[:, k], x0[:2]) for k, b in enumerate(self.behaviours)])
-        w = self._auv_step(self.S, SP.T, self.LIM).full().ravel()
+        for k in self._scripted:  # after setpoint(): events up to t0 applied
+            lim = self.behaviours[k].limits_now()
+            if lim is not None:
+                self.LIM[:, k] = lim
+        if self._carry:
+            w = self._auv_step(self.S, SP.T, self.LIM, self.C_auv).full().ravel()
+        else:
+            w = self._auv_step(self.S, SP.T, self.LIM).full().ravel()
         S_next = w[: NA * m].reshape(NA, m, order="F")
         # the mapped function stacks the AUVs' (NA x n) trajectories side by side
         ST = w[NA * m :].reshape(NA, n, m, order="F").transpose(0, 2, 1)  # [:, k, j]
