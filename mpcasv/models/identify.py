@@ -446,14 +446,24 @@ def write_params(path: Path, res: Identification, prior: VesselParams, sources: 
 
     val = res.metrics["simulation_error"]["validation"]
     fit = ", ".join(f"{c} {v['fit_pct']:.1f} %" for c, v in val.items())
+    from mpcasv.models.vessel import top_speed
+
     data = {f.name: getattr(res.params, f.name) for f in dataclasses.fields(res.params)}
     data.pop("provenance")
+    data = {k: v for k, v in data.items() if v is not None}  # absent optional (T_idle)
     data["name"] = f"{prior.name}-identified"
+    # the declared top speed is checked against the model at load: the identified resistance
+    # moves it (set-points are fractions of the prior's T_max, so it is the full-throttle speed
+    # the identified model predicts)
+    data["u_max"] = round(top_speed(res.params), 4)
     prov = {}
     for key in data:
         if key == "name":
             continue
-        if key in res.coeffs:
+        if key == "u_max":
+            prov[key] = (f"top speed of the identified model at T_max = {prior.T_max:g} N "
+                         f"(prior declared {prior.u_max:g} m/s: {prior.provenance.get(key, '')})")
+        elif key in res.coeffs:
             prov[key] = (f"identified by mpcasv identify from {', '.join(sources)}: simulation-"
                          f"error least squares, 1-sigma {100 * res.rel_std[key]:.1f} %; "
                          f"validation fit {fit}; prior {getattr(prior, key):.6g}")  # fmt: skip
