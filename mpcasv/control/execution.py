@@ -68,6 +68,28 @@ def speed_reference(psi_e, u_ff, k_u):
     return u_ff + k_u * ca.fmax(math.pi / 2 - ca.fabs(psi_e), 0)
 
 
+def steering_floor(u_s, P, ep: ExecutionParams):
+    """Least thrust in transit (N): the yaw authority of steady cruising at eq. 3.1's turn speed.
+
+    A steerable drive turns the boat by the side force ``T sin(delta) + |Y_uudelta| u^2 delta``
+    (thrust vectoring plus the leg's lift). The floor keeps the side force at full steering no
+    smaller than at ``u_ff`` with the thrust ``T_f0 = thrust_floor T_max``, and no larger:
+
+        T_floor(u) = clip(T_f0 - |Y_uudelta| (u^2 - u_ff^2) delta_max / sin(delta_max), 0, T_f0)
+
+    It fades out as speed rises (the leg's lift takes over: 0 above ~0.76 m/s on Gretha) and
+    is ``T_f0`` at or below ``u_ff``. ``T_f0`` is ``thrust_floor T_max`` capped at the hull's
+    trim thrust at ``u_ff`` (running drive), so the floor never holds the boat faster than
+    eq. 3.1's speed (``u_ref >= u_ff``). docs/tuning.md, "Thrust floor".
+    """
+    u_ff = ep.reference.u_ff
+    T_trim_ff = -(P.X_u * u_ff + P.X_uu * abs(u_ff) * u_ff)
+    T_f0 = min(ep.thrust_floor * P.T_max, T_trim_ff)
+    k_leg = abs(P.Y_uudelta) * P.delta_max / math.sin(P.delta_max)
+    T_f = ca.fmin(ca.fmax(T_f0 - k_leg * (u_s * u_s - u_ff * u_ff), 0.0), T_f0)
+    return ca.fmax(T_f, P.T_min)
+
+
 def execution_law(x, z, cmd, model: VesselModel, ep: ExecutionParams, dt: float):
     """One sample of the execution level.
 
@@ -82,6 +104,7 @@ def execution_law(x, z, cmd, model: VesselModel, ep: ExecutionParams, dt: float)
     psi_d = guidance(x, cmd[1:3])
     e_psi = wrap(psi_d - psi)
     # (3.1) with psi_e = psi_asv - psi_wp; capped by the command and the vessel's top speed
+    # (a command above u_max is clipped here: the autopilot's saturation, docs/vessel.md)
     u_cap = ca.fmin(cmd[3], P.u_max)
     u_ref = ca.fmin(speed_reference(e_psi, ep.reference.u_ff, ep.reference.k_u), u_cap)
 
@@ -91,14 +114,12 @@ def execution_law(x, z, cmd, model: VesselModel, ep: ExecutionParams, dt: float)
     d_sat = ca.fmin(ca.fmax(d_unsat, -P.delta_max), P.delta_max)
     I_psi_next = _integrate(I_psi, dt * Ki * e_psi, d_unsat, P.delta_max)
 
-    # surge speed loop with model-based feed-forward (trim thrust of eq. 2.6)
+    # surge speed loop with model-based feed-forward (trim thrust of eq. 2.6; the idle-drive
+    # drag is left to the integrator: below 3 % of the trim thrust at u_ref >= u_ff)
     T_ff = -(P.X_u * u_ref + P.X_uu * sabs(u_ref, P.eps_abs) * u_ref)
     e_u = u_ref - u_s
     T_unsat = T_ff + ep.speed.Kp * e_u + I_u
-    # thrust floor: keep yaw authority in transit, more of it in hard turns (power turn)
-    turn = ca.fmin(ca.fmax((ca.fabs(e_psi) - math.pi / 4) / (math.pi / 4), 0), 1)
-    T_floor = ca.fmax(P.T_min, P.T_max * (ep.thrust_floor
-                                          + (ep.turn_thrust - ep.thrust_floor) * turn))  # fmt: skip
+    T_floor = steering_floor(u_s, P, ep)
     T_sat = ca.fmin(ca.fmax(T_unsat, T_floor), P.T_max)
     I_u_next = _integrate(I_u, dt * ep.speed.Ki * e_u, T_unsat - (P.T_max + T_floor) / 2,
                           (P.T_max - T_floor) / 2)  # fmt: skip

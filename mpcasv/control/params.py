@@ -58,12 +58,13 @@ class ExecutionParams:
     speed: SpeedLoop
     reference: SpeedReference = SpeedReference()
     propeller_on_threshold: Float = 0.05  # fraction of T_max above which n_p != 0 (~22 % rpm)
-    # Thrust floor in transit, as fractions of T_max: a steerable drive has no yaw authority
-    # without thrust, so the speed loop may not starve the yaw loop. ``thrust_floor`` always
-    # applies; it ramps up to ``turn_thrust`` as |psi_e| grows from pi/4 to pi/2 (a "power
-    # turn": without it a boat caught drifting towards an AUV turns away far too slowly).
-    thrust_floor: Annotated[float, Strict(), Field(ge=0, lt=1)] = 0.1
-    turn_thrust: Annotated[float, Strict(), Field(ge=0, le=1)] = 0.8
+    # Thrust floor in transit at and below eq. 3.1's turn speed u_ff, as a fraction of T_max:
+    # a steerable drive has little yaw authority without thrust at low speed. It fades out as
+    # the drive leg's lift takes over (mpcasv.control.execution.steering_floor) and may not
+    # exceed the trim thrust at u_ff (capped there, steering_floor): it never holds
+    # the boat above eq. 3.1's speed. (The "power turn" up to 0.8 T_max in hard turns, which
+    # overrode eq. 3.1, was removed by issue 13.)
+    thrust_floor: Annotated[float, Strict(), Field(ge=0, lt=1)] = 0.075
     provenance: str = ""
 
 
