@@ -123,10 +123,17 @@ def test_speed_loop_design(model, shipped):
 
 
 def test_turn_detects_pirouettes(model, shipped):
-    """A waypoint inside the turning circle is circled (pirouette); one far enough is not."""
+    """A waypoint inside the full-power turning circle is circled (pirouette) without eq. 3.1;
+    with eq. 3.1 (slowing to u_ff in the turn) the boat gets on course; one far enough is
+    reached either way. (Before issue 13 the 'power turn' thrust floor made the shipped
+    execution level circle the 10 m waypoint too.)"""
+    from mpcasv.control.tuning_speed import without_reference
+
+    _, near_none = turn(model, without_reference(shipped, model), math.radians(90.0), 10.0)
     _, near = turn(model, shipped, math.radians(90.0), 10.0)
     _, far = turn(model, shipped, math.radians(90.0), 50.0)
-    assert near["pirouette"] and not math.isfinite(near["turn_s"])
+    assert near_none["pirouette"] and not math.isfinite(near_none["turn_s"])
+    assert not near["pirouette"] and near["min_u"] < shipped.reference.u_ff + 0.05
     assert not far["pirouette"] and 0 < far["turn_s"] < 60 and far["total_turn_deg"] < 180
 
 
@@ -151,8 +158,16 @@ def test_cli_tune_yaw_writes_loadable_schedule(tmp_path, shipped):
 
 
 def test_cli_refuses_mismatched_wn(tmp_path, capsys):
-    rc = main(["tune", "yaw", "--speeds", "1,2,3", "--wn", "0.3,0.6", "--out", str(tmp_path)])
+    rc = main(["tune", "yaw", "--speeds", "1,1.5,2", "--wn", "0.3,0.6", "--out", str(tmp_path)])
     assert rc == 2 and "--wn: 2 values for 3 speeds" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("what", ["yaw", "speed"])
+def test_cli_refuses_speeds_beyond_the_vessels_top_speed(tmp_path, capsys, what):
+    """Issue 13 item 4: tuning steps at speeds the vessel cannot hold at T_max are refused."""
+    rc = main(["tune", what, "--speeds", "1,3", "--out", str(tmp_path), "--quiet"])
+    err = capsys.readouterr().err
+    assert rc == 2 and "speeds [3.0] m/s outside (0, 2.5] m/s: gretha cannot hold them" in err
 
 
 # ../shared beside the checkout (/work/main), or beside the worktrees' folder (/work/wt/NAME)

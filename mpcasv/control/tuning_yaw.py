@@ -113,8 +113,8 @@ def nomoto(model: VesselModel, u0: float) -> Nomoto:
 
     The transfer function from the steering angle (the lag state ``delta``) to ``r`` of the
     2x2 sway-yaw block is exactly second-order Nomoto; its poles ``p_i`` give ``T_i = -1/p_i``
-    (``T1 >= T2``) and its zero ``T3``. A course-unstable hull (a pole > 0, Fossen 2021
-    §7.1.3) has a negative time constant, ``T < 0``, and a negative ``K`` (``K/T`` > 0: the
+    (``T1 >= T2``) and its zero ``T3``. A course-unstable hull (a pole > 0) has a
+    negative time constant, ``T < 0``, and a negative ``K`` (``K/T`` > 0: the
     steering still turns the bow the right way); the pole placement of :func:`place_pid`
     works for it unchanged.
 

@@ -148,8 +148,6 @@ def trim_thrust(P: VesselParams, u: float) -> float:
     Solves ``T + X_idle(u, T) = R(u)`` (:func:`idle_drag`; unique for ``u >= 0``: the left
     side grows with ``T``). Astern (``u < 0``) the idle drag is not included.
     """
-    from scipy.optimize import brentq
-
     R = resistance(P, u)
     if P.X_uu_idle == 0.0 or u <= 0.0:
         return R
@@ -160,19 +158,32 @@ def trim_thrust(P: VesselParams, u: float) -> float:
     def net(T):
         return T - D * math.exp(-((T / T_idle) ** 2)) - R
 
-    return float(brentq(net, R, R + D, xtol=1e-10))
+    return _bisect(net, R, R + D)
+
+
+def _bisect(f, lo: float, hi: float, tol: float = 1e-10) -> float:
+    """Root of an increasing scalar ``f`` on ``[lo, hi]`` (``f(lo) <= 0 <= f(hi)``) by
+    bisection. (Plain Python on purpose: ``scipy.optimize`` costs ~0.6 s of import in every
+    simulator process for a one-dimensional monotonic root.)"""
+    for _ in range(200):
+        mid = 0.5 * (lo + hi)
+        if hi - lo <= tol * max(1.0, abs(mid)):
+            break
+        if f(mid) > 0:
+            hi = mid
+        else:
+            lo = mid
+    return 0.5 * (lo + hi)
 
 
 def top_speed(P: VesselParams) -> float:
     """Straight-line speed (m/s) at ``T_max`` in still water, solved on the model's trim."""
-    from scipy.optimize import brentq
-
     hi = 1.0
     while trim_thrust(P, hi) < P.T_max:
         hi *= 2
         if hi > 1e3:
             raise ValueError(f"{P.name}: no top speed below 1000 m/s at T_max = {P.T_max:g} N")
-    return float(brentq(lambda u: trim_thrust(P, u) - P.T_max, 0.0, hi))
+    return _bisect(lambda u: trim_thrust(P, u) - P.T_max, 0.0, hi)
 
 
 #: tolerance of the load-time check of a vessel file's declared ``u_max`` against the model's
