@@ -208,3 +208,26 @@ def test_identify_cli_vehicle_option_gives_one_line(tmp_path, prior, capsys):
                "--quiet"])  # fmt: skip
     err = capsys.readouterr().err
     assert rc == 2 and "no vehicle 'nemo'" in err and len(err.strip().splitlines()) == 1
+
+
+def test_two_thruster_lsf_is_mapped_to_total_and_differential_thrust(tmp_path):
+    """Issue 15 item 3: a DUNE log of a boat with two fixed thrusters (id 0 port, id 1
+    starboard, as DUNE's Otter) is mapped for a prior with actuation = "differential"."""
+    otter = load_vessel("otter")
+    msgs, t0 = [], 1.7e9
+    for k in range(150):
+        es = _stamp(imcpy.EstimatedState(), t0 + 0.1 * k)
+        es.lat, es.lon, es.x, es.y, es.z = 0.7188, -0.1519, 0.1 * k, 0.0, 0.0
+        es.psi, es.u, es.v, es.r, es.vx, es.vy = 0.0, 1.0, 0.0, 0.05, 1.0, 0.0
+        for i, a in ((0, 0.6), (1, 0.2)):
+            thr = _stamp(imcpy.SetThrusterActuation(), t0 + 0.1 * k - 0.01)
+            thr.id, thr.value = i, a
+            msgs.append(thr)
+        msgs.append(es)
+    path = tmp_path / "Data.lsf"
+    path.write_bytes(b"".join(m.serialize() for m in msgs))
+    df = load_log(path, otter)
+    assert df["T_cmd"].to_numpy() == pytest.approx(0.4 * otter.T_max)
+    assert df["delta_cmd"].to_numpy() == pytest.approx(0.2 * otter.delta_max)
+    with pytest.raises(LogError, match="steering set-points|SetServoPosition"):
+        load_log(path, prior=load_vessel("gretha"))  # a steerable prior needs the servo

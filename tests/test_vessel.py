@@ -115,7 +115,7 @@ def test_every_shipped_number_has_provenance():
     numeric = {f.name for f in dataclasses.fields(p)} - {"name", "provenance"}
     assert numeric <= set(p.provenance)
     assert all(len(p.provenance[k]) > 5 for k in numeric)
-    assert set(MODEL_COEFFS) <= numeric
+    assert set(MODEL_COEFFS) - {"k_diff", "N_diff"} <= numeric  # those two derive from actuation
 
 
 def _gretha_data():
@@ -229,3 +229,53 @@ def test_declared_top_speed_is_checked_against_the_model(tmp_path):
     data["u_max"] = 2.45  # within the stated 5 %
     path.write_text(tomli_w.dumps(data))
     assert load_vessel(path).u_max == 2.45
+
+
+def test_differential_thrust_turns_the_boat_at_rest_and_steerable_does_not():
+    """Issue 15 item 3 (model part): the Otter's two fixed thrusters (actuation =
+    "differential", mpcasv/data/vessels/otter.toml) in the one model: yaw moment
+    N = y_thr (T_port - T_stbd) = N_diff delta, no side force, surge = total thrust; it turns
+    at rest with no total thrust, where the steerable drive cannot."""
+    otter, gretha = VesselModel(load_vessel("otter")), VesselModel(load_vessel("gretha"))
+    P = otter.params
+    assert P.actuation == "differential" and P.N_diff == pytest.approx(
+        P.y_thr * P.T_max / P.delta_max)
+    x = np.zeros(NX)
+    x[IX["delta"]] = 0.2
+    xd = np.array(otter.f(x, [0.0, 0.2], [0, 0])).ravel()
+    M = np.array([[P.m - P.Y_vdot, P.m * P.x_g - P.Y_rdot],
+                  [P.m * P.x_g - P.N_vdot, P.I_z - P.N_rdot]])  # fmt: skip
+    tau_vr = M @ xd[[IX["v"], IX["r"]]]
+    assert tau_vr == pytest.approx([0.0, P.N_diff * 0.2], abs=1e-9)
+    assert xd[IX["u"]] == pytest.approx(0.0, abs=1e-12)
+    xs = run(otter, x, [0.0, 0.2], 5.0)
+    assert xs[-1, IX["r"]] > 0.1  # to starboard, from rest
+    assert np.abs(run(gretha, x, [0.0, 0.2], 5.0)[:, IX["r"]]).max() < 1e-12
+    # surge: the total thrust straight ahead, whatever the differential
+    x2 = np.zeros(NX)
+    x2[IX["T"]] = 100.0
+    a = np.array(otter.f(x2, [100.0, 0.0], [0, 0])).ravel()[IX["u"]]
+    x2[IX["delta"]] = 0.3
+    b = np.array(otter.f(x2, [100.0, 0.3], [0, 0])).ravel()[IX["u"]]
+    assert a == pytest.approx(100.0 / (P.m - P.X_udot)) and b == pytest.approx(a)
+
+
+def test_differential_linearisation_agrees_with_finite_differences():
+    model = VesselModel(load_vessel("otter"))
+    x0 = np.array([3.0, -2.0, 0.4, 1.2, 0.1, 0.2, 80.0, 0.1])
+    u0, c0 = np.array([90.0, -0.1]), np.array([0.1, 0.05])
+    A, B = model.linearize(x0, u0, c0)
+    f = lambda x, u: np.array(model.f(x, u, c0)).ravel()  # noqa: E731
+    dx, du = 1e-6 * (1 + np.abs(x0)), 1e-6 * (1 + np.abs(u0))
+    fd = f(x0 + dx, u0 + du) - f(x0 - dx, u0 - du)
+    assert np.allclose(fd, 2 * (A @ dx + B @ du), rtol=1e-5, atol=1e-9)
+
+
+def test_differential_without_thruster_offset_is_refused():
+    data = load_toml(Path(__file__).resolve().parents[1] / "mpcasv/data/vessels/otter.toml")
+    data["y_thr"] = 0.0
+    with pytest.raises(ConfigError, match="y_thr > 0"):
+        parse(VesselParams, data, "otter.toml")
+    data["actuation"] = "jet"
+    with pytest.raises(ConfigError, match="actuation"):
+        parse(VesselParams, data, "otter.toml")

@@ -77,14 +77,17 @@ def steering_floor(u_s, P, ep: ExecutionParams):
 
         T_floor(u) = clip(T_f0 - |Y_uudelta| (u^2 - u_ff^2) delta_max / sin(delta_max), 0, T_f0)
 
-    It fades out as speed rises (the leg's lift takes over: 0 above ~0.76 m/s on Gretha) and
-    is ``T_f0`` at or below ``u_ff``. ``T_f0`` is ``thrust_floor T_max`` capped at the hull's
-    trim thrust at ``u_ff`` (running drive), so the floor never holds the boat faster than
-    eq. 3.1's speed (``u_ref >= u_ff``). docs/tuning.md, "Thrust floor".
+    Zero for differential thrust (``actuation = "differential"``), whose yaw authority needs
+    neither speed nor total thrust. It fades out as speed rises (the leg's lift takes over: 0
+    above ~0.76 m/s on Gretha) and is ``T_f0`` at or below ``u_ff``. ``T_f0`` is
+    ``thrust_floor T_max`` capped at the hull's trim thrust at ``u_ff`` (running drive), so
+    the floor never holds the boat faster than eq. 3.1's speed (``u_ref >= u_ff``).
+    docs/tuning.md, "Thrust floor".
     """
     u_ff = ep.reference.u_ff
     T_trim_ff = -(P.X_u * u_ff + P.X_uu * abs(u_ff) * u_ff)
-    T_f0 = min(ep.thrust_floor * P.T_max, T_trim_ff)
+    # two fixed thrusters (differential thrust) steer without total thrust: no floor
+    T_f0 = min(ep.thrust_floor * P.T_max, T_trim_ff) * (1.0 - P.k_diff)
     k_leg = abs(P.Y_uudelta) * P.delta_max / math.sin(P.delta_max)
     T_f = ca.fmin(ca.fmax(T_f0 - k_leg * (u_s * u_s - u_ff * u_ff), 0.0), T_f0)
     return ca.fmax(T_f, P.T_min)

@@ -115,6 +115,7 @@ def derive_gretha() -> tuple[dict[str, float | str], dict[str, str]]:
         "delta_max": math.radians(30.0), "delta_rate_max": math.radians(30.0),
         "T_thrust": 0.5, "T_delta": 0.3, "eps_abs": 0.01, "u_max": U_top,
         "X_uu_idle": X_uu_idle, "T_idle": 0.05 * R_top,
+        "actuation": "steerable", "y_thr": 0.0,
     }  # fmt: skip
     clarke = "Clarke et al. (1982) regression, Fossen (2021) §6.4.1"
     fin = (
@@ -161,6 +162,8 @@ def derive_gretha() -> tuple[dict[str, float | str], dict[str, str]]:
         f"{C_prop:g} on expanded blade area A_E = {A_E:.4f} m^2 (UFC 4-159-03 eq. 21; D = "
         f"{D_prop:g} m, EAR = {EAR:g}: guess) + drive leg C_leg = {C_leg:g} on frontal "
         f"{A_leg_x:g} m^2 (Hoerner 1965 ch. 6, streamlined strut; area a guess); docs/vessel.md",
+        "actuation": "thesis §3.1: one propeller at the stern, steerable drive",
+        "y_thr": "0: one drive on the centreline",
         "T_idle": "idle drag blends out as exp(-(T/T_idle)^2): T_idle = 5 % of T_max, the thrust "
         "below which the propeller counts as stopped (n_p = 0)",
     }

@@ -194,6 +194,8 @@ def _from_lsf(path: Path, prior: VesselParams, vehicle: str | None = None) -> pd
     chosen = pick_vehicle(df, path, vehicle)
     df = df[df["vehicle"] == chosen]
     vehicles = [chosen]
+    if (df["depth"] > 0.5).mean() <= 0.05 and prior.actuation == "differential":
+        return _differential_inputs(df, path, prior)
     fins = sorted(c for c in df.columns if c.startswith("fin_cmd_") and df[c].notna().any())
     if len(fins) > 1:
         raise LogError(
@@ -215,6 +217,25 @@ def _from_lsf(path: Path, prior: VesselParams, vehicle: str | None = None) -> pd
         "t": df["t"], "N": df["N"], "E": df["E"], "psi": df["psi"], "u": df["u"], "v": df["v"],
         "r": df["r"], "T_cmd": df["thrust_0"].astype(float) * prior.T_max,
         "delta_cmd": df["fin_cmd_0"].astype(float),
+    })  # fmt: skip
+
+
+def _differential_inputs(df: pd.DataFrame, path, prior: VesselParams) -> pd.DataFrame:
+    """Two fixed thrusters (prior ``actuation = "differential"``): SetThrusterActuation id 0
+    (port) and id 1 (starboard), fractions ``a_0, a_1`` of each thruster's ``T_max / 2``:
+    ``T_cmd = (a_0 + a_1) T_max / 2`` and ``delta_cmd = delta_max (a_0 - a_1) / 2`` (so that
+    ``T_port - T_stbd = T_max delta / delta_max``, :func:`mpcasv.models.vessel.actuator_forces`).
+    The thrust is taken as proportional to the set-point (no thrust-speed map)."""
+    for col, i in (("thrust_0", 0), ("thrust_1", 1)):
+        if col not in df.columns or df[col].isna().all():
+            raise LogError(f"{path}: missing messages: no SetThrusterActuation id {i} (a vessel "
+                           "with two thrusters needs both)")  # fmt: skip
+    df = df.dropna(subset=["thrust_0", "thrust_1"])
+    a0, a1 = df["thrust_0"].astype(float), df["thrust_1"].astype(float)
+    return pd.DataFrame({
+        "t": df["t"], "N": df["N"], "E": df["E"], "psi": df["psi"], "u": df["u"], "v": df["v"],
+        "r": df["r"], "T_cmd": (a0 + a1) * prior.T_max / 2,
+        "delta_cmd": (a0 - a1) * prior.delta_max / 2,
     })  # fmt: skip
 
 

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Literal
 
 import numpy as np
 from pydantic import Field, Strict
@@ -26,8 +26,11 @@ MODEL_COEFFS: tuple[str, ...] = (
     "X_u", "X_uu", "Y_v", "Y_r", "N_v", "N_r",
     "Y_uv", "Y_ur", "N_uv", "N_ur", "Y_vv", "N_rr",
     "x_p", "Y_uudelta", "T_thrust", "T_delta", "eps_abs",
-    "X_uu_idle", "T_idle",
+    "X_uu_idle", "T_idle", "k_diff", "N_diff",
 )  # fmt: skip
+
+#: actuation kinds a vessel file can name (``actuation = "..."``; docs/vessel.md)
+ACTUATIONS = ("steerable", "differential")
 
 
 @frozen
@@ -77,18 +80,40 @@ class VesselParams:
     # file without it has no idle drag (as third-party files written before it existed).
     X_uu_idle: Annotated[float, Strict(), Field(le=0)] = 0.0
     T_idle: Pos | None = None  # thrust over which the idle drag blends out (N); needed if != 0
+    # Actuation (optional; docs/vessel.md): "steerable" = one steerable drive at x_p (default);
+    # "differential" = two fixed thrusters at (x_p, -+y_thr) (the Otter): T is their sum and
+    # the second input, in [-delta_max, delta_max], their difference T_port - T_stbd =
+    # T_max delta / delta_max.
+    actuation: Literal["steerable", "differential"] = "steerable"
+    y_thr: NonNeg = 0.0  # lateral offset of each thruster from the centreline (m)
     provenance: dict[str, str] = dataclasses.field(default_factory=dict)
 
     def __post_init__(self) -> None:
+        if self.actuation == "differential" and self.y_thr <= 0:
+            raise ValueError("actuation = 'differential' needs y_thr > 0 (thruster offset, m)")
         if self.X_uu_idle != 0.0 and self.T_idle is None:
             raise ValueError("X_uu_idle given without T_idle (the thrust that blends it out, N)")
         numeric = [f.name for f in dataclasses.fields(self) if f.name not in ("name", "provenance")]
         if self.X_uu_idle == 0.0 and self.T_idle is None:  # optional pair, absent: the default
             numeric = [k for k in numeric if k not in ("X_uu_idle", "T_idle")]
+        numeric = [k for k in numeric if k != "actuation"]
+        if self.actuation == "steerable" and self.y_thr == 0.0:  # optional, absent
+            numeric = [k for k in numeric if k != "y_thr"]
         if self.provenance:
             missing = [k for k in numeric if k not in self.provenance]
             if missing:
                 raise ValueError(f"provenance missing for {missing}")
+
+    @property
+    def k_diff(self) -> float:
+        """1 for differential thrust, 0 for the steerable drive (a switch in the model)."""
+        return 1.0 if self.actuation == "differential" else 0.0
+
+    @property
+    def N_diff(self) -> float:
+        """Yaw moment per unit of the second input, differential thrust (N m/rad):
+        ``y_thr T_max / delta_max`` (0 for the steerable drive)."""
+        return self.k_diff * self.y_thr * self.T_max / self.delta_max
 
     def vector(self) -> np.ndarray:
         """The model coefficients in :data:`MODEL_COEFFS` order.

@@ -65,6 +65,29 @@ def idle_drag(u_r, T, P):
     return P["X_uu_idle"] * sabs(u_r, P["eps_abs"]) * u_r * idle_weight(T, P["T_idle"])
 
 
+def actuator_forces(T, delta, u_r, P):
+    """Actuator forces and moment ``[X, Y, N]`` (N, N, N m) in body axes.
+
+    - Steerable drive at ``(x_p, 0)`` (``k_diff = 0``): thrust ``[T cos(delta),
+      -T sin(delta)]`` plus the steered leg's lift ``Y_uudelta |u_r| u_r delta``; ``N = x_p Y``.
+    - Two fixed thrusters at ``(x_p, -+y_thr)`` (``k_diff = 1``, the Otter): ``X = T`` (their
+      sum), no side force, ``N = y_thr (T_port - T_stbd) = N_diff delta`` with
+      ``N_diff = y_thr T_max / delta_max``: the second input is the differential thrust scaled
+      to the steering range, so the execution level, the MPC and the tuning tools keep one
+      interface. Yaw authority then does not need speed or total thrust.
+
+    The switch ``k_diff`` is a number of the parameter vector (0 or 1), so both kinds live in
+    the one symbolic model.
+    """
+    k, eps = P["k_diff"], P["eps_abs"]
+    Y_steer = -T * ca.sin(delta) + P["Y_uudelta"] * sabs(u_r, eps) * u_r * delta
+    return ca.vertcat(
+        (1 - k) * T * ca.cos(delta) + k * T,
+        (1 - k) * Y_steer,
+        (1 - k) * P["x_p"] * Y_steer + P["N_diff"] * delta,
+    )
+
+
 def xdot_expr(x, u, c, p):
     """Right-hand side of the model as a CasADi expression (SX or MX).
 
@@ -108,9 +131,8 @@ def xdot_expr(x, u, c, p):
         + P["N_rr"] * sabs(r, eps) * r,
     )
 
-    # steerable stern thrust
-    Y_act = -T * ca.sin(delta) + P["Y_uudelta"] * sabs(u_r, eps) * u_r * delta
-    tau = ca.vertcat(T * ca.cos(delta) + idle_drag(u_r, T, P), Y_act, P["x_p"] * Y_act)
+    # actuation: steerable stern drive (k_diff = 0) or two fixed thrusters (k_diff = 1)
+    tau = actuator_forces(T, delta, u_r, P) + ca.vertcat(idle_drag(u_r, T, P), 0, 0)
 
     # (2.6): M_RB nu_dot + M_A (nu_dot - nu_c_dot) + ... = tau
     nu_c_dot = ca.vertcat(r * v_c, -r * u_c, 0)
