@@ -68,29 +68,53 @@ def speed_reference(psi_e, u_ff, k_u):
     return u_ff + k_u * ca.fmax(math.pi / 2 - ca.fabs(psi_e), 0)
 
 
-def steering_floor(u_s, P, ep: ExecutionParams):
-    """Least thrust in transit (N): the yaw authority of steady cruising at eq. 3.1's turn speed.
+def steady_turn(P, u: float, delta: float) -> tuple[float, float, float]:
+    """Steady turn at surge speed ``u`` (m/s) and steering angle ``delta`` (rad), still water.
 
-    A steerable drive turns the boat by the side force ``T sin(delta) + |Y_uudelta| u^2 delta``
-    (thrust vectoring plus the leg's lift). The floor keeps the side force at full steering no
-    smaller than at ``u_ff`` with the thrust ``T_f0 = thrust_floor T_max``, and no larger:
+    Solves ``nu_dot = 0`` of the vessel model (eq. 2.6) for the thrust, the sway speed and the
+    yaw rate with CasADi's Newton rootfinder. Returns ``(T, v, r)`` in N, m/s, rad/s.
 
-        T_floor(u) = clip(T_f0 - |Y_uudelta| (u^2 - u_ff^2) delta_max / sin(delta_max), 0, T_f0)
+    Raises ``ValueError`` if Newton's method does not converge.
+    """
+    from mpcasv.models.vessel import xdot_expr
 
-    Zero for differential thrust (``actuation = "differential"``), whose yaw authority needs
-    neither speed nor total thrust. It fades out as speed rises (the leg's lift takes over: 0
-    above ~0.76 m/s on Gretha) and is ``T_f0`` at or below ``u_ff``. ``T_f0`` is
-    ``thrust_floor T_max`` capped at the hull's trim thrust at ``u_ff`` (running drive), so
-    the floor never holds the boat faster than eq. 3.1's speed (``u_ref >= u_ff``).
-    docs/tuning.md, "Thrust floor".
+    w = ca.SX.sym("w", 3)  # T, v, r
+    x = ca.vertcat(0, 0, 0, u, w[1], w[2], w[0], delta)
+    g = xdot_expr(x, ca.vertcat(w[0], delta), ca.DM.zeros(NC), P.vector())[3:6]
+    solve = ca.rootfinder("steady_turn", "newton", ca.Function("g", [w], [g]),
+                          {"error_on_fail": True})  # fmt: skip
+    T0 = -(P.X_u * u + P.X_uu * abs(u) * u)
+    try:
+        T, v, r = np.array(solve([T0, 0.0, 0.1 * u * math.copysign(1, delta)])).ravel().tolist()
+    except RuntimeError as exc:
+        raise ValueError(f"{P.name}: no steady turn at u = {u:g} m/s, delta = {delta:g} rad"
+                         ) from exc  # fmt: skip
+    return T, v, r
+
+
+def steering_floor(u_ref, d_cmd, P, ep: ExecutionParams):
+    """Least thrust in transit (N): what a helmsman gives a steerable drive at full lock.
+
+    A steerable drive turns the boat by its side force ``T sin(delta) + |Y_uudelta| u^2 delta``:
+    at low speed with little thrust it barely turns (thrust vectoring needs thrust). The floor
+    is the thrust ``T_lock`` of the boat's steady full-lock turn at eq. 3.1's turn speed
+    ``u_ff`` (:func:`steady_turn`), in proportion to the steering command:
+
+        T_floor = T_lock |delta_cmd| / delta_max * min(1, (u_ref / u_ff)^2)
+
+    In a hard turn (``|psi_e| >= pi/2``: ``u_ref = u_ff`` and the yaw PID at full lock) it can
+    hold at most ``u_ff``, so it never keeps the boat above eq. 3.1's command; it vanishes on
+    a straight course, and below ``u_ff`` (a slower command) it shrinks with ``u_ref^2``
+    (the turn's thrust grows at least as fast as ``u^2``). Zero for differential thrust
+    (``k_diff = 1``), whose yaw authority needs no total thrust. The steering authority it
+    gives (Gretha: yaw rate at ``T_lock``) is in docs/tuning.md, "Thrust floor".
     """
     u_ff = ep.reference.u_ff
-    T_trim_ff = -(P.X_u * u_ff + P.X_uu * abs(u_ff) * u_ff)
-    # two fixed thrusters (differential thrust) steer without total thrust: no floor
-    T_f0 = min(ep.thrust_floor * P.T_max, T_trim_ff) * (1.0 - P.k_diff)
-    k_leg = abs(P.Y_uudelta) * P.delta_max / math.sin(P.delta_max)
-    T_f = ca.fmin(ca.fmax(T_f0 - k_leg * (u_s * u_s - u_ff * u_ff), 0.0), T_f0)
-    return ca.fmax(T_f, P.T_min)
+    if P.k_diff or u_ff <= 0:
+        return ca.DM(P.T_min)
+    T_lock = steady_turn(P, u_ff, P.delta_max)[0]
+    slow = ca.fmin(1.0, (u_ref / u_ff) ** 2)
+    return ca.fmax(T_lock * ca.fabs(d_cmd) / P.delta_max * slow, P.T_min)
 
 
 def execution_law(x, z, cmd, model: VesselModel, ep: ExecutionParams, dt: float):
@@ -122,7 +146,7 @@ def execution_law(x, z, cmd, model: VesselModel, ep: ExecutionParams, dt: float)
     T_ff = -(P.X_u * u_ref + P.X_uu * sabs(u_ref, P.eps_abs) * u_ref)
     e_u = u_ref - u_s
     T_unsat = T_ff + ep.speed.Kp * e_u + I_u
-    T_floor = steering_floor(u_s, P, ep)
+    T_floor = steering_floor(u_ref, x[7], P, ep)  # actual steering angle (lagged)
     T_sat = ca.fmin(ca.fmax(T_unsat, T_floor), P.T_max)
     I_u_next = _integrate(I_u, dt * ep.speed.Ki * e_u, T_unsat - (P.T_max + T_floor) / 2,
                           (P.T_max - T_floor) / 2)  # fmt: skip

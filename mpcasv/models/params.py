@@ -26,7 +26,7 @@ MODEL_COEFFS: tuple[str, ...] = (
     "X_u", "X_uu", "Y_v", "Y_r", "N_v", "N_r",
     "Y_uv", "Y_ur", "N_uv", "N_ur", "Y_vv", "N_rr",
     "x_p", "Y_uudelta", "T_thrust", "T_delta", "eps_abs",
-    "X_uu_idle", "T_idle", "k_diff", "N_diff",
+    "X_uu_idle", "T_idle", "k_diff", "N_diff", "alpha_Y", "alpha_N",
 )  # fmt: skip
 
 #: actuation kinds a vessel file can name (``actuation = "..."``; docs/vessel.md)
@@ -86,6 +86,12 @@ class VesselParams:
     # T_max delta / delta_max.
     actuation: Literal["steerable", "differential"] = "steerable"
     y_thr: NonNeg = 0.0  # lateral offset of each thruster from the centreline (m)
+    # Fade of the low-speed linear damping (optional; docs/vessel.md): the constant sway terms
+    # (Y_v, Y_r) are multiplied by exp(-alpha_Y U_r), the yaw terms (N_v, N_r) by
+    # exp(-alpha_N U_r), so that they do not double-count the speed-proportional (Clarke)
+    # damping at speed (Fossen 2021 §6.4). s/m, >= 0; default 0: no fade.
+    alpha_Y: NonNeg = 0.0
+    alpha_N: NonNeg = 0.0
     provenance: dict[str, str] = dataclasses.field(default_factory=dict)
 
     def __post_init__(self) -> None:
@@ -97,6 +103,8 @@ class VesselParams:
         if self.X_uu_idle == 0.0 and self.T_idle is None:  # optional pair, absent: the default
             numeric = [k for k in numeric if k not in ("X_uu_idle", "T_idle")]
         numeric = [k for k in numeric if k != "actuation"]
+        fades = ("alpha_Y", "alpha_N")  # optional, absent when 0
+        numeric = [k for k in numeric if not (k in fades and getattr(self, k) == 0)]
         if self.actuation == "steerable" and self.y_thr == 0.0:  # optional, absent
             numeric = [k for k in numeric if k != "y_thr"]
         if self.provenance:

@@ -121,13 +121,14 @@ def xdot_expr(x, u, c, p):
 
     # damping: linear (constant + proportional to speed, Clarke 1982) and quadratic
     U = sabs(u_r, eps)
+    f_Y, f_N = ca.exp(-P["alpha_Y"] * U), ca.exp(-P["alpha_N"] * U)  # low-speed terms fade
     D_nur = -ca.vertcat(
         P["X_u"] * u_r + P["X_uu"] * sabs(u_r, eps) * u_r,
-        (P["Y_v"] + P["Y_uv"] * U) * v_r
-        + (P["Y_r"] + P["Y_ur"] * U) * r
+        (f_Y * P["Y_v"] + P["Y_uv"] * U) * v_r
+        + (f_Y * P["Y_r"] + P["Y_ur"] * U) * r
         + P["Y_vv"] * sabs(v_r, eps) * v_r,
-        (P["N_v"] + P["N_uv"] * U) * v_r
-        + (P["N_r"] + P["N_ur"] * U) * r
+        (f_N * P["N_v"] + P["N_uv"] * U) * v_r
+        + (f_N * P["N_r"] + P["N_ur"] * U) * r
         + P["N_rr"] * sabs(r, eps) * r,
     )
 
