@@ -9,8 +9,9 @@ import numpy as np
 import pytest
 
 from mpcasv.cli import main
-from mpcasv.control.execution import steady_turn, steering_floor
+from mpcasv.control.execution import steering_floor
 from mpcasv.control.params import load_execution
+from mpcasv.control.steering import full_lock_turns, lock_thrust
 from mpcasv.control.tuning_speed import PIROUETTE_CASE, pirouette_check, turn
 from mpcasv.models.params import load_vessel
 from mpcasv.models.vessel import IX, VesselModel
@@ -26,21 +27,30 @@ def ep():
     return load_execution("gretha")
 
 
-def test_steering_floor_is_the_full_lock_turn_thrust_at_u_ff(model, ep):
-    """The floor at full lock is the thrust of the steady full-lock turn at u_ff (so it can hold
-    at most u_ff there), vanishes on a straight course, and shrinks for slower commands."""
+def test_steering_floor_is_the_least_full_lock_thrust_within_eq_3_1(model, ep):
+    """T_lock = min(T_req, T_hold): the least thrust whose steady full-lock turn reaches
+    r_steer, capped by the one whose steady full-lock turn runs at u_ff (Gretha: the cap binds,
+    38.8 N for 4.42 deg/s against 39.7 N for 4.5 deg/s). The floor is T_lock at full lock,
+    nothing on a straight course and less for slower commands."""
     P = model.params
     u_ff = ep.reference.u_ff
-    T_lock, v, r = steady_turn(P, u_ff, P.delta_max)
-    x = np.array(model.f([0, 0, 0, u_ff, v, r, T_lock, P.delta_max], [T_lock, P.delta_max],
-                         [0, 0])).ravel()  # fmt: skip
-    assert np.abs(x[3:6]).max() < 1e-9  # a steady turn of the model
-    assert T_lock > model.thrust_for_speed(u_ff)  # a turn costs more thrust than straight
-    fl = lambda u_ref, d: float(ca.DM(steering_floor(u_ref, d, P, ep)))  # noqa: E731
-    assert fl(u_ff, P.delta_max) == pytest.approx(T_lock)
-    assert fl(2.5, -P.delta_max) == pytest.approx(T_lock)
+    lock = lock_thrust(model, ep)
+    turns = full_lock_turns(model)
+    assert np.all(np.diff(turns.u) > 0) and np.all(np.diff(turns.r) > 0)
+    # each grid point is a steady turn of the model
+    for i in (0, len(turns.T) // 2, -1):
+        x = [0, 0, 0, turns.u[i], turns.v[i], turns.r[i], turns.T[i], P.delta_max]
+        xdot = np.array(model.f(x, [turns.T[i], P.delta_max], [0, 0])).ravel()
+        assert np.abs(xdot[3:6]).max() < 1e-4
+    assert lock["T_lock"] == pytest.approx(min(lock["T_req"], lock["T_hold"]))
+    assert lock["u_lock"] <= u_ff + 1e-6  # never faster than eq. 3.1's turn speed
+    assert lock["r_lock"] <= ep.r_steer + 1e-9  # and no more authority than asked for
+    assert lock["T_lock"] > model.thrust_for_speed(u_ff)  # a turn costs more than straight
+    fl = lambda u_ref, d: float(ca.DM(steering_floor(u_ref, d, model, ep)))  # noqa: E731
+    assert fl(u_ff, P.delta_max) == pytest.approx(lock["T_lock"])
+    assert fl(2.5, -P.delta_max) == pytest.approx(lock["T_lock"])
     assert fl(u_ff, 0.0) == 0.0
-    assert fl(u_ff / 2, P.delta_max) == pytest.approx(T_lock / 4)
+    assert fl(u_ff / 2, P.delta_max) == pytest.approx(lock["T_lock"] / 4)
 
 
 def test_speed_in_a_hard_turn_stays_at_eq_3_1s_command(model, ep):
@@ -69,8 +79,7 @@ def test_hard_turn_speed_is_eq_3_1s(model, ep):
     assert np.allclose(run.Y[hard, 1], ep.reference.u_ff)
     i = int(np.argmax(~hard[1:])) + 1  # end of the hard part
     assert np.all(np.diff(run.X[:i, IX["u"]]) < 0)  # slowing down all through it
-    T_lock = steady_turn(model.params, ep.reference.u_ff, model.params.delta_max)[0]
-    assert run.U[:i, 0].max() <= T_lock + 1e-6
+    assert run.U[:i, 0].max() <= lock_thrust(model, ep)["T_lock"] + 1e-6
 
 
 def test_pirouette_check_with_and_without_eq_3_1(model, ep):

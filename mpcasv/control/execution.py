@@ -68,53 +68,28 @@ def speed_reference(psi_e, u_ff, k_u):
     return u_ff + k_u * ca.fmax(math.pi / 2 - ca.fabs(psi_e), 0)
 
 
-def steady_turn(P, u: float, delta: float) -> tuple[float, float, float]:
-    """Steady turn at surge speed ``u`` (m/s) and steering angle ``delta`` (rad), still water.
-
-    Solves ``nu_dot = 0`` of the vessel model (eq. 2.6) for the thrust, the sway speed and the
-    yaw rate with CasADi's Newton rootfinder. Returns ``(T, v, r)`` in N, m/s, rad/s.
-
-    Raises ``ValueError`` if Newton's method does not converge.
-    """
-    from mpcasv.models.vessel import xdot_expr
-
-    w = ca.SX.sym("w", 3)  # T, v, r
-    x = ca.vertcat(0, 0, 0, u, w[1], w[2], w[0], delta)
-    g = xdot_expr(x, ca.vertcat(w[0], delta), ca.DM.zeros(NC), P.vector())[3:6]
-    solve = ca.rootfinder("steady_turn", "newton", ca.Function("g", [w], [g]),
-                          {"error_on_fail": True})  # fmt: skip
-    T0 = -(P.X_u * u + P.X_uu * abs(u) * u)
-    try:
-        T, v, r = np.array(solve([T0, 0.0, 0.1 * u * math.copysign(1, delta)])).ravel().tolist()
-    except RuntimeError as exc:
-        raise ValueError(f"{P.name}: no steady turn at u = {u:g} m/s, delta = {delta:g} rad"
-                         ) from exc  # fmt: skip
-    return T, v, r
-
-
-def steering_floor(u_ref, d_cmd, P, ep: ExecutionParams):
+def steering_floor(u_ref, delta, model: VesselModel, ep: ExecutionParams):
     """Least thrust in transit (N): what a helmsman gives a steerable drive at full lock.
 
-    A steerable drive turns the boat by its side force ``T sin(delta) + |Y_uudelta| u^2 delta``:
-    at low speed with little thrust it barely turns (thrust vectoring needs thrust). The floor
-    is the thrust ``T_lock`` of the boat's steady full-lock turn at eq. 3.1's turn speed
-    ``u_ff`` (:func:`steady_turn`), in proportion to the steering command:
-
-        T_floor = T_lock |delta_cmd| / delta_max * min(1, (u_ref / u_ff)^2)
-
-    In a hard turn (``|psi_e| >= pi/2``: ``u_ref = u_ff`` and the yaw PID at full lock) it can
-    hold at most ``u_ff``, so it never keeps the boat above eq. 3.1's command; it vanishes on
-    a straight course, and below ``u_ff`` (a slower command) it shrinks with ``u_ref^2``
-    (the turn's thrust grows at least as fast as ``u^2``). Zero for differential thrust
-    (``k_diff = 1``), whose yaw authority needs no total thrust. The steering authority it
-    gives (Gretha: yaw rate at ``T_lock``) is in docs/tuning.md, "Thrust floor".
+    ``T_floor = T_lock |delta| / delta_max * min(1, (u_ref / u_ff)^2)`` with ``delta`` the
+    steering angle (rad) and ``T_lock`` from :func:`mpcasv.control.steering.lock_thrust`: the
+    least thrust whose steady full-lock turn reaches the yaw rate ``r_steer``, but no more than
+    the thrust whose steady full-lock turn runs at eq. 3.1's ``u_ff``. In a hard turn
+    (``|psi_e| >= pi/2``: ``u_ref = u_ff``, the yaw PID at full lock) it can therefore hold at
+    most ``u_ff``; it vanishes on a straight course, and for a command slower than ``u_ff`` it
+    shrinks with ``u_ref^2`` (a turn's thrust grows at least as fast as ``u^2``). Zero for
+    differential thrust (``k_diff = 1``), whose yaw authority needs no total thrust.
+    docs/tuning.md, "Thrust floor and eq. 3.1".
     """
+    from mpcasv.control.steering import lock_thrust
+
+    P = model.params
     u_ff = ep.reference.u_ff
     if P.k_diff or u_ff <= 0:
         return ca.DM(P.T_min)
-    T_lock = steady_turn(P, u_ff, P.delta_max)[0]
+    T_lock = lock_thrust(model, ep)["T_lock"]
     slow = ca.fmin(1.0, (u_ref / u_ff) ** 2)
-    return ca.fmax(T_lock * ca.fabs(d_cmd) / P.delta_max * slow, P.T_min)
+    return ca.fmax(T_lock * ca.fabs(delta) / P.delta_max * slow, P.T_min)
 
 
 def execution_law(x, z, cmd, model: VesselModel, ep: ExecutionParams, dt: float):
@@ -146,7 +121,7 @@ def execution_law(x, z, cmd, model: VesselModel, ep: ExecutionParams, dt: float)
     T_ff = -(P.X_u * u_ref + P.X_uu * sabs(u_ref, P.eps_abs) * u_ref)
     e_u = u_ref - u_s
     T_unsat = T_ff + ep.speed.Kp * e_u + I_u
-    T_floor = steering_floor(u_ref, x[7], P, ep)  # actual steering angle (lagged)
+    T_floor = steering_floor(u_ref, x[7], model, ep)  # actual steering angle (lagged)
     T_sat = ca.fmin(ca.fmax(T_unsat, T_floor), P.T_max)
     I_u_next = _integrate(I_u, dt * ep.speed.Ki * e_u, T_unsat - (P.T_max + T_floor) / 2,
                           (P.T_max - T_floor) / 2)  # fmt: skip
