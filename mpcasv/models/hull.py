@@ -18,8 +18,8 @@ Formulas
   added to the speed-proportional sway/yaw damping. Without it the Munk moment makes this
   wide, shallow hull course-unstable above ~1.5 m/s (checked by ``sway_yaw_eigenvalues``).
 - Low-speed linear damping from time constants (Fossen's PythonVehicleSimulator ``otter.py``:
-  Y_v = -M22 / T_sway, N_r = -M33 / T_yaw); N_r faded out as exp(-alpha_N U) where the
-  speed-proportional yaw damping takes over (Fossen 2021 §6.4; docs/vessel.md).
+  Y_v = -M22 / T_sway, N_r = -M33 / T_yaw). Not faded out at speed (``alpha_Y = alpha_N = 0``;
+  the fade of Fossen 2021 §6.4 is measured in docs/vessel.md).
 - Cross-flow drag (Fossen 2021 §6.4.3, strip theory): Y_|v|v = -rho/2 T C_d L,
   N_|r|r = -rho/2 T C_d L^4 / 32.
 - Idle drive (propeller stopped): locked-propeller form drag, ``C_prop = 1.0`` on the expanded
@@ -88,12 +88,12 @@ def derive_gretha() -> tuple[dict[str, float | str], dict[str, str]]:
     N_r = -(I_z - N_rdot) / T_yaw
     Y_uv = Yv_p * half * L**2 - k_fin
     N_ur = Nr_p * half * L**4 - k_fin * x_p**2
-    # the low-speed yaw term fades as exp(-alpha_N U) (Fossen 2021 §6.4: no double counting of
-    # the speed-proportional damping at speed), as fast as keeps N_r e^(-alpha_N U) + N_ur U
-    # non-decreasing in U (d/dU >= 0 at U = 0: alpha_N = N_ur / N_r). The sway term is kept
-    # (alpha_Y = 0): its fade makes the hull markedly less course-stable at speed and the yaw
-    # design misses PM 45 deg at 2.5 m/s (docs/vessel.md, "Low-speed damping").
-    alpha_N = N_ur / N_r
+    # Fade of the low-speed terms, exp(-alpha U) (Fossen 2021 §6.4): measured, not shipped.
+    # alpha_N = N_ur / N_r (2.05 s/m, the fastest fade keeping the yaw damping monotone in U)
+    # gives more yaw authority at low speed, but the yaw schedule tune yaw places on that model
+    # makes eq. 3.1's turns pirouette (docs/vessel.md, "Low-speed damping"): 0 until low-speed
+    # turning logs identify it.
+    alpha_N_fossen = N_ur / N_r
 
     S = L * (1.7 * T + C_B * B)  # Mumford wetted surface
     Re = U_top * L / NU_WATER
@@ -124,7 +124,7 @@ def derive_gretha() -> tuple[dict[str, float | str], dict[str, str]]:
         "delta_max": math.radians(30.0), "delta_rate_max": math.radians(30.0),
         "T_thrust": 0.5, "T_delta": 0.3, "eps_abs": 0.01, "u_max": U_top,
         "X_uu_idle": X_uu_idle, "T_idle": 0.05 * R_top,
-        "actuation": "steerable", "y_thr": 0.0, "alpha_N": alpha_N,
+        "actuation": "steerable", "y_thr": 0.0, "alpha_Y": 0.0, "alpha_N": 0.0,
     }  # fmt: skip
     clarke = "Clarke et al. (1982) regression, Fossen (2021) §6.4.1"
     fin = (
@@ -173,10 +173,13 @@ def derive_gretha() -> tuple[dict[str, float | str], dict[str, str]]:
         f"{A_leg_x:g} m^2 (Hoerner 1965 ch. 6, streamlined strut; area a guess); docs/vessel.md",
         "actuation": "thesis §3.1: one propeller at the stern, steerable drive",
         "y_thr": "0: one drive on the centreline",
-        "alpha_N": "fade of the low-speed yaw damping, N_r exp(-alpha_N U) (Fossen 2021 §6.4 and "
-        "lecture notes ch. 6: linear damping blended out to avoid double counting at speed): "
-        "N_ur / N_r, the fastest fade that keeps the linear yaw damping non-decreasing in U; "
-        "docs/vessel.md",
+        "alpha_Y": "0: the low-speed sway damping Y_v is not faded (fading it at the monotone "
+        "limit Y_uv / Y_v makes the hull much less course-stable at speed: Nomoto T 1.5 -> 2.9 s "
+        "at 2.5 m/s); docs/vessel.md, Low-speed damping",
+        "alpha_N": f"0: N_r not faded. Fossen 2021 §6.4 would fade it as exp(-alpha_N U), "
+        f"alpha_N = N_ur / N_r = {alpha_N_fossen:.2f} s/m (more low-speed yaw authority), but the "
+        "yaw schedule placed on that model makes eq. 3.1's turns pirouette; to be identified from "
+        "low-speed turning logs (docs/vessel.md, Low-speed damping)",
         "T_idle": "idle drag blends out as exp(-(T/T_idle)^2): T_idle = 5 % of T_max, the thrust "
         "below which the propeller counts as stopped (n_p = 0)",
     }
