@@ -26,7 +26,10 @@ from mpcasv.models.identify import (
 from mpcasv.models.params import load_vessel
 from mpcasv.models.vessel import VesselModel
 
-SHARED_LOG = Path(__file__).resolve().parents[2] / "shared" / "data" / "dune-lauv-followref.lsf.gz"
+# ../shared beside the checkout (/work/main), or beside the worktrees' folder (/work/wt/NAME)
+SHARED = next((p / "shared" for p in Path(__file__).resolve().parents[2:4]
+               if (p / "shared" / "data").is_dir()), Path("/nonexistent"))  # fmt: skip
+SHARED_LOG = SHARED / "data" / "dune-lauv-followref.lsf.gz"
 CURRENT = (0.2, -0.1)
 PLAN = (("zigzag", 1.5, 20, 150), ("zigzag", 2.2, 20, 150), ("turning-circle", 2.0, 30, 150),
         ("turning-circle", 1.0, 20, 150), ("speed-steps", 1.5, 20, 240))  # fmt: skip
@@ -160,3 +163,71 @@ def test_surface_vessel_lsf_is_mapped(tmp_path, prior):
     assert df["T_cmd"].to_numpy() == pytest.approx(0.5 * prior.T_max)
     assert df["delta_cmd"].to_numpy() == pytest.approx(0.1)
     assert df["u"].to_numpy() == pytest.approx(1.5) and df["psi"].iloc[-1] == pytest.approx(1.49)
+
+
+def _two_vehicle_log(tmp_path):
+    """A boat (0x2801: thruster and steering set-points) and an AUV it hears (0x0015: navigation
+    only, at 5 m depth) in one DUNE log, as a boat's DUNE logs what it receives."""
+    msgs, t0 = [], 1.7e9
+    for k in range(150):
+        es = _stamp(imcpy.EstimatedState(), t0 + 0.1 * k)
+        es.lat, es.lon, es.x, es.y, es.z = 0.7188, -0.1519, 0.15 * k, 0.0, 0.0
+        es.psi, es.u, es.v, es.r, es.vx, es.vy = 0.01 * k, 1.5, 0.02, 0.01, 1.5, 0.0
+        auv = _stamp(imcpy.EstimatedState(), t0 + 0.1 * k + 0.02)
+        auv.src = 0x0015
+        auv.lat, auv.lon, auv.x, auv.y, auv.z, auv.depth = 0.7188, -0.1519, 50.0, 0.1 * k, 5, 5
+        auv.psi, auv.u = 1.57, 1.0
+        thr = _stamp(imcpy.SetThrusterActuation(), t0 + 0.1 * k - 0.01)
+        thr.id, thr.value = 0, 0.5
+        servo = _stamp(imcpy.SetServoPosition(), t0 + 0.1 * k - 0.01)
+        servo.id, servo.value = 0, 0.1
+        msgs += [thr, servo, es, auv]
+    path = tmp_path / "Data.lsf"
+    path.write_bytes(b"".join(m.serialize() for m in msgs))
+    return path
+
+
+def test_multi_vehicle_log_takes_the_actuated_vehicle_and_says_so(tmp_path, prior, capsys):
+    """Issue 13 item 6: by default the vehicle with the actuator set-points, named on stdout."""
+    path = _two_vehicle_log(tmp_path)
+    df = load_log(path, prior)
+    assert "identifying '0x2801', the one with actuator set-points" in capsys.readouterr().out
+    assert len(df) == 150 and df["u"].to_numpy() == pytest.approx(1.5)
+    assert df["T_cmd"].to_numpy() == pytest.approx(0.5 * prior.T_max)
+    # --vehicle picks by IMC id (hex or decimal) or by name
+    assert load_log(path, prior, "10241")["u"].to_numpy() == pytest.approx(1.5)
+    with pytest.raises(LogError, match="'0x0015' is submerged"):
+        load_log(path, prior, "0x15")
+    with pytest.raises(LogError, match=r"no vehicle 'gretha' in the log \(vehicles: 0x0015, "):
+        load_log(path, prior, "gretha")
+
+
+def test_identify_cli_vehicle_option_gives_one_line(tmp_path, prior, capsys):
+    path = _two_vehicle_log(tmp_path)
+    rc = main(["identify", str(path), "--vehicle", "nemo", "--out", str(tmp_path / "p.toml"),
+               "--quiet"])  # fmt: skip
+    err = capsys.readouterr().err
+    assert rc == 2 and "no vehicle 'nemo'" in err and len(err.strip().splitlines()) == 1
+
+
+def test_two_thruster_lsf_is_mapped_to_total_and_differential_thrust(tmp_path):
+    """Issue 15 item 3: a DUNE log of a boat with two fixed thrusters (id 0 port, id 1
+    starboard, as DUNE's Otter) is mapped for a prior with actuation = "differential"."""
+    otter = load_vessel("otter")
+    msgs, t0 = [], 1.7e9
+    for k in range(150):
+        es = _stamp(imcpy.EstimatedState(), t0 + 0.1 * k)
+        es.lat, es.lon, es.x, es.y, es.z = 0.7188, -0.1519, 0.1 * k, 0.0, 0.0
+        es.psi, es.u, es.v, es.r, es.vx, es.vy = 0.0, 1.0, 0.0, 0.05, 1.0, 0.0
+        for i, a in ((0, 0.6), (1, 0.2)):
+            thr = _stamp(imcpy.SetThrusterActuation(), t0 + 0.1 * k - 0.01)
+            thr.id, thr.value = i, a
+            msgs.append(thr)
+        msgs.append(es)
+    path = tmp_path / "Data.lsf"
+    path.write_bytes(b"".join(m.serialize() for m in msgs))
+    df = load_log(path, otter)
+    assert df["T_cmd"].to_numpy() == pytest.approx(0.4 * otter.T_max)
+    assert df["delta_cmd"].to_numpy() == pytest.approx(0.2 * otter.delta_max)
+    with pytest.raises(LogError, match="steering set-points|SetServoPosition"):
+        load_log(path, prior=load_vessel("gretha"))  # a steerable prior needs the servo

@@ -123,10 +123,17 @@ def test_speed_loop_design(model, shipped):
 
 
 def test_turn_detects_pirouettes(model, shipped):
-    """A waypoint inside the turning circle is circled (pirouette); one far enough is not."""
+    """A waypoint inside the full-power turning circle is circled (pirouette) without eq. 3.1;
+    with eq. 3.1 (slowing to u_ff in the turn) the boat gets on course; one far enough is
+    reached either way. (Before issue 13 the 'power turn' thrust floor made the shipped
+    execution level circle the 10 m waypoint too.)"""
+    from mpcasv.control.tuning_speed import without_reference
+
+    _, near_none = turn(model, without_reference(shipped, model), math.radians(90.0), 10.0)
     _, near = turn(model, shipped, math.radians(90.0), 10.0)
     _, far = turn(model, shipped, math.radians(90.0), 50.0)
-    assert near["pirouette"] and not math.isfinite(near["turn_s"])
+    assert near_none["pirouette"] and not math.isfinite(near_none["turn_s"])
+    assert not near["pirouette"] and near["min_u"] < shipped.reference.u_ff + 0.05
     assert not far["pirouette"] and 0 < far["turn_s"] < 60 and far["total_turn_deg"] < 180
 
 
@@ -151,5 +158,106 @@ def test_cli_tune_yaw_writes_loadable_schedule(tmp_path, shipped):
 
 
 def test_cli_refuses_mismatched_wn(tmp_path, capsys):
-    rc = main(["tune", "yaw", "--speeds", "1,2,3", "--wn", "0.3,0.6", "--out", str(tmp_path)])
+    rc = main(["tune", "yaw", "--speeds", "1,1.5,2", "--wn", "0.3,0.6", "--out", str(tmp_path)])
     assert rc == 2 and "--wn: 2 values for 3 speeds" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("what", ["yaw", "speed"])
+def test_cli_refuses_speeds_beyond_the_vessels_top_speed(tmp_path, capsys, what):
+    """Issue 13 item 4: tuning steps at speeds the vessel cannot hold at T_max are refused."""
+    rc = main(["tune", what, "--speeds", "1,3", "--out", str(tmp_path), "--quiet"])
+    err = capsys.readouterr().err
+    assert rc == 2 and "speeds [3.0] m/s outside (0, 2.5] m/s: gretha cannot hold them" in err
+
+
+# ../shared beside the checkout (/work/main), or beside the worktrees' folder (/work/wt/NAME)
+from pathlib import Path  # noqa: E402
+
+CASES = next((p / "shared" / "cases" for p in Path(__file__).resolve().parents[2:4]
+              if (p / "shared" / "cases").is_dir()), None)  # fmt: skip
+needs_cases = pytest.mark.skipif(CASES is None, reason="../shared/cases not found")
+
+
+@needs_cases
+@pytest.mark.parametrize("vessel", ["otter.toml", "cybership2.toml"])
+def test_unstable_hull_tune_yaw_refuses_in_one_line(tmp_path, capsys, vessel):
+    """../shared/cases/unstable-hull-tune-yaw: a course-unstable hull (Otter, CyberShip II in
+    the 3-DOF form) gives one line naming the speed and the unstable pole, exit 2, no
+    traceback, no schedule written."""
+    path = CASES / "vessels" / vessel
+    rc = main(["tune", "yaw", "--vessel", str(path), "--out", str(tmp_path), "--quiet"])
+    err = [line for line in capsys.readouterr().err.splitlines() if "error:" in line]
+    assert rc == 2 and len(err) == 1
+    assert re.search(r"course-unstable at u0=[0-9.]+ m/s \(sway-yaw pole \+[0-9.]+ 1/s", err[0])
+    assert not (tmp_path / "execution.toml").exists()
+
+
+@needs_cases
+def test_unstable_nomoto_model_has_negative_T_and_pole_placement_stabilises_it():
+    """../shared/cases/unstable-hull-tune-yaw: the first-order Nomoto model of the Otter at
+    0.5 m/s has T < 0 (and K < 0, K/T > 0); the PID placed on it puts the poles of the
+    first-order loop where asked (Fossen's pole placement covers T < 0)."""
+    m = VesselModel(load_vessel(CASES / "vessels" / "otter.toml"))
+    assert np.max(m.sway_yaw_eigenvalues(0.5).real) > 0.1  # course-unstable (+0.20 1/s)
+    nm = nomoto(m, 0.5)
+    assert nm.T < 0 and nm.K < 0
+    wn, zeta, ratio = 0.6, 1.0, 0.5
+    g = place_pid(nm, wn, zeta, ratio)
+    assert g.Kp > 0 and g.Ki > 0 and g.Kd > 0
+    s = ct.tf("s")
+    cl = ct.feedback(nm.first_order() / s, g.Kp + g.Ki / s + g.Kd * s)
+    want = np.sort_complex(np.roots(np.polymul([1, 2 * zeta * wn, wn**2], [1, ratio * wn])))
+    assert np.allclose(np.sort_complex(ct.poles(cl)), want, atol=1e-6)
+
+
+@needs_cases
+def test_sampled_phase_margin_is_cross_checked_by_a_sweep():
+    """../shared/cases/sampled-phase-margin: python-control gives PM = inf for this sampled
+    loop; the reported margin is the sweep's, ~77.7 deg at ~0.098 rad/s, and says so."""
+    from mpcasv.control.params import SpeedLoop
+
+    P = ct.ss([[-0.90706433, 0.01169591], [0.0, -1.0]], [[0.0], [1.0]], [[1.0, 0.0]], [[0.0]])
+    g = SpeedLoop(Kp=0.0, Ki=7.695)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        samp, cont = speed_figures(P, g, 0.1), speed_figures(P, g)
+    assert samp["phase_margin_deg"] == pytest.approx(77.7, abs=0.3)
+    assert samp["w_gain_crossover"] == pytest.approx(0.098, abs=0.001)
+    assert "python-control inf" in samp["margin_check"]
+    assert cont["phase_margin_deg"] == pytest.approx(78.2, abs=0.3)  # continuous: agree
+    assert cont["margin_check"] == "python-control = sweep"
+
+
+def test_margins_without_crossover_are_infinite_only_if_the_sweep_agrees():
+    from mpcasv.control.tuning import loop_margins, sweep_margins
+
+    L = ct.tf([0.5], [1.0, 1.0])  # |L| < 1 everywhere: no gain crossover, no phase crossover
+    m = loop_margins(L)
+    assert m["phase_margin_deg"] == math.inf and m["margin_check"] == "python-control = sweep"
+    L2 = ct.tf([4.0], [1.0, 2.0, 1.0, 0.0])  # crossover near 1.3 rad/s, closed loop unstable
+    sw = sweep_margins(L2, np.logspace(-3, 2, 20000))
+    assert sw["phase_margin_deg"] < 0 and sw["gain_margin_db"] < 0
+
+
+def test_a_response_that_does_not_settle_reads_not_reached():
+    from mpcasv.control.tuning import step_figures
+    from mpcasv.control.tuning_report import _t
+
+    t = np.arange(0.0, 50.0, 0.1)
+    f = step_figures(np.exp(0.1 * t) - 1.0, t, 1.0)  # diverges
+    assert f["settling_s"] == math.inf and _t(f["settling_s"]) == "not reached"
+    f = step_figures(1.0 - np.cos(t), t, 1.0)  # oscillates for ever
+    assert f["settling_s"] == math.inf
+
+
+@needs_cases
+@pytest.mark.parametrize("vessel", ["otter.toml", "cybership2.toml"])
+def test_tune_speed_runs_on_third_party_hulls(tmp_path, capsys, vessel):
+    """Acceptance of issue 13: `mpcasv tune speed` on the Otter and CyberShip II files, no
+    traceback, honest margins (exit 0 = pass, 1 = acceptance FAIL; never an exception)."""
+    rc = main(["tune", "speed", "--vessel", str(CASES / "vessels" / vessel), "--out",
+               str(tmp_path), "--u-ff", "0.6", "--k-u", "1.59", "--distance", "50",
+               "--quiet"])  # fmt: skip
+    out = capsys.readouterr().out
+    assert rc in (0, 1) and "loop margins" in out
+    assert not re.search(r"\| -?\d+ / inf \|", out)  # no 'inf' sampled phase margin

@@ -16,7 +16,8 @@ from pathlib import Path
 
 from mpcasv.config import ConfigError
 
-DEFAULT_SPEEDS = "0.5,1,1.5,2,2.5"
+DEFAULT_SPEEDS = "0.5,1,1.5,2,2.5"  # Gretha's: 0.2 ... 1.0 u_max (the default for any vessel)
+SPEED_FRACTIONS = (0.2, 0.4, 0.6, 0.8, 1.0)
 
 
 def _floats(text: str) -> list[float]:
@@ -37,8 +38,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     y.add_argument(
         "--speeds",
         type=_floats,
-        default=_floats(DEFAULT_SPEEDS),
-        help=f"surge speeds of the schedule, m/s (default {DEFAULT_SPEEDS})",
+        help="surge speeds of the schedule, m/s (default 0.2, 0.4, ... 1.0 times the vessel's "
+        f"u_max: {DEFAULT_SPEEDS} for Gretha)",
     )
     y.add_argument(
         "--wn",
@@ -77,8 +78,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     s.add_argument(
         "--speeds",
         type=_floats,
-        default=_floats(DEFAULT_SPEEDS),
-        help="speeds where the margins are checked, m/s",
+        help="speeds where the margins are checked, m/s (default 0.2 ... 1.0 u_max)",
     )
     s.add_argument(
         "--u-ff",
@@ -116,6 +116,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     i.add_argument("--out", type=Path, required=True, help="identified parameters TOML")
     i.add_argument("--vessel", default="gretha", help="prior parameters (name or TOML)")
+    i.add_argument(
+        "--vehicle",
+        dest="vehicle_pick",
+        metavar="NAME|ID",
+        help="DUNE logs with several vehicles: the one to identify (Announce name or IMC id, "
+        "e.g. 0x2801); default: the one that carries the actuator set-points",
+    )
     i.add_argument(
         "--coeffs", help="comma-separated coefficients to identify (default: the documented subset)"
     )
@@ -169,22 +176,25 @@ def _provenance(old: str, key: str, text: str) -> str:
 
 def _setup(args):
     from mpcasv.control.params import load_execution
+    from mpcasv.control.tuning_yaw import check_speeds
     from mpcasv.models.params import load_vessel
     from mpcasv.models.vessel import VesselModel
 
     model = VesselModel(load_vessel(args.vessel))
     ep = load_execution(args.base)
+    if args.speeds is None:
+        top = min(model.top_speed, model.params.u_max)
+        args.speeds = [round(f * top, 4) for f in SPEED_FRACTIONS]
+    check_speeds(model, args.speeds)
     args.out.mkdir(parents=True, exist_ok=True)
     return model, ep, args.toml or args.out / "execution.toml"
 
 
 def run_tune_yaw(args: argparse.Namespace) -> int:
-    import warnings
-
     from mpcasv.config import replace
     from mpcasv.control.tuning import write_execution_toml
     from mpcasv.control.tuning_report import plot_yaw, yaw_table
-    from mpcasv.control.tuning_yaw import tune_yaw
+    from mpcasv.control.tuning_yaw import CourseUnstable, tune_yaw
 
     model, ep, toml = _setup(args)
     speeds = args.speeds
@@ -194,14 +204,17 @@ def run_tune_yaw(args: argparse.Namespace) -> int:
         wn = args.wn * len(speeds) if len(args.wn) == 1 else args.wn
     else:
         raise ConfigError(f"--wn: {len(args.wn)} values for {len(speeds)} speeds")
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", UserWarning)  # python-control's margin-search notes
+    try:
         ep_new, designs, runs = tune_yaw(model, ep, speeds, wn, args.zeta, args.integral_ratio,
                                          args.T_f, args.dt, progress=not args.quiet)  # fmt: skip
-        plot_yaw(model, designs, runs, args.T_f, args.out)
+    except CourseUnstable as exc:
+        raise ConfigError(f"{args.vessel}: {exc}") from None
+    plot_yaw(model, designs, runs, args.T_f, args.out)
     table = yaw_table(designs)
+    # nan (a margin neither python-control nor the sweep could compute) fails every >= test
     ok = all(d.sampled["phase_margin_deg"] >= 45 and d.sampled["gain_margin_db"] >= 6
              and d.linear["phase_margin_deg"] >= 45 and d.linear["gain_margin_db"] >= 6
+             and d.linear["stable"] and d.sampled["stable"]
              and math.isfinite(d.nonlinear["settling_s"]) for d in designs)  # fmt: skip
     ts_max = max(d.nonlinear["settling_s"] for d in designs)
     cmd = _command_line(args, "tune yaw")
@@ -224,8 +237,6 @@ def run_tune_yaw(args: argparse.Namespace) -> int:
 
 
 def run_tune_speed(args: argparse.Namespace) -> int:
-    import warnings
-
     from mpcasv.config import replace
     from mpcasv.control.params import SpeedReference
     from mpcasv.control.tuning import write_execution_toml
@@ -241,15 +252,13 @@ def run_tune_speed(args: argparse.Namespace) -> int:
     model, ep, toml = _setup(args)
     g = place_speed_pi(model, args.design_speed, args.w, args.zeta)
     ep_new = replace(ep, speed=g)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", UserWarning)
-        loop = {
-            u: (
-                speed_figures(surge_plant(model, u), g),
-                speed_figures(surge_plant(model, u), g, args.dt),
-            )
-            for u in args.speeds
-        }
+    loop = {
+        u: (
+            speed_figures(surge_plant(model, u), g),
+            speed_figures(surge_plant(model, u), g, args.dt),
+        )
+        for u in args.speeds
+    }
     pairs = [(a, b) for a in args.u_ff for b in args.k_u]
     field = (ep.reference.u_ff, ep.reference.k_u)
     grids = {}
@@ -276,8 +285,12 @@ def run_tune_speed(args: argparse.Namespace) -> int:
         )
         for k, v in by_pair.items()
     ]
-    best = recommend(merged)
-    ok_loop = all(c["phase_margin_deg"] >= 45 and c["gain_margin_db"] >= 6
+    try:
+        best = recommend(merged)
+    except ValueError as exc:  # every pair pirouetted: reported, the field values are kept
+        best = None
+        none_reason = str(exc)
+    ok_loop = all(c["phase_margin_deg"] >= 45 and c["gain_margin_db"] >= 6 and c["stable"]
                   for f in loop.values() for c in f)  # fmt: skip
     cmd = _command_line(args, "tune speed")
     text = (f"{cmd}: PI by pole placement on the linearised surge model at "
@@ -285,6 +298,8 @@ def run_tune_speed(args: argparse.Namespace) -> int:
             f"{min(f[1]['phase_margin_deg'] for f in loop.values()):.0f} deg (sampled, thrust "
             f"lag incl.)")  # fmt: skip
     prov = _provenance(ep.provenance, "speed", text)
+    if args.set_reference and best is None:
+        raise ConfigError(f"--set-reference: {none_reason}")
     if args.set_reference:
         ep_new = replace(ep_new, reference=SpeedReference(u_ff=best.u_ff, k_u=best.k_u))
         prov = _provenance(
@@ -295,18 +310,27 @@ def run_tune_speed(args: argparse.Namespace) -> int:
             prov,
             "reference",
             "field tuning, thesis §3.4.1 (kept; the turn grid "
-            f"of mpcasv tune speed recommends u_ff={best.u_ff}, k_u={best.k_u})",
+            + (f"of mpcasv tune speed recommends u_ff={best.u_ff}, k_u={best.k_u})" if best
+               else "of mpcasv tune speed found no pirouette-free pair)"),
         )
     ep_new = replace(ep_new, provenance=prov)
     write_execution_toml(toml, ep_new, _header(ep_new))
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", UserWarning)
-        plot_speed(model, g, grids, field, best, args.out)
+    plot_speed(model, g, grids, field, best, args.out)
+    from mpcasv.control.tuning_report import plot_pirouette
+    from mpcasv.control.tuning_speed import PIROUETTE_CASE, pirouette_check
+
+    a, d, u0 = PIROUETTE_CASE
+    plot_pirouette(pirouette_check(model, ep_new, a, d, u0), (d * math.cos(math.radians(a)),
+                   d * math.sin(math.radians(a))), args.out,
+                   f"{model.params.name}: waypoint {d:g} m at {a:g} deg, from {u0:g} m/s, "
+                   f"command u_max = {model.params.u_max:g} m/s")  # fmt: skip
     text_tables = speed_tables(g, loop, grids, best)
     (args.out / "speed.md").write_text(text_tables + "\n")
     print(text_tables)
     print(
-        f"recommended (u_ff, k_u) = ({best.u_ff}, {best.k_u}); wrote {toml}, "
+        (f"recommended (u_ff, k_u) = ({best.u_ff}, {best.k_u})" if best else
+         "no recommended (u_ff, k_u): every pair of the grid pirouetted")
+        + f"; wrote {toml}, "
         f"{args.out}/speed.md and plots; loop margins {'PASS' if ok_loop else 'FAIL'}"
     )
     return 0 if ok_loop else 1

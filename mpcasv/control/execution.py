@@ -68,6 +68,30 @@ def speed_reference(psi_e, u_ff, k_u):
     return u_ff + k_u * ca.fmax(math.pi / 2 - ca.fabs(psi_e), 0)
 
 
+def steering_floor(u_ref, delta, model: VesselModel, ep: ExecutionParams):
+    """Least thrust in transit (N): what a helmsman gives a steerable drive at full lock.
+
+    ``T_floor = T_lock |delta| / delta_max * min(1, (u_ref / u_ff)^2)`` with ``delta`` the
+    steering angle (rad) and ``T_lock`` from :func:`mpcasv.control.steering.lock_thrust`: the
+    least thrust whose steady full-lock turn reaches the yaw rate ``r_steer``, but no more than
+    the thrust whose steady full-lock turn runs at eq. 3.1's ``u_ff``. In a hard turn
+    (``|psi_e| >= pi/2``: ``u_ref = u_ff``, the yaw PID at full lock) it can therefore hold at
+    most ``u_ff``; it vanishes on a straight course, and for a command slower than ``u_ff`` it
+    shrinks with ``u_ref^2`` (a turn's thrust grows at least as fast as ``u^2``). Zero for
+    differential thrust (``k_diff = 1``), whose yaw authority needs no total thrust.
+    docs/tuning.md, "Thrust floor and eq. 3.1".
+    """
+    from mpcasv.control.steering import lock_thrust
+
+    P = model.params
+    u_ff = ep.reference.u_ff
+    if P.k_diff or u_ff <= 0:
+        return ca.DM(P.T_min)
+    T_lock = lock_thrust(model, ep)["T_lock"]
+    slow = ca.fmin(1.0, (u_ref / u_ff) ** 2)
+    return ca.fmax(T_lock * ca.fabs(delta) / P.delta_max * slow, P.T_min)
+
+
 def execution_law(x, z, cmd, model: VesselModel, ep: ExecutionParams, dt: float):
     """One sample of the execution level.
 
@@ -82,6 +106,7 @@ def execution_law(x, z, cmd, model: VesselModel, ep: ExecutionParams, dt: float)
     psi_d = guidance(x, cmd[1:3])
     e_psi = wrap(psi_d - psi)
     # (3.1) with psi_e = psi_asv - psi_wp; capped by the command and the vessel's top speed
+    # (a command above u_max is clipped here: the autopilot's saturation, docs/vessel.md)
     u_cap = ca.fmin(cmd[3], P.u_max)
     u_ref = ca.fmin(speed_reference(e_psi, ep.reference.u_ff, ep.reference.k_u), u_cap)
 
@@ -91,14 +116,12 @@ def execution_law(x, z, cmd, model: VesselModel, ep: ExecutionParams, dt: float)
     d_sat = ca.fmin(ca.fmax(d_unsat, -P.delta_max), P.delta_max)
     I_psi_next = _integrate(I_psi, dt * Ki * e_psi, d_unsat, P.delta_max)
 
-    # surge speed loop with model-based feed-forward (trim thrust of eq. 2.6)
+    # surge speed loop with model-based feed-forward (trim thrust of eq. 2.6; the idle-drive
+    # drag is left to the integrator: below 3 % of the trim thrust at u_ref >= u_ff)
     T_ff = -(P.X_u * u_ref + P.X_uu * sabs(u_ref, P.eps_abs) * u_ref)
     e_u = u_ref - u_s
     T_unsat = T_ff + ep.speed.Kp * e_u + I_u
-    # thrust floor: keep yaw authority in transit, more of it in hard turns (power turn)
-    turn = ca.fmin(ca.fmax((ca.fabs(e_psi) - math.pi / 4) / (math.pi / 4), 0), 1)
-    T_floor = ca.fmax(P.T_min, P.T_max * (ep.thrust_floor
-                                          + (ep.turn_thrust - ep.thrust_floor) * turn))  # fmt: skip
+    T_floor = steering_floor(u_ref, x[7], model, ep)  # actual steering angle (lagged)
     T_sat = ca.fmin(ca.fmax(T_unsat, T_floor), P.T_max)
     I_u_next = _integrate(I_u, dt * ep.speed.Ki * e_u, T_unsat - (P.T_max + T_floor) / 2,
                           (P.T_max - T_floor) / 2)  # fmt: skip

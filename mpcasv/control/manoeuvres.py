@@ -49,14 +49,27 @@ def simulate_manoeuvre(model: VesselModel, name: str, u0: float = 1.5, delta_deg
                        noise: Noise | None = None, seed: int = 0) -> pd.DataFrame:  # fmt: skip
     """Simulate one manoeuvre; return the identification table (noise added if given).
 
+    Set-points beyond the vessel's limits are refused, not clipped: an identification log must
+    hold the inputs the boat really received.
+
     Raises
     ------
-    ValueError
-        Unknown manoeuvre name.
+    mpcasv.config.ConfigError (a ValueError)
+        Unknown manoeuvre name; ``|delta_deg|`` beyond ``delta_max``; ``u0`` beyond the speed
+        the vessel holds at ``T_max`` (its trim thrust would exceed ``T_max``); ``u0 <= 0``.
     """
+    from mpcasv.config import ConfigError
+
     if name not in MANOEUVRES:
-        raise ValueError(f"unknown manoeuvre {name!r}; known: {', '.join(MANOEUVRES)}")
+        raise ConfigError(f"unknown manoeuvre {name!r}; known: {', '.join(MANOEUVRES)}")
     P = model.params
+    if abs(math.radians(delta_deg)) > P.delta_max * (1 + 1e-9):
+        raise ConfigError(f"--delta {delta_deg:g} deg beyond {P.name}'s steering limit delta_max "
+                          f"= {math.degrees(P.delta_max):.1f} deg")  # fmt: skip
+    top = min(model.top_speed, P.u_max)
+    if not 0 < u0 <= top * (1 + 1e-9):
+        raise ConfigError(f"--speed {u0:g} m/s outside (0, {top:.3g}] m/s: {P.name} cannot hold "
+                          f"it at T_max = {P.T_max:g} N")  # fmt: skip
     F = model.rk4(dt)
     c = np.asarray(current, float)
     x, _ = model.trim(u0)

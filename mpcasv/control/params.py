@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 from typing import Annotated
 
@@ -58,12 +59,14 @@ class ExecutionParams:
     speed: SpeedLoop
     reference: SpeedReference = SpeedReference()
     propeller_on_threshold: Float = 0.05  # fraction of T_max above which n_p != 0 (~22 % rpm)
-    # Thrust floor in transit, as fractions of T_max: a steerable drive has no yaw authority
-    # without thrust, so the speed loop may not starve the yaw loop. ``thrust_floor`` always
-    # applies; it ramps up to ``turn_thrust`` as |psi_e| grows from pi/4 to pi/2 (a "power
-    # turn": without it a boat caught drifting towards an AUV turns away far too slowly).
-    thrust_floor: Annotated[float, Strict(), Field(ge=0, lt=1)] = 0.1
-    turn_thrust: Annotated[float, Strict(), Field(ge=0, le=1)] = 0.8
+    # Fraction of T_max: the MPC's least thrust in transit (its deadband cost,
+    # mpcasv/mpc/problem.py). The execution level's own floor is sized from the model
+    # (mpcasv.control.steering.lock_thrust, docs/tuning.md "Thrust floor and eq. 3.1").
+    thrust_floor: Annotated[float, Strict(), Field(ge=0, lt=1)] = 0.075
+    # Steering-authority criterion of the full-lock thrust floor (rad/s): turn 90 deg within
+    # (alpha - 1) T0 = 20 s (r_inner = alpha T0 rdot_max, Paper 1 field alpha = 5, T0 = 5 s:
+    # one fix period lost to latency), i.e. (pi/2) / 20 s = 4.5 deg/s (docs/tuning.md).
+    r_steer: NonNeg = math.radians(4.5)
     provenance: str = ""
 
 

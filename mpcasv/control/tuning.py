@@ -80,35 +80,100 @@ def run_closed_loop(model: VesselModel, ep: ExecutionParams, x0, wp, u_cap: floa
     return Run(t=np.arange(len(X)) * dt, X=X, U=U, Y=Y)
 
 
+#: agreement demanded between python-control's margins and the frequency sweep
+PM_TOL_DEG, GM_TOL_DB = 2.0, 1.0
+
+
+def sweep_margins(L, omega) -> dict:
+    """Classical margins of a SISO loop from its frequency response on the grid ``omega``.
+
+    Gain crossovers (``|L| = 1``) and phase crossovers (phase = -180 deg mod 360) are located
+    by sign changes on the grid and refined linearly. Returns ``phase_margin_deg`` (smallest
+    over the gain crossovers; ``inf`` if ``|L|`` never crosses 1 on the grid) with its
+    frequency, and ``gain_margin_db`` (smallest ``-20 log|L|`` over the phase crossovers;
+    ``inf`` if none). Frequencies in rad/s; a sampled loop is evaluated at ``exp(j w dt)``.
+    """
+    H = np.asarray(L.frequency_response(omega).complex, complex).ravel()
+    mag, ph = np.abs(H), np.unwrap(np.angle(H))
+    out = {"phase_margin_deg": math.inf, "w_gain_crossover": math.nan,
+           "gain_margin_db": math.inf, "w_phase_crossover": math.nan}  # fmt: skip
+    lm = np.log(mag)
+    for i in np.nonzero(np.sign(lm[:-1]) != np.sign(lm[1:]))[0]:
+        f = lm[i] / (lm[i] - lm[i + 1])
+        w = omega[i] + f * (omega[i + 1] - omega[i])
+        phase = ph[i] + f * (ph[i + 1] - ph[i])
+        pm = (math.degrees(phase) + 180.0 + 180.0) % 360.0 - 180.0
+        if abs(pm) < abs(out["phase_margin_deg"]):
+            out["phase_margin_deg"], out["w_gain_crossover"] = pm, float(w)
+    s180 = (ph + math.pi) / (2 * math.pi)  # integer where the phase is -180 deg (mod 360)
+    for i in np.nonzero(np.floor(s180[:-1]) != np.floor(s180[1:]))[0]:
+        k = max(np.floor(s180[i]), np.floor(s180[i + 1]))
+        f = (k - s180[i]) / (s180[i + 1] - s180[i])
+        w = omega[i] + f * (omega[i + 1] - omega[i])
+        gm = -20 * math.log10(mag[i] + f * (mag[i + 1] - mag[i]))
+        if gm < out["gain_margin_db"]:
+            out["gain_margin_db"], out["w_phase_crossover"] = gm, float(w)
+    return out
+
+
 def loop_margins(L) -> dict:
     """Classical and balanced disk margins of an open loop ``L`` (continuous or sampled).
 
+    ``control.stability_margins`` is cross-checked against :func:`sweep_margins` on a dense
+    grid (up to Nyquist for a sampled loop). Where they disagree (python-control 0.10's
+    discrete-time margins miss gain crossovers: ``inf`` where the loop has one, see
+    ../shared/cases/sampled-phase-margin) the sweep's value is reported and
+    ``margin_check`` says so; a margin neither can compute is ``nan``, which fails every
+    ``>=`` acceptance test. python-control's warnings are not silenced.
     ``disk_*`` are the skew-0 disk margins of ``control.disk_margins`` (gain margin in dB, as
     python-control returns it); frequencies in rad/s.
     """
-    import warnings
-
     import control as ct
 
-    with warnings.catch_warnings():  # 'frd' fallback notes
-        warnings.simplefilter("ignore", UserWarning)
-        gm, pm, _, wg, wp, _ = ct.stability_margins(L)
+    gm, pm, _, wg, wp, _ = ct.stability_margins(L)
     dt = L.dt if L.isdtime() else None
     omega = np.logspace(-3, math.log10(math.pi / dt if dt else 100.0) - 1e-6, 2000)
+    sweep = sweep_margins(L, np.logspace(-4, math.log10(math.pi / dt if dt else 1e3) - 1e-6,
+                                         20000))  # fmt: skip
+    lib = {"gain_margin_db": 20 * math.log10(gm) if np.isfinite(gm) and gm > 0 else
+           (math.inf if gm == math.inf else math.nan),
+           "phase_margin_deg": float(pm)}  # fmt: skip
+    notes = []
+    for key, tol in (("phase_margin_deg", PM_TOL_DEG), ("gain_margin_db", GM_TOL_DB)):
+        a, b = lib[key], sweep[key]
+        same = (a == b) if (math.isinf(a) or math.isinf(b)) else abs(a - b) <= tol
+        if not same:
+            notes.append(f"{key}: python-control {a:.4g}, sweep {b:.4g} (sweep used)")
+            lib[key] = b
     dm, dgm, dpm = ct.disk_margins(L, omega, skew=0.0)
     return {
-        "gain_margin_db": 20 * math.log10(gm) if np.isfinite(gm) else math.inf,
-        "phase_margin_deg": float(pm),
-        "w_gain_crossover": float(wp),  # |L| = 1 (phase margin frequency)
-        "w_phase_crossover": float(wg),
+        "gain_margin_db": lib["gain_margin_db"],
+        "phase_margin_deg": lib["phase_margin_deg"],
+        "w_gain_crossover": float(sweep["w_gain_crossover"]) if notes else float(wp),
+        "w_phase_crossover": float(sweep["w_phase_crossover"]) if notes else float(wg),
+        "margin_check": "; ".join(notes) if notes else "python-control = sweep",
         "disk_margin": float(dm),
         "disk_gain_margin_db": float(dgm),
         "disk_phase_margin_deg": float(dpm),
     }
 
 
-def step_figures(info: dict) -> dict:
-    """Rise, settling time (s) and overshoot (%) from ``control.step_info``."""
+def step_figures(y, t, yfinal: float, **kw) -> dict:
+    """Rise, settling time (s) and overshoot (%) of a step response ``y(t)`` towards ``yfinal``.
+
+    ``control.step_info`` where the response settles; a response that diverges or does not
+    settle within ``t`` reports ``inf`` ("not reached") instead of failing in the library.
+    """
+    import control as ct
+
+    y = np.asarray(y, float).ravel()
+    band = kw.get("SettlingTimeThreshold", 0.02) * abs(yfinal)
+    if not np.all(np.isfinite(y)) or abs(y[-1] - yfinal) > band:
+        over = 100 * (np.nanmax(y) / yfinal - 1) if np.all(np.isfinite(y)) else math.inf
+        reached = np.nonzero(y >= 0.9 * yfinal)[0]
+        rise = float(t[reached[0]] - t[np.argmax(y >= 0.1 * yfinal)]) if len(reached) else math.inf
+        return {"rise_s": rise, "settling_s": math.inf, "overshoot_pct": max(float(over), 0.0)}
+    info = ct.step_info(y, t, yfinal=yfinal, **kw)
     return {
         "rise_s": float(info["RiseTime"]),
         "settling_s": float(info["SettlingTime"]),

@@ -16,7 +16,14 @@ from mpcasv.control.tuning_yaw import SETTLE_BAND, yaw_loop, yaw_plant
 
 
 def _f(v: float, nd: int = 1) -> str:
+    if math.isnan(v):
+        return "n/a"
     return "inf" if not math.isfinite(v) else f"{v:.{nd}f}"
+
+
+def _t(v: float) -> str:
+    """A time that may never come: 'not reached'."""
+    return "not reached" if not math.isfinite(v) else f"{v:.1f}"
 
 
 def yaw_table(designs) -> str:
@@ -38,15 +45,30 @@ def yaw_table(designs) -> str:
             f"| {_f(c['phase_margin_deg'], 0)} / {_f(s['phase_margin_deg'], 0)} "
             f"| {s['disk_margin']:.2f}, {_f(s['disk_gain_margin_db'])}, "
             f"{_f(s['disk_phase_margin_deg'], 0)} "
-            f"| {_f(s['rise_s'])} / {_f(s['settling_s'])}, {s['overshoot_pct']:.0f} "
-            f"| {s['dist_peak_deg']:.2f}, {_f(s['dist_recover_s'])} "
-            f"| {_f(nl['rise_s'])} / {_f(nl['settling_s'])}, {nl['overshoot_deg']:.1f}, "
+            f"| {_t(s['rise_s'])} / {_t(s['settling_s'])}, {s['overshoot_pct']:.0f} "
+            f"| {s['dist_peak_deg']:.2f}, {_t(s['dist_recover_s'])} "
+            f"| {_t(nl['rise_s'])} / {_t(nl['settling_s'])}, {nl['overshoot_deg']:.1f}, "
             f"{nl['max_delta_deg']:.0f} |"
         )
     out.append("")
     out.append("Disk margins, linear steps and disturbance: sampled loop (dt as given), steering "
                "lag included; settle = within ±2 deg of a 45 deg step.")  # fmt: skip
+    out += _margin_notes((d.u0, kind, f) for d in designs
+                         for kind, f in (("continuous", d.linear), ("sampled", d.sampled)))
     return "\n".join(out)
+
+
+def _margin_notes(items) -> list[str]:
+    """Lines for every loop whose margins python-control and the frequency sweep disagree on,
+    and for closed loops that are unstable."""
+    lines = []
+    for u, kind, f in items:
+        if f.get("margin_check", "python-control = sweep") != "python-control = sweep":
+            lines.append(f"- u0 = {u:g} m/s, {kind}: {f['margin_check']}")
+        if not f.get("stable", True):
+            lines.append(f"- u0 = {u:g} m/s, {kind}: closed loop UNSTABLE")
+    return (["", "Margin cross-check (python-control vs frequency sweep):", *lines]
+            if lines else ["", "Margin cross-check: python-control and the frequency sweep agree."])
 
 
 def plot_yaw(model, designs, runs, T_f: float, out: Path) -> list[Path]:
@@ -116,8 +138,10 @@ def speed_tables(g, loop, grids, best) -> str:
     for u, (c, s) in loop.items():
         out.append(f"| {u:g} | {_f(c['gain_margin_db'])} / {_f(s['gain_margin_db'])} "
                    f"| {_f(c['phase_margin_deg'], 0)} / {_f(s['phase_margin_deg'], 0)} "
-                   f"| {s['disk_margin']:.2f} | {_f(s['rise_s'])} / {_f(s['settling_s'])}, "
+                   f"| {s['disk_margin']:.2f} | {_t(s['rise_s'])} / {_t(s['settling_s'])}, "
                    f"{s['overshoot_pct']:.0f} |")  # fmt: skip
+    out += _margin_notes((u, kind, f) for u, (c, s) in loop.items()
+                         for kind, f in (("continuous", c), ("sampled", s)))
     for d, (rows, _) in grids.items():
         angles = list(rows[0].figures)
         out += ["", f"Turns from full speed, waypoint {d:g} m away (time s / path m to stay within "
@@ -130,7 +154,8 @@ def speed_tables(g, loop, grids, best) -> str:
             label = " (no reference model)" if r.k_u == 0 and r is rows[-1] else ""
             out.append(f"| {r.u_ff:g}{label} | {r.k_u:g} | " + " | ".join(cells) + " |")
     out += ["", f"Recommended (grid, pirouette-free, least total turn time): u_ff = {best.u_ff}, "
-            f"k_u = {best.k_u}"]  # fmt: skip
+            f"k_u = {best.k_u}" if best else "Recommended: none (every pair of the grid "
+            "pirouetted)"]  # fmt: skip
     return "\n".join(out)
 
 
@@ -152,7 +177,7 @@ def plot_speed(model, g, grids, field, best, out: Path) -> list[Path]:
     for d, (_rows, runs) in grids.items():
         fig, ax = plt.subplots(1, 1, figsize=(7, 7))
         for (u_ff, k_u, a), r in runs.items():
-            if (u_ff, k_u) not in (field, (best.u_ff, best.k_u)) and k_u != 0.0:
+            if (u_ff, k_u) not in (field, (best.u_ff, best.k_u) if best else field) and k_u != 0.0:
                 continue
             label = "no ref. model" if k_u == 0 else f"u_ff={u_ff}, k_u={k_u}"
             wp = (d * math.cos(math.radians(a)), d * math.sin(math.radians(a)))
@@ -175,3 +200,39 @@ def plot_speed(model, g, grids, field, best, out: Path) -> list[Path]:
         plt.close(fig)
         paths.append(p)
     return paths
+
+
+def plot_pirouette(checks: dict, wp, out: Path, title: str) -> Path:
+    """Paths, speeds and heading errors of :func:`mpcasv.control.tuning_speed.pirouette_check`
+    (hard turn while accelerating, with and without eq. 3.1)."""
+    fig, (ax0, ax1) = plt.subplots(1, 2, figsize=(11, 4.8))
+    ax2 = ax1.twinx()
+    for key, color in (("with", "C0"), ("without", "C3")):
+        run, f = checks[key]
+        what = ("PIROUETTE (circles it, never on course)" if f["pirouette"]
+                else f"on course after {f['turn_s']:.0f} s")  # fmt: skip
+        label = f"{key} eq. 3.1: {what}, turned {f['total_turn_deg']:.0f} deg"
+        reach = np.hypot(run.X[:, 0] - wp[0], run.X[:, 1] - wp[1]) < 5.0  # as turn() counts
+        n = int(np.argmax(reach)) + 1 if reach.any() and not f["pirouette"] else len(run.t)
+        ax0.plot(run.X[:n, 1], run.X[:n, 0], color=color, label=label)
+        ax1.plot(run.t[:n], run.X[:n, 3], color=color, label=f"u, {key} eq. 3.1")
+        ax2.plot(run.t[:n], np.degrees(np.abs(run.psi_error[:n])), color=color, ls=":", lw=1)
+    ax0.plot(wp[1], wp[0], "k*", ms=12, label="waypoint (reached: within 5 m)")
+    ax0.plot(0, 0, "ko", label="start (heading north)")
+    ax0.set_aspect("equal")
+    ax0.set_xlabel("E (m)")
+    ax0.set_ylabel("N (m)")
+    ax0.legend(fontsize=7, loc="lower left")
+    ax0.grid(True, alpha=0.3)
+    ax0.set_title(title, fontsize=9)
+    ax1.set_xlabel("time (s)")
+    ax1.set_ylabel("surge u (m/s), solid")
+    ax2.set_ylabel("|heading error| (deg), dotted")
+    ax1.legend(fontsize=8, loc="upper right")
+    ax1.grid(True, alpha=0.3)
+    fig.tight_layout()
+    out.mkdir(parents=True, exist_ok=True)
+    p = out / "pirouette.png"
+    fig.savefig(p, dpi=100)
+    plt.close(fig)
+    return p

@@ -63,20 +63,25 @@ def speed_figures(P: ct.StateSpace, g: SpeedLoop, dt: float | None = None,
 
     L = ct.ss(C) * P
     t = np.arange(0.0, 120.0, dt or 0.05)
-    y = ct.step_response(ct.feedback(L, 1), t).outputs * step
-    return loop_margins(L) | step_figures(ct.step_info(y, t, yfinal=step))
+    cl = ct.feedback(L, 1)
+    y = ct.step_response(cl, t).outputs * step
+    poles = ct.poles(cl)
+    stable = bool(np.all(np.abs(poles) < 1) if dt else np.all(poles.real < 0))
+    return loop_margins(L) | step_figures(y, t, step) | {"stable": stable}
 
 
 def turn(model: VesselModel, ep: ExecutionParams, angle: float, distance: float,
-         t_end: float = 150.0):  # fmt: skip
-    """Turn by ``angle`` (rad) from full speed towards a waypoint ``distance`` m away.
+         t_end: float = 150.0, u0: float | None = None):  # fmt: skip
+    """Turn by ``angle`` (rad) from full speed (or trim at ``u0``) towards a waypoint
+    ``distance`` m away.
 
     Returns the run and ``{"turn_s", "turn_m", "pirouette", "total_turn_deg", "min_u"}``:
     time and path length until the heading error stays within 10 deg (until the run ends or
     the waypoint is within 5 m), the total heading change before that, and whether it
     pirouetted (never settled, or turned more than 270 deg beyond the commanded turn).
     """
-    u0 = min(model.top_speed, model.params.u_max)
+    if u0 is None:
+        u0 = min(model.top_speed, model.params.u_max)
     x0, _ = model.trim(u0)
     wp = (distance * math.cos(angle), distance * math.sin(angle))
     run = run_closed_loop(model, ep, x0, wp, model.params.u_max, t_end)
@@ -135,3 +140,28 @@ def recommend(rows: list[TurnRow]) -> TurnRow:
     if not good:
         raise ValueError("every (u_ff, k_u) pair pirouetted: no recommendation")
     return min(good, key=lambda r: r.cost)
+
+
+def without_reference(ep: ExecutionParams, model: VesselModel) -> ExecutionParams:
+    """``ep`` with eq. 3.1 switched off: the speed reference is the command at every heading
+    error (``u_ff = u_max``, ``k_u = 0``)."""
+    return replace(ep, reference=SpeedReference(u_ff=model.params.u_max, k_u=0.0))
+
+
+#: the pirouette check of docs/tuning.md: (angle deg, distance m, start speed m/s)
+PIROUETTE_CASE = (90.0, 10.0, 0.6)
+
+
+def pirouette_check(model: VesselModel, ep: ExecutionParams, angle_deg: float = 150.0,
+                    distance: float = 25.0, u0: float = 0.6, t_end: float = 120.0):  # fmt: skip
+    """Hard turn while accelerating (thesis §3.4.1), with and without eq. 3.1.
+
+    From trim at ``u0`` (slow, e.g. leaving standby) the waypoint is ``distance`` m away at
+    ``angle_deg`` off the bow and the command asks for ``u_max``. Returns
+    ``{"with": (run, figures), "without": (run, figures)}`` with :func:`turn`'s figures.
+    """
+    a = math.radians(angle_deg)
+    return {
+        "with": turn(model, ep, a, distance, t_end, u0=u0),
+        "without": turn(model, without_reference(ep, model), a, distance, t_end, u0=u0),
+    }

@@ -104,23 +104,42 @@ def yaw_plant(model: VesselModel, u0: float) -> ct.StateSpace:
     )  # fmt: skip
 
 
+class CourseUnstable(ValueError):
+    """The hull's sway-yaw block has no real Nomoto form at this speed (message: one line)."""
+
+
 def nomoto(model: VesselModel, u0: float) -> Nomoto:
     """Nomoto models of the hull at ``u0`` from the linearised sway-yaw block.
 
     The transfer function from the steering angle (the lag state ``delta``) to ``r`` of the
-    2x2 sway-yaw block is exactly second-order Nomoto; its poles give ``T1 >= T2`` and its
-    zero ``T3``. Raises ``ValueError`` if the hull is course-unstable there (a pole >= 0).
+    2x2 sway-yaw block is exactly second-order Nomoto; its poles ``p_i`` give ``T_i = -1/p_i``
+    (``T1 >= T2``) and its zero ``T3``. A course-unstable hull (a pole > 0) has a
+    negative time constant, ``T < 0``, and a negative ``K`` (``K/T`` > 0: the
+    steering still turns the bow the right way); the pole placement of :func:`place_pid`
+    works for it unchanged.
+
+    Raises
+    ------
+    CourseUnstable
+        Complex or zero sway-yaw poles, or no steering effect on the yaw rate: no first-order
+        Nomoto model (the message names the speed and the poles).
     """
     A, _ = model.linearize(*model.trim(u0))
     i2 = [IX["v"], IX["r"]]
     sys2 = ct.ss(A[np.ix_(i2, i2)], A[np.ix_(i2, [IX["delta"]])], [[0.0, 1.0]], [[0.0]])
     poles, zeros = ct.poles(sys2), ct.zeros(sys2)
-    if np.any(poles.real >= 0) or np.any(np.abs(poles.imag) > 1e-9):
-        raise ValueError(f"sway-yaw poles {poles} at u0={u0}: not a stable real Nomoto model")
+    pol = ", ".join(f"{complex(p).real:+.3g}{complex(p).imag:+.3g}j" for p in poles)
+    if np.any(np.abs(poles.imag) > 1e-9) or np.any(np.abs(poles.real) < 1e-9):
+        raise CourseUnstable(f"sway-yaw poles {pol} 1/s at u0={u0:g} m/s: no real first-order "
+                             "Nomoto model (complex or zero poles)")  # fmt: skip
     T1, T2 = sorted((-1.0 / poles.real).tolist(), reverse=True)
     T3 = float(-1.0 / zeros.real[0]) if len(zeros) else 0.0
     K = float(np.real(ct.dcgain(sys2)))
-    return Nomoto(u0=u0, K=K, T=T1 + T2 - T3, T1=T1, T2=T2, T3=T3)
+    T = T1 + T2 - T3
+    if abs(K) < 1e-12 or abs(T) < 1e-9:
+        raise CourseUnstable(f"at u0={u0:g} m/s the steering has no first-order effect on the "
+                             f"yaw rate (K = {K:.3g}, T = {T:.3g} s; sway-yaw poles {pol} 1/s)")
+    return Nomoto(u0=u0, K=K, T=T, T1=T1, T2=T2, T3=T3)
 
 
 def place_pid(nm: Nomoto, wn: float, zeta: float, integral_ratio: float) -> PIDGains:
@@ -133,6 +152,10 @@ def place_pid(nm: Nomoto, wn: float, zeta: float, integral_ratio: float) -> PIDG
     Kp = T * (wn**2 + 2 * zeta * wn * a) / K
     Ki = T * wn**2 * a / K
     Kd = (T * (2 * zeta * wn + a) - 1.0) / K
+    if min(Kp, Ki) <= 0 or K / T <= 0:
+        raise CourseUnstable(f"at u0={nm.u0:g} m/s the Nomoto model (K = {K:.3g} 1/s, T = "
+                             f"{T:.3g} s) turns the bow against the steering (K/T <= 0): no PID "
+                             "by pole placement")  # fmt: skip
     return PIDGains(Kp=Kp, Ki=Ki, Kd=max(Kd, 0.0))
 
 
@@ -203,10 +226,9 @@ def loop_figures(loop: YawLoop, step: float = math.radians(45.0)) -> dict[str, f
     poles = ct.poles(loop.T_dist)  # all the closed loop's states
     t = np.arange(0.0, 200.0, dt or 0.05)
     resp = ct.step_response(T_ref, t)
-    info = ct.step_info(resp.outputs * step, t, yfinal=step,
-                        SettlingTimeThreshold=SETTLE_BAND / step)  # fmt: skip
+    steps = step_figures(resp.outputs * step, t, step, SettlingTimeThreshold=SETTLE_BAND / step)
     dist = ct.step_response(loop.T_dist, t).outputs * math.radians(5.0)
-    return loop_margins(L) | step_figures(info) | {
+    return loop_margins(L) | steps | {
         "dist_peak_deg": float(np.degrees(np.abs(dist).max())),
         "dist_recover_s": settling_time(t, dist, math.radians(0.5)),
         "stable": bool(np.all(np.abs(poles) < 1) if dt else np.all(poles.real < 0)),
@@ -288,6 +310,7 @@ def tune_yaw(model: VesselModel, ep: ExecutionParams, speeds, wn, zeta: float = 
     from tqdm import tqdm
 
     speeds = [float(s) for s in speeds]
+    check_speeds(model, speeds)
     noms = [nomoto(model, u) for u in speeds]
     gains = [place_pid(nm, w, zeta, integral_ratio) for nm, w in zip(noms, wn, strict=True)]
     ep_new = schedule_params(ep, speeds, gains, T_f)
@@ -295,11 +318,34 @@ def tune_yaw(model: VesselModel, ep: ExecutionParams, speeds, wn, zeta: float = 
     for u, w, nm, g in tqdm(list(zip(speeds, wn, noms, gains, strict=True)), desc="tune yaw",
                             disable=not progress):  # fmt: skip
         P = yaw_plant(model, u)
+        linear, sampled = loop_figures(yaw_loop(P, g, T_f)), loop_figures(yaw_loop(P, g, T_f, dt))
+        if nm.T < 0 and not (linear["stable"] and sampled["stable"]):
+            p_max = max(-1.0 / nm.T1, -1.0 / nm.T2)
+            raise CourseUnstable(
+                f"hull course-unstable at u0={u:g} m/s (sway-yaw pole {p_max:+.2f} 1/s, Nomoto "
+                f"T = {nm.T:.2f} s): the PID placed on the first-order Nomoto model (wn "
+                f"{w:.2f} rad/s) does not stabilise the {'sampled ' if linear['stable'] else ''}"
+                "loop with the steering lag; no schedule written"
+            )
         run, nl = heading_step(model, ep_new, u)
         runs[u] = run
-        designs.append(YawDesign(
-            u0=u, wn=float(w), zeta=zeta, nomoto=nm, gains=g,
-            linear=loop_figures(yaw_loop(P, g, T_f)),
-            sampled=loop_figures(yaw_loop(P, g, T_f, dt)), nonlinear=nl,
-        ))  # fmt: skip
+        designs.append(YawDesign(u0=u, wn=float(w), zeta=zeta, nomoto=nm, gains=g,
+                                 linear=linear, sampled=sampled, nonlinear=nl))  # fmt: skip
     return ep_new, designs, runs
+
+
+def check_speeds(model: VesselModel, speeds) -> None:
+    """Refuse design speeds the vessel cannot hold (above its top speed at ``T_max``, or <= 0).
+
+    Raises
+    ------
+    mpcasv.config.ConfigError
+        One line naming the speed, the top speed and the vessel.
+    """
+    from mpcasv.config import ConfigError
+
+    top = min(model.top_speed, model.params.u_max)
+    bad = [u for u in speeds if not 0 < u <= top * (1 + 1e-6)]
+    if bad:
+        raise ConfigError(f"speeds {bad} m/s outside (0, {top:.3g}] m/s: {model.params.name} "
+                          f"cannot hold them at T_max = {model.params.T_max:g} N")  # fmt: skip

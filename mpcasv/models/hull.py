@@ -18,9 +18,13 @@ Formulas
   added to the speed-proportional sway/yaw damping. Without it the Munk moment makes this
   wide, shallow hull course-unstable above ~1.5 m/s (checked by ``sway_yaw_eigenvalues``).
 - Low-speed linear damping from time constants (Fossen's PythonVehicleSimulator ``otter.py``:
-  Y_v = -M22 / T_sway, N_r = -M33 / T_yaw).
+  Y_v = -M22 / T_sway, N_r = -M33 / T_yaw). Not faded out at speed (``alpha_Y = alpha_N = 0``;
+  the fade of Fossen 2021 §6.4 is measured in docs/vessel.md).
 - Cross-flow drag (Fossen 2021 §6.4.3, strip theory): Y_|v|v = -rho/2 T C_d L,
   N_|r|r = -rho/2 T C_d L^4 / 32.
+- Idle drive (propeller stopped): locked-propeller form drag, ``C_prop = 1.0`` on the expanded
+  blade area (UFC 4-159-03 "Design: Moorings", 2005, eq. 21), plus the drive leg as a
+  streamlined strut (Hoerner 1965, ch. 6), blended out as thrust rises (docs/vessel.md).
 - Surge resistance: ITTC-1957 friction line with a form factor and a residual-resistance
   coefficient (guessed for Fn = 0.35), split 10 % linear / 90 % quadratic; T_max is then the
   thrust that gives the observed top speed of 2.5 m/s.
@@ -35,6 +39,18 @@ import tomli_w
 
 RHO = 1025.0  # sea water density (kg/m^3)
 NU_WATER = 1.19e-6  # kinematic viscosity at 15 C (m^2/s)
+
+
+#: idle-drive inputs of :func:`derive_gretha` (docs/vessel.md): propeller diameter (m), expanded
+#: area ratio, locked-propeller drag coefficient, drive-leg frontal area (m^2) and C_D
+IDLE_DRIVE = {"D_prop": 0.30, "EAR": 0.55, "C_prop": 1.0, "A_leg_x": 0.022, "C_leg": 0.1}
+
+
+def idle_drag_coeff(D_prop: float, EAR: float, C_prop: float, A_leg_x: float,
+                    C_leg: float) -> float:  # fmt: skip
+    """``X_uu_idle = -rho/2 (C_prop A_E + C_leg A_leg_x)`` (N s^2/m^2), ``A_E = EAR pi D^2/4``."""
+    A_E = EAR * math.pi * D_prop**2 / 4
+    return -0.5 * RHO * (C_prop * A_E + C_leg * A_leg_x)
 
 
 def derive_gretha() -> tuple[dict[str, float | str], dict[str, str]]:
@@ -70,6 +86,14 @@ def derive_gretha() -> tuple[dict[str, float | str], dict[str, str]]:
     k_fin = half * A_fin * C_L_alpha  # fin lift per (m/s) of local sway at x_p, per m/s of U
     Y_v = -(m - Y_vdot) / T_sway
     N_r = -(I_z - N_rdot) / T_yaw
+    Y_uv = Yv_p * half * L**2 - k_fin
+    N_ur = Nr_p * half * L**4 - k_fin * x_p**2
+    # Fade of the low-speed terms, exp(-alpha U) (Fossen 2021 §6.4): measured, not shipped.
+    # alpha_N = N_ur / N_r (2.05 s/m, the fastest fade keeping the yaw damping monotone in U)
+    # gives more yaw authority at low speed, but the yaw schedule tune yaw places on that model
+    # makes eq. 3.1's turns pirouette (docs/vessel.md, "Low-speed damping"): 0 until low-speed
+    # turning logs identify it.
+    alpha_N_fossen = N_ur / N_r
 
     S = L * (1.7 * T + C_B * B)  # Mumford wetted surface
     Re = U_top * L / NU_WATER
@@ -80,17 +104,27 @@ def derive_gretha() -> tuple[dict[str, float | str], dict[str, str]]:
     X_u = -0.1 * R_top / U_top
     X_uu = -0.9 * R_top / U_top**2
     C_d = 1.0
+    # Idle drive (docs/vessel.md): locked propeller, form drag on the expanded blade area,
+    # C_prop = 1.0 (UFC 4-159-03, 2005, eq. 21); drive leg (strut + lower unit) as a
+    # streamlined body, C_D ~ 0.1 on frontal area (Hoerner 1965, ch. 6). The propeller's size
+    # is a guess for a ~2 kW drive that pushes this hull at 2.5 m/s.
+    D_prop, EAR, C_prop = IDLE_DRIVE["D_prop"], IDLE_DRIVE["EAR"], IDLE_DRIVE["C_prop"]
+    A_leg_x, C_leg = IDLE_DRIVE["A_leg_x"], IDLE_DRIVE["C_leg"]
+    A_E = EAR * math.pi * D_prop**2 / 4
+    X_uu_idle = idle_drag_coeff(**IDLE_DRIVE)
     values: dict[str, float | str] = {
         "name": "gretha",
         "L": L, "B": B, "T_draft": T, "m": m, "I_z": I_z, "x_g": x_g,
         "X_udot": X_udot, "Y_vdot": Y_vdot, "Y_rdot": Y_rdot, "N_vdot": N_vdot, "N_rdot": N_rdot,
         "X_u": X_u, "X_uu": X_uu, "Y_v": Y_v, "Y_r": 0.0, "N_v": 0.0, "N_r": N_r,
-        "Y_uv": Yv_p * half * L**2 - k_fin, "Y_ur": Yr_p * half * L**3 - k_fin * x_p,
-        "N_uv": Nv_p * half * L**3 - k_fin * x_p, "N_ur": Nr_p * half * L**4 - k_fin * x_p**2,
+        "Y_uv": Y_uv, "Y_ur": Yr_p * half * L**3 - k_fin * x_p,
+        "N_uv": Nv_p * half * L**3 - k_fin * x_p, "N_ur": N_ur,
         "Y_vv": -half * T * C_d * L, "N_rr": -half * T * C_d * L**4 / 32,
         "x_p": x_p, "Y_uudelta": -half * A_leg * C_L_alpha, "T_max": R_top, "T_min": 0.0,
         "delta_max": math.radians(30.0), "delta_rate_max": math.radians(30.0),
         "T_thrust": 0.5, "T_delta": 0.3, "eps_abs": 0.01, "u_max": U_top,
+        "X_uu_idle": X_uu_idle, "T_idle": 0.05 * R_top,
+        "actuation": "steerable", "y_thr": 0.0, "alpha_Y": 0.0, "alpha_N": 0.0,
     }  # fmt: skip
     clarke = "Clarke et al. (1982) regression, Fossen (2021) §6.4.1"
     fin = (
@@ -133,6 +167,21 @@ def derive_gretha() -> tuple[dict[str, float | str], dict[str, str]]:
         "T_delta": "0.3 s steering lag (guess)",
         "eps_abs": "smoothing of |.| (numerical choice, 0.01 m/s)",
         "u_max": "thesis: observed maximum 4.9 kn = 2.5 m/s with ballast",
+        "X_uu_idle": f"idle drive, -rho/2 (C_prop A_E + C_leg A_leg): locked propeller C_prop = "
+        f"{C_prop:g} on expanded blade area A_E = {A_E:.4f} m^2 (UFC 4-159-03 eq. 21; D = "
+        f"{D_prop:g} m, EAR = {EAR:g}: guess) + drive leg C_leg = {C_leg:g} on frontal "
+        f"{A_leg_x:g} m^2 (Hoerner 1965 ch. 6, streamlined strut; area a guess); docs/vessel.md",
+        "actuation": "thesis §3.1: one propeller at the stern, steerable drive",
+        "y_thr": "0: one drive on the centreline",
+        "alpha_Y": "0: the low-speed sway damping Y_v is not faded (fading it at the monotone "
+        "limit Y_uv / Y_v makes the hull much less course-stable at speed: Nomoto T 1.5 -> 2.9 s "
+        "at 2.5 m/s); docs/vessel.md, Low-speed damping",
+        "alpha_N": f"0: N_r not faded. Fossen 2021 §6.4 would fade it as exp(-alpha_N U), "
+        f"alpha_N = N_ur / N_r = {alpha_N_fossen:.2f} s/m (more low-speed yaw authority), but the "
+        "yaw schedule placed on that model makes eq. 3.1's turns pirouette; to be identified from "
+        "low-speed turning logs (docs/vessel.md, Low-speed damping)",
+        "T_idle": "idle drag blends out as exp(-(T/T_idle)^2): T_idle = 5 % of T_max, the thrust "
+        "below which the propeller counts as stopped (n_p = 0)",
     }
     return values, prov
 
@@ -152,5 +201,31 @@ def write_gretha(path: Path | None = None) -> Path:
     return path
 
 
+def stopping_table(params=None) -> str:
+    """Markdown: coasting distance/time from 2.5 and 1.5 m/s, propeller off, and their
+    sensitivity to the idle-drive inputs (``python -m mpcasv.models.hull --stopping``)."""
+    from mpcasv.models.params import load_vessel
+    from mpcasv.models.vessel import VesselModel
+
+    base = params or load_vessel("gretha")
+    rows = [("shipped (D 0.30 m, EAR 0.55, C_prop 1.0)", base.X_uu_idle)]
+    for key, vals in (("C_prop", (0.8, 1.2)), ("D_prop", (0.25, 0.35)), ("EAR", (0.40, 0.70))):
+        for v in vals:
+            rows.append((f"{key} = {v:g}", idle_drag_coeff(**{**IDLE_DRIVE, key: v})))
+    rows.append(("no idle drag (before issue 13)", 0.0))
+    out = ["| idle drive | X_uu_idle (N s^2/m^2) | 2.5 m/s: to 0.5 / to 0.2 m/s | "
+           "1.5 m/s: to 0.5 / to 0.2 m/s |", "|---|---|---|---|"]  # fmt: skip
+    for label, X in rows:
+        m = VesselModel(base.with_coeffs(X_uu_idle=X))
+        cells = []
+        for u0 in (2.5, 1.5):
+            (d5, t5), (d2, t2) = m.stopping(u0, 0.5), m.stopping(u0, 0.2)
+            cells.append(f"{d5:.1f} m, {t5:.0f} s / {d2:.1f} m, {t2:.0f} s")
+        out.append(f"| {label} | {X:.2f} | {cells[0]} | {cells[1]} |")
+    return "\n".join(out)
+
+
 if __name__ == "__main__":
-    print(write_gretha())
+    import sys
+
+    print(stopping_table() if "--stopping" in sys.argv[1:] else write_gretha())

@@ -17,9 +17,13 @@ CSV or parquet (``mpcasv simulate --manoeuvre`` writes them), one row per sample
 Extra columns are ignored. DUNE logs (``.lsf``, ``.lsf.gz``) are read by
 :func:`mpcasv.io.lsf.read_lsf` and mapped: navigation from EstimatedState, ``T_cmd`` =
 SetThrusterActuation id 0 (fraction) x ``T_max`` of the prior, ``delta_cmd`` = SetServoPosition
-id 0. A log with several steering servos (an AUV's fins, such as the shared DUNE LAUV log), of
-a submerged vehicle, or of several vehicles is refused with a :class:`LogError`: the 3-DOF model
-is that of a surface vessel with one steerable drive.
+id 0. DUNE logs the messages it receives, so a boat's log holds other vehicles' states too:
+``vehicle`` (``--vehicle NAME|ID``: Announce name, or IMC id as ``0x2801`` or decimal) picks
+one; by default the one vehicle that carries the actuator set-points (SetThrusterActuation) is
+taken and named on stdout. A log with several steering servos on the chosen vehicle (an AUV's
+fins, such as the shared DUNE LAUV log), of a submerged vehicle, or with no or several
+vehicles carrying set-points and no ``--vehicle`` is refused with a :class:`LogError`: the 3-DOF
+model is that of a surface vessel with one steerable drive.
 
 Method
 ------
@@ -81,8 +85,10 @@ def mass_terms(p: VesselParams) -> dict[str, float]:
 # --- loading -----------------------------------------------------------------------------
 
 
-def load_log(path: Path, prior: VesselParams) -> pd.DataFrame:
+def load_log(path: Path, prior: VesselParams, vehicle: str | None = None) -> pd.DataFrame:
     """Read one log into the identification table (uniform time step).
+
+    ``vehicle`` selects one vehicle of a DUNE log (name or IMC id); see the module docstring.
 
     Raises
     ------
@@ -95,7 +101,7 @@ def load_log(path: Path, prior: VesselParams) -> pd.DataFrame:
         raise LogError(f"{path}: no such log file")
     name = path.name.lower()
     if name.endswith((".lsf", ".lsf.gz")):
-        df = _from_lsf(path, prior)
+        df = _from_lsf(path, prior, vehicle)
     elif name.endswith(".csv"):
         try:
             df = pd.read_csv(path)
@@ -139,14 +145,58 @@ def _resample(t, y, grid, kind):
     return y[idx]  # zero-order hold of set-points
 
 
-def _from_lsf(path: Path, prior: VesselParams) -> pd.DataFrame:
+def _vehicle_id(text: str) -> int | None:
+    try:
+        return int(text, 0)
+    except ValueError:
+        return None
+
+
+def pick_vehicle(df: pd.DataFrame, path, vehicle: str | None = None) -> str:
+    """The vehicle of a multi-vehicle DUNE log to identify (its ``vehicle`` name).
+
+    With ``vehicle`` (a name, or an IMC id such as ``0x2801`` or ``10241``) that one; without,
+    the single vehicle whose rows carry thrust set-points (``thrust_0``), printed.
+
+    Raises
+    ------
+    LogError
+        Unknown vehicle; none or several vehicles carry set-points and none was named.
+    """
+    names = sorted(set(df["vehicle"]))
+    if vehicle is not None:
+        if vehicle in names:
+            return vehicle
+        vid = _vehicle_id(vehicle)
+        hit = sorted(set(df.loc[df["src"] == vid, "vehicle"])) if vid is not None else []
+        if len(hit) == 1:
+            return hit[0]
+        raise LogError(f"{path}: no vehicle {vehicle!r} in the log (vehicles: "
+                       f"{', '.join(names)})")  # fmt: skip
+    if "thrust_0" in df.columns:
+        actuated = sorted(set(df.loc[df["thrust_0"].notna(), "vehicle"]))
+    else:
+        actuated = []
+    if len(names) == 1 and len(actuated) <= 1:
+        return names[0]
+    if len(actuated) != 1:
+        raise LogError(f"{path}: {len(names)} vehicles ({', '.join(names)}), {len(actuated)} "
+                       "with thrust set-points: name one with --vehicle")  # fmt: skip
+    print(f"{path}: {len(names)} vehicles ({', '.join(names)}); identifying '{actuated[0]}', "
+          "the one with actuator set-points (--vehicle to choose)")  # fmt: skip
+    return actuated[0]
+
+
+def _from_lsf(path: Path, prior: VesselParams, vehicle: str | None = None) -> pd.DataFrame:
     from mpcasv.io.lsf import read_lsf
 
     df = read_lsf(path)
-    vehicles = sorted(set(df["vehicle"]))
-    if len(vehicles) != 1:
-        raise LogError(f"{path}: {len(vehicles)} vehicles {vehicles}; identify one at a time")
-    fins = sorted(c for c in df.columns if c.startswith("fin_cmd_"))
+    chosen = pick_vehicle(df, path, vehicle)
+    df = df[df["vehicle"] == chosen]
+    vehicles = [chosen]
+    if (df["depth"] > 0.5).mean() <= 0.05 and prior.actuation == "differential":
+        return _differential_inputs(df, path, prior)
+    fins = sorted(c for c in df.columns if c.startswith("fin_cmd_") and df[c].notna().any())
     if len(fins) > 1:
         raise LogError(
             f"{path}: {len(fins)} steering servos ({', '.join(fins)}) on '{vehicles[0]}': a "
@@ -167,6 +217,25 @@ def _from_lsf(path: Path, prior: VesselParams) -> pd.DataFrame:
         "t": df["t"], "N": df["N"], "E": df["E"], "psi": df["psi"], "u": df["u"], "v": df["v"],
         "r": df["r"], "T_cmd": df["thrust_0"].astype(float) * prior.T_max,
         "delta_cmd": df["fin_cmd_0"].astype(float),
+    })  # fmt: skip
+
+
+def _differential_inputs(df: pd.DataFrame, path, prior: VesselParams) -> pd.DataFrame:
+    """Two fixed thrusters (prior ``actuation = "differential"``): SetThrusterActuation id 0
+    (port) and id 1 (starboard), fractions ``a_0, a_1`` of each thruster's ``T_max / 2``:
+    ``T_cmd = (a_0 + a_1) T_max / 2`` and ``delta_cmd = delta_max (a_0 - a_1) / 2`` (so that
+    ``T_port - T_stbd = T_max delta / delta_max``, :func:`mpcasv.models.vessel.actuator_forces`).
+    The thrust is taken as proportional to the set-point (no thrust-speed map)."""
+    for col, i in (("thrust_0", 0), ("thrust_1", 1)):
+        if col not in df.columns or df[col].isna().all():
+            raise LogError(f"{path}: missing messages: no SetThrusterActuation id {i} (a vessel "
+                           "with two thrusters needs both)")  # fmt: skip
+    df = df.dropna(subset=["thrust_0", "thrust_1"])
+    a0, a1 = df["thrust_0"].astype(float), df["thrust_1"].astype(float)
+    return pd.DataFrame({
+        "t": df["t"], "N": df["N"], "E": df["E"], "psi": df["psi"], "u": df["u"], "v": df["v"],
+        "r": df["r"], "T_cmd": (a0 + a1) * prior.T_max / 2,
+        "delta_cmd": (a0 - a1) * prior.delta_max / 2,
     })  # fmt: skip
 
 
@@ -446,14 +515,24 @@ def write_params(path: Path, res: Identification, prior: VesselParams, sources: 
 
     val = res.metrics["simulation_error"]["validation"]
     fit = ", ".join(f"{c} {v['fit_pct']:.1f} %" for c, v in val.items())
+    from mpcasv.models.vessel import top_speed
+
     data = {f.name: getattr(res.params, f.name) for f in dataclasses.fields(res.params)}
     data.pop("provenance")
+    data = {k: v for k, v in data.items() if v is not None}  # absent optional (T_idle)
     data["name"] = f"{prior.name}-identified"
+    # the declared top speed is checked against the model at load: the identified resistance
+    # moves it (set-points are fractions of the prior's T_max, so it is the full-throttle speed
+    # the identified model predicts)
+    data["u_max"] = round(top_speed(res.params), 4)
     prov = {}
     for key in data:
         if key == "name":
             continue
-        if key in res.coeffs:
+        if key == "u_max":
+            prov[key] = (f"top speed of the identified model at T_max = {prior.T_max:g} N "
+                         f"(prior declared {prior.u_max:g} m/s: {prior.provenance.get(key, '')})")
+        elif key in res.coeffs:
             prov[key] = (f"identified by mpcasv identify from {', '.join(sources)}: simulation-"
                          f"error least squares, 1-sigma {100 * res.rel_std[key]:.1f} %; "
                          f"validation fit {fit}; prior {getattr(prior, key):.6g}")  # fmt: skip
@@ -539,7 +618,7 @@ def run_cli(args) -> int:
         from mpcasv.config import ConfigError
 
         raise ConfigError(f"--coeffs: not model coefficients: {unknown}")
-    logs = [load_log(p, prior) for p in args.logs]
+    logs = [load_log(p, prior, getattr(args, "vehicle_pick", None)) for p in args.logs]
     res = identify(logs, prior, coeffs, current=not args.no_current,
                    validation=args.validation, progress=not args.quiet)  # fmt: skip
     write_params(args.out, res, prior, [str(p) for p in args.logs])

@@ -5,8 +5,9 @@ Input  u = [T_cmd, delta_cmd]              (N, rad): thrust and steering set-poi
 Current c = [V_N, V_E]                     (m/s): constant, irrotational, in NED
 
 Gretha has one steerable stern drive at (x_p, 0): its thrust in body axes is
-[T cos(delta), -T sin(delta)], and its steered underwater leg adds a lift force
-Y_uudelta |u_r| u_r delta, so the yaw moment is x_p times the total side force (positive
+[T cos(delta), -T sin(delta)]; with the propeller stopped (T ~ 0) the drive adds the surge
+drag of the locked propeller and its leg (:func:`idle_drag`); its steered underwater leg adds a
+lift force Y_uudelta |u_r| u_r delta, so the yaw moment is x_p times the total side force (positive
 delta turns the bow to starboard, r > 0). Yaw authority therefore grows with thrust and with
 speed, and vanishes at rest. Thrust and steering follow their set-points with first-order
 lags, so the actuators are part of the state and every user (simulator, MPC, tuning)
@@ -24,6 +25,7 @@ vector in :data:`mpcasv.models.params.MODEL_COEFFS` order.
 
 from __future__ import annotations
 
+import math
 from functools import cached_property
 
 import casadi as ca
@@ -40,6 +42,50 @@ IX = {name: i for i, name in enumerate(STATE_NAMES)}
 def sabs(x, eps):
     """Smooth |x| = sqrt(x^2 + eps^2) - eps: differentiable, zero at zero, >= 0."""
     return ca.sqrt(x * x + eps * eps) - eps
+
+
+def idle_weight(T, T_idle):
+    """Blend of the idle-drive drag: 1 at zero thrust, ``exp(-(T/T_idle)^2)``, smooth in ``T``.
+
+    At ``T = 2 T_idle`` it is 0.018; at ``3 T_idle`` 1e-4 (the drag is gone while the
+    propeller runs).
+    """
+    return ca.exp(-((T / T_idle) ** 2))
+
+
+def idle_drag(u_r, T, P):
+    """Surge drag of the idle drive (N): ``X_uu_idle |u_r| u_r w(T)``.
+
+    ``X_uu_idle = -rho/2 (C_prop A_E + C_leg A_leg)``: the locked propeller's form drag on its
+    expanded blade area ``A_E`` (UFC 4-159-03, 2005, eq. 21: ``C_prop = 1.0``) plus the drive
+    leg's on its frontal area. While the propeller runs, ``T`` is the drive unit's net thrust
+    (its own drag netted out), so the term is blended out by :func:`idle_weight`.
+    See docs/vessel.md for the numbers and their sensitivity.
+    """
+    return P["X_uu_idle"] * sabs(u_r, P["eps_abs"]) * u_r * idle_weight(T, P["T_idle"])
+
+
+def actuator_forces(T, delta, u_r, P):
+    """Actuator forces and moment ``[X, Y, N]`` (N, N, N m) in body axes.
+
+    - Steerable drive at ``(x_p, 0)`` (``k_diff = 0``): thrust ``[T cos(delta),
+      -T sin(delta)]`` plus the steered leg's lift ``Y_uudelta |u_r| u_r delta``; ``N = x_p Y``.
+    - Two fixed thrusters at ``(x_p, -+y_thr)`` (``k_diff = 1``, the Otter): ``X = T`` (their
+      sum), no side force, ``N = y_thr (T_port - T_stbd) = N_diff delta`` with
+      ``N_diff = y_thr T_max / delta_max``: the second input is the differential thrust scaled
+      to the steering range, so the execution level, the MPC and the tuning tools keep one
+      interface. Yaw authority then does not need speed or total thrust.
+
+    The switch ``k_diff`` is a number of the parameter vector (0 or 1), so both kinds live in
+    the one symbolic model.
+    """
+    k, eps = P["k_diff"], P["eps_abs"]
+    Y_steer = -T * ca.sin(delta) + P["Y_uudelta"] * sabs(u_r, eps) * u_r * delta
+    return ca.vertcat(
+        (1 - k) * T * ca.cos(delta) + k * T,
+        (1 - k) * Y_steer,
+        (1 - k) * P["x_p"] * Y_steer + P["N_diff"] * delta,
+    )
 
 
 def xdot_expr(x, u, c, p):
@@ -75,19 +121,19 @@ def xdot_expr(x, u, c, p):
 
     # damping: linear (constant + proportional to speed, Clarke 1982) and quadratic
     U = sabs(u_r, eps)
+    f_Y, f_N = ca.exp(-P["alpha_Y"] * U), ca.exp(-P["alpha_N"] * U)  # low-speed terms fade
     D_nur = -ca.vertcat(
         P["X_u"] * u_r + P["X_uu"] * sabs(u_r, eps) * u_r,
-        (P["Y_v"] + P["Y_uv"] * U) * v_r
-        + (P["Y_r"] + P["Y_ur"] * U) * r
+        (f_Y * P["Y_v"] + P["Y_uv"] * U) * v_r
+        + (f_Y * P["Y_r"] + P["Y_ur"] * U) * r
         + P["Y_vv"] * sabs(v_r, eps) * v_r,
-        (P["N_v"] + P["N_uv"] * U) * v_r
-        + (P["N_r"] + P["N_ur"] * U) * r
+        (f_N * P["N_v"] + P["N_uv"] * U) * v_r
+        + (f_N * P["N_r"] + P["N_ur"] * U) * r
         + P["N_rr"] * sabs(r, eps) * r,
     )
 
-    # steerable stern thrust
-    Y_act = -T * ca.sin(delta) + P["Y_uudelta"] * sabs(u_r, eps) * u_r * delta
-    tau = ca.vertcat(T * ca.cos(delta), Y_act, P["x_p"] * Y_act)
+    # actuation: steerable stern drive (k_diff = 0) or two fixed thrusters (k_diff = 1)
+    tau = actuator_forces(T, delta, u_r, P) + ca.vertcat(idle_drag(u_r, T, P), 0, 0)
 
     # (2.6): M_RB nu_dot + M_A (nu_dot - nu_c_dot) + ... = tau
     nu_c_dot = ca.vertcat(r * v_c, -r * u_c, 0)
@@ -110,6 +156,62 @@ def rk4_expr(f, x, u, c, dt, n_sub=1):
         k4 = f(x + h * k3, u, c)
         x = x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
     return x
+
+
+def resistance(P: VesselParams, u: float) -> float:
+    """Hull resistance (N) at surge speed ``u`` straight ahead in still water, drive running:
+    ``-(X_u u + X_uu |u| u)`` with the model's smooth ``|u|`` (eq. 2.6 in trim)."""
+    su = math.sqrt(u * u + P.eps_abs**2) - P.eps_abs
+    return float(-(P.X_u * u + P.X_uu * su * u))
+
+
+def trim_thrust(P: VesselParams, u: float) -> float:
+    """Thrust (N) that holds surge speed ``u`` straight ahead in still water (trim, eq. 2.6).
+
+    Solves ``T + X_idle(u, T) = R(u)`` (:func:`idle_drag`; unique for ``u >= 0``: the left
+    side grows with ``T``). Astern (``u < 0``) the idle drag is not included.
+    """
+    R = resistance(P, u)
+    if P.X_uu_idle == 0.0 or u <= 0.0:
+        return R
+    su = math.sqrt(u * u + P.eps_abs**2) - P.eps_abs
+    D = -P.X_uu_idle * su * u  # full idle drag at u (N), >= 0
+    T_idle = P.T_idle
+
+    def net(T):
+        return T - D * math.exp(-((T / T_idle) ** 2)) - R
+
+    return _bisect(net, R, R + D)
+
+
+def _bisect(f, lo: float, hi: float, tol: float = 1e-10) -> float:
+    """Root of an increasing scalar ``f`` on ``[lo, hi]`` (``f(lo) <= 0 <= f(hi)``) by
+    bisection. (Plain Python on purpose: ``scipy.optimize`` costs ~0.6 s of import in every
+    simulator process for a one-dimensional monotonic root.)"""
+    for _ in range(200):
+        mid = 0.5 * (lo + hi)
+        if hi - lo <= tol * max(1.0, abs(mid)):
+            break
+        if f(mid) > 0:
+            hi = mid
+        else:
+            lo = mid
+    return 0.5 * (lo + hi)
+
+
+def top_speed(P: VesselParams) -> float:
+    """Straight-line speed (m/s) at ``T_max`` in still water, solved on the model's trim."""
+    hi = 1.0
+    while trim_thrust(P, hi) < P.T_max:
+        hi *= 2
+        if hi > 1e3:
+            raise ValueError(f"{P.name}: no top speed below 1000 m/s at T_max = {P.T_max:g} N")
+    return _bisect(lambda u: trim_thrust(P, u) - P.T_max, 0.0, hi)
+
+
+#: tolerance of the load-time check of a vessel file's declared ``u_max`` against the model's
+#: top speed at ``T_max`` (relative)
+U_MAX_TOLERANCE = 0.05
 
 
 class VesselModel:
@@ -153,11 +255,13 @@ class VesselModel:
         A, B = self._jac(np.asarray(x0, float), np.asarray(u0, float), np.asarray(c0, float))
         return np.array(A), np.array(B)
 
+    def resistance(self, u: float) -> float:
+        """Hull resistance (N) at surge speed ``u`` straight ahead in still water, drive running."""
+        return resistance(self.params, u)
+
     def thrust_for_speed(self, u: float) -> float:
-        """Thrust that holds surge speed ``u`` straight ahead in still water (trim, eq. 2.6)."""
-        P = self.params
-        su = np.sqrt(u * u + P.eps_abs**2) - P.eps_abs
-        return float(-(P.X_u * u + P.X_uu * su * u))
+        """Thrust that holds surge speed ``u`` straight ahead, still water (:func:`trim_thrust`)."""
+        return trim_thrust(self.params, u)
 
     def trim(self, u: float) -> tuple[np.ndarray, np.ndarray]:
         """Straight-line equilibrium at surge speed ``u`` heading north: (x0, u0)."""
@@ -167,10 +271,28 @@ class VesselModel:
 
     @cached_property
     def top_speed(self) -> float:
-        """Straight-line speed at full thrust in still water (solved on the model)."""
-        from scipy.optimize import brentq
+        """Straight-line speed at full thrust in still water (:func:`top_speed`)."""
+        return top_speed(self.params)
 
-        return float(brentq(lambda u: self.thrust_for_speed(u) - self.params.T_max, 0.0, 20.0))
+    def stopping(self, u0: float, u_stop: float = 0.2, dt: float = 0.05,
+                 t_end: float = 600.0) -> tuple[float, float]:  # fmt: skip
+        """Distance (m) and time (s) to coast from trim at ``u0`` below ``u_stop`` (propeller off).
+
+        Straight ahead in still water: the vessel starts in trim at ``u0`` and the thrust
+        set-point drops to zero at t = 0 (the thrust follows its lag ``T_thrust``). Returns
+        ``(inf, inf)`` if the speed does not fall below ``u_stop`` within ``t_end``.
+        """
+        F = self.rk4(dt)
+        x, _ = self.trim(u0)
+        zero, c = np.zeros(NU), np.zeros(NC)
+        dist, t = 0.0, 0.0
+        while x[IX["u"]] >= u_stop:
+            if t >= t_end:
+                return math.inf, math.inf
+            x_next = np.array(F(x, zero, c)).ravel()
+            dist += math.hypot(x_next[0] - x[0], x_next[1] - x[1])
+            x, t = x_next, t + dt
+        return dist, t
 
     def sway_yaw_eigenvalues(self, u: float) -> np.ndarray:
         """Eigenvalues of the linearised sway-yaw subsystem at straight-line speed ``u``.
