@@ -122,6 +122,9 @@ def execution_law(x, z, cmd, model: VesselModel, ep: ExecutionParams, dt: float)
     e_u = u_ref - u_s
     T_unsat = T_ff + ep.speed.Kp * e_u + I_u
     T_floor = steering_floor(u_ref, x[7], model, ep)  # actual steering angle (lagged)
+    if ep.turn_thrust > 0:  # the optional power turn: overrides eq. 3.1 (params.py)
+        turn = ca.fmin(ca.fmax((ca.fabs(e_psi) - math.pi / 4) / (math.pi / 4), 0), 1)
+        T_floor = ca.fmax(T_floor, P.T_max * ep.turn_thrust * turn)
     T_sat = ca.fmin(ca.fmax(T_unsat, T_floor), P.T_max)
     I_u_next = _integrate(I_u, dt * ep.speed.Ki * e_u, T_unsat - (P.T_max + T_floor) / 2,
                           (P.T_max - T_floor) / 2)  # fmt: skip

@@ -67,6 +67,12 @@ class ExecutionParams:
     # (alpha - 1) T0 = 20 s (r_inner = alpha T0 rdot_max, Paper 1 field alpha = 5, T0 = 5 s:
     # one fix period lost to latency), i.e. (pi/2) / 20 s = 4.5 deg/s (docs/tuning.md).
     r_steer: NonNeg = math.radians(4.5)
+    # "Power turn" (fraction of T_max): a thrust floor that ramps from 0 to ``turn_thrust``
+    # as |psi_e| grows from pi/4 to pi/2. It OVERRIDES eq. 3.1 (it can hold the boat above
+    # u_ff in a hard turn), so it is off by default; Gretha's file keeps it at 0.8 because
+    # without it her derived (not identified) hull turns too slowly at low speed and the
+    # pursuer Cases 4 and 8 collide (docs/tuning.md, "Thrust floor and eq. 3.1").
+    turn_thrust: Annotated[float, Strict(), Field(ge=0, le=1)] = 0.0
     provenance: str = ""
 
 
