@@ -14,7 +14,8 @@ Every step (docs/mpc.md, "Controller"):
    heading for the AUV with the largest projected fix age (standing still is a local minimum:
    at rest the rudder has no authority, so the gradient cannot say "turn and go");
 4. the safety check: the ASV more than ``max_violation`` outside the range bounds now (no
-   solve), a failed solve, a solve over the time budget, or a plan entering r_inner /
+   solve), a failed solve (in the field also: no answer within ``budget_ms``, see
+   :meth:`MPCController.use_deadline`), or a plan entering r_inner /
    r_avoid within its first ``check_stages`` stages (or, already inside, closing the range
    further) hands this step to the hybrid controller
    (stepped on every observation so that its state is current), counted in ``fallbacks``;
@@ -26,7 +27,9 @@ Every step (docs/mpc.md, "Controller"):
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
+import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -37,6 +40,7 @@ from mpcasv.hybrid.multi import HybridMulti, HybridMultiParams
 from mpcasv.hybrid.single import HybridSingle, HybridSingleParams
 from mpcasv.interface import Command, Mode, Observation, PlannedTrajectory, Reason
 from mpcasv.models.acoustics import AcousticParams
+from mpcasv.mpc.deadline import DeadlineSolver
 from mpcasv.mpc.params import MPCParams
 from mpcasv.mpc.problem import NXV, OCP
 from mpcasv.mpc.solvers import SolveResult, make_solver
@@ -66,6 +70,12 @@ def build_ocp(params: MPCParams, n_auv: int, multi: bool, log=print, boat: Boat 
         ocp = OCP(params, n_auv, outer=not multi, boat=boat)
         _OCP_CACHE[key] = (ocp, make_solver(ocp, params.solver, log=log))
     return _OCP_CACHE[key]
+
+
+def _worker_solver(params: MPCParams, n_auv: int, multi: bool, boat):
+    """The solver of a field-mode worker process (:class:`~mpcasv.mpc.deadline.DeadlineSolver`):
+    the same problem as the controller's, its library loaded from the cache."""
+    return build_ocp(params, n_auv, multi, log=lambda *a: None, boat=boat)[1]
 
 
 def ranges(asv_NE: np.ndarray, pa: np.ndarray) -> np.ndarray:
@@ -107,13 +117,45 @@ class MPCController:
         self.multi = multi
         self.name = "mpc-multi" if multi else "mpc-single"
         self.acoustics = AcousticParams()
+        #: field mode (:meth:`use_deadline`): solves in a worker process with a deadline
+        self.deadline: DeadlineSolver | None = None
         self._setup(n_auv)
         self.reset(n_auv)
+
+    def use_deadline(self, factory=None, start_timeout: float = 600.0) -> None:
+        """Field mode: every step's solves run in a worker process and are abandoned at the
+        step's budget ``solver.budget_ms`` (the step then takes the hybrid fallback's command,
+        reason ``deadline``; the next step starts warm from the previous plan, on a spare
+        worker). Set by the deploy loop; never in simulation, where only iteration limits
+        decide and wall time is measured (``mpc_over_budget``), so runs are reproducible.
+
+        ``factory`` (tests): builds the worker's solver (default: this controller's problem,
+        its compiled library loaded from the cache). Blocks until the first worker is ready.
+
+        Raises
+        ------
+        RuntimeError
+            The worker could not build the solver within ``start_timeout`` s.
+        """
+        if self.deadline is not None:
+            self.deadline.close()
+        factory = factory or functools.partial(_worker_solver, self.params, self.ocp.dims.n_auv,
+                                               self.multi, self.boat)  # fmt: skip
+        self.deadline = DeadlineSolver(factory, start_timeout)
+        self._deadline_n = self.ocp.dims.n_auv
+
+    def close(self) -> None:
+        """Stop the field mode's solver workers (no-op in simulation)."""
+        if self.deadline is not None:
+            self.deadline.close()
+            self.deadline = None
 
     # ------------------------------------------------------------------ set-up
     def _setup(self, n_auv: int) -> None:
         P = self.params
         self.ocp, self.solver = build_ocp(P, n_auv, self.multi, boat=self.boat)
+        if self.deadline is not None and getattr(self, "_deadline_n", n_auv) != n_auv:
+            self.use_deadline()  # another number of AUVs: workers for the new problem
         if self.multi:
             self.hybrid = HybridMulti(HybridMultiParams(P.domain, P.T_standby, P.speed,
                                                         avoidance=P.avoidance))  # fmt: skip
@@ -133,6 +175,10 @@ class MPCController:
         self.plan: PlannedTrajectory | None = None
         self.fallbacks = 0
         self.fallback_log: list[FallbackEvent] = []
+        #: steps whose solves took longer than ``budget_ms`` of wall time: a diagnostic in
+        #: simulation (never a decision); in the field such a step is cut at the deadline
+        self.over_budget = 0
+        self._t_step = 0.0
         self.t_explore: float | None = None
         self.explored = 0
         self.target = 0  # the AUV the terminal cost visits next
@@ -222,8 +268,17 @@ class MPCController:
         return self.ocp.pack(self._x0(obs), self.tau, (0.0, 0.0), pa, r_lo + m, r_hi - m, depth,
                              d_fix, r_t, self.target)  # fmt: skip
 
+    def _solve(self, p: np.ndarray, w0: np.ndarray, lam_x=None, lam_g=None) -> SolveResult:
+        """One solve: in this process (simulation: only the iteration limit decides), or in
+        the field mode's worker with what is left of this step's budget."""
+        if self.deadline is None:
+            return self.solver.solve(p, w0, lam_x, lam_g)
+        left = self.params.solver.budget_ms / 1e3 - (time.perf_counter() - self._t_step)
+        return self.deadline.solve(p, w0, lam_x, lam_g, timeout=left)
+
     def step(self, obs: Observation) -> Command:
         ocp = self.ocp
+        self._t_step = time.perf_counter()  # wall time: the field deadline and diagnostics only
         elapsed = 0.0 if self.t_prev is None else obs.t - self.t_prev
         self.t_prev = obs.t
         self.tau = self._fix_ages(obs, elapsed)
@@ -244,7 +299,7 @@ class MPCController:
         gap = self._violation_now(p)
         solved = gap <= self.params.solver.max_violation  # else badly scaled (SolverParams)
         if solved:
-            res = self.solver.solve(p, w0, *lam)
+            res = self._solve(p, w0, *lam)
             res = self._explore(obs, p, res)
             reason = self._check(res, p)
         else:
@@ -258,10 +313,12 @@ class MPCController:
                 self._store_plan(obs.t, res.w)
         else:
             self.w_prev, self.lam_prev = None, None  # next step starts from a rollout
+        over = int((time.perf_counter() - self._t_step) * 1e3 > self.params.solver.budget_ms)
+        self.over_budget += over  # measured, never a decision in simulation
         self._diag = {"mpc_ok": int(res.ok), "mpc_iter": res.iters, "mpc_ms": res.ms,
                       "mpc_cost": res.f, "mpc_status": res.status,
                       "mpc_fallback": int(reason is not None),
-                      "mpc_fallback_reason": reason or ""}  # fmt: skip
+                      "mpc_fallback_reason": reason or "", "mpc_over_budget": over}  # fmt: skip
         self._diag |= {f"mpc_tau{i}": float(v) for i, v in enumerate(self.tau)}
         self._diag["mpc_target"] = self.target
         if reason is not None:
@@ -313,7 +370,9 @@ class MPCController:
         j = self.target
         if np.hypot(*(obs.asv.position - par["pa"][0, j])) <= par["r_t"][j] + self.domain.eps_plus:
             return res  # already there
-        alt = self.solver.solve(p, ocp.guided_rollout(p, j, P.speed))
+        if self.deadline is not None and res.status == "deadline":
+            return res  # the field budget is spent
+        alt = self._solve(p, ocp.guided_rollout(p, j, P.speed))
         self.explored += 1
         best = alt if alt.ok and (not res.ok or alt.f < res.f) else res
         return dataclasses.replace(best, ms=res.ms + alt.ms, iters=res.iters + alt.iters)
@@ -331,10 +390,10 @@ class MPCController:
     def _check(self, res, p) -> str | None:
         """Why this step's plan may not be used (None: it may)."""
         sp = self.params.solver
+        if not res.ok and res.status == "deadline":
+            return f"deadline: no plan within the step's {sp.budget_ms:g} ms (field mode)"
         if not res.ok:
             return f"solver: {res.status}"
-        if res.ms > sp.budget_ms:
-            return f"time budget: {res.ms:.0f} ms > {sp.budget_ms:g} ms"
         Z, _ = self.ocp.split(res.w)
         par = self.ocp.unpack_par(p)
         n = min(sp.check_stages, self.ocp.dims.N) + 1

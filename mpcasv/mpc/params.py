@@ -141,7 +141,12 @@ class SolverParams:
     qp_iters : int
         SQP iterations of the ``qp`` variant per step (1 = real-time iteration).
     budget_ms : float
-        Time budget of one solve (ms): a slower solve is not used for the command.
+        Wall-time budget of one control step's solves (ms). In the field
+        (:meth:`~mpcasv.mpc.controller.MPCController.use_deadline`, set by the deploy loop) a
+        hard deadline: the solve runs in a worker process and is abandoned at the budget (the
+        hybrid fallback commands that step). In simulation it decides nothing (runs are
+        reproduced exactly under any load): a step over it is only counted
+        (``mpc_over_budget``); ``max_iter`` bounds the work.
     check_stages : int
         Stages of the plan checked against r_inner / r_avoid before it is used.
     check_margin : float
