@@ -182,6 +182,7 @@ class MPCController:
         self.t_explore: float | None = None
         self.explored = 0
         self.target = 0  # the AUV the terminal cost visits next
+        self.target_switches = 0  # changes of target this run (diagnostic, issue 16 item 6)
         self.dwell = 0.0  # time spent in the target AUV's target domain (s)
         #: if a list: (parameters, elapsed stages) of every step's main solve (benchmarks)
         self.recorder: list | None = getattr(self, "recorder", None)
@@ -321,6 +322,7 @@ class MPCController:
                       "mpc_fallback_reason": reason or "", "mpc_over_budget": over}  # fmt: skip
         self._diag |= {f"mpc_tau{i}": float(v) for i, v in enumerate(self.tau)}
         self._diag["mpc_target"] = self.target
+        self._diag["mpc_target_switches"] = self.target_switches  # cumulative
         if reason is not None:
             self.fallbacks += 1
             self.fallback_log.append(FallbackEvent(obs.t, reason, res.status, res.ms))
@@ -334,7 +336,8 @@ class MPCController:
         """The AUV the terminal cost sends the ASV to (M9): kept until it is served (its
         expected fix age below ``tau_served``, or the ASV has been within its target domain for
         ``dwell_max``), then the one with the largest projected fix age ``tau_i + t_go,i``
-        (Paper 2's eq. 8 on projected ages)."""
+        (Paper 2's eq. 8 on projected ages) among those whose projected age exceeds
+        ``tau_served``; none such: the target stays (no switching between served AUVs)."""
         K = len(obs.auvs)
         if K == 1:
             return
@@ -346,11 +349,17 @@ class MPCController:
         served = self.tau[self.target] <= self.params.tau_served
         if not (served or self.dwell >= self.params.dwell_max):
             return
-        self.dwell = 0.0
         t_go = np.maximum(dist - r_t, 0.0) / self.params.weights.U_go
         proj = self.tau + t_go
-        proj[self.target] = -np.inf
+        # commitment (issue 16 item 6): leave the target only for an AUV that needs a visit
+        # itself (projected fix age above tau_served); with every other AUV served the target
+        # stays (before, two served AUVs swapped the target every step for a whole run)
+        proj[(np.arange(K) == self.target) | (proj <= self.params.tau_served)] = -np.inf
+        if not np.isfinite(proj).any():
+            return
+        self.dwell = 0.0
         self.target = int(np.argmax(proj))
+        self.target_switches += 1
         self.t_explore = None  # new target: also try a guess heading there (_explore)
 
     def _explore(self, obs: Observation, p: np.ndarray, res):
