@@ -42,11 +42,12 @@ from mpcasv.interface import Command, Mode, Observation, PlannedTrajectory, Reas
 from mpcasv.models.acoustics import AcousticParams
 from mpcasv.mpc.deadline import DeadlineSolver
 from mpcasv.mpc.params import MPCParams
-from mpcasv.mpc.problem import NXV, OCP
+from mpcasv.mpc.problem import NXV, OCP, channel_vector
 from mpcasv.mpc.solvers import SolveResult, make_solver
 
 R_HI_NONE = 1.0e5  # "no outer bound" (m)
 TAU_UNKNOWN = 600.0  # fix age used for an AUV never fixed (s)
+W_MAX_DEPTH = 2.0  # bound on the estimated vertical speed of an AUV (m/s)
 
 _OCP_CACHE: dict = {}
 
@@ -116,7 +117,10 @@ class MPCController:
         self.domain = params.domain
         self.multi = multi
         self.name = "mpc-multi" if multi else "mpc-single"
-        self.acoustics = AcousticParams()
+        # the run's acoustic channel (the scenario's or the deploy configuration's), as the
+        # vessel comes: with the Boat (default channel outside a run)
+        self.acoustics = getattr(boat, "acoustics", None) or AcousticParams()
+        self.channel = channel_vector(self.acoustics)
         #: field mode (:meth:`use_deadline`): solves in a worker process with a deadline
         self.deadline: DeadlineSolver | None = None
         self._setup(n_auv)
@@ -183,6 +187,9 @@ class MPCController:
         self.explored = 0
         self.target = 0  # the AUV the terminal cost visits next
         self.target_switches = 0  # changes of target this run (diagnostic, issue 16 item 6)
+        #: per AUV: the last two distinct depth estimates (t, depth) and the vertical speed
+        self._depth_hist: list[list[tuple[float, float]]] = [[] for _ in range(n_auv)]
+        self.w_depth = np.zeros(n_auv)  # estimated vertical speed, positive down (m/s)
         self.dwell = 0.0  # time spent in the target AUV's target domain (s)
         #: if a list: (parameters, elapsed stages) of every step's main solve (benchmarks)
         self.recorder: list | None = getattr(self, "recorder", None)
@@ -204,7 +211,8 @@ class MPCController:
         return np.where(rho > 1e-9, relaxed, self.tau + elapsed)
 
     def _fix_geometry(self, obs: Observation, r_lo0: np.ndarray):
-        """(depth used in the slant range, d_fix) per AUV for the fix-rate model (M3)."""
+        """(depth now, d_fix) per AUV: ``d_fix`` is the reliable-fix range of the ``target``
+        fix model (M3; unused by the ``acoustic`` one, whose range is the channel's)."""
         K = len(obs.auvs)
         if self.params.fix.range_kind == "acoustic":
             depth = np.array([a.depth for a in obs.auvs])
@@ -212,19 +220,52 @@ class MPCController:
         return np.zeros(K), r_lo0 + self.domain.delta_r + self.domain.eps_plus
 
     def _rates(self, obs: Observation) -> np.ndarray:
-        """Fix rates now (1/s): propeller state as observed, geometry as in the plan."""
-        if obs.propeller_on:
-            return np.zeros(len(obs.auvs))
+        """Fix rates now (1/s): propeller state as observed, geometry and channel as in the
+        plan (eq. M3)."""
         r_lo = self._radii(obs, 0.0, obs.asv.position)
-        depth, d_fix = self._fix_geometry(obs, r_lo)
-        x = np.array([obs.asv.N, obs.asv.E, 0, 0, 0, 0, 0.0, 0])
-        return np.array([float(self.ocp.rho_fun(x, a.position, depth[i], d_fix[i]))
+        _, d_fix = self._fix_geometry(obs, r_lo)
+        T = self.ocp.vessel.T_max if obs.propeller_on else 0.0
+        x = np.array([obs.asv.N, obs.asv.E, 0, 0, 0, 0, T, 0])
+        return np.array([float(self.ocp.rho_fun(x, a.position, a.depth, d_fix[i], self.channel))
                          for i, a in enumerate(obs.auvs)])  # fmt: skip
 
-    def _radii(self, obs: Observation, lookahead: float, asv_NE) -> np.ndarray:
+    def _track_depth(self, obs: Observation) -> None:
+        """Vertical speed of each AUV from its last two distinct depth estimates (exact for a
+        steady climb under the perfect estimator; the mean rate between reports under the
+        acoustic one); back to 0 once the estimate has held longer than twice that interval
+        (the AUV levelled off); bounded by ``W_MAX_DEPTH``."""
+        for i, a in enumerate(obs.auvs):
+            h = self._depth_hist[i]
+            if not math.isfinite(a.depth):
+                continue
+            if not h or abs(a.depth - h[-1][1]) > 1e-6:
+                h.append((obs.t, a.depth))
+                del h[:-2]
+            if len(h) == 2 and h[1][0] > h[0][0]:
+                gap = h[1][0] - h[0][0]
+                w = (h[1][1] - h[0][1]) / gap
+                held = obs.t - h[1][0]
+                self.w_depth[i] = 0.0 if held > 2 * gap + 1e-9 else np.clip(w, -W_MAX_DEPTH,
+                                                                              W_MAX_DEPTH)
+            else:
+                self.w_depth[i] = 0.0
+
+    def depth_forecast(self, obs: Observation, ts: np.ndarray) -> np.ndarray:
+        """Each AUV's depth at offsets ``ts`` (s) from now: the estimate moved at the tracked
+        vertical speed, not above the surface (m, shape ``(len(ts), K)``)."""
+        d0 = np.array([a.depth for a in obs.auvs], float)
+        return np.maximum(d0[None, :] + np.asarray(ts, float)[:, None] * self.w_depth[None, :],
+                          0.0)  # fmt: skip
+
+    def _radii(self, obs: Observation, lookahead: float, asv_NE, depth=None) -> np.ndarray:
         """Anti-collision radius (r_inner / r_avoid) of each AUV ``lookahead`` s ahead, along
-        the bearing from the AUV to ``asv_NE``."""
-        shape = estimate_shape(self.params.avoidance, self.domain, obs.auvs, obs.t, lookahead)
+        the bearing from the AUV to ``asv_NE``, at the AUVs' ``depth`` (forecast; None: the
+        estimates')."""
+        auvs = obs.auvs
+        if depth is not None:
+            auvs = tuple(dataclasses.replace(a, depth=float(d))
+                         for a, d in zip(auvs, depth, strict=True))  # fmt: skip
+        shape = estimate_shape(self.params.avoidance, self.domain, auvs, obs.t, lookahead)
         rel = np.asarray(asv_NE, float) - shape.center
         return np.asarray(shape.radius(np.arctan2(rel[..., 1], rel[..., 0])), float)
 
@@ -253,21 +294,24 @@ class MPCController:
             asv = Z[:, None, 0:2]
         else:
             asv = np.broadcast_to(obs.asv.position, (N + 1, 1, 2))
+        # each AUV's depth over the horizon, and with it the radii: the collision domain of an
+        # AUV rising towards the surface grows (r_inner / r_avoid from 0 below r_in)
+        depth = self.depth_forecast(obs, ts)
         if self.params.avoidance.kind == "fixed":
-            r0 = self._radii(obs, 0.0, obs.asv.position)
-            r_lo = np.broadcast_to(r0, (N + 1, K)).copy()
+            r_lo = np.stack([self._radii(obs, 0.0, obs.asv.position, depth[k])
+                             for k in range(N + 1)])  # fmt: skip
         else:
-            r_lo = np.stack([self._radii(obs, float(ts[k]), asv[k]) for k in range(N + 1)])
+            r_lo = np.stack([self._radii(obs, float(ts[k]), asv[k], depth[k])
+                             for k in range(N + 1)])  # fmt: skip
         if self.multi:
             r_hi = np.full((N + 1, K), R_HI_NONE)
         else:
-            r_hi = np.broadcast_to(self.domain.outer(np.array([a.depth for a in obs.auvs])),
-                                   (N + 1, K)).copy()  # fmt: skip
-        depth, d_fix = self._fix_geometry(obs, r_lo[0])
+            r_hi = np.asarray(self.domain.outer(depth), float)
+        _, d_fix = self._fix_geometry(obs, r_lo[0])
         r_t = r_lo[-1] + self.domain.delta_r
         m = self.params.margin  # the plan keeps this far off the anti-collision radius
         return self.ocp.pack(self._x0(obs), self.tau, (0.0, 0.0), pa, r_lo + m, r_hi - m, depth,
-                             d_fix, r_t, self.target)  # fmt: skip
+                             d_fix, r_t, self.target, self.channel)  # fmt: skip
 
     def _solve(self, p: np.ndarray, w0: np.ndarray, lam_x=None, lam_g=None) -> SolveResult:
         """One solve: in this process (simulation: only the iteration limit decides), or in
@@ -282,6 +326,7 @@ class MPCController:
         self._t_step = time.perf_counter()  # wall time: the field deadline and diagnostics only
         elapsed = 0.0 if self.t_prev is None else obs.t - self.t_prev
         self.t_prev = obs.t
+        self._track_depth(obs)
         self.tau = self._fix_ages(obs, elapsed)
         self._choose_target(obs, elapsed)
         hybrid_cmd = self.hybrid.step(obs)  # always stepped: its state stays current
@@ -377,8 +422,11 @@ class MPCController:
         self.t_explore = obs.t
         par = ocp.unpack_par(p)
         j = self.target
-        if np.hypot(*(obs.asv.position - par["pa"][0, j])) <= par["r_t"][j] + self.domain.eps_plus:
-            return res  # already there
+        still = ranges(obs.asv.position, par["pa"])[:, j]  # the ASV held where it is
+        # already there; but inside the anti-collision radius (plus margin) at some stage, as
+        # when an AUV rises under the ASV, the guess heading out to the target circle is needed
+        if np.all(still >= par["r_lo"][:, j]) and still[0] <= par["r_t"][j] + self.domain.eps_plus:
+            return res
         if self.deadline is not None and res.status == "deadline":
             return res  # the field budget is spent
         alt = self._solve(p, ocp.guided_rollout(p, j, P.speed))
