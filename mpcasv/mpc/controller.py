@@ -120,7 +120,7 @@ class MPCController:
         # the run's acoustic channel (the scenario's or the deploy configuration's), as the
         # vessel comes: with the Boat (default channel outside a run)
         self.acoustics = getattr(boat, "acoustics", None) or AcousticParams()
-        self.channel = channel_vector(self.acoustics)
+        self.channel = channel_vector(self.acoustics, params.fix.noisy_fixes)
         #: field mode (:meth:`use_deadline`): solves in a worker process with a deadline
         self.deadline: DeadlineSolver | None = None
         self._setup(n_auv)

@@ -49,12 +49,19 @@ class FixRateParams:
         propeller-on threshold.
     w_thrust : float
         Width of the thrust sigmoid (N).
+    noisy_fixes : bool
+        ``acoustic`` model only: fixes while the propeller runs count too, at the channel's
+        ``propeller_factor`` (every fix the simulator delivers). False (presets): only fixes
+        with the propeller off count, as in Paper 2's reliable fix (eq. 9) and the comparison's
+        reliable-fix age; with True Case 1's standby fraction fell from 0.88 to 0.47
+        (``mpc-single-sim``, seed 0).
     """
 
     range_kind: Literal["acoustic", "target"] = "acoustic"
     w_range: Pos = 10.0
     T_quiet: Pos | None = None
     w_thrust: Pos = 4.0
+    noisy_fixes: bool = False
 
 
 @frozen

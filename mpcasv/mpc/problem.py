@@ -60,13 +60,15 @@ CHANNEL_NAMES = ("rate", "p_good", "p_sporadic", "d1", "d2", "propeller_factor")
 NCH = len(CHANNEL_NAMES)
 
 
-def channel_vector(ac: AcousticParams) -> np.ndarray:
+def channel_vector(ac: AcousticParams, noisy: bool = False) -> np.ndarray:
     """The fix-rate model's channel parameters (eq. M3) from the scenario's (or deploy
     configuration's) acoustic channel: transmissions per second per AUV (``1 / T0`` with USBL,
     else the status reports' ``1 / T_report``), success probabilities within ``d1`` and in
-    ``(d1, d2]``, the factor while the propeller runs."""
+    ``(d1, d2]``, and the factor while the propeller runs when such fixes count (``noisy``,
+    :attr:`~mpcasv.mpc.params.FixRateParams.noisy_fixes`; else 0)."""
     rate = 1.0 / ac.T0 if ac.usbl else 1.0 / ac.T_report
-    return np.array([rate, ac.p_good, ac.p_sporadic, ac.d1, ac.d2, ac.propeller_factor])
+    f_prop = ac.propeller_factor if noisy else 0.0
+    return np.array([rate, ac.p_good, ac.p_sporadic, ac.d1, ac.d2, f_prop])
 
 
 def sigmoid(x):
@@ -196,8 +198,9 @@ class OCP:
 
         ``rate * P(slant) * prop(T)`` with ``P = p_good sig((d1 - slant) / w) + p_sporadic
         (sig((d2 - slant) / w) - sig((d1 - slant) / w))`` (the simulator's success against
-        slant range, smoothed); ``acoustic``: ``prop = quiet + f_prop (1 - quiet)`` (every
-        fix counts; the propeller's noise scales the success); ``target``: ``prop = quiet``
+        slant range, smoothed); ``acoustic``: ``prop = quiet + f_prop (1 - quiet)`` (with
+        ``noisy_fixes`` the propeller's noise scales the success, else ``f_prop = 0``: only
+        quiet fixes count); ``target``: ``prop = quiet``
         times ``sig((d_fix - dh) / w)``, Paper 2's reliable fix (eq. 9: within
         ``r_t + eps_plus`` with the propeller off). ``quiet = sig((T_quiet - T) / w_T)``.
         """
@@ -411,7 +414,8 @@ class OCP:
         d = self.dims
         K, N = d.n_auv, d.N
         dep = np.broadcast_to(np.asarray(depth, float), (N + 1, K))
-        ch = channel_vector(AcousticParams()) if channel is None else np.asarray(channel, float)
+        ch = (channel_vector(AcousticParams(), self.params.fix.noisy_fixes) if channel is None
+              else np.asarray(channel, float))  # fmt: skip
         stage = np.concatenate(
             [np.asarray(pa, float).reshape(N + 1, 2 * K), np.asarray(r_lo, float),
              np.asarray(r_hi, float), dep], axis=1,
