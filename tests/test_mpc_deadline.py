@@ -104,7 +104,7 @@ def test_field_deadline_abandons_a_hung_solve_and_the_next_step_starts_warm(tmp_
         assert cmd.reason == Reason.FALLBACK
         assert ctrl.fallback_log[-1].reason.startswith("deadline")
         assert ctrl.deadline.abandoned == 1
-        assert took < budget + 0.25, f"the step took {took:.3f} s, budget {budget:.3f} s"
+        assert took < budget + 0.05, f"the step took {took:.3f} s, budget {budget:.3f} s"
         assert ctrl.w_prev is not None  # the warm start is kept for the next step
         # the spare (started at use_deadline) takes over: the next step is solved in time
         assert ctrl.deadline.wait_active(120.0)

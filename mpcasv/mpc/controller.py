@@ -48,6 +48,9 @@ from mpcasv.mpc.solvers import SolveResult, make_solver
 R_HI_NONE = 1.0e5  # "no outer bound" (m)
 TAU_UNKNOWN = 600.0  # fix age used for an AUV never fixed (s)
 W_MAX_DEPTH = 2.0  # bound on the estimated vertical speed of an AUV (m/s)
+#: field mode: part of the step's budget kept for the fallback and the command after a
+#: missed solve deadline (s)
+STEP_RESERVE_S = 0.03
 
 _OCP_CACHE: dict = {}
 
@@ -318,7 +321,8 @@ class MPCController:
         the field mode's worker with what is left of this step's budget."""
         if self.deadline is None:
             return self.solver.solve(p, w0, lam_x, lam_g)
-        left = self.params.solver.budget_ms / 1e3 - (time.perf_counter() - self._t_step)
+        left = (self.params.solver.budget_ms / 1e3 - STEP_RESERVE_S
+                - (time.perf_counter() - self._t_step))  # fmt: skip
         return self.deadline.solve(p, w0, lam_x, lam_g, timeout=left)
 
     def step(self, obs: Observation) -> Command:

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import math
 import multiprocessing
+import threading
 import time
 from collections.abc import Callable
 
@@ -30,6 +31,10 @@ import numpy as np
 from mpcasv.mpc.solvers import SolveResult
 
 _READY = "ready"
+#: after a missed deadline the new spare worker is started this much later (s), in the idle
+#: part of the control period: starting a process holds the interpreter for 4-45 ms (measured
+#: at load 8 on 2 cores), which would otherwise be spent on the step that missed its deadline
+SPARE_DELAY_S = 0.1
 
 
 def _serve(factory: Callable, conn) -> None:  # pragma: no cover - runs in the worker
@@ -56,13 +61,24 @@ def _serve(factory: Callable, conn) -> None:  # pragma: no cover - runs in the w
 class _Worker:
     """One solver process and the parent's end of its pipe."""
 
-    def __init__(self, factory: Callable, ctx):
-        self.conn, child = ctx.Pipe()
-        self.proc = ctx.Process(target=_serve, args=(factory, child), daemon=True,
+    def __init__(self, factory: Callable, ctx, background: bool = False, delay: float = 0.0):
+        self.conn, self._child = ctx.Pipe()
+        self.proc = ctx.Process(target=_serve, args=(factory, self._child), daemon=True,
                                 name="mpcasv-mpc-solver")  # fmt: skip
-        self.proc.start()
-        child.close()
         self.ready = False
+        self._started = threading.Event()
+        if background:  # starting a process takes tens of ms (and the GIL): not on the step's time
+            threading.Thread(target=self._start, args=(delay,), daemon=True).start()
+        else:
+            self._start()
+
+    def _start(self, delay: float = 0.0) -> None:
+        time.sleep(delay)
+        try:
+            self.proc.start()
+        finally:
+            self._child.close()
+            self._started.set()
 
     def wait_ready(self, timeout: float) -> bool:
         """Consume the worker's ready message if it comes within ``timeout`` s.
@@ -76,19 +92,34 @@ class _Worker:
             return True
         if not self.conn.poll(max(timeout, 0.0)):
             return False
-        msg = self.conn.recv()
+        try:
+            msg = self.conn.recv()
+        except EOFError:
+            self.proc.join(timeout=5.0)
+            raise RuntimeError("MPC solver worker exited before it was ready (exit code "
+                               f"{self.proc.exitcode}; with 'spawn' a script that builds a "
+                               "field-mode controller needs an if __name__ == '__main__' guard)"
+                               ) from None  # fmt: skip
         if msg != _READY:
             raise RuntimeError(f"MPC solver worker failed to start: {msg[1]}")
         self.ready = True
         return True
 
-    def kill(self) -> None:
-        if self.proc.is_alive():
+    def kill(self, wait: bool = True) -> None:
+        """SIGKILL the worker; ``wait``: also reap it (else :meth:`reap` later)."""
+        self._started.wait(timeout=30.0)
+        if self.proc.pid is not None and self.proc.is_alive():
             self.proc.kill()
-        self.proc.join(timeout=5.0)
         self.conn.close()
+        if wait:
+            self.reap()
+
+    def reap(self) -> None:
+        if self.proc.pid is not None:
+            self.proc.join(timeout=5.0)
 
     def stop(self) -> None:
+        self._started.wait(timeout=30.0)
         try:
             self.conn.send(None)
         except (OSError, ValueError):
@@ -124,11 +155,12 @@ class DeadlineSolver:
         self._ctx = multiprocessing.get_context("spawn")
         self.factory = factory
         self.abandoned = 0
+        self._dead: list[_Worker] = []  # killed workers not yet reaped
         self._active = _Worker(factory, self._ctx)
         if not self._active.wait_ready(start_timeout):
             self._active.kill()
             raise RuntimeError(f"MPC solver worker not ready within {start_timeout:g} s")
-        self._spare = _Worker(factory, self._ctx)
+        self._spare = _Worker(factory, self._ctx, background=True)
 
     def wait_spare(self, timeout: float) -> bool:
         """Wait until the spare worker is ready (tests, start-up)."""
@@ -144,6 +176,9 @@ class DeadlineSolver:
         spare takes over, and the result is a failure with status ``"deadline"`` and the
         warm start ``w0`` as its iterate (the next step starts warm from it)."""
         t0 = time.perf_counter()
+        for dead in self._dead:  # killed at an earlier deadline: gone by now
+            dead.reap()
+        self._dead.clear()
         w = self._active
         answer = None
         try:
@@ -170,15 +205,20 @@ class DeadlineSolver:
         return SolveResult(np.asarray(w0, float), None, None, math.nan, False, status, 0, ms)
 
     def _replace(self) -> None:
-        """Kill the active worker; the spare takes over; start a new spare."""
-        self._active.kill()
+        """Kill the active worker (reaped at the next call); the spare takes over; a new spare
+        starts in the background (the step's time is not spent on it)."""
+        self._active.kill(wait=False)
+        self._dead.append(self._active)
         self._active = self._spare
-        self._spare = _Worker(self.factory, self._ctx)
+        self._spare = _Worker(self.factory, self._ctx, background=True, delay=SPARE_DELAY_S)
 
     def close(self) -> None:
         """Stop both workers."""
         for w in (self._active, self._spare):
             w.stop()
+        for dead in self._dead:
+            dead.reap()
+        self._dead.clear()
 
     def __del__(self):  # pragma: no cover - best effort at interpreter exit
         try:
