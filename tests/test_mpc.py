@@ -63,7 +63,7 @@ def test_forced_solver_failure_engages_the_fallback_and_stays_safe(scenarios_dir
 
 
 def test_the_safety_check_names_each_fallback_reason():
-    """A failed solve, a solve over the time budget and a plan whose first stages enter
+    """A failed solve, a solve abandoned at the field deadline and a plan whose first stages enter
     r_inner (or, already inside, go deeper) are each refused with their reason; a sound plan
     is accepted."""
     ctrl = make_controller("mpc-single", 1, "mpc-single")
@@ -75,8 +75,11 @@ def test_the_safety_check_names_each_fallback_reason():
     good = SolveResult(w, None, None, 1.0, True, "0", 5, 1.0)
     assert ctrl._check(good, p) is None
     assert ctrl._check(dataclasses.replace(good, ok=False, status="1"), p) == "solver: 1"
+    # wall time is no reason in simulation (issue 16 item 5); the field deadline is
     slow = dataclasses.replace(good, ms=ctrl.params.solver.budget_ms + 1.0)
-    assert ctrl._check(slow, p).startswith("time budget")
+    assert ctrl._check(slow, p) is None
+    late = dataclasses.replace(good, ok=False, status="deadline")
+    assert ctrl._check(late, p).startswith("deadline")
     Z, V = ctrl.ocp.split(w)
     Z[1:3, 0:2] = [100.0, 0.0]  # 20 m from the AUV: inside r_inner = 50 m
     bad = dataclasses.replace(good, w=ctrl.ocp.join(Z, V))

@@ -11,9 +11,10 @@ import numpy as np
 import pytest
 
 from mpcasv.controllers import load_preset
+from mpcasv.models.acoustics import AcousticParams
 from mpcasv.mpc.codegen import library_key
 from mpcasv.mpc.derivatives import nlp_functions
-from mpcasv.mpc.problem import NXV, OCP
+from mpcasv.mpc.problem import NXV, OCP, channel_vector, sigmoid
 
 
 @pytest.fixture(scope="module")
@@ -62,23 +63,42 @@ def test_thrust_and_steering_follow_their_rates(single):
     assert z1[7] == pytest.approx(par["z0"][7] - 0.02 * single.dt)
 
 
-def test_expected_fix_age_relaxes_when_quiet_in_range_and_grows_otherwise(single):
-    """Eq. M2-M3: propeller off next to the AUV, tau tends to 1 / rho0; at full thrust it grows
-    by the elapsed time."""
-    d = single.dims
-    N = d.N
+def test_expected_fix_age_relaxes_when_quiet_in_range_and_grows_otherwise(single, multi):
+    """Eq. M2-M3 with the channel's numbers: propeller off next to the AUV, tau tends to
+    1 / (p_good / T0); at full thrust it grows by the elapsed time (only quiet fixes count:
+    the presets, and Paper 2 eq. 9's reliable fix), or with noisy fixes counted tends to
+    1 / (propeller_factor p_good / T0); beyond d2 nothing gets through."""
+    ac = AcousticParams()
+    N = single.dims.N
     x0 = np.zeros(NXV)
     pa = np.tile([[[60.0, 0.0]]], (N + 1, 1, 1))
-    p = single.pack(x0, [300.0], (0, 0), pa, np.full((N + 1, 1), 50.0),
-                    np.full((N + 1, 1), 200.0), [0.0], [500.0], [70.0])  # fmt: skip
-    Z, _ = single.split(single.rollout(p))
-    assert Z[-1, NXV] == pytest.approx(1 / single.rho0, rel=0.05)
+
+    def ages(ocp, x0, pa, d_fix=70.0, channel=None):
+        K = ocp.dims.n_auv
+        p = ocp.pack(x0, np.full(K, 300.0), (0, 0), np.repeat(pa, K, axis=1),
+                     np.full((N + 1, K), 50.0), np.full((N + 1, K), 2000.0), np.full(K, 20.0),
+                     np.full(K, d_fix), np.full(K, 70.0), channel=channel)  # fmt: skip
+        return ocp.split(ocp.rollout(p))[0]
+
+    Z = ages(single, x0, pa)
+    assert Z[-1, NXV] == pytest.approx(ac.T0 / ac.p_good, rel=0.05)
     assert np.all(np.diff(Z[:, NXV]) < 0)
-    x0[6] = single.vessel.T_max
-    p = single.pack(x0, [300.0], (0, 0), pa, np.full((N + 1, 1), 50.0),
-                    np.full((N + 1, 1), 200.0), [0.0], [500.0], [70.0])  # fmt: skip
-    Z, _ = single.split(single.rollout(p))
-    np.testing.assert_allclose(np.diff(Z[:, NXV]), single.dt, rtol=0.02)
+    loud = x0.copy()
+    loud[6] = single.vessel.T_max
+    np.testing.assert_allclose(np.diff(ages(single, loud, pa)[:, NXV]), single.dt, rtol=0.02)
+    Z = ages(single, loud, pa, channel=channel_vector(ac, noisy=True))
+    assert Z[-1, NXV] == pytest.approx(ac.T0 / (ac.p_good * ac.propeller_factor), rel=0.1)
+    Zm = ages(multi, loud, pa)
+    np.testing.assert_allclose(np.diff(Zm[:, NXV]), multi.dt, rtol=0.02)
+    far = np.tile([[[ac.d2 + 200.0, 0.0]]], (N + 1, 1, 1))
+    np.testing.assert_allclose(np.diff(ages(single, x0, far)[:, NXV]), single.dt, rtol=0.02)
+    # another channel (status reports only, every 60 s): the exact relaxation from 300 s
+    slow = channel_vector(AcousticParams(usbl=False, T_report=60.0))
+    Z = ages(single, x0, pa, channel=slow)
+    rho = ac.p_good / 60.0 * sigmoid(single.T_quiet / single.params.fix.w_thrust)  # T = 0
+    horizon = N * single.dt
+    expected = 1 / rho + (300.0 - 1 / rho) * np.exp(-rho * horizon)
+    assert Z[-1, NXV] == pytest.approx(expected, rel=0.005)
 
 
 @pytest.mark.parametrize("which", ["single", "multi"])

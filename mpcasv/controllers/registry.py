@@ -27,6 +27,7 @@ from typing import Any
 from mpcasv.config import ConfigError, load_toml, parse, resolve
 from mpcasv.control.params import ExecutionParams, load_execution
 from mpcasv.interface import Controller
+from mpcasv.models.acoustics import AcousticParams
 from mpcasv.models.params import VesselParams, load_vessel
 
 CONTROLLERS: dict[str, str] = {
@@ -58,10 +59,14 @@ class Boat:
         The Fossen 3-DOF model's parameters (:mod:`mpcasv.models.params`).
     execution : ExecutionParams
         The execution level's parameters (:mod:`mpcasv.control.params`).
+    acoustics : AcousticParams
+        The acoustic channel (USBL and modem) the run's fixes go through: the scenario's
+        ``[acoustics]`` (the MPC's fix-rate model uses it; issue 16 item 1).
     """
 
     vessel: VesselParams
     execution: ExecutionParams
+    acoustics: AcousticParams = AcousticParams()
 
     @classmethod
     def load(cls, vessel: str | Path = "gretha", execution: str | Path = "gretha") -> Boat:
@@ -77,8 +82,10 @@ class Boat:
     @classmethod
     def of_scenario(cls, scenario) -> Boat:
         """The boat a scenario names (``scenario.asv.vessel`` / ``scenario.asv.execution``),
-        loaded as the simulator loads it (:func:`mpcasv.sim.world.build_plant`)."""
-        return cls.load(scenario.asv.vessel, scenario.asv.execution)
+        loaded as the simulator loads it (:func:`mpcasv.sim.world.build_plant`), with the
+        scenario's acoustic channel."""
+        return dataclasses.replace(cls.load(scenario.asv.vessel, scenario.asv.execution),
+                                   acoustics=scenario.acoustics)
 
     def describe(self) -> dict[str, str]:
         """What ``run.json`` records: the vessel's name and the parameter hashes."""

@@ -39,6 +39,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         action="store_true",
         help="rerun jobs recorded with an error (default: keep them)",
     )
+    p.add_argument("--job-timeout", type=float, metavar="S", default=None,
+                   help="end a job running longer than S seconds and record it as 'timeout' "
+                   "(local worker pools; default 1200; 0: no limit)")  # fmt: skip
     p.add_argument("--no-report", action="store_true", help="skip report.md / report.html")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
@@ -47,15 +50,18 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from mpcasv.config import ConfigError
     from mpcasv.experiments.report import READ_LINE
-    from mpcasv.experiments.runner import run_suite
+    from mpcasv.experiments.runner import JOB_TIMEOUT_S, run_suite
     from mpcasv.experiments.suite import load_suite
 
     if args.workers < 1:
         raise ConfigError(f"--workers must be >= 1, got {args.workers}")
+    if args.job_timeout is not None and args.job_timeout < 0:
+        raise ConfigError(f"--job-timeout must be >= 0, got {args.job_timeout}")
+    limit = JOB_TIMEOUT_S if args.job_timeout is None else (args.job_timeout or None)
     out = args.out or Path("results") / load_suite(args.suite)[0].name
     stats, exp, results = run_suite(args.suite, out, args.workers, args.dask, args.quiet,
                                     args.retry_errors, not args.no_report,
-                                    runs_dir=args.runs_dir)  # fmt: skip
+                                    runs_dir=args.runs_dir, job_timeout=limit)  # fmt: skip
     out = out.resolve()
     ok = int((results["status"] == "ok").sum()) if len(results) else 0
     print(f"{stats.ran} jobs run in {stats.jobs_wall_s:.1f} s on {stats.backend or 'nothing'} "

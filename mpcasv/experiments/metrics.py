@@ -132,6 +132,11 @@ _BASE: dict[str, MetricInfo] = {
                                     "(machine-dependent)"),
     "controller_step_ms_p99": _i("ms", "lower", "99th percentile of that time"),
     "fallbacks": _i("1", "lower", "MPC steps handed to the fallback controller"),
+    "target_switches": _i("1", "lower", "changes of the AUV an MPC targets (0 for the other "
+                          "controllers; chattering shows here)", "issue 16 item 6"),
+    "over_budget_steps": _i("1", "lower", "MPC steps whose solve took longer than the field "
+                            "budget_ms (wall clock: measured only, it changes no decision in "
+                            "simulation)"),
 }
 
 #: per-AUV lists (suffix ``_auv``) of these scalars
@@ -217,6 +222,11 @@ def _sum(ts: pd.DataFrame, col: str) -> float | None:
     return None if np.isnan(v).any() else float(v.sum())
 
 
+def _last_int(ts: pd.DataFrame, col: str) -> int:
+    """The last value of a cumulative counter column (0 if the controller logs none)."""
+    return int(ts[col].iloc[-1]) if col in ts and len(ts) else 0
+
+
 def compute_metrics(result) -> dict:
     """All metrics of a :class:`mpcasv.sim.simulator.RunResult` as a flat JSON-able dict
     (keys: :data:`METRIC_NAMES`; ``None`` where undefined)."""
@@ -300,6 +310,8 @@ def compute_metrics(result) -> dict:
         "controller_step_ms_median": float(np.median(step_ms)),
         "controller_step_ms_p99": float(np.percentile(step_ms, 99)),
         "fallbacks": int(result.fallbacks),
+        "target_switches": _last_int(ts, "mpc_target_switches"),
+        "over_budget_steps": int(ts["mpc_over_budget"].sum()) if "mpc_over_budget" in ts else 0,
         # per-AUV lists
         "auv_distance_m_auv": auv_d,
         "collision_domain_s_auv": coll_auv,

@@ -16,7 +16,11 @@ by themselves if the runner dies.
 
 A job that raises is recorded (``status = "error"``, the traceback in ``error``) and the others
 go on; a failure of the machinery itself (a worker process killed, the cluster lost) writes no
-row, so resuming reruns that job.
+row, so resuming reruns that job. On a local pool a job running longer than ``job_timeout``
+(default :data:`JOB_TIMEOUT_S`) is ended (its worker process killed and replaced, by Pebble's
+process pool) and recorded with ``status = "timeout"``; the sweep goes on (issue 16 item 5:
+a hung solve must not stall a sweep). ``--workers 1`` (this process) and Dask do not enforce
+it.
 """
 
 from __future__ import annotations
@@ -29,7 +33,7 @@ import socket
 import threading
 import time
 import traceback
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures import as_completed
 from multiprocessing import get_context
 from pathlib import Path
 
@@ -37,6 +41,10 @@ from mpcasv.config import ConfigError
 from mpcasv.experiments.metrics import auv_column
 from mpcasv.experiments.store import done_ids, write_part, write_results
 from mpcasv.experiments.suite import Expansion, Job, expand
+
+#: default time limit of one job on a local pool (s): generous (a 1500 s MPC run with three
+#: AUVs takes a few minutes on a busy 2-core machine)
+JOB_TIMEOUT_S = 1200.0
 
 
 def _describe(job: Job) -> dict:
@@ -136,6 +144,15 @@ def run_job(job: Job, runs: str) -> dict:
         "worker": f"{socket.gethostname()}:{os.getpid()}",
     }
     return row
+
+
+def timeout_row(job: Job, limit: float) -> dict:
+    """The row of a job ended at its time limit (``status = "timeout"``)."""
+    return _describe(job) | {
+        "status": "timeout", "run_dir": None, "wall_s": limit, "worker": None,
+        "error": f"job ended after its time limit of {limit:g} s (--job-timeout)",
+        "finished_at": datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds"),
+    }  # fmt: skip
 
 
 def finish_job(out: Path, row: dict) -> dict:
@@ -244,10 +261,12 @@ def pending_jobs(exp: Expansion, out: Path, retry_errors: bool = False) -> list[
 
 
 def run_jobs(jobs: list[Job], out: Path, stats: SweepStats, workers: int = 1,
-             dask: str | None = None, quiet: bool = False,
-             runs: str | None = None) -> None:  # fmt: skip
+             dask: str | None = None, quiet: bool = False, runs: str | None = None,
+             job_timeout: float | None = JOB_TIMEOUT_S) -> None:  # fmt: skip
     """Run ``jobs`` (serially, on a process pool, or on Dask), updating ``stats``; run folders
-    under ``runs`` (default: :func:`runs_location`), rows written into ``out`` here."""
+    under ``runs`` (default: :func:`runs_location`), rows written into ``out`` here.
+    ``job_timeout`` (s, local pool only; None: no limit): a longer job is ended and recorded
+    as ``timeout``."""
     out = out.resolve()
     runs = runs or runs_location(out, stats.suite, None, dask)
     stats.runs = stats.runs or runs
@@ -265,7 +284,7 @@ def run_jobs(jobs: list[Job], out: Path, stats: SweepStats, workers: int = 1,
                 bar.update(1)
         else:
             stats.backend, stats.workers = f"local process pool ({workers} workers)", workers
-            _run_pool(jobs, out, runs, stats, workers, bar)
+            _run_pool(jobs, out, runs, stats, workers, bar, job_timeout)
     except KeyboardInterrupt:
         stats.interrupted = True
         raise
@@ -274,29 +293,35 @@ def run_jobs(jobs: list[Job], out: Path, stats: SweepStats, workers: int = 1,
         bar.close()
 
 
-def _run_pool(jobs, out: Path, runs: str, stats: SweepStats, workers: int, bar) -> None:
-    from concurrent.futures.process import BrokenProcessPool
+def _run_pool(jobs, out: Path, runs: str, stats: SweepStats, workers: int, bar,
+              job_timeout: float | None = JOB_TIMEOUT_S) -> None:  # fmt: skip
+    from pebble import ProcessExpired, ProcessPool
 
-    ctx = get_context("spawn")
-    pool = ProcessPoolExecutor(workers, mp_context=ctx, initializer=_watch_parent,
-                               initargs=(os.getpid(),))  # fmt: skip
+    pool = ProcessPool(workers, initializer=_watch_parent, initargs=(os.getpid(),),
+                       context=get_context("spawn"))  # fmt: skip
     try:
-        futures = {pool.submit(run_job, job, runs): job for job in jobs}
+        futures = {pool.schedule(run_job, (job, runs), timeout=job_timeout): job for job in jobs}
         for fut in as_completed(futures):
             job = futures[fut]
             try:
-                _record(stats, job, finish_job(out, fut.result()))
-            except BrokenProcessPool as exc:
-                raise RuntimeError(f"a worker process died ({exc}); rerun the same command to "
-                                   "resume (finished jobs are kept)") from None  # fmt: skip
+                row = fut.result()
+            except TimeoutError:  # Pebble killed the worker and started another
+                row = timeout_row(job, job_timeout)
+            except ProcessExpired as exc:  # the machinery failed: no row, rerun on resume
+                stats.lost += 1
+                bar.write(f"lost {job.run_name}: worker process died ({exc}); rerun the same "
+                          "command to resume")  # fmt: skip
+                bar.update(1)
+                continue
+            _record(stats, job, finish_job(out, row))
             bar.set_postfix(errors=stats.errors, refresh=False)
             bar.update(1)
     except BaseException:  # Ctrl-C or a failure: stop now, not after the queued jobs
-        for proc in list(getattr(pool, "_processes", {}).values()):  # kill_workers() in 3.14
-            proc.terminate()
+        pool.stop()
         raise
     finally:
-        pool.shutdown(wait=True, cancel_futures=True)
+        pool.close()
+        pool.join()
 
 
 def _run_dask(jobs, out: Path, runs: str, stats: SweepStats, address: str, bar) -> None:
@@ -328,11 +353,12 @@ def _run_dask(jobs, out: Path, runs: str, stats: SweepStats, address: str, bar) 
 
 def run_suite(suite: str | Path, out: str | Path, workers: int = 1, dask: str | None = None,
               quiet: bool = False, retry_errors: bool = False, report: bool = True,
-              runs_dir: str | None = None):  # fmt: skip
+              runs_dir: str | None = None,
+              job_timeout: float | None = JOB_TIMEOUT_S):  # fmt: skip
     """Expand ``suite``, run its pending jobs, consolidate ``results.parquet``, write the report.
 
     ``runs_dir``: where the run folders go (a path or an fsspec URL; see
-    :func:`runs_location` for the default).
+    :func:`runs_location` for the default). ``job_timeout``: see :func:`run_jobs`.
 
     Returns
     -------
@@ -360,7 +386,7 @@ def run_suite(suite: str | Path, out: str | Path, workers: int = 1, dask: str | 
     try:
         if todo:
             prepare_controllers(todo, quiet, dask)
-            run_jobs(todo, out, stats, workers, dask, quiet, runs)
+            run_jobs(todo, out, stats, workers, dask, quiet, runs, job_timeout)
     except KeyboardInterrupt:
         print(f"interrupted after {stats.ran} of {len(todo)} jobs; rerun the same command to "
               "resume (finished jobs are kept)")  # fmt: skip

@@ -14,7 +14,8 @@ Every step (docs/mpc.md, "Controller"):
    heading for the AUV with the largest projected fix age (standing still is a local minimum:
    at rest the rudder has no authority, so the gradient cannot say "turn and go");
 4. the safety check: the ASV more than ``max_violation`` outside the range bounds now (no
-   solve), a failed solve, a solve over the time budget, or a plan entering r_inner /
+   solve), a failed solve (in the field also: no answer within ``budget_ms``, see
+   :meth:`MPCController.use_deadline`), or a plan entering r_inner /
    r_avoid within its first ``check_stages`` stages (or, already inside, closing the range
    further) hands this step to the hybrid controller
    (stepped on every observation so that its state is current), counted in ``fallbacks``;
@@ -26,7 +27,9 @@ Every step (docs/mpc.md, "Controller"):
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
+import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -37,12 +40,17 @@ from mpcasv.hybrid.multi import HybridMulti, HybridMultiParams
 from mpcasv.hybrid.single import HybridSingle, HybridSingleParams
 from mpcasv.interface import Command, Mode, Observation, PlannedTrajectory, Reason
 from mpcasv.models.acoustics import AcousticParams
+from mpcasv.mpc.deadline import DeadlineSolver
 from mpcasv.mpc.params import MPCParams
-from mpcasv.mpc.problem import NXV, OCP
+from mpcasv.mpc.problem import NXV, OCP, channel_vector
 from mpcasv.mpc.solvers import SolveResult, make_solver
 
 R_HI_NONE = 1.0e5  # "no outer bound" (m)
 TAU_UNKNOWN = 600.0  # fix age used for an AUV never fixed (s)
+W_MAX_DEPTH = 2.0  # bound on the estimated vertical speed of an AUV (m/s)
+#: field mode: part of the step's budget kept for the fallback and the command after a
+#: missed solve deadline (s)
+STEP_RESERVE_S = 0.03
 
 _OCP_CACHE: dict = {}
 
@@ -66,6 +74,12 @@ def build_ocp(params: MPCParams, n_auv: int, multi: bool, log=print, boat: Boat 
         ocp = OCP(params, n_auv, outer=not multi, boat=boat)
         _OCP_CACHE[key] = (ocp, make_solver(ocp, params.solver, log=log))
     return _OCP_CACHE[key]
+
+
+def _worker_solver(params: MPCParams, n_auv: int, multi: bool, boat):
+    """The solver of a field-mode worker process (:class:`~mpcasv.mpc.deadline.DeadlineSolver`):
+    the same problem as the controller's, its library loaded from the cache."""
+    return build_ocp(params, n_auv, multi, log=lambda *a: None, boat=boat)[1]
 
 
 def ranges(asv_NE: np.ndarray, pa: np.ndarray) -> np.ndarray:
@@ -106,14 +120,49 @@ class MPCController:
         self.domain = params.domain
         self.multi = multi
         self.name = "mpc-multi" if multi else "mpc-single"
-        self.acoustics = AcousticParams()
+        # the run's acoustic channel (the scenario's or the deploy configuration's), as the
+        # vessel comes: with the Boat (default channel outside a run)
+        self.acoustics = getattr(boat, "acoustics", None) or AcousticParams()
+        self.channel = channel_vector(self.acoustics, params.fix.noisy_fixes)
+        #: field mode (:meth:`use_deadline`): solves in a worker process with a deadline
+        self.deadline: DeadlineSolver | None = None
         self._setup(n_auv)
         self.reset(n_auv)
+
+    def use_deadline(self, factory=None, start_timeout: float = 600.0) -> None:
+        """Field mode: every step's solves run in a worker process and are abandoned at the
+        step's budget ``solver.budget_ms`` (the step then takes the hybrid fallback's command,
+        reason ``deadline``; the next step starts warm from the previous plan, on a spare
+        worker). Set by the deploy loop; never in simulation, where only iteration limits
+        decide and wall time is measured (``mpc_over_budget``), so runs are reproducible.
+
+        ``factory`` (tests): builds the worker's solver (default: this controller's problem,
+        its compiled library loaded from the cache). Blocks until the first worker is ready.
+
+        Raises
+        ------
+        RuntimeError
+            The worker could not build the solver within ``start_timeout`` s.
+        """
+        if self.deadline is not None:
+            self.deadline.close()
+        factory = factory or functools.partial(_worker_solver, self.params, self.ocp.dims.n_auv,
+                                               self.multi, self.boat)  # fmt: skip
+        self.deadline = DeadlineSolver(factory, start_timeout)
+        self._deadline_n = self.ocp.dims.n_auv
+
+    def close(self) -> None:
+        """Stop the field mode's solver workers (no-op in simulation)."""
+        if self.deadline is not None:
+            self.deadline.close()
+            self.deadline = None
 
     # ------------------------------------------------------------------ set-up
     def _setup(self, n_auv: int) -> None:
         P = self.params
         self.ocp, self.solver = build_ocp(P, n_auv, self.multi, boat=self.boat)
+        if self.deadline is not None and getattr(self, "_deadline_n", n_auv) != n_auv:
+            self.use_deadline()  # another number of AUVs: workers for the new problem
         if self.multi:
             self.hybrid = HybridMulti(HybridMultiParams(P.domain, P.T_standby, P.speed,
                                                         avoidance=P.avoidance))  # fmt: skip
@@ -133,9 +182,17 @@ class MPCController:
         self.plan: PlannedTrajectory | None = None
         self.fallbacks = 0
         self.fallback_log: list[FallbackEvent] = []
+        #: steps whose solves took longer than ``budget_ms`` of wall time: a diagnostic in
+        #: simulation (never a decision); in the field such a step is cut at the deadline
+        self.over_budget = 0
+        self._t_step = 0.0
         self.t_explore: float | None = None
         self.explored = 0
         self.target = 0  # the AUV the terminal cost visits next
+        self.target_switches = 0  # changes of target this run (diagnostic, issue 16 item 6)
+        #: per AUV: the last two distinct depth estimates (t, depth) and the vertical speed
+        self._depth_hist: list[list[tuple[float, float]]] = [[] for _ in range(n_auv)]
+        self.w_depth = np.zeros(n_auv)  # estimated vertical speed, positive down (m/s)
         self.dwell = 0.0  # time spent in the target AUV's target domain (s)
         #: if a list: (parameters, elapsed stages) of every step's main solve (benchmarks)
         self.recorder: list | None = getattr(self, "recorder", None)
@@ -157,7 +214,8 @@ class MPCController:
         return np.where(rho > 1e-9, relaxed, self.tau + elapsed)
 
     def _fix_geometry(self, obs: Observation, r_lo0: np.ndarray):
-        """(depth used in the slant range, d_fix) per AUV for the fix-rate model (M3)."""
+        """(depth now, d_fix) per AUV: ``d_fix`` is the reliable-fix range of the ``target``
+        fix model (M3; unused by the ``acoustic`` one, whose range is the channel's)."""
         K = len(obs.auvs)
         if self.params.fix.range_kind == "acoustic":
             depth = np.array([a.depth for a in obs.auvs])
@@ -165,19 +223,52 @@ class MPCController:
         return np.zeros(K), self.domain.reliable_limit(r_lo0 + self.domain.delta_r)
 
     def _rates(self, obs: Observation) -> np.ndarray:
-        """Fix rates now (1/s): propeller state as observed, geometry as in the plan."""
-        if obs.propeller_on:
-            return np.zeros(len(obs.auvs))
+        """Fix rates now (1/s): propeller state as observed, geometry and channel as in the
+        plan (eq. M3)."""
         r_lo = self._radii(obs, 0.0, obs.asv.position)
-        depth, d_fix = self._fix_geometry(obs, r_lo)
-        x = np.array([obs.asv.N, obs.asv.E, 0, 0, 0, 0, 0.0, 0])
-        return np.array([float(self.ocp.rho_fun(x, a.position, depth[i], d_fix[i]))
+        _, d_fix = self._fix_geometry(obs, r_lo)
+        T = self.ocp.vessel.T_max if obs.propeller_on else 0.0
+        x = np.array([obs.asv.N, obs.asv.E, 0, 0, 0, 0, T, 0])
+        return np.array([float(self.ocp.rho_fun(x, a.position, a.depth, d_fix[i], self.channel))
                          for i, a in enumerate(obs.auvs)])  # fmt: skip
 
-    def _radii(self, obs: Observation, lookahead: float, asv_NE) -> np.ndarray:
+    def _track_depth(self, obs: Observation) -> None:
+        """Vertical speed of each AUV from its last two distinct depth estimates (exact for a
+        steady climb under the perfect estimator; the mean rate between reports under the
+        acoustic one); back to 0 once the estimate has held longer than twice that interval
+        (the AUV levelled off); bounded by ``W_MAX_DEPTH``."""
+        for i, a in enumerate(obs.auvs):
+            h = self._depth_hist[i]
+            if not math.isfinite(a.depth):
+                continue
+            if not h or abs(a.depth - h[-1][1]) > 1e-6:
+                h.append((obs.t, a.depth))
+                del h[:-2]
+            if len(h) == 2 and h[1][0] > h[0][0]:
+                gap = h[1][0] - h[0][0]
+                w = (h[1][1] - h[0][1]) / gap
+                held = obs.t - h[1][0]
+                self.w_depth[i] = 0.0 if held > 2 * gap + 1e-9 else np.clip(w, -W_MAX_DEPTH,
+                                                                              W_MAX_DEPTH)
+            else:
+                self.w_depth[i] = 0.0
+
+    def depth_forecast(self, obs: Observation, ts: np.ndarray) -> np.ndarray:
+        """Each AUV's depth at offsets ``ts`` (s) from now: the estimate moved at the tracked
+        vertical speed, not above the surface (m, shape ``(len(ts), K)``)."""
+        d0 = np.array([a.depth for a in obs.auvs], float)
+        return np.maximum(d0[None, :] + np.asarray(ts, float)[:, None] * self.w_depth[None, :],
+                          0.0)  # fmt: skip
+
+    def _radii(self, obs: Observation, lookahead: float, asv_NE, depth=None) -> np.ndarray:
         """Anti-collision radius (r_inner / r_avoid) of each AUV ``lookahead`` s ahead, along
-        the bearing from the AUV to ``asv_NE``."""
-        shape = estimate_shape(self.params.avoidance, self.domain, obs.auvs, obs.t, lookahead)
+        the bearing from the AUV to ``asv_NE``, at the AUVs' ``depth`` (forecast; None: the
+        estimates')."""
+        auvs = obs.auvs
+        if depth is not None:
+            auvs = tuple(dataclasses.replace(a, depth=float(d))
+                         for a, d in zip(auvs, depth, strict=True))  # fmt: skip
+        shape = estimate_shape(self.params.avoidance, self.domain, auvs, obs.t, lookahead)
         rel = np.asarray(asv_NE, float) - shape.center
         return np.asarray(shape.radius(np.arctan2(rel[..., 1], rel[..., 0])), float)
 
@@ -206,26 +297,40 @@ class MPCController:
             asv = Z[:, None, 0:2]
         else:
             asv = np.broadcast_to(obs.asv.position, (N + 1, 1, 2))
+        # each AUV's depth over the horizon, and with it the radii: the collision domain of an
+        # AUV rising towards the surface grows (r_inner / r_avoid from 0 below r_in)
+        depth = self.depth_forecast(obs, ts)
         if self.params.avoidance.kind == "fixed":
-            r0 = self._radii(obs, 0.0, obs.asv.position)
-            r_lo = np.broadcast_to(r0, (N + 1, K)).copy()
+            r_lo = np.stack([self._radii(obs, 0.0, obs.asv.position, depth[k])
+                             for k in range(N + 1)])  # fmt: skip
         else:
-            r_lo = np.stack([self._radii(obs, float(ts[k]), asv[k]) for k in range(N + 1)])
+            r_lo = np.stack([self._radii(obs, float(ts[k]), asv[k], depth[k])
+                             for k in range(N + 1)])  # fmt: skip
         if self.multi:
             r_hi = np.full((N + 1, K), R_HI_NONE)
         else:
-            r_hi = np.broadcast_to(self.domain.outer(np.array([a.depth for a in obs.auvs])),
-                                   (N + 1, K)).copy()  # fmt: skip
-        depth, d_fix = self._fix_geometry(obs, r_lo[0])
+            r_hi = np.asarray(self.domain.outer(depth), float)
+        _, d_fix = self._fix_geometry(obs, r_lo[0])
         r_t = r_lo[-1] + self.domain.delta_r
         m = self.params.margin  # the plan keeps this far off the anti-collision radius
         return self.ocp.pack(self._x0(obs), self.tau, (0.0, 0.0), pa, r_lo + m, r_hi - m, depth,
-                             d_fix, r_t, self.target)  # fmt: skip
+                             d_fix, r_t, self.target, self.channel)  # fmt: skip
+
+    def _solve(self, p: np.ndarray, w0: np.ndarray, lam_x=None, lam_g=None) -> SolveResult:
+        """One solve: in this process (simulation: only the iteration limit decides), or in
+        the field mode's worker with what is left of this step's budget."""
+        if self.deadline is None:
+            return self.solver.solve(p, w0, lam_x, lam_g)
+        left = (self.params.solver.budget_ms / 1e3 - STEP_RESERVE_S
+                - (time.perf_counter() - self._t_step))  # fmt: skip
+        return self.deadline.solve(p, w0, lam_x, lam_g, timeout=left)
 
     def step(self, obs: Observation) -> Command:
         ocp = self.ocp
+        self._t_step = time.perf_counter()  # wall time: the field deadline and diagnostics only
         elapsed = 0.0 if self.t_prev is None else obs.t - self.t_prev
         self.t_prev = obs.t
+        self._track_depth(obs)
         self.tau = self._fix_ages(obs, elapsed)
         self._choose_target(obs, elapsed)
         hybrid_cmd = self.hybrid.step(obs)  # always stepped: its state stays current
@@ -244,7 +349,7 @@ class MPCController:
         gap = self._violation_now(p)
         solved = gap <= self.params.solver.max_violation  # else badly scaled (SolverParams)
         if solved:
-            res = self.solver.solve(p, w0, *lam)
+            res = self._solve(p, w0, *lam)
             res = self._explore(obs, p, res)
             reason = self._check(res, p)
         else:
@@ -258,12 +363,15 @@ class MPCController:
                 self._store_plan(obs.t, res.w)
         else:
             self.w_prev, self.lam_prev = None, None  # next step starts from a rollout
+        over = int((time.perf_counter() - self._t_step) * 1e3 > self.params.solver.budget_ms)
+        self.over_budget += over  # measured, never a decision in simulation
         self._diag = {"mpc_ok": int(res.ok), "mpc_iter": res.iters, "mpc_ms": res.ms,
                       "mpc_cost": res.f, "mpc_status": res.status,
                       "mpc_fallback": int(reason is not None),
-                      "mpc_fallback_reason": reason or ""}  # fmt: skip
+                      "mpc_fallback_reason": reason or "", "mpc_over_budget": over}  # fmt: skip
         self._diag |= {f"mpc_tau{i}": float(v) for i, v in enumerate(self.tau)}
         self._diag["mpc_target"] = self.target
+        self._diag["mpc_target_switches"] = self.target_switches  # cumulative
         if reason is not None:
             self.fallbacks += 1
             self.fallback_log.append(FallbackEvent(obs.t, reason, res.status, res.ms))
@@ -277,7 +385,8 @@ class MPCController:
         """The AUV the terminal cost sends the ASV to (M9): kept until it is served (its
         expected fix age below ``tau_served``, or the ASV has been within its target domain for
         ``dwell_max``), then the one with the largest projected fix age ``tau_i + t_go,i``
-        (Paper 2's eq. 8 on projected ages)."""
+        (Paper 2's eq. 8 on projected ages) among those whose projected age exceeds
+        ``tau_served``; none such: the target stays (no switching between served AUVs)."""
         K = len(obs.auvs)
         if K == 1:
             return
@@ -289,11 +398,17 @@ class MPCController:
         served = self.tau[self.target] <= self.params.tau_served
         if not (served or self.dwell >= self.params.dwell_max):
             return
-        self.dwell = 0.0
         t_go = np.maximum(dist - r_t, 0.0) / self.params.weights.U_go
         proj = self.tau + t_go
-        proj[self.target] = -np.inf
+        # commitment (issue 16 item 6): leave the target only for an AUV that needs a visit
+        # itself (projected fix age above tau_served); with every other AUV served the target
+        # stays (before, two served AUVs swapped the target every step for a whole run)
+        proj[(np.arange(K) == self.target) | (proj <= self.params.tau_served)] = -np.inf
+        if not np.isfinite(proj).any():
+            return
+        self.dwell = 0.0
         self.target = int(np.argmax(proj))
+        self.target_switches += 1
         self.t_explore = None  # new target: also try a guess heading there (_explore)
 
     def _explore(self, obs: Observation, p: np.ndarray, res):
@@ -311,10 +426,15 @@ class MPCController:
         self.t_explore = obs.t
         par = ocp.unpack_par(p)
         j = self.target
-        if self.domain.in_reliable_range(np.hypot(*(obs.asv.position - par["pa"][0, j])),
-                                         par["r_t"][j]):  # fmt: skip
-            return res  # already there
-        alt = self.solver.solve(p, ocp.guided_rollout(p, j, P.speed))
+        still = ranges(obs.asv.position, par["pa"])[:, j]  # the ASV held where it is
+        # already there; but inside the anti-collision radius (plus margin) at some stage, as
+        # when an AUV rises under the ASV, the guess heading out to the target circle is needed
+        if np.all(still >= par["r_lo"][:, j]) and self.domain.in_reliable_range(still[0],
+                                                                             par["r_t"][j]):
+            return res
+        if self.deadline is not None and res.status == "deadline":
+            return res  # the field budget is spent
+        alt = self._solve(p, ocp.guided_rollout(p, j, P.speed))
         self.explored += 1
         best = alt if alt.ok and (not res.ok or alt.f < res.f) else res
         return dataclasses.replace(best, ms=res.ms + alt.ms, iters=res.iters + alt.iters)
@@ -332,10 +452,10 @@ class MPCController:
     def _check(self, res, p) -> str | None:
         """Why this step's plan may not be used (None: it may)."""
         sp = self.params.solver
+        if not res.ok and res.status == "deadline":
+            return f"deadline: no plan within the step's {sp.budget_ms:g} ms (field mode)"
         if not res.ok:
             return f"solver: {res.status}"
-        if res.ms > sp.budget_ms:
-            return f"time budget: {res.ms:.0f} ms > {sp.budget_ms:g} ms"
         Z, _ = self.ocp.split(res.w)
         par = self.ocp.unpack_par(p)
         n = min(sp.check_stages, self.ocp.dims.N) + 1

@@ -49,12 +49,19 @@ class FixRateParams:
         propeller-on threshold.
     w_thrust : float
         Width of the thrust sigmoid (N).
+    noisy_fixes : bool
+        ``acoustic`` model only: fixes while the propeller runs count too, at the channel's
+        ``propeller_factor`` (every fix the simulator delivers). False (presets): only fixes
+        with the propeller off count, as in Paper 2's reliable fix (eq. 9) and the comparison's
+        reliable-fix age; with True Case 1's standby fraction fell from 0.88 to 0.47
+        (``mpc-single-sim``, seed 0).
     """
 
     range_kind: Literal["acoustic", "target"] = "acoustic"
     w_range: Pos = 10.0
     T_quiet: Pos | None = None
     w_thrust: Pos = 4.0
+    noisy_fixes: bool = False
 
 
 @frozen
@@ -141,7 +148,12 @@ class SolverParams:
     qp_iters : int
         SQP iterations of the ``qp`` variant per step (1 = real-time iteration).
     budget_ms : float
-        Time budget of one solve (ms): a slower solve is not used for the command.
+        Wall-time budget of one control step's solves (ms). In the field
+        (:meth:`~mpcasv.mpc.controller.MPCController.use_deadline`, set by the deploy loop) a
+        hard deadline: the solve runs in a worker process and is abandoned at the budget (the
+        hybrid fallback commands that step). In simulation it decides nothing (runs are
+        reproduced exactly under any load): a step over it is only counted
+        (``mpc_over_budget``); ``max_iter`` bounds the work.
     check_stages : int
         Stages of the plan checked against r_inner / r_avoid before it is used.
     check_margin : float

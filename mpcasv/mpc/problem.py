@@ -11,6 +11,10 @@ Stage-interleaved layout (what fatrop's structure detection and a Riccati recurs
   worst-age epigraph variable ``m`` when its weight is positive); ``v_N = [s, m]``;
 - path constraints ``h_k``: ``d_i + s_i >= r_lo,i`` and (single AUV) ``d_i - s_i <= r_hi,i``,
   ``m >= tau_i`` (at N: ``m >= tau_i + t_go,i``).
+- parameters per stage: each AUV's forecast position, depth and range bounds (the radii
+  depend on the forecast depth: an AUV rising under the ASV grows its collision domain);
+  global: the current, the fix-rate geometry, the target, the acoustic channel
+  (:func:`channel_vector`) and the weights.
 
 The rigid-body part of the dynamics is the shared model's :func:`~mpcasv.models.vessel.xdot_expr`
 evaluated with the actuators at their set-points (``u = x[6:8]``), i.e. the actuator lags
@@ -27,6 +31,7 @@ import casadi as ca
 import numpy as np
 
 from mpcasv.control.params import load_execution
+from mpcasv.models.acoustics import AcousticParams
 from mpcasv.models.params import load_vessel
 from mpcasv.models.vessel import VesselModel, rk4_expr, xdot_expr
 from mpcasv.mpc.params import MPCParams
@@ -50,6 +55,20 @@ WEIGHT_NAMES = (
 )
 NW = len(WEIGHT_NAMES)
 D_EPS = 0.1  # smoothing of the range sqrt (m)
+#: the acoustic channel as it enters the parameters (channel_vector), in this order
+CHANNEL_NAMES = ("rate", "p_good", "p_sporadic", "d1", "d2", "propeller_factor")
+NCH = len(CHANNEL_NAMES)
+
+
+def channel_vector(ac: AcousticParams, noisy: bool = False) -> np.ndarray:
+    """The fix-rate model's channel parameters (eq. M3) from the scenario's (or deploy
+    configuration's) acoustic channel: transmissions per second per AUV (``1 / T0`` with USBL,
+    else the status reports' ``1 / T_report``), success probabilities within ``d1`` and in
+    ``(d1, d2]``, and the factor while the propeller runs when such fixes count (``noisy``,
+    :attr:`~mpcasv.mpc.params.FixRateParams.noisy_fixes`; else 0)."""
+    rate = 1.0 / ac.T0 if ac.usbl else 1.0 / ac.T_report
+    f_prop = ac.propeller_factor if noisy else 0.0
+    return np.array([rate, ac.p_good, ac.p_sporadic, ac.d1, ac.d2, f_prop])
 
 
 def sigmoid(x):
@@ -98,15 +117,15 @@ class Dims:
 
     @property
     def n_stage_par(self) -> int:
-        return 4 * self.n_auv  # AUV position (2), r_lo, r_hi per AUV
+        return 5 * self.n_auv  # AUV position (2), r_lo, r_hi, depth per AUV
 
     @property
     def npar(self) -> int:
-        return self.nx + 2 + (self.N + 1) * self.n_stage_par + 4 * self.n_auv + NW
+        return self.nx + 2 + (self.N + 1) * self.n_stage_par + 3 * self.n_auv + NCH + NW
 
     @property
     def n_global_par(self) -> int:
-        return 2 + 4 * self.n_auv + NW
+        return 2 + 3 * self.n_auv + NCH + NW
 
 
 class OCP:
@@ -156,36 +175,57 @@ class OCP:
     def rhs(self, z, w, q):
         """Continuous dynamics of the augmented state ``[z; s]`` (``s``: time into the stage).
 
-        ``q = [c (2), pa_k (2K), va (2K), depth (K), d_fix (K)]``.
+        ``q = [c (2), pa_k (2K), va (2K), depth_k (K), depth rate (K), d_fix (K), channel]``.
         """
-        K, vp = self.dims.n_auv, self.vessel
+        K = self.dims.n_auv
         x, tau, s = z[0:NXV], z[NXV : NXV + K], z[NXV + K]
         c = q[0:2]
         xd = xdot_expr(x, x[6:8], c, self.model.p)  # actuators at their set-points
         rows = [xd[0:6], w[0], w[1]]
-        quiet = sigmoid((self.T_quiet - x[6]) / self.params.fix.w_thrust)
+        ch = q[2 + 7 * K : 2 + 7 * K + NCH]
         for i in range(K):
             pa = q[2 + 2 * i : 4 + 2 * i] + s * q[2 + 2 * K + 2 * i : 4 + 2 * K + 2 * i]
-            depth, d_fix = q[2 + 4 * K + i], q[2 + 5 * K + i]
-            slant = ca.sqrt((x[0] - pa[0]) ** 2 + (x[1] - pa[1]) ** 2 + depth**2)
-            rho = self.rho0 * sigmoid((d_fix - slant) / self.params.fix.w_range) * quiet  # (M3)
+            depth = q[2 + 4 * K + i] + s * q[2 + 5 * K + i]  # linear within the stage
+            dh = ca.sqrt((x[0] - pa[0]) ** 2 + (x[1] - pa[1]) ** 2 + D_EPS**2)
+            rho = self.fix_rate(dh, depth, q[2 + 6 * K + i], x[6], ch)  # (M3)
             rows.append(1 - rho * tau[i])  # (M2)
         rows.append(ca.DM(1.0))
-        del vp
         return ca.vertcat(*rows)
+
+    def fix_rate(self, dh, depth, d_fix, T, ch):
+        """Smooth expected fix rate (1/s, eq. M3) of one AUV at horizontal range ``dh`` and
+        depth ``depth`` (m) with thrust ``T`` (N), channel ``ch`` (:func:`channel_vector`):
+
+        ``rate * P(slant) * prop(T)`` with ``P = p_good sig((d1 - slant) / w) + p_sporadic
+        (sig((d2 - slant) / w) - sig((d1 - slant) / w))`` (the simulator's success against
+        slant range, smoothed); ``acoustic``: ``prop = quiet + f_prop (1 - quiet)`` (with
+        ``noisy_fixes`` the propeller's noise scales the success, else ``f_prop = 0``: only
+        quiet fixes count); ``target``: ``prop = quiet``
+        times ``sig((d_fix - dh) / w)``, Paper 2's reliable fix (eq. 9: within
+        ``r_t + eps_plus`` with the propeller off). ``quiet = sig((T_quiet - T) / w_T)``.
+        """
+        fp = self.params.fix
+        rate, p_good, p_spor, d1, d2, f_prop = (ch[j] for j in range(NCH))
+        slant = ca.sqrt(dh**2 + depth**2)
+        s1 = sigmoid((d1 - slant) / fp.w_range)
+        s2 = sigmoid((d2 - slant) / fp.w_range)
+        P = p_good * s1 + p_spor * (s2 - s1)
+        quiet = sigmoid((self.T_quiet - T) / fp.w_thrust)
+        if fp.range_kind == "acoustic":
+            return rate * P * (quiet + f_prop * (1 - quiet))
+        return rate * P * quiet * sigmoid((d_fix - dh) / fp.w_range)
 
     @property
     def rho0(self) -> float:
-        """Fix rate with the propeller off in range, ``p_good / T0`` (1/s)."""
-        from mpcasv.models.acoustics import AcousticParams
-
-        ac = AcousticParams()
-        return ac.p_good / ac.T0
+        """Fix rate with the propeller off in range, ``p_good / T0`` (1/s) of the default
+        channel (the run's: :func:`channel_vector`)."""
+        ch = channel_vector(AcousticParams())
+        return float(ch[0] * ch[1])
 
     def _build(self) -> None:
         d, hz, wt, vp = self.dims, self.params.horizon, self.params.weights, self.vessel
         K, N, nx, dt = d.n_auv, d.N, d.nx, hz.dt
-        nq = 2 + 6 * K
+        nq = 2 + 7 * K + NCH
         za, wv, q = ca.SX.sym("z", nx + 1), ca.SX.sym("w", 2), ca.SX.sym("q", nq)
         f = ca.Function("f_plan", [za, wv, q], [self.rhs(za, wv, q)])
         z, qs = ca.SX.sym("z", nx), ca.SX.sym("q", nq)
@@ -196,11 +236,14 @@ class OCP:
         # one stage: L_k and g_k = [z_{k+1} - F(z_k, v_k), h_k]; the terminal stage: L_N, h_N
         v, z1 = ca.SX.sym("v", d.nu), ca.SX.sym("z1", nx)
         sp, sp1 = ca.SX.sym("sp", d.n_stage_par), ca.SX.sym("sp1", d.n_stage_par)
-        gp = ca.SX.sym("gp", d.n_global_par)  # current, depth, d_fix, r_t, target, weights
-        c, depth, d_fix = gp[0:2], gp[2 : 2 + K], gp[2 + K : 2 + 2 * K]
-        W = dict(zip(WEIGHT_NAMES, ca.vertsplit(gp[2 + 4 * K :]), strict=True))
-        target = gp[2 + 3 * K : 2 + 4 * K]  # one-hot: the AUV the tail visits next
-        qk = ca.vertcat(c, sp[0 : 2 * K], (sp1[0 : 2 * K] - sp[0 : 2 * K]) / dt, depth, d_fix)
+        gp = ca.SX.sym("gp", d.n_global_par)  # current, d_fix, r_t, target, channel, weights
+        c, d_fix = gp[0:2], gp[2 : 2 + K]
+        W = dict(zip(WEIGHT_NAMES, ca.vertsplit(gp[2 + 3 * K + NCH :]), strict=True))
+        target = gp[2 + 2 * K : 2 + 3 * K]  # one-hot: the AUV the tail visits next
+        ch = gp[2 + 3 * K : 2 + 3 * K + NCH]
+        dep, dep1 = sp[4 * K : 5 * K], sp1[4 * K : 5 * K]
+        qk = ca.vertcat(c, sp[0 : 2 * K], (sp1[0 : 2 * K] - sp[0 : 2 * K]) / dt, dep,
+                        (dep1 - dep) / dt, d_fix, ch)  # fmt: skip
         h, lbh, ubh = self._path(z, v[2 : 2 + K], v[2 + K] if d.epi else None, sp)
         T, u = z[6], z[3]
         L = W["age"] * ca.sum1(z[NXV : NXV + K])  # (M4)
@@ -265,12 +308,11 @@ class OCP:
         ubx = (zub + uub) * N + zub
         self.lbx, self.ubx = np.array(lbx, float) / self.s_w, np.array(ubx, float) / self.s_w
         #: fix rate at a given vessel state (for the controller's bookkeeping)
-        xv, pa1, dep1, df1 = (ca.SX.sym(n, s) for n, s in
-                              (("x", NXV), ("pa", 2), ("depth", 1), ("d_fix", 1)))  # fmt: skip
-        slant = ca.sqrt(ca.sumsqr(xv[0:2] - pa1) + dep1**2)
-        rho = (self.rho0 * sigmoid((df1 - slant) / self.params.fix.w_range)
-               * sigmoid((self.T_quiet - xv[6]) / self.params.fix.w_thrust))  # fmt: skip
-        self.rho_fun = ca.Function("rho", [xv, pa1, dep1, df1], [rho])
+        xv, pa1, dep1, df1, ch1 = (ca.SX.sym(n, s) for n, s in (
+            ("x", NXV), ("pa", 2), ("depth", 1), ("d_fix", 1), ("channel", NCH)))  # fmt: skip
+        dh1 = ca.sqrt(ca.sumsqr(xv[0:2] - pa1) + D_EPS**2)
+        rho = self.fix_rate(dh1, dep1, df1, xv[6], ch1)
+        self.rho_fun = ca.Function("rho", [xv, pa1, dep1, df1, ch1], [rho])
 
     def _scales(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Typical magnitudes of the state, control and path-constraint entries (M8)."""
@@ -303,7 +345,7 @@ class OCP:
         o = nx + 2
         SP = ca.reshape(p[o : o + (N + 1) * d.n_stage_par], d.n_stage_par, N + 1)
         o += (N + 1) * d.n_stage_par
-        gpx = ca.vertcat(p[nx : nx + 2], p[o : o + 4 * K + NW])
+        gpx = ca.vertcat(p[nx : nx + 2], p[o : o + 3 * K + NCH + NW])
         args = [Zs, Vs, ca.horzcat(Zs[:, 1:], zN), SP[:, :N], SP[:, 1:], ca.repmat(gpx, 1, N)]
         return args, zN, [SP[:, N], gpx]
 
@@ -316,7 +358,8 @@ class OCP:
     def _t_go(self, z, sp, gp):
         """Time to reach each AUV's target circle from the stage's position (s, smooth)."""
         K = self.dims.n_auv
-        r_t, inv_U = gp[2 + 2 * K : 2 + 3 * K], gp[2 + 4 * K + WEIGHT_NAMES.index("inv_U_go")]
+        r_t = gp[2 + K : 2 + 2 * K]
+        inv_U = gp[2 + 3 * K + NCH + WEIGHT_NAMES.index("inv_U_go")]
         return ca.vertcat(*[SOFTPLUS_M * softplus((d - r_t[i]) / SOFTPLUS_M) * inv_U
                             for i, d in enumerate(self._dist(z, sp))])  # fmt: skip
 
@@ -343,7 +386,7 @@ class OCP:
 
     # ------------------------------------------------------------------ numbers
     def pack(self, x0, tau0, current, pa, r_lo, r_hi, depth, d_fix, r_t,
-             target: int = 0) -> np.ndarray:  # fmt: skip
+             target: int = 0, channel=None) -> np.ndarray:  # fmt: skip
         """Parameter vector from the per-step data.
 
         Parameters
@@ -358,20 +401,29 @@ class OCP:
             Predicted AUV positions at the stage times.
         r_lo, r_hi : array (N+1, K)
             Lower (r_inner / r_avoid) and upper (r_outer) range bounds per stage (m).
-        depth, d_fix, r_t : array (K,)
-            Depth used in the slant range, range of the fix-rate sigmoid, target radius (m).
+        depth : array (N+1, K) or (K,)
+            Forecast AUV depth per stage (m; a (K,) array: constant over the horizon).
+        d_fix, r_t : array (K,)
+            Range of the reliable-fix sigmoid (``target`` fix model), target radius (m).
         target : int
             The AUV the terminal cost has the ASV visit next.
+        channel : array (NCH,), optional
+            :func:`channel_vector` of the run's acoustic channel (default: the default
+            :class:`~mpcasv.models.acoustics.AcousticParams`).
         """
         d = self.dims
+        K, N = d.n_auv, d.N
+        dep = np.broadcast_to(np.asarray(depth, float), (N + 1, K))
+        ch = (channel_vector(AcousticParams(), self.params.fix.noisy_fixes) if channel is None
+              else np.asarray(channel, float))  # fmt: skip
         stage = np.concatenate(
-            [np.asarray(pa, float).reshape(d.N + 1, 2 * d.n_auv), np.asarray(r_lo, float),
-             np.asarray(r_hi, float)], axis=1,
+            [np.asarray(pa, float).reshape(N + 1, 2 * K), np.asarray(r_lo, float),
+             np.asarray(r_hi, float), dep], axis=1,
         )  # fmt: skip
         return np.concatenate([np.asarray(x0, float), np.asarray(tau0, float),
-                               np.asarray(current, float), stage.ravel(), np.asarray(depth, float),
+                               np.asarray(current, float), stage.ravel(),
                                np.asarray(d_fix, float), np.asarray(r_t, float),
-                               np.eye(d.n_auv)[target], self.weight_vector()])  # fmt: skip
+                               np.eye(K)[target], ch, self.weight_vector()])  # fmt: skip
 
     def weight_vector(self) -> np.ndarray:
         """The cost weights as they enter the parameter vector (normalised, M4)."""
@@ -390,10 +442,11 @@ class OCP:
         o += (N + 1) * d.n_stage_par
         return {
             "z0": p[:nx], "current": p[nx:nx + 2], "pa": S[:, :2 * K].reshape(N + 1, K, 2),
-            "r_lo": S[:, 2 * K:3 * K], "r_hi": S[:, 3 * K:4 * K], "depth": p[o:o + K],
-            "d_fix": p[o + K:o + 2 * K], "r_t": p[o + 2 * K:o + 3 * K],
-            "target": int(np.argmax(p[o + 3 * K:o + 4 * K])),
-            "weights": p[o + 4 * K:o + 4 * K + NW],
+            "r_lo": S[:, 2 * K:3 * K], "r_hi": S[:, 3 * K:4 * K], "depth": S[:, 4 * K:5 * K],
+            "d_fix": p[o:o + K], "r_t": p[o + K:o + 2 * K],
+            "target": int(np.argmax(p[o + 2 * K:o + 3 * K])),
+            "channel": p[o + 3 * K:o + 3 * K + NCH],
+            "weights": p[o + 3 * K + NCH:o + 3 * K + NCH + NW],
         }  # fmt: skip
 
     def bounds(self, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -430,7 +483,8 @@ class OCP:
 
     def guided_rollout(self, p: np.ndarray, auv: int, speed: float) -> np.ndarray:
         """A primal guess that heads for AUV ``auv``'s target circle at ``speed`` and stops
-        there: rates from a simple stage-wise steering and thrust law on the plan model.
+        there (from outside inwards, from inside outwards): rates from a simple stage-wise
+        steering and thrust law on the plan model.
 
         Used to escape the local minimum of standing still (at rest the steering has no
         authority, so first-order information cannot tell the solver to turn and go).
@@ -446,7 +500,7 @@ class OCP:
             rel = z[0:2] - c
             r = max(float(np.hypot(*rel)), 1e-6)
             goal = c + rel / r * par["r_t"][auv]  # closest point of the target circle
-            arrived = r <= par["r_t"][auv] + 5.0
+            arrived = abs(r - par["r_t"][auv]) <= 5.0  # on the circle (inside: head out)
             e = math.atan2(goal[1] - z[1], goal[0] - z[0]) - z[2]
             e = math.atan2(math.sin(e), math.cos(e))
             T_des = 0.0 if arrived else T_go
@@ -476,8 +530,9 @@ class OCP:
 
     def _q(self, par: dict, k: int) -> np.ndarray:
         pa, pa1 = par["pa"][k].ravel(), par["pa"][k + 1].ravel()
-        return np.concatenate([par["current"], pa, (pa1 - pa) / self.dt, par["depth"],
-                               par["d_fix"]])  # fmt: skip
+        dep, dep1 = par["depth"][k], par["depth"][k + 1]
+        return np.concatenate([par["current"], pa, (pa1 - pa) / self.dt, dep,
+                               (dep1 - dep) / self.dt, par["d_fix"], par["channel"]])  # fmt: skip
 
     def shift(self, w: np.ndarray, frac: float) -> np.ndarray:
         """Primal warm start moved ``frac`` stages ahead (linear interpolation, end held)."""

@@ -1,0 +1,227 @@
+"""Solves that can be abandoned: the field mode's hard deadline (issue 16 item 5).
+
+In the field a solve may never hold the control step beyond its budget. A solve running in
+this process cannot be abandoned: a native call that hangs (fatrop has looped forever on NaN
+trial points, docs/mpc.md "Known problems") cannot be interrupted from Python, and a thread
+running it cannot be stopped (it would keep a core and the solver's memory for ever; CasADi
+releases the GIL during numeric calls only from its 3.7 line on, casadi/casadi#2955). So the
+solver runs in a worker process: the controller sends the parameters and the warm start
+through a pipe and waits at most the remaining budget. A worker that has not answered by then
+is killed (SIGKILL) and replaced by a spare that was started beforehand (its compiled library
+already loaded), so the next step has a ready solver; a new spare is started at once.
+
+The warm start stays in the controller (the previous plan moved one period ahead), so the
+step after an overrun starts warm whatever happened to the worker.
+
+Used only in the field (:meth:`mpcasv.mpc.controller.MPCController.use_deadline`); in
+simulation the solver runs in the simulator's process and only iteration limits decide
+(wall-clock time never changes a simulated decision).
+"""
+
+from __future__ import annotations
+
+import math
+import multiprocessing
+import threading
+import time
+from collections.abc import Callable
+
+import numpy as np
+
+from mpcasv.mpc.solvers import SolveResult
+
+_READY = "ready"
+#: after a missed deadline the new spare worker is started this much later (s), in the idle
+#: part of the control period: starting a process holds the interpreter for 4-45 ms (measured
+#: at load 8 on 2 cores), which would otherwise be spent on the step that missed its deadline
+SPARE_DELAY_S = 0.1
+
+
+def _serve(factory: Callable, conn) -> None:  # pragma: no cover - runs in the worker
+    """Worker process: build the solver, say so, then answer solve requests until None."""
+    try:
+        solver = factory()
+    except BaseException as exc:
+        conn.send(("error", f"{type(exc).__name__}: {exc}"))
+        return
+    conn.send(_READY)
+    while True:
+        try:
+            msg = conn.recv()
+        except EOFError:
+            return
+        if msg is None:
+            return
+        try:
+            conn.send(solver.solve(*msg))
+        except Exception as exc:
+            conn.send(("error", f"{type(exc).__name__}: {exc}"))
+
+
+class _Worker:
+    """One solver process and the parent's end of its pipe."""
+
+    def __init__(self, factory: Callable, ctx, background: bool = False, delay: float = 0.0):
+        self.conn, self._child = ctx.Pipe()
+        self.proc = ctx.Process(target=_serve, args=(factory, self._child), daemon=True,
+                                name="mpcasv-mpc-solver")  # fmt: skip
+        self.ready = False
+        self._started = threading.Event()
+        if background:  # starting a process takes tens of ms (and the GIL): not on the step's time
+            threading.Thread(target=self._start, args=(delay,), daemon=True).start()
+        else:
+            self._start()
+
+    def _start(self, delay: float = 0.0) -> None:
+        time.sleep(delay)
+        try:
+            self.proc.start()
+        finally:
+            self._child.close()
+            self._started.set()
+
+    def wait_ready(self, timeout: float) -> bool:
+        """Consume the worker's ready message if it comes within ``timeout`` s.
+
+        Raises
+        ------
+        RuntimeError
+            The worker could not build its solver (its message).
+        """
+        if self.ready:
+            return True
+        if not self.conn.poll(max(timeout, 0.0)):
+            return False
+        try:
+            msg = self.conn.recv()
+        except EOFError:
+            self.proc.join(timeout=5.0)
+            raise RuntimeError("MPC solver worker exited before it was ready (exit code "
+                               f"{self.proc.exitcode}; with 'spawn' a script that builds a "
+                               "field-mode controller needs an if __name__ == '__main__' guard)"
+                               ) from None  # fmt: skip
+        if msg != _READY:
+            raise RuntimeError(f"MPC solver worker failed to start: {msg[1]}")
+        self.ready = True
+        return True
+
+    def kill(self, wait: bool = True) -> None:
+        """SIGKILL the worker; ``wait``: also reap it (else :meth:`reap` later)."""
+        self._started.wait(timeout=30.0)
+        if self.proc.pid is not None and self.proc.is_alive():
+            self.proc.kill()
+        self.conn.close()
+        if wait:
+            self.reap()
+
+    def reap(self) -> None:
+        if self.proc.pid is not None:
+            self.proc.join(timeout=5.0)
+
+    def stop(self) -> None:
+        self._started.wait(timeout=30.0)
+        try:
+            self.conn.send(None)
+        except (OSError, ValueError):
+            pass
+        self.proc.join(timeout=2.0)
+        self.kill()
+
+
+class DeadlineSolver:
+    """A solver in a worker process, with a deadline per call and a spare worker.
+
+    Parameters
+    ----------
+    factory : callable
+        Picklable, no arguments; returns an object with ``solve(p, w0, lam_x0, lam_g0) ->
+        SolveResult`` (built in the worker: e.g. ``functools.partial`` of a module-level
+        function that builds the OCP and loads the compiled library from the cache).
+    start_timeout : float
+        Seconds to wait for the first worker to be ready at construction.
+
+    Raises
+    ------
+    RuntimeError
+        The first worker did not start within ``start_timeout`` or could not build its solver.
+
+    Attributes
+    ----------
+    abandoned : int
+        Solves abandoned at their deadline (their worker killed).
+    """
+
+    def __init__(self, factory: Callable, start_timeout: float = 600.0):
+        self._ctx = multiprocessing.get_context("spawn")
+        self.factory = factory
+        self.abandoned = 0
+        self._dead: list[_Worker] = []  # killed workers not yet reaped
+        self._active = _Worker(factory, self._ctx)
+        if not self._active.wait_ready(start_timeout):
+            self._active.kill()
+            raise RuntimeError(f"MPC solver worker not ready within {start_timeout:g} s")
+        self._spare = _Worker(factory, self._ctx, background=True)
+
+    def wait_spare(self, timeout: float) -> bool:
+        """Wait until the spare worker is ready (tests, start-up)."""
+        return self._spare.wait_ready(timeout)
+
+    def wait_active(self, timeout: float) -> bool:
+        """Wait until the active worker is ready (after a replacement)."""
+        return self._active.wait_ready(timeout)
+
+    def solve(self, p: np.ndarray, w0: np.ndarray, lam_x0=None, lam_g0=None, *,
+              timeout: float) -> SolveResult:  # fmt: skip
+        """Solve in the worker; after ``timeout`` s without an answer the worker is killed, the
+        spare takes over, and the result is a failure with status ``"deadline"`` and the
+        warm start ``w0`` as its iterate (the next step starts warm from it)."""
+        t0 = time.perf_counter()
+        for dead in self._dead:  # killed at an earlier deadline: gone by now
+            dead.reap()
+        self._dead.clear()
+        w = self._active
+        answer = None
+        try:
+            w.conn.send((p, w0, lam_x0, lam_g0))
+            while answer is None:
+                left = timeout - (time.perf_counter() - t0)
+                if not w.conn.poll(max(left, 0.0)):
+                    break
+                msg = w.conn.recv()
+                if msg == _READY:  # a promoted spare that was still loading
+                    w.ready = True
+                    continue
+                answer = msg
+        except (EOFError, OSError):  # the worker died
+            answer = ("error", "solver worker died")
+        ms = (time.perf_counter() - t0) * 1e3
+        if isinstance(answer, SolveResult):
+            return SolveResult(answer.w, answer.lam_x, answer.lam_g, answer.f, answer.ok,
+                               answer.status, answer.iters, ms)  # fmt: skip
+        status = answer[1] if answer is not None else "deadline"
+        self._replace()
+        if answer is None:
+            self.abandoned += 1
+        return SolveResult(np.asarray(w0, float), None, None, math.nan, False, status, 0, ms)
+
+    def _replace(self) -> None:
+        """Kill the active worker (reaped at the next call); the spare takes over; a new spare
+        starts in the background (the step's time is not spent on it)."""
+        self._active.kill(wait=False)
+        self._dead.append(self._active)
+        self._active = self._spare
+        self._spare = _Worker(self.factory, self._ctx, background=True, delay=SPARE_DELAY_S)
+
+    def close(self) -> None:
+        """Stop both workers."""
+        for w in (self._active, self._spare):
+            w.stop()
+        for dead in self._dead:
+            dead.reap()
+        self._dead.clear()
+
+    def __del__(self):  # pragma: no cover - best effort at interpreter exit
+        try:
+            self.close()
+        except Exception:
+            pass

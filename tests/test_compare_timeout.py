@@ -1,0 +1,33 @@
+"""Issue 16 item 5: in ``mpcasv compare`` a job past its time limit is ended and recorded
+(``status = "timeout"``) and the sweep goes on."""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+
+import pandas as pd
+
+from mpcasv.experiments.runner import SweepStats, pending_jobs, run_jobs
+from mpcasv.experiments.store import write_results
+from mpcasv.experiments.suite import expand
+
+
+def test_a_job_past_its_time_limit_is_ended_and_the_sweep_goes_on(tmp_path):
+    quick = expand("quick")
+    jobs = sorted(pending_jobs(quick, tmp_path), key=lambda j: j.index)[:3]
+    # one job that would run for days (a 10^7 s scenario): it stands for a hung solve
+    endless = dataclasses.replace(jobs[1], duration=1.0e7)
+    jobs = [jobs[0], endless, jobs[2]]
+    stats = SweepStats("quick", len(jobs), 0)
+    t0 = time.perf_counter()
+    run_jobs(jobs, tmp_path, stats, workers=2, quiet=True, job_timeout=25.0)
+    took = time.perf_counter() - t0
+    table = write_results(tmp_path, jobs).set_index("job_id")
+    assert table.loc[endless.job_id, "status"] == "timeout"
+    assert "time limit of 25 s" in table.loc[endless.job_id, "error"]
+    assert pd.isna(table.loc[endless.job_id, "run_dir"])
+    for job in (jobs[0], jobs[2]):
+        assert table.loc[job.job_id, "status"] == "ok"
+    assert stats.ran == 3 and stats.ok == 2 and stats.errors == 1 and stats.lost == 0
+    assert took < 120.0, f"the sweep took {took:.0f} s"

@@ -1,0 +1,120 @@
+"""Issue 16 item 5: deterministic in simulation, a hard deadline in the field.
+
+- In simulation no wall-clock measurement changes a decision: one MPC scenario run with a
+  clock that says every solve took hours, and under CPU load, gives the same time series.
+- In the field (``use_deadline``) a solve that hangs is abandoned at the step's budget: the
+  step returns the hybrid fallback's command in time, and the next step starts warm on the
+  spare worker.
+"""
+
+from __future__ import annotations
+
+import functools
+import itertools
+import os
+import subprocess
+import sys
+import time
+
+import pandas as pd
+import pytest
+
+from mpcasv.controllers import make_controller
+from mpcasv.interface import ASVState, AUVEstimate, Observation, Reason
+from mpcasv.mpc.controller import _worker_solver
+from mpcasv.sim.scenario import load_scenario, scenario_with
+from mpcasv.sim.simulator import simulate
+
+#: columns that hold measured wall time (reported, never used for a decision)
+WALL_COLUMNS = ("step_ms", "mpc_ms", "mpc_over_budget")
+
+
+def _decisions(ts: pd.DataFrame) -> pd.DataFrame:
+    return ts.drop(columns=[c for c in WALL_COLUMNS if c in ts.columns])
+
+
+@pytest.fixture
+def case3(scenarios_dir):
+    def run(duration: float = 60.0):
+        sc = scenario_with(load_scenario(scenarios_dir / "case3.toml"), duration=duration)
+        ctrl = make_controller("mpc-single", 1, "mpc-single")
+        return simulate(sc, ctrl, seed=0).timeseries, ctrl
+
+    return run
+
+
+def test_wall_time_never_changes_a_simulated_decision(case3, monkeypatch):
+    """A clock on which every call is 10 s after the previous one (each solve 'takes' 10 s,
+    far over the 200 ms budget) gives exactly the same run: before issue 16 every step went
+    to the hybrid fallback ('time budget')."""
+    ref, ctrl_ref = case3()
+    clock = itertools.count(1e6, 10.0)
+    monkeypatch.setattr(time, "perf_counter", lambda: float(next(clock)))
+    slow, ctrl = case3()
+    monkeypatch.undo()
+    pd.testing.assert_frame_equal(_decisions(ref), _decisions(slow))
+    assert ctrl.over_budget == len(slow)  # measured and reported: every step 'overran'
+    assert (slow["mpc_over_budget"] == 1).all()
+    assert (ref["mpc_ok"] == 1).sum() > 0.9 * len(ref)  # the run did solve
+
+
+def test_a_run_under_cpu_load_is_the_same_run(case3):
+    """Two busy-loop processes on this 2-core machine while the scenario runs again."""
+    ref, _ = case3(30.0)
+    busy = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(2)]
+    try:
+        loaded, _ = case3(30.0)
+    finally:
+        for p in busy:
+            p.kill()
+            p.wait()
+    pd.testing.assert_frame_equal(_decisions(ref), _decisions(loaded))
+
+
+class _HangOnce:
+    """The real solver, except that the first solve after ``flag`` appears never returns."""
+
+    def __init__(self, solver, flag: str):
+        self.solver, self.flag = solver, flag
+
+    def solve(self, *args):
+        if os.path.exists(self.flag):
+            os.remove(self.flag)
+            time.sleep(3600.0)  # a hung native solve, as fatrop on NaN
+        return self.solver.solve(*args)
+
+
+def hang_once_solver(flag: str, params, n_auv: int, multi: bool):
+    return _HangOnce(_worker_solver(params, n_auv, multi, None), flag)
+
+
+def test_field_deadline_abandons_a_hung_solve_and_the_next_step_starts_warm(tmp_path):
+    ctrl = make_controller("mpc-single", 1, "mpc-single")
+    flag = tmp_path / "hang"
+    ctrl.use_deadline(functools.partial(hang_once_solver, str(flag), ctrl.params, 1, False))
+    try:
+        budget = ctrl.params.solver.budget_ms / 1e3
+        obs = Observation(0.0, ASVState(0.0, 0.0, 0.0, 1.0), True,
+                          (AUVEstimate(120.0, 0.0, 30.0, 0.5, 0.0),))  # fmt: skip
+        flag.touch()
+        t0 = time.perf_counter()
+        cmd = ctrl.step(obs)
+        took = time.perf_counter() - t0
+        assert not flag.exists()  # the worker did start the hanging solve
+        assert cmd.reason == Reason.FALLBACK
+        assert ctrl.fallback_log[-1].reason.startswith("deadline")
+        assert ctrl.deadline.abandoned == 1
+        assert took < budget + 0.05, f"the step took {took:.3f} s, budget {budget:.3f} s"
+        assert ctrl.w_prev is not None  # the warm start is kept for the next step
+        # the spare (started at use_deadline) takes over: the next step is solved in time
+        assert ctrl.deadline.wait_active(120.0)
+        obs1 = Observation(1.0, ASVState(1.0, 0.0, 0.0, 1.0), True,
+                           (AUVEstimate(120.5, 0.0, 30.0, 0.5, 0.0),))  # fmt: skip
+        t0 = time.perf_counter()
+        cmd1 = ctrl.step(obs1)
+        took1 = time.perf_counter() - t0
+        assert cmd1.reason != Reason.FALLBACK, ctrl.fallback_log
+        assert ctrl.diagnostics()["mpc_ok"] == 1
+        assert took1 < budget + 0.25
+    finally:
+        ctrl.close()
