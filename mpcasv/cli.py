@@ -18,6 +18,7 @@ COMMAND_MODULES = (
     "mpcasv.sim.commands",  # simulate
     "mpcasv.hybrid.commands",  # paper-table
     "mpcasv.experiments.commands",  # compare
+    "mpcasv.experiments.falsify_commands",  # falsify
     "mpcasv.control.commands",  # tune, identify
     "mpcasv.io.commands",  # deploy, sitl, replay, log
     "mpcasv.bench",  # bench
