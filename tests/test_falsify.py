@@ -225,3 +225,25 @@ def test_falsified_worst_cases_keep_todays_margin(name):
 
 def test_every_committed_worst_case_is_pinned():
     assert sorted(p.stem for p in FALSIFIED.glob("*.toml")) == sorted(PINNED)
+
+
+def test_a_run_that_does_not_return_is_recorded_as_a_timeout(tmp_path, monkeypatch):
+    """A solver that never returns (seen with mpc-multi, docs/safety.md) must not stop the
+    search: with --timeout the run is recorded as an error and the search goes on."""
+    import mpcasv.experiments.falsify_pool as pool_mod
+    from mpcasv.experiments.falsify_pool import WorkerPool, run_batch
+
+    told = []
+    with WorkerPool(1, timeout=3.0) as workers:
+        items = [("hang", lambda: ("sleep", 60.0)), ("quick", lambda: ("sleep", 0.0))]
+        monkeypatch.setattr(pool_mod, "_guarded", _sleeper)
+        t0 = time.monotonic()
+        run_batch(items, workers, lambda trial, m, err: told.append((trial, m, err)))
+        assert time.monotonic() - t0 < 40
+    assert told[0][0] == "hang" and "timeout" in told[0][2]
+    assert told[1] == ("quick", {"slept": 0.0}, None)
+
+
+def _sleeper(args):  # a module-level stand-in for a run (picklable by reference)
+    time.sleep(args[1])
+    return {"slept": args[1]}, None

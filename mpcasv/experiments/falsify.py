@@ -303,8 +303,12 @@ class SearchSetup:
 
 
 def search(setup: SearchSetup, storage_path: Path, budget: int, workers: int = 1,
-           progress: Callable[[int, dict], None] | None = None):  # fmt: skip
+           progress: Callable[[int, dict], None] | None = None,
+           timeout: float | None = None):  # fmt: skip
     """Run (or resume) the CMA-ES search until ``budget`` runs are finished; return the study.
+
+    ``timeout`` (s of wall clock per run, None: no limit): a run that takes longer is
+    recorded as failed with a ``timeout`` error (see :mod:`mpcasv.experiments.falsify_pool`).
 
     The study lives in the SQLite file ``storage_path`` (Optuna RDB storage). Trials left
     running by a killed search are marked failed (``interrupted``) and not counted; finished
@@ -312,7 +316,7 @@ def search(setup: SearchSetup, storage_path: Path, budget: int, workers: int = 1
     """
     import optuna
 
-    from mpcasv.experiments.falsify_pool import run_batch, worker_pool
+    from mpcasv.experiments.falsify_pool import WorkerPool, run_batch
 
     optuna.logging.set_verbosity(optuna.logging.WARNING)
     storage = optuna.storages.RDBStorage(f"sqlite:///{storage_path}")
@@ -337,7 +341,7 @@ def search(setup: SearchSetup, storage_path: Path, budget: int, workers: int = 1
         if progress is not None:
             progress(trial.number, measures if error is None else {"error": error})
 
-    with worker_pool(workers) as pool:
+    with WorkerPool(workers, timeout) as pool:
         while (done := n_finished(study)) < budget:
             trials = [study.ask(dists) for _ in range(min(BATCH, budget - done))]
             items = [(t, (lambda t=t: setup.trial_args(t.params, t.number))) for t in trials]

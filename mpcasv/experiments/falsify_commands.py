@@ -25,6 +25,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--params", help="controller preset: shipped name or TOML path")
     p.add_argument("--budget", type=int, default=32, help="runs in all (default 32)")
     p.add_argument("--workers", type=int, default=1, help="worker processes (default 1)")
+    p.add_argument("--timeout", type=float, metavar="S",
+                   help="wall-clock limit per run (s): a run still going is recorded as an "
+                   "error (a solver that never returns); default: none")  # fmt: skip
     p.add_argument("--seed", type=int, default=0,
                    help="seed of the sampler and of every run (default 0)")  # fmt: skip
     p.add_argument("--objective", choices=("margin", "stay"), default="margin",
@@ -64,7 +67,7 @@ def run(args: argparse.Namespace) -> int:
             print(f"  trial {number:3d}: margin {m['margin_m']:7.2f} m, longest stay "
                   f"{m['longest_stay_s']:5.0f} s", flush=True)  # fmt: skip
 
-    study = search(setup, out / "study.db", args.budget, args.workers, progress)
+    study = search(setup, out / "study.db", args.budget, args.workers, progress, args.timeout)
     table = trials_table(study)
     table.to_csv(out / "trials.csv", index=False)
     (out / "trials.md").write_text(_markdown(table, setup, args.budget) + "\n")
