@@ -200,6 +200,9 @@ def test_cli_writes_worst_cases_that_load_and_reproduce_their_margin(tmp_path):
 # differences between machines, not behaviour changes.
 PINNED: dict[str, tuple[float, float]] = {
     "falsified-crossing-multi-hybrid-multi-1": (-30.839, 68),
+    # reproduced 4 times (search, rerun, two fresh processes); other mpc-multi runs are not
+    # reproducible (docs/safety.md)
+    "falsified-crossing-multi-mpc-multi-1": (-41.675, 149),
     # the worst case of the printed eq. 8 (-46.28 m there), run with S1/S2
     "falsified-crossing-multi-printed-eq8": (-20.622, 39),
     "falsified-pursuer-single-hybrid-single-1": (-29.681, 59),
