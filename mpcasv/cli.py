@@ -2,14 +2,18 @@
 
 Each sub-command lives beside the code it drives (``mpcasv/<package>/commands.py``) and
 registers itself through ``register(subparsers)``; this module only assembles them and turns
-configuration errors into one clear message and exit code 2.
+every expected failure (bad configuration, bad or unsupported input files) into one line
+naming the file and the cause, with exit code 2 (:func:`input_error`).
 """
 
 from __future__ import annotations
 
 import argparse
 import importlib
+import json
+import os
 import sys
+import tomllib
 
 from mpcasv import __version__
 from mpcasv.config import ConfigError
@@ -19,6 +23,7 @@ COMMAND_MODULES = (
     "mpcasv.sim.commands",  # simulate
     "mpcasv.hybrid.commands",  # paper-table
     "mpcasv.experiments.commands",  # compare
+    "mpcasv.experiments.falsify_commands",  # falsify
     "mpcasv.control.commands",  # tune, identify
     "mpcasv.io.commands",  # deploy, sitl, replay, log
     "mpcasv.bench",  # bench
@@ -38,17 +43,62 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def input_error(exc: BaseException) -> str | None:
+    """The one-line message for an expected failure, or None for an unexpected exception.
+
+    Expected: the project's error classes (:class:`~mpcasv.config.ConfigError`, a bad log's
+    ``mpcasv.errors.LogError``), operating-system errors (a missing or unreadable file, a
+    folder given for a file, a port in use) and a file that cannot be decoded (binary
+    garbage where TOML, JSON or CSV was expected). The file is named: from the error itself,
+    or else the innermost file being read where it was raised.
+    """
+    if isinstance(exc, (ConfigError, LogError)):
+        return "; ".join(line.strip() for line in str(exc).splitlines() if line.strip())
+    if isinstance(exc, OSError):
+        where = f"{exc.filename}: " if exc.filename is not None else ""
+        return f"{where}{exc.strerror or exc}"
+    if isinstance(exc, UnicodeDecodeError):
+        return (f"{_file_being_read(exc)}: not a text file ({exc.reason}: byte "
+                f"{exc.object[exc.start]:#04x} at {exc.start}); a binary file where TOML, JSON "
+                "or CSV was expected?")  # fmt: skip
+    if isinstance(exc, (tomllib.TOMLDecodeError, json.JSONDecodeError)):
+        kind = "TOML" if isinstance(exc, tomllib.TOMLDecodeError) else "JSON"
+        return f"{_file_being_read(exc)}: not valid {kind}: {exc}"
+    return None
+
+
+def _file_being_read(exc: BaseException) -> str:
+    """The innermost open file (or existing file path) in the frames ``exc`` went through."""
+    frames = []
+    tb = exc.__traceback__
+    while tb is not None:
+        frames.append(tb.tb_frame)
+        tb = tb.tb_next
+    for frame in reversed(frames):
+        for value in frame.f_locals.values():
+            name = getattr(value, "name", None) if hasattr(value, "read") else value
+            if isinstance(name, (str, os.PathLike)) and os.path.isfile(name):
+                return os.fspath(name)
+    return "input file"
+
+
 def main(argv: list[str] | None = None) -> int:
+    """Run ``mpcasv``: 0 success, 1 ran and an acceptance check failed, 2 bad input (one
+    line on stderr naming the file and the cause), 130 interrupted. An unexpected exception
+    (a bug) keeps its traceback."""
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
         return int(args.func(args) or 0)
-    except (ConfigError, LogError) as exc:  # bad input: one line, exit 2
-        print(f"mpcasv {args.command}: error: {exc}", file=sys.stderr)
-        return 2
     except KeyboardInterrupt:
         print(f"mpcasv {args.command}: interrupted", file=sys.stderr)
         return 130
+    except Exception as exc:
+        message = input_error(exc)
+        if message is None:
+            raise
+        print(f"mpcasv {args.command}: error: {message}", file=sys.stderr)
+        return 2
 
 
 if __name__ == "__main__":

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -100,8 +101,8 @@ def test_invariants_over_random_sequences(seq):
         cmd = c.step(obs_at(float(t), (n, e), auvs, propeller_on=prop))
         r = np.array([math.hypot(n - a[0], e - a[1]) for a in AUVS])
         r_avoid, r_t = d.avoid(np.array(depths)), d.target(np.array(depths))
-        if np.any(r < r_avoid):
-            assert c.state.i == int(np.argmin(r)) and cmd.mode is Mode.TRANSIT
+        if np.any(r < r_avoid):  # the deepest breach (issue 14, S1)
+            assert c.state.i == int(np.argmin(r - r_avoid)) and cmd.mode is Mode.TRANSIT
         rule = (r < r_t + d.eps_plus) & (not prop)
         assert np.all(c.tau_k[rule] == 0.0)
         assert np.allclose(c.tau_k[~rule], prev_tau[~rule] + 1.0)  # tau_dot = 1 (dt = 1 s)
@@ -113,3 +114,106 @@ def test_invariants_over_random_sequences(seq):
                 assert standby_len >= T
             standby_len = 0
     assert set(c.jump_log()["to_mode"]) <= {Q1, Q2}
+
+
+# --- issue 14: Eq. 8 with the thesis's intent at mixed depths --------------------------------
+# paper2-field: r_avoid = alpha T0 rdot_max = 50 m, delta_r = 20 m, eps = 10 m.
+DEEP_SURFACE = [(0.0, 0.0, 45.0), (65.0, 0.0, 0.0)]  # r_avoid,0 = sqrt(50^2 - 45^2) = 21.8 m
+
+
+def ctrl_n(n):
+    c = make_controller("hybrid-multi", n, "paper2-field")
+    c.reset(n)
+    return c
+
+
+def domains(auvs, d):
+    """Centres (K, 2) and the papers' r_avoid,k (K,) of AUVs [(N, E, depth), ...]."""
+    a = np.asarray(auvs, float)
+    return a[:, :2], np.asarray(d.avoid(a[:, 2]), float)
+
+
+@pytest.mark.parametrize("standing_by", [False, True])
+def test_mixed_depths_the_breached_surface_auv_is_avoided_not_the_nearer_deep_one(standing_by):
+    """The issue's case: ASV at (25, 0), 25 m from a 45 m-deep AUV (domain 21.8 m: not
+    breached) and 40 m from a surface AUV (domain 50 m: breached). The printed eq. 8 picks
+    the deep AUV (nearest) and stays in standby, or transits to (41.8, 0), 23 m from the
+    surface AUV."""
+    c = ctrl_n(2)
+    if standing_by:
+        c.state = dataclasses.replace(c.state, q=Q1, tau=8.0)
+    cmd = c.step(obs_at(0.0, (25.0, 0.0), DEEP_SURFACE))
+    assert cmd.mode is Mode.TRANSIT and cmd.reason is Reason.AVOIDANCE
+    assert cmd.auv == 1 and c.state.i == 1
+    centres, r_avoid = domains(DEEP_SURFACE, c.domain)
+    gap = np.hypot(*(np.asarray(cmd.waypoint) - centres).T) - r_avoid
+    # eq. 12 alone would give (-5, 0): outside the surface AUV's domain by delta_r but 5 m
+    # from the deep AUV, inside its 21.8 m domain; S2 keeps delta_r clear of both
+    assert np.all(gap >= c.domain.delta_r - 1e-9), gap
+    assert gap[1] < c.domain.delta_r + 20.0  # and it stays near the target circle
+
+
+def test_eq12_point_kept_when_clear_of_the_other_domains():
+    """S2 changes nothing when eq. 12's point is clear (the AUVs are far apart)."""
+    c = ctrl()
+    cmd = c.step(obs_at(0.0, (10.0, 0.0), AUVS))
+    r_t = float(c.domain.target(0.0))
+    assert cmd.waypoint == pytest.approx((r_t, 0.0))
+
+
+close_auvs = st.lists(
+    st.tuples(st.floats(-60.0, 60.0), st.floats(-60.0, 60.0), st.floats(0.0, 60.0)),
+    min_size=2, max_size=4,
+)  # fmt: skip
+asv_walk = st.lists(
+    st.tuples(st.floats(-90.0, 90.0), st.floats(-90.0, 90.0), st.booleans()),
+    min_size=1, max_size=25,
+)  # fmt: skip
+
+
+@settings(max_examples=300, deadline=None)
+@given(auvs=close_auvs, walk=asv_walk, start_in_standby=st.booleans())
+def test_inside_a_domain_the_next_command_leaves_every_domain(auvs, walk, start_in_standby):
+    """Issue 14 property: AUVs close together at mixed depths, random ASV positions. Whenever
+    the ASV is inside some AUV's anti-collision domain, the command is an avoidance transit
+    serving the deepest breach, to a waypoint >= delta_r outside every domain (so never a
+    standby inside a domain). Standby is commanded only outside every domain."""
+    c = ctrl_n(len(auvs))
+    if start_in_standby:
+        c.state = dataclasses.replace(c.state, q=Q1, tau=c.params.T_standby)
+    centres, r_avoid = domains(auvs, c.domain)
+    for t, (n, e, prop) in enumerate(walk):
+        cmd = c.step(obs_at(float(t), (n, e), auvs, propeller_on=prop))
+        r = np.hypot(n - centres[:, 0], e - centres[:, 1])
+        inside = r < r_avoid
+        if not np.any(inside):
+            continue
+        assert cmd.mode is Mode.TRANSIT and cmd.reason is Reason.AVOIDANCE
+        assert cmd.auv == int(np.argmin(np.where(inside, r - r_avoid, np.inf)))
+        wp = np.asarray(cmd.waypoint)
+        gap = np.hypot(*(wp - centres).T) - r_avoid
+        assert np.all(gap >= c.domain.delta_r - 1e-6), (wp, gap)
+
+
+@settings(max_examples=60, deadline=None)
+@given(auvs=close_auvs, n=st.floats(-90.0, 90.0), e=st.floats(-90.0, 90.0),
+       kind=st.sampled_from(["uncertainty", "reachable"]))  # fmt: skip
+def test_inside_an_uncertainty_aware_domain_the_waypoint_leaves_every_domain(auvs, n, e, kind):
+    """S1/S2 with the issue-8 domains (discs grown by the uncertainty; reach-set polygons):
+    inside any domain, the waypoint is outside every domain, >= delta_r outside the others."""
+    from mpcasv.hybrid.domains import estimate_shape
+
+    c = make_controller("hybrid-multi", len(auvs), "paper2-field",
+                        overrides={"avoidance.kind": kind})  # fmt: skip
+    c.reset(len(auvs))
+    obs = obs_at(0.0, (n, e), auvs)
+    cmd = c.step(obs)
+    shape = estimate_shape(c.params.avoidance, c.domain, obs.auvs, 0.0)
+    if not np.any(shape.inside(np.array([n, e]))):
+        return
+    assert cmd.mode is Mode.TRANSIT and cmd.reason is Reason.AVOIDANCE
+    sd = shape.signed_distance(np.asarray(cmd.waypoint))
+    # the served AUV's target circle is delta_r out along the bearing (eq. 6), which for a
+    # polygon is a signed distance between 0 and delta_r; every other domain >= delta_r
+    assert sd[cmd.auv] > 0.0
+    assert np.all(np.delete(sd, cmd.auv) >= c.domain.delta_r - 1e-6), sd

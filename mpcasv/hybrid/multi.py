@@ -3,13 +3,20 @@
 - Fix-age timers tau_k (eq. 9): tau_k grows while the ASV is outside the outer limit of AUV
   k's target domain or its propeller runs; it resets to 0 when r_k < r_t,k + eps with the
   propeller off (the reliable-fix rule; optionally also requiring an observed fix).
-- AUV selection (eq. 8): nominally argmax_k tau_k; argmin_k r_k as soon as the ASV is inside
-  any AUV's anti-collision radius r_avoid,k. After such an avoidance the ASV keeps serving
-  that AUV until it has stood by there for its fix, then resumes the nominal choice
-  (Paper 2 §2.3).
+- AUV selection (eq. 8, with the thesis's intent; issue 14, docs/safety.md): nominally
+  argmax_k tau_k; as soon as the ASV is inside any AUV's anti-collision radius r_avoid,k, the
+  deepest breach argmin_k (r_k - r_avoid,k) over the breached AUVs (rule S1 of
+  :mod:`mpcasv.hybrid.clearance`). The printed equation's argmin_k r_k can pick a deeper AUV
+  whose smaller (depth-reduced) domain is not breached, and leave the ASV standing by, or
+  send it deeper, inside another AUV's domain. After an avoidance the ASV keeps serving that
+  AUV until it has stood by there for its fix, then resumes the nominal choice (Paper 2 §2.3).
 - Modes (eq. 11): Q1 standby with a countdown tau (set to T on entry, tau_dot = -1, may leave
   only at 0); Q2 transit to the closest point of the selected AUV's target circle (eq. 12).
   Jump to Q1 when |e_i| < eps in Q2; jump to Q2 when (q, tau) = (1, 0) or r_i < r_avoid,i.
+  Because i is a breached AUV whenever any domain is breached, the ASV never stands by inside
+  a domain. The commanded point is eq. 12's unless it lies within delta_r of another AUV's
+  domain; then it is the nearest point (in bearing, then in range) that keeps delta_r clear of
+  every domain (rule S2), so an avoidance transit leaves all breached domains at once.
 """
 
 from __future__ import annotations
@@ -22,10 +29,11 @@ import numpy as np
 
 from mpcasv.config import Pos, frozen
 from mpcasv.controllers import ControllerKind
+from mpcasv.hybrid.clearance import clear_waypoint, deepest_breach
 from mpcasv.hybrid.domains import (
     AvoidanceParams,
     DomainParams,
-    avoidance_radii,
+    estimate_shape,
     point_on_circle,
     range_bearing,
 )
@@ -129,9 +137,13 @@ class HybridMulti:
         self.tau_k = np.where(ok, 0.0, self.tau_k + dt)
 
     def select(self, r: np.ndarray, r_avoid: np.ndarray) -> int:
-        """Eq. 8 with the avoid-then-wait latch."""
-        if np.any(r < r_avoid):
-            self.latch = int(np.argmin(r))
+        """Eq. 8 with the avoid-then-wait latch; inside any domain the deepest breach (S1).
+
+        ``r``, ``r_avoid``: shape (K,), m. The printed eq. 8 takes ``argmin_k r_k`` here.
+        """
+        breach = deepest_breach(r, r_avoid)  # argmin_k (r_k - r_avoid,k) over r_k < r_avoid,k
+        if breach is not None:
+            self.latch = breach
             return self.latch
         if self.latch is not None:
             return self.latch
@@ -142,8 +154,8 @@ class HybridMulti:
         self._t_prev = obs.t
         pos = np.array([a.position for a in obs.auvs])
         r, beta = range_bearing(obs.asv.position, pos)
-        r_avoid = avoidance_radii(self.params.avoidance, self.domain, obs.auvs, obs.t,
-                                  obs.asv.position)  # fmt: skip
+        shape = estimate_shape(self.params.avoidance, self.domain, obs.auvs, obs.t)
+        r_avoid = np.asarray(shape.radius(beta), float)  # r_avoid,k on the bearing to the ASV
         r_t = r_avoid + self.domain.delta_r  # eq. 6
         self.update_timers(obs, r, r_t, dt)
         if self.state.q == Q1 and self.state.tau <= 1e-9 and self.latch == self.standby_auv:
@@ -159,6 +171,8 @@ class HybridMulti:
         if x.q == Q1:
             return Command.standby(auv=self.standby_auv)
         wp = point_on_circle(pos[i], x.r_wp, x.beta_wp)  # eq. 12
+        if len(pos) > 1 and np.any(np.delete(shape.signed_distance(wp), i) < self.domain.delta_r):
+            wp = clear_waypoint(shape, i, x.beta_wp, self.domain.delta_r)  # S2
         return Command(CmdMode.TRANSIT, (float(wp[0]), float(wp[1])), self.params.speed, i,
                        x.reason)  # fmt: skip
 

@@ -126,6 +126,7 @@ class MPCController:
         self.channel = channel_vector(self.acoustics, params.fix.noisy_fixes)
         #: field mode (:meth:`use_deadline`): solves in a worker process with a deadline
         self.deadline: DeadlineSolver | None = None
+        self._hang_guard = False
         self._setup(n_auv)
         self.reset(n_auv)
 
@@ -150,6 +151,17 @@ class MPCController:
                                                self.multi, self.boat)  # fmt: skip
         self.deadline = DeadlineSolver(factory, start_timeout)
         self._deadline_n = self.ocp.dims.n_auv
+        self._hang_guard = False
+
+    def use_hang_guard(self) -> None:
+        """Simulation: the solves run in a worker process and only one that has not answered
+        after ``solver.hang_s`` s is abandoned (:class:`~mpcasv.mpc.params.SolverParams`;
+        ``hang_s = 0``: solves stay in this process, unguarded)."""
+        if self.params.solver.hang_s <= 0:
+            self.close()
+            return
+        self.use_deadline()
+        self._hang_guard = True
 
     def close(self) -> None:
         """Stop the field mode's solver workers (no-op in simulation)."""
@@ -321,6 +333,8 @@ class MPCController:
         the field mode's worker with what is left of this step's budget."""
         if self.deadline is None:
             return self.solver.solve(p, w0, lam_x, lam_g)
+        if self._hang_guard:  # simulation: abandon only a hung solve (SolverParams.hang_s)
+            return self.deadline.solve(p, w0, lam_x, lam_g, timeout=self.params.solver.hang_s)
         left = (self.params.solver.budget_ms / 1e3 - STEP_RESERVE_S
                 - (time.perf_counter() - self._t_step))  # fmt: skip
         return self.deadline.solve(p, w0, lam_x, lam_g, timeout=left)

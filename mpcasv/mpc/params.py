@@ -154,6 +154,14 @@ class SolverParams:
         hybrid fallback commands that step). In simulation it decides nothing (runs are
         reproduced exactly under any load): a step over it is only counted
         (``mpc_over_budget``); ``max_iter`` bounds the work.
+    hang_s : float
+        Hang guard in simulation (s; 0 = none): the solves run in a worker process and one
+        that has not answered after ``hang_s`` s of wall time is abandoned as hung (the step
+        takes the fallback, status ``deadline``). fatrop has looped forever inside its linear
+        solver on finite, well-posed parameters (Case 4 with the issue-13 plant, step 1097:
+        docs/mpc.md "Known problems"). Normal solves take milliseconds, so no run that does
+        not hang depends on wall time; a run that meets a hang is reproducible only as far
+        as the hang is.
     check_stages : int
         Stages of the plan checked against r_inner / r_avoid before it is used.
     check_margin : float
@@ -179,6 +187,7 @@ class SolverParams:
     bound_push: Pos = 1e-6
     qp_iters: PosInt = 10
     budget_ms: Pos = 200.0
+    hang_s: NonNeg = 30.0
     check_stages: PosInt = 2
     check_margin: NonNeg = 2.0
     max_violation: Pos = 60.0

@@ -57,6 +57,9 @@ def simulate(
     wall0 = time.perf_counter()
     world = World(scenario, seed, estimator)
     controller.reset(world.n_auv)
+    guard = getattr(controller, "use_hang_guard", None)  # an MPC: a hung solve must not
+    if guard is not None:  # stall the run (mpcasv.mpc.params.SolverParams.hang_s)
+        guard()
     rows, step_ms, plans = [], [], []
     next_plan_t = 0.0
     bar = None
@@ -88,6 +91,9 @@ def simulate(
             bar.update(1)
     if bar is not None:
         bar.close()
+    close = getattr(controller, "close", None)  # stops an MPC's solver workers
+    if close is not None:
+        close()
     jumps = getattr(controller, "jump_log", None)
     return RunResult(
         scenario, controller.name, seed, pd.DataFrame(rows), np.array(step_ms),

@@ -1,0 +1,163 @@
+"""``mpcasv falsify``: search a scenario family for a controller's worst case; write the worst
+cases as scenario files with their figures, and a table of the search."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+from pathlib import Path
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "falsify", help="search a scenario family for a controller's worst case (CMA-ES)",
+        description="Search the parameters of FAMILY (a TOML file: a template scenario and "
+        "parameter ranges, e.g. experiments/falsify/pursuer-single.toml) for the smallest "
+        "margin min_t (slant range - required separation) (or the longest stay inside a "
+        "collision domain) of CONTROLLER, with Optuna's CMA-ES sampler. Writes DIR/study.db "
+        "(resumable: rerun the same command), DIR/trials.csv, DIR/trials.md, and the worst "
+        "cases as DIR/worst/<name>.toml with their run folders (paths.png, range.png). A "
+        "search finds counterexamples; it does not prove safety.",
+    )  # fmt: skip
+    p.add_argument("family", type=Path, help="family TOML (template scenario + parameters)")
+    p.add_argument("--controller", required=True, help="controller name")
+    p.add_argument("--params", help="controller preset: shipped name or TOML path")
+    p.add_argument("--budget", type=int, default=32, help="runs in all (default 32)")
+    p.add_argument("--workers", type=int, default=1, help="worker processes (default 1)")
+    p.add_argument("--timeout", type=float, metavar="S",
+                   help="wall-clock limit per run (s): a run still going is recorded as an "
+                   "error (a solver that never returns); default: none")  # fmt: skip
+    p.add_argument("--seed", type=int, default=0,
+                   help="seed of the sampler and of every run (default 0)")  # fmt: skip
+    p.add_argument("--objective", choices=("margin", "stay"), default="margin",
+                   help="minimise the margin (default) or maximise the longest stay")  # fmt: skip
+    p.add_argument("--separation", type=float, metavar="M",
+                   help="required separation (m; default: the controller's r_in)")  # fmt: skip
+    p.add_argument("--worst", type=int, default=3, help="worst cases written (default 3)")
+    p.add_argument("--require-margin", type=float, metavar="M",
+                   help="exit 1 if the worst margin found is below M (m)")  # fmt: skip
+    p.add_argument("--out", type=Path, metavar="DIR",
+                   help="output folder (default results/falsify/FAMILY-CONTROLLER)")  # fmt: skip
+    p.add_argument("--quiet", action="store_true", help="no line per finished run")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from mpcasv.config import ConfigError
+    from mpcasv.controllers import load_preset
+    from mpcasv.experiments.falsify import SearchSetup, load_family, search, trials_table
+
+    for flag in ("budget", "worst"):
+        if getattr(args, flag) < 1:
+            raise ConfigError(f"--{flag} must be >= 1, got {getattr(args, flag)}")
+    family = load_family(args.family)
+    load_preset(args.controller, args.params)  # unknown controller / bad preset: refused now
+    out = args.out or Path("results") / "falsify" / f"{family.name}-{args.controller}"
+    out.mkdir(parents=True, exist_ok=True)
+    setup = SearchSetup(family, args.controller, args.params, args.seed, args.separation,
+                        args.objective)  # fmt: skip
+
+    def progress(number: int, m: dict) -> None:
+        if args.quiet:
+            return
+        if "error" in m:
+            print(f"  trial {number:3d}: error {m['error'][:120]}", flush=True)
+        else:
+            print(f"  trial {number:3d}: margin {m['margin_m']:7.2f} m, longest stay "
+                  f"{m['longest_stay_s']:5.0f} s", flush=True)  # fmt: skip
+
+    study = search(setup, out / "study.db", args.budget, args.workers, progress, args.timeout)
+    table = trials_table(study)
+    table.to_csv(out / "trials.csv", index=False)
+    (out / "trials.md").write_text(_markdown(table, setup, args.budget) + "\n")
+    ok = table[table["state"] == "complete"] if len(table) else table
+    if not len(ok):
+        print(f"no run finished without an error: see {out / 'trials.csv'}")
+        return 1
+    key = "margin_m" if args.objective == "margin" else "longest_stay_s"
+    ranked = ok.sort_values(key, ascending=args.objective == "margin")
+    top = ranked.head(args.worst).iterrows()
+    reruns = dict(write_worst(setup, row, rank, out / "worst")
+                  for rank, (_, row) in enumerate(top, 1))  # fmt: skip
+    written = list(reruns)
+    worst = float(ok["margin_m"].min())
+    summary = {"family": family.name, "controller": args.controller, "preset": args.params,
+               "budget": args.budget, "seed": args.seed, "objective": args.objective,
+               "finished": int(len(table)), "errors": int((table["state"] != "complete").sum()),
+               "worst_margin_m": worst, "longest_stay_s": float(ok["longest_stay_s"].max()),
+               "r_sep_m": float(ok["r_sep_m"].iloc[0]), "worst_cases": written,
+               "rerun_margin_m": reruns}  # fmt: skip
+    (out / "summary.json").write_text(json.dumps(summary, indent=1) + "\n")
+    print(f"{len(table)} runs ({summary['errors']} errors); worst margin {worst:.2f} m "
+          f"(r_sep {summary['r_sep_m']:g} m), longest stay {summary['longest_stay_s']:.0f} s; "
+          f"worst cases: {', '.join(written)}; table: {out / 'trials.md'}")  # fmt: skip
+    if args.require_margin is not None and worst < args.require_margin:
+        print(f"margin check FAIL: {worst:.2f} m < {args.require_margin:g} m")
+        return 1
+    return 0
+
+
+def _markdown(table, setup, budget: int) -> str:
+    head = (f"# Falsification: {setup.family.name} with {setup.controller} "
+            f"(preset {setup.preset or 'default'})\n\nbudget {budget} runs, seed {setup.seed}, "
+            f"objective {setup.objective}; sorted by margin (m). A search finds "
+            "counterexamples; it does not prove safety.\n")  # fmt: skip
+    if not len(table):
+        return head
+    measures = ("margin_m", "t_margin_s", "auv_margin", "longest_stay_s", "time_inside_s",
+                "min_range_m", "fallbacks", "error")  # fmt: skip
+    cols = ["trial", *[p.name for p in setup.family.spec.param],
+            *[c for c in measures if c in table]]  # fmt: skip
+    from mpcasv.experiments.report import _md_table
+
+    shown = table[cols].set_index("trial").map(lambda v: f"{v:.2f}" if isinstance(v, float) else v)
+    return head + "\n" + _md_table(shown)
+
+
+def write_worst(setup, row, rank: int, folder: Path) -> str:
+    """Write the scenario of a trial as ``folder/<name>.toml`` and rerun it into
+    ``folder/<name>/`` with the figures; return the name and the rerun's margin (m), which
+    should be the searched one (runs are deterministic; a warning is printed if not)."""
+    import tomli_w
+
+    from mpcasv.controllers import Boat, make_controller
+    from mpcasv.experiments.falsify import candidate, robustness
+    from mpcasv.experiments.metrics import compute_metrics
+    from mpcasv.sim.record import write_run
+    from mpcasv.sim.simulator import simulate
+
+    fam = setup.family
+    params = {p.name: float(row[p.name]) for p in fam.spec.param}
+    name = f"falsified-{fam.name}-{setup.controller}-{rank}"
+    scenario, data = candidate(fam, params, name)
+    data = {**data, "name": name, "controller": setup.controller,
+            "preset": setup.preset or "default",
+            "description": f"worst case {rank} of mpcasv falsify {fam.source.name} for "
+                           f"{setup.controller} (trial {int(row['trial'])})"}  # fmt: skip
+    if setup.preset is None:
+        data.pop("preset")
+    prov = dict(data.get("provenance", {}))
+    prov["falsify"] = (f"family {fam.source.name}, controller {setup.controller}, preset "
+                       f"{setup.preset or 'default'}, seed {setup.seed}, trial "
+                       f"{int(row['trial'])}: margin {row['margin_m']:.3f} m (r_sep "
+                       f"{row['r_sep_m']:g} m), longest stay {row['longest_stay_s']:g} s; "
+                       "parameters "
+                       + ", ".join(f"{k} = {v:.4g}" for k, v in params.items()))  # fmt: skip
+    data["provenance"] = prov
+    folder.mkdir(parents=True, exist_ok=True)
+    header = f"# {data['description']}\n# {prov['falsify']}\n"
+    (folder / f"{name}.toml").write_text(header + tomli_w.dumps(data))
+    ctrl = make_controller(setup.controller, len(scenario.auv), setup.preset,
+                           boat=Boat.of_scenario(scenario))  # fmt: skip
+    result = simulate(scenario, ctrl, setup.seed)
+    period = scenario.sim.dt if scenario.sim.log_every_step else scenario.sim.control_period
+    rob = robustness(result.timeseries, len(scenario.auv), float(row["r_sep_m"]), period)
+    if not math.isclose(rob.margin_m, float(row["margin_m"]), abs_tol=1e-6):
+        # the runs should be deterministic: say so loudly, keep the rerun (its figures)
+        print(f"warning: {name}: the rerun's margin is {rob.margin_m:.3f} m, the search's "
+              f"{float(row['margin_m']):.3f} m: this controller's runs are not "
+              "reproducible")  # fmt: skip
+    extra = {"preset": setup.preset, "falsify": prov["falsify"], "rerun_margin_m": rob.margin_m}
+    write_run(result, folder / name, compute_metrics(result), extra=extra)
+    return name, rob.margin_m
