@@ -36,7 +36,11 @@ def test_every_row_of_the_metric_table_has_five_cells_and_says_what_metric_info_
     for name, info in scalars.items():
         _, unit, better, definition, source = rows[name]
         assert (unit, better, definition, source) == (
-            info.unit, info.better or "—", info.definition, info.source or "—"), name
+            info.unit,
+            info.better or "—",
+            info.definition,
+            info.source or "—",
+        ), name
     assert set(rows) <= set(METRIC_INFO), set(rows) - set(METRIC_INFO)
     # the names not in the table are the per-AUV lists, listed in the prose above it
     listed = DOC.read_text().split("## Every metric", 1)[1].split("| name |", 1)[0]
