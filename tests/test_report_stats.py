@@ -287,3 +287,28 @@ def test_one_nonzero_difference_is_no_crash_and_no_verdict():
     s = paired_stat(ref, other)
     assert s.n == 10 and s.p == 1.0 and s.note == ""
     assert stats.verdict(s, "higher", "a", "b", 20.0) == "no significant difference"
+
+
+def test_multiplicity_counts_tests_and_the_verdicts_that_survive_benjamini_hochberg():
+    t = pd.DataFrame({"p": [0.001, 0.04, 0.2, np.nan],
+                      "verdict": ["mpc better", "hybrid better", "no significant difference",
+                                  "n/a"]})  # fmt: skip
+    mu = stats.multiplicity(t)
+    # BH by hand, m = 3: sorted p 0.001, 0.04, 0.2 -> 0.003, 0.06, 0.2: only the first stays
+    assert (mu.tests, mu.better, mu.better_bh) == (3, 2, 1)
+    assert mu.expected_false == pytest.approx(3 * stats.ALPHA)
+    assert stats.multiplicity(t.iloc[:0]) == stats.Multiplicity(0, 0.0, 0, 0)
+
+
+def test_report_states_the_negligible_rule_and_the_multiplicity_of_each_table(tmp_path):
+    df = results({"min_range_m": 1.0, "energy_J": 0.0}, variants=("hybrid", "mpc"))
+    md = write_report(tmp_path, _exp(df), df)[0].read_text()
+    assert f"±{stats.NEGLIGIBLE:.1%} of the reference's median" in md
+    section = md.split("### mpc vs hybrid")[1]
+    line = next(ln for ln in section.splitlines() if "Multiple comparisons" in ln)
+    t = paired_table(df, [h.name for h in HEADLINE], directions())
+    mu = stats.multiplicity(t)
+    assert mu.tests == 4 and mu.better >= 2  # min_range_m in c1 and c2 (shift 1 m, 32 pairs)
+    assert f"{mu.tests} tests in this table" in line and f"{mu.better} verdicts" in line
+    assert f"'better', {mu.better_bh} of them" in line
+    assert section.index("Multiple comparisons") < section.index("| metric | case | pairs |")

@@ -253,7 +253,11 @@ def write_report(out: Path, exp, results: pd.DataFrame, stats=None) -> tuple[Pat
             f"bootstrap CI (scipy.stats.bootstrap, paired, percentile, "
             f"{paired.N_RESAMPLES} resamples, seed {paired.SEED}) and the two-sided Wilcoxon "
             f"signed-rank p (zero differences dropped). A variant is *better* only if the CI "
-            f"excludes 0 and p < {paired.ALPHA}. n/a: fewer than {paired.MIN_PAIRS} pairs "
+            f"excludes 0, p < {paired.ALPHA} and the CI is not inside ±{paired.NEGLIGIBLE:.1%} "
+            f"of the reference's median (else: negligible difference). No correction for "
+            f"multiple comparisons in the verdicts: each table says how many tests it holds and "
+            f"how many of its verdicts survive the Benjamini-Hochberg adjustment. "
+            f"n/a: fewer than {paired.MIN_PAIRS} pairs "
             f"(the Wilcoxon test cannot reach p < 0.05 below 6 non-zero differences), or all "
             f"differences zero.",
         ]
@@ -265,6 +269,13 @@ def write_report(out: Path, exp, results: pd.DataFrame, stats=None) -> tuple[Pat
             sub = f"{other} vs {ref}"
             both(f"\n### {sub}\n", f"<h3>{html.escape(sub)}</h3>")
             if len(th):
+                mu = paired.multiplicity(th)
+                bullet(f"Multiple comparisons: {mu.tests} tests in this table at α = "
+                       f"{paired.ALPHA} (about {mu.expected_false:.1f} 'better' verdicts "
+                       f"expected by chance if nothing differed); {mu.better} verdicts "
+                       f"'better', {mu.better_bh} of them with Benjamini-Hochberg adjusted "
+                       f"p < {paired.ALPHA} (scipy.stats.false_discovery_control).")  # fmt: skip
+                md.append("")
                 d = headline_table(th)
                 both(_md_table(d) + "\n", d.to_html())
                 figure(
