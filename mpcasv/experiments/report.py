@@ -270,12 +270,15 @@ def write_report(out: Path, exp, results: pd.DataFrame, stats=None) -> tuple[Pat
             both(f"\n### {sub}\n", f"<h3>{html.escape(sub)}</h3>")
             if len(th):
                 mu = paired.multiplicity(th)
-                bullet(f"Multiple comparisons: {mu.tests} tests in this table at α = "
-                       f"{paired.ALPHA} (about {mu.expected_false:.1f} 'better' verdicts "
-                       f"expected by chance if nothing differed); {mu.better} verdicts "
-                       f"'better', {mu.better_bh} of them with Benjamini-Hochberg adjusted "
-                       f"p < {paired.ALPHA} (scipy.stats.false_discovery_control).")  # fmt: skip
-                md.append("")
+                if mu.tests:  # every comparison n/a: nothing to correct
+                    bullet(
+                        f"Multiple comparisons: {mu.tests} tests in this table at α = "
+                        f"{paired.ALPHA} (about {mu.expected_false:.1f} 'better' verdicts "
+                        f"expected by chance if nothing differed); {mu.better} verdicts "
+                        f"'better', {mu.better_bh} of them with Benjamini-Hochberg adjusted "
+                        f"p < {paired.ALPHA} (scipy.stats.false_discovery_control)."
+                    )
+                    md.append("")
                 d = headline_table(th)
                 both(_md_table(d) + "\n", d.to_html())
                 figure(
