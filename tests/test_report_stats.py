@@ -312,3 +312,18 @@ def test_report_states_the_negligible_rule_and_the_multiplicity_of_each_table(tm
     assert f"{mu.tests} tests in this table" in line and f"{mu.better} verdicts" in line
     assert f"'better', {mu.better_bh} of them" in line
     assert section.index("Multiple comparisons") < section.index("| metric | case | pairs |")
+
+
+def test_a_panel_draws_every_variant_alike_when_one_needs_the_envelope():
+    """paper run, Case 4 (compare-case4.png): the hybrid's tau (many fixes) was drawn as its
+    envelope, a staircase, the MPC's (few) as a raw saw-tooth, and the y label carried the
+    last variant's (empty) suffix; one decision per panel now."""
+    from mpcasv.experiments.report_figures import needs_envelope
+
+    t = np.arange(0.0, 1242.0)
+    many, few = t % 7.0, t % 300.0  # 177 resets / 4 resets
+    assert needs_envelope(t, many) and not needs_envelope(t, few)
+    tt, a, suffix = fix_age_trace(t, few, envelope=True)
+    assert len(tt) <= ENVELOPE_BINS and "max per" in suffix and a.max() == 299.0
+    tt, a, suffix = fix_age_trace(t, many, envelope=False)
+    assert suffix == "" and np.array_equal(a, many)
