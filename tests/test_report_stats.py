@@ -327,3 +327,22 @@ def test_a_panel_draws_every_variant_alike_when_one_needs_the_envelope():
     assert len(tt) <= ENVELOPE_BINS and "max per" in suffix and a.max() == 299.0
     tt, a, suffix = fix_age_trace(t, many, envelope=False)
     assert suffix == "" and np.array_equal(a, many)
+
+
+def test_a_case_without_any_fix_is_named_in_the_report(tmp_path):
+    """paper run, Case 5: no USBL fix in any of the 20 runs (the case's acoustic reports
+    stand in); its fix-age rows were 'no difference' without saying why."""
+    from mpcasv.experiments.report import cases_without_fixes
+
+    df = results({"min_range_m": 1.0}, variants=("hybrid", "mpc"))
+    df["fixes"] = np.where(df["scenario"] == "c2", 0, 12)
+    assert cases_without_fixes(df) == ["c2"]
+    md = write_report(tmp_path, _exp(df), df)[0].read_text()
+    head = md.split("### mpc vs hybrid")[0]
+    assert "No USBL fix arrived in any run of c2:" in head
+    assert md.split("\n## c2")[1].count("No USBL fix arrived in any run of this case") == 1
+    assert "No USBL fix arrived in any run of this case" not in md.split("\n## c1")[1].split(
+        "\n## c2")[0]  # fmt: skip
+    one = df.copy()
+    one.loc[one.index[one["scenario"] == "c2"][0], "fixes"] = 1  # one fix in one run
+    assert cases_without_fixes(one) == []

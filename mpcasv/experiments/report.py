@@ -177,6 +177,17 @@ def win_loss_table(wl: pd.DataFrame) -> pd.DataFrame:
     return t
 
 
+def cases_without_fixes(ok: pd.DataFrame) -> list[str]:
+    """Scenarios in which no USBL fix arrived in any ok run (``fixes`` 0 everywhere): there
+    the fix ages are the run's clock and the AUVs' navigation does not depend on the
+    controller, so their liveness and navigation comparisons say nothing about it."""
+    if "fixes" not in ok or not len(ok):
+        return []
+    n = pd.to_numeric(ok["fixes"], errors="coerce")
+    return [c for c, g in n.groupby(ok["scenario"], sort=False) if g.notna().all() and
+            (g == 0).all()]  # fmt: skip
+
+
 def _heading_id(text: str) -> str:
     return "".join(c if c.isalnum() else "-" for c in text.lower())
 
@@ -261,6 +272,13 @@ def write_report(out: Path, exp, results: pd.DataFrame, stats=None) -> tuple[Pat
             f"(the Wilcoxon test cannot reach p < 0.05 below 6 non-zero differences), or all "
             f"differences zero.",
         ]
+        no_fix = cases_without_fixes(ok)
+        if no_fix:
+            lines.append(
+                f"No USBL fix arrived in any run of {', '.join(no_fix)}: there the fix ages are "
+                "the run's clock and the AUVs navigate without fixes whatever the controller, so "
+                "its liveness and navigation rows compare nothing."
+            )
         for line in lines:
             bullet(line)
         md.append("")
@@ -324,6 +342,9 @@ def write_report(out: Path, exp, results: pd.DataFrame, stats=None) -> tuple[Pat
         g = ok[ok["scenario"] == scenario]
         auv_names = g.iloc[0]["auv_names"].split(",")
         both(f"\n## {scenario}\n", f"<h2>{html.escape(scenario)}</h2>")
+        if scenario in cases_without_fixes(ok):
+            bullet("No USBL fix arrived in any run of this case: the fix-age ECDFs are the "
+                   "run's clock, and the navigation error does not depend on the controller.")
         t = scenario_table(summ, scenario, auv_names)
         both(_md_table(t) + "\n", t.to_html())
         ecdf, notes = rf.ecdf_figure(out, ok, scenario, figdir / f"ecdf-{scenario}.png")
