@@ -4,6 +4,7 @@ and the report rendered from one: headline table first, missing metrics named.""
 from __future__ import annotations
 
 import warnings
+from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
@@ -346,3 +347,20 @@ def test_a_case_without_any_fix_is_named_in_the_report(tmp_path):
     one = df.copy()
     one.loc[one.index[one["scenario"] == "c2"][0], "fixes"] = 1  # one fix in one run
     assert cases_without_fixes(one) == []
+
+
+def test_run_folders_outside_the_report_folder_are_linked_by_absolute_uri(tmp_path):
+    """`mpcasv compare quick --out A --runs-dir B` (B not under A): the report crashed on
+    Path.relative_to (ValueError, a traceback after the whole sweep had run)."""
+    runs, out = tmp_path / "elsewhere", tmp_path / "report"
+    out.mkdir()
+    df = results({"min_range_m": 2.0}, seeds=range(2))
+    _write_timeseries(runs, df)
+    df["run_dir"] = [str(runs / d) for d in df["run_dir"]]  # absolute, as --runs-dir writes
+    for d in df["run_dir"]:
+        (Path(d) / "paths.png").write_bytes(b"png")
+    md_path, html_path = write_report(out, _exp(df), df)
+    md, page = md_path.read_text(), html_path.read_text()
+    first = Path(df["run_dir"].iloc[0]) / "paths.png"
+    assert f"[paths]({first.as_uri()})" in md and f'href="{first.as_uri()}"' in page
+    assert (out / "figures" / "compare-c1.png").stat().st_size > 10_000

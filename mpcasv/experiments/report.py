@@ -188,6 +188,16 @@ def cases_without_fixes(ok: pd.DataFrame) -> list[str]:
             (g == 0).all()]  # fmt: skip
 
 
+def run_link(path: Path, out: Path) -> str:
+    """Link to a run file from the report in ``out``: relative when the run folder is under
+    ``out`` (move ``out`` as a whole), else its absolute ``file://`` URI (run folders put
+    elsewhere with ``--runs-dir``)."""
+    try:
+        return path.relative_to(out).as_posix()
+    except ValueError:
+        return path.resolve().as_uri()
+
+
 def _heading_id(text: str) -> str:
     return "".join(c if c.isalnum() else "-" for c in text.lower())
 
@@ -367,9 +377,10 @@ def write_report(out: Path, exp, results: pd.DataFrame, stats=None) -> tuple[Pat
             pngs = sorted(rf.run_path(out, r["run_dir"]).glob("*.png"))
             if pngs:
                 links_md.append(f"{r['variant']}: " + ", ".join(
-                    f"[{p.stem}]({p.relative_to(out)})" for p in pngs))  # fmt: skip
-                links_html.append(html.escape(r["variant"]) + ": " + ", ".join(
-                    f'<a href="{p.relative_to(out)}">{p.stem}</a>' for p in pngs))  # fmt: skip
+                    f"[{p.stem}]({run_link(p, out)})" for p in pngs))  # fmt: skip
+                anchors = [f'<a href="{html.escape(run_link(p, out))}">{p.stem}</a>'
+                           for p in pngs]  # fmt: skip
+                links_html.append(html.escape(r["variant"]) + ": " + ", ".join(anchors))
         if links_md:
             both(
                 "Run figures (representative runs): " + "; ".join(links_md) + "\n",
