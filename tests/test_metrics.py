@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from mpcasv.controllers import make_controller
 from mpcasv.experiments.metrics import (
     HEADLINE,
     METRIC_INFO,
@@ -26,7 +27,6 @@ from mpcasv.hybrid.domains import (
 )
 from mpcasv.interface import Reason
 from mpcasv.sim.account import evaluation_domain, stay_lengths
-from mpcasv.sim.controllers import make_controller
 from mpcasv.sim.scenario import load_scenario, scenario_from_dict, scenario_with
 from mpcasv.sim.simulator import simulate
 
