@@ -4,6 +4,7 @@ and the report rendered from one: headline table first, missing metrics named.""
 from __future__ import annotations
 
 import warnings
+from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
@@ -287,3 +288,79 @@ def test_one_nonzero_difference_is_no_crash_and_no_verdict():
     s = paired_stat(ref, other)
     assert s.n == 10 and s.p == 1.0 and s.note == ""
     assert stats.verdict(s, "higher", "a", "b", 20.0) == "no significant difference"
+
+
+def test_multiplicity_counts_tests_and_the_verdicts_that_survive_benjamini_hochberg():
+    t = pd.DataFrame({"p": [0.001, 0.04, 0.2, np.nan],
+                      "verdict": ["mpc better", "hybrid better", "no significant difference",
+                                  "n/a"]})  # fmt: skip
+    mu = stats.multiplicity(t)
+    # BH by hand, m = 3: sorted p 0.001, 0.04, 0.2 -> 0.003, 0.06, 0.2: only the first stays
+    assert (mu.tests, mu.better, mu.better_bh) == (3, 2, 1)
+    assert mu.expected_false == pytest.approx(3 * stats.ALPHA)
+    assert stats.multiplicity(t.iloc[:0]) == stats.Multiplicity(0, 0.0, 0, 0)
+
+
+def test_report_states_the_negligible_rule_and_the_multiplicity_of_each_table(tmp_path):
+    df = results({"min_range_m": 1.0, "energy_J": 0.0}, variants=("hybrid", "mpc"))
+    md = write_report(tmp_path, _exp(df), df)[0].read_text()
+    assert f"±{stats.NEGLIGIBLE:.1%} of the reference's median" in md
+    section = md.split("### mpc vs hybrid")[1]
+    line = next(ln for ln in section.splitlines() if "Multiple comparisons" in ln)
+    t = paired_table(df, [h.name for h in HEADLINE], directions())
+    mu = stats.multiplicity(t)
+    assert mu.tests == 4 and mu.better >= 2  # min_range_m in c1 and c2 (shift 1 m, 32 pairs)
+    assert f"{mu.tests} tests in this table" in line and f"{mu.better} verdicts" in line
+    assert f"'better', {mu.better_bh} of them" in line
+    assert section.index("Multiple comparisons") < section.index("| metric | case | pairs |")
+
+
+def test_a_panel_draws_every_variant_alike_when_one_needs_the_envelope():
+    """paper run, Case 4 (compare-case4.png): the hybrid's tau (many fixes) was drawn as its
+    envelope, a staircase, the MPC's (few) as a raw saw-tooth, and the y label carried the
+    last variant's (empty) suffix; one decision per panel now."""
+    from mpcasv.experiments.report_figures import needs_envelope
+
+    t = np.arange(0.0, 1242.0)
+    many, few = t % 7.0, t % 300.0  # 177 resets / 4 resets
+    assert needs_envelope(t, many) and not needs_envelope(t, few)
+    tt, a, suffix = fix_age_trace(t, few, envelope=True)
+    assert len(tt) <= ENVELOPE_BINS and "max per" in suffix and a.max() == 299.0
+    tt, a, suffix = fix_age_trace(t, many, envelope=False)
+    assert suffix == "" and np.array_equal(a, many)
+
+
+def test_a_case_without_any_fix_is_named_in_the_report(tmp_path):
+    """paper run, Case 5: no USBL fix in any of the 20 runs (the case's acoustic reports
+    stand in); its fix-age rows were 'no difference' without saying why."""
+    from mpcasv.experiments.report import cases_without_fixes
+
+    df = results({"min_range_m": 1.0}, variants=("hybrid", "mpc"))
+    df["fixes"] = np.where(df["scenario"] == "c2", 0, 12)
+    assert cases_without_fixes(df) == ["c2"]
+    md = write_report(tmp_path, _exp(df), df)[0].read_text()
+    head = md.split("### mpc vs hybrid")[0]
+    assert "No USBL fix arrived in any run of c2:" in head
+    assert md.split("\n## c2")[1].count("No USBL fix arrived in any run of this case") == 1
+    assert "No USBL fix arrived in any run of this case" not in md.split("\n## c1")[1].split(
+        "\n## c2")[0]  # fmt: skip
+    one = df.copy()
+    one.loc[one.index[one["scenario"] == "c2"][0], "fixes"] = 1  # one fix in one run
+    assert cases_without_fixes(one) == []
+
+
+def test_run_folders_outside_the_report_folder_are_linked_by_absolute_uri(tmp_path):
+    """`mpcasv compare quick --out A --runs-dir B` (B not under A): the report crashed on
+    Path.relative_to (ValueError, a traceback after the whole sweep had run)."""
+    runs, out = tmp_path / "elsewhere", tmp_path / "report"
+    out.mkdir()
+    df = results({"min_range_m": 2.0}, seeds=range(2))
+    _write_timeseries(runs, df)
+    df["run_dir"] = [str(runs / d) for d in df["run_dir"]]  # absolute, as --runs-dir writes
+    for d in df["run_dir"]:
+        (Path(d) / "paths.png").write_bytes(b"png")
+    md_path, html_path = write_report(out, _exp(df), df)
+    md, page = md_path.read_text(), html_path.read_text()
+    first = Path(df["run_dir"].iloc[0]) / "paths.png"
+    assert f"[paths]({first.as_uri()})" in md and f'href="{first.as_uri()}"' in page
+    assert (out / "figures" / "compare-c1.png").stat().st_size > 10_000

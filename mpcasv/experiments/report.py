@@ -177,6 +177,27 @@ def win_loss_table(wl: pd.DataFrame) -> pd.DataFrame:
     return t
 
 
+def cases_without_fixes(ok: pd.DataFrame) -> list[str]:
+    """Scenarios in which no USBL fix arrived in any ok run (``fixes`` 0 everywhere): there
+    the fix ages are the run's clock and the AUVs' navigation does not depend on the
+    controller, so their liveness and navigation comparisons say nothing about it."""
+    if "fixes" not in ok or not len(ok):
+        return []
+    n = pd.to_numeric(ok["fixes"], errors="coerce")
+    return [c for c, g in n.groupby(ok["scenario"], sort=False) if g.notna().all() and
+            (g == 0).all()]  # fmt: skip
+
+
+def run_link(path: Path, out: Path) -> str:
+    """Link to a run file from the report in ``out``: relative when the run folder is under
+    ``out`` (move ``out`` as a whole), else its absolute ``file://`` URI (run folders put
+    elsewhere with ``--runs-dir``)."""
+    try:
+        return path.relative_to(out).as_posix()
+    except ValueError:
+        return path.resolve().as_uri()
+
+
 def _heading_id(text: str) -> str:
     return "".join(c if c.isalnum() else "-" for c in text.lower())
 
@@ -253,10 +274,21 @@ def write_report(out: Path, exp, results: pd.DataFrame, stats=None) -> tuple[Pat
             f"bootstrap CI (scipy.stats.bootstrap, paired, percentile, "
             f"{paired.N_RESAMPLES} resamples, seed {paired.SEED}) and the two-sided Wilcoxon "
             f"signed-rank p (zero differences dropped). A variant is *better* only if the CI "
-            f"excludes 0 and p < {paired.ALPHA}. n/a: fewer than {paired.MIN_PAIRS} pairs "
+            f"excludes 0, p < {paired.ALPHA} and the CI is not inside ±{paired.NEGLIGIBLE:.1%} "
+            f"of the reference's median (else: negligible difference). No correction for "
+            f"multiple comparisons in the verdicts: each table says how many tests it holds and "
+            f"how many of its verdicts survive the Benjamini-Hochberg adjustment. "
+            f"n/a: fewer than {paired.MIN_PAIRS} pairs "
             f"(the Wilcoxon test cannot reach p < 0.05 below 6 non-zero differences), or all "
             f"differences zero.",
         ]
+        no_fix = cases_without_fixes(ok)
+        if no_fix:
+            lines.append(
+                f"No USBL fix arrived in any run of {', '.join(no_fix)}: there the fix ages are "
+                "the run's clock and the AUVs navigate without fixes whatever the controller, so "
+                "its liveness and navigation rows compare nothing."
+            )
         for line in lines:
             bullet(line)
         md.append("")
@@ -265,6 +297,16 @@ def write_report(out: Path, exp, results: pd.DataFrame, stats=None) -> tuple[Pat
             sub = f"{other} vs {ref}"
             both(f"\n### {sub}\n", f"<h3>{html.escape(sub)}</h3>")
             if len(th):
+                mu = paired.multiplicity(th)
+                if mu.tests:  # every comparison n/a: nothing to correct
+                    bullet(
+                        f"Multiple comparisons: {mu.tests} tests in this table at α = "
+                        f"{paired.ALPHA} (about {mu.expected_false:.1f} 'better' verdicts "
+                        f"expected by chance if nothing differed); {mu.better} verdicts "
+                        f"'better', {mu.better_bh} of them with Benjamini-Hochberg adjusted "
+                        f"p < {paired.ALPHA} (scipy.stats.false_discovery_control)."
+                    )
+                    md.append("")
                 d = headline_table(th)
                 both(_md_table(d) + "\n", d.to_html())
                 figure(
@@ -310,6 +352,9 @@ def write_report(out: Path, exp, results: pd.DataFrame, stats=None) -> tuple[Pat
         g = ok[ok["scenario"] == scenario]
         auv_names = g.iloc[0]["auv_names"].split(",")
         both(f"\n## {scenario}\n", f"<h2>{html.escape(scenario)}</h2>")
+        if scenario in cases_without_fixes(ok):
+            bullet("No USBL fix arrived in any run of this case: the fix-age ECDFs are the "
+                   "run's clock, and the navigation error does not depend on the controller.")
         t = scenario_table(summ, scenario, auv_names)
         both(_md_table(t) + "\n", t.to_html())
         ecdf, notes = rf.ecdf_figure(out, ok, scenario, figdir / f"ecdf-{scenario}.png")
@@ -332,9 +377,10 @@ def write_report(out: Path, exp, results: pd.DataFrame, stats=None) -> tuple[Pat
             pngs = sorted(rf.run_path(out, r["run_dir"]).glob("*.png"))
             if pngs:
                 links_md.append(f"{r['variant']}: " + ", ".join(
-                    f"[{p.stem}]({p.relative_to(out)})" for p in pngs))  # fmt: skip
-                links_html.append(html.escape(r["variant"]) + ": " + ", ".join(
-                    f'<a href="{p.relative_to(out)}">{p.stem}</a>' for p in pngs))  # fmt: skip
+                    f"[{p.stem}]({run_link(p, out)})" for p in pngs))  # fmt: skip
+                anchors = [f'<a href="{html.escape(run_link(p, out))}">{p.stem}</a>'
+                           for p in pngs]  # fmt: skip
+                links_html.append(html.escape(r["variant"]) + ": " + ", ".join(anchors))
         if links_md:
             both(
                 "Run figures (representative runs): " + "; ".join(links_md) + "\n",

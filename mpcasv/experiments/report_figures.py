@@ -306,12 +306,21 @@ MAX_SAWTEETH = 40
 ENVELOPE_BINS = 60
 
 
-def fix_age_trace(t: np.ndarray, age: np.ndarray) -> tuple[np.ndarray, np.ndarray, str]:
-    """The fix age to draw: the series itself, or, when it has more than
-    :data:`MAX_SAWTEETH` resets (a long run: an unreadable solid block), its maximum per
-    window of (duration / :data:`ENVELOPE_BINS`). Returns t, value and a label suffix."""
-    resets = int(np.sum(np.diff(age) < 0))
-    if resets <= MAX_SAWTEETH or len(t) < 2 * ENVELOPE_BINS:
+def needs_envelope(t: np.ndarray, age: np.ndarray) -> bool:
+    """Whether a fix-age series has more than :data:`MAX_SAWTEETH` resets (an unreadable
+    solid block when drawn as it is) and enough samples for the envelope."""
+    return int(np.sum(np.diff(age) < 0)) > MAX_SAWTEETH and len(t) >= 2 * ENVELOPE_BINS
+
+
+def fix_age_trace(t: np.ndarray, age: np.ndarray, envelope: bool | None = None
+                  ) -> tuple[np.ndarray, np.ndarray, str]:  # fmt: skip
+    """The fix age to draw: the series itself, or its maximum per window of (duration /
+    :data:`ENVELOPE_BINS`) when ``envelope`` (default: :func:`needs_envelope`). A panel
+    with several series passes one ``envelope`` for all, so that they are drawn alike.
+    Returns t, value and a label suffix."""
+    if envelope is None:
+        envelope = needs_envelope(t, age)
+    if not envelope or len(t) < 2 * ENVELOPE_BINS:
         return t, age, ""
     edges = np.linspace(t[0], t[-1], ENVELOPE_BINS + 1)
     b = np.clip(np.searchsorted(edges, t, side="right") - 1, 0, ENVELOPE_BINS - 1)
@@ -355,14 +364,18 @@ def compare_figure(out: Path, reps: pd.DataFrame, scenario: str, path: Path) -> 
                              label="inside r_inner")  # fmt: skip
             axr.plot(t0, ts0[f"r_t{k}"], color="tab:green", lw=0.8, ls="--", label="r_t")
             axr.plot(t0, ts0[f"r_outer{k}"], color="tab:red", lw=0.8, ls=":", label="r_outer")
+        # one representation for every variant of the panel (and its label says which)
+        envelope = any(needs_envelope(ts["t"].to_numpy(float), ts[f"{age}{k}"].to_numpy(float))
+                       for _, ts in series)  # fmt: skip
         suffix = ""
         for i, (v, ts) in enumerate(series):
             c = colours[i % len(colours)]
             axr.plot(ts["t"], ts[f"range{k}"], color=c, lw=1, label=v)
-            tf, af, suffix = fix_age_trace(ts["t"].to_numpy(float),
-                                           ts[f"{age}{k}"].to_numpy(float))  # fmt: skip
+            tf, af, s_ = fix_age_trace(ts["t"].to_numpy(float),
+                                       ts[f"{age}{k}"].to_numpy(float), envelope)  # fmt: skip
+            suffix = suffix or s_
             axf.plot(
-                tf, af, color=c, lw=1, label=v, drawstyle="steps-post" if suffix else "default"
+                tf, af, color=c, lw=1, label=v, drawstyle="steps-post" if s_ else "default"
             )
         top = max(float(ts[f"range{k}"].max()) for _, ts in series) * 1.1
         axr.set_ylim(0, top)

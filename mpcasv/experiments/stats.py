@@ -264,6 +264,35 @@ def paired_table(results: pd.DataFrame, metrics: Sequence[str],
 NOT_SIGNIFICANT = ("no significant difference", "negligible difference", "no difference")
 
 
+@dataclass(frozen=True)
+class Multiplicity:
+    """How much the verdicts of one table rest on chance: ``tests`` comparisons with a
+    p-value, ``expected_false`` = ``tests`` x :data:`ALPHA` (the "better" verdicts expected
+    if no variant differed anywhere), ``better`` such verdicts, of which ``better_bh`` keep
+    p < :data:`ALPHA` after the Benjamini-Hochberg adjustment of the table's p-values
+    (:func:`scipy.stats.false_discovery_control`)."""
+
+    tests: int
+    expected_false: float
+    better: int
+    better_bh: int
+
+
+def multiplicity(table: pd.DataFrame) -> Multiplicity:
+    """:class:`Multiplicity` of the rows of :func:`paired_table` in ``table`` (e.g. one
+    compared variant's headline rows). The verdicts themselves stay unadjusted."""
+    if not len(table):
+        return Multiplicity(0, 0.0, 0, 0)
+    p = table["p"].to_numpy(float)
+    tested = np.isfinite(p)
+    better = table["verdict"].str.endswith(" better").to_numpy() & tested
+    adjusted = np.full(len(p), np.nan)
+    if tested.any():
+        adjusted[tested] = sps.false_discovery_control(p[tested], method="bh")
+    n = int(tested.sum())
+    return Multiplicity(n, n * ALPHA, int(better.sum()), int((better & (adjusted < ALPHA)).sum()))
+
+
 def significant_win_loss(table: pd.DataFrame) -> pd.DataFrame:
     """Per (other, metric): cases where ``other`` / the reference is significantly better,
     with no significant difference, and n/a (from :func:`paired_table`)."""
