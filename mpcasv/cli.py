@@ -20,6 +20,7 @@ COMMAND_MODULES = (
     "mpcasv.hybrid.commands",  # paper-table
     "mpcasv.experiments.commands",  # compare
     "mpcasv.control.commands",  # tune, identify
+    "mpcasv.experiments.tune_commands",  # tune controller (extends "tune": after the above)
     "mpcasv.io.commands",  # deploy, sitl, replay, log
     "mpcasv.bench",  # bench
 )
