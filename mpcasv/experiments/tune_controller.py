@@ -232,15 +232,21 @@ def aggregate(spec: TuneSpec, rows) -> tuple[list[float] | None, float, str | No
 
 def _ask_batch(study, spec: TuneSpec) -> list:
     """Trials of the current batch still to evaluate (RUNNING), asking the missing ones."""
+    import optuna
     from optuna.trial import TrialState
 
     trials = study.get_trials(deepcopy=False)
     n = len(trials)
-    running = [t.number for t in trials if t.state == TrialState.RUNNING]
+    running = [t for t in trials if t.state == TrialState.RUNNING]
+    names = {p.name for p in spec.params}
+    for t in running:  # killed between asking a trial and drawing all its values: draw them
+        if not names <= set(t.params):  # first, as they were drawn before the later trials
+            study.sampler = make_sampler(spec, t.number)  # the sampler that asked it
+            _suggest(optuna.trial.Trial(study, t._trial_id), spec)
     # a batch left running (killed) is finished first, else a new batch starts at trial n
-    start = (min(running) // spec.batch) * spec.batch if running else n
+    start = (min(t.number for t in running) // spec.batch) * spec.batch if running else n
     end = min(start + spec.batch, spec.trials)
-    while n < end and n < spec.trials:
+    while n < end:
         study.sampler = make_sampler(spec, n)
         trial = study.ask()
         _suggest(trial, spec)
