@@ -7,6 +7,7 @@ Budgets are tiny (Case 3 cut to 120 s, 2 training seeds, 4-6 trials) so the file
 
 from __future__ import annotations
 
+import json
 import os
 import signal
 import sqlite3
@@ -24,7 +25,8 @@ ROOT = Path(__file__).resolve().parents[1]
 PY = sys.executable
 
 
-def _write(tmp: Path, trials: int = 4, batch: int = 2, extra: str = "") -> Path:
+def _write(tmp: Path, trials: int = 4, batch: int = 2, extra: str = "",
+           heldout: str = "[7]") -> Path:  # fmt: skip
     (tmp / "train.toml").write_text(
         'name = "tiny-train"\nscenarios = ["case3"]\nduration = 120.0\nseeds = [0, 1]\n'
         'plots = "none"\n[[controllers]]\nlabel = "hybrid"\nsingle = "hybrid-single"\n'
@@ -32,7 +34,7 @@ def _write(tmp: Path, trials: int = 4, batch: int = 2, extra: str = "") -> Path:
     )
     ranges = tmp / "ranges.toml"
     ranges.write_text(
-        f'controller = "hybrid-single"\nsuite = "train.toml"\nheldout_seeds = [7]\n'
+        f'controller = "hybrid-single"\nsuite = "train.toml"\nheldout_seeds = {heldout}\n'
         f"trials = {trials}\nbatch = {batch}\nseed = 3\n{extra}\n[params]\n"
         '"domain.delta_r" = { low = 20.0, high = 140.0 }\n'
         '"domain.eps_plus" = { low = 2.0, high = 40.0, log = true }\n'
@@ -52,26 +54,36 @@ def _trials(out: Path) -> pd.DataFrame:
     return t.set_index("trial_id").join(params).join(values).set_index("number").sort_index()
 
 
-def test_tiny_search_writes_front_presets_importance_and_report(tmp_path):
-    from mpcasv.controllers import load_preset
-
-    ranges = _write(tmp_path)
-    out = tmp_path / "out"
+@pytest.fixture(scope="module")
+def tiny(tmp_path_factory):
+    """A finished tiny search with five held-out seeds (enough pairs for the statistics)."""
+    tmp = tmp_path_factory.mktemp("tiny")
+    ranges = _write(tmp, heldout="[7, 8, 9, 10, 11]")
+    out = tmp / "out"
     assert main(["tune", "controller", str(ranges), "--out", str(out), "--workers", "1",
                  "--quiet"]) == 0  # fmt: skip
+    return out
+
+
+def test_tiny_search_writes_front_presets_importance_and_report(tiny):
+    from mpcasv.controllers import load_preset
+
+    out = tiny
     for name in ("study.db", "trials.csv", "front.csv", "front.md", "front.png",
                  "importance.csv", "report.md", "tune.json"):  # fmt: skip
         assert (out / name).stat().st_size > 0, name
     trials = pd.read_csv(out / "trials.csv")
     assert list(trials["trial"]) == [0, 1, 2, 3] and set(trials["state"]) == {"COMPLETE"}
-    assert len(list((out / "train" / "parts").glob("*.parquet"))) == 4 * 2  # trials x seeds
+    distinct = trials[["domain.delta_r", "domain.eps_plus", "speed"]].drop_duplicates()
+    assert len(list((out / "train" / "parts").glob("*.parquet"))) == 2 * len(distinct)
     front = pd.read_csv(out / "front.csv")
     assert 1 <= len(front) <= 4
     feasible = trials[trials["collision_domain_s"] <= 0]
     assert set(front["trial"]) <= set(feasible["trial"])
-    # every front point ran on the held-out seed, and its preset loads to its values
+    # every front point ran on the held-out seeds, and its preset loads to its values
     assert front["heldout.energy_J"].notna().all()
-    assert len(list((out / "heldout" / "parts").glob("*.parquet"))) == len(front)
+    distinct_front = front[["domain.delta_r", "domain.eps_plus", "speed"]].drop_duplicates()
+    assert len(list((out / "heldout" / "parts").glob("*.parquet"))) == 5 * len(distinct_front)
     for _, row in front.iterrows():
         params = load_preset("hybrid-single", out / "presets" / f"trial-{row.trial:04d}.toml")
         assert params.domain.delta_r == pytest.approx(row["domain.delta_r"], rel=1e-12)
@@ -81,7 +93,30 @@ def test_tiny_search_writes_front_presets_importance_and_report(tmp_path):
     imp = pd.read_csv(out / "importance.csv", index_col=0)
     assert list(imp.index) == ["domain.delta_r", "domain.eps_plus", "speed"]
     report = (out / "report.md").read_text()
-    assert "budget: 4 trials" in report and "8 training runs" in report
+    assert "budget: 4 trials" in report and f"{2 * len(distinct)} training runs" in report
+
+
+def test_matched_comparison_pairs_held_out_runs_by_realisation(tiny, tmp_path):
+    """A tuning compared with itself: every point matches itself at equal energy, the five
+    held-out runs pair up and every difference is zero; other held-out seeds are refused."""
+    from mpcasv.config import ConfigError
+    from mpcasv.experiments.tune_compare import matched_comparison
+
+    df = matched_comparison(tiny, tiny, at="energy_J")
+    front = pd.read_csv(tiny / "front.csv")
+    assert len(df) == 2 * int(front["heldout_front"].sum())  # two other objectives each
+    assert (df["mismatch"] == 0).all() and (df["n"] == 5).all()
+    assert (df["median_diff"] == 0).all() and set(df["verdict"]) == {"no difference"}
+    other = tmp_path / "other"
+    other.mkdir()
+    for name in ("tune.json", "front.csv"):
+        (other / name).write_text((tiny / name).read_text())
+    (other / "heldout").symlink_to(tiny / "heldout")
+    summary = json.loads((other / "tune.json").read_text())
+    summary["heldout"]["realisations"] = ["another"]
+    (other / "tune.json").write_text(json.dumps(summary))
+    with pytest.raises(ConfigError, match="different held-out realisations"):
+        matched_comparison(tiny, other)
 
 
 def test_killed_search_resumes_without_losing_a_finished_trial(tmp_path):

@@ -1,8 +1,9 @@
-"""``mpcasv tune controller RANGES.toml``: registered under the ``tune`` command of
-:mod:`mpcasv.control.commands` (which must be registered first: see ``mpcasv.cli``).
+"""``mpcasv tune controller RANGES.toml`` and ``mpcasv tune compare``: registered under the
+``tune`` command of :mod:`mpcasv.control.commands` (registered first: see ``mpcasv.cli``).
 
     mpcasv tune controller experiments/tuning/hybrid-single.toml --out results/tune-hybrid
     mpcasv tune controller RANGES.toml --out DIR --trials 8 --workers 2   # resume/extend
+    mpcasv tune compare DIR_HYBRID DIR_MPC --at energy_J                  # matched points
 """
 
 from __future__ import annotations
@@ -27,7 +28,11 @@ def _tune_subparsers(sub: argparse._SubParsersAction) -> argparse._SubParsersAct
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = _tune_subparsers(sub).add_parser(
+    from mpcasv.experiments.tune_compare import register_compare
+
+    tsub = _tune_subparsers(sub)
+    register_compare(tsub)
+    p = tsub.add_parser(
         "controller", help="multi-objective search over a controller's preset fields (Optuna)",
         description="Search the preset fields declared in RANGES.toml (bounds, log, int) for "
         "the Pareto front of metrics.json objectives over a suite's training realisations, "
