@@ -98,6 +98,59 @@ def matched_comparison(ref_dir: str | Path, other_dir: str | Path, at: str = "en
     return pd.DataFrame(out)
 
 
+def baseline_points(results: str | Path, objectives: list[str]) -> pd.DataFrame:
+    """Mean of each objective per variant of an ``mpcasv compare`` results table (e.g. the
+    published presets on the same held-out realisations), and the summed constraint."""
+    df = pd.read_parquet(results)
+    df = df[df["status"] == "ok"]
+    agg = df.groupby("variant")[list(objectives)].mean()
+    agg["collision_domain_s"] = df.groupby("variant")["collision_domain_s"].sum()
+    agg["runs"] = df.groupby("variant").size()
+    return agg
+
+
+def plot_fronts(dirs: list[str | Path], path: str | Path,
+                baseline: str | Path | None = None) -> Path:  # fmt: skip
+    """The held-out values of several tunings' fronts (one colour per folder; filled: still
+    feasible and non-dominated on the held-out realisations), objectives pairwise; with
+    ``baseline`` (an ``mpcasv compare`` results.parquet on the same realisations), each of
+    its variants as a star."""
+    import itertools
+
+    import matplotlib.pyplot as plt
+
+    from mpcasv.experiments.metrics import METRIC_INFO
+
+    loaded = [(_load(Path(d))[:2], Path(d)) for d in dirs]
+    objectives = loaded[0][0][0]["objectives"]
+    pairs = list(itertools.combinations(objectives, 2))
+    fig, axes = plt.subplots(1, len(pairs), figsize=(5.2 * len(pairs), 4.4), squeeze=False)
+    for ((summary, front), d), colour in zip(loaded, plt.cm.tab10.colors, strict=False):
+        nd = front["heldout_front"].astype(bool)
+        for ax, (a, b) in zip(axes[0], pairs, strict=True):
+            x, y = front[f"heldout.{a}"], front[f"heldout.{b}"]
+            ax.scatter(x[nd], y[nd], c=[colour], s=34, label=f"{summary['controller']} "
+                       f"({d.name}): held-out front")  # fmt: skip
+            ax.scatter(x[~nd], y[~nd], facecolors="none", edgecolors=[colour], s=34,
+                       label="dominated or infeasible on held-out")  # fmt: skip
+            ax.set_xlabel(f"{a} ({METRIC_INFO[a].unit})")
+            ax.set_ylabel(f"{b} ({METRIC_INFO[b].unit})")
+            ax.grid(alpha=0.3)
+    if baseline is not None:
+        base = baseline_points(baseline, objectives)
+        for (variant, row), marker in zip(base.iterrows(), "*P^v", strict=False):
+            for ax, (a, b) in zip(axes[0], pairs, strict=True):
+                ax.scatter(row[a], row[b], marker=marker, s=140, c="k",
+                           label=f"{variant} (published preset)")  # fmt: skip
+    axes[0][0].legend(fontsize=7)
+    fig.suptitle("Tuned fronts re-run on the held-out realisations (means over the runs; "
+                 "lower is better)", fontsize=10)  # fmt: skip
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return Path(path)
+
+
 def register_compare(tsub) -> None:
     """Add ``compare`` to the sub-commands of ``mpcasv tune``."""
     p = tsub.add_parser(
@@ -113,6 +166,10 @@ def register_compare(tsub) -> None:
     p.add_argument("--tolerance", type=float, default=0.1,
                    help="largest relative mismatch of --at (default 0.1)")  # fmt: skip
     p.add_argument("--out", type=Path, help="write the table as CSV here")
+    p.add_argument("--plot", type=Path, help="draw both held-out fronts into this PNG")
+    p.add_argument("--baseline", type=Path,
+                   help="results.parquet of 'mpcasv compare' on the same held-out "
+                   "realisations: its variants drawn as stars")  # fmt: skip
     p.set_defaults(func=_run)
 
 
@@ -122,6 +179,8 @@ def _run(args) -> int:
     df = matched_comparison(args.ref, args.other, args.at, args.tolerance)
     if args.out:
         df.to_csv(args.out, index=False)
+    if args.plot:
+        plot_fronts([args.ref, args.other], args.plot, args.baseline)
     with pd.option_context("display.width", 200, "display.max_columns", 30):
         print(df.to_string(index=False, float_format=lambda v: f"{v:.4g}") if len(df)
               else "no held-out front point of the reference")  # fmt: skip
