@@ -239,10 +239,16 @@ def write_outputs(spec: TuneSpec, study, heldout: dict, out: str | Path) -> Path
     n_feasible = int(((trials["state"] == "COMPLETE") & (trials[spec.constraint] <= 0)).sum()
                      if spec.constraint else states.get("COMPLETE", 0))  # fmt: skip
     runs = {k: len(done_ids(out / k)) for k in ("train", "heldout")}  # finished runs
+    least = []
+    if spec.constraint and (trials["state"] == "COMPLETE").any():
+        done = trials[trials["state"] == "COMPLETE"]
+        k = done[spec.constraint].idxmin()
+        least = [int(done.loc[k, "trial"]), float(done.loc[k, spec.constraint])]
     summary = {
         "controller": spec.controller, "range_file": str(spec.path), "suite": spec.suite,
         "sampler": spec.sampler, "batch": spec.batch, "seed": spec.seed,
         "budget_trials": spec.trials, "trials": states, "feasible_trials": n_feasible,
+        "least_violation": least,
         "objectives": list(spec.objectives), "constraint": spec.constraint,
         "params": [p.name for p in spec.params],
         "training": {"runs_per_trial": len(train),
@@ -278,6 +284,9 @@ def _report(spec: TuneSpec, s: dict, front: pd.DataFrame, imp: pd.DataFrame) -> 
         f"- **budget: {spec.trials} trials**; states {s['trials']}; feasible "
         f"{s['feasible_trials']}; {s['runs']['training']} training runs "
         f"({tr['runs_per_trial']} per trial; none for a trial the preset refuses)",
+        *([f"- **no feasible trial**: the smallest summed {spec.constraint} is "
+           f"{s['least_violation'][1]:.4g} (trial {s['least_violation'][0]}); no front"]
+          if spec.constraint and not s["feasible_trials"] and s["least_violation"] else []),
         f"- training: scenarios {tr['scenarios']}, seeds {tr['seeds']}, duration "
         f"{tr['duration_s']} s; realisations {tr['realisations']}",
         f"- held-out: the {ho['front_trials_run']} front trials x {ho['runs_per_trial']} runs "
