@@ -1,15 +1,16 @@
 """``mpcasv tune compare DIR_REF DIR_OTHER``: two tuned controllers compared at matched
 operating points (issue 17 item 3), with the paired statistics of the fair comparison.
 
-Each ``DIR`` is the output of ``mpcasv tune controller`` with held-out runs. For every
-point of the reference's training front that stayed feasible on the held-out realisations,
-the other controller's front point with the nearest held-out mean of the matching metric
-(``--at``, default ``energy_J``) is taken, if that mean is within ``--tolerance`` (relative)
-of the reference's; the two trials' held-out runs are then paired by realisation (scenario,
-current, estimator, seed: both searches must use the same held-out realisations) and every
-other objective gets the median paired difference (other - reference), its bootstrap CI and
-the Wilcoxon p-value (:func:`mpcasv.experiments.stats.paired_stat`, at least
-``stats.MIN_PAIRS`` pairs) and a verdict (:func:`mpcasv.experiments.stats.verdict`).
+Each ``DIR`` is the output of ``mpcasv tune controller`` with held-out runs. For every point
+of the reference's training front that stayed feasible and non-dominated on the held-out
+realisations, the other controller's front point (among those feasible on the held-out runs)
+with the nearest held-out mean of the matching metric (``--at``, default ``energy_J``) is
+taken, if that mean is within ``--tolerance`` (relative) of the reference's; the two trials'
+held-out runs are then paired by realisation (scenario, current, estimator, seed: both
+searches must use the same held-out realisations) and every other objective gets the median
+paired difference (other - reference), its bootstrap CI and the Wilcoxon p-value
+(:func:`mpcasv.experiments.stats.paired_stat`, at least ``stats.MIN_PAIRS`` pairs) and a
+verdict (:func:`mpcasv.experiments.stats.verdict`).
 """
 
 from __future__ import annotations
@@ -71,6 +72,8 @@ def matched_comparison(ref_dir: str | Path, other_dir: str | Path, at: str = "en
     objectives = [m for m in sa["objectives"] if m in sb["objectives"] and m != at]
     ca, cb = sa["controller"], sb["controller"]
     fb_ok = fb[fb["heldout_error"].isna() | (fb["heldout_error"] == "")]
+    if sb.get("constraint"):  # only points that stayed feasible on the held-out runs
+        fb_ok = fb_ok[fb_ok[f"heldout.{sb['constraint']}"] <= 0]
     out = []
     for _, pa in fa[fa["heldout_front"]].iterrows():
         ea = pa[f"heldout.{at}"]
@@ -141,7 +144,8 @@ def plot_fronts(dirs: list[str | Path], path: str | Path,
         for (variant, row), marker in zip(base.iterrows(), "*P^v", strict=False):
             for ax, (a, b) in zip(axes[0], pairs, strict=True):
                 ax.scatter(row[a], row[b], marker=marker, s=140, c="k",
-                           label=f"{variant} (published preset)")  # fmt: skip
+                           label=f"{variant} (published preset): "
+                           f"{row['collision_domain_s']:g} s in a collision domain")  # fmt: skip
     axes[0][0].legend(fontsize=7)
     fig.suptitle("Tuned fronts re-run on the held-out realisations (means over the runs; "
                  "lower is better)", fontsize=10)  # fmt: skip
