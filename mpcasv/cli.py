@@ -25,6 +25,7 @@ COMMAND_MODULES = (
     "mpcasv.experiments.commands",  # compare
     "mpcasv.experiments.falsify_commands",  # falsify
     "mpcasv.control.commands",  # tune, identify
+    "mpcasv.experiments.tune_commands",  # tune controller (extends "tune": after the above)
     "mpcasv.io.commands",  # deploy, sitl, replay, log
     "mpcasv.bench",  # bench
 )

@@ -1,0 +1,75 @@
+"""``mpcasv tune controller RANGES.toml`` and ``mpcasv tune compare``: registered under the
+``tune`` command of :mod:`mpcasv.control.commands` (registered first: see ``mpcasv.cli``).
+
+    mpcasv tune controller experiments/tuning/hybrid-single.toml --out results/tune-hybrid
+    mpcasv tune controller RANGES.toml --out DIR --trials 8 --workers 2   # resume/extend
+    mpcasv tune compare DIR_HYBRID DIR_MPC --at energy_J                  # matched points
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+from pathlib import Path
+
+
+def _tune_subparsers(sub: argparse._SubParsersAction) -> argparse._SubParsersAction:
+    """The sub-commands of ``mpcasv tune`` (added by mpcasv.control.commands)."""
+    tune = sub.choices.get("tune")
+    if tune is None:
+        raise RuntimeError(
+            "mpcasv.control.commands must be registered before "
+            "mpcasv.experiments.tune_commands (see mpcasv.cli)"
+        )
+    for action in tune._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            return action
+    raise RuntimeError("'mpcasv tune' has no sub-commands to extend")
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    from mpcasv.experiments.tune_compare import register_compare
+
+    tsub = _tune_subparsers(sub)
+    register_compare(tsub)
+    p = tsub.add_parser(
+        "controller", help="multi-objective search over a controller's preset fields (Optuna)",
+        description="Search the preset fields declared in RANGES.toml (bounds, log, int) for "
+        "the Pareto front of metrics.json objectives over a suite's training realisations, "
+        "with no time in a collision domain as the constraint; re-run the front on held-out "
+        "seeds; write front tables and figure, the front's presets, parameter importances and "
+        "a report into --out. Resumable: rerun the same command (docs/tuning-controllers.md).",
+    )  # fmt: skip
+    p.add_argument("ranges", type=Path, help="range file (experiments/tuning/*.toml)")
+    p.add_argument("--out", type=Path,
+                   help="output folder (default results/tune-<range file name>)")  # fmt: skip
+    p.add_argument("--trials", type=int, help="budget: trials (default: the range file's)")
+    p.add_argument(
+        "--workers",
+        type=int,
+        default=os.cpu_count() or 1,
+        help="local worker processes (default: one per core; 1: this process)",
+    )
+    p.add_argument("--dask", metavar="ADDRESS", help="run on a Dask scheduler instead")
+    p.add_argument("--no-heldout", action="store_true", help="skip the held-out runs")
+    p.add_argument("--quiet", action="store_true", help="no progress output")
+    p.set_defaults(func=run_tune_controller)
+
+
+def run_tune_controller(args: argparse.Namespace) -> int:
+    from mpcasv.config import ConfigError
+    from mpcasv.experiments.tune_controller import evaluate_heldout, search
+    from mpcasv.experiments.tune_outputs import write_outputs
+    from mpcasv.experiments.tune_space import load_spec
+
+    if args.workers < 1:
+        raise ConfigError(f"--workers {args.workers}: must be >= 1")
+    spec = load_spec(args.ranges, args.trials)
+    out = (args.out or Path("results") / f"tune-{spec.path.stem}").resolve()
+    study = search(spec, out, args.workers, args.dask, args.quiet)
+    heldout = {} if args.no_heldout else evaluate_heldout(spec, study, out, args.workers,
+                                                          args.dask, args.quiet)  # fmt: skip
+    report = write_outputs(spec, study, heldout, out)
+    if not args.quiet:
+        print(f"report: {report}")
+    return 0

@@ -1,0 +1,191 @@
+"""``mpcasv tune compare DIR_REF DIR_OTHER``: two tuned controllers compared at matched
+operating points (issue 17 item 3), with the paired statistics of the fair comparison.
+
+Each ``DIR`` is the output of ``mpcasv tune controller`` with held-out runs. For every point
+of the reference's training front that stayed feasible and non-dominated on the held-out
+realisations, the other controller's front point (among those feasible on the held-out runs)
+with the nearest held-out mean of the matching metric (``--at``, default ``energy_J``) is
+taken, if that mean is within ``--tolerance`` (relative) of the reference's; the two trials'
+held-out runs are then paired by realisation (scenario, current, estimator, seed: both
+searches must use the same held-out realisations) and every other objective gets the median
+paired difference (other - reference), its bootstrap CI and the Wilcoxon p-value
+(:func:`mpcasv.experiments.stats.paired_stat`, at least ``stats.MIN_PAIRS`` pairs) and a
+verdict (:func:`mpcasv.experiments.stats.verdict`).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import pandas as pd
+
+from mpcasv.config import ConfigError
+
+PAIR_COLUMNS = ("scenario", "current", "estimator", "seed", "realisation")
+
+
+def _load(d: Path) -> tuple[dict, pd.DataFrame, pd.DataFrame]:
+    """(tune.json, front.csv, held-out rows) of a tuning output folder."""
+    from mpcasv.experiments.store import read_parts
+
+    for name in ("tune.json", "front.csv"):
+        if not (d / name).exists():
+            raise ConfigError(f"{d}: no {name}: not an output folder of 'mpcasv tune controller'")
+    summary = json.loads((d / "tune.json").read_text())
+    front = pd.read_csv(d / "front.csv")
+    rows = read_parts(d / "heldout")
+    if not len(rows) or "heldout_front" not in front:
+        raise ConfigError(f"{d}: no held-out runs (rerun without --no-heldout)")
+    return summary, front, rows
+
+
+def _runs(rows: pd.DataFrame, trial: int) -> pd.DataFrame:
+    sel = rows[rows["variant"].str.endswith(f"[trial={trial}]") & (rows["status"] == "ok")]
+    return sel.set_index(list(PAIR_COLUMNS))
+
+
+def matched_comparison(ref_dir: str | Path, other_dir: str | Path, at: str = "energy_J",
+                       tolerance: float = 0.1) -> pd.DataFrame:  # fmt: skip
+    """One row per (reference point, objective): the matched other point and the paired
+    statistics of that objective on their held-out runs (see the module docstring).
+
+    Raises
+    ------
+    ConfigError
+        A folder is not a tuning output with held-out runs, ``at`` is not an objective of
+        both, or the two used different held-out realisations.
+    """
+    from mpcasv.experiments.metrics import METRIC_INFO
+    from mpcasv.experiments.stats import paired_stat, verdict
+
+    (sa, fa, ra), (sb, fb, rb) = _load(Path(ref_dir)), _load(Path(other_dir))
+    for s, d in ((sa, ref_dir), (sb, other_dir)):
+        if at not in s["objectives"]:
+            raise ConfigError(f"{d}: --at {at!r} is not one of its objectives {s['objectives']}")
+    if sorted(sa["heldout"]["realisations"]) != sorted(sb["heldout"]["realisations"]):
+        raise ConfigError(
+            f"{ref_dir} and {other_dir}: different held-out realisations; "
+            "pairing needs the same scenarios, conditions and seeds"
+        )
+    objectives = [m for m in sa["objectives"] if m in sb["objectives"] and m != at]
+    ca, cb = sa["controller"], sb["controller"]
+    fb_ok = fb[fb["heldout_error"].isna() | (fb["heldout_error"] == "")]
+    if sb.get("constraint"):  # only points that stayed feasible on the held-out runs
+        fb_ok = fb_ok[fb_ok[f"heldout.{sb['constraint']}"] <= 0]
+    out = []
+    for _, pa in fa[fa["heldout_front"]].iterrows():
+        ea = pa[f"heldout.{at}"]
+        if not len(fb_ok):
+            break
+        k = (fb_ok[f"heldout.{at}"] - ea).abs().idxmin()
+        pb = fb_ok.loc[k]
+        rel = abs(pb[f"heldout.{at}"] - ea) / max(abs(ea), 1e-12)
+        base = {"ref": ca, "ref_trial": int(pa["trial"]), "other": cb,
+                "other_trial": int(pb["trial"]), f"ref.{at}": ea,
+                f"other.{at}": pb[f"heldout.{at}"], "mismatch": rel}  # fmt: skip
+        if rel > tolerance:
+            out.append(base | {"metric": "", "verdict": f"no match within {tolerance:.0%}"})
+            continue
+        a, b = _runs(ra, int(pa["trial"])), _runs(rb, int(pb["trial"]))
+        both = a.index.intersection(b.index)
+        for m in objectives:
+            s = paired_stat(a.loc[both, m].to_numpy(float), b.loc[both, m].to_numpy(float))
+            ref_med = float(a.loc[both, m].median()) if len(both) else math.nan
+            out.append(base | {"metric": m, "n": s.n, "ref_median": ref_med,
+                               "median_diff": s.median, "ci_low": s.ci_low,
+                               "ci_high": s.ci_high, "p": s.p, "note": s.note,
+                               "verdict": verdict(s, METRIC_INFO[m].better, ca, cb,
+                                                  ref_med)})  # fmt: skip
+    return pd.DataFrame(out)
+
+
+def baseline_points(results: str | Path, objectives: list[str]) -> pd.DataFrame:
+    """Mean of each objective per variant of an ``mpcasv compare`` results table (e.g. the
+    published presets on the same held-out realisations), and the summed constraint."""
+    df = pd.read_parquet(results)
+    df = df[df["status"] == "ok"]
+    agg = df.groupby("variant")[list(objectives)].mean()
+    agg["collision_domain_s"] = df.groupby("variant")["collision_domain_s"].sum()
+    agg["runs"] = df.groupby("variant").size()
+    return agg
+
+
+def plot_fronts(dirs: list[str | Path], path: str | Path,
+                baseline: str | Path | None = None) -> Path:  # fmt: skip
+    """The held-out values of several tunings' fronts (one colour per folder; filled: still
+    feasible and non-dominated on the held-out realisations), objectives pairwise; with
+    ``baseline`` (an ``mpcasv compare`` results.parquet on the same realisations), each of
+    its variants as a star."""
+    import itertools
+
+    import matplotlib.pyplot as plt
+
+    from mpcasv.experiments.metrics import METRIC_INFO
+
+    loaded = [(_load(Path(d))[:2], Path(d)) for d in dirs]
+    objectives = loaded[0][0][0]["objectives"]
+    pairs = list(itertools.combinations(objectives, 2))
+    fig, axes = plt.subplots(1, len(pairs), figsize=(5.2 * len(pairs), 4.4), squeeze=False)
+    for ((summary, front), d), colour in zip(loaded, plt.cm.tab10.colors, strict=False):
+        nd = front["heldout_front"].astype(bool)
+        for ax, (a, b) in zip(axes[0], pairs, strict=True):
+            x, y = front[f"heldout.{a}"], front[f"heldout.{b}"]
+            ax.scatter(x[nd], y[nd], c=[colour], s=34, label=f"{summary['controller']} "
+                       f"({d.name}): held-out front")  # fmt: skip
+            ax.scatter(x[~nd], y[~nd], facecolors="none", edgecolors=[colour], s=34,
+                       label="dominated or infeasible on held-out")  # fmt: skip
+            ax.set_xlabel(f"{a} ({METRIC_INFO[a].unit})")
+            ax.set_ylabel(f"{b} ({METRIC_INFO[b].unit})")
+            ax.grid(alpha=0.3)
+    if baseline is not None:
+        base = baseline_points(baseline, objectives)
+        for (variant, row), marker in zip(base.iterrows(), "*P^v", strict=False):
+            for ax, (a, b) in zip(axes[0], pairs, strict=True):
+                ax.scatter(row[a], row[b], marker=marker, s=140, c="k",
+                           label=f"{variant} (published preset): "
+                           f"{row['collision_domain_s']:g} s in a collision domain")  # fmt: skip
+    axes[0][0].legend(fontsize=7)
+    fig.suptitle("Tuned fronts re-run on the held-out realisations (means over the runs; "
+                 "lower is better)", fontsize=10)  # fmt: skip
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return Path(path)
+
+
+def register_compare(tsub) -> None:
+    """Add ``compare`` to the sub-commands of ``mpcasv tune``."""
+    p = tsub.add_parser(
+        "compare", help="compare two tuned controllers at matched operating points",
+        description="Pair the held-out runs of two 'mpcasv tune controller' outputs at "
+        "matched values of --at (default energy_J): for each feasible held-out front point of "
+        "DIR_REF, the front point of DIR_OTHER nearest in --at; paired median differences, "
+        "bootstrap CIs and Wilcoxon p-values of the other objectives.",
+    )  # fmt: skip
+    p.add_argument("ref", type=Path, help="output folder of the reference tuning")
+    p.add_argument("other", type=Path, help="output folder of the other tuning")
+    p.add_argument("--at", default="energy_J", help="metric to match (default energy_J)")
+    p.add_argument("--tolerance", type=float, default=0.1,
+                   help="largest relative mismatch of --at (default 0.1)")  # fmt: skip
+    p.add_argument("--out", type=Path, help="write the table as CSV here")
+    p.add_argument("--plot", type=Path, help="draw both held-out fronts into this PNG")
+    p.add_argument("--baseline", type=Path,
+                   help="results.parquet of 'mpcasv compare' on the same held-out "
+                   "realisations: its variants drawn as stars")  # fmt: skip
+    p.set_defaults(func=_run)
+
+
+def _run(args) -> int:
+    if not args.tolerance > 0:
+        raise ConfigError(f"--tolerance {args.tolerance}: must be > 0")
+    df = matched_comparison(args.ref, args.other, args.at, args.tolerance)
+    if args.out:
+        df.to_csv(args.out, index=False)
+    if args.plot:
+        plot_fronts([args.ref, args.other], args.plot, args.baseline)
+    with pd.option_context("display.width", 200, "display.max_columns", 30):
+        print(df.to_string(index=False, float_format=lambda v: f"{v:.4g}") if len(df)
+              else "no held-out front point of the reference")  # fmt: skip
+    return 0

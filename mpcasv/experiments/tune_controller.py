@@ -1,0 +1,335 @@
+"""``mpcasv tune controller``: a multi-objective search over a controller's preset fields
+(issue 17 items 1 and 4), with Optuna.
+
+A **trial** is one point of the declared ranges (:mod:`mpcasv.experiments.tune_space`). It is
+evaluated on the **training set**, the jobs of one ``[[controllers]]`` entry of a suite
+(scenarios x seeds: realisations of the scenarios' ``[uncertain]`` tables), each job run with
+the trial's values as overrides; its objective values are the means over those runs of the
+named ``metrics.json`` keys, and its constraint value is the sum of ``collision_domain_s``
+over them, stored with Optuna's ``Trial.set_constraint`` (Optuna 5's replacement of the
+samplers' ``constraints_func``; NSGA-II's constrained domination and TPE's feasibility
+weighting read it): a trial is feasible when the value is <= 0, i.e. no run entered a
+collision domain. No penalty is added to the objectives. A trial whose values the preset
+refuses (e.g. ``eps_minus > delta_r``) fails without a run; it counts in the budget. The
+trials on the training front are then run on **held-out** realisations: the same scenarios
+and conditions, other seeds.
+
+Reproducible and resumable:
+
+* the trials are asked in fixed-size **batches** (``batch``, the NSGA-II population) and all
+  of a batch's runs are done before the next batch is asked, so the sampler sees the same
+  history whatever the number of workers or the order in which runs finish;
+* the sampler is rebuilt before each ask with a seed derived from (``seed``, trial number):
+  a resumed search asks the same trials as one that was never interrupted;
+* the study lives in ``DIR/study.db`` (Optuna's RDB storage, SQLite); every finished run is
+  written at once as a part (``DIR/train/parts``, ``DIR/heldout/parts``: the runner's store),
+  keyed by a job id that is a hash of the base job and the trial's values. Killing the
+  command loses no finished run and no finished trial: a rerun evaluates the trials left
+  running (only their missing runs) and goes on.
+
+Runs go through the suite runner's machinery (:func:`mpcasv.experiments.runner.run_jobs`):
+in this process, on a local process pool, or on Dask.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+
+from mpcasv.config import ConfigError
+from mpcasv.experiments.suite import Job, expand
+from mpcasv.experiments.tune_space import TuneSpec
+
+STUDY_NAME = "tune-controller"
+
+
+def _digest(obj) -> str:
+    text = json.dumps(obj, sort_keys=True, default=str, separators=(",", ":"))
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+def training_jobs(spec: TuneSpec) -> list[Job]:
+    """The base jobs of the training set: the suite's jobs of the entry ``spec.label``.
+
+    Raises
+    ------
+    ConfigError
+        The suite is invalid, the entry is missing or ambiguous, runs another controller than
+        ``spec.controller``, has a grid, or a held-out seed is also a training seed.
+    """
+    exp = expand(spec.suite)
+    labels = sorted({j.label for j in exp.jobs})
+    label = spec.label
+    if label is None:
+        if len(labels) != 1:
+            raise ConfigError(f"{spec.path}: the suite has entries {labels}: name one as 'label'")
+        label = labels[0]
+    jobs = [j for j in exp.jobs if j.label == label]
+    if not jobs:
+        raise ConfigError(f"{spec.path}: label {label!r} is not an entry of suite {exp.path} "
+                          f"(entries: {labels})")  # fmt: skip
+    others = sorted({j.controller for j in jobs} - {spec.controller})
+    if others:
+        raise ConfigError(f"{spec.path}: entry {label!r} of {exp.path} runs {others}, not only "
+                          f"{spec.controller!r}")  # fmt: skip
+    if any(j.variant != j.label for j in jobs):
+        raise ConfigError(f"{spec.path}: entry {label!r} of {exp.path} has a grid; the search "
+                          "replaces it (remove the grid)")  # fmt: skip
+    clash = sorted(set(spec.heldout_seeds) & set(exp.suite.seeds))
+    if clash:
+        raise ConfigError(f"{spec.path}: heldout_seeds {clash} are also training seeds of "
+                          f"{exp.path}")  # fmt: skip
+    return jobs
+
+
+def heldout_jobs(spec: TuneSpec, train: list[Job]) -> list[Job]:
+    """Base jobs of the held-out set: each training condition (scenario, current, estimator)
+    realised for every held-out seed (drawn as the suite draws them)."""
+    from mpcasv.experiments.conditions import condition_scenario, realisations
+    from mpcasv.sim.scenario import load_scenario
+
+    firsts: dict = {}
+    for j in train:
+        firsts.setdefault((j.scenario_path, j.current_axis, j.current, j.estimator), j)
+    out = []
+    for base in firsts.values():
+        sc = condition_scenario(load_scenario(base.scenario_path), base.current_axis,
+                                base.current, base.duration)  # fmt: skip
+        reals = realisations(sc, spec.heldout_seeds, f"{spec.path}: heldout_seeds")
+        for seed in spec.heldout_seeds:
+            real, cur = reals[seed]
+            out.append(dataclasses.replace(
+                base, seed=seed, realisation=real.id, current_realised=cur, plots=False,
+                job_id=_digest([base.job_id, "heldout", seed, real.id]),
+                index=len(out)))  # fmt: skip
+    return out
+
+
+def trial_jobs(base: list[Job], number: int, values: dict) -> list[Job]:
+    """The runs of trial ``number``: each base job with ``values`` (dotted preset fields) as
+    overrides (replacing the entry's own), no figures, and a job id hashed from the base
+    job and the values (so a rerun finds its finished runs)."""
+    out = []
+    for j in base:
+        overrides = dict(j.overrides) | values
+        out.append(dataclasses.replace(
+            j, overrides=tuple(sorted(overrides.items())), plots=False,
+            variant=f"{j.label}[trial={number}]",
+            job_id=_digest([j.job_id, sorted(values.items())])))  # fmt: skip
+    return out
+
+
+def invalid_preset(spec: TuneSpec, base: list[Job], values: dict) -> str | None:
+    """Why the preset refuses ``values`` on some base job (one line), else None."""
+    from mpcasv.controllers import load_preset
+
+    for preset, overrides in {(j.preset, j.overrides) for j in base}:
+        try:
+            load_preset(spec.controller, preset, dict(overrides) | values)
+        except ConfigError as exc:
+            return "invalid preset: " + " ".join(str(exc).split())
+    return None
+
+
+def spec_fingerprint(spec: TuneSpec, train: list[Job]) -> dict:
+    """What must not change between a search and its resumption (the budget may grow)."""
+    return {"controller": spec.controller, "objectives": list(spec.objectives),
+            "constraint": spec.constraint, "sampler": spec.sampler, "batch": spec.batch,
+            "seed": spec.seed, "params": [dataclasses.asdict(p) for p in spec.params],
+            "train_jobs": [j.job_id for j in train]}  # fmt: skip
+
+
+def _trial_seed(seed: int, number: int) -> int:
+    return int(np.random.SeedSequence([seed, number]).generate_state(1)[0])
+
+
+def make_sampler(spec: TuneSpec, number: int):
+    """The sampler that asks trial ``number`` (seeded by ``spec.seed`` and ``number``)."""
+    import optuna
+
+    seed = _trial_seed(spec.seed, number)
+    if spec.sampler == "tpe":
+        return optuna.samplers.TPESampler(seed=seed, multivariate=True,
+                                          n_startup_trials=spec.batch)  # fmt: skip
+    return optuna.samplers.NSGAIISampler(population_size=spec.batch, seed=seed)
+
+
+def directions(spec: TuneSpec) -> list[str]:
+    from mpcasv.experiments.metrics import METRIC_INFO
+
+    return ["minimize" if METRIC_INFO[m].better == "lower" else "maximize"
+            for m in spec.objectives]  # fmt: skip
+
+
+def open_study(spec: TuneSpec, out: Path, train: list[Job]):
+    """Create or load the study in ``out/study.db``; refuse one made for another search."""
+    import optuna
+
+    optuna.logging.set_verbosity(optuna.logging.WARNING)
+    storage = f"sqlite:///{out / 'study.db'}"
+    study = optuna.create_study(study_name=STUDY_NAME, storage=storage, load_if_exists=True,
+                                directions=directions(spec),
+                                sampler=make_sampler(spec, 0))  # fmt: skip
+    fp = spec_fingerprint(spec, train)
+    old = study.user_attrs.get("spec")
+    if old is None:
+        study.set_user_attr("spec", fp)
+    elif old != fp:
+        changed = sorted(k for k in fp if fp[k] != old.get(k))
+        raise ConfigError(f"{out / 'study.db'}: holds a search with other {changed} than "
+                          f"{spec.path}; use another --out")  # fmt: skip
+    return study
+
+
+def _suggest(trial, spec: TuneSpec) -> dict:
+    values = {}
+    for p in spec.params:
+        if p.int:
+            values[p.name] = trial.suggest_int(p.name, p.low, p.high, log=p.log)
+        else:
+            values[p.name] = trial.suggest_float(p.name, p.low, p.high, log=p.log)
+    return values
+
+
+def run_batch(jobs: list[Job], out: Path, workers: int, dask: str | None, quiet: bool,
+              name: str):  # fmt: skip
+    """Run the jobs without a part in ``out`` (the runner's machinery); their rows."""
+    from mpcasv.experiments.runner import SweepStats, prepare_controllers, run_jobs
+    from mpcasv.experiments.store import done_ids, read_parts
+
+    out.mkdir(parents=True, exist_ok=True)
+    done = done_ids(out)
+    todo = [j for j in jobs if j.job_id not in done]
+    if todo:
+        prepare_controllers(todo, quiet, dask)
+        stats = SweepStats(name, len(jobs), len(jobs) - len(todo), workers=workers)
+        run_jobs(sorted(todo, key=lambda j: (-j.cost, j.index)), out, stats, workers, dask,
+                 quiet)  # fmt: skip
+    return read_parts(out, [j.job_id for j in jobs])
+
+
+def aggregate(spec: TuneSpec, rows) -> tuple[list[float] | None, float, str | None]:
+    """(objective means over the runs, summed constraint, error) of one trial's rows; the
+    values are None when a run failed or a metric is missing (the trial fails)."""
+    bad = rows[rows["status"] != "ok"]
+    if len(bad):
+        last = str(bad.iloc[0]["error"]).strip().splitlines()[-1]
+        return None, float("nan"), f"{len(bad)} run(s) failed: {last}"
+    values = []
+    for m in spec.objectives:
+        col = rows[m].astype(float)
+        if col.isna().any():
+            return None, float("nan"), f"metric {m} is missing (NaN) in a run"
+        values.append(float(col.mean()))
+    c = float(rows[spec.constraint].astype(float).sum()) if spec.constraint else 0.0
+    return values, c, None
+
+
+def _ask_batch(study, spec: TuneSpec) -> list:
+    """Trials of the current batch still to evaluate (RUNNING), asking the missing ones."""
+    import optuna
+    from optuna.trial import TrialState
+
+    trials = study.get_trials(deepcopy=False)
+    n = len(trials)
+    running = [t for t in trials if t.state == TrialState.RUNNING]
+    names = {p.name for p in spec.params}
+    for t in running:  # killed between asking a trial and drawing all its values: draw them
+        if not names <= set(t.params):  # first, as they were drawn before the later trials
+            study.sampler = make_sampler(spec, t.number)  # the sampler that asked it
+            _suggest(optuna.trial.Trial(study, t._trial_id), spec)
+    # a batch left running (killed) is finished first, else a new batch starts at trial n
+    start = (min(t.number for t in running) // spec.batch) * spec.batch if running else n
+    end = min(start + spec.batch, spec.trials)
+    while n < end:
+        study.sampler = make_sampler(spec, n)
+        trial = study.ask()
+        _suggest(trial, spec)
+        n += 1
+    return [t for t in study.get_trials(deepcopy=False) if t.state == TrialState.RUNNING]
+
+
+def search(spec: TuneSpec, out: str | Path, workers: int = 1, dask: str | None = None,
+           quiet: bool = False):  # fmt: skip
+    """Run (or resume) the search until ``spec.trials`` trials are finished.
+
+    Returns
+    -------
+    optuna.Study
+        The study (``DIR/study.db``); its user attribute ``wall_s`` sums the wall time of
+        every session, ``sessions`` counts them.
+    """
+    import optuna
+    from optuna.trial import TrialState
+
+    out = Path(out).resolve()
+    out.mkdir(parents=True, exist_ok=True)
+    train = training_jobs(spec)
+    study = open_study(spec, out, train)
+    t0 = time.perf_counter()
+    wall0 = float(study.user_attrs.get("wall_s", 0.0))
+    study.set_user_attr("sessions", int(study.user_attrs.get("sessions", 0)) + 1)
+    try:
+        while True:
+            batch = _ask_batch(study, spec)
+            if not batch:
+                break
+            invalid = {t.number: invalid_preset(spec, train, dict(t.params)) for t in batch}
+            jobs = {t.number: trial_jobs(train, t.number, dict(t.params)) for t in batch
+                    if invalid[t.number] is None}  # fmt: skip
+            first, last = batch[0].number, batch[-1].number
+            if not quiet:
+                print(f"trials {first}-{last} of {spec.trials}: {len(jobs)} x {len(train)} runs "
+                      f"({len(batch) - len(jobs)} refused by the preset)")  # fmt: skip
+            rows = run_batch([j for js in jobs.values() for j in js], out / "train", workers,
+                             dask, quiet, f"trials {first}-{last}")  # fmt: skip
+            by_id = rows.set_index("job_id") if len(rows) else rows
+            study.sampler = make_sampler(spec, last)
+            for t in batch:  # told in trial order: the same history for any worker count
+                handle = optuna.trial.Trial(study, t._trial_id)  # attributes of a stored trial
+                if invalid[t.number] is not None:
+                    values, c, err = None, None, invalid[t.number]
+                else:
+                    values, c, err = aggregate(spec, by_id.loc[[j.job_id for j in jobs[t.number]]])
+                if values is None:
+                    handle.set_user_attr("error", err)
+                    study.tell(t.number, state=TrialState.FAIL)
+                    continue
+                if spec.constraint:
+                    handle.set_constraint(spec.constraint, c)
+                study.tell(t.number, values)
+            study.set_user_attr("wall_s", wall0 + time.perf_counter() - t0)
+    finally:
+        study.set_user_attr("wall_s", wall0 + time.perf_counter() - t0)
+    return study
+
+
+def front_trials(study) -> list:
+    """The training Pareto front: complete, feasible, non-dominated trials (by number)."""
+    return sorted(study.best_trials, key=lambda t: t.number)
+
+
+def evaluate_heldout(spec: TuneSpec, study, out: str | Path, workers: int = 1,
+                     dask: str | None = None, quiet: bool = False) -> dict:  # fmt: skip
+    """Run the front's trials on the held-out realisations; ``{number: (values, constraint,
+    error)}`` (as :func:`aggregate`)."""
+    out = Path(out).resolve()
+    base = heldout_jobs(spec, training_jobs(spec))
+    front = front_trials(study)
+    jobs = {t.number: trial_jobs(base, t.number, dict(t.params)) for t in front}
+    if not jobs:
+        return {}
+    if not quiet:
+        print(f"held-out: {len(front)} front trials x {len(base)} runs (seeds "
+              f"{list(spec.heldout_seeds)})")  # fmt: skip
+    t0 = time.perf_counter()
+    rows = run_batch([j for js in jobs.values() for j in js], out / "heldout", workers, dask,
+                     quiet, "held-out").set_index("job_id")  # fmt: skip
+    study.set_user_attr("heldout_wall_s", float(study.user_attrs.get("heldout_wall_s", 0.0))
+                        + time.perf_counter() - t0)  # fmt: skip
+    return {n: aggregate(spec, rows.loc[[j.job_id for j in js]]) for n, js in jobs.items()}

@@ -1,0 +1,228 @@
+"""The range file of ``mpcasv tune controller`` (issue 17 item 1): which preset fields of which
+controller to search, over which training set, toward which objectives.
+
+```toml
+controller = "hybrid-single"          # registered controller (its preset fields are searched)
+suite = "train-c1c3.toml"             # training set: a suite (scenarios x seeds); a name in
+                                      # experiments/suites or a path relative to this file
+label = "hybrid"                      # the suite's [[controllers]] entry (default: the only one)
+heldout_seeds = [100, 101, 102]       # held-out realisations: same scenarios, other seeds
+objectives = ["reliable_fix_age_p95_s", "nav_error_rms_m", "energy_J"]  # metrics.json keys
+constraint = "collision_domain_s"     # must be 0 on every training run ("" : none)
+sampler = "nsga2"                     # "nsga2" (default) or "tpe"
+trials = 40                           # budget: trials (each = one run per training job)
+batch = 8                             # trials asked and evaluated together (NSGA-II population)
+seed = 0                              # the sampler's seed
+
+[params]                              # dotted preset fields: bounds, log scale, integer
+"domain.delta_r" = { low = 5.0, high = 150.0 }
+"weights.dT" = { low = 0.001, high = 1.0, log = true }
+"horizon.N" = { low = 8, high = 20, int = true }
+```
+
+Every problem is refused with one line naming the file and the field (:class:`ConfigError`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from mpcasv.config import ConfigError, load_toml
+
+#: default objectives (metrics.json keys, all "lower is better"; issue 17 item 1)
+DEFAULT_OBJECTIVES = ("reliable_fix_age_p95_s", "nav_error_rms_m", "energy_J")
+#: default constraint: no time inside the collision domain (Paper 1 eq. 5; Paper 2 eqs. 4-5)
+DEFAULT_CONSTRAINT = "collision_domain_s"
+SAMPLERS = ("nsga2", "tpe")
+_TOP_KEYS = {"controller", "suite", "label", "heldout_seeds", "objectives", "constraint",
+             "sampler", "trials", "batch", "seed", "params"}  # fmt: skip
+_RANGE_KEYS = {"low", "high", "log", "int"}
+
+
+@dataclass(frozen=True)
+class ParamRange:
+    """One searched preset field: ``low <= value <= high``, optionally on a log scale
+    (``low > 0``) and integer."""
+
+    name: str  # dotted preset field, e.g. "domain.delta_r"
+    low: float
+    high: float
+    log: bool = False
+    int: bool = False
+
+
+@dataclass(frozen=True)
+class TuneSpec:
+    """A validated range file (see the module docstring); ``suite`` is an absolute path or
+    a shipped suite name."""
+
+    path: Path
+    controller: str
+    suite: str
+    label: str | None
+    heldout_seeds: tuple[int, ...]
+    objectives: tuple[str, ...]
+    constraint: str | None
+    sampler: str
+    trials: int
+    batch: int
+    seed: int
+    params: tuple[ParamRange, ...]
+
+
+def _fail(path: Path, msg: str):
+    raise ConfigError(f"{path}: {msg}")
+
+
+def _number(path: Path, where: str, v: Any, integer: bool) -> float:
+    ok = isinstance(v, int) and not isinstance(v, bool)
+    if not integer:
+        ok = ok or isinstance(v, float)
+    if not ok or not math.isfinite(v):
+        _fail(path, f"{where}: expected {'an integer' if integer else 'a finite number'}, "
+                    f"got {v!r}")  # fmt: skip
+    return v
+
+
+def _range(path: Path, name: str, spec: Any) -> ParamRange:
+    where = f"params.{name!r}"
+    if not isinstance(spec, dict):
+        _fail(path, f"{where}: expected a table {{ low = ..., high = ... }}, got {spec!r}")
+    unknown = set(spec) - _RANGE_KEYS
+    if unknown:
+        _fail(path, f"{where}: unknown keys {sorted(unknown)}; known: {sorted(_RANGE_KEYS)}")
+    for key in ("low", "high"):
+        if key not in spec:
+            _fail(path, f"{where}: '{key}' is missing")
+    for key in ("log", "int"):
+        if not isinstance(spec.get(key, False), bool):
+            _fail(path, f"{where}: '{key}' must be true or false, got {spec[key]!r}")
+    integer = spec.get("int", False)
+    low = _number(path, f"{where}.low", spec["low"], integer)
+    high = _number(path, f"{where}.high", spec["high"], integer)
+    if not low < high:
+        _fail(path, f"{where}: low = {low!r} must be below high = {high!r}")
+    if spec.get("log", False) and low <= 0:
+        _fail(path, f"{where}: a log scale needs low > 0, got {low!r}")
+    return ParamRange(name, float(low) if not integer else int(low),
+                      float(high) if not integer else int(high),
+                      spec.get("log", False), integer)  # fmt: skip
+
+
+def _int_list(path: Path, key: str, v: Any) -> tuple[int, ...]:
+    if not isinstance(v, list) or not v:
+        _fail(path, f"{key}: expected a non-empty list of seeds, got {v!r}")
+    for s in v:
+        if not isinstance(s, int) or isinstance(s, bool) or s < 0:
+            _fail(path, f"{key}: a seed is an integer >= 0, got {s!r}")
+    if len(set(v)) != len(v):
+        _fail(path, f"{key}: duplicate seeds {v}")
+    return tuple(v)
+
+
+def _check_fields(path: Path, spec: TuneSpec) -> None:
+    """Every field exists in the controller's preset and accepts both bounds."""
+    from mpcasv.controllers import controller_kind
+    from mpcasv.experiments.metrics import METRIC_INFO
+
+    try:
+        controller_kind(spec.controller)
+    except ConfigError as exc:
+        _fail(path, f"controller: {exc}")
+    for m in (*spec.objectives, *([spec.constraint] if spec.constraint else [])):
+        if m not in METRIC_INFO:
+            _fail(path, f"unknown metric {m!r} (metrics.json keys: see docs/metrics.md)")
+        if METRIC_INFO[m].better not in ("lower", "higher"):
+            _fail(path, f"metric {m!r} has no better direction: it cannot be an objective")
+    params_cls = controller_kind(spec.controller).params_cls
+    for p in spec.params:
+        kind = _field_type(params_cls, p.name)
+        if kind is None:
+            _fail(path, f"params.{p.name!r}: {spec.controller} presets have no such field")
+        if kind not in (float, int) or (p.int and kind is not int) or (kind is int and not p.int):
+            what = {float: "a float: drop 'int'", int: "an integer: add int = true"}.get(
+                kind, f"not a number ({getattr(kind, '__name__', kind)})"
+            )
+            _fail(path, f"params.{p.name!r}: the preset field is {what}")
+    # value combinations the preset refuses (e.g. eps_minus > delta_r) are found per trial:
+    # such a trial fails without a run (mpcasv.experiments.tune_controller)
+
+
+def _field_type(cls: type, dotted: str):
+    """The (unwrapped) type of the dotted field of parameter dataclass ``cls``; None: none."""
+    import dataclasses
+    import typing
+
+    for part in dotted.split("."):
+        if not dataclasses.is_dataclass(cls):
+            return None
+        hints = typing.get_type_hints(cls)
+        if part not in hints:
+            return None
+        cls = hints[part]
+    return cls
+
+
+def load_spec(path: str | Path, trials: int | None = None) -> TuneSpec:
+    """Load and validate a range file; ``trials`` replaces its budget when given.
+
+    Raises
+    ------
+    ConfigError
+        One line: the file and the offending field (missing file, bad TOML, unknown key or
+        metric or preset field, a non-numeric field, low >= high, log with low <= 0, a
+        non-integer bound of an integer field, empty ranges or seeds).
+    """
+    path = Path(path).resolve()
+    if not path.exists():
+        raise ConfigError(f"{path}: no such range file")
+    try:
+        data = load_toml(path)
+    except ConfigError as exc:
+        raise ConfigError(" ".join(str(exc).split())) from None
+    unknown = set(data) - _TOP_KEYS
+    if unknown:
+        _fail(path, f"unknown keys {sorted(unknown)}; known: {sorted(_TOP_KEYS)}")
+    for key in ("controller", "suite", "heldout_seeds", "params"):
+        if key not in data:
+            _fail(path, f"'{key}' is missing")
+    for key in ("controller", "suite", "label", "constraint", "sampler"):
+        if key in data and not isinstance(data[key], str):
+            _fail(path, f"{key}: expected a string, got {data[key]!r}")
+    params = data["params"]
+    if not isinstance(params, dict) or not params:
+        _fail(path, "params: give at least one field to search")
+    objectives = data.get("objectives", list(DEFAULT_OBJECTIVES))
+    if (not isinstance(objectives, list) or not objectives
+            or not all(isinstance(o, str) for o in objectives)):  # fmt: skip
+        _fail(path, f"objectives: expected a non-empty list of metric names, got {objectives!r}")
+    if len(set(objectives)) != len(objectives):
+        _fail(path, f"objectives: duplicates {objectives}")
+    sampler = data.get("sampler", "nsga2")
+    if sampler not in SAMPLERS:
+        _fail(path, f"sampler: {sampler!r} is not one of {list(SAMPLERS)}")
+    n_trials = _number(path, "trials", data.get("trials", 40), True)
+    batch = _number(path, "batch", data.get("batch", 8), True)
+    seed = _number(path, "seed", data.get("seed", 0), True)
+    for key, v, lo in (("trials", n_trials, 1), ("batch", batch, 2), ("seed", seed, 0)):
+        if v < lo:
+            _fail(path, f"{key}: must be >= {lo}, got {v}")
+    if trials is not None:
+        if trials < 1:
+            raise ConfigError(f"--trials {trials}: must be >= 1")
+        n_trials = trials
+    suite = data["suite"]
+    if suite.endswith(".toml") and not Path(suite).is_absolute():
+        suite = str((path.parent / suite).resolve())
+    spec = TuneSpec(
+        path=path, controller=data["controller"], suite=suite, label=data.get("label"),
+        heldout_seeds=_int_list(path, "heldout_seeds", data["heldout_seeds"]),
+        objectives=tuple(objectives), constraint=data.get("constraint", DEFAULT_CONSTRAINT) or None,
+        sampler=sampler, trials=int(n_trials), batch=int(batch), seed=int(seed),
+        params=tuple(_range(path, k, v) for k, v in params.items()),
+    )  # fmt: skip
+    _check_fields(path, spec)
+    return spec

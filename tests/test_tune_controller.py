@@ -1,0 +1,234 @@
+"""``mpcasv tune controller`` (issue 17): a tiny search writes its outputs, a killed search
+resumes without losing a finished trial or run (and asks the same trials as an uninterrupted
+one, whatever the worker count), and a bad range file is refused in one line (exit 2).
+
+Budgets are tiny (Case 3 cut to 120 s, 2 training seeds, 4-6 trials) so the file runs in CI time.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import sqlite3
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+from mpcasv.cli import main
+
+ROOT = Path(__file__).resolve().parents[1]
+PY = sys.executable
+
+
+def _write(tmp: Path, trials: int = 4, batch: int = 2, extra: str = "",
+           heldout: str = "[7]") -> Path:  # fmt: skip
+    (tmp / "train.toml").write_text(
+        'name = "tiny-train"\nscenarios = ["case3"]\nduration = 120.0\nseeds = [0, 1]\n'
+        'plots = "none"\n[[controllers]]\nlabel = "hybrid"\nsingle = "hybrid-single"\n'
+        'preset = "scenario"\n'
+    )
+    ranges = tmp / "ranges.toml"
+    ranges.write_text(
+        f'controller = "hybrid-single"\nsuite = "train.toml"\nheldout_seeds = {heldout}\n'
+        f"trials = {trials}\nbatch = {batch}\nseed = 3\n{extra}\n[params]\n"
+        '"domain.delta_r" = { low = 20.0, high = 140.0 }\n'
+        '"domain.eps_plus" = { low = 2.0, high = 40.0, log = true }\n'
+        '"speed" = { low = 1.0, high = 2.5 }\n'
+    )
+    return ranges
+
+
+def _trials(out: Path) -> pd.DataFrame:
+    """The study's trials straight from its SQLite file (what a killed run left behind)."""
+    with sqlite3.connect(out / "study.db") as con:
+        t = pd.read_sql("SELECT trial_id, number, state, datetime_complete FROM trials", con)
+        p = pd.read_sql("SELECT trial_id, param_name, param_value FROM trial_params", con)
+        v = pd.read_sql("SELECT trial_id, objective, value FROM trial_values", con)
+    params = p.pivot(index="trial_id", columns="param_name", values="param_value")
+    values = v.pivot(index="trial_id", columns="objective", values="value").add_prefix("obj")
+    return t.set_index("trial_id").join(params).join(values).set_index("number").sort_index()
+
+
+@pytest.fixture(scope="module")
+def tiny(tmp_path_factory):
+    """A finished tiny search with five held-out seeds (enough pairs for the statistics)."""
+    tmp = tmp_path_factory.mktemp("tiny")
+    ranges = _write(tmp, heldout="[7, 8, 9, 10, 11]")
+    out = tmp / "out"
+    assert main(["tune", "controller", str(ranges), "--out", str(out), "--workers", "1",
+                 "--quiet"]) == 0  # fmt: skip
+    return out
+
+
+def test_tiny_search_writes_front_presets_importance_and_report(tiny):
+    from mpcasv.controllers import load_preset
+
+    out = tiny
+    for name in ("study.db", "trials.csv", "front.csv", "front.md", "front.png",
+                 "importance.csv", "report.md", "tune.json"):  # fmt: skip
+        assert (out / name).stat().st_size > 0, name
+    trials = pd.read_csv(out / "trials.csv")
+    assert list(trials["trial"]) == [0, 1, 2, 3] and set(trials["state"]) == {"COMPLETE"}
+    distinct = trials[["domain.delta_r", "domain.eps_plus", "speed"]].drop_duplicates()
+    assert len(list((out / "train" / "parts").glob("*.parquet"))) == 2 * len(distinct)
+    front = pd.read_csv(out / "front.csv")
+    assert 1 <= len(front) <= 4
+    feasible = trials[trials["collision_domain_s"] <= 0]
+    assert set(front["trial"]) <= set(feasible["trial"])
+    # every front point ran on the held-out seeds, and its preset loads to its values
+    assert front["heldout.energy_J"].notna().all()
+    distinct_front = front[["domain.delta_r", "domain.eps_plus", "speed"]].drop_duplicates()
+    assert len(list((out / "heldout" / "parts").glob("*.parquet"))) == 5 * len(distinct_front)
+    for _, row in front.iterrows():
+        params = load_preset("hybrid-single", out / "presets" / f"trial-{row.trial:04d}.toml")
+        assert params.domain.delta_r == pytest.approx(row["domain.delta_r"], rel=1e-12)
+        assert params.domain.eps_plus == pytest.approx(row["domain.eps_plus"], rel=1e-12)
+        assert params.speed == pytest.approx(row["speed"], rel=1e-12)
+        assert params.domain.alpha_inner == 5.0  # Case 3's own (paper1-field) donut kept
+    imp = pd.read_csv(out / "importance.csv", index_col=0)
+    assert list(imp.index) == ["domain.delta_r", "domain.eps_plus", "speed"]
+    report = (out / "report.md").read_text()
+    assert "budget: 4 trials" in report and f"{2 * len(distinct)} training runs" in report
+
+
+def test_matched_comparison_pairs_held_out_runs_by_realisation(tiny, tmp_path):
+    """A tuning compared with itself: every point matches itself at equal energy, the five
+    held-out runs pair up and every difference is zero; other held-out seeds are refused."""
+    from mpcasv.config import ConfigError
+    from mpcasv.experiments.tune_compare import matched_comparison
+
+    df = matched_comparison(tiny, tiny, at="energy_J")
+    front = pd.read_csv(tiny / "front.csv")
+    assert len(df) == 2 * int(front["heldout_front"].sum())  # two other objectives each
+    assert (df["mismatch"] == 0).all() and (df["n"] == 5).all()
+    assert (df["median_diff"] == 0).all() and set(df["verdict"]) == {"no difference"}
+    other = tmp_path / "other"
+    other.mkdir()
+    for name in ("tune.json", "front.csv"):
+        (other / name).write_text((tiny / name).read_text())
+    (other / "heldout").symlink_to(tiny / "heldout")
+    summary = json.loads((other / "tune.json").read_text())
+    summary["heldout"]["realisations"] = ["another"]
+    (other / "tune.json").write_text(json.dumps(summary))
+    with pytest.raises(ConfigError, match="different held-out realisations"):
+        matched_comparison(tiny, other)
+
+
+def test_killed_search_resumes_without_losing_a_finished_trial(tmp_path):
+    """Kill the command (a subprocess with 2 workers) once a batch is told, resume it with 1
+    worker: the finished trials are untouched, the finished runs are not redone, and the
+    trials equal those of an uninterrupted search (fixed batches, per-trial sampler seeds)."""
+    ranges = _write(tmp_path, trials=4)
+    out = tmp_path / "killed"
+    env = os.environ | {"PYTHONPATH": str(ROOT), "MPLBACKEND": "Agg"}
+    proc = subprocess.Popen([PY, "-m", "mpcasv.cli", "tune", "controller", str(ranges), "--out",
+                             str(out), "--workers", "2", "--quiet"], env=env,
+                            start_new_session=True)  # fmt: skip
+    try:
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline:
+            time.sleep(0.05)
+            if (out / "study.db").exists():
+                try:
+                    done = _trials(out)
+                except (sqlite3.Error, pd.errors.DatabaseError, KeyError):
+                    continue
+                if (done["state"] == "COMPLETE").sum() >= 2:
+                    break
+            assert proc.poll() is None, "the search ended before it could be killed"
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait(30)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+    before = _trials(out)
+    finished = before[before["state"] == "COMPLETE"]
+    assert 2 <= len(finished) < 4, "kill it between its first and its last batch"
+    parts = {p.name: p.stat().st_mtime_ns for p in (out / "train" / "parts").glob("*.parquet")}
+    assert main(["tune", "controller", str(ranges), "--out", str(out), "--workers", "1",
+                 "--no-heldout", "--quiet"]) == 0  # fmt: skip
+    after = _trials(out)
+    assert list(after.index) == list(range(4)) and set(after["state"]) == {"COMPLETE"}
+    pd.testing.assert_frame_equal(after.loc[finished.index], finished)  # untouched
+    now = {p.name: p.stat().st_mtime_ns for p in (out / "train" / "parts").glob("*.parquet")}
+    assert {k: now[k] for k in parts} == parts  # no finished run redone
+    # one run per training seed and distinct value set (NSGA-II may repeat a point: a repeat
+    # reuses the deterministic runs of its twin)
+    distinct = after[["domain.delta_r", "domain.eps_plus", "speed"]].drop_duplicates()
+    assert len(now) == 2 * len(distinct)
+    # an uninterrupted search with one worker asks and scores the very same trials
+    ref = tmp_path / "ref"
+    assert main(["tune", "controller", str(ranges), "--out", str(ref), "--workers", "1",
+                 "--no-heldout", "--quiet"]) == 0  # fmt: skip
+    cols = [c for c in after.columns if c not in ("datetime_complete",)]
+    pd.testing.assert_frame_equal(_trials(ref)[cols], after[cols])
+
+
+BAD = {
+    "unknown field": ('"domain.delta_rr" = { low = 1.0, high = 2.0 }', "no such field"),
+    "low above high": ('"domain.delta_r" = { low = 50.0, high = 20.0 }', "must be below"),
+    "log from zero": ('"domain.delta_r" = { low = 0.0, high = 20.0, log = true }', "log scale"),
+    "int on a float": ('"domain.delta_r" = { low = 1, high = 20, int = true }', "is a float"),
+    "missing high": ('"speed" = { low = 1.0 }', "'high' is missing"),
+    "unknown key": ('"speed" = { low = 1.0, high = 2.0, step = 0.1 }', "unknown keys"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(BAD))
+def test_bad_range_file_is_refused_in_one_line(tmp_path, capsys, case):
+    line, cause = BAD[case]
+    ranges = _write(tmp_path)
+    text = ranges.read_text()
+    ranges.write_text(text[: text.index("[params]")] + "[params]\n" + line + "\n")
+    assert main(["tune", "controller", str(ranges), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and str(ranges) in err and cause in err, err
+    assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize(("extra", "cause"), [
+    ('objectives = ["energy_Joules"]', "unknown metric"),
+    ('sampler = "cmaes"', "sampler"),
+    ("heldout_seeds = [1]", "also training seeds"),
+    ('label = "mpc"', "not an entry"),
+])  # fmt: skip
+def test_bad_search_settings_are_refused_in_one_line(tmp_path, capsys, extra, cause):
+    ranges = _write(tmp_path)
+    text = ranges.read_text().replace("heldout_seeds = [7]\n", "")
+    if not extra.startswith("heldout_seeds"):
+        text = "heldout_seeds = [7]\n" + text
+    ranges.write_text(extra + "\n" + text)
+    assert main(["tune", "controller", str(ranges), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and cause in err, err
+
+
+def test_a_trial_the_preset_refuses_fails_without_a_run(tmp_path):
+    """eps_minus > delta_r is refused by the preset (Paper 1: the target domain would reach
+    into the collision domain): such values are named, not simulated."""
+    from mpcasv.experiments.tune_controller import invalid_preset, training_jobs
+    from mpcasv.experiments.tune_space import load_spec
+
+    spec = load_spec(_write(tmp_path))
+    train = training_jobs(spec)
+    assert invalid_preset(spec, train, {"domain.delta_r": 30.0}) is None
+    why = invalid_preset(spec, train, {"domain.delta_r": 5.0})  # Case 3: eps_minus = 10 m
+    assert why is not None and "eps_minus" in why and "\n" not in why
+
+
+def test_tpe_sampler_runs_and_is_reproducible(tmp_path):
+    """The optional TPE sampler (multivariate, seeded per trial): two searches from scratch
+    ask the same trials."""
+    ranges = _write(tmp_path, extra='sampler = "tpe"')
+    for out in ("a", "b"):
+        assert main(["tune", "controller", str(ranges), "--out", str(tmp_path / out),
+                     "--workers", "1", "--no-heldout", "--quiet"]) == 0  # fmt: skip
+    a, b = _trials(tmp_path / "a"), _trials(tmp_path / "b")
+    assert set(a["state"]) == {"COMPLETE"} and len(a) == 4
+    cols = [c for c in a.columns if c != "datetime_complete"]
+    pd.testing.assert_frame_equal(a[cols], b[cols])
