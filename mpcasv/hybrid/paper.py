@@ -57,16 +57,17 @@ NOTES = """\
   scenario file says what is taken from the text and what is our guess (pattern sizes,
   positions, speeds, depths, timings). Distances and transit times follow the paths.
 - **A different boat model.** Gretha's model here is derived from her dimensions (not
-  identified), and the execution level (LOS guidance, eq. 3.1, gain-scheduled PID, power
-  turn) is ours; the papers used DUNE's LAUV simulator with Maritime Robotics' VCS simulator
+  identified), and the execution level (LOS guidance, eq. 3.1, gain-scheduled PID, steering
+  floor, and a power turn that overrides eq. 3.1 in hard turns: docs/tuning.md) is ours; the papers used DUNE's LAUV simulator with Maritime Robotics' VCS simulator
   (Cases 1, 2, 6) or the real boat (Cases 3, 4, 7, 8). Our boat coasts after the propeller
   stops, which makes standby glide out of the target domain and adds transits.
 - **Coasting into the anti-collision radius (Cases 6-8).** The ASV reaches the target domain
-  at up to 2.5 m/s, stops the propeller and glides some 40 m; with r_t - r_avoid = delta_r =
-  20 m it then crosses r_avoid of the very AUV it came to serve, and transits again
-  (`label_avoidance_s`). The published runs never entered it in Case 6: the real and VCS
-  boats evidently lost speed faster than our derived model, which has no propeller drag
-  when idle. Slowing down before the target circle would avoid it but is not in the papers.
+  at up to 2.5 m/s, stops the propeller and glides (34 m to 0.2 m/s with the idle-drive drag
+  of docs/vessel.md); with r_t - r_avoid = delta_r = 20 m it can then cross r_avoid of the
+  very AUV it came to serve, and transits again (`label_avoidance_s`). The published runs
+  never entered it in Case 6. The idle drag barely changed our time inside (docs/tuning.md:
+  the glide is not the main cause in this model); the boats' low-speed turning and the
+  guessed AUV paths are the other suspects.
 - **No wind or waves.** Field cases (3, 4, 7, 8) had environmental loads; Case 7 has a constant
   current as a stand-in.
 - **Case 5** used a different ASV (a Mariner with an asymmetric modem mount) and a real AUV;
