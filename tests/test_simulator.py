@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -134,3 +135,25 @@ def test_multi_auv_ranges_pair_each_auv_with_the_asv_at_the_same_instant():
         assert (df[f"range_min{k}"] >= 100.0 * (k + 1) - 1.0).all()
         assert (df[f"range_min{k}"] >= np.hypot(100.0 * (k + 1), east_prev) - 10.0).all()
     assert ts.min_range_m == pytest.approx(df[[f"range_min{k}" for k in range(3)]].min().min())
+
+
+def test_simulate_refuses_to_replace_a_folder_that_is_not_a_run(tmp_path, capsys):
+    """`mpcasv simulate --out DIR` deleted an existing folder it had not written (found by a
+    new user: data loss). A non-empty folder without run.json, or a file, is refused before
+    the run with one line and exit 2, and left as it was; an earlier run's folder is replaced."""
+    from mpcasv.cli import main
+
+    keep = tmp_path / "precious"
+    keep.mkdir()
+    (keep / "thesis.tex").write_text("data")
+    scenario = str(Path(__file__).resolve().parents[1] / "experiments/scenarios/demo.toml")
+    assert main(["simulate", scenario, "--out", str(keep), "--no-plots", "--quiet"]) == 2
+    assert (keep / "thesis.tex").read_text() == "data"
+    assert "not a run folder" in capsys.readouterr().err
+    afile = tmp_path / "afile"
+    afile.write_text("x")
+    assert main(["simulate", scenario, "--out", str(afile), "--no-plots", "--quiet"]) == 2
+    run = tmp_path / "run"
+    assert main(["simulate", scenario, "--out", str(run), "--no-plots", "--quiet"]) == 0
+    assert main(["simulate", scenario, "--out", str(run), "--no-plots", "--quiet"]) == 0
+    assert (run / "run.json").is_file()

@@ -48,7 +48,7 @@ def run(args: argparse.Namespace) -> int:
     from mpcasv.controllers.prepare import needed_libraries, prepare
     from mpcasv.estimation import ESTIMATORS
     from mpcasv.experiments.metrics import compute_metrics
-    from mpcasv.sim.record import write_run
+    from mpcasv.sim.record import check_run_dir, write_run
     from mpcasv.sim.scenario import load_scenario
     from mpcasv.sim.simulator import simulate
     from mpcasv.sim.uncertainty import nominal, realise
@@ -65,6 +65,7 @@ def run(args: argparse.Namespace) -> int:
     if args.estimator and args.estimator not in ESTIMATORS:
         raise ConfigError(f"unknown estimator {args.estimator!r}; known: {sorted(ESTIMATORS)}")
     out = args.out or Path("runs") / f"{scenario.name}-{name}-{args.seed}"
+    check_run_dir(out)  # before the run, not after it
     result = simulate(scenario, controller, args.seed, args.estimator, progress=not args.quiet)
     extra = {"preset": preset, "estimator": args.estimator or scenario.estimator,
              "realisation": real.as_dict(), "boat": boat.describe()}  # fmt: skip

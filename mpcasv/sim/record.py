@@ -22,15 +22,37 @@ def _jsonable(v):
     return v
 
 
+def check_run_dir(out_dir: str | Path) -> Path:
+    """Refuse an output folder that :func:`write_run` must not replace: a file, or a folder
+    with content but no ``run.json`` (not a run folder: replacing it would delete the user's
+    files). An earlier run's folder (it has ``run.json``) or an empty folder is fine.
+
+    Raises
+    ------
+    ConfigError
+        One line naming the path and why.
+    """
+    from mpcasv.config import ConfigError
+
+    out = Path(out_dir)
+    if out.exists() and not out.is_dir():
+        raise ConfigError(f"{out}: the output folder is a file")
+    if out.is_dir() and any(out.iterdir()) and not (out / "run.json").is_file():
+        raise ConfigError(f"{out}: the output folder exists and is not a run folder (no "
+                          "run.json): refusing to replace it; name a new or empty folder")
+    return out
+
+
 def write_run(result, out_dir: str | Path, metrics: dict, plots: bool = True,
               extra: dict | None = None) -> dict:  # fmt: skip
-    """Write the run files into ``out_dir`` (replaced if present); return the metrics as
-    written (non-finite numbers as None).
+    """Write the run files into ``out_dir`` (an earlier run's folder there is replaced; any
+    other non-empty folder is refused, :func:`check_run_dir`); return the metrics as written
+    (non-finite numbers as None).
 
     ``run.json`` holds the scenario, controller, seed, wall time, ``extra`` and the boat
     (``boat``: :meth:`mpcasv.controllers.Boat.describe`, when ``extra`` carries it).
     """
-    out = Path(out_dir)
+    out = check_run_dir(out_dir)
     out.parent.mkdir(parents=True, exist_ok=True)
     metrics = {k: _jsonable(v) for k, v in metrics.items()}
     tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
