@@ -10,15 +10,14 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from mpcasv.config import ConfigError, parse
-from mpcasv.hybrid.domains import (
+from mpcasv.hybrid.avoidance import (
     AvoidanceParams,
-    DomainParams,
     avoidance_radii,
     avoidance_shape,
     estimate_shape,
-    r_avoid,
     r_avoid_uncertain,
 )
+from mpcasv.hybrid.domains import DomainParams, r_avoid
 from mpcasv.interface import AUVEstimate
 from mpcasv.models.auv import AUVLimits, auv_step_function
 

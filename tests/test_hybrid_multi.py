@@ -201,7 +201,7 @@ def test_inside_a_domain_the_next_command_leaves_every_domain(auvs, walk, start_
 def test_inside_an_uncertainty_aware_domain_the_waypoint_leaves_every_domain(auvs, n, e, kind):
     """S1/S2 with the issue-8 domains (discs grown by the uncertainty; reach-set polygons):
     inside any domain, the waypoint is outside every domain, >= delta_r outside the others."""
-    from mpcasv.hybrid.domains import estimate_shape
+    from mpcasv.hybrid.avoidance import estimate_shape
 
     c = make_controller("hybrid-multi", len(auvs), "paper2-field",
                         overrides={"avoidance.kind": kind})  # fmt: skip

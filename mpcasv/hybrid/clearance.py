@@ -27,7 +27,7 @@ import math
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from mpcasv.hybrid.domains import AvoidanceShape
+from mpcasv.hybrid.avoidance import AvoidanceShape
 
 __all__ = ["clear_waypoint", "deepest_breach", "shape_extent"]
 

@@ -29,14 +29,9 @@ import numpy as np
 
 from mpcasv.config import Pos, frozen
 from mpcasv.controllers import ControllerKind
+from mpcasv.hybrid.avoidance import AvoidanceParams, estimate_shape
 from mpcasv.hybrid.clearance import clear_waypoint, deepest_breach
-from mpcasv.hybrid.domains import (
-    AvoidanceParams,
-    DomainParams,
-    estimate_shape,
-    point_on_circle,
-    range_bearing,
-)
+from mpcasv.hybrid.domains import DomainParams, point_on_circle, range_bearing
 from mpcasv.hybrid.system import HybridAutomaton, Mode, Transition
 from mpcasv.interface import Command, Observation, Reason
 from mpcasv.interface import Mode as CmdMode

@@ -26,13 +26,8 @@ from dataclasses import dataclass
 
 from mpcasv.config import Pos, frozen
 from mpcasv.controllers import ControllerKind
-from mpcasv.hybrid.domains import (
-    AvoidanceParams,
-    DomainParams,
-    avoidance_radii,
-    point_on_circle,
-    range_bearing,
-)
+from mpcasv.hybrid.avoidance import AvoidanceParams, avoidance_radii
+from mpcasv.hybrid.domains import DomainParams, point_on_circle, range_bearing
 from mpcasv.hybrid.system import HybridAutomaton, Mode, Transition
 from mpcasv.interface import Command, Observation, Reason
 from mpcasv.interface import Mode as CmdMode

@@ -62,7 +62,7 @@ _PC = imcpy.PlanControl
 
 def guard_params(cfg: DeployConfig, controller) -> GuardParams:
     """Guard parameters: watchdog limits, and the keep-out sphere of the controller's
-    ``avoid`` option (:class:`mpcasv.hybrid.domains.AvoidanceParams`), else its domain's
+    ``avoid`` option (:class:`mpcasv.hybrid.avoidance.AvoidanceParams`), else its domain's
     ``r_in``, else ``watchdog.keep_out_m``."""
     wd = cfg.watchdog
     params = getattr(controller, "params", None)

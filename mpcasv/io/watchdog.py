@@ -12,7 +12,7 @@ AUV states age between messages. With ``age`` the time since the last accepted s
   ``uncertainty``/``reachable`` options of :mod:`mpcasv.hybrid.domains`) sees the growth
   itself; with those options the growth is counted twice (sigma and age), which errs on
   the safe side. Whatever the controller's domain, :func:`guard` enforces the grown radius
-  of :func:`mpcasv.hybrid.domains.r_avoid_uncertain` (keep-out sphere, the AUV may have
+  of :func:`mpcasv.hybrid.avoidance.r_avoid_uncertain` (keep-out sphere, the AUV may have
   risen at ``w_max`` and moved at ``v_max`` since) around the last position: it moves a
   transit waypoint out of that disc, and if the ASV is inside it, replaces the command by a
   transit straight away from the AUV to ``r_g + guard_margin_m`` ("guard_avoid").
@@ -34,7 +34,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, replace
 
-from mpcasv.hybrid.domains import r_avoid_uncertain
+from mpcasv.hybrid.avoidance import r_avoid_uncertain
 from mpcasv.interface import AUVEstimate, Command, Mode, Observation, Reason
 
 __all__ = ["OK", "UNCERTAIN", "LOST", "GuardParams", "auv_status", "guard", "inflate"]
@@ -71,7 +71,7 @@ def inflate(est: AUVEstimate, age: float, v_max: float) -> AUVEstimate:
 
 def grown_radius(est: AUVEstimate, age: float, p: GuardParams) -> float:
     """The anti-collision radius of an AUV last seen ``age`` s ago (capped at ``lost_s``):
-    :func:`mpcasv.hybrid.domains.r_avoid_uncertain` with the keep-out sphere ``r_keep``, no
+    :func:`mpcasv.hybrid.avoidance.r_avoid_uncertain` with the keep-out sphere ``r_keep``, no
     sigma term (the estimate is the last state itself), ``u_age = v_max`` and ``w_max``."""
     a = min(max(age, 0.0), p.lost_s)
     return float(r_avoid_uncertain(est.depth, p.r_keep, 0.0, a, 0.0, p.v_max, p.w_max))

@@ -8,7 +8,7 @@ Every step (docs/mpc.md, "Controller"):
    only whether the propeller runs), the AUVs' positions over the horizon (the estimator's
    forecast: along the known plan with the plan-aware estimator, else constant velocity),
    their anti-collision radii along the planned bearing (the hybrid controllers' domain
-   functions, :func:`~mpcasv.hybrid.domains.estimate_shape`);
+   functions, :func:`~mpcasv.hybrid.avoidance.estimate_shape`);
 3. a warm-started solve from the previous plan moved one control period ahead;
    while the plan stands still, every ``explore_every`` s a second solve starts from a guess
    heading for the AUV with the largest projected fix age (standing still is a local minimum:
@@ -35,7 +35,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from mpcasv.controllers import Boat, ControllerKind
-from mpcasv.hybrid.domains import estimate_shape
+from mpcasv.hybrid.avoidance import estimate_shape
 from mpcasv.hybrid.multi import HybridMulti, HybridMultiParams
 from mpcasv.hybrid.single import HybridSingle, HybridSingleParams
 from mpcasv.interface import Command, Mode, Observation, PlannedTrajectory, Reason

@@ -12,7 +12,8 @@ from typing import Annotated, Literal
 from pydantic import Field, Strict
 
 from mpcasv.config import NonNeg, Pos, PosInt, frozen
-from mpcasv.hybrid.domains import AvoidanceParams, DomainParams
+from mpcasv.hybrid.avoidance import AvoidanceParams
+from mpcasv.hybrid.domains import DomainParams
 
 SolverName = Literal["fatrop", "ipopt", "qp"]
 
