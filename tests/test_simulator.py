@@ -157,3 +157,23 @@ def test_simulate_refuses_to_replace_a_folder_that_is_not_a_run(tmp_path, capsys
     assert main(["simulate", scenario, "--out", str(run), "--no-plots", "--quiet"]) == 0
     assert main(["simulate", scenario, "--out", str(run), "--no-plots", "--quiet"]) == 0
     assert (run / "run.json").is_file()
+
+
+def test_simulate_duration_cuts_a_scenario_and_manoeuvre_options_are_refused(tmp_path, capsys):
+    """`mpcasv simulate SCENARIO --duration 20` ran the whole scenario (the option belonged to
+    --manoeuvre and was silently ignored; found by a new user). It now simulates the first 20 s
+    (recorded in metrics.json); the manoeuvre-only options, and a non-positive duration, are
+    refused with one line and exit 2 instead of being ignored."""
+    scenario = str(Path(__file__).resolve().parents[1] / "experiments/scenarios/demo.toml")
+    out = tmp_path / "cut"
+    assert main(["simulate", scenario, "--duration", "20", "--out", str(out), "--no-plots",
+                 "--quiet"]) == 0  # fmt: skip
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["duration_s"] == pytest.approx(20.0)
+    capsys.readouterr()
+    for bad in (["--speed", "2"], ["--vessel", "otter"], ["--noise"], ["--duration", "0"],
+                ["--duration", "nan"]):  # fmt: skip
+        assert main(["simulate", scenario, "--out", str(tmp_path / "x"), *bad]) == 2, bad
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and "error" in err[0], (bad, err)
+    assert not (tmp_path / "x").exists()

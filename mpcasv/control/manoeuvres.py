@@ -132,15 +132,16 @@ def add_arguments(p) -> None:
         choices=MANOEUVRES,
         help="simulate this manoeuvre instead of a scenario; --out FILE.csv|.parquet",
     )
-    g.add_argument("--vessel", default="gretha", help="vessel parameters: name or TOML")
-    g.add_argument("--speed", type=float, default=1.5, help="approach speed, m/s (default 1.5)")
-    g.add_argument("--delta", type=float, default=20.0, help="steering angle, deg (default 20)")
-    g.add_argument("--duration", type=float, default=150.0, help="duration, s (default 150)")
+    g.add_argument("--vessel", help="vessel parameters: name or TOML (default gretha)")
+    g.add_argument("--speed", type=float, help="approach speed, m/s (default 1.5)")
+    g.add_argument("--delta", type=float, help="steering angle, deg (default 20)")
+    g.add_argument("--duration", type=float,
+                   help="duration, s (default 150; with a SCENARIO: simulate only its first "
+                   "DURATION seconds)")  # fmt: skip
     g.add_argument(
         "--current",
         type=float,
         nargs=2,
-        default=(0.0, 0.0),
         metavar=("V_N", "V_E"),
         help="constant current, m/s (default 0 0)",
     )
@@ -151,14 +152,21 @@ def add_arguments(p) -> None:
     )
 
 
+#: options that only a manoeuvre reads (a SCENARIO run refuses them rather than ignore them)
+MANOEUVRE_ONLY = ("vessel", "speed", "delta", "current", "noise")
+
+
 def run_cli(args) -> int:
     """``mpcasv simulate --manoeuvre NAME``: write one identification log."""
     from mpcasv.models.params import load_vessel
 
-    model = VesselModel(load_vessel(args.vessel))
+    model = VesselModel(load_vessel(args.vessel or "gretha"))
     noise = Noise() if args.noise else None
-    df = simulate_manoeuvre(model, args.manoeuvre, u0=args.speed, delta_deg=args.delta,
-                            duration=args.duration, current=args.current, noise=noise,
+    df = simulate_manoeuvre(model, args.manoeuvre,
+                            u0=1.5 if args.speed is None else args.speed,
+                            delta_deg=20.0 if args.delta is None else args.delta,
+                            duration=150.0 if args.duration is None else args.duration,
+                            current=args.current or (0.0, 0.0), noise=noise,
                             seed=args.seed)  # fmt: skip
     out = args.out or Path("runs") / f"{args.manoeuvre}-{args.seed}.csv"
     if out.suffix not in (".csv", ".parquet"):

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
+import math
 from pathlib import Path
 
 from mpcasv.config import ConfigError
@@ -44,6 +46,14 @@ def run(args: argparse.Namespace) -> int:
         return run_cli(args)
     if args.scenario is None:
         raise ConfigError("give a SCENARIO (TOML file) or --manoeuvre")
+    from mpcasv.control.manoeuvres import MANOEUVRE_ONLY
+
+    given = [f"--{k}" for k in MANOEUVRE_ONLY if getattr(args, k) not in (None, False)]
+    if given:
+        raise ConfigError(f"{', '.join(given)}: only with --manoeuvre (a scenario names its own "
+                          "vessel, current and noise)")  # fmt: skip
+    if args.duration is not None and not (math.isfinite(args.duration) and args.duration > 0):
+        raise ConfigError(f"--duration {args.duration:g}: a duration is a number of seconds > 0")
     from mpcasv.controllers import Boat, make_controller
     from mpcasv.controllers.prepare import needed_libraries, prepare
     from mpcasv.estimation import ESTIMATORS
@@ -54,6 +64,8 @@ def run(args: argparse.Namespace) -> int:
     from mpcasv.sim.uncertainty import nominal, realise
 
     scenario = load_scenario(args.scenario)
+    if args.duration is not None:  # the first DURATION s: part of the realised scenario
+        scenario = dataclasses.replace(scenario, duration=args.duration)
     if args.seed < 0:
         raise ConfigError(f"--seed {args.seed}: a seed is an integer >= 0")
     scenario, real = nominal(scenario) if args.nominal else realise(scenario, args.seed)
