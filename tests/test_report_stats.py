@@ -364,3 +364,24 @@ def test_run_folders_outside_the_report_folder_are_linked_by_absolute_uri(tmp_pa
     first = Path(df["run_dir"].iloc[0]) / "paths.png"
     assert f"[paths]({first.as_uri()})" in md and f'href="{first.as_uri()}"' in page
     assert (out / "figures" / "compare-c1.png").stat().st_size > 10_000
+
+
+def test_an_infinite_value_is_the_worst_run_not_a_missing_one():
+    """`revisit_interval_max_s` is infinite when an AUV is never revisited. Such rows were
+    dropped as non-finite before pairing, so the controller that never came back lost its
+    worst runs from the comparison (found in a review). They are now pairs: in 8 of 10 worlds
+    "new" never revisits (inf) where "ref" does, so "new" is significantly worse, with the
+    median and upper CI bound infinite; two equal infinities are a zero difference."""
+    df = results({"revisit_interval_max_s": 0.0}, seeds=range(5), cases=("c1",))
+    new = df["variant"] == "new"
+    worlds = df.loc[new].index[:8]
+    df.loc[worlds, "revisit_interval_max_s"] = np.inf
+    both = df.loc[new].index[8]  # one world where neither revisits: a tie
+    df.loc[df["seed"].eq(df.at[both, "seed"]) & df["current"].eq(df.at[both, "current"]),
+           "revisit_interval_max_s"] = np.inf  # fmt: skip
+    paired, _ = stats.pairs(df, "revisit_interval_max_s", "ref", "new")
+    assert len(paired) == 10
+    s = paired_stat(paired["ref"].to_numpy(), paired["other"].to_numpy())
+    assert s.median == np.inf and s.ci_high == np.inf and s.p < 0.05
+    assert stats.verdict(s, "lower", "ref", "new") == "ref better"
+    assert paired_stat(np.array([np.inf] * 6), np.array([np.inf] * 6)).note.startswith("all 6")

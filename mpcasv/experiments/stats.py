@@ -113,7 +113,9 @@ def pairs(results: pd.DataFrame, metric: str, reference: str, other: str
           ) -> tuple[pd.DataFrame, pd.Series]:  # fmt: skip
     """The paired values of ``metric``: ``reference`` vs ``other`` on equal :func:`pair_key`.
 
-    Only ``status == "ok"`` rows with a finite value count. Returns the pairs (key columns,
+    Only ``status == "ok"`` rows with a value count; an infinite value (e.g. an AUV never
+    revisited: ``revisit_interval_max_s``) is the worst a run can do and is kept, never
+    dropped as missing (only NaN is). Returns the pairs (key columns,
     ``ref``, ``other``; one row per pair) and, per case, how many rows of either variant
     found no partner. Raises :class:`PairingError` if a variant has two rows with the same key
     (the key does not identify the job).
@@ -122,7 +124,7 @@ def pairs(results: pd.DataFrame, metric: str, reference: str, other: str
     ok = results[(results["status"] == "ok") & results[COMPARE].isin([reference, other])]
     ok = ok[[*key, COMPARE, metric]].copy()
     ok[metric] = pd.to_numeric(ok[metric], errors="coerce").astype(float)
-    ok = ok[np.isfinite(ok[metric])]
+    ok = ok[ok[metric].notna()]
     sides = {}
     for name, v in (("ref", reference), ("other", other)):
         side = ok[ok[COMPARE] == v].drop(columns=COMPARE).rename(columns={metric: name})
@@ -156,15 +158,36 @@ def _median_difference(other: np.ndarray, ref: np.ndarray, axis: int = -1) -> np
     return np.median(other - ref, axis=axis)
 
 
+def _differences(ref: np.ndarray, other: np.ndarray) -> np.ndarray:
+    """``other - ref`` with two equal infinities a zero difference (both never did it)."""
+    with np.errstate(invalid="ignore"):
+        d = other - ref
+    return np.where(np.isinf(ref) & (ref == other), 0.0, d)
+
+
+def _finite_stand_in(d: np.ndarray) -> tuple[np.ndarray, float]:
+    """``d`` with +-inf replaced by +-S, S far beyond every finite ``|d|`` (ranks, signs and
+    order statistics kept), and the largest finite ``|d|`` M: a statistic of the stand-in
+    beyond M is infinite."""
+    finite = np.abs(d[np.isfinite(d)])
+    M = float(finite.max()) if finite.size else 0.0
+    return np.where(np.isinf(d), np.sign(d) * 1e15 * (M + 1.0), d), M
+
+
 def paired_stat(ref: np.ndarray, other: np.ndarray, seed: int = SEED) -> PairedStat:
     """Statistics of the pairs ``(ref[i], other[i])`` (shape (n,) each, units of the metric):
-    the pairs are resampled together (``paired=True``)."""
+    the pairs are resampled together (``paired=True``). Infinite values take part: the
+    Wilcoxon test only sees ranks and signs, and a median or CI bound that falls on an
+    infinite difference is reported as +-inf."""
     ref, other = np.asarray(ref, float), np.asarray(other, float)
-    d = other - ref
+    d, M = _finite_stand_in(_differences(ref, other))
     n = len(d)
     if n == 0:
         return PairedStat(0, math.nan, math.nan, math.nan, math.nan, "no pairs")
-    med = float(np.median(d))
+    def back(v: float) -> float:  # a statistic of the stand-in, in the metric's terms
+        return math.copysign(math.inf, v) if abs(v) > M * (1 + 1e-9) + 1e-9 else float(v)
+
+    med = back(float(np.median(d)))
     if n < MIN_PAIRS:
         return PairedStat(n, med, math.nan, math.nan, math.nan,
                           f"n/a: {n} pairs < {MIN_PAIRS}")  # fmt: skip
@@ -172,13 +195,14 @@ def paired_stat(ref: np.ndarray, other: np.ndarray, seed: int = SEED) -> PairedS
         if d[0] == 0:
             return PairedStat(n, 0.0, 0.0, 0.0, math.nan,
                               f"all {n} differences zero: no test")  # fmt: skip
-        lo = hi = float(d[0])
+        lo = hi = back(float(d[0]))
     else:
         ci = sps.bootstrap(
-            (other, ref), _median_difference, vectorized=True, paired=True, n_resamples=N_RESAMPLES,
-            confidence_level=CONFIDENCE, method="percentile", rng=np.random.default_rng(seed),
+            (d, np.zeros(n)), _median_difference, vectorized=True, paired=True,
+            n_resamples=N_RESAMPLES, confidence_level=CONFIDENCE, method="percentile",
+            rng=np.random.default_rng(seed),
         ).confidence_interval  # fmt: skip
-        lo, hi = float(ci.low), float(ci.high)
+        lo, hi = back(float(ci.low)), back(float(ci.high))
     return PairedStat(n, med, lo, hi, wilcoxon_p(d), "")
 
 
