@@ -177,3 +177,19 @@ def test_simulate_duration_cuts_a_scenario_and_manoeuvre_options_are_refused(tmp
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and "error" in err[0], (bad, err)
     assert not (tmp_path / "x").exists()
+
+
+def test_a_preset_of_another_controller_is_named_as_such(tmp_path, capsys):
+    """`--controller hybrid-single --params mpc-single` listed twelve "Unexpected keyword
+    argument" errors (found by a new user); it now says in one line which controllers the
+    preset is for. A preset that fits no controller keeps its field-by-field errors."""
+    scenario = str(Path(__file__).resolve().parents[1] / "experiments/scenarios/case3.toml")
+    out = str(tmp_path / "x")
+    assert main(["simulate", scenario, "--controller", "hybrid-single", "--params",
+                 "mpc-single", "--out", out, "--quiet"]) == 2  # fmt: skip
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "a preset for mpc-multi, mpc-single, not for 'hybrid-single'" in err[0]
+    bad = tmp_path / "bad.toml"
+    bad.write_text("speed = -3\n")
+    assert main(["simulate", scenario, "--params", str(bad), "--out", out, "--quiet"]) == 2
+    assert "greater than 0" in capsys.readouterr().err

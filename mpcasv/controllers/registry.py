@@ -153,7 +153,28 @@ def load_preset(
             node = node.setdefault(part, {})
         node[parts[-1]] = value
     source = f"{path}" + (f" with overrides {dict(overrides)}" if overrides else "")
-    return parse(kind.params_cls, data, source)
+    try:
+        return parse(kind.params_cls, data, source)
+    except ConfigError:
+        fits = _kinds_that_accept(data, kind)
+        if fits and not overrides:  # a preset of another kind: say so in one line
+            raise ConfigError(f"{path}: a preset for {', '.join(fits)}, not for {name!r} "
+                              "(choose a preset of that controller)") from None  # fmt: skip
+        raise
+
+
+def _kinds_that_accept(data: dict, kind: ControllerKind) -> list[str]:
+    """The other controllers whose parameter class validates ``data`` (sorted names)."""
+    fits = []
+    for other in sorted(CONTROLLERS):
+        try:
+            k = controller_kind(other)
+            if k.params_cls is not kind.params_cls:
+                parse(k.params_cls, data, other)
+                fits.append(other)
+        except ConfigError:
+            continue
+    return fits
 
 
 def check_boat(params: Any, boat: Boat, source: str) -> None:
