@@ -170,3 +170,18 @@ def test_report_of_a_sweep_whose_jobs_all_failed_lists_the_errors(tmp_path):
     assert "1 errors" in text and "RuntimeError: solver exploded" in text
     assert f"**Incomplete**: {len(QUICK.jobs) - 1} jobs have not run" in text
     assert "solver exploded" in page.read_text()
+
+
+def test_an_unwritable_runs_dir_is_refused_before_any_job(tmp_path, capsys):
+    """`--runs-dir /proc/x` ran every job and recorded each as an error (found by a new
+    user); it is refused in one line, exit 2, before any job or output folder exists. A
+    writable fsspec URL passes the same check."""
+    from mpcasv.experiments.runner import check_runs_location
+
+    out = tmp_path / "out"
+    assert main(["compare", "quick", "--out", str(out), "--runs-dir", "/proc/x"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--runs-dir /proc/x: cannot write run folders" in err[0]
+    assert not out.exists()
+    check_runs_location(f"file://{tmp_path / 'remote'}", None)  # no exception
+    assert (tmp_path / "remote").is_dir() and not any((tmp_path / "remote").iterdir())

@@ -174,6 +174,30 @@ def runs_location(out: Path, suite: str, runs_dir: str | None, dask: str | None)
     return f"mpcasv-runs/{suite}" if dask else str(out / "runs")
 
 
+def check_runs_location(runs: str, dask: str | None) -> None:
+    """Refuse, before any job starts, a runs location this process cannot write: a local
+    path (unless Dask workers write it on their own machines) or an fsspec URL. Raises
+    :class:`ConfigError` in one line naming it and the cause (every job would fail on it)."""
+    if dask and not is_url(runs):
+        return  # a path on the workers' machines: only they can tell
+    probe = ".mpcasv-write-probe"
+    try:
+        if is_url(runs):
+            import fsspec
+
+            fs, root = fsspec.core.url_to_fs(runs)
+            fs.makedirs(root, exist_ok=True)
+            fs.pipe(f"{root.rstrip('/')}/{probe}", b"")
+            fs.rm(f"{root.rstrip('/')}/{probe}")
+        else:
+            Path(runs).mkdir(parents=True, exist_ok=True)
+            (Path(runs) / probe).write_bytes(b"")
+            (Path(runs) / probe).unlink()
+    except (OSError, ValueError, ImportError) as exc:
+        cause = getattr(exc, "strerror", None) or str(exc).splitlines()[0]
+        raise ConfigError(f"--runs-dir {runs}: cannot write run folders there ({cause})") from None
+
+
 def prepare_controllers(jobs: list[Job], quiet: bool = False, dask: str | None = None) -> list:
     """Before the workers start: compile the libraries the jobs' controllers need that are not
     in the cache, saying which, that it happens once, and how long (issue 12 item 8); the
@@ -367,11 +391,13 @@ def run_suite(suite: str | Path, out: str | Path, workers: int = 1, dask: str | 
     """
     exp = expand(suite)  # refuses a bad suite before anything starts
     out = Path(out).resolve()
+    runs = runs_location(out, exp.suite.name, runs_dir, dask)
+    if runs_dir:
+        check_runs_location(runs, dask)  # before anything is written
     out.mkdir(parents=True, exist_ok=True)
     (out / "suite.toml").write_bytes(exp.path.read_bytes())
     todo = pending_jobs(exp, out, retry_errors)
     stats = SweepStats(exp.suite.name, len(exp.jobs), len(exp.jobs) - len(todo), workers=workers)
-    runs = runs_location(out, exp.suite.name, runs_dir, dask)
     stats.runs = runs if (runs_dir or not dask) else f"{runs} in each Dask worker's directory"
     if not quiet:
         for s in exp.skipped:
