@@ -128,3 +128,31 @@ def test_shipped_power_turn_overrides_eq_3_1(model):
     run, _ = turn(model, shipped, math.radians(180.0), 200.0, t_end=60.0,
                   u0=shipped.reference.u_ff)  # fmt: skip
     assert float(np.max(run.X[:, IX["u"]])) > shipped.reference.u_ff + 0.3
+
+
+def test_power_turn_scoped_to_avoidance_keeps_eq_3_1_in_tracking_turns(model):
+    """turn_scope = "avoidance": the power turn acts only in collision-avoidance transits
+    (cmd[0] = 2, from Reason.AVOIDANCE); a tracking transit's long hard turn stays at eq. 3.1's
+    u_ff while an avoidance transit's runs well above it (docs/tuning.md)."""
+    from mpcasv.control.execution import command_vector
+    from mpcasv.control.tuning import run_closed_loop
+    from mpcasv.interface import Command, Mode, Reason
+
+    shipped = load_execution("gretha")
+    ep = dataclasses.replace(shipped, turn_thrust=0.8, turn_scope="avoidance")
+    u_ff = ep.reference.u_ff
+    x0, _ = model.trim(u_ff)
+    u_max = {}
+    for transit in (1.0, 2.0):
+        run = run_closed_loop(model, ep, x0, (-200.0, 1e-3), model.params.u_max, 60.0,
+                              transit=transit)  # fmt: skip
+        hard = np.abs(run.psi_error) >= math.pi / 2
+        n = int(np.argmax(~hard))
+        assert n * (run.t[1] - run.t[0]) > 10.0
+        u_max[transit] = float(run.X[:n, IX["u"]].max())
+    assert u_max[1.0] <= u_ff + 0.05
+    assert u_max[2.0] > u_ff + 0.3
+    wp = (10.0, 0.0)
+    assert command_vector(Command(Mode.TRANSIT, wp, 1.0, 0, Reason.AVOIDANCE))[0] == 2.0
+    assert command_vector(Command(Mode.TRANSIT, wp, 1.0, 0, Reason.TRACKING))[0] == 1.0
+    assert command_vector(Command.standby(0))[0] == 0.0

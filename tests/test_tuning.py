@@ -141,6 +141,21 @@ def test_turn_detects_pirouettes(model, shipped):
     assert not far["pirouette"] and 0 < far["turn_s"] < 60 and far["total_turn_deg"] < 180
 
 
+def test_turn_grid_close_waypoint_picks_the_field_u_ff(model, shipped):
+    """The turn grid with its close waypoint (10 m at 90 deg, inside the full-power turning
+    circle): u_ff = 0.8 pirouettes there, the field value 0.6 does not, so the grid recommends
+    0.6 (docs/tuning.md). At 20 m and 50 m neither pirouettes, which made the old 20,50 grid
+    recommend 0.8."""
+    from mpcasv.control.tuning_speed import recommend, turn_grid
+
+    ep = dataclasses.replace(shipped, turn_thrust=0.0)
+    rows, _ = turn_grid(model, ep, [(0.6, 1.59), (0.8, 1.59)], angles_deg=(90.0,), distance=10.0)
+    assert [r.ok for r in rows] == [True, False]
+    assert recommend(rows).u_ff == 0.6
+    far, _ = turn_grid(model, ep, [(0.6, 1.59), (0.8, 1.59)], angles_deg=(90.0,), distance=20.0)
+    assert all(r.ok for r in far) and recommend(far).u_ff == 0.8
+
+
 def test_cli_tune_yaw_writes_loadable_schedule(tmp_path, shipped):
     toml = tmp_path / "exec.toml"
     rc = main(["tune", "yaw", "--speeds", "1,2", "--wn", "0.3,0.6", "--out", str(tmp_path),

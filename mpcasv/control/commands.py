@@ -95,8 +95,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     s.add_argument(
         "--distance",
         type=_floats,
-        default=_floats("20,50"),
-        help="waypoint distances of the turns, m (default 20,50)",
+        default=_floats("10,20,50"),
+        help="waypoint distances of the turns, m (default 10,20,50: 10 m is inside the "
+        "full-power turning circle, where turning while accelerating pirouettes)",
     )
     s.add_argument(
         "--set-reference",
@@ -262,8 +263,10 @@ def run_tune_speed(args: argparse.Namespace) -> int:
     pairs = [(a, b) for a in args.u_ff for b in args.k_u]
     field = (ep.reference.u_ff, ep.reference.k_u)
     grids = {}
+    # the grid and the pirouette check tune eq. 3.1 itself: the optional power turn is off
+    ep_31 = replace(ep_new, turn_thrust=0.0)
     for d in args.distance:
-        rows, runs = turn_grid(model, ep_new, [*pairs, (model.params.u_max, 0.0)], distance=d,
+        rows, runs = turn_grid(model, ep_31, [*pairs, (model.params.u_max, 0.0)], distance=d,
                                progress=not args.quiet)  # fmt: skip
         grids[d] = (rows, runs)
     # recommend on the grid (the last row, "no reference model", is a baseline only)
@@ -305,7 +308,7 @@ def run_tune_speed(args: argparse.Namespace) -> int:
         prov = _provenance(
             prov, "reference", f"{_command_line(args, 'tune speed')}: recommended by the turn grid"
         )
-    elif "reference: " not in prov:
+    elif "reference: " not in prov or "reference: field tuning" in prov:
         prov = _provenance(
             prov,
             "reference",
@@ -320,7 +323,7 @@ def run_tune_speed(args: argparse.Namespace) -> int:
     from mpcasv.control.tuning_speed import PIROUETTE_CASE, pirouette_check
 
     a, d, u0 = PIROUETTE_CASE
-    plot_pirouette(pirouette_check(model, ep_new, a, d, u0), (d * math.cos(math.radians(a)),
+    plot_pirouette(pirouette_check(model, ep_31, a, d, u0), (d * math.cos(math.radians(a)),
                    d * math.sin(math.radians(a))), args.out,
                    f"{model.params.name}: waypoint {d:g} m at {a:g} deg, from {u0:g} m/s, "
                    f"command u_max = {model.params.u_max:g} m/s")  # fmt: skip

@@ -6,10 +6,11 @@ one compiled CasADi function per supervisory period (:func:`closed_loop`). That 
 simulator fast (one call per second of simulated time) while the code below reads as plain
 control law. The same laws run in the tuning tools' nonlinear checks.
 
-Command vector ``cmd = [transit (0/1), N_wp, E_wp, U_cap]``; controller state
-``z = [I_psi, I_u, r_f]`` (yaw integrator output in rad, speed integrator output in N,
-filtered yaw rate in rad/s). Standby (transit = 0) commands zero thrust and zero steering
-and resets the integrators.
+Command vector ``cmd = [transit, N_wp, E_wp, U_cap]`` with ``transit`` 0 (standby), 1 (transit)
+or 2 (transit for collision avoidance: only the optional power turn tells it apart);
+controller state ``z = [I_psi, I_u, r_f]`` (yaw integrator output in rad, speed integrator
+output in N, filtered yaw rate in rad/s). Standby (transit = 0) commands zero thrust and
+zero steering and resets the integrators.
 """
 
 from __future__ import annotations
@@ -124,6 +125,8 @@ def execution_law(x, z, cmd, model: VesselModel, ep: ExecutionParams, dt: float)
     T_floor = steering_floor(u_ref, x[7], model, ep)  # actual steering angle (lagged)
     if ep.turn_thrust > 0:  # the optional power turn: overrides eq. 3.1 (params.py)
         turn = ca.fmin(ca.fmax((ca.fabs(e_psi) - math.pi / 4) / (math.pi / 4), 0), 1)
+        if ep.turn_scope == "avoidance":  # only in collision-avoidance transits (cmd[0] = 2)
+            turn = ca.if_else(transit > 1.5, turn, 0)
         T_floor = ca.fmax(T_floor, P.T_max * ep.turn_thrust * turn)
     T_sat = ca.fmin(ca.fmax(T_unsat, T_floor), P.T_max)
     I_u_next = _integrate(I_u, dt * ep.speed.Ki * e_u, T_unsat - (P.T_max + T_floor) / 2,
@@ -160,9 +163,11 @@ def closed_loop(model: VesselModel, ep: ExecutionParams, dt: float, n_sub: int) 
 
 
 def command_vector(command) -> np.ndarray:
-    """Turn a :class:`mpcasv.interface.Command` into the ``cmd`` vector of :func:`closed_loop`."""
-    from mpcasv.interface import Mode
+    """Turn a :class:`mpcasv.interface.Command` into the ``cmd`` vector of :func:`closed_loop`
+    (``transit`` = 2 for a collision-avoidance transit, 1 for any other)."""
+    from mpcasv.interface import Mode, Reason
 
     if command.mode is Mode.STANDBY:
         return np.zeros(NCMD)
-    return np.array([1.0, command.waypoint[0], command.waypoint[1], command.speed])
+    transit = 2.0 if command.reason is Reason.AVOIDANCE else 1.0
+    return np.array([transit, command.waypoint[0], command.waypoint[1], command.speed])
