@@ -137,3 +137,39 @@ def test_achievable_speed_caps_a_planned_speed(tmp_path):
     assert last["speed_capped"] is True
     dep.jsonl.close()
     dep.lsf.close()
+    # the autopilot's own limit (DUNE's Maximum Absolute Speed) caps it too
+    lim = Deploy(asv_cfg(tmp_path / "lim", speed={"command_max": 2.5}), dry_run=True)
+    lim.controller, lim.observation = Planner(), dep.observation
+    assert lim.step(0.0, 0.0).speed == 2.5
+    lim.jsonl.close()
+    lim.lsf.close()
+
+
+def test_otter_deploy_config_plans_with_the_identified_otter(monkeypatch):
+    """experiments/deploy/dune-otter.toml names the vessel identified from DUNE's Otter log;
+    the MPC is built for that boat (with the configuration's acoustic channel)."""
+    from pathlib import Path
+
+    import pytest
+
+    from mpcasv.io.config import build_controller, deploy_boat, load_deploy_config
+    from mpcasv.models.params import load_vessel
+
+    cfg = load_deploy_config(Path(__file__).resolve().parents[1] / "experiments" / "deploy"
+                             / "dune-otter.toml")  # fmt: skip
+    assert deploy_boat(cfg).vessel == load_vessel("dune-otter")
+    assert cfg.controller.speed_feedback and cfg.speed.command_max == 2.5
+    seen = {}
+
+    class Built(Exception):
+        pass
+
+    def build_ocp(params, n_auv, multi, log=print, boat=None):  # stands in for the compile
+        seen["boat"] = boat
+        raise Built
+
+    monkeypatch.setattr("mpcasv.mpc.controller.build_ocp", build_ocp)
+    with pytest.raises(Built):
+        build_controller(cfg, log=lambda *a: None)
+    assert seen["boat"].vessel.name == "dune-otter"
+    assert seen["boat"].acoustics == cfg.acoustics

@@ -212,6 +212,9 @@ class SpeedSpec:
     ratio: Annotated[float, Strict(), Field(gt=0, le=1)] = 0.8
     persist_s: Pos = 10.0
     settle_s: NonNeg = 5.0  # after a change of commanded speed, before the window opens
+    # the autopilot's own limit (DUNE: [General] Maximum Absolute Speed, 2.5 m/s for the
+    # Otter): every transit speed sent is capped at it (a plan may ask for the model's u_max)
+    command_max: Pos | None = None
 
 
 @frozen

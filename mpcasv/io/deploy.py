@@ -335,10 +335,10 @@ class Deploy(BoatFeedback, FieldMode):
     def _act(self, ts, now, obs, status, ages, raw: Command, step_ms: float) -> Command:
         """Guard, cap the speed (``speed_feedback``), send (unless dry run), log."""
         cmd, override = guard(raw, obs, status, ages, self.gp)
-        capped = (self.speed_cap is not None and cmd.mode is Mode.TRANSIT
-                  and cmd.speed > self.speed_cap)  # fmt: skip
+        caps = [c for c in (self.speed_cap, self.cfg.speed.command_max) if c is not None]
+        capped = bool(caps) and cmd.mode is Mode.TRANSIT and cmd.speed > min(caps)
         if capped:  # an MPC's speed comes from its plan, not from params.speed
-            cmd = dataclasses.replace(cmd, speed=self.speed_cap)
+            cmd = dataclasses.replace(cmd, speed=min(caps))
         sent = False
         if not self.dry_run:
             lk = self.cfg.link

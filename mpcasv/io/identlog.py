@@ -218,7 +218,13 @@ def _thruster_map_for(logs: list[Path], prior: VesselParams):
 def run_map_identification(args, prior: VesselParams, tmap) -> int:
     """``mpcasv identify`` through a thruster map: writes the vessel file and a report
     folder beside it (``identify.md``, ``identify.json``)."""
-    from mpcasv.models.ident_mapout import phase_speeds, report, write_vessel, written_vessel
+    from mpcasv.models.ident_mapout import (
+        phase_speeds,
+        plot_map_replay,
+        report,
+        write_vessel,
+        written_vessel,
+    )  # fmt: skip
     from mpcasv.models.ident_thrust import HULL_COEFFS, identify_through_map, vsim_structure
 
     coeffs = tuple(c.strip() for c in args.coeffs.split(",")) if args.coeffs else HULL_COEFFS
@@ -253,12 +259,13 @@ def run_map_identification(args, prior: VesselParams, tmap) -> int:
     folder = args.out.with_name(args.out.stem + "-report")
     folder.mkdir(parents=True, exist_ok=True)
     (folder / "identify.md").write_text(table_md + "\n")
+    plot_map_replay(fit, folder)
     (folder / "identify.json").write_text(json.dumps({
         "coeffs": {c: getattr(P, c) for c in fit.coeffs}, "rel_std": fit.rel_std,
         "metrics": fit.metrics, "split_s": fit.split_s, "T_max": P.T_max, "u_max": P.u_max,
         "phases": phases}, indent=1))  # fmt: skip
     print(table_md)
-    print(f"wrote {args.out} and {folder}/ (identify.md, identify.json)")
+    print(f"wrote {args.out} and {folder}/ (identify.md, identify.json, identify_replay.png)")
     return 0
 
 

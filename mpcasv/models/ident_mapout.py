@@ -147,3 +147,36 @@ def phase_speeds(t: np.ndarray, commanded: np.ndarray, u: np.ndarray, a: np.ndar
         out.append({"t0": float(t[i0]), "commanded": float(commanded[i0]),
                     "u": float(u[sel][tail].mean()), "a": float(a[sel][tail].mean())})
     return out
+
+
+def plot_map_replay(fit: MapFit, out: Path) -> Path:
+    """Measured and replayed speed, yaw rate and heading over the training and the held-out
+    windows (``identify_replay.png`` in ``out``)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(3, 2, figsize=(13, 7.5), sharex="col")
+    scale = {"psi": (math.degrees(1), "deg"), "u": (1.0, "m/s"), "r": (math.degrees(1), "deg/s")}
+    for j, part in enumerate(("train", "validation")):
+        Y, Ys = fit.replay[part]
+        k = np.arange(Y.shape[1]) * 0.1
+        m = fit.metrics["identified"][part]
+        for i, c in enumerate(("u", "r", "psi")):
+            row = ("psi", "u", "r").index(c)
+            f, unit = scale[c]
+            ax = axes[i, j]
+            ax.plot(k, Y[row] * f, ".", ms=1, color="0.55", label="DUNE log (EstimatedState)")
+            ax.plot(k, Ys[row] * f, lw=0.8, color="tab:blue", label="identified model")
+            ax.set_ylabel(f"{c} ({unit})")
+            ax.set_title(f"{'held out' if part == 'validation' else 'fit'}: {c}, RMS "
+                         f"{m[c] * f:.3g} {unit}", fontsize=9)  # fmt: skip
+        axes[2, j].set_xlabel("time over the 30-s replay windows, concatenated (s)")
+    axes[0, 0].legend(fontsize=8, loc="lower right")
+    fig.tight_layout()
+    out.mkdir(parents=True, exist_ok=True)
+    p = out / "identify_replay.png"
+    fig.savefig(p, dpi=90)
+    plt.close(fig)
+    return p
