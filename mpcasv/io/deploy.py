@@ -47,57 +47,25 @@ from pathlib import Path
 
 import imcpy
 
-from mpcasv.config import ConfigError
 from mpcasv.estimation import make_estimator
 from mpcasv.interface import ASVState, Command, Mode, Observation
 from mpcasv.io.asvwatch import SpeedWatch, Thrusters
 from mpcasv.io.config import DeployConfig, build_controller, load_deploy_config
 from mpcasv.io.deployfeedback import BoatFeedback
-from mpcasv.io.deploystep import FieldMode, start_field_mode
+from mpcasv.io.deploystep import FieldMode, guard_params, known_plans, prepare_controller
 from mpcasv.io.imc import RF, reference
 from mpcasv.io.link import ImcLink, Peer
 from mpcasv.io.logs import JsonlWriter, LsfWriter
 from mpcasv.io.records import cmd_to_dict, obs_to_dict
 from mpcasv.io.transport import Clock
-from mpcasv.io.watchdog import OK, GuardParams, auv_status, guard, inflate
+from mpcasv.io.watchdog import OK, auv_status, guard, inflate
 from mpcasv.models.acoustics import Report
 
-__all__ = ["Deploy", "guard_params", "run_deploy"]
+__all__ = ["Deploy", "guard_params", "run_deploy"]  # guard_params: from deploystep
 
 log = logging.getLogger("mpcasv.deploy")
 WAITING, STARTING, RUNNING, ASV_STALE = "waiting", "starting", "running", "asv_stale"
 _PC = imcpy.PlanControl
-
-
-def guard_params(cfg: DeployConfig, controller) -> GuardParams:
-    """Guard parameters: watchdog limits, and the keep-out sphere of the controller's
-    ``avoid`` option (:class:`mpcasv.hybrid.avoidance.AvoidanceParams`), else its domain's
-    ``r_in``, else ``watchdog.keep_out_m``."""
-    wd = cfg.watchdog
-    params = getattr(controller, "params", None)
-    domain = getattr(controller, "domain", None)
-    avoid = getattr(params, "avoid", None)
-    if avoid is not None:
-        r_keep = avoid.sphere(domain)
-    else:
-        r_keep = domain.r_in if domain is not None else wd.keep_out_m
-    speed = float(getattr(params, "speed", wd.guard_speed))
-    return GuardParams(wd.auv_stale_s, wd.auv_lost_s, wd.auv_speed_max, wd.auv_rise_rate,
-                       float(r_keep), wd.guard_margin_m, speed)  # fmt: skip
-
-
-def _known_plans(cfg: DeployConfig) -> list:
-    n = len(cfg.auvs)
-    if cfg.controller.scenario is None:
-        return [None] * n
-    from mpcasv.estimation import known_plan
-    from mpcasv.sim.scenario import load_scenario
-
-    sc = load_scenario(cfg.controller.scenario)
-    if len(sc.auv) != n:
-        raise ConfigError(f"controller.scenario {cfg.controller.scenario} has {len(sc.auv)} "
-                          f"AUVs, the config {n}")  # fmt: skip
-    return [known_plan(a.build_behaviour()) for a in sc.auv]
 
 
 class Deploy(BoatFeedback, FieldMode):
@@ -125,7 +93,7 @@ class Deploy(BoatFeedback, FieldMode):
         self.controller.reset(self.n_auv)
         self.init_field_mode(solver_factory)  # before any socket is opened
         self.domain = getattr(self.controller, "domain", None)
-        plans = _known_plans(cfg)
+        plans = known_plans(cfg)
         self.estimators = [make_estimator(c.estimator, initial=None, plan=plans[k])
                            for k in range(self.n_auv)]  # fmt: skip
         self.log_dir = Path(log_dir or cfg.log.dir)
@@ -452,14 +420,7 @@ def run_deploy(config: str | Path, dry_run: bool = False, log_dir: Path | None =
     any socket is opened."""
     cfg = load_deploy_config(config)
     if prepare:
-        t0 = time.perf_counter()
-        ctl = build_controller(cfg, log=log.warning)
-        field = hasattr(ctl, "use_deadline")
-        if field:  # the solver worker loads the compiled library: proven before the quay
-            start_field_mode(ctl, log=log.warning)
-            ctl.close()
-        return {"controller": cfg.controller.name, "vessel": cfg.controller.vessel or "gretha",
-                "field_mode": field, "seconds": time.perf_counter() - t0}
+        return prepare_controller(cfg)
     deploy = Deploy(cfg, dry_run, log_dir)
 
     async def main() -> dict:

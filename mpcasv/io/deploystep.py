@@ -1,4 +1,7 @@
-"""Field mode of the deploy loop (a mixin of :class:`mpcasv.io.deploy.Deploy`): a controller
+"""How the deploy loop builds and steps its controller: the guard's parameters, the AUVs'
+known plans, ``--prepare``, and the field mode (a mixin of :class:`mpcasv.io.deploy.Deploy`).
+
+Field mode: a controller
 that solves an optimisation (one with ``use_deadline``: the MPCs) solves in a worker process
 with a hard deadline per step (:mod:`mpcasv.mpc.deadline`), started before any socket is
 opened, and its ``step`` runs in a thread of its own so that the event loop (link,
@@ -13,7 +16,10 @@ import contextlib
 import logging
 import time
 
+from mpcasv.config import ConfigError
 from mpcasv.interface import Command
+from mpcasv.io.config import DeployConfig, build_controller
+from mpcasv.io.watchdog import GuardParams
 
 log = logging.getLogger("mpcasv.deploy")
 
@@ -25,6 +31,51 @@ def start_field_mode(controller, factory=None, log=log.info) -> None:
     log("starting the solver worker (field mode: hard deadline per step)")
     controller.use_deadline(factory)
     log(f"solver worker ready in {time.perf_counter() - t0:.1f} s")
+
+
+def guard_params(cfg: DeployConfig, controller) -> GuardParams:
+    """Guard parameters: watchdog limits, and the keep-out sphere of the controller's
+    ``avoid`` option (:class:`mpcasv.hybrid.avoidance.AvoidanceParams`), else its domain's
+    ``r_in``, else ``watchdog.keep_out_m``."""
+    wd = cfg.watchdog
+    params = getattr(controller, "params", None)
+    domain = getattr(controller, "domain", None)
+    avoid = getattr(params, "avoid", None)
+    if avoid is not None:
+        r_keep = avoid.sphere(domain)
+    else:
+        r_keep = domain.r_in if domain is not None else wd.keep_out_m
+    speed = float(getattr(params, "speed", wd.guard_speed))
+    return GuardParams(wd.auv_stale_s, wd.auv_lost_s, wd.auv_speed_max, wd.auv_rise_rate,
+                       float(r_keep), wd.guard_margin_m, speed)  # fmt: skip
+
+
+def known_plans(cfg: DeployConfig) -> list:
+    n = len(cfg.auvs)
+    if cfg.controller.scenario is None:
+        return [None] * n
+    from mpcasv.estimation import known_plan
+    from mpcasv.sim.scenario import load_scenario
+
+    sc = load_scenario(cfg.controller.scenario)
+    if len(sc.auv) != n:
+        raise ConfigError(f"controller.scenario {cfg.controller.scenario} has {len(sc.auv)} "
+                          f"AUVs, the config {n}")  # fmt: skip
+    return [known_plan(a.build_behaviour()) for a in sc.auv]
+
+
+def prepare_controller(cfg: DeployConfig) -> dict:
+    """``mpcasv deploy CONFIG --prepare``: build the controller (an MPC's library compiled if
+    it is not cached) and, for an MPC, start its solver worker once (it loads the library in a
+    fresh process) and stop it; nothing is bound, nobody contacted."""
+    t0 = time.perf_counter()
+    ctl = build_controller(cfg, log=log.warning)
+    field = hasattr(ctl, "use_deadline")
+    if field:
+        start_field_mode(ctl, log=log.warning)
+        ctl.close()
+    return {"controller": cfg.controller.name, "vessel": cfg.controller.vessel or "gretha",
+            "field_mode": field, "seconds": time.perf_counter() - t0}
 
 
 class FieldMode:
