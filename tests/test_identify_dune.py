@@ -134,3 +134,23 @@ def test_written_vessel_speeds_and_provenance(identified):
     model = VesselModel(P)
     for u in (0.0, 1.0, 3.0):
         assert np.abs(np.linalg.eigvals(model.linearize(*model.trim(u))[0])).max() < 2.78
+
+
+def test_no_config_beside_the_log_says_the_thrust_is_proportional(tmp_path, capsys):
+    from mpcasv.io.identlog import _thruster_map_for
+
+    log = tmp_path / "Data.lsf.gz"
+    assert _thruster_map_for([log], load_vessel("otter")) is None
+    assert "no Config.ini beside the log: thrust taken proportional" in capsys.readouterr().out
+    assert _thruster_map_for([log], load_vessel("gretha")) is None  # steerable: no map at all
+
+
+@needs_log
+def test_coefficients_the_map_cannot_identify_are_refused_in_one_line(tmp_path, capsys):
+    for name in ("Data.lsf.gz", "Config.ini"):
+        (tmp_path / name).symlink_to(IDENT / name)
+    rc = main(["identify", str(tmp_path / "Data.lsf.gz"), "--vessel", "otter", "--coeffs",
+               "m,Y_uv", "--out", str(tmp_path / "x.toml"), "--quiet"])  # fmt: skip
+    err = capsys.readouterr().err
+    assert rc == 2 and "only m, I_z, X_u, X_uu, N_r, N_rr are identified" in err
+    assert len(err.strip().splitlines()) == 1 and not (tmp_path / "x.toml").exists()
