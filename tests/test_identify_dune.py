@@ -143,6 +143,15 @@ def test_no_config_beside_the_log_says_the_thrust_is_proportional(tmp_path, caps
     assert _thruster_map_for([log], load_vessel("otter")) is None
     assert "no Config.ini beside the log: thrust taken proportional" in capsys.readouterr().out
     assert _thruster_map_for([log], load_vessel("gretha")) is None  # steerable: no map at all
+    # a real vehicle's log folder: Config.ini lists the VSIM models too, but no SimulatedState
+    import imcpy
+
+    es = imcpy.EstimatedState()
+    es.timestamp, es.src = 1.7e9, 0x0803
+    log.write_bytes(es.serialize())
+    (tmp_path / "Config.ini").write_text("[General]\nVehicle Type = asv\n")
+    assert _thruster_map_for([log], load_vessel("otter")) is None
+    assert "no SimulatedState in the log" in capsys.readouterr().out
 
 
 @needs_log

@@ -16,9 +16,10 @@ AUV's fins), of a submerged vehicle, or with no or several vehicles carrying set
 no ``--vehicle`` is refused with a :class:`LogError`.
 
 **Through DUNE's thruster map.** A DUNE log folder holds the configuration DUNE ran with,
-``Config.ini``, beside ``Data.lsf.gz``. When it configures a simulated vehicle (VSIM) with
-two fixed thrusters and the prior has differential actuation, ``mpcasv identify`` says so and
-identifies the hull through that simulator's thruster map
+``Config.ini``, beside ``Data.lsf.gz``. When the log comes from DUNE's simulator (it holds
+SimulatedState), the prior has differential actuation and the configuration's VSIM model has
+two fixed thrusters, ``mpcasv identify`` says so and identifies the hull through that
+simulator's thruster map
 (:mod:`mpcasv.models.ident_thrust`): the actuation-to-force map is DUNE's own, not a
 proportional one. Its table (:func:`map_table`) holds the actuations as DUNE applied them:
 over ``[t_k, t_k+1)`` the latest SetThrusterActuation of each thruster at ``t_k + dt / 2``
@@ -198,19 +199,31 @@ def map_table(path: Path, vehicle: str | None = None) -> tuple[pd.DataFrame, pd.
 
 
 def _thruster_map_for(logs: list[Path], prior: VesselParams):
-    """DUNE's thruster map when the one log's folder has a ``Config.ini`` configuring a
-    simulated vehicle and the prior has differential actuation; else None (said on stdout
-    for a differential prior: the thrust is then taken proportional to the set-point)."""
+    """DUNE's thruster map when the one log comes from DUNE's simulator (it holds
+    SimulatedState: VSIM ran) with a ``Config.ini`` beside it, and the prior has differential
+    actuation; else None, said on stdout for a differential prior (the thrust is then taken
+    proportional to the set-point). A real vehicle's Config.ini lists the VSIM models too
+    (common/vsim-models.ini is always included), so the log decides, not the file."""
     from mpcasv.io.dune_config import read_thruster_map
 
-    if prior.actuation != "differential" or len(logs) != 1:
+    if prior.actuation != "differential":
         return None
-    cfg = Path(logs[0]).parent / "Config.ini"
-    if not cfg.is_file():
-        print(f"{logs[0]}: no Config.ini beside the log: thrust taken proportional to the "
-              "set-point (no thruster map)")  # fmt: skip
+    why = None
+    if len(logs) != 1:
+        why = f"{len(logs)} logs (the thruster map takes one DUNE log)"
+    elif not (Path(logs[0]).parent / "Config.ini").is_file():
+        why = "no Config.ini beside the log"
+    elif str(logs[0]).lower().endswith((".lsf", ".lsf.gz")):
+        try:
+            read_messages(logs[0], "SimulatedState")
+        except LogError:
+            why = "no SimulatedState in the log (not DUNE's simulator)"
+    else:
+        why = "not a DUNE log"
+    if why is not None:
+        print(f"{logs[0]}: {why}: thrust taken proportional to the set-point (no thruster map)")
         return None
-    tmap = read_thruster_map(cfg)
+    tmap = read_thruster_map(Path(logs[0]).parent / "Config.ini")
     print(f"{logs[0]}: identifying through DUNE's thruster map: {tmap.source}")
     return tmap
 
