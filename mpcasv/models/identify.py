@@ -75,7 +75,7 @@ def mass_terms(p: VesselParams) -> dict[str, float]:
     return {"m11": p.m - p.X_udot, "m22": p.m - p.Y_vdot, "m33": p.I_z - p.N_rdot}
 
 
-# --- loading -----------------------------------------------------------------------------
+# --- the table -----------------------------------------------------------------------------
 
 
 def identification_table(df: pd.DataFrame, path) -> pd.DataFrame:
@@ -110,7 +110,6 @@ def identification_table(df: pd.DataFrame, path) -> pd.DataFrame:
         kind = "previous" if c in ("T_cmd", "delta_cmd") else "linear"
         out[c] = _resample(t, src, grid, kind)
     return out
-
 
 
 def _resample(t, y, grid, kind):
