@@ -41,13 +41,7 @@ APPLICATIONS = {
 }
 
 #: known upward imports still to remove: (module, imported name) -> why it is still there
-KNOWN = {
-    ("mpcasv.models.identify", "mpcasv.io.lsf"): (
-        "identify reads a DUNE .lsf log through mpcasv.io.lsf.read_lsf inside _from_lsf; the "
-        "log-to-table conversion belongs in mpcasv.io (helper 'plant' is reworking it, issue "
-        "13 item 6)"
-    ),
-}
+KNOWN: dict[tuple[str, str], str] = {}
 
 
 def _module_name(path: Path) -> str:

@@ -12,16 +12,16 @@ import pytest
 
 from mpcasv.cli import main
 from mpcasv.control.manoeuvres import Noise, simulate_manoeuvre
+from mpcasv.io.identlog import load_log
 from mpcasv.io.lsf import LogError
+from mpcasv.models.ident_output import write_params
 from mpcasv.models.identify import (
     DAMPING,
     IDENTIFIED,
     OUTPUTS,
     REQUIRED,
     identify,
-    load_log,
     mass_terms,
-    write_params,
 )  # fmt: skip
 from mpcasv.models.params import load_vessel
 from mpcasv.models.vessel import VesselModel

@@ -111,7 +111,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     i = sub.add_parser("identify", help="identify the 3-DOF model from logs (CSV or DUNE LSF)",
                        description="Identify vessel parameters from logged manoeuvres: "
                        "equation-error start, simulation-error refinement, held-out validation."
-                       " See mpcasv/models/identify.py for the CSV columns.")  # fmt: skip
+                       " See mpcasv/models/identify.py for the CSV columns and "
+                       "mpcasv/io/identlog.py for DUNE logs.")  # fmt: skip
     i.add_argument(
         "logs", nargs="+", type=Path, help="CSV/parquet identification logs or .lsf(.gz)"
     )
@@ -363,6 +364,6 @@ def _design_dict(d) -> dict:
 
 
 def run_identify(args: argparse.Namespace) -> int:
-    from mpcasv.models.identify import run_cli
+    from mpcasv.io.identlog import run_cli
 
     return run_cli(args)

@@ -18,6 +18,7 @@ from typing import Annotated, Any, Literal
 from pydantic import Field, Strict, field_validator, model_validator
 
 from mpcasv.config import Float, NonNeg, Pos, frozen, load, parse
+from mpcasv.models.acoustics import AcousticParams
 
 __all__ = [
     "DeployConfig", "build_controller", "controller_overrides", "deploy_config_from_dict",
@@ -211,6 +212,9 @@ class SpeedSpec:
     ratio: Annotated[float, Strict(), Field(gt=0, le=1)] = 0.8
     persist_s: Pos = 10.0
     settle_s: NonNeg = 5.0  # after a change of commanded speed, before the window opens
+    # the autopilot's own limit (DUNE: [General] Maximum Absolute Speed, 2.5 m/s for the
+    # Otter): every transit speed sent is capped at it (a plan may ask for the model's u_max)
+    command_max: Pos | None = None
 
 
 @frozen
@@ -244,6 +248,9 @@ class DeployConfig:
     speed: SpeedSpec = SpeedSpec()
     clock: ClockSpec = ClockSpec()
     log: LogSpec = LogSpec()
+    # the acoustic channel of the operation (USBL and modem; a scenario's [acoustics] fields):
+    # the MPC's fix-rate model plans with it (the run's Boat, as in simulation)
+    acoustics: AcousticParams = AcousticParams()
 
     @model_validator(mode="after")
     def _vehicles(self) -> DeployConfig:
@@ -299,11 +306,15 @@ def controller_overrides(cfg: DeployConfig, speed: float | None = None) -> dict[
 
 
 def deploy_boat(cfg: DeployConfig):
-    """The boat the deploy drives (``controller.vessel``, default Gretha): the one vessel the
-    controller plans with; a preset that names another vessel is refused in one line."""
+    """The boat the deploy drives (``controller.vessel``, default Gretha) with the
+    configuration's acoustic channel (``[acoustics]``): the one vessel the controller plans
+    with; a preset that names another vessel is refused in one line."""
+    import dataclasses
+
     from mpcasv.controllers import Boat
 
-    return Boat.load(cfg.controller.vessel or "gretha")
+    return dataclasses.replace(Boat.load(cfg.controller.vessel or "gretha"),
+                               acoustics=cfg.acoustics)  # fmt: skip
 
 
 def build_controller(cfg: DeployConfig, speed: float | None = None, log=print):

@@ -24,6 +24,14 @@ then MANDONE; wait (at most ``link.plan_done_timeout``) for DUNE's answer to MAN
 
 The controller is built (an MPC's library compiled if it is not cached) before any socket is
 opened: ``mpcasv deploy CONFIG --prepare`` does only that, at the quay.
+
+A controller that solves an optimisation (one with ``use_deadline``: the MPCs) runs in field
+mode (:mod:`mpcasv.mpc.deadline`): its solves run in a worker process, started here before
+any socket is opened, and a solve that overruns the step's budget (``solver.budget_ms``) is
+abandoned (that step takes the hybrid fallback's command). Its ``step`` runs in a thread of
+its own, so the event loop (link, watchdogs, logs) keeps running during a solve; a tick that
+comes while the previous step is still running is skipped (event ``step_skipped``). Other
+controllers step inline (well under a millisecond). The workers are stopped at shutdown.
 """
 
 from __future__ import annotations
@@ -39,59 +47,28 @@ from pathlib import Path
 
 import imcpy
 
-from mpcasv.config import ConfigError
 from mpcasv.estimation import make_estimator
 from mpcasv.interface import ASVState, Command, Mode, Observation
 from mpcasv.io.asvwatch import SpeedWatch, Thrusters
 from mpcasv.io.config import DeployConfig, build_controller, load_deploy_config
 from mpcasv.io.deployfeedback import BoatFeedback
+from mpcasv.io.deploystep import FieldMode, guard_params, known_plans, prepare_controller
 from mpcasv.io.imc import RF, reference
 from mpcasv.io.link import ImcLink, Peer
 from mpcasv.io.logs import JsonlWriter, LsfWriter
 from mpcasv.io.records import cmd_to_dict, obs_to_dict
 from mpcasv.io.transport import Clock
-from mpcasv.io.watchdog import OK, GuardParams, auv_status, guard, inflate
+from mpcasv.io.watchdog import OK, auv_status, guard, inflate
 from mpcasv.models.acoustics import Report
 
-__all__ = ["Deploy", "guard_params", "run_deploy"]
+__all__ = ["Deploy", "guard_params", "run_deploy"]  # guard_params: from deploystep
 
 log = logging.getLogger("mpcasv.deploy")
 WAITING, STARTING, RUNNING, ASV_STALE = "waiting", "starting", "running", "asv_stale"
 _PC = imcpy.PlanControl
 
 
-def guard_params(cfg: DeployConfig, controller) -> GuardParams:
-    """Guard parameters: watchdog limits, and the keep-out sphere of the controller's
-    ``avoid`` option (:class:`mpcasv.hybrid.avoidance.AvoidanceParams`), else its domain's
-    ``r_in``, else ``watchdog.keep_out_m``."""
-    wd = cfg.watchdog
-    params = getattr(controller, "params", None)
-    domain = getattr(controller, "domain", None)
-    avoid = getattr(params, "avoid", None)
-    if avoid is not None:
-        r_keep = avoid.sphere(domain)
-    else:
-        r_keep = domain.r_in if domain is not None else wd.keep_out_m
-    speed = float(getattr(params, "speed", wd.guard_speed))
-    return GuardParams(wd.auv_stale_s, wd.auv_lost_s, wd.auv_speed_max, wd.auv_rise_rate,
-                       float(r_keep), wd.guard_margin_m, speed)  # fmt: skip
-
-
-def _known_plans(cfg: DeployConfig) -> list:
-    n = len(cfg.auvs)
-    if cfg.controller.scenario is None:
-        return [None] * n
-    from mpcasv.estimation import known_plan
-    from mpcasv.sim.scenario import load_scenario
-
-    sc = load_scenario(cfg.controller.scenario)
-    if len(sc.auv) != n:
-        raise ConfigError(f"controller.scenario {cfg.controller.scenario} has {len(sc.auv)} "
-                          f"AUVs, the config {n}")  # fmt: skip
-    return [known_plan(a.build_behaviour()) for a in sc.auv]
-
-
-class Deploy(BoatFeedback):
+class Deploy(BoatFeedback, FieldMode):
     """The deploy loop (see the module docstring).
 
     Parameters
@@ -101,17 +78,22 @@ class Deploy(BoatFeedback):
         Compute and log the commands, send no PlanControl/Reference.
     log_dir : Path, optional
         Overrides ``cfg.log.dir``.
+    solver_factory : callable, optional
+        Field mode (controllers with ``use_deadline``): builds the worker's solver (tests:
+        :meth:`mpcasv.mpc.controller.MPCController.use_deadline`); None: the controller's own.
     """
 
-    def __init__(self, cfg: DeployConfig, dry_run: bool = False, log_dir: Path | None = None):
+    def __init__(self, cfg: DeployConfig, dry_run: bool = False, log_dir: Path | None = None,
+                 solver_factory=None):  # fmt: skip
         self.cfg, self.dry_run = cfg, dry_run
         self.clock = Clock(cfg.clock.speedup)
         c = cfg.controller
         self.n_auv = len(cfg.auvs)
         self.controller = build_controller(cfg, log=log.info)
         self.controller.reset(self.n_auv)
+        self.init_field_mode(solver_factory)  # before any socket is opened
         self.domain = getattr(self.controller, "domain", None)
-        plans = _known_plans(cfg)
+        plans = known_plans(cfg)
         self.estimators = [make_estimator(c.estimator, initial=None, plan=plans[k])
                            for k in range(self.n_auv)]  # fmt: skip
         self.log_dir = Path(log_dir or cfg.log.dir)
@@ -293,7 +275,10 @@ class Deploy(BoatFeedback):
             return
         on_grid = math.isfinite(self.t_next) and ts < self.t_next + 0.5 * Tc
         self.t_next = self.t_next + Tc if on_grid else ts + Tc
-        self.step(ts, now)
+        if self.field_mode:
+            self.schedule_step(ts, now)
+        else:
+            self.step(ts, now)
 
     def observation(self, ts: float, now: float) -> tuple[Observation, list[str], list[float]]:
         """The Observation at ASV-state time ``ts`` with the watchdogs' verdicts."""
@@ -309,11 +294,19 @@ class Deploy(BoatFeedback):
         return obs, status, ages
 
     def step(self, ts: float, now: float) -> Command:
+        """One decision at ASV-state time ``ts``, the controller stepped inline."""
         obs, status, ages = self.observation(ts, now)
         c0 = time.perf_counter()
         raw = self.controller.step(obs)
-        step_ms = (time.perf_counter() - c0) * 1e3
+        return self._act(ts, now, obs, status, ages, raw, (time.perf_counter() - c0) * 1e3)
+
+    def _act(self, ts, now, obs, status, ages, raw: Command, step_ms: float) -> Command:
+        """Guard, cap the speed (``speed_feedback``), send (unless dry run), log."""
         cmd, override = guard(raw, obs, status, ages, self.gp)
+        caps = [c for c in (self.speed_cap, self.cfg.speed.command_max) if c is not None]
+        capped = bool(caps) and cmd.mode is Mode.TRANSIT and cmd.speed > min(caps)
+        if capped:  # an MPC's speed comes from its plan, not from params.speed
+            cmd = dataclasses.replace(cmd, speed=min(caps))
         sent = False
         if not self.dry_run:
             lk = self.cfg.link
@@ -331,7 +324,7 @@ class Deploy(BoatFeedback):
             "override": override, "sent": sent, "status": status, "ages": ages,
             "step_ms": step_ms, "followref": self.followref, "diag": diag() if diag else {},
             "propeller_source": self._propeller_source, "thrusters": self.thrusters.values(),
-            "speed": self.speed.status(),
+            "speed": self.speed.status(), "speed_capped": capped,
         })  # fmt: skip
         return cmd
 
@@ -393,10 +386,13 @@ class Deploy(BoatFeedback):
         return True
 
     async def finish(self) -> dict:
-        """Close the link, then write ``summary`` (the last record) and close the logs."""
+        """Close the link, stop the solver workers, then write ``summary`` (the last record)
+        and close the logs."""
         await asyncio.sleep(0.05)  # let the last datagrams leave
         await self.link.stop()
+        await self.stop_stepping()
         summary = {"steps": self.steps, "overrides": self.overrides,
+                   "skipped_steps": self.skipped_steps,
                    "asv_stale_events": self.stale_events,
                    "plan_completed": self.plan_done.is_set(), "load": self.load(),
                    **self.link.counters()}  # fmt: skip
@@ -424,9 +420,7 @@ def run_deploy(config: str | Path, dry_run: bool = False, log_dir: Path | None =
     any socket is opened."""
     cfg = load_deploy_config(config)
     if prepare:
-        t0 = time.perf_counter()
-        build_controller(cfg, log=log.warning)
-        return {"controller": cfg.controller.name, "seconds": time.perf_counter() - t0}
+        return prepare_controller(cfg)
     deploy = Deploy(cfg, dry_run, log_dir)
 
     async def main() -> dict:

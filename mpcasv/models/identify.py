@@ -14,16 +14,10 @@ CSV or parquet (``mpcasv simulate --manoeuvre`` writes them), one row per sample
 ``delta_cmd`` rad  steering set-point (+ turns the bow to starboard)
 ======== ====== ===============================================================
 
-Extra columns are ignored. DUNE logs (``.lsf``, ``.lsf.gz``) are read by
-:func:`mpcasv.io.lsf.read_lsf` and mapped: navigation from EstimatedState, ``T_cmd`` =
-SetThrusterActuation id 0 (fraction) x ``T_max`` of the prior, ``delta_cmd`` = SetServoPosition
-id 0. DUNE logs the messages it receives, so a boat's log holds other vehicles' states too:
-``vehicle`` (``--vehicle NAME|ID``: Announce name, or IMC id as ``0x2801`` or decimal) picks
-one; by default the one vehicle that carries the actuator set-points (SetThrusterActuation) is
-taken and named on stdout. A log with several steering servos on the chosen vehicle (an AUV's
-fins, such as the shared DUNE LAUV log), of a submerged vehicle, or with no or several
-vehicles carrying set-points and no ``--vehicle`` is refused with a :class:`LogError`: the 3-DOF
-model is that of a surface vessel with one steerable drive.
+Extra columns are ignored. Files, DUNE logs (``.lsf``, ``.lsf.gz``) included, are read by
+:func:`mpcasv.io.identlog.load_log` (the I/O layer; models never import it), which also
+identifies a DUNE-simulated boat through its simulator's thruster map
+(:mod:`mpcasv.models.ident_thrust`).
 
 Method
 ------
@@ -59,7 +53,6 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
-from pathlib import Path
 
 import casadi as ca
 import numpy as np
@@ -82,38 +75,19 @@ def mass_terms(p: VesselParams) -> dict[str, float]:
     return {"m11": p.m - p.X_udot, "m22": p.m - p.Y_vdot, "m33": p.I_z - p.N_rdot}
 
 
-# --- loading -----------------------------------------------------------------------------
+# --- the table -----------------------------------------------------------------------------
 
 
-def load_log(path: Path, prior: VesselParams, vehicle: str | None = None) -> pd.DataFrame:
-    """Read one log into the identification table (uniform time step).
-
-    ``vehicle`` selects one vehicle of a DUNE log (name or IMC id); see the module docstring.
+def identification_table(df: pd.DataFrame, path) -> pd.DataFrame:
+    """The identification table of a log already read (:data:`REQUIRED` columns), on a
+    uniform time step (the median; set-points held, the rest interpolated). Reading files,
+    DUNE logs included, is :func:`mpcasv.io.identlog.load_log`.
 
     Raises
     ------
     LogError
-        Unreadable file, missing columns, bad time axis, non-finite values, too short, or a
-        DUNE log this model does not apply to; the message names the file.
+        Missing columns, bad time axis, non-finite values, too short; naming ``path``.
     """
-    path = Path(path)
-    if not path.is_file():
-        raise LogError(f"{path}: no such log file")
-    name = path.name.lower()
-    if name.endswith((".lsf", ".lsf.gz")):
-        df = _from_lsf(path, prior, vehicle)
-    elif name.endswith(".csv"):
-        try:
-            df = pd.read_csv(path)
-        except (pd.errors.ParserError, UnicodeDecodeError, pd.errors.EmptyDataError) as exc:
-            raise LogError(f"{path}: not a readable CSV ({exc})") from None
-    elif name.endswith(".parquet"):
-        try:
-            df = pd.read_parquet(path)
-        except Exception as exc:  # pyarrow raises several types for corrupt files
-            raise LogError(f"{path}: not a readable parquet file ({exc})") from None
-    else:
-        raise LogError(f"{path}: unknown log format (expected .csv, .parquet, .lsf, .lsf.gz)")
     missing = [c for c in REQUIRED if c not in df.columns]
     if missing:
         raise LogError(f"{path}: missing columns {missing} (identification format: "
@@ -143,100 +117,6 @@ def _resample(t, y, grid, kind):
         return np.interp(grid, t, y)
     idx = np.clip(np.searchsorted(t, grid, side="right") - 1, 0, len(t) - 1)
     return y[idx]  # zero-order hold of set-points
-
-
-def _vehicle_id(text: str) -> int | None:
-    try:
-        return int(text, 0)
-    except ValueError:
-        return None
-
-
-def pick_vehicle(df: pd.DataFrame, path, vehicle: str | None = None) -> str:
-    """The vehicle of a multi-vehicle DUNE log to identify (its ``vehicle`` name).
-
-    With ``vehicle`` (a name, or an IMC id such as ``0x2801`` or ``10241``) that one; without,
-    the single vehicle whose rows carry thrust set-points (``thrust_0``), printed.
-
-    Raises
-    ------
-    LogError
-        Unknown vehicle; none or several vehicles carry set-points and none was named.
-    """
-    names = sorted(set(df["vehicle"]))
-    if vehicle is not None:
-        if vehicle in names:
-            return vehicle
-        vid = _vehicle_id(vehicle)
-        hit = sorted(set(df.loc[df["src"] == vid, "vehicle"])) if vid is not None else []
-        if len(hit) == 1:
-            return hit[0]
-        raise LogError(f"{path}: no vehicle {vehicle!r} in the log (vehicles: "
-                       f"{', '.join(names)})")  # fmt: skip
-    if "thrust_0" in df.columns:
-        actuated = sorted(set(df.loc[df["thrust_0"].notna(), "vehicle"]))
-    else:
-        actuated = []
-    if len(names) == 1 and len(actuated) <= 1:
-        return names[0]
-    if len(actuated) != 1:
-        raise LogError(f"{path}: {len(names)} vehicles ({', '.join(names)}), {len(actuated)} "
-                       "with thrust set-points: name one with --vehicle")  # fmt: skip
-    print(f"{path}: {len(names)} vehicles ({', '.join(names)}); identifying '{actuated[0]}', "
-          "the one with actuator set-points (--vehicle to choose)")  # fmt: skip
-    return actuated[0]
-
-
-def _from_lsf(path: Path, prior: VesselParams, vehicle: str | None = None) -> pd.DataFrame:
-    from mpcasv.io.lsf import read_lsf
-
-    df = read_lsf(path)
-    chosen = pick_vehicle(df, path, vehicle)
-    df = df[df["vehicle"] == chosen]
-    vehicles = [chosen]
-    if (df["depth"] > 0.5).mean() <= 0.05 and prior.actuation == "differential":
-        return _differential_inputs(df, path, prior)
-    fins = sorted(c for c in df.columns if c.startswith("fin_cmd_") and df[c].notna().any())
-    if len(fins) > 1:
-        raise LogError(
-            f"{path}: {len(fins)} steering servos ({', '.join(fins)}) on '{vehicles[0]}': a "
-            "finned vehicle such as an AUV, not a surface vessel with one steerable drive; the "
-            "3-DOF surface model does not apply (expected SetServoPosition id 0 only)"
-        )
-    if (df["depth"] > 0.5).mean() > 0.05:
-        raise LogError(
-            f"{path}: '{vehicles[0]}' is submerged (depth up to "
-            f"{df['depth'].max():.1f} m): the 3-DOF surface model does not apply"
-        )
-    for col, msg in (("thrust_0", "SetThrusterActuation id 0"), ("fin_cmd_0", "SetServoPosition "
-                     "id 0")):  # fmt: skip
-        if col not in df.columns or df[col].isna().all():
-            raise LogError(f"{path}: missing messages: no {msg} (thrust/steering set-points)")
-    df = df.dropna(subset=["thrust_0", "fin_cmd_0"])
-    return pd.DataFrame({
-        "t": df["t"], "N": df["N"], "E": df["E"], "psi": df["psi"], "u": df["u"], "v": df["v"],
-        "r": df["r"], "T_cmd": df["thrust_0"].astype(float) * prior.T_max,
-        "delta_cmd": df["fin_cmd_0"].astype(float),
-    })  # fmt: skip
-
-
-def _differential_inputs(df: pd.DataFrame, path, prior: VesselParams) -> pd.DataFrame:
-    """Two fixed thrusters (prior ``actuation = "differential"``): SetThrusterActuation id 0
-    (port) and id 1 (starboard), fractions ``a_0, a_1`` of each thruster's ``T_max / 2``:
-    ``T_cmd = (a_0 + a_1) T_max / 2`` and ``delta_cmd = delta_max (a_0 - a_1) / 2`` (so that
-    ``T_port - T_stbd = T_max delta / delta_max``, :func:`mpcasv.models.vessel.actuator_forces`).
-    The thrust is taken as proportional to the set-point (no thrust-speed map)."""
-    for col, i in (("thrust_0", 0), ("thrust_1", 1)):
-        if col not in df.columns or df[col].isna().all():
-            raise LogError(f"{path}: missing messages: no SetThrusterActuation id {i} (a vessel "
-                           "with two thrusters needs both)")  # fmt: skip
-    df = df.dropna(subset=["thrust_0", "thrust_1"])
-    a0, a1 = df["thrust_0"].astype(float), df["thrust_1"].astype(float)
-    return pd.DataFrame({
-        "t": df["t"], "N": df["N"], "E": df["E"], "psi": df["psi"], "u": df["u"], "v": df["v"],
-        "r": df["r"], "T_cmd": (a0 + a1) * prior.T_max / 2,
-        "delta_cmd": (a0 - a1) * prior.delta_max / 2,
-    })  # fmt: skip
 
 
 # --- data preparation ----------------------------------------------------------------------
@@ -500,135 +380,3 @@ def identify(logs: list[pd.DataFrame], prior: VesselParams, coeffs=IDENTIFIED,
         replay={"train": (info_tr["Y"], np.array(info_tr["replay"](final["train"]))),
                 "validation": (info_va["Y"], np.array(info_va["replay"](final["validation"])))},
     )  # fmt: skip
-
-
-# --- output --------------------------------------------------------------------------------
-
-
-def write_params(path: Path, res: Identification, prior: VesselParams, sources: list[str]) -> None:
-    """Write the identified parameters as a vessel TOML (loads with ``load_vessel``).
-
-    Every number keeps a provenance entry: identified ones name the logs, the method, the
-    1-sigma uncertainty and the validation fit; the others are the prior's, marked as held.
-    """
-    import tomli_w
-
-    val = res.metrics["simulation_error"]["validation"]
-    fit = ", ".join(f"{c} {v['fit_pct']:.1f} %" for c, v in val.items())
-    from mpcasv.models.vessel import top_speed
-
-    data = {f.name: getattr(res.params, f.name) for f in dataclasses.fields(res.params)}
-    data.pop("provenance")
-    data = {k: v for k, v in data.items() if v is not None}  # absent optional (T_idle)
-    data["name"] = f"{prior.name}-identified"
-    # the declared top speed is checked against the model at load: the identified resistance
-    # moves it (set-points are fractions of the prior's T_max, so it is the full-throttle speed
-    # the identified model predicts)
-    data["u_max"] = round(top_speed(res.params), 4)
-    prov = {}
-    for key in data:
-        if key == "name":
-            continue
-        if key == "u_max":
-            prov[key] = (f"top speed of the identified model at T_max = {prior.T_max:g} N "
-                         f"(prior declared {prior.u_max:g} m/s: {prior.provenance.get(key, '')})")
-        elif key in res.coeffs:
-            prov[key] = (f"identified by mpcasv identify from {', '.join(sources)}: simulation-"
-                         f"error least squares, 1-sigma {100 * res.rel_std[key]:.1f} %; "
-                         f"validation fit {fit}; prior {getattr(prior, key):.6g}")  # fmt: skip
-        else:
-            prov[key] = "held at the prior: " + prior.provenance.get(key, "(no provenance)")
-    header = (f"# Identified by `mpcasv identify` from {', '.join(sources)}.\n"
-              f"# Estimated constant current V_N = {res.current[0]:.3f} m/s, "
-              f"V_E = {res.current[1]:.3f} m/s (not a vessel parameter).\n")  # fmt: skip
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(header + tomli_w.dumps({**data, "provenance": prov}))
-
-
-def plot_replay(res: Identification, out: Path) -> Path:
-    """Measured vs simulated outputs over the training and validation windows."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, axes = plt.subplots(4, 2, figsize=(13, 9), sharex="col")
-    scale = {"psi": (math.degrees(1), "deg"), "u": (1, "m/s"), "v": (1, "m/s"),
-             "r": (math.degrees(1), "deg/s")}  # fmt: skip
-    for j, part in enumerate(("train", "validation")):
-        Y, Ys = res.replay[part]
-        k = np.arange(Y.shape[1]) * 0.1
-        for i, c in enumerate(OUTPUTS):
-            f, unit = scale[c]
-            ax = axes[i, j]
-            ax.plot(k, Y[i] * f, ".", ms=1, color="0.6", label="measured")
-            ax.plot(k, Ys[i] * f, lw=0.8, color="tab:blue", label="simulated (identified)")
-            ax.set_ylabel(f"{c} ({unit})")
-            fit = res.metrics["simulation_error"][part][c]["fit_pct"]
-            ax.set_title(f"{part}: {c}, fit {fit:.1f} %", fontsize=9)
-        axes[3, j].set_xlabel("time over the replay windows, concatenated (s)")
-    axes[0, 0].legend(fontsize=8)
-    fig.tight_layout()
-    out.mkdir(parents=True, exist_ok=True)
-    p = out / "identify_replay.png"
-    fig.savefig(p, dpi=100)
-    plt.close(fig)
-    return p
-
-
-def report_table(res: Identification, prior: VesselParams, truth: VesselParams | None = None):
-    """Markdown: coefficients (prior, identified, 1-sigma, truth error if known), fits."""
-    lines = ["| coefficient | prior | identified | 1-sigma % |" + (" true | error % |" if truth
-             else ""), "|---|---|---|---|" + ("---|---|" if truth else "")]  # fmt: skip
-    rows = [(c, getattr(prior, c), getattr(res.params, c), 100 * res.rel_std[c],
-             getattr(truth, c) if truth else None) for c in res.coeffs]  # fmt: skip
-    mp, mi = mass_terms(prior), mass_terms(res.params)
-    mt = mass_terms(truth) if truth else {}
-    rows += [(k, mp[k], mi[k], math.nan, mt.get(k)) for k in mp]
-    for c, p0, pi, sd, pt in rows:
-        line = f"| {c} | {p0:.4g} | {pi:.4g} | {sd:.1f} |"
-        if truth:
-            line += f" {pt:.4g} | {100 * (pi / pt - 1):+.1f} |"
-        lines.append(line)
-    lines += ["", f"Current: V_N = {res.current[0]:.3f} m/s, V_E = {res.current[1]:.3f} m/s", "",
-              "| stage | split | " + " | ".join(f"{c} fit % (RMSE)" for c in OUTPUTS) + " |",
-              "|---|---|" + "---|" * len(OUTPUTS)]  # fmt: skip
-    for stage, d in res.metrics.items():
-        for part, m in d.items():
-            lines.append(
-                f"| {stage} | {part} | "
-                + " | ".join(f"{m[c]['fit_pct']:.1f} ({m[c]['rmse']:.3g})" for c in OUTPUTS)
-                + " |"
-            )
-    lines.append("RMSE in rad, m/s, m/s, rad/s; fits over replay windows re-initialised every "
-                 "window from the smoothed measurement.")  # fmt: skip
-    return "\n".join(lines)
-
-
-def run_cli(args) -> int:
-    """``mpcasv identify LOG... --out params.toml``."""
-    import json
-
-    from mpcasv.models.params import load_vessel
-
-    prior = load_vessel(args.vessel)
-    coeffs = tuple(c.strip() for c in args.coeffs.split(",")) if args.coeffs else IDENTIFIED
-    unknown = [c for c in coeffs if c not in MODEL_COEFFS]
-    if unknown:
-        from mpcasv.config import ConfigError
-
-        raise ConfigError(f"--coeffs: not model coefficients: {unknown}")
-    logs = [load_log(p, prior, getattr(args, "vehicle_pick", None)) for p in args.logs]
-    res = identify(logs, prior, coeffs, current=not args.no_current,
-                   validation=args.validation, progress=not args.quiet)  # fmt: skip
-    write_params(args.out, res, prior, [str(p) for p in args.logs])
-    folder = args.out.with_name(args.out.stem + "-report")
-    plot_replay(res, folder)
-    table = report_table(res, prior)
-    (folder / "identify.md").write_text(table + "\n")
-    (folder / "identify.json").write_text(json.dumps({
-        "coeffs": {c: getattr(res.params, c) for c in res.coeffs}, "rel_std": res.rel_std,
-        "current": res.current, "metrics": res.metrics}, indent=1))  # fmt: skip
-    print(table)
-    print(f"wrote {args.out} and {folder}/ (identify.md, identify.json, identify_replay.png)")
-    return 0

@@ -1,0 +1,128 @@
+"""How the deploy loop builds and steps its controller: the guard's parameters, the AUVs'
+known plans, ``--prepare``, and the field mode (a mixin of :class:`mpcasv.io.deploy.Deploy`).
+
+Field mode: a controller
+that solves an optimisation (one with ``use_deadline``: the MPCs) solves in a worker process
+with a hard deadline per step (:mod:`mpcasv.mpc.deadline`), started before any socket is
+opened, and its ``step`` runs in a thread of its own so that the event loop (link,
+watchdogs, logs) keeps running during a solve. Other controllers step inline.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import concurrent.futures
+import contextlib
+import logging
+import time
+
+from mpcasv.config import ConfigError
+from mpcasv.interface import Command
+from mpcasv.io.config import DeployConfig, build_controller
+from mpcasv.io.watchdog import GuardParams
+
+log = logging.getLogger("mpcasv.deploy")
+
+
+def start_field_mode(controller, factory=None, log=log.info) -> None:
+    """Start the controller's solver worker (:meth:`use_deadline`), with a line before and
+    after: it loads the compiled library in a new process (seconds)."""
+    t0 = time.perf_counter()
+    log("starting the solver worker (field mode: hard deadline per step)")
+    controller.use_deadline(factory)
+    log(f"solver worker ready in {time.perf_counter() - t0:.1f} s")
+
+
+def guard_params(cfg: DeployConfig, controller) -> GuardParams:
+    """Guard parameters: watchdog limits, and the keep-out sphere of the controller's
+    ``avoid`` option (:class:`mpcasv.hybrid.avoidance.AvoidanceParams`), else its domain's
+    ``r_in``, else ``watchdog.keep_out_m``."""
+    wd = cfg.watchdog
+    params = getattr(controller, "params", None)
+    domain = getattr(controller, "domain", None)
+    avoid = getattr(params, "avoid", None)
+    if avoid is not None:
+        r_keep = avoid.sphere(domain)
+    else:
+        r_keep = domain.r_in if domain is not None else wd.keep_out_m
+    speed = float(getattr(params, "speed", wd.guard_speed))
+    return GuardParams(wd.auv_stale_s, wd.auv_lost_s, wd.auv_speed_max, wd.auv_rise_rate,
+                       float(r_keep), wd.guard_margin_m, speed)  # fmt: skip
+
+
+def known_plans(cfg: DeployConfig) -> list:
+    n = len(cfg.auvs)
+    if cfg.controller.scenario is None:
+        return [None] * n
+    from mpcasv.estimation import known_plan
+    from mpcasv.sim.scenario import load_scenario
+
+    sc = load_scenario(cfg.controller.scenario)
+    if len(sc.auv) != n:
+        raise ConfigError(f"controller.scenario {cfg.controller.scenario} has {len(sc.auv)} "
+                          f"AUVs, the config {n}")  # fmt: skip
+    return [known_plan(a.build_behaviour()) for a in sc.auv]
+
+
+def prepare_controller(cfg: DeployConfig) -> dict:
+    """``mpcasv deploy CONFIG --prepare``: build the controller (an MPC's library compiled if
+    it is not cached) and, for an MPC, start its solver worker once (it loads the library in a
+    fresh process) and stop it; nothing is bound, nobody contacted."""
+    t0 = time.perf_counter()
+    ctl = build_controller(cfg, log=log.warning)
+    field = hasattr(ctl, "use_deadline")
+    if field:
+        start_field_mode(ctl, log=log.warning)
+        ctl.close()
+    return {"controller": cfg.controller.name, "vessel": cfg.controller.vessel or "gretha",
+            "field_mode": field, "seconds": time.perf_counter() - t0}
+
+
+class FieldMode:
+    """Mixin of :class:`~mpcasv.io.deploy.Deploy` (uses its ``controller``, ``closing``,
+    ``event``, ``observation`` and ``_act``)."""
+
+    def init_field_mode(self, solver_factory=None) -> None:
+        """Field mode if the controller has ``use_deadline``: start its solver worker
+        (``solver_factory``: tests' hook, see ``use_deadline``) and the step thread."""
+        #: field mode: solves in a worker process with a hard deadline, steps in a thread
+        self.field_mode = hasattr(self.controller, "use_deadline")
+        self._step_task: asyncio.Task | None = None
+        self._step_pool: concurrent.futures.ThreadPoolExecutor | None = None
+        self.skipped_steps = 0
+        if self.field_mode:
+            start_field_mode(self.controller, solver_factory)
+            self._step_pool = concurrent.futures.ThreadPoolExecutor(
+                1, thread_name_prefix="mpcasv-step")
+
+    def schedule_step(self, ts: float, now: float) -> None:
+        """Start the decision at ``ts`` in the step thread; a tick that comes while the
+        previous one is still solving is skipped (event ``step_skipped``)."""
+        if self._step_task is not None and not self._step_task.done():
+            self.skipped_steps += 1
+            self.event("step_skipped", t=ts, reason="the previous step is still solving")
+            return
+        self._step_task = asyncio.get_running_loop().create_task(self.step_async(ts, now))
+
+    async def step_async(self, ts: float, now: float) -> Command | None:
+        """One decision, the controller stepped in the step thread (field mode): the event
+        loop runs on meanwhile. None if the shutdown began during the solve."""
+        obs, status, ages = self.observation(ts, now)
+        c0 = time.perf_counter()
+        loop = asyncio.get_running_loop()
+        raw = await loop.run_in_executor(self._step_pool, self.controller.step, obs)
+        if self.closing:
+            return None
+        return self._act(ts, now, obs, status, ages, raw, (time.perf_counter() - c0) * 1e3)
+
+    async def stop_stepping(self) -> None:
+        """Field mode: let a step in flight end (its solve is cut at the deadline), stop the
+        solver workers and the step thread."""
+        if self._step_task is not None:
+            with contextlib.suppress(Exception):
+                await asyncio.wait_for(asyncio.shield(self._step_task), 5.0)
+        if self.field_mode:
+            self.controller.close()
+            self._step_pool.shutdown(wait=False, cancel_futures=True)
+            self.field_mode = False
+

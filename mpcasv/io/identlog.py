@@ -1,0 +1,313 @@
+"""DUNE and CSV logs into identification tables, and ``mpcasv identify`` itself.
+
+The identification (:mod:`mpcasv.models.identify`, :mod:`mpcasv.models.ident_thrust`) works
+on tables; reading files, DUNE's LSF logs and their ``Config.ini`` is done here, in the I/O
+layer (models never import it).
+
+DUNE logs (``.lsf``, ``.lsf.gz``) are read by :func:`mpcasv.io.lsf.read_lsf` and mapped:
+navigation from EstimatedState, ``T_cmd`` = SetThrusterActuation id 0 (fraction) x ``T_max`` of
+the prior, ``delta_cmd`` = SetServoPosition id 0; for a prior with ``actuation =
+"differential"`` ids 0 (port) and 1 (starboard) give the total and the differential thrust.
+DUNE logs the messages it receives, so a boat's log holds other vehicles' states too:
+``vehicle`` (``--vehicle NAME|ID``: Announce name, or IMC id as ``0x2801`` or decimal) picks
+one; by default the one vehicle that carries the actuator set-points (SetThrusterActuation)
+is taken and named on stdout. A log with several steering servos on the chosen vehicle (an
+AUV's fins), of a submerged vehicle, or with no or several vehicles carrying set-points and
+no ``--vehicle`` is refused with a :class:`LogError`.
+
+**Through DUNE's thruster map.** A DUNE log folder holds the configuration DUNE ran with,
+``Config.ini``, beside ``Data.lsf.gz``. When the log comes from DUNE's simulator (it holds
+SimulatedState), the prior has differential actuation and the configuration's VSIM model has
+two fixed thrusters, ``mpcasv identify`` says so and identifies the hull through that
+simulator's thruster map
+(:mod:`mpcasv.models.ident_thrust`): the actuation-to-force map is DUNE's own, not a
+proportional one. Its table (:func:`map_table`) holds the actuations as DUNE applied them:
+over ``[t_k, t_k+1)`` the latest SetThrusterActuation of each thruster at ``t_k + dt / 2``
+(DUNE's controller answers each EstimatedState within a millisecond).
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from mpcasv.errors import LogError
+from mpcasv.io.lsf import read_lsf, read_messages
+from mpcasv.models.identify import IDENTIFIED, identification_table, identify
+from mpcasv.models.params import MODEL_COEFFS, VesselParams
+
+__all__ = ["load_log", "map_table", "pick_vehicle", "run_cli"]
+
+
+def load_log(path: Path, prior: VesselParams, vehicle: str | None = None) -> pd.DataFrame:
+    """Read one log (CSV, parquet or DUNE LSF) into the identification table
+    (:func:`mpcasv.models.identify.identification_table`).
+
+    ``vehicle`` selects one vehicle of a DUNE log (name or IMC id); see the module docstring.
+
+    Raises
+    ------
+    LogError
+        Unreadable file, missing columns, bad time axis, non-finite values, too short, or a
+        DUNE log this model does not apply to; the message names the file.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise LogError(f"{path}: no such log file")
+    name = path.name.lower()
+    if name.endswith((".lsf", ".lsf.gz")):
+        df = _from_lsf(path, prior, vehicle)
+    elif name.endswith(".csv"):
+        try:
+            df = pd.read_csv(path)
+        except (pd.errors.ParserError, UnicodeDecodeError, pd.errors.EmptyDataError) as exc:
+            raise LogError(f"{path}: not a readable CSV ({exc})") from None
+    elif name.endswith(".parquet"):
+        try:
+            df = pd.read_parquet(path)
+        except Exception as exc:  # pyarrow raises several types for corrupt files
+            raise LogError(f"{path}: not a readable parquet file ({exc})") from None
+    else:
+        raise LogError(f"{path}: unknown log format (expected .csv, .parquet, .lsf, .lsf.gz)")
+    return identification_table(df, path)
+
+
+def _vehicle_id(text: str) -> int | None:
+    try:
+        return int(text, 0)
+    except ValueError:
+        return None
+
+
+def pick_vehicle(df: pd.DataFrame, path, vehicle: str | None = None) -> str:
+    """The vehicle of a multi-vehicle DUNE log to identify (its ``vehicle`` name).
+
+    With ``vehicle`` (a name, or an IMC id such as ``0x2801`` or ``10241``) that one; without,
+    the single vehicle whose rows carry thrust set-points (``thrust_0``), printed.
+
+    Raises
+    ------
+    LogError
+        Unknown vehicle; none or several vehicles carry set-points and none was named.
+    """
+    names = sorted(set(df["vehicle"]))
+    if vehicle is not None:
+        if vehicle in names:
+            return vehicle
+        vid = _vehicle_id(vehicle)
+        hit = sorted(set(df.loc[df["src"] == vid, "vehicle"])) if vid is not None else []
+        if len(hit) == 1:
+            return hit[0]
+        raise LogError(f"{path}: no vehicle {vehicle!r} in the log (vehicles: "
+                       f"{', '.join(names)})")  # fmt: skip
+    if "thrust_0" in df.columns:
+        actuated = sorted(set(df.loc[df["thrust_0"].notna(), "vehicle"]))
+    else:
+        actuated = []
+    if len(names) == 1 and len(actuated) <= 1:
+        return names[0]
+    if len(actuated) != 1:
+        raise LogError(f"{path}: {len(names)} vehicles ({', '.join(names)}), {len(actuated)} "
+                       "with thrust set-points: name one with --vehicle")  # fmt: skip
+    print(f"{path}: {len(names)} vehicles ({', '.join(names)}); identifying '{actuated[0]}', "
+          "the one with actuator set-points (--vehicle to choose)")  # fmt: skip
+    return actuated[0]
+
+
+def _from_lsf(path: Path, prior: VesselParams, vehicle: str | None = None) -> pd.DataFrame:
+    df = read_lsf(path)
+    chosen = pick_vehicle(df, path, vehicle)
+    df = df[df["vehicle"] == chosen]
+    vehicles = [chosen]
+    if (df["depth"] > 0.5).mean() <= 0.05 and prior.actuation == "differential":
+        return _differential_inputs(df, path, prior)
+    fins = sorted(c for c in df.columns if c.startswith("fin_cmd_") and df[c].notna().any())
+    if len(fins) > 1:
+        raise LogError(
+            f"{path}: {len(fins)} steering servos ({', '.join(fins)}) on '{vehicles[0]}': a "
+            "finned vehicle such as an AUV, not a surface vessel with one steerable drive; the "
+            "3-DOF surface model does not apply (expected SetServoPosition id 0 only)"
+        )
+    if (df["depth"] > 0.5).mean() > 0.05:
+        raise LogError(
+            f"{path}: '{vehicles[0]}' is submerged (depth up to "
+            f"{df['depth'].max():.1f} m): the 3-DOF surface model does not apply"
+        )
+    for col, msg in (("thrust_0", "SetThrusterActuation id 0"), ("fin_cmd_0", "SetServoPosition "
+                     "id 0")):  # fmt: skip
+        if col not in df.columns or df[col].isna().all():
+            raise LogError(f"{path}: missing messages: no {msg} (thrust/steering set-points)")
+    df = df.dropna(subset=["thrust_0", "fin_cmd_0"])
+    return pd.DataFrame({
+        "t": df["t"], "N": df["N"], "E": df["E"], "psi": df["psi"], "u": df["u"], "v": df["v"],
+        "r": df["r"], "T_cmd": df["thrust_0"].astype(float) * prior.T_max,
+        "delta_cmd": df["fin_cmd_0"].astype(float),
+    })  # fmt: skip
+
+
+def _differential_inputs(df: pd.DataFrame, path, prior: VesselParams) -> pd.DataFrame:
+    """Two fixed thrusters (prior ``actuation = "differential"``): SetThrusterActuation id 0
+    (port) and id 1 (starboard), fractions ``a_0, a_1`` of each thruster's ``T_max / 2``:
+    ``T_cmd = (a_0 + a_1) T_max / 2`` and ``delta_cmd = delta_max (a_0 - a_1) / 2`` (so that
+    ``T_port - T_stbd = T_max delta / delta_max``, :func:`mpcasv.models.vessel.actuator_forces`).
+    The thrust is taken as proportional to the set-point (no thrust-speed map)."""
+    for col, i in (("thrust_0", 0), ("thrust_1", 1)):
+        if col not in df.columns or df[col].isna().all():
+            raise LogError(f"{path}: missing messages: no SetThrusterActuation id {i} (a vessel "
+                           "with two thrusters needs both)")  # fmt: skip
+    df = df.dropna(subset=["thrust_0", "thrust_1"])
+    a0, a1 = df["thrust_0"].astype(float), df["thrust_1"].astype(float)
+    return pd.DataFrame({
+        "t": df["t"], "N": df["N"], "E": df["E"], "psi": df["psi"], "u": df["u"], "v": df["v"],
+        "r": df["r"], "T_cmd": (a0 + a1) * prior.T_max / 2,
+        "delta_cmd": (a0 - a1) * prior.delta_max / 2,
+    })  # fmt: skip
+
+
+
+def map_table(path: Path, vehicle: str | None = None) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """(table of :data:`mpcasv.models.ident_thrust.MAP_COLUMNS`, the vehicle's
+    :func:`~mpcasv.io.lsf.read_lsf` rows) of a DUNE log of a boat with thrusters 0 and 1.
+
+    Raises
+    ------
+    LogError
+        Unreadable log, unknown vehicle, or no SetThrusterActuation of thruster 0 or 1.
+    """
+    from mpcasv.models.ident_thrust import check_table
+
+    df = read_lsf(path)
+    chosen = pick_vehicle(df, path, vehicle)
+    df = df[df["vehicle"] == chosen].reset_index(drop=True)
+    act = read_messages(path, "SetThrusterActuation")
+    act = act[act["src"] == int(df["src"].iloc[0])]
+    t = df["t"].to_numpy(float)
+    dt = float(np.median(np.diff(t)))
+    table = pd.DataFrame({c: df[c].to_numpy(float) for c in ("t", "N", "E", "psi", "u", "v",
+                                                             "r")})  # fmt: skip
+    for i in (0, 1):
+        s = act[act["id"] == i]
+        if s.empty:
+            raise LogError(f"{path}: missing messages: no SetThrusterActuation id {i} (a vessel "
+                           "with two thrusters needs both)")  # fmt: skip
+        k = np.searchsorted(s["t"].to_numpy(float), t + dt / 2, side="right") - 1
+        table[f"a_{i}"] = np.where(k >= 0, s["value"].to_numpy(float)[np.clip(k, 0, None)], 0.0)
+    return check_table(table, path), df
+
+
+def _thruster_map_for(logs: list[Path], prior: VesselParams):
+    """DUNE's thruster map when the one log comes from DUNE's simulator (it holds
+    SimulatedState: VSIM ran) with a ``Config.ini`` beside it, and the prior has differential
+    actuation; else None, said on stdout for a differential prior (the thrust is then taken
+    proportional to the set-point). A real vehicle's Config.ini lists the VSIM models too
+    (common/vsim-models.ini is always included), so the log decides, not the file."""
+    from mpcasv.io.dune_config import read_thruster_map
+
+    if prior.actuation != "differential":
+        return None
+    why = None
+    if len(logs) != 1:
+        why = f"{len(logs)} logs (the thruster map takes one DUNE log)"
+    elif not (Path(logs[0]).parent / "Config.ini").is_file():
+        why = "no Config.ini beside the log"
+    elif str(logs[0]).lower().endswith((".lsf", ".lsf.gz")):
+        try:
+            read_messages(logs[0], "SimulatedState")
+        except LogError:
+            why = "no SimulatedState in the log (not DUNE's simulator)"
+    else:
+        why = "not a DUNE log"
+    if why is not None:
+        print(f"{logs[0]}: {why}: thrust taken proportional to the set-point (no thruster map)")
+        return None
+    tmap = read_thruster_map(Path(logs[0]).parent / "Config.ini")
+    print(f"{logs[0]}: identifying through DUNE's thruster map: {tmap.source}")
+    return tmap
+
+
+def run_map_identification(args, prior: VesselParams, tmap) -> int:
+    """``mpcasv identify`` through a thruster map: writes the vessel file and a report
+    folder beside it (``identify.md``, ``identify.json``)."""
+    from mpcasv.models.ident_mapout import (
+        phase_speeds,
+        plot_map_replay,
+        report,
+        write_vessel,
+        written_vessel,
+    )  # fmt: skip
+    from mpcasv.models.ident_thrust import HULL_COEFFS, identify_through_map, vsim_structure
+
+    coeffs = tuple(c.strip() for c in args.coeffs.split(",")) if args.coeffs else HULL_COEFFS
+    bad = [c for c in coeffs if c not in HULL_COEFFS]
+    if bad:
+        from mpcasv.config import ConfigError
+
+        raise ConfigError(f"--coeffs: through a thruster map only {', '.join(HULL_COEFFS)} "
+                          f"are identified, not {bad}")  # fmt: skip
+    log = Path(args.logs[0])
+    table, nav = map_table(log, getattr(args, "vehicle_pick", None))
+    shaped, held = vsim_structure(prior, tmap)
+    say = (lambda m: None) if args.quiet else print
+    fit = identify_through_map(table, shaped, tmap, coeffs, validation=args.validation, say=say)
+    name = args.out.stem
+    P, data = written_vessel(fit, tmap, name, held, [str(log)], prior)
+    header = (f"# {name}: identified by `mpcasv identify {log} --vessel {args.vessel} "
+              f"--validation {args.validation:g}` through DUNE's thruster map "
+              f"({tmap.source}).\n# Hull from the log; held values and the thrust limit: see "
+              "[provenance] and docs/deploy.md.\n")  # fmt: skip
+    write_vessel(args.out, data, header)
+    cmd = nav["ref_speed"].to_numpy(float) if "ref_speed" in nav else None
+    phases = None
+    if cmd is not None:
+        cmd = np.nan_to_num(cmd, nan=-1.0)
+        a = table[["a_0", "a_1"]].mean(axis=1).to_numpy()
+        n = min(len(cmd), len(a))
+        phases = phase_speeds(table["t"].to_numpy()[:n], cmd[:n], table["u"].to_numpy()[:n],
+                              a[:n])  # fmt: skip
+        phases = [ph for ph in phases if ph["commanded"] >= 0]
+    table_md = report(fit, P, tmap, prior, phases)
+    folder = args.out.with_name(args.out.stem + "-report")
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / "identify.md").write_text(table_md + "\n")
+    plot_map_replay(fit, folder)
+    (folder / "identify.json").write_text(json.dumps({
+        "coeffs": {c: getattr(P, c) for c in fit.coeffs}, "rel_std": fit.rel_std,
+        "metrics": fit.metrics, "split_s": fit.split_s, "T_max": P.T_max, "u_max": P.u_max,
+        "phases": phases}, indent=1))  # fmt: skip
+    print(table_md)
+    print(f"wrote {args.out} and {folder}/ (identify.md, identify.json, identify_replay.png)")
+    return 0
+
+
+def run_cli(args) -> int:
+    """``mpcasv identify LOG... --out params.toml``."""
+    from mpcasv.models.ident_output import plot_replay, report_table, write_params
+    from mpcasv.models.params import load_vessel
+
+    prior = load_vessel(args.vessel)
+    tmap = _thruster_map_for(args.logs, prior)
+    if tmap is not None:
+        return run_map_identification(args, prior, tmap)
+    coeffs = tuple(c.strip() for c in args.coeffs.split(",")) if args.coeffs else IDENTIFIED
+    unknown = [c for c in coeffs if c not in MODEL_COEFFS]
+    if unknown:
+        from mpcasv.config import ConfigError
+
+        raise ConfigError(f"--coeffs: not model coefficients: {unknown}")
+    logs = [load_log(p, prior, getattr(args, "vehicle_pick", None)) for p in args.logs]
+    res = identify(logs, prior, coeffs, current=not args.no_current,
+                   validation=args.validation, progress=not args.quiet)  # fmt: skip
+    write_params(args.out, res, prior, [str(p) for p in args.logs])
+    folder = args.out.with_name(args.out.stem + "-report")
+    plot_replay(res, folder)
+    table = report_table(res, prior)
+    (folder / "identify.md").write_text(table + "\n")
+    (folder / "identify.json").write_text(json.dumps({
+        "coeffs": {c: getattr(res.params, c) for c in res.coeffs}, "rel_std": res.rel_std,
+        "current": res.current, "metrics": res.metrics}, indent=1))  # fmt: skip
+    print(table)
+    print(f"wrote {args.out} and {folder}/ (identify.md, identify.json, identify_replay.png)")
+    return 0

@@ -1,0 +1,115 @@
+"""Output of :func:`mpcasv.models.identify.identify`: the vessel TOML with provenance, the
+replay plot and the report table (``mpcasv identify``)."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from pathlib import Path
+
+import numpy as np
+
+from mpcasv.models.identify import OUTPUTS, Identification, mass_terms
+from mpcasv.models.params import VesselParams
+
+
+def write_params(path: Path, res: Identification, prior: VesselParams, sources: list[str]) -> None:
+    """Write the identified parameters as a vessel TOML (loads with ``load_vessel``).
+
+    Every number keeps a provenance entry: identified ones name the logs, the method, the
+    1-sigma uncertainty and the validation fit; the others are the prior's, marked as held.
+    """
+    import tomli_w
+
+    val = res.metrics["simulation_error"]["validation"]
+    fit = ", ".join(f"{c} {v['fit_pct']:.1f} %" for c, v in val.items())
+    from mpcasv.models.vessel import top_speed
+
+    data = {f.name: getattr(res.params, f.name) for f in dataclasses.fields(res.params)}
+    data.pop("provenance")
+    data = {k: v for k, v in data.items() if v is not None}  # absent optional (T_idle)
+    data["name"] = f"{prior.name}-identified"
+    # the declared top speed is checked against the model at load: the identified resistance
+    # moves it (set-points are fractions of the prior's T_max, so it is the full-throttle speed
+    # the identified model predicts)
+    data["u_max"] = round(top_speed(res.params), 4)
+    prov = {}
+    for key in data:
+        if key == "name":
+            continue
+        if key == "u_max":
+            prov[key] = (f"top speed of the identified model at T_max = {prior.T_max:g} N "
+                         f"(prior declared {prior.u_max:g} m/s: {prior.provenance.get(key, '')})")
+        elif key in res.coeffs:
+            prov[key] = (f"identified by mpcasv identify from {', '.join(sources)}: simulation-"
+                         f"error least squares, 1-sigma {100 * res.rel_std[key]:.1f} %; "
+                         f"validation fit {fit}; prior {getattr(prior, key):.6g}")  # fmt: skip
+        else:
+            prov[key] = "held at the prior: " + prior.provenance.get(key, "(no provenance)")
+    header = (f"# Identified by `mpcasv identify` from {', '.join(sources)}.\n"
+              f"# Estimated constant current V_N = {res.current[0]:.3f} m/s, "
+              f"V_E = {res.current[1]:.3f} m/s (not a vessel parameter).\n")  # fmt: skip
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(header + tomli_w.dumps({**data, "provenance": prov}))
+
+
+def plot_replay(res: Identification, out: Path) -> Path:
+    """Measured vs simulated outputs over the training and validation windows."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(4, 2, figsize=(13, 9), sharex="col")
+    scale = {"psi": (math.degrees(1), "deg"), "u": (1, "m/s"), "v": (1, "m/s"),
+             "r": (math.degrees(1), "deg/s")}  # fmt: skip
+    for j, part in enumerate(("train", "validation")):
+        Y, Ys = res.replay[part]
+        k = np.arange(Y.shape[1]) * 0.1
+        for i, c in enumerate(OUTPUTS):
+            f, unit = scale[c]
+            ax = axes[i, j]
+            ax.plot(k, Y[i] * f, ".", ms=1, color="0.6", label="measured")
+            ax.plot(k, Ys[i] * f, lw=0.8, color="tab:blue", label="simulated (identified)")
+            ax.set_ylabel(f"{c} ({unit})")
+            fit = res.metrics["simulation_error"][part][c]["fit_pct"]
+            ax.set_title(f"{part}: {c}, fit {fit:.1f} %", fontsize=9)
+        axes[3, j].set_xlabel("time over the replay windows, concatenated (s)")
+    axes[0, 0].legend(fontsize=8)
+    fig.tight_layout()
+    out.mkdir(parents=True, exist_ok=True)
+    p = out / "identify_replay.png"
+    fig.savefig(p, dpi=100)
+    plt.close(fig)
+    return p
+
+
+def report_table(res: Identification, prior: VesselParams, truth: VesselParams | None = None):
+    """Markdown: coefficients (prior, identified, 1-sigma, truth error if known), fits."""
+    lines = ["| coefficient | prior | identified | 1-sigma % |" + (" true | error % |" if truth
+             else ""), "|---|---|---|---|" + ("---|---|" if truth else "")]  # fmt: skip
+    rows = [(c, getattr(prior, c), getattr(res.params, c), 100 * res.rel_std[c],
+             getattr(truth, c) if truth else None) for c in res.coeffs]  # fmt: skip
+    mp, mi = mass_terms(prior), mass_terms(res.params)
+    mt = mass_terms(truth) if truth else {}
+    rows += [(k, mp[k], mi[k], math.nan, mt.get(k)) for k in mp]
+    for c, p0, pi, sd, pt in rows:
+        line = f"| {c} | {p0:.4g} | {pi:.4g} | {sd:.1f} |"
+        if truth:
+            line += f" {pt:.4g} | {100 * (pi / pt - 1):+.1f} |"
+        lines.append(line)
+    lines += ["", f"Current: V_N = {res.current[0]:.3f} m/s, V_E = {res.current[1]:.3f} m/s", "",
+              "| stage | split | " + " | ".join(f"{c} fit % (RMSE)" for c in OUTPUTS) + " |",
+              "|---|---|" + "---|" * len(OUTPUTS)]  # fmt: skip
+    for stage, d in res.metrics.items():
+        for part, m in d.items():
+            lines.append(
+                f"| {stage} | {part} | "
+                + " | ".join(f"{m[c]['fit_pct']:.1f} ({m[c]['rmse']:.3g})" for c in OUTPUTS)
+                + " |"
+            )
+    lines.append("RMSE in rad, m/s, m/s, rad/s; fits over replay windows re-initialised every "
+                 "window from the smoothed measurement.")  # fmt: skip
+    return "\n".join(lines)
+
+

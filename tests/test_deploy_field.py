@@ -1,0 +1,175 @@
+"""Issue 15 / issue 16 item 5 in the deploy: an MPC deploys in field mode. Its solves run in
+a worker process with a hard deadline (started before any vehicle is contacted, also by
+``--prepare``), its step runs off the event loop, so the link and the watchdogs keep running
+while a solve hangs, and the workers are stopped at shutdown."""
+
+from __future__ import annotations
+
+import asyncio
+import functools
+import json
+import time
+
+import imcpy
+import tomli_w
+
+from mpcasv.cli import main
+from mpcasv.io.deploy import Deploy
+from mpcasv.io.logs import read_jsonl
+from tests.test_io_link import ASV_ID, AUV_ID, Fake, _cfg
+
+BUDGET_MS = 1500.0  # the step's deadline in these tests (s of wall time, well above a tick)
+
+
+class _Hang:
+    """A solver whose every solve hangs (a native solver looping for ever, docs/mpc.md)."""
+
+    def solve(self, *args):
+        time.sleep(3600.0)
+
+
+def hanging_solver():
+    return _Hang()
+
+
+def _mpc_cfg(tmp_path):
+    cfg = _cfg(tmp_path)
+    data = {
+        "identity": {"id": cfg.identity.id},
+        "origin": {"lat_deg": cfg.origin.lat_deg, "lon_deg": cfg.origin.lon_deg},
+        "link": {"bind": "127.0.0.1", "port": 0, "announce_to": [], "discovery_ports": []},
+        "vehicle": [{"role": "asv", "name": "fake-asv", "id": ASV_ID},
+                    {"role": "auv", "name": "fake-auv"}],
+        "controller": {"name": "mpc-single", "preset": "mpc-single",
+                       "overrides": {"solver.budget_ms": BUDGET_MS}},
+        "acoustics": {"T0": 4.0},
+        "log": {"dir": str(tmp_path / "log"), "flush_s": 0.2},
+    }  # fmt: skip
+    return data
+
+
+def test_link_and_watchdogs_run_while_a_solve_hangs(tmp_path):
+    from mpcasv.io.config import deploy_config_from_dict
+
+    cfg = deploy_config_from_dict(_mpc_cfg(tmp_path))
+    dep = Deploy(cfg, dry_run=True, solver_factory=functools.partial(hanging_solver))
+    assert dep.field_mode and dep.controller.deadline is not None  # before any socket
+    assert dep.controller.acoustics.T0 == 4.0  # the configuration's channel, in the Boat
+    seen = []  # (monotonic time, a step in flight, last ASV state's arrival)
+    watch = dep.watch
+
+    def watched():
+        busy = dep._step_task is not None and not dep._step_task.done()
+        seen.append((time.monotonic(), busy, dep.link.asv.nav_recv))
+        watch()
+
+    dep.watch = watched
+
+    async def run():
+        stop = asyncio.Event()
+        task = asyncio.create_task(dep.run(stop))
+        await asyncio.sleep(0.2)
+        to = dep.link.endpoint.address
+        asv = await Fake("fake-asv", ASV_ID, imcpy.SystemType.USV).open()
+        auv = await Fake("fake-auv", AUV_ID).open()
+        for v in (asv, auv):
+            v.announce(to, dep.clock.now())
+        t_end = time.monotonic() + 4.5
+        i = 0
+        while time.monotonic() < t_end:
+            t = dep.clock.now()
+            auv.send(auv.es(t, 120.0, 0.0), to, t)  # in the donut: the MPC solves
+            asv.send(asv.es(t, 0.1 * i, 0.0), to, t)
+            i += 1
+            await asyncio.sleep(0.1)
+        stop.set()
+        return await task
+
+    summary = asyncio.run(run())
+    steps = read_jsonl(tmp_path / "log" / "deploy.jsonl", "step")
+    assert steps, "no decision"
+    first = steps[0]
+    # the hung solve was cut at the deadline: the fallback's command, in about the budget
+    assert first["diag"]["mpc_ok"] == 0 and first["controller_cmd"]["reason"] == "fallback"
+    assert BUDGET_MS * 0.9 <= first["step_ms"] <= BUDGET_MS + 1000
+    assert dep.controller.deadline is None  # workers stopped at shutdown
+    # while it hung, the watchdogs ran every 0.25 s and the link took in the ASV's states
+    busy = [s for s in seen if s[1]]
+    assert len(busy) >= 4, seen
+    assert busy[-1][2] > busy[0][2]  # newer ASV states accepted during the solve
+    assert summary["skipped_steps"] >= 1  # the ticks during the hung solve were skipped
+    recs = read_jsonl(tmp_path / "log" / "deploy.jsonl")
+    assert recs[-1]["kind"] == "summary"
+
+
+def test_prepare_starts_the_solver_worker_before_any_vehicle(tmp_path, capsys):
+    data = _mpc_cfg(tmp_path)
+    path = tmp_path / "deploy.toml"
+    path.write_text(tomli_w.dumps(data))
+    assert main(["deploy", str(path), "--prepare"]) == 0
+    out = json.loads(capsys.readouterr().out)["prepared"]
+    assert out["controller"] == "mpc-single" and out["field_mode"] is True
+    assert not (tmp_path / "log").exists()  # nobody contacted, nothing logged
+
+
+def test_achievable_speed_caps_a_planned_speed(tmp_path):
+    """With ``speed_feedback`` the learned achievable speed caps every transit command sent,
+    also a controller whose speed comes from its plan (an MPC) rather than ``params.speed``."""
+    from mpcasv.interface import ASVState, AUVEstimate, Command, Mode, Observation
+    from tests.test_io_asv import _cfg as asv_cfg
+
+    dep = Deploy(asv_cfg(tmp_path, controller={"speed_feedback": True}), dry_run=True)
+
+    class Planner:  # an MPC's command: the speed of its plan
+        def step(self, obs):
+            return Command(Mode.TRANSIT, (500.0, 0.0), 3.4, 0)
+
+    dep.controller = Planner()
+    auv = AUVEstimate(300.0, 0.0, 0.0, 0.0, 0.0, (1.0, 0.0, 0.0, 1.0), 0.0)
+    obs = Observation(0.0, ASVState(0.0, 0.0, 0.0, 0.7), True, (auv,))
+    dep.observation = lambda ts, now: (obs, ["ok"], [0.0])
+    assert dep.step(0.0, 0.0).speed == 3.4  # nothing learned yet
+    dep.speed_cap = 0.7
+    assert dep.step(1.0, 1.0).speed == 0.7
+    dep.jsonl.flush()
+    last = read_jsonl(tmp_path / "deploy.jsonl", "step")[-1]
+    assert last["controller_cmd"]["speed"] == 3.4 and last["cmd"]["speed"] == 0.7
+    assert last["speed_capped"] is True
+    dep.jsonl.close()
+    dep.lsf.close()
+    # the autopilot's own limit (DUNE's Maximum Absolute Speed) caps it too
+    lim = Deploy(asv_cfg(tmp_path / "lim", speed={"command_max": 2.5}), dry_run=True)
+    lim.controller, lim.observation = Planner(), dep.observation
+    assert lim.step(0.0, 0.0).speed == 2.5
+    lim.jsonl.close()
+    lim.lsf.close()
+
+
+def test_otter_deploy_config_plans_with_the_identified_otter(monkeypatch):
+    """experiments/deploy/dune-otter.toml names the vessel identified from DUNE's Otter log;
+    the MPC is built for that boat (with the configuration's acoustic channel)."""
+    from pathlib import Path
+
+    import pytest
+
+    from mpcasv.io.config import build_controller, deploy_boat, load_deploy_config
+    from mpcasv.models.params import load_vessel
+
+    cfg = load_deploy_config(Path(__file__).resolve().parents[1] / "experiments" / "deploy"
+                             / "dune-otter.toml")  # fmt: skip
+    assert deploy_boat(cfg).vessel == load_vessel("dune-otter")
+    assert cfg.controller.speed_feedback and cfg.speed.command_max == 2.5
+    seen = {}
+
+    class Built(Exception):
+        pass
+
+    def build_ocp(params, n_auv, multi, log=print, boat=None):  # stands in for the compile
+        seen["boat"] = boat
+        raise Built
+
+    monkeypatch.setattr("mpcasv.mpc.controller.build_ocp", build_ocp)
+    with pytest.raises(Built):
+        build_controller(cfg, log=lambda *a: None)
+    assert seen["boat"].vessel.name == "dune-otter"
+    assert seen["boat"].acoustics == cfg.acoustics
