@@ -58,7 +58,7 @@ NOTES = """\
   positions, speeds, depths, timings). Distances and transit times follow the paths.
 - **A different boat model.** Gretha's model here is derived from her dimensions (not
   identified), and the execution level (LOS guidance, eq. 3.1, gain-scheduled PID, steering
-  floor, and a power turn that overrides eq. 3.1 in hard turns: docs/tuning.md) is ours;
+  floor, and a power turn in collision-avoidance escapes only: docs/tuning.md) is ours;
   the papers used DUNE's LAUV simulator with Maritime Robotics' VCS simulator
   (Cases 1, 2, 6) or the real boat (Cases 3, 4, 7, 8). Our boat coasts after the propeller
   stops, which makes standby glide out of the target domain and adds transits.
