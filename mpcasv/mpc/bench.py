@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import os
 import platform
 import time
 from pathlib import Path
@@ -48,13 +49,31 @@ POLISH = {
 
 def record(case: str, preset: str, multi: bool, steps: int = STEPS):
     """(params, controller, [(p, elapsed stages)]) of a closed-loop MPC run of ``case``."""
+    return record_run(case, preset, multi, steps)[:3]
+
+
+def record_run(case: str, preset: str, multi: bool, steps: int = STEPS):
+    """:func:`record` plus the run's whole controller step times (ms, per step: the
+    controller's ``step`` as the simulator timed it, solves, rescues, the fallback's
+    bookkeeping and, under the simulator's hang guard, the round trip to the solver process)."""
     sc = load_scenario(SCENARIOS / f"{case}.toml")
     sc = scenario_with(sc, duration=float(steps))
     params = load_preset(preset, preset)
     ctrl = MPCController(params, len(sc.auv), multi, boat=Boat.of_scenario(sc))
     ctrl.recorder = []
-    simulate(sc, ctrl, seed=0)
-    return params, ctrl, list(ctrl.recorder)
+    result = simulate(sc, ctrl, seed=0)
+    ctrl.close()
+    return params, ctrl, list(ctrl.recorder), np.asarray(result.step_ms, float)
+
+
+def step_summary(step_ms: np.ndarray, ctrl: MPCController) -> dict:
+    """Median / p99 / max of the whole controller step (ms; the first step, cold, left out)
+    and the run's plan sources (docs/mpc.md, "Fallbacks")."""
+    ms = step_ms[1:]
+    return {"median_ms": round(float(np.median(ms)), 3),
+            "p99_ms": round(float(np.percentile(ms, 99)), 3),
+            "max_ms": round(float(np.max(ms)), 2), "steps": int(len(step_ms)),
+            "fallbacks": int(ctrl.fallbacks), "sources": dict(ctrl.sources)}  # fmt: skip
 
 
 def replay(solver, ocp, seq, desc: str) -> dict[str, np.ndarray]:
@@ -130,10 +149,12 @@ def polish(ref, seq, res: dict) -> dict:
 def bench_mpc(args: argparse.Namespace) -> dict:
     """Record the Case 3 / Case 6 sequences, replay them three ways, print and return figures."""
     figures: dict = {"machine": platform.processor() or platform.machine(), "steps": STEPS,
+                     "load_average": [round(x, 2) for x in os.getloadavg()],
                      "cases": {}}  # fmt: skip
     for case, preset, multi in CASES:
         t0 = time.perf_counter()
-        params, ctrl, seq = record(case, preset, multi)
+        params, ctrl, seq, step_ms = record_run(case, preset, multi)
+        step = step_summary(step_ms, ctrl)
         ocp, default = build_ocp(params, ctrl.ocp.dims.n_auv, multi, boat=ctrl.boat)
         qp = QPSolver(ocp, dataclasses.replace(params.solver, solver="qp"))
         ref = OptiReference(ocp)
@@ -150,10 +171,14 @@ def bench_mpc(args: argparse.Namespace) -> dict:
         speedup = rows["opti_ipopt"]["median_ms"] / rows[f"default_{params.solver.solver}"][
             "median_ms"]  # fmt: skip
         figures["cases"][f"{case}_{n}auv"] = {
-            "solvers": rows, "speedup_median": round(speedup, 1),
+            "solvers": rows, "speedup_median": round(speedup, 1), "controller_step": step,
             "wall_s": round(time.perf_counter() - t0, 1),
         }  # fmt: skip
         _print(case, n, rows, speedup)
+        print(f"whole controller step in the recorded run: median {step['median_ms']:.2f} ms, "
+              f"p99 {step['p99_ms']:.2f} ms, max {step['max_ms']:.1f} ms; plan sources "
+              f"{step['sources']}")
+    figures["load_average_end"] = [round(x, 2) for x in os.getloadavg()]
     return figures
 
 

@@ -170,7 +170,7 @@ class SolverParams:
         guess and the hybrid controller's command, each within this many iterations, before
         it hands the step to the hybrid controller. A work budget, like ``max_iter``: on the
         Case 6 run (seed 0) every one of the 54 solves stopped at 50 iterations converged
-        within 200 (median 76).
+        within 200 (median 76). 0 forces failures (tests).
     check_stages : int
         Stages of the plan checked against r_inner / r_avoid before it is used.
     check_margin : float
@@ -200,7 +200,7 @@ class SolverParams:
     qp_iters: PosInt = 10
     budget_ms: Pos = 200.0
     hang_s: NonNeg = 30.0
-    rescue_iter: PosInt = 200
+    rescue_iter: Annotated[int, Strict(), Field(ge=0)] = 200
     check_stages: PosInt = 2
     check_margin: NonNeg = 2.0
     max_violation: Pos = 60.0
