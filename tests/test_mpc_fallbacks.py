@@ -6,6 +6,7 @@ escape manoeuvre is flown; the hybrid takes the step only when no AUV is near.""
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -118,3 +119,28 @@ def test_case8_needs_the_fallback_at_most_once(scenarios_dir):
     assert m["fallbacks"] <= 1
     assert m["collision_domain_s"] <= 92.2
     assert m["min_range_m"] >= 10.0
+
+
+def test_after_a_hung_solve_in_simulation_the_step_is_still_planned(tmp_path):
+    """Simulation's hang guard (``hang_s``): a solve that never returns is abandoned (as the
+    recorded Case 4 problem that hangs fatrop, docs/mpc.md "Known problems"); the step is then
+    planned by the exploration or rescue solves on the spare worker (that Case 4 problem
+    converges from the escape guess and from a rollout), not handed to the hybrid."""
+    from test_mpc_deadline import hang_once_solver
+
+    c = make_controller("mpc-single", 1, "mpc-single", overrides={"solver.hang_s": 5.0})
+    flag = tmp_path / "hang"
+    c.use_deadline(functools.partial(hang_once_solver, str(flag), c.params, 1, False))
+    c._hang_guard = True  # as use_hang_guard, with the hanging solver
+    try:
+        assert c.deadline.wait_spare(300.0)
+        obs = Observation(0.0, ASVState(0.0, 0.0, 0.0, 1.0), True,
+                          (AUVEstimate(120.0, 0.0, 30.0, 0.5, 0.0),))  # fmt: skip
+        flag.touch()
+        cmd = c.step(obs)
+        assert not flag.exists()  # the worker did start the hanging solve
+        assert c.deadline.abandoned == 1
+        assert c.fallbacks == 0 and cmd.reason != Reason.FALLBACK
+        assert c.diagnostics()["mpc_ok"] == 1
+    finally:
+        c.close()

@@ -385,7 +385,9 @@ class MPCController:
         res = self._explore(obs, p_s, res)
         reason = self._check(res, p)
         source = "plan" if reason is None else "fallback"
-        if reason is not None and res.status != "deadline":
+        # rescue, except after a missed field deadline (no time left); after a hang in
+        # simulation too (the Case 4 problem that hangs fatrop converges from the escape guess)
+        if reason is not None and (res.status != "deadline" or self._hang_guard):
             res, reason, source = self._rescue(obs, p_s, p, res, reason, hybrid_cmd)
         if source == "escape":  # the escape manoeuvre's rollout: warm-starts the next step
             self.w_prev, self.lam_prev = res.w, None
@@ -468,7 +470,7 @@ class MPCController:
         if np.all(still >= par["r_lo"][:, j]) and self.domain.in_reliable_range(still[0],
                                                                              par["r_t"][j]):
             return res
-        if self.deadline is not None and res.status == "deadline":
+        if self.deadline is not None and not self._hang_guard and res.status == "deadline":
             return res  # the field budget is spent
         alt = self._solve(p, ocp.guided_rollout(p, j, P.speed))
         self.explored += 1
@@ -488,6 +490,8 @@ class MPCController:
     def _check(self, res, p) -> str | None:
         """Why this step's plan may not be used (None: it may)."""
         sp = self.params.solver
+        if not res.ok and res.status == "deadline" and self._hang_guard:
+            return f"solver hung: no answer within {sp.hang_s:g} s (hang guard)"
         if not res.ok and res.status == "deadline":
             return f"deadline: no plan within the step's {sp.budget_ms:g} ms (field mode)"
         if not res.ok:
@@ -526,8 +530,8 @@ class MPCController:
         P, ocp = self.params, self.ocp
         esc = escape_guess(ocp, p_s, P.margin)
         starts = []
-        if not res.ok and np.all(np.isfinite(res.w)):
-            starts.append(res.w)
+        if not res.ok and res.status != "deadline" and np.all(np.isfinite(res.w)):
+            starts.append(res.w)  # (a hung solve's "iterate" is its start: not again)
         if esc is not None:
             starts.append(esc)
         wp = None if hybrid_cmd.mode is Mode.STANDBY else hybrid_cmd.waypoint
@@ -538,8 +542,8 @@ class MPCController:
                 break  # the field budget is spent
             r = self._solve(p_s, w0, max_iter=P.solver.rescue_iter)
             ms, iters = ms + r.ms, iters + r.iters
-            if r.status == "deadline":
-                break
+            if r.status == "deadline" and not self._hang_guard:
+                break  # field budget spent (a hang in simulation: try the next start)
             if r.ok:
                 tried.append(r)
         self.rescues += 1
