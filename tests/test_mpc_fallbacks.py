@@ -87,7 +87,7 @@ def test_a_refused_plan_no_deeper_than_the_escape_is_used(ctrl, monkeypatch):
     assert ctrl._check(SolveResult(esc, None, None, 1.0, True, "0", 5, 1.0), p) is not None
     _always(monkeypatch, ctrl, lambda q: escape_guess(ctrl.ocp, q, ctrl.params.margin))
     cmd = ctrl.step(obs)
-    assert ctrl.sources == {"plan": 1} and ctrl.fallbacks == 0 and ctrl.rescues == 1
+    assert ctrl.sources == {"as-escape": 1} and ctrl.fallbacks == 0 and ctrl.rescues == 1
     assert cmd.reason != Reason.FALLBACK and ctrl.diagnostics()["mpc_ok"] == 1
 
 

@@ -196,7 +196,8 @@ class MPCController:
         self.fallbacks = 0
         self.fallback_log: list[FallbackEvent] = []
         #: steps per plan source: "plan" (warm-started or exploration solve), "rescue" (a
-        #: rescue solve), "escape" (the escape manoeuvre), "fallback" (the hybrid's command)
+        #: rescue solve), "as-escape" (a refused plan no deeper than the escape manoeuvre),
+        #: "escape" (the escape manoeuvre), "fallback" (the hybrid's command)
         self.sources: dict[str, int] = {}
         #: steps whose solves took longer than ``budget_ms`` of wall time: a diagnostic in
         #: simulation (never a decision); in the field such a step is cut at the deadline
@@ -519,11 +520,11 @@ class MPCController:
         """The warm-started plan cannot be used (``reason``): solve again, within
         ``solver.rescue_iter`` iterations each, from the unconverged iterate (solver failure),
         from the escape guess (full thrust away from the AUVs near the ASV, when there are
-        any) and from the hybrid controller's command; keep the cheapest plan that passes the
-        check. None passes: a converged plan that goes no deeper than the escape manoeuvre's
-        rollout (within ``check_margin``) is used (the hybrid controller could not do
-        better: source ``plan``); else the escape manoeuvre itself (source ``escape``); with
-        no AUV near, the hybrid controller's command (``fallback``).
+        any) and from the hybrid controller's command, in this order; the first plan that
+        passes the check is used. None passes: a converged plan that goes no deeper than the
+        escape manoeuvre's rollout (within ``check_margin``) is used (the hybrid controller
+        could not do better: source ``as-escape``); else the escape manoeuvre itself (source
+        ``escape``); with no AUV near, the hybrid controller's command (``fallback``).
 
         Returns ``(result, reason or None, source)``; ``p_s`` the solved parameters (funnel),
         ``p`` those the check uses. docs/mpc.md, "Fallbacks"."""
@@ -546,17 +547,16 @@ class MPCController:
                 break  # field budget spent (a hang in simulation: try the next start)
             if r.ok:
                 tried.append(r)
+                if self._check(r, p) is None:  # the first usable plan ends the rescue
+                    self.rescues += 1
+                    return dataclasses.replace(r, ms=ms, iters=iters), None, "rescue"
         self.rescues += 1
-        good = [r for r in tried if self._check(r, p) is None]
-        if good:
-            best = min(good, key=lambda r: r.f)
-            return dataclasses.replace(best, ms=ms, iters=iters), None, "rescue"
         if esc is not None:
             d_esc = self._depth(esc, p)
             if tried:
                 best = min(tried, key=lambda r: self._depth(r.w, p))
                 if self._depth(best.w, p) <= d_esc + P.solver.check_margin:
-                    return dataclasses.replace(best, ms=ms, iters=iters), None, "plan"
+                    return dataclasses.replace(best, ms=ms, iters=iters), None, "as-escape"
             return (SolveResult(esc, None, None, math.nan, False, "escape", iters, ms), None,
                     "escape")  # fmt: skip
         if tried:  # converged, but into the radius, with no AUV near: cannot happen often
