@@ -13,12 +13,15 @@ Every step (docs/mpc.md, "Controller"):
    while the plan stands still, every ``explore_every`` s a second solve starts from a guess
    heading for the AUV with the largest projected fix age (standing still is a local minimum:
    at rest the rudder has no authority, so the gradient cannot say "turn and go");
-4. the safety check: the ASV more than ``max_violation`` outside the range bounds now (no
-   solve), a failed solve (in the field also: no answer within ``budget_ms``, see
-   :meth:`MPCController.use_deadline`), or a plan entering r_inner /
-   r_avoid within its first ``check_stages`` stages (or, already inside, closing the range
-   further) hands this step to the hybrid controller
-   (stepped on every observation so that its state is current), counted in ``fallbacks``;
+4. the safety check and, when the plan cannot be used (a failed solve, or a plan entering
+   r_inner / r_avoid within its first ``check_stages`` stages, or, already inside, closing
+   the range further), the rescue: solves from the unconverged iterate, an escape guess and
+   the hybrid's command with a larger iteration budget; a plan no deeper than the escape
+   manoeuvre, else the escape manoeuvre itself; only with no AUV near does the hybrid
+   controller take the step (stepped on every observation so that its state is current),
+   counted in ``fallbacks`` (docs/mpc.md, "Fallbacks"). Far outside the range bounds the
+   bounds are relaxed along a funnel (:func:`~mpcasv.mpc.rescue.funnel`) and the problem is
+   solved;
 5. the command: STANDBY while the plan keeps the thrust below the propeller-on threshold for
    ``standby_time``, else TRANSIT to the planned position ``lookahead`` seconds ahead (pushed
    out to ``min_carrot`` m) at the planned speed, labelled AVOIDANCE or TRACKING (its reason).
