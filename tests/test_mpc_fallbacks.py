@@ -144,3 +144,19 @@ def test_after_a_hung_solve_in_simulation_the_step_is_still_planned(tmp_path):
         assert c.diagnostics()["mpc_ok"] == 1
     finally:
         c.close()
+
+
+def test_the_benchmark_records_wall_and_cpu_time_of_each_whole_step():
+    """``mpcasv bench mpc`` (issue 16 item 8): the recorded run's whole controller steps are
+    timed on the wall clock and in CPU time of this process (its solves in-process), one each
+    per step; the summary gives both and the run's plan sources."""
+    from mpcasv.mpc.bench import record_run, step_summary
+
+    params, ctrl, seq, times = record_run("case3", "mpc-single", False, steps=12)
+    assert params.solver.hang_s == 0.0 and ctrl.deadline is None  # solves in this process
+    assert len(seq) == len(times["wall"]) == len(times["cpu"]) == 12
+    assert np.all(times["cpu"] > 0.0)
+    assert np.all(times["cpu"] <= times["wall"] + 5.0)  # one thread: CPU <= wall (+ clock ticks)
+    s = step_summary(times, ctrl)
+    assert s["steps"] == 12 and sum(s["sources"].values()) == 12
+    assert s["cpu_p99_ms"] >= s["cpu_median_ms"] > 0.0 and s["wall_p99_ms"] >= s["wall_median_ms"]

@@ -1,4 +1,4 @@
-"""Primal guesses the MPC solves from when its warm-started plan cannot be used (issue 16 item 7).
+"""What the MPC does before it hands a step to the hybrid controller (issue 16 item 7).
 
 The warm start (the previous plan moved on) is usually the best start; it fails in two ways
 (docs/mpc.md, "Fallbacks"): the solver stops at its iteration limit, or it converges to a plan
@@ -15,6 +15,8 @@ thrust law:
   waypoint at its speed cap, or stop for its standby).
 
 Only the primal start changes: the problem, its constraints and its cost are the same.
+:func:`funnel` relaxes the range bounds (parameters) when the ASV is far outside them, so
+that such a step is solved rather than handed over (docs/mpc.md, "Fallbacks").
 """
 
 from __future__ import annotations
