@@ -22,6 +22,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--json", type=Path, help="also write the figures to this JSON file")
     p.add_argument("--repeat", type=int, default=3, help="repetitions (best/median reported)")
     p.add_argument("--suite", help="suite for 'compare' benchmarks")
+    p.add_argument("--steps", type=int, default=300,
+                   help="'mpc': receding-horizon problems per recorded sequence (default 300)")
+    p.add_argument("--quick", action="store_true",
+                   help="'mpc': only Opti + IPOPT and the default solver (no QP variant, no "
+                        "IPOPT polish of the default's solutions)")  # fmt: skip
     p.set_defaults(func=run)
 
 

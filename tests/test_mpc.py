@@ -17,6 +17,7 @@ from mpcasv.experiments.metrics import compute_metrics
 from mpcasv.interface import ASVState, AUVEstimate, Mode, Observation, Reason
 from mpcasv.mpc.bench import record, replay
 from mpcasv.mpc.qp import QPSolver
+from mpcasv.mpc.rescue import funnel
 from mpcasv.mpc.solvers import SolveResult
 from mpcasv.sim.scenario import load_scenario, scenario_with
 from mpcasv.sim.simulator import simulate
@@ -48,18 +49,21 @@ def test_mpc_mostly_stands_by_in_case1(scenarios_dir):
 
 
 def test_forced_solver_failure_engages_the_fallback_and_stays_safe(scenarios_dir):
-    res, m, ctrl = run(scenarios_dir, "case4", overrides={"solver.max_iter": 0}, duration=400.0)
-    assert m["fallbacks"] == 400  # every step
-    assert m["min_range_m"] >= 10.0
+    """With no iterations allowed (main and rescue solves) no solve succeeds: every step takes
+    the escape manoeuvre (an AUV near) or the hybrid controller's command, and stays safe."""
+    res, m, ctrl = run(scenarios_dir, "case4", duration=400.0,
+                       overrides={"solver.max_iter": 0, "solver.rescue_iter": 0})  # fmt: skip
     assert m["duration_s"] == pytest.approx(400.0)
-    assert set(res.timeseries["reason"]) == {"fallback"}
-    # every step falls back: the solver fails, or (the hybrid lets a pursuer come close) the
-    # ASV is too far inside r_inner to try
-    solver = [e.reason.startswith("solver") for e in ctrl.fallback_log]
-    assert sum(solver) > 200
-    assert all(s or "outside the range bounds" in e.reason
-               for s, e in zip(solver, ctrl.fallback_log, strict=True))  # fmt: skip
-    assert (res.timeseries["mpc_fallback_reason"] != "").all()
+    assert m["min_range_m"] >= 10.0
+    assert set(ctrl.sources) <= {"escape", "fallback"}
+    assert sum(ctrl.sources.values()) == 400
+    assert m["fallbacks"] == ctrl.sources.get("fallback", 0) > 0
+    assert set(res.timeseries["mpc_source"]) == set(ctrl.sources)
+    assert all(e.reason.startswith("solver") for e in ctrl.fallback_log)
+    assert (res.timeseries["mpc_fallback_reason"] != "").sum() == m["fallbacks"]
+    fb = res.timeseries["mpc_source"] == "fallback"
+    assert (res.timeseries.loc[fb, "reason"] == "fallback").all()
+    assert (res.timeseries.loc[~fb, "reason"] != "fallback").all()
 
 
 def test_the_safety_check_names_each_fallback_reason():
@@ -138,18 +142,28 @@ def test_mpc_predicts_the_auvs_with_the_estimators_forecast():
     np.testing.assert_allclose(pa, np.stack([100.0 + ts, 0 * ts], axis=1))
 
 
-def test_far_outside_the_bounds_the_hybrid_drives_without_a_solve(monkeypatch):
-    """An AUV estimate that jumped far beyond r_outer (a report after a long silence): no solve
-    (the badly scaled problem once hung fatrop), the hybrid controller's command, a counted
-    fallback with its reason."""
+def test_far_outside_the_bounds_the_relaxed_problem_is_solved():
+    """An AUV estimate that jumped far beyond r_outer (a report after a long silence): the
+    bounds are relaxed along a funnel closing at ``funnel_speed`` (well scaled: the
+    unrelaxed problem once hung fatrop), the plan is solved and heads back towards the AUV;
+    no fallback (before issue 16 item 7: no solve, the hybrid's command)."""
     ctrl = make_controller("mpc-single", 1, "mpc-single")
     ctrl.reset(1)
-    monkeypatch.setattr(ctrl.solver, "solve", lambda *a: pytest.fail("solver called"))
     obs = Observation(0.0, ASVState(0.0, 0.0, 0.0, 1.0), True,
                       (AUVEstimate(400.0, 0.0, 0.0, 0.0, 0.0),))  # fmt: skip
+    p = ctrl.parameters(obs)
+    sp = ctrl.params.solver
+    gap = ctrl._violation_now(p)
+    assert gap > sp.max_violation
+    ps = funnel(ctrl.ocp, p, sp.max_violation, sp.funnel_speed)
+    r_hi, r_hi_s = ctrl.ocp.unpack_par(p)["r_hi"][:, 0], ctrl.ocp.unpack_par(ps)["r_hi"][:, 0]
+    t = ctrl.ocp.dt * np.arange(ctrl.ocp.dims.N + 1)
+    np.testing.assert_allclose(r_hi_s - r_hi, np.maximum(gap - sp.funnel_speed * t, 0.0))
+    assert ctrl._violation_now(ps) == pytest.approx(0.0, abs=1e-9)
     cmd = ctrl.step(obs)
-    assert cmd.reason == Reason.FALLBACK and cmd.mode == Mode.TRANSIT
-    assert ctrl.fallbacks == 1 and "outside the range bounds" in ctrl.fallback_log[0].reason
+    assert ctrl.fallbacks == 0 and cmd.reason != Reason.FALLBACK
+    assert ctrl.diagnostics()["mpc_funnel"] == 1 and ctrl.diagnostics()["mpc_ok"] == 1
+    assert cmd.mode == Mode.TRANSIT and cmd.waypoint[0] > 0.0  # back towards the AUV
 
 
 _CASE5_HANG = """
@@ -162,17 +176,21 @@ sc = load_scenario(sys.argv[1])
 ctrl = make_controller("mpc-single", 1, "mpc-single", overrides={
     "domain.alpha_inner": 5.0, "domain.alpha_outer": 17.5, "weights.dT": 0.2})
 print("fallbacks", compute_metrics(simulate(sc, ctrl, 1))["fallbacks"])
+print("abandoned", ctrl.deadline.abandoned if ctrl.deadline is not None else 0)
 """
 
 
 def test_case5_estimate_jumps_do_not_hang_the_solver(scenarios_dir):
     """Regression: Case 5 (acoustic estimator), seed 1, dT = 0.2 hung fatrop forever (NaNs after
     an estimate jump put the ASV 186 m outside r_outer). A separate process, so that a hang
-    fails the test instead of the suite."""
+    fails the test instead of the suite. Since issue 16 item 7 those steps are solved with the
+    bounds relaxed along a funnel (before: not solved, 53 fallbacks): no solve may hang (none
+    abandoned by the simulator's hang guard) and none goes to the hybrid controller. The
+    timeout is for a hang, not for speed: the run took 94 s at load 19 on 2 cores."""
     import subprocess
     import sys
 
     out = subprocess.run([sys.executable, "-c", _CASE5_HANG, str(scenarios_dir / "case5.toml")],
-                         capture_output=True, text=True, timeout=120)  # fmt: skip
+                         capture_output=True, text=True, timeout=600)  # fmt: skip
     assert out.returncode == 0, out.stderr[-2000:]
-    assert "fallbacks" in out.stdout
+    assert "fallbacks 0\n" in out.stdout and "abandoned 0\n" in out.stdout, out.stdout

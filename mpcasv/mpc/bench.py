@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import os
 import platform
 import time
 from pathlib import Path
@@ -48,18 +49,50 @@ POLISH = {
 
 def record(case: str, preset: str, multi: bool, steps: int = STEPS):
     """(params, controller, [(p, elapsed stages)]) of a closed-loop MPC run of ``case``."""
+    return record_run(case, preset, multi, steps)[:3]
+
+
+def record_run(case: str, preset: str, multi: bool, steps: int = STEPS):
+    """:func:`record` plus the run's whole controller step times: wall and CPU time (ms) of
+    each ``step`` (solves, rescues, the fallback's bookkeeping). The solves run in this
+    process (``hang_s = 0``; no decision depends on it), so the CPU time is the step's own
+    work, which a loaded machine stretches far less than the wall time."""
     sc = load_scenario(SCENARIOS / f"{case}.toml")
     sc = scenario_with(sc, duration=float(steps))
     params = load_preset(preset, preset)
+    params = dataclasses.replace(params, solver=dataclasses.replace(params.solver, hang_s=0.0))
     ctrl = MPCController(params, len(sc.auv), multi, boat=Boat.of_scenario(sc))
     ctrl.recorder = []
-    simulate(sc, ctrl, seed=0)
-    return params, ctrl, list(ctrl.recorder)
+    step, cpu = ctrl.step, []
+
+    def timed_step(obs):
+        c0 = time.process_time()
+        cmd = step(obs)
+        cpu.append((time.process_time() - c0) * 1e3)
+        return cmd
+
+    ctrl.step = timed_step
+    result = simulate(sc, ctrl, seed=0)
+    times = {"wall": np.asarray(result.step_ms, float), "cpu": np.asarray(cpu, float)}
+    return params, ctrl, list(ctrl.recorder), times
+
+
+def step_summary(times: dict, ctrl: MPCController) -> dict:
+    """Median / p99 / max of the whole controller step, wall and CPU time (ms; the first
+    step, cold, left out), and the run's plan sources (docs/mpc.md, "Fallbacks")."""
+    out = {"steps": int(len(times["wall"])), "fallbacks": int(ctrl.fallbacks),
+           "sources": dict(ctrl.sources)}  # fmt: skip
+    for kind, ms in times.items():
+        ms = ms[1:]
+        out |= {f"{kind}_median_ms": round(float(np.median(ms)), 3),
+                f"{kind}_p99_ms": round(float(np.percentile(ms, 99)), 3),
+                f"{kind}_max_ms": round(float(np.max(ms)), 2)}  # fmt: skip
+    return out
 
 
 def replay(solver, ocp, seq, desc: str) -> dict[str, np.ndarray]:
     """Solve the sequence with ``solver``, each step warm-started from its previous solution."""
-    out = {k: [] for k in ("ms", "iters", "f", "ok", "w")}
+    out = {k: [] for k in ("ms", "cpu_ms", "iters", "f", "ok", "w")}
     w_prev, lam = None, (None, None)
     for p, frac in tqdm(seq, desc=desc, leave=False):
         if w_prev is None:
@@ -69,8 +102,11 @@ def replay(solver, ocp, seq, desc: str) -> dict[str, np.ndarray]:
             w0 = ocp.fill_slacks(Z, V, p)
             lam0 = (None if lam[0] is None else ocp.shift_lam_x(lam[0], frac),
                     None if lam[1] is None else ocp.shift_lam_g(lam[1], frac))  # fmt: skip
+        c0 = time.process_time()
         r = solver.solve(p, w0, *lam0)
-        for k, v in (("ms", r.ms), ("iters", r.iters), ("f", r.f), ("ok", r.ok), ("w", r.w)):
+        cpu = (time.process_time() - c0) * 1e3  # this process's CPU time (loaded machines)
+        for k, v in (("ms", r.ms), ("cpu_ms", cpu), ("iters", r.iters), ("f", r.f),
+                     ("ok", r.ok), ("w", r.w)):  # fmt: skip
             out[k].append(v)
         finite = np.all(np.isfinite(r.w))
         keep = r.ok or getattr(solver, "warm_from_failures", False)
@@ -82,10 +118,13 @@ def replay(solver, ocp, seq, desc: str) -> dict[str, np.ndarray]:
 def summary(res: dict, ref: dict | None) -> dict:
     """Median / p99 ms, iterations, failures and cost agreement with ``ref``."""
     ms = res["ms"][1:]  # the first solve starts cold
+    cpu = res["cpu_ms"][1:]
     row = {
         "median_ms": round(float(np.median(ms)), 3),
         "p99_ms": round(float(np.percentile(ms, 99)), 3),
         "max_ms": round(float(np.max(ms)), 2),
+        "cpu_median_ms": round(float(np.median(cpu)), 3),
+        "cpu_p99_ms": round(float(np.percentile(cpu, 99)), 3),
         "iters_median": float(np.median(res["iters"])),
         "iters_max": int(np.max(res["iters"])),
         "failures": int(np.sum(~res["ok"].astype(bool))),
@@ -129,40 +168,52 @@ def polish(ref, seq, res: dict) -> dict:
 
 def bench_mpc(args: argparse.Namespace) -> dict:
     """Record the Case 3 / Case 6 sequences, replay them three ways, print and return figures."""
-    figures: dict = {"machine": platform.processor() or platform.machine(), "steps": STEPS,
+    steps = getattr(args, "steps", STEPS) or STEPS
+    quick = getattr(args, "quick", False)
+    figures: dict = {"machine": platform.processor() or platform.machine(), "steps": steps,
+                     "load_average": [round(x, 2) for x in os.getloadavg()],
                      "cases": {}}  # fmt: skip
     for case, preset, multi in CASES:
         t0 = time.perf_counter()
-        params, ctrl, seq = record(case, preset, multi)
+        params, ctrl, seq, step_ms = record_run(case, preset, multi, steps)
+        step = step_summary(step_ms, ctrl)
         ocp, default = build_ocp(params, ctrl.ocp.dims.n_auv, multi, boat=ctrl.boat)
-        qp = QPSolver(ocp, dataclasses.replace(params.solver, solver="qp"))
         ref = OptiReference(ocp)
         n = ocp.dims.n_auv
         res_ref = replay(ref, ocp, seq, f"{case} opti+ipopt")
         res_def = replay(default, ocp, seq, f"{case} {params.solver.solver}")
-        res_qp = replay(qp, ocp, seq, f"{case} qp/osqp")
-        rows = {
-            "opti_ipopt": summary(res_ref, None),
-            f"default_{params.solver.solver}": summary(res_def, res_ref),
-            "qp_osqp": summary(res_qp, res_ref),
-        }
-        rows[f"default_{params.solver.solver}"] |= polish(OptiReference(ocp, POLISH), seq, res_def)
+        rows = {"opti_ipopt": summary(res_ref, None),
+                f"default_{params.solver.solver}": summary(res_def, res_ref)}  # fmt: skip
+        if not quick:
+            qp = QPSolver(ocp, dataclasses.replace(params.solver, solver="qp"))
+            rows["qp_osqp"] = summary(replay(qp, ocp, seq, f"{case} qp/osqp"), res_ref)
+            rows[f"default_{params.solver.solver}"] |= polish(OptiReference(ocp, POLISH), seq,
+                                                              res_def)  # fmt: skip
         speedup = rows["opti_ipopt"]["median_ms"] / rows[f"default_{params.solver.solver}"][
             "median_ms"]  # fmt: skip
+        speedup_cpu = rows["opti_ipopt"]["cpu_median_ms"] / rows[
+            f"default_{params.solver.solver}"]["cpu_median_ms"]  # fmt: skip
         figures["cases"][f"{case}_{n}auv"] = {
             "solvers": rows, "speedup_median": round(speedup, 1),
+            "speedup_cpu_median": round(speedup_cpu, 1), "controller_step": step,
             "wall_s": round(time.perf_counter() - t0, 1),
         }  # fmt: skip
-        _print(case, n, rows, speedup)
+        _print(case, n, rows, speedup, len(seq))
+        print(f"whole controller step in the recorded run: wall median {step['wall_median_ms']:.2f}"
+              f" / p99 {step['wall_p99_ms']:.2f} ms, CPU median {step['cpu_median_ms']:.2f} / "
+              f"p99 {step['cpu_p99_ms']:.2f} ms; plan sources {step['sources']}")
+    figures["load_average_end"] = [round(x, 2) for x in os.getloadavg()]
     return figures
 
 
-def _print(case: str, n: int, rows: dict, speedup: float) -> None:
-    print(f"\n{case}: {n} AUV(s), {STEPS} receding-horizon problems")
-    head = f"{'solver':<16}{'median ms':>10}{'p99 ms':>9}{'iters':>7}{'fail':>6}"
+def _print(case: str, n: int, rows: dict, speedup: float, steps: int = STEPS) -> None:
+    print(f"\n{case}: {n} AUV(s), {steps} receding-horizon problems")
+    head = f"{'solver':<16}{'median ms':>10}{'p99 ms':>9}{'CPU med':>9}{'CPU p99':>9}{'iters':>7}"
+    head += f"{'fail':>6}"
     print(head + f"{'cost vs ref (median / p95 |rel|)':>36}{'<=+1 %':>8}")
     for name, r in rows.items():
-        line = f"{name:<16}{r['median_ms']:>10.2f}{r['p99_ms']:>9.2f}{r['iters_median']:>7.0f}"
+        line = f"{name:<16}{r['median_ms']:>10.2f}{r['p99_ms']:>9.2f}{r['cpu_median_ms']:>9.2f}"
+        line += f"{r['cpu_p99_ms']:>9.2f}{r['iters_median']:>7.0f}"
         line += f"{r['failures']:>6d}"
         if "cost_rel_median" in r:
             line += f"{r['cost_rel_median']:>+20.2e} / {r['cost_rel_p95_abs']:<13.2e}"
@@ -170,6 +221,8 @@ def _print(case: str, n: int, rows: dict, speedup: float) -> None:
         print(line)
     print(f"default vs Opti + IPOPT: {speedup:.1f}x faster (median)")
     d = next(r for k, r in rows.items() if k.startswith("default"))
+    if "polished_rel_median" not in d:
+        return
     print(
         f"local: default's cost vs IPOPT polishing the default's solution: median "
         f"{d['polished_rel_median']:+.2e}, p95 |rel| {d['polished_rel_p95_abs']:.2e}, max "

@@ -13,12 +13,15 @@ Every step (docs/mpc.md, "Controller"):
    while the plan stands still, every ``explore_every`` s a second solve starts from a guess
    heading for the AUV with the largest projected fix age (standing still is a local minimum:
    at rest the rudder has no authority, so the gradient cannot say "turn and go");
-4. the safety check: the ASV more than ``max_violation`` outside the range bounds now (no
-   solve), a failed solve (in the field also: no answer within ``budget_ms``, see
-   :meth:`MPCController.use_deadline`), or a plan entering r_inner /
-   r_avoid within its first ``check_stages`` stages (or, already inside, closing the range
-   further) hands this step to the hybrid controller
-   (stepped on every observation so that its state is current), counted in ``fallbacks``;
+4. the safety check and, when the plan cannot be used (a failed solve, or a plan entering
+   r_inner / r_avoid within its first ``check_stages`` stages, or, already inside, closing
+   the range further), the rescue: solves from the unconverged iterate, an escape guess and
+   the hybrid's command with a larger iteration budget; a plan no deeper than the escape
+   manoeuvre, else the escape manoeuvre itself; only with no AUV near does the hybrid
+   controller take the step (stepped on every observation so that its state is current),
+   counted in ``fallbacks`` (docs/mpc.md, "Fallbacks"). Far outside the range bounds the
+   bounds are relaxed along a funnel (:func:`~mpcasv.mpc.rescue.funnel`) and the problem is
+   solved;
 5. the command: STANDBY while the plan keeps the thrust below the propeller-on threshold for
    ``standby_time``, else TRANSIT to the planned position ``lookahead`` seconds ahead (pushed
    out to ``min_carrot`` m) at the planned speed, labelled AVOIDANCE or TRACKING (its reason).
@@ -43,6 +46,7 @@ from mpcasv.models.acoustics import AcousticParams
 from mpcasv.mpc.deadline import DeadlineSolver
 from mpcasv.mpc.params import MPCParams
 from mpcasv.mpc.problem import NXV, OCP, channel_vector
+from mpcasv.mpc.rescue import command_guess, escape_guess, funnel
 from mpcasv.mpc.solvers import SolveResult, make_solver
 
 R_HI_NONE = 1.0e5  # "no outer bound" (m)
@@ -194,12 +198,17 @@ class MPCController:
         self.plan: PlannedTrajectory | None = None
         self.fallbacks = 0
         self.fallback_log: list[FallbackEvent] = []
+        #: steps per plan source: "plan" (warm-started or exploration solve), "rescue" (a
+        #: rescue solve), "as-escape" (a refused plan no deeper than the escape manoeuvre),
+        #: "escape" (the escape manoeuvre), "fallback" (the hybrid's command)
+        self.sources: dict[str, int] = {}
         #: steps whose solves took longer than ``budget_ms`` of wall time: a diagnostic in
         #: simulation (never a decision); in the field such a step is cut at the deadline
         self.over_budget = 0
         self._t_step = 0.0
         self.t_explore: float | None = None
         self.explored = 0
+        self.rescues = 0  # steps that needed rescue solves (docs/mpc.md, "Fallbacks")
         self.target = 0  # the AUV the terminal cost visits next
         self.target_switches = 0  # changes of target this run (diagnostic, issue 16 item 6)
         #: per AUV: the last two distinct depth estimates (t, depth) and the vertical speed
@@ -328,16 +337,24 @@ class MPCController:
         return self.ocp.pack(self._x0(obs), self.tau, (0.0, 0.0), pa, r_lo + m, r_hi - m, depth,
                              d_fix, r_t, self.target, self.channel)  # fmt: skip
 
-    def _solve(self, p: np.ndarray, w0: np.ndarray, lam_x=None, lam_g=None) -> SolveResult:
-        """One solve: in this process (simulation: only the iteration limit decides), or in
-        the field mode's worker with what is left of this step's budget."""
+    def _solve(self, p: np.ndarray, w0: np.ndarray, lam_x=None, lam_g=None,
+               max_iter: int | None = None) -> SolveResult:  # fmt: skip
+        """One solve (``max_iter``: this solve's iteration limit, None: ``solver.max_iter``):
+        in this process (simulation: only the iteration limit decides), or in the field
+        mode's worker with what is left of this step's budget."""
         if self.deadline is None:
-            return self.solver.solve(p, w0, lam_x, lam_g)
+            if max_iter is None:
+                return self.solver.solve(p, w0, lam_x, lam_g)
+            return self.solver.solve(p, w0, lam_x, lam_g, max_iter)
         if self._hang_guard:  # simulation: abandon only a hung solve (SolverParams.hang_s)
-            return self.deadline.solve(p, w0, lam_x, lam_g, timeout=self.params.solver.hang_s)
-        left = (self.params.solver.budget_ms / 1e3 - STEP_RESERVE_S
+            return self.deadline.solve(p, w0, lam_x, lam_g, max_iter,
+                                       timeout=self.params.solver.hang_s)  # fmt: skip
+        return self.deadline.solve(p, w0, lam_x, lam_g, max_iter, timeout=self._left())
+
+    def _left(self) -> float:
+        """Field mode: seconds left of this step's solve budget."""
+        return (self.params.solver.budget_ms / 1e3 - STEP_RESERVE_S
                 - (time.perf_counter() - self._t_step))  # fmt: skip
-        return self.deadline.solve(p, w0, lam_x, lam_g, timeout=left)
 
     def step(self, obs: Observation) -> Command:
         ocp = self.ocp
@@ -361,17 +378,26 @@ class MPCController:
             lam = (None if lx is None else ocp.shift_lam_x(lx, frac),
                    None if lg is None else ocp.shift_lam_g(lg, frac))  # fmt: skip
         gap = self._violation_now(p)
-        solved = gap <= self.params.solver.max_violation  # else badly scaled (SolverParams)
-        if solved:
-            res = self._solve(p, w0, *lam)
-            res = self._explore(obs, p, res)
-            reason = self._check(res, p)
-        else:
-            reason = f"{gap:.0f} m outside the range bounds: not solved"
-            res = SolveResult(w0, None, None, math.nan, False, "not solved", 0, 0.0)
-        keep = res.ok or (solved and getattr(self.solver, "warm_from_failures", False))
-        if keep and np.all(np.isfinite(res.w)):  # an unconverged NLP iterate warm-starts too
-            self.w_prev = res.w
+        # far outside the range bounds: the bounds relaxed along a funnel (well scaled)
+        sp = self.params.solver
+        p_s = p if gap <= sp.max_violation else funnel(ocp, p, sp.max_violation,
+                                                       sp.funnel_speed)  # fmt: skip
+        if p_s is not p:
+            Z, V = ocp.split(w0)
+            w0 = ocp.fill_slacks(Z, V, p_s)
+        res = self._solve(p_s, w0, *lam)
+        res = self._explore(obs, p_s, res)
+        reason = self._check(res, p)
+        source = "plan" if reason is None else "fallback"
+        # rescue, except after a missed field deadline (no time left); after a hang in
+        # simulation too (the Case 4 problem that hangs fatrop converges from the escape guess)
+        if reason is not None and (res.status != "deadline" or self._hang_guard):
+            res, reason, source = self._rescue(obs, p_s, p, res, reason, hybrid_cmd)
+        if source == "escape":  # the escape manoeuvre's rollout: warm-starts the next step
+            self.w_prev, self.lam_prev = res.w, None
+        elif res.ok or (np.all(np.isfinite(res.w))
+                        and getattr(self.solver, "warm_from_failures", False)):  # fmt: skip
+            self.w_prev = res.w  # an unconverged NLP iterate warm-starts too
             self.lam_prev = (res.lam_x, res.lam_g) if res.ok else None
             if res.ok:
                 self._store_plan(obs.t, res.w)
@@ -379,10 +405,12 @@ class MPCController:
             self.w_prev, self.lam_prev = None, None  # next step starts from a rollout
         over = int((time.perf_counter() - self._t_step) * 1e3 > self.params.solver.budget_ms)
         self.over_budget += over  # measured, never a decision in simulation
+        self.sources[source] = self.sources.get(source, 0) + 1
         self._diag = {"mpc_ok": int(res.ok), "mpc_iter": res.iters, "mpc_ms": res.ms,
                       "mpc_cost": res.f, "mpc_status": res.status,
                       "mpc_fallback": int(reason is not None),
-                      "mpc_fallback_reason": reason or "", "mpc_over_budget": over}  # fmt: skip
+                      "mpc_fallback_reason": reason or "", "mpc_over_budget": over,
+                      "mpc_source": source, "mpc_funnel": int(p_s is not p)}  # fmt: skip
         self._diag |= {f"mpc_tau{i}": float(v) for i, v in enumerate(self.tau)}
         self._diag["mpc_target"] = self.target
         self._diag["mpc_target_switches"] = self.target_switches  # cumulative
@@ -446,7 +474,7 @@ class MPCController:
         if np.all(still >= par["r_lo"][:, j]) and self.domain.in_reliable_range(still[0],
                                                                              par["r_t"][j]):
             return res
-        if self.deadline is not None and res.status == "deadline":
+        if self.deadline is not None and not self._hang_guard and res.status == "deadline":
             return res  # the field budget is spent
         alt = self._solve(p, ocp.guided_rollout(p, j, P.speed))
         self.explored += 1
@@ -466,20 +494,78 @@ class MPCController:
     def _check(self, res, p) -> str | None:
         """Why this step's plan may not be used (None: it may)."""
         sp = self.params.solver
+        if not res.ok and res.status == "deadline" and self._hang_guard:
+            return f"solver hung: no answer within {sp.hang_s:g} s (hang guard)"
         if not res.ok and res.status == "deadline":
             return f"deadline: no plan within the step's {sp.budget_ms:g} ms (field mode)"
         if not res.ok:
             return f"solver: {res.status}"
-        Z, _ = self.ocp.split(res.w)
-        par = self.ocp.unpack_par(p)
-        n = min(sp.check_stages, self.ocp.dims.N) + 1
-        dist = ranges(Z[:n, 0:2], par["pa"][:n])
-        inside = dist[1:] < par["r_lo"][1:n] - self.params.margin - sp.check_margin
         # already inside (a pursuer caught up): a plan that gets out of the way is the best
         # there is; one that goes deeper is not
-        if np.any(inside & (dist[1:] < dist[0] - sp.check_margin)):
+        if self._depth(res.w, p) > sp.check_margin:
             return "plan enters the anti-collision radius"
         return None
+
+    def _depth(self, w: np.ndarray, p: np.ndarray) -> float:
+        """How far (m) the plan ``w`` goes both inside an anti-collision radius (r_lo without
+        the margin) and deeper than the ASV is now, within its first ``check_stages`` stages
+        (0: nowhere). The safety check refuses a plan when this exceeds ``check_margin``."""
+        Z, _ = self.ocp.split(w)
+        par = self.ocp.unpack_par(p)
+        n = min(self.params.solver.check_stages, self.ocp.dims.N) + 1
+        dist = ranges(Z[:n, 0:2], par["pa"][:n])
+        inside = par["r_lo"][1:n] - self.params.margin - dist[1:]
+        deeper = dist[0] - dist[1:]
+        return float(max(np.max(np.minimum(inside, deeper)), 0.0))
+
+    def _rescue(self, obs: Observation, p_s: np.ndarray, p: np.ndarray, res: SolveResult,
+                reason: str, hybrid_cmd: Command):  # fmt: skip
+        """The warm-started plan cannot be used (``reason``): solve again, within
+        ``solver.rescue_iter`` iterations each, from the unconverged iterate (solver failure),
+        from the escape guess (full thrust away from the AUVs near the ASV, when there are
+        any) and from the hybrid controller's command, in this order; the first plan that
+        passes the check is used. None passes: a converged plan that goes no deeper than the
+        escape manoeuvre's rollout (within ``check_margin``) is used (the hybrid controller
+        could not do better: source ``as-escape``); else the escape manoeuvre itself (source
+        ``escape``); with no AUV near, the hybrid controller's command (``fallback``).
+
+        Returns ``(result, reason or None, source)``; ``p_s`` the solved parameters (funnel),
+        ``p`` those the check uses. docs/mpc.md, "Fallbacks"."""
+        P, ocp = self.params, self.ocp
+        esc = escape_guess(ocp, p_s, P.margin)
+        starts = []
+        if not res.ok and res.status != "deadline" and np.all(np.isfinite(res.w)):
+            starts.append(res.w)  # (a hung solve's "iterate" is its start: not again)
+        if esc is not None:
+            starts.append(esc)
+        wp = None if hybrid_cmd.mode is Mode.STANDBY else hybrid_cmd.waypoint
+        starts.append(command_guess(ocp, p_s, wp, hybrid_cmd.speed or P.speed))
+        tried, ms, iters = [], res.ms, res.iters
+        for w0 in starts:
+            if self.deadline is not None and not self._hang_guard and self._left() <= 0.0:
+                break  # the field budget is spent
+            r = self._solve(p_s, w0, max_iter=P.solver.rescue_iter)
+            ms, iters = ms + r.ms, iters + r.iters
+            if r.status == "deadline" and not self._hang_guard:
+                break  # field budget spent (a hang in simulation: try the next start)
+            if r.ok:
+                tried.append(r)
+                if self._check(r, p) is None:  # the first usable plan ends the rescue
+                    self.rescues += 1
+                    return dataclasses.replace(r, ms=ms, iters=iters), None, "rescue"
+        self.rescues += 1
+        if esc is not None:
+            d_esc = self._depth(esc, p)
+            if tried:
+                best = min(tried, key=lambda r: self._depth(r.w, p))
+                if self._depth(best.w, p) <= d_esc + P.solver.check_margin:
+                    return dataclasses.replace(best, ms=ms, iters=iters), None, "as-escape"
+            return (SolveResult(esc, None, None, math.nan, False, "escape", iters, ms), None,
+                    "escape")  # fmt: skip
+        if tried:  # converged, but into the radius, with no AUV near: cannot happen often
+            res = min(tried, key=lambda r: self._depth(r.w, p))
+            reason = self._check(res, p) or reason
+        return dataclasses.replace(res, ms=ms, iters=iters), reason, "fallback"
 
     def _store_plan(self, t: float, w: np.ndarray) -> None:
         Z, V = self.ocp.split(w)

@@ -170,9 +170,10 @@ class DeadlineSolver:
         """Wait until the active worker is ready (after a replacement)."""
         return self._active.wait_ready(timeout)
 
-    def solve(self, p: np.ndarray, w0: np.ndarray, lam_x0=None, lam_g0=None, *,
-              timeout: float) -> SolveResult:  # fmt: skip
-        """Solve in the worker; after ``timeout`` s without an answer the worker is killed, the
+    def solve(self, p: np.ndarray, w0: np.ndarray, lam_x0=None, lam_g0=None,
+              max_iter: int | None = None, *, timeout: float) -> SolveResult:  # fmt: skip
+        """Solve in the worker (``max_iter``: the solver's iteration limit for this solve,
+        None: its own); after ``timeout`` s without an answer the worker is killed, the
         spare takes over, and the result is a failure with status ``"deadline"`` and the
         warm start ``w0`` as its iterate (the next step starts warm from it)."""
         t0 = time.perf_counter()
@@ -182,7 +183,8 @@ class DeadlineSolver:
         w = self._active
         answer = None
         try:
-            w.conn.send((p, w0, lam_x0, lam_g0))
+            msg = (p, w0, lam_x0, lam_g0) + (() if max_iter is None else (max_iter,))
+            w.conn.send(msg)
             while answer is None:
                 left = timeout - (time.perf_counter() - t0)
                 if not w.conn.poll(max(left, 0.0)):

@@ -73,8 +73,11 @@ class QPSolver:
         return sps.block_diag(out, format="csc")
 
     def solve(self, p: np.ndarray, w0: np.ndarray, lam_x0: np.ndarray | None = None,
-              lam_g0: np.ndarray | None = None) -> SolveResult:  # fmt: skip
-        """Up to ``qp_iters`` full SQP steps from ``w0`` (stage 0 set to the initial state)."""
+              lam_g0: np.ndarray | None = None, max_iter: int | None = None
+              ) -> SolveResult:  # fmt: skip
+        """Up to ``qp_iters`` full SQP steps from ``w0`` (stage 0 set to the initial state;
+        ``max_iter``, the NLP solvers' rescue budget, is not used: ``qp_iters`` bounds the
+        work)."""
         ocp, sp = self.ocp, self.sp
         t0 = time.perf_counter()
         lbx, ubx = ocp.bounds(p)

@@ -9,6 +9,7 @@ takes no dual start), primal and dual for IPOPT (``warm_start_init_point``). The
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from dataclasses import dataclass
 
@@ -75,27 +76,42 @@ class NLPSolver:
 
     def __init__(self, ocp: OCP, sp: SolverParams, log=print):
         self.ocp, self.sp = ocp, sp
-        opts = solver_options(ocp, sp)
+        self._lib = None
         if sp.compiled:
-            lib = compiled_library(nlp_functions(ocp, sp.solver), sp.solver, sp.cflags, log=log)
-            self.solver = ca.nlpsol("mpc", sp.solver, str(lib), opts)
-        else:
-            self.solver = ca.nlpsol("mpc", sp.solver, ocp.nlp, opts | {"expand": True})
+            self._lib = compiled_library(nlp_functions(ocp, sp.solver), sp.solver, sp.cflags,
+                                         log=log)  # fmt: skip
+        #: one CasADi solver per iteration limit (the rescue solves' larger budget)
+        self._solvers: dict[int, ca.Function] = {}
+        self.solver = self._nlpsol(sp.max_iter)
         self.duals = sp.solver == "ipopt"
 
+    def _nlpsol(self, max_iter: int) -> ca.Function:
+        if max_iter not in self._solvers:
+            sp = dataclasses.replace(self.sp, max_iter=max_iter)
+            opts = solver_options(self.ocp, sp)
+            if self._lib is not None:
+                s = ca.nlpsol("mpc", sp.solver, str(self._lib), opts)
+            else:
+                s = ca.nlpsol("mpc", sp.solver, self.ocp.nlp, opts | {"expand": True})
+            self._solvers[max_iter] = s
+        return self._solvers[max_iter]
+
     def solve(self, p: np.ndarray, w0: np.ndarray, lam_x0: np.ndarray | None = None,
-              lam_g0: np.ndarray | None = None) -> SolveResult:  # fmt: skip
+              lam_g0: np.ndarray | None = None, max_iter: int | None = None
+              ) -> SolveResult:  # fmt: skip
         """Solve for parameters ``p`` from the primal start ``w0`` (physical units) and the
-        dual start (the solver's scaled multipliers of a previous result)."""
+        dual start (the solver's scaled multipliers of a previous result), within ``max_iter``
+        iterations (None: ``SolverParams.max_iter``; a work budget, never a wall-time one)."""
         lbx, ubx = self.ocp.bounds(p)
         args = {"x0": np.clip(self.ocp.scaled(w0), lbx, ubx), "p": p, "lbx": lbx, "ubx": ubx,
                 "lbg": self.ocp.lbg, "ubg": self.ocp.ubg}  # fmt: skip
         if self.duals and lam_x0 is not None and lam_g0 is not None:
             args |= {"lam_x0": lam_x0, "lam_g0": lam_g0}
+        solver = self.solver if max_iter is None else self._nlpsol(max_iter)
         t0 = time.perf_counter()
-        r = self.solver(**args)
+        r = solver(**args)
         ms = (time.perf_counter() - t0) * 1e3
-        st = self.solver.stats()
+        st = solver.stats()
         return SolveResult(
             self.ocp.physical(np.array(r["x"]).ravel()), np.array(r["lam_x"]).ravel(),
             np.array(r["lam_g"]).ravel(), float(r["f"]), bool(st["success"]),
