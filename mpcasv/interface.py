@@ -76,12 +76,23 @@ class AUVEstimate:
 
 @dataclass(frozen=True, slots=True)
 class Observation:
-    """Everything a controller may use at time ``t`` (s)."""
+    """Everything a controller may use at time ``t`` (s).
+
+    ``asv`` is the ASV's navigation state (body velocities ``u``, ``v`` over ground).
+    ``actuators`` (optional): the thrust (N) and steering (rad) the execution level applies
+    now, as the boat knows them (simulation: the plant's actuator states; deploy: thruster
+    feedback when the boat sends it, else None). ``current_oracle`` (optional): the TRUE
+    current ``(V_N, V_E)`` (m/s) at the ASV, filled by the simulator only for a controller
+    that asks for it (attribute ``needs_current_oracle = True``), for ablations; never in the
+    field.
+    """
 
     t: float
     asv: ASVState
     propeller_on: bool
     auvs: tuple[AUVEstimate, ...]
+    actuators: tuple[float, float] | None = None
+    current_oracle: tuple[float, float] | None = None
 
 
 class Mode(StrEnum):

@@ -35,6 +35,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from mpcasv.controllers import Boat, ControllerKind
+from mpcasv.estimation.current import CurrentObserver, measurement
 from mpcasv.hybrid.avoidance import estimate_shape
 from mpcasv.hybrid.multi import HybridMulti, HybridMultiParams
 from mpcasv.hybrid.single import HybridSingle, HybridSingleParams
@@ -127,6 +128,8 @@ class MPCController:
         #: field mode (:meth:`use_deadline`): solves in a worker process with a deadline
         self.deadline: DeadlineSolver | None = None
         self._hang_guard = False
+        #: ``current = "oracle"``: the simulator puts the true current into the observations
+        self.needs_current_oracle = params.current == "oracle"
         self._setup(n_auv)
         self.reset(n_auv)
 
@@ -173,6 +176,7 @@ class MPCController:
     def _setup(self, n_auv: int) -> None:
         P = self.params
         self.ocp, self.solver = build_ocp(P, n_auv, self.multi, boat=self.boat)
+        self.observer = CurrentObserver(self.ocp.model, P.observer)
         if self.deadline is not None and getattr(self, "_deadline_n", n_auv) != n_auv:
             self.use_deadline()  # another number of AUVs: workers for the new problem
         if self.multi:
@@ -187,6 +191,9 @@ class MPCController:
         if n_auv != self.ocp.dims.n_auv:
             self._setup(n_auv)
         self.hybrid.reset(n_auv)
+        self.observer.reset()
+        #: the current the plan assumes (V_N, V_E), m/s (``params.current``; set each step)
+        self.current = np.zeros(2)
         self.tau = np.zeros(n_auv)  # expected fix ages (s)
         self.t_prev: float | None = None
         self.w_prev: np.ndarray | None = None
@@ -284,14 +291,39 @@ class MPCController:
         rel = np.asarray(asv_NE, float) - shape.center
         return np.asarray(shape.radius(np.arctan2(rel[..., 1], rel[..., 0])), float)
 
+    def _plan_current(self, obs: Observation) -> np.ndarray:
+        """The current the plan assumes (``params.current``), after the observer has taken
+        this observation: its estimate, the true current the simulator put in the
+        observation (oracle), or zero (m/s, shape (2,)).
+
+        Raises
+        ------
+        ValueError
+            ``current = "oracle"`` and the observation carries no true current (only the
+            simulator provides it, and only to a controller that asks).
+        """
+        est = self.observer.update(measurement(obs))
+        mode = self.params.current
+        if mode == "estimated":
+            return est
+        if mode == "zero":
+            return np.zeros(2)
+        if obs.current_oracle is None:
+            raise ValueError("MPC current = 'oracle': the observation carries no true current "
+                             "(only the simulator provides it, for ablations); use "
+                             "current = 'estimated'")  # fmt: skip
+        return np.asarray(obs.current_oracle, float)
+
     def _x0(self, obs: Observation) -> np.ndarray:
         """Plan initial state; thrust and steering are not observed: trim thrust for the
-        current speed while the propeller runs (at least the on-threshold), else 0; steering
+        current speed through the water (ground surge speed less the planned current along
+        the heading) while the propeller runs (at least the on-threshold), else 0; steering
         from the previous plan."""
         a, ocp = obs.asv, self.ocp
         T0, d0 = 0.0, 0.0
         if obs.propeller_on:
-            T0 = max(ocp.model.thrust_for_speed(max(a.u, 0.0)), 1.2 * ocp.T_on)
+            u_c = self.current[0] * math.cos(a.psi) + self.current[1] * math.sin(a.psi)
+            T0 = max(ocp.model.thrust_for_speed(max(a.u - u_c, 0.0)), 1.2 * ocp.T_on)
             if self.plan is not None:
                 d0 = float(np.interp(obs.t, self.plan.t, self.plan.extra["delta"]))
         return np.array([a.N, a.E, a.psi, a.u, a.v, a.r, min(T0, ocp.vessel.T_max), d0])
@@ -325,8 +357,8 @@ class MPCController:
         _, d_fix = self._fix_geometry(obs, r_lo[0])
         r_t = r_lo[-1] + self.domain.delta_r
         m = self.params.margin  # the plan keeps this far off the anti-collision radius
-        return self.ocp.pack(self._x0(obs), self.tau, (0.0, 0.0), pa, r_lo + m, r_hi - m, depth,
-                             d_fix, r_t, self.target, self.channel)  # fmt: skip
+        return self.ocp.pack(self._x0(obs), self.tau, self.current, pa, r_lo + m, r_hi - m,
+                             depth, d_fix, r_t, self.target, self.channel)  # fmt: skip
 
     def _solve(self, p: np.ndarray, w0: np.ndarray, lam_x=None, lam_g=None) -> SolveResult:
         """One solve: in this process (simulation: only the iteration limit decides), or in
@@ -345,6 +377,7 @@ class MPCController:
         elapsed = 0.0 if self.t_prev is None else obs.t - self.t_prev
         self.t_prev = obs.t
         self._track_depth(obs)
+        self.current = self._plan_current(obs)
         self.tau = self._fix_ages(obs, elapsed)
         self._choose_target(obs, elapsed)
         hybrid_cmd = self.hybrid.step(obs)  # always stepped: its state stays current
@@ -385,6 +418,9 @@ class MPCController:
                       "mpc_fallback_reason": reason or "", "mpc_over_budget": over}  # fmt: skip
         self._diag |= {f"mpc_tau{i}": float(v) for i, v in enumerate(self.tau)}
         self._diag["mpc_target"] = self.target
+        c_est = self.observer.current
+        self._diag |= {"mpc_cur_N": float(self.current[0]), "mpc_cur_E": float(self.current[1]),
+                       "mpc_est_cur_N": float(c_est[0]), "mpc_est_cur_E": float(c_est[1])}
         self._diag["mpc_target_switches"] = self.target_switches  # cumulative
         if reason is not None:
             self.fallbacks += 1

@@ -12,6 +12,7 @@ from typing import Annotated, Literal
 from pydantic import Field, Strict
 
 from mpcasv.config import NonNeg, Pos, PosInt, frozen
+from mpcasv.estimation.current import CurrentObserverParams
 from mpcasv.hybrid.avoidance import AvoidanceParams
 from mpcasv.hybrid.domains import DomainParams
 
@@ -245,6 +246,17 @@ class MPCParams:
         Initial fix ages: ``model`` integrates the same expected-fix-age model (eq. M2) on the
         observed states (works with any estimator, also ``perfect``); ``estimate`` takes
         ``obs.t - t_last_fix`` of each AUV estimate (needs an estimator fed by fixes).
+    current : {"estimated", "oracle", "zero"}
+        The current the plan assumes (constant over the horizon; issue 16 item 1):
+        ``estimated`` (default): the on-board observer's estimate from the ASV's own motion
+        (:mod:`mpcasv.estimation.current`); ``oracle``: the simulator's true current at the
+        ASV (ablations only: the controller asks for it and the simulator puts it into the
+        observation; refused where no observation carries it, as in the field); ``zero``:
+        still water (the MPC before issue 16).
+    observer : CurrentObserverParams
+        Tuning of the current observer (run in every mode; its estimate is logged as
+        ``mpc_est_cur_N`` / ``mpc_est_cur_E``, the plan's current as ``mpc_cur_N`` /
+        ``mpc_cur_E``).
     """
 
     domain: DomainParams
@@ -267,3 +279,5 @@ class MPCParams:
     dwell_max: Pos = 45.0
     explore_every: NonNeg = 5.0
     fix_age_source: Literal["model", "estimate"] = "model"
+    current: Literal["estimated", "oracle", "zero"] = "estimated"
+    observer: CurrentObserverParams = CurrentObserverParams()

@@ -56,6 +56,8 @@ def simulate(
     """
     wall0 = time.perf_counter()
     world = World(scenario, seed, estimator)
+    # the true current reaches a controller only if it asks (an MPC's current = "oracle")
+    world.oracle_current = bool(getattr(controller, "needs_current_oracle", False))
     controller.reset(world.n_auv)
     guard = getattr(controller, "use_hang_guard", None)  # an MPC: a hung solve must not
     if guard is not None:  # stall the run (mpcasv.mpc.params.SolverParams.hang_s)
