@@ -119,6 +119,9 @@ class Command:
     ``waypoint`` is (N, E) in m; ``speed`` is the cruise speed cap in m/s (the surge-speed
     reference model of thesis eq. 3.1 slows down in turns below it). Standby means zero
     thrust; its waypoint and speed are ignored. ``auv`` is the index of the AUV served.
+    ``standby_time`` (optional, standby only): how long the controller means to stand by from
+    now (s; an MPC: until its plan's thrust next reaches the propeller-on threshold, at most
+    its horizon); None: not said (the hybrid controllers).
     """
 
     mode: Mode
@@ -126,6 +129,7 @@ class Command:
     speed: float = 0.0
     auv: int | None = None
     reason: Reason = Reason.NOMINAL
+    standby_time: float | None = None
 
     def __post_init__(self) -> None:
         if self.mode is Mode.TRANSIT:
@@ -135,13 +139,17 @@ class Command:
                 raise ValueError(f"transit needs a positive speed, got {self.speed}")
 
     @classmethod
-    def standby(cls, auv: int | None = None, reason: Reason = Reason.NOMINAL) -> Command:
-        return cls(Mode.STANDBY, None, 0.0, auv, reason)
+    def standby(cls, auv: int | None = None, reason: Reason = Reason.NOMINAL,
+                standby_time: float | None = None) -> Command:  # fmt: skip
+        return cls(Mode.STANDBY, None, 0.0, auv, reason, standby_time)
 
 
 @dataclass(frozen=True, slots=True)
 class PlannedTrajectory:
-    """An MPC's plan for plots: times (s) and NED positions (m) of the ASV."""
+    """An MPC's plan: times (s) and NED positions (m) of the ASV; ``extra`` holds further
+    planned quantities on the same times (an MPC: thrust ``T`` N, surge speed over ground
+    ``u`` m/s, heading ``psi`` rad, steering ``delta`` rad, fix ages ``tau`` s, and the
+    planned current ``current`` (V_N, V_E) m/s)."""
 
     t: np.ndarray
     N: np.ndarray

@@ -52,6 +52,11 @@ W_MAX_DEPTH = 2.0  # bound on the estimated vertical speed of an AUV (m/s)
 #: field mode: part of the step's budget kept for the fallback and the command after a
 #: missed solve deadline (s)
 STEP_RESERVE_S = 0.03
+#: offsets (s) at which each used plan's position and thrust are logged (``mpc_plan_N<h>``,
+#: ``mpc_plan_E<h>``, ``mpc_plan_T<h>``) and compared with what the boat did
+#: (``plan_tracking_error_m``, :mod:`mpcasv.experiments.metrics`): the near horizon, up to
+#: the presets' ``lookahead`` (the part of the plan the TRANSIT waypoint stands for)
+PLAN_CHECK_S = (5, 10, 15)
 
 _OCP_CACHE: dict = {}
 
@@ -216,6 +221,8 @@ class MPCController:
         #: if a list: (parameters, elapsed stages) of every step's main solve (benchmarks)
         self.recorder: list | None = getattr(self, "recorder", None)
         self._diag: dict = {}
+        #: the plan whose command the previous step handed over (None: a fallback step)
+        self._used_plan: PlannedTrajectory | None = None
 
     # ------------------------------------------------------------------ per step
     def _fix_ages(self, obs: Observation, elapsed: float) -> np.ndarray:
@@ -381,6 +388,10 @@ class MPCController:
         self.tau = self._fix_ages(obs, elapsed)
         self._choose_target(obs, elapsed)
         hybrid_cmd = self.hybrid.step(obs)  # always stepped: its state stays current
+        # the energy the previous step's plan meant to spend until now (item 4)
+        e_plan = math.nan if self._used_plan is None else plan_energy(self._used_plan, obs.t)
+        t_used = math.nan if self._used_plan is None else float(self._used_plan.t[0])
+        self._used_plan = None
         p = self.parameters(obs)
         if self.recorder is not None:
             self.recorder.append((p.copy(), elapsed / ocp.dt))
@@ -417,6 +428,9 @@ class MPCController:
                       "mpc_fallback": int(reason is not None),
                       "mpc_fallback_reason": reason or "", "mpc_over_budget": over}  # fmt: skip
         self._diag |= {f"mpc_tau{i}": float(v) for i, v in enumerate(self.tau)}
+        self._diag |= {"mpc_plan_E_J": e_plan, "mpc_plan_E_t0": t_used, "mpc_plan_E_t1": obs.t,
+                       "mpc_plan_t": math.nan}  # fmt: skip
+        self._diag |= {f"mpc_plan_{q}{h}": math.nan for h in PLAN_CHECK_S for q in "NET"}
         self._diag["mpc_target"] = self.target
         c_est = self.observer.current
         self._diag |= {"mpc_cur_N": float(self.current[0]), "mpc_cur_E": float(self.current[1]),
@@ -523,7 +537,8 @@ class MPCController:
         K = self.ocp.dims.n_auv
         self.plan = PlannedTrajectory(ts, Z[:, 0].copy(), Z[:, 1].copy(), {
             "T": Z[:, 6].copy(), "u": Z[:, 3].copy(), "delta": Z[:, 7].copy(),
-            "tau": Z[:, NXV:NXV + K].copy(),
+            "psi": Z[:, 2].copy(), "tau": Z[:, NXV:NXV + K].copy(),
+            "current": self.current.copy(),
         })  # fmt: skip
 
     def _command(self, obs: Observation, w: np.ndarray, p: np.ndarray) -> Command:
@@ -534,9 +549,11 @@ class MPCController:
         par = ocp.unpack_par(p)
         dist = ranges(Z[:, 0:2], par["pa"])
         served = int(np.argmin(dist[-1] - par["r_t"]))
+        self._log_plan(obs.t)
         m = max(1, math.ceil(P.standby_time / ocp.dt - 1e-9))
         if np.max(Z[1 : m + 1, 6]) < ocp.T_on:
-            return Command.standby(auv=served)
+            return Command.standby(auv=served, standby_time=planned_standby(ts, Z[:, 6],
+                                                                            ocp.T_on))
         look = min(P.lookahead, ts[-1])
         target = np.array([np.interp(look, ts, Z[:, 0]), np.interp(look, ts, Z[:, 1])])
         here = obs.asv.position
@@ -550,6 +567,18 @@ class MPCController:
         reason = self._transit_reason(here, par)
         return Command(Mode.TRANSIT, (float(wp[0]), float(wp[1])), speed, served, reason)
 
+    def _log_plan(self, t: float) -> None:
+        """This step's command comes from :attr:`plan`: log its near-horizon predictions
+        (``PLAN_CHECK_S``) for the plan-tracking metrics, and keep it for the energy check of
+        the next step."""
+        plan = self._used_plan = self.plan
+        self._diag["mpc_plan_t"] = t
+        for h in PLAN_CHECK_S:
+            th = t + h
+            self._diag |= {f"mpc_plan_N{h}": float(np.interp(th, plan.t, plan.N)),
+                           f"mpc_plan_E{h}": float(np.interp(th, plan.t, plan.E)),
+                           f"mpc_plan_T{h}": float(np.interp(th, plan.t, plan.extra["T"]))}
+
     def _transit_reason(self, here: np.ndarray, par: dict) -> Reason:
         """Why the plan moves: AVOIDANCE when an AUV would come within its anti-collision
         radius plus ``eps_minus`` of the ASV held where it is, at some stage of the horizon
@@ -562,6 +591,37 @@ class MPCController:
     def diagnostics(self) -> dict:
         """Flat per-step record: solver status, iterations, solve time, cost, fallback."""
         return dict(self._diag)
+
+
+def plan_energy(plan: PlannedTrajectory, t1: float, n: int = 20) -> float:
+    """Propulsive energy (J) ``plan`` meant to spend from its start to ``t1`` (s): thrust x
+    surge speed through the water, ``T |u - u_c|`` with ``u_c`` the planned current along
+    the planned heading (the definition of ``energy_J``), on the plan's linear interpolation
+    between stages, trapezoidal rule with ``n`` intervals."""
+    t = np.linspace(plan.t[0], t1, n + 1)
+    if t1 <= plan.t[0]:
+        return 0.0
+    x = plan.extra
+    T, u, psi = (np.interp(t, plan.t, x[k]) for k in ("T", "u", "psi"))
+    c = x["current"]
+    power = T * np.abs(u - (c[0] * np.cos(psi) + c[1] * np.sin(psi)))
+    return float(np.sum(0.5 * (power[1:] + power[:-1]) * np.diff(t)))
+
+
+def planned_standby(ts: np.ndarray, T: np.ndarray, T_on: float) -> float:
+    """How long (s) from now a standby plan (thrust ``T`` at stage offsets ``ts``, s; below
+    ``T_on`` at the first stage, the STANDBY rule) keeps the propeller off: until its thrust
+    next reaches ``T_on`` after the first stage (linear between stages); the horizon's length
+    when it never does (a lower bound). The thrust at ``ts[0]`` (the observed state) is not
+    looked at: the plan may be stopping a running propeller."""
+    T = np.asarray(T, float)
+    above = np.flatnonzero(T[1:] >= T_on) + 1
+    if not above.size:
+        return float(ts[-1])
+    k = int(above[0])
+    if T[k - 1] >= T_on:  # not a standby plan: the thrust is on at the first stage
+        return 0.0
+    return float(ts[k - 1] + (T_on - T[k - 1]) / (T[k] - T[k - 1]) * (ts[k] - ts[k - 1]))
 
 
 def _build_single(params: MPCParams, n_auv: int, boat: Boat | None) -> MPCController:

@@ -118,7 +118,7 @@ def timeseries_row(world: World, obs, cmd, period, step_ms: float) -> dict:
         "wp_N": cmd.waypoint[0] if transit else math.nan,
         "wp_E": cmd.waypoint[1] if transit else math.nan,
         "cmd_speed": cmd.speed, "psi_d": period.Y[0, -1], "u_ref": period.Y[1, -1],
-        "step_ms": step_ms,
+        "step_ms": step_ms, "energy_cum_J": world.energy_J,
     }  # fmt: skip
     nav_err = np.hypot(*world.nav.error(period.t1).T)
     nav_sigma = world.nav.sigma(period.t1)
