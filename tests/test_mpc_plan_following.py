@@ -96,3 +96,25 @@ def test_closed_loop_plan_following_on_case3(scenarios_dir):
     horizon = ctrl.ocp.dt * ctrl.ocp.dims.N
     assert all(0.0 < c.standby_time <= horizon for c in standby)
     assert all(c.standby_time is None for c in cmds if c.mode is Mode.TRANSIT)
+
+
+@pytest.mark.parametrize("rule", ["max", "mean"])
+def test_the_transit_speed_cap_follows_the_speed_rule(rule):
+    """``speed_rule``: the largest planned speed within the lookahead (presets) or its time
+    average (the plan slowing from 2 to 1 m/s over the first 15 s)."""
+    from mpcasv.interface import ASVState, AUVEstimate, Observation
+
+    ctrl = make_controller("mpc-single", 1, "mpc-single", overrides={"speed_rule": rule})
+    ctrl.reset(1)
+    obs = Observation(0.0, ASVState(0.0, 0.0, 0.0, 2.0), True,
+                      (AUVEstimate(150.0, 0.0, 0.0),))  # fmt: skip
+    p = ctrl.parameters(obs)
+    Z, V = ctrl.ocp.split(ctrl.ocp.rollout(p))
+    ts = ctrl.ocp.dt * np.arange(Z.shape[0])
+    Z[:, 3] = 2.0 - ts / 15.0  # linear: 2 m/s now, 1 m/s at the lookahead
+    Z[:, 6] = 100.0  # propeller on: TRANSIT
+    Z[:, 0] = np.cumsum(np.r_[0.0, Z[:-1, 3]] * ctrl.ocp.dt)
+    ctrl._store_plan(0.0, ctrl.ocp.join(Z, V))
+    cmd = ctrl._command(obs, ctrl.ocp.join(Z, V), p)
+    assert cmd.mode is Mode.TRANSIT
+    assert cmd.speed == pytest.approx(2.0 if rule == "max" else 1.5, abs=1e-3)

@@ -562,8 +562,11 @@ class MPCController:
         if dn < 1e-6:  # plan does not move: head along the current heading
             delta, dn = np.array([math.cos(obs.asv.psi), math.sin(obs.asv.psi)]), 1.0
         wp = here + delta / dn * max(dn, P.min_carrot)
-        sel = ts <= look + 1e-9
-        speed = float(np.clip(np.max(Z[sel, 3]), P.speed_min, ocp.vessel.u_max))
+        if P.speed_rule == "max":
+            u_cap = np.max(Z[ts <= look + 1e-9, 3])
+        else:  # the time average of the planned speed over the lookahead
+            u_cap = np.mean(np.interp(np.linspace(0.0, look, 31), ts, Z[:, 3]))
+        speed = float(np.clip(u_cap, P.speed_min, ocp.vessel.u_max))
         reason = self._transit_reason(here, par)
         return Command(Mode.TRANSIT, (float(wp[0]), float(wp[1])), speed, served, reason)
 

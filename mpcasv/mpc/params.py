@@ -228,6 +228,11 @@ class MPCParams:
         guidance has a well-defined bearing.
     speed_min : float
         Lowest speed cap handed to the execution level (m/s).
+    speed_rule : {"max", "mean"}
+        The TRANSIT speed cap: the largest planned surge speed within ``lookahead`` (``max``,
+        the presets) or its time average over ``lookahead`` (``mean``). With ``max`` the
+        execution level holds the speed the plan is about to give up (the plan glides at
+        low thrust while the boat keeps its speed): docs/mpc.md, "Plan following".
     speed : float
         Transit speed cap of the hybrid fallback controller (m/s).
     T_standby : float
@@ -273,6 +278,7 @@ class MPCParams:
     lookahead: Pos = 15.0
     min_carrot: Pos = 25.0
     speed_min: Pos = 0.5
+    speed_rule: Literal["max", "mean"] = "max"
     speed: Pos = 2.5
     T_standby: Pos = 10.0
     tau_served: Pos = 10.0
