@@ -91,3 +91,27 @@ def test_an_oracle_mpc_without_the_truth_is_refused():
                       (AUVEstimate(120.0, 0.0, 0.0, 0.5, 0.0),))  # fmt: skip
     with pytest.raises(ValueError, match="no true current"):
         ctrl.step(obs)
+
+
+def test_the_plan_starts_from_the_observed_actuators_when_known():
+    """With ``Observation.actuators`` (the simulator's; a deploy with feedback) the plan's
+    initial thrust and steering are the observed ones; without, trim thrust for the speed
+    through the water (the current the plan assumes taken off the ground speed)."""
+    ctrl = make_controller("mpc-single", 1, "mpc-single")
+    ctrl.reset(1)
+    obs = Observation(0.0, ASVState(0.0, 0.0, 0.0, 1.5), True,
+                      (AUVEstimate(150.0, 0.0, 0.0),), actuators=(42.0, 0.05))  # fmt: skip
+    z0 = ctrl.ocp.unpack_par(ctrl.parameters(obs))["z0"]
+    assert (z0[6], z0[7]) == pytest.approx((42.0, 0.05))
+    blind = Observation(obs.t, obs.asv, True, obs.auvs)
+    trim = make_controller("mpc-single", 1, "mpc-single",
+                           overrides={"initial_actuators": "trim"})  # fmt: skip
+    trim.reset(1)
+    z0_trim = trim.ocp.unpack_par(trim.parameters(obs))["z0"]
+    assert z0_trim[6] == pytest.approx(trim.ocp.model.thrust_for_speed(1.5)) and z0_trim[7] == 0
+    model = ctrl.ocp.model
+    assert ctrl.ocp.unpack_par(ctrl.parameters(blind))["z0"][6] == pytest.approx(
+        model.thrust_for_speed(1.5))
+    ctrl.current = np.array([0.5, 0.0])  # 0.5 m/s along the heading: 1.0 m/s through water
+    assert ctrl.ocp.unpack_par(ctrl.parameters(blind))["z0"][6] == pytest.approx(
+        model.thrust_for_speed(1.0))

@@ -322,12 +322,18 @@ class MPCController:
         return np.asarray(obs.current_oracle, float)
 
     def _x0(self, obs: Observation) -> np.ndarray:
-        """Plan initial state; thrust and steering are not observed: trim thrust for the
-        current speed through the water (ground surge speed less the planned current along
-        the heading) while the propeller runs (at least the on-threshold), else 0; steering
-        from the previous plan."""
+        """Plan initial state: the observed thrust and steering (``obs.actuators``) when the
+        observation carries them; else trim thrust for the current speed through the water
+        (ground surge speed less the planned current along the heading) while the propeller
+        runs (at least the on-threshold), else 0, and steering from the previous plan."""
         a, ocp = obs.asv, self.ocp
+        vp = ocp.vessel
         T0, d0 = 0.0, 0.0
+        if obs.actuators is not None and self.params.initial_actuators == "observed":
+            # the boat knows its actuators (simulation; deploy with feedback): plan from them
+            T0, d0 = obs.actuators
+            return np.array([a.N, a.E, a.psi, a.u, a.v, a.r, float(np.clip(T0, vp.T_min, vp.T_max)),
+                             float(np.clip(d0, -vp.delta_max, vp.delta_max))])  # fmt: skip
         if obs.propeller_on:
             u_c = self.current[0] * math.cos(a.psi) + self.current[1] * math.sin(a.psi)
             T0 = max(ocp.model.thrust_for_speed(max(a.u - u_c, 0.0)), 1.2 * ocp.T_on)

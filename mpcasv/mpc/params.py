@@ -258,6 +258,12 @@ class MPCParams:
         ASV (ablations only: the controller asks for it and the simulator puts it into the
         observation; refused where no observation carries it, as in the field); ``zero``:
         still water (the MPC before issue 16).
+    initial_actuators : {"observed", "trim"}
+        The plan's initial thrust and steering: ``observed`` (default) takes
+        ``Observation.actuators`` when the observation carries them (simulation; a deploy
+        with thruster and steering feedback), else as ``trim``: trim thrust for the speed
+        through the water while the propeller runs, steering from the previous plan (the MPC
+        before; docs/mpc.md "Plan following" has both measured).
     observer : CurrentObserverParams
         Tuning of the current observer (run in every mode; its estimate is logged as
         ``mpc_est_cur_N`` / ``mpc_est_cur_E``, the plan's current as ``mpc_cur_N`` /
@@ -286,4 +292,5 @@ class MPCParams:
     explore_every: NonNeg = 5.0
     fix_age_source: Literal["model", "estimate"] = "model"
     current: Literal["estimated", "oracle", "zero"] = "estimated"
+    initial_actuators: Literal["observed", "trim"] = "observed"
     observer: CurrentObserverParams = CurrentObserverParams()
