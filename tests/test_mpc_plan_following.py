@@ -14,7 +14,7 @@ import pytest
 from mpcasv.controllers import make_controller
 from mpcasv.experiments.metrics import compute_metrics, plan_following
 from mpcasv.interface import Mode, PlannedTrajectory, Reason
-from mpcasv.mpc.controller import PLAN_CHECK_S, plan_energy, planned_standby
+from mpcasv.mpc.plan_check import PLAN_CHECK_S, plan_energy, planned_standby
 from mpcasv.sim.scenario import load_scenario, scenario_with
 from mpcasv.sim.simulator import simulate
 

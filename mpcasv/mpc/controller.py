@@ -43,6 +43,7 @@ from mpcasv.interface import Command, Mode, Observation, PlannedTrajectory, Reas
 from mpcasv.models.acoustics import AcousticParams
 from mpcasv.mpc.deadline import DeadlineSolver
 from mpcasv.mpc.params import MPCParams
+from mpcasv.mpc.plan_check import PLAN_CHECK_S, plan_energy, planned_standby
 from mpcasv.mpc.problem import NXV, OCP, channel_vector
 from mpcasv.mpc.solvers import SolveResult, make_solver
 
@@ -52,11 +53,6 @@ W_MAX_DEPTH = 2.0  # bound on the estimated vertical speed of an AUV (m/s)
 #: field mode: part of the step's budget kept for the fallback and the command after a
 #: missed solve deadline (s)
 STEP_RESERVE_S = 0.03
-#: offsets (s) at which each used plan's position and thrust are logged (``mpc_plan_N<h>``,
-#: ``mpc_plan_E<h>``, ``mpc_plan_T<h>``) and compared with what the boat did
-#: (``plan_tracking_error_m``, :mod:`mpcasv.experiments.metrics`): the near horizon, up to
-#: the presets' ``lookahead`` (the part of the plan the TRANSIT waypoint stands for)
-PLAN_CHECK_S = (5, 10, 15)
 
 _OCP_CACHE: dict = {}
 
@@ -600,37 +596,6 @@ class MPCController:
     def diagnostics(self) -> dict:
         """Flat per-step record: solver status, iterations, solve time, cost, fallback."""
         return dict(self._diag)
-
-
-def plan_energy(plan: PlannedTrajectory, t1: float, n: int = 20) -> float:
-    """Propulsive energy (J) ``plan`` meant to spend from its start to ``t1`` (s): thrust x
-    surge speed through the water, ``T |u - u_c|`` with ``u_c`` the planned current along
-    the planned heading (the definition of ``energy_J``), on the plan's linear interpolation
-    between stages, trapezoidal rule with ``n`` intervals."""
-    t = np.linspace(plan.t[0], t1, n + 1)
-    if t1 <= plan.t[0]:
-        return 0.0
-    x = plan.extra
-    T, u, psi = (np.interp(t, plan.t, x[k]) for k in ("T", "u", "psi"))
-    c = x["current"]
-    power = T * np.abs(u - (c[0] * np.cos(psi) + c[1] * np.sin(psi)))
-    return float(np.sum(0.5 * (power[1:] + power[:-1]) * np.diff(t)))
-
-
-def planned_standby(ts: np.ndarray, T: np.ndarray, T_on: float) -> float:
-    """How long (s) from now a standby plan (thrust ``T`` at stage offsets ``ts``, s; below
-    ``T_on`` at the first stage, the STANDBY rule) keeps the propeller off: until its thrust
-    next reaches ``T_on`` after the first stage (linear between stages); the horizon's length
-    when it never does (a lower bound). The thrust at ``ts[0]`` (the observed state) is not
-    looked at: the plan may be stopping a running propeller."""
-    T = np.asarray(T, float)
-    above = np.flatnonzero(T[1:] >= T_on) + 1
-    if not above.size:
-        return float(ts[-1])
-    k = int(above[0])
-    if T[k - 1] >= T_on:  # not a standby plan: the thrust is on at the first stage
-        return 0.0
-    return float(ts[k - 1] + (T_on - T[k - 1]) / (T[k] - T[k - 1]) * (ts[k] - ts[k - 1]))
 
 
 def _build_single(params: MPCParams, n_auv: int, boat: Boat | None) -> MPCController:
