@@ -76,12 +76,23 @@ class AUVEstimate:
 
 @dataclass(frozen=True, slots=True)
 class Observation:
-    """Everything a controller may use at time ``t`` (s)."""
+    """Everything a controller may use at time ``t`` (s).
+
+    ``asv`` is the ASV's navigation state (body velocities ``u``, ``v`` over ground).
+    ``actuators`` (optional): the thrust (N) and steering (rad) the execution level applies
+    now, as the boat knows them (simulation: the plant's actuator states; deploy: thruster
+    feedback when the boat sends it, else None). ``current_oracle`` (optional): the TRUE
+    current ``(V_N, V_E)`` (m/s) at the ASV, filled by the simulator only for a controller
+    that asks for it (attribute ``needs_current_oracle = True``), for ablations; never in the
+    field.
+    """
 
     t: float
     asv: ASVState
     propeller_on: bool
     auvs: tuple[AUVEstimate, ...]
+    actuators: tuple[float, float] | None = None
+    current_oracle: tuple[float, float] | None = None
 
 
 class Mode(StrEnum):
@@ -108,6 +119,9 @@ class Command:
     ``waypoint`` is (N, E) in m; ``speed`` is the cruise speed cap in m/s (the surge-speed
     reference model of thesis eq. 3.1 slows down in turns below it). Standby means zero
     thrust; its waypoint and speed are ignored. ``auv`` is the index of the AUV served.
+    ``standby_time`` (optional, standby only): how long the controller means to stand by from
+    now (s; an MPC: until its plan's thrust next reaches the propeller-on threshold, at most
+    its horizon); None: not said (the hybrid controllers).
     """
 
     mode: Mode
@@ -115,6 +129,7 @@ class Command:
     speed: float = 0.0
     auv: int | None = None
     reason: Reason = Reason.NOMINAL
+    standby_time: float | None = None
 
     def __post_init__(self) -> None:
         if self.mode is Mode.TRANSIT:
@@ -124,13 +139,17 @@ class Command:
                 raise ValueError(f"transit needs a positive speed, got {self.speed}")
 
     @classmethod
-    def standby(cls, auv: int | None = None, reason: Reason = Reason.NOMINAL) -> Command:
-        return cls(Mode.STANDBY, None, 0.0, auv, reason)
+    def standby(cls, auv: int | None = None, reason: Reason = Reason.NOMINAL,
+                standby_time: float | None = None) -> Command:  # fmt: skip
+        return cls(Mode.STANDBY, None, 0.0, auv, reason, standby_time)
 
 
 @dataclass(frozen=True, slots=True)
 class PlannedTrajectory:
-    """An MPC's plan for plots: times (s) and NED positions (m) of the ASV."""
+    """An MPC's plan: times (s) and NED positions (m) of the ASV; ``extra`` holds further
+    planned quantities on the same times (an MPC: thrust ``T`` N, surge speed over ground
+    ``u`` m/s, heading ``psi`` rad, steering ``delta`` rad, fix ages ``tau`` s, and the
+    planned current ``current`` (V_N, V_E) m/s)."""
 
     t: np.ndarray
     N: np.ndarray

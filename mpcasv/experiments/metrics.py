@@ -15,6 +15,7 @@ scenario without an evaluation domain).
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass
 
 import numpy as np
@@ -137,6 +138,23 @@ _BASE: dict[str, MetricInfo] = {
     "over_budget_steps": _i("1", "lower", "MPC steps whose solve took longer than the field "
                             "budget_ms (wall clock: measured only, it changes no decision in "
                             "simulation)"),
+    # --- does the boat do what the MPC planned? (issue 16 item 4) -------------------------
+    "plan_tracking_error_m": _i("m", "lower", "RMS over the MPC's used plans (steps not handed "
+                                "to the fallback) and the offsets h = 5, 10, 15 s of the "
+                                "horizontal distance between the position the plan made at t "
+                                "predicted for t + h and the ASV's true position at t + h "
+                                "(period ends); null for a controller without plans",
+                                "issue 16 item 4"),
+    "plan_thrust_error_N": _i("N", "lower", "RMS, over the same plans and offsets, of the "
+                              "planned thrust minus the actual thrust at t + h",
+                              "issue 16 item 4"),
+    "plan_energy_J": _i("J", None, "propulsive energy (as energy_J) the MPC's used plans meant "
+                        "to spend, each over the period until the next step (the part of it "
+                        "executed), summed", "issue 16 item 4"),
+    "plan_energy_ratio": _i("1", None, "energy actually spent over those same periods (as "
+                            "energy_J) / plan_energy_J: 1 = spent as planned, above 1 = the "
+                            "boat spent more than its plans (null if plan_energy_J is 0 or "
+                            "there are no plans)", "issue 16 item 4"),
 }
 
 #: per-AUV lists (suffix ``_auv``) of these scalars
@@ -227,6 +245,57 @@ def _last_int(ts: pd.DataFrame, col: str) -> int:
     return int(ts[col].iloc[-1]) if col in ts and len(ts) else 0
 
 
+def _at(t: np.ndarray, query: np.ndarray, tol: float = 1e-6) -> np.ndarray:
+    """Row index of each time in ``query`` in the sorted times ``t`` (-1: no row there)."""
+    i = np.clip(np.searchsorted(t, query - tol), 0, len(t) - 1)
+    return np.where(np.abs(t[i] - query) <= tol, i, -1)
+
+
+def plan_following(ts: pd.DataFrame) -> dict:
+    """The plan-following metrics (``plan_*``, issue 16 item 4) from the MPC's logged plan
+    columns (``mpc_plan_t``, ``mpc_plan_N<h>`` / ``E<h>`` / ``T<h>``: the used plan's
+    predictions at offsets h; ``mpc_plan_E_J`` with its period ``mpc_plan_E_t0`` -
+    ``mpc_plan_E_t1``) and the cumulative energy ``energy_cum_J``. All None without them."""
+    out = dict.fromkeys(("plan_tracking_error_m", "plan_thrust_error_N", "plan_energy_J",
+                         "plan_energy_ratio"))  # fmt: skip
+    if "mpc_plan_t" not in ts:
+        return out
+    t = ts["t"].to_numpy(float)
+    t_plan = ts["mpc_plan_t"].to_numpy(float)
+    offsets = sorted(int(m.group(1)) for c in ts.columns
+                     if (m := re.fullmatch(r"mpc_plan_N(\d+)", c)))  # fmt: skip
+    d2, dT2 = [], []
+    for h in offsets:
+        ok = np.isfinite(t_plan)
+        j = _at(t, t_plan[ok] + h)
+        src, j = np.flatnonzero(ok)[j >= 0], j[j >= 0]
+        dn = ts[f"mpc_plan_N{h}"].to_numpy(float)[src] - ts["N"].to_numpy(float)[j]
+        de = ts[f"mpc_plan_E{h}"].to_numpy(float)[src] - ts["E"].to_numpy(float)[j]
+        d2.append(dn**2 + de**2)
+        dT2.append((ts[f"mpc_plan_T{h}"].to_numpy(float)[src] - ts["thrust"].to_numpy(float)[j])
+                   ** 2)  # fmt: skip
+    if d2 and np.concatenate(d2).size:
+        out["plan_tracking_error_m"] = float(np.sqrt(np.mean(np.concatenate(d2))))
+        out["plan_thrust_error_N"] = float(np.sqrt(np.mean(np.concatenate(dT2))))
+    e_plan = ts["mpc_plan_E_J"].to_numpy(float)
+    ok = np.isfinite(e_plan)
+    if ok.any() and "energy_cum_J" in ts:
+        cum = ts["energy_cum_J"].to_numpy(float)
+
+        def spent_by(times):  # cumulative energy at these times (0 at the start), NaN: no row
+            i = _at(t, times)
+            return np.where(times <= 1e-9, 0.0, np.where(i >= 0, cum[i], np.nan))
+
+        e_spent = (spent_by(ts["mpc_plan_E_t1"].to_numpy(float)[ok])
+                   - spent_by(ts["mpc_plan_E_t0"].to_numpy(float)[ok]))  # fmt: skip
+        both = np.isfinite(e_spent)
+        out["plan_energy_J"] = float(e_plan[ok][both].sum())
+        spent = float(e_spent[both].sum())
+        out["plan_energy_ratio"] = spent / out["plan_energy_J"] if out["plan_energy_J"] > 0 \
+            else None
+    return out
+
+
 def compute_metrics(result) -> dict:
     """All metrics of a :class:`mpcasv.sim.simulator.RunResult` as a flat JSON-able dict
     (keys: :data:`METRIC_NAMES`; ``None`` where undefined)."""
@@ -312,6 +381,7 @@ def compute_metrics(result) -> dict:
         "fallbacks": int(result.fallbacks),
         "target_switches": _last_int(ts, "mpc_target_switches"),
         "over_budget_steps": int(ts["mpc_over_budget"].sum()) if "mpc_over_budget" in ts else 0,
+        **plan_following(ts),
         # per-AUV lists
         "auv_distance_m_auv": auv_d,
         "collision_domain_s_auv": coll_auv,

@@ -89,7 +89,11 @@ def summary_table(df: pd.DataFrame) -> pd.DataFrame:
     for key, g in ok.groupby(keys, sort=False):
         for col, m, k in metric_columns(g):
             v = g[col].astype(float).dropna()
-            if not len(v):  # e.g. a per-AUV column of another scenario
+            if not len(v):  # e.g. a per-AUV column of another scenario: left out; a scalar
+                if k is None:  # metric not defined for these runs (null): a row saying so
+                    rows.append(dict(zip(keys, key, strict=True)) | {
+                        "column": col, "metric": m, "auv": k, "mean": math.nan,
+                        "sd": math.nan, "n": 0})  # fmt: skip
                 continue
             rows.append(dict(zip(keys, key, strict=True)) | {
                 "column": col, "metric": m, "auv": k, "mean": float(v.mean()),
@@ -106,8 +110,8 @@ def scenario_table(summ: pd.DataFrame, scenario: str, auv_names: list[str]) -> p
     s = summ[summ["scenario"] == scenario].copy()
     multi = [c for c in CONDITION if s[c].nunique() > 1]
     s["group"] = [rf.group_label(r, multi) for _, r in s.iterrows()]
-    s["cell"] = [num(m) if not np.isfinite(sd) else f"{num(m)} ± {num(sd)}"
-                 for m, sd in zip(s["mean"], s["sd"], strict=True)]  # fmt: skip
+    s["cell"] = ["—" if n == 0 else num(m) if not np.isfinite(sd) else f"{num(m)} ± {num(sd)}"
+                 for m, sd, n in zip(s["mean"], s["sd"], s["n"], strict=True)]  # fmt: skip
     s["row"] = [m if pd.isna(k) else f"{m} [{auv_names[int(k)]}]"
                 for m, k in zip(s["metric"], s["auv"], strict=True)]  # fmt: skip
     rows = list(dict.fromkeys(s["row"]))

@@ -38,6 +38,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from mpcasv.controllers import Boat, ControllerKind
+from mpcasv.estimation.current import CurrentObserver, measurement
 from mpcasv.hybrid.avoidance import estimate_shape
 from mpcasv.hybrid.multi import HybridMulti, HybridMultiParams
 from mpcasv.hybrid.single import HybridSingle, HybridSingleParams
@@ -45,6 +46,7 @@ from mpcasv.interface import Command, Mode, Observation, PlannedTrajectory, Reas
 from mpcasv.models.acoustics import AcousticParams
 from mpcasv.mpc.deadline import DeadlineSolver
 from mpcasv.mpc.params import MPCParams
+from mpcasv.mpc.plan_check import PLAN_CHECK_S, plan_energy, planned_standby
 from mpcasv.mpc.problem import NXV, OCP, channel_vector
 from mpcasv.mpc.rescue import command_guess, escape_guess, funnel
 from mpcasv.mpc.solvers import SolveResult, make_solver
@@ -131,6 +133,8 @@ class MPCController:
         #: field mode (:meth:`use_deadline`): solves in a worker process with a deadline
         self.deadline: DeadlineSolver | None = None
         self._hang_guard = False
+        #: ``current = "oracle"``: the simulator puts the true current into the observations
+        self.needs_current_oracle = params.current == "oracle"
         self._setup(n_auv)
         self.reset(n_auv)
 
@@ -177,6 +181,7 @@ class MPCController:
     def _setup(self, n_auv: int) -> None:
         P = self.params
         self.ocp, self.solver = build_ocp(P, n_auv, self.multi, boat=self.boat)
+        self.observer = CurrentObserver(self.ocp.model, P.observer)
         if self.deadline is not None and getattr(self, "_deadline_n", n_auv) != n_auv:
             self.use_deadline()  # another number of AUVs: workers for the new problem
         if self.multi:
@@ -191,6 +196,9 @@ class MPCController:
         if n_auv != self.ocp.dims.n_auv:
             self._setup(n_auv)
         self.hybrid.reset(n_auv)
+        self.observer.reset()
+        #: the current the plan assumes (V_N, V_E), m/s (``params.current``; set each step)
+        self.current = np.zeros(2)
         self.tau = np.zeros(n_auv)  # expected fix ages (s)
         self.t_prev: float | None = None
         self.w_prev: np.ndarray | None = None
@@ -218,6 +226,8 @@ class MPCController:
         #: if a list: (parameters, elapsed stages) of every step's main solve (benchmarks)
         self.recorder: list | None = getattr(self, "recorder", None)
         self._diag: dict = {}
+        #: the plan whose command the previous step handed over (None: a fallback step)
+        self._used_plan: PlannedTrajectory | None = None
 
     # ------------------------------------------------------------------ per step
     def _fix_ages(self, obs: Observation, elapsed: float) -> np.ndarray:
@@ -293,14 +303,45 @@ class MPCController:
         rel = np.asarray(asv_NE, float) - shape.center
         return np.asarray(shape.radius(np.arctan2(rel[..., 1], rel[..., 0])), float)
 
+    def _plan_current(self, obs: Observation) -> np.ndarray:
+        """The current the plan assumes (``params.current``), after the observer has taken
+        this observation: its estimate, the true current the simulator put in the
+        observation (oracle), or zero (m/s, shape (2,)).
+
+        Raises
+        ------
+        ValueError
+            ``current = "oracle"`` and the observation carries no true current (only the
+            simulator provides it, and only to a controller that asks).
+        """
+        est = self.observer.update(measurement(obs))
+        mode = self.params.current
+        if mode == "estimated":
+            return est
+        if mode == "zero":
+            return np.zeros(2)
+        if obs.current_oracle is None:
+            raise ValueError("MPC current = 'oracle': the observation carries no true current "
+                             "(only the simulator provides it, for ablations); use "
+                             "current = 'estimated'")  # fmt: skip
+        return np.asarray(obs.current_oracle, float)
+
     def _x0(self, obs: Observation) -> np.ndarray:
-        """Plan initial state; thrust and steering are not observed: trim thrust for the
-        current speed while the propeller runs (at least the on-threshold), else 0; steering
-        from the previous plan."""
+        """Plan initial state: the observed thrust and steering (``obs.actuators``) when the
+        observation carries them; else trim thrust for the current speed through the water
+        (ground surge speed less the planned current along the heading) while the propeller
+        runs (at least the on-threshold), else 0, and steering from the previous plan."""
         a, ocp = obs.asv, self.ocp
+        vp = ocp.vessel
         T0, d0 = 0.0, 0.0
+        if obs.actuators is not None and self.params.initial_actuators == "observed":
+            # the boat knows its actuators (simulation; deploy with feedback): plan from them
+            T0, d0 = obs.actuators
+            return np.array([a.N, a.E, a.psi, a.u, a.v, a.r, float(np.clip(T0, vp.T_min, vp.T_max)),
+                             float(np.clip(d0, -vp.delta_max, vp.delta_max))])  # fmt: skip
         if obs.propeller_on:
-            T0 = max(ocp.model.thrust_for_speed(max(a.u, 0.0)), 1.2 * ocp.T_on)
+            u_c = self.current[0] * math.cos(a.psi) + self.current[1] * math.sin(a.psi)
+            T0 = max(ocp.model.thrust_for_speed(max(a.u - u_c, 0.0)), 1.2 * ocp.T_on)
             if self.plan is not None:
                 d0 = float(np.interp(obs.t, self.plan.t, self.plan.extra["delta"]))
         return np.array([a.N, a.E, a.psi, a.u, a.v, a.r, min(T0, ocp.vessel.T_max), d0])
@@ -334,8 +375,8 @@ class MPCController:
         _, d_fix = self._fix_geometry(obs, r_lo[0])
         r_t = r_lo[-1] + self.domain.delta_r
         m = self.params.margin  # the plan keeps this far off the anti-collision radius
-        return self.ocp.pack(self._x0(obs), self.tau, (0.0, 0.0), pa, r_lo + m, r_hi - m, depth,
-                             d_fix, r_t, self.target, self.channel)  # fmt: skip
+        return self.ocp.pack(self._x0(obs), self.tau, self.current, pa, r_lo + m, r_hi - m,
+                             depth, d_fix, r_t, self.target, self.channel)  # fmt: skip
 
     def _solve(self, p: np.ndarray, w0: np.ndarray, lam_x=None, lam_g=None,
                max_iter: int | None = None) -> SolveResult:  # fmt: skip
@@ -362,9 +403,14 @@ class MPCController:
         elapsed = 0.0 if self.t_prev is None else obs.t - self.t_prev
         self.t_prev = obs.t
         self._track_depth(obs)
+        self.current = self._plan_current(obs)
         self.tau = self._fix_ages(obs, elapsed)
         self._choose_target(obs, elapsed)
         hybrid_cmd = self.hybrid.step(obs)  # always stepped: its state stays current
+        # the energy the previous step's plan meant to spend until now (item 4)
+        e_plan = math.nan if self._used_plan is None else plan_energy(self._used_plan, obs.t)
+        t_used = math.nan if self._used_plan is None else float(self._used_plan.t[0])
+        self._used_plan = None
         p = self.parameters(obs)
         if self.recorder is not None:
             self.recorder.append((p.copy(), elapsed / ocp.dt))
@@ -412,7 +458,13 @@ class MPCController:
                       "mpc_fallback_reason": reason or "", "mpc_over_budget": over,
                       "mpc_source": source, "mpc_funnel": int(p_s is not p)}  # fmt: skip
         self._diag |= {f"mpc_tau{i}": float(v) for i, v in enumerate(self.tau)}
+        self._diag |= {"mpc_plan_E_J": e_plan, "mpc_plan_E_t0": t_used, "mpc_plan_E_t1": obs.t,
+                       "mpc_plan_t": math.nan}  # fmt: skip
+        self._diag |= {f"mpc_plan_{q}{h}": math.nan for h in PLAN_CHECK_S for q in "NET"}
         self._diag["mpc_target"] = self.target
+        c_est = self.observer.current
+        self._diag |= {"mpc_cur_N": float(self.current[0]), "mpc_cur_E": float(self.current[1]),
+                       "mpc_est_cur_N": float(c_est[0]), "mpc_est_cur_E": float(c_est[1])}
         self._diag["mpc_target_switches"] = self.target_switches  # cumulative
         if reason is not None:
             self.fallbacks += 1
@@ -573,7 +625,8 @@ class MPCController:
         K = self.ocp.dims.n_auv
         self.plan = PlannedTrajectory(ts, Z[:, 0].copy(), Z[:, 1].copy(), {
             "T": Z[:, 6].copy(), "u": Z[:, 3].copy(), "delta": Z[:, 7].copy(),
-            "tau": Z[:, NXV:NXV + K].copy(),
+            "psi": Z[:, 2].copy(), "tau": Z[:, NXV:NXV + K].copy(),
+            "current": self.current.copy(),
         })  # fmt: skip
 
     def _command(self, obs: Observation, w: np.ndarray, p: np.ndarray) -> Command:
@@ -584,9 +637,11 @@ class MPCController:
         par = ocp.unpack_par(p)
         dist = ranges(Z[:, 0:2], par["pa"])
         served = int(np.argmin(dist[-1] - par["r_t"]))
+        self._log_plan(obs.t)
         m = max(1, math.ceil(P.standby_time / ocp.dt - 1e-9))
         if np.max(Z[1 : m + 1, 6]) < ocp.T_on:
-            return Command.standby(auv=served)
+            return Command.standby(auv=served, standby_time=planned_standby(ts, Z[:, 6],
+                                                                            ocp.T_on))
         look = min(P.lookahead, ts[-1])
         target = np.array([np.interp(look, ts, Z[:, 0]), np.interp(look, ts, Z[:, 1])])
         here = obs.asv.position
@@ -595,10 +650,25 @@ class MPCController:
         if dn < 1e-6:  # plan does not move: head along the current heading
             delta, dn = np.array([math.cos(obs.asv.psi), math.sin(obs.asv.psi)]), 1.0
         wp = here + delta / dn * max(dn, P.min_carrot)
-        sel = ts <= look + 1e-9
-        speed = float(np.clip(np.max(Z[sel, 3]), P.speed_min, ocp.vessel.u_max))
+        if P.speed_rule == "max":
+            u_cap = np.max(Z[ts <= look + 1e-9, 3])
+        else:  # the time average of the planned speed over the lookahead
+            u_cap = np.mean(np.interp(np.linspace(0.0, look, 31), ts, Z[:, 3]))
+        speed = float(np.clip(u_cap, P.speed_min, ocp.vessel.u_max))
         reason = self._transit_reason(here, par)
         return Command(Mode.TRANSIT, (float(wp[0]), float(wp[1])), speed, served, reason)
+
+    def _log_plan(self, t: float) -> None:
+        """This step's command comes from :attr:`plan`: log its near-horizon predictions
+        (``PLAN_CHECK_S``) for the plan-tracking metrics, and keep it for the energy check of
+        the next step."""
+        plan = self._used_plan = self.plan
+        self._diag["mpc_plan_t"] = t
+        for h in PLAN_CHECK_S:
+            th = t + h
+            self._diag |= {f"mpc_plan_N{h}": float(np.interp(th, plan.t, plan.N)),
+                           f"mpc_plan_E{h}": float(np.interp(th, plan.t, plan.E)),
+                           f"mpc_plan_T{h}": float(np.interp(th, plan.t, plan.extra["T"]))}
 
     def _transit_reason(self, here: np.ndarray, par: dict) -> Reason:
         """Why the plan moves: AVOIDANCE when an AUV would come within its anti-collision

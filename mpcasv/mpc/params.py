@@ -12,6 +12,7 @@ from typing import Annotated, Literal
 from pydantic import Field, Strict
 
 from mpcasv.config import NonNeg, Pos, PosInt, frozen
+from mpcasv.estimation.current import CurrentObserverParams
 from mpcasv.hybrid.avoidance import AvoidanceParams
 from mpcasv.hybrid.domains import DomainParams
 
@@ -240,6 +241,11 @@ class MPCParams:
         guidance has a well-defined bearing.
     speed_min : float
         Lowest speed cap handed to the execution level (m/s).
+    speed_rule : {"max", "mean"}
+        The TRANSIT speed cap: the largest planned surge speed within ``lookahead`` (``max``,
+        the presets) or its time average over ``lookahead`` (``mean``). With ``max`` the
+        execution level holds the speed the plan is about to give up (the plan glides at
+        low thrust while the boat keeps its speed): docs/mpc.md, "Plan following".
     speed : float
         Transit speed cap of the hybrid fallback controller (m/s).
     T_standby : float
@@ -258,6 +264,23 @@ class MPCParams:
         Initial fix ages: ``model`` integrates the same expected-fix-age model (eq. M2) on the
         observed states (works with any estimator, also ``perfect``); ``estimate`` takes
         ``obs.t - t_last_fix`` of each AUV estimate (needs an estimator fed by fixes).
+    current : {"estimated", "oracle", "zero"}
+        The current the plan assumes (constant over the horizon; issue 16 item 1):
+        ``estimated`` (default): the on-board observer's estimate from the ASV's own motion
+        (:mod:`mpcasv.estimation.current`); ``oracle``: the simulator's true current at the
+        ASV (ablations only: the controller asks for it and the simulator puts it into the
+        observation; refused where no observation carries it, as in the field); ``zero``:
+        still water (the MPC before issue 16).
+    initial_actuators : {"observed", "trim"}
+        The plan's initial thrust and steering: ``observed`` (default) takes
+        ``Observation.actuators`` when the observation carries them (simulation; a deploy
+        with thruster and steering feedback), else as ``trim``: trim thrust for the speed
+        through the water while the propeller runs, steering from the previous plan (the MPC
+        before; docs/mpc.md "Plan following" has both measured).
+    observer : CurrentObserverParams
+        Tuning of the current observer (run in every mode; its estimate is logged as
+        ``mpc_est_cur_N`` / ``mpc_est_cur_E``, the plan's current as ``mpc_cur_N`` /
+        ``mpc_cur_E``).
     """
 
     domain: DomainParams
@@ -274,9 +297,13 @@ class MPCParams:
     lookahead: Pos = 15.0
     min_carrot: Pos = 25.0
     speed_min: Pos = 0.5
+    speed_rule: Literal["max", "mean"] = "max"
     speed: Pos = 2.5
     T_standby: Pos = 10.0
     tau_served: Pos = 10.0
     dwell_max: Pos = 45.0
     explore_every: NonNeg = 5.0
     fix_age_source: Literal["model", "estimate"] = "model"
+    current: Literal["estimated", "oracle", "zero"] = "estimated"
+    initial_actuators: Literal["observed", "trim"] = "observed"
+    observer: CurrentObserverParams = CurrentObserverParams()

@@ -56,6 +56,8 @@ def simulate(
     """
     wall0 = time.perf_counter()
     world = World(scenario, seed, estimator)
+    # the true current reaches a controller only if it asks (an MPC's current = "oracle")
+    world.oracle_current = bool(getattr(controller, "needs_current_oracle", False))
     controller.reset(world.n_auv)
     guard = getattr(controller, "use_hang_guard", None)  # an MPC: a hung solve must not
     if guard is not None:  # stall the run (mpcasv.mpc.params.SolverParams.hang_s)
@@ -116,7 +118,7 @@ def timeseries_row(world: World, obs, cmd, period, step_ms: float) -> dict:
         "wp_N": cmd.waypoint[0] if transit else math.nan,
         "wp_E": cmd.waypoint[1] if transit else math.nan,
         "cmd_speed": cmd.speed, "psi_d": period.Y[0, -1], "u_ref": period.Y[1, -1],
-        "step_ms": step_ms,
+        "step_ms": step_ms, "energy_cum_J": world.energy_J,
     }  # fmt: skip
     nav_err = np.hypot(*world.nav.error(period.t1).T)
     nav_sigma = world.nav.sigma(period.t1)

@@ -163,6 +163,8 @@ class World:
         self.reliable_times: list[list[float]] = [[] for _ in range(n)]
         self.energy_J = 0.0
         self.min_range = self.min_slant = math.inf
+        #: put the true current into the observations (only for a controller that asks)
+        self.oracle_current = False
 
     @property
     def propeller_on(self) -> bool:
@@ -180,12 +182,25 @@ class World:
         c = self.C_auv[:, k]
         return N, E, d, U * math.cos(psi) + c[0], U * math.sin(psi) + c[1]
 
+    def current_at_asv(self) -> tuple[float, float]:
+        """The true current (V_N, V_E) at the ASV now (m/s): the field at this time and
+        position, else the scenario's constant current."""
+        if self.flow is None:
+            return float(self.current[0]), float(self.current[1])
+        V = self.flow(self.t, self.x[:2])
+        return float(V[0]), float(V[1])
+
     def observation(self) -> Observation:
-        """What a controller sees now (estimators fed with the truth for ``perfect``)."""
+        """What a controller sees now (estimators fed with the truth for ``perfect``): the
+        ASV's state and its actuators' (thrust, steering) as the boat knows them (exact:
+        the simulator has no navigation or actuator sensor noise); the true current only
+        when :attr:`oracle_current` is set (a controller that asked for it, ablations)."""
         for k, est in enumerate(self.estimators):
             est.on_truth(self.t, *self.auv_truth(k))
         ests = tuple(e.estimate(self.t) for e in self.estimators)
-        return Observation(self.t, self.asv_state(), self.propeller_on, ests)
+        oracle = self.current_at_asv() if self.oracle_current else None
+        return Observation(self.t, self.asv_state(), self.propeller_on, ests,
+                           (float(self.x[6]), float(self.x[7])), oracle)  # fmt: skip
 
     def advance(self, cmd: np.ndarray) -> Period:
         """Move everything one supervisory period under execution-level command ``cmd``

@@ -1,0 +1,117 @@
+"""The MPC plans with the current as estimated on board (issue 16 item 1): by default the
+observer's estimate enters the OCP's parameter vector; ``current = "oracle"`` takes the true
+current, which the simulator puts into the observations only for a controller that asks;
+``"zero"`` is still water (the MPC before)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from mpcasv.controllers import make_controller
+from mpcasv.interface import ASVState, AUVEstimate, Mode, Observation
+from mpcasv.sim.scenario import load_scenario, scenario_with
+from mpcasv.sim.simulator import simulate
+
+CURRENT = (0.12, -0.08)  # m/s (N, E)
+
+
+def run(scenarios_dir, mode: str, duration: float = 120.0):
+    """Case 3 (one AUV, field domain) with a constant current, mpc-single planning with
+    ``current = mode``; every step's parameter vector recorded."""
+    sc = scenario_with(load_scenario(scenarios_dir / "case3.toml"), duration=duration,
+                       current=CURRENT)  # fmt: skip
+    ctrl = make_controller("mpc-single", 1, "mpc-single", overrides={"current": mode})
+    ctrl.recorder = []
+    res = simulate(sc, ctrl, seed=0)
+    par = [ctrl.ocp.unpack_par(p)["current"] for p, _ in ctrl.recorder]
+    return res, ctrl, np.array(par)
+
+
+def test_the_plan_carries_the_estimated_current(scenarios_dir):
+    res, ctrl, par = run(scenarios_dir, "estimated")
+    assert not ctrl.needs_current_oracle
+    # the last step's parameters carry the observer's estimate (the observer took no
+    # observation after it), which has found the current within 0.02 m/s
+    np.testing.assert_array_equal(par[-1], ctrl.observer.current)
+    assert np.hypot(*(par[-1] - CURRENT)) < 0.02
+    assert np.hypot(*par[0]) < 1e-3  # it starts from still water: nothing handed over
+    ts = res.timeseries
+    np.testing.assert_allclose(ts[["mpc_cur_N", "mpc_cur_E"]].to_numpy(), par)
+    np.testing.assert_allclose(ts["mpc_est_cur_N"], ts["mpc_cur_N"])
+
+
+def test_the_oracle_option_plans_with_the_true_current_and_zero_with_none(scenarios_dir):
+    _, ctrl, par = run(scenarios_dir, "oracle", duration=20.0)
+    assert ctrl.needs_current_oracle
+    np.testing.assert_array_equal(par, np.tile(CURRENT, (len(par), 1)))
+    res, _, par = run(scenarios_dir, "zero", duration=20.0)
+    assert np.all(par == 0.0)
+    # the observer runs in every mode (logged for comparison)
+    assert np.hypot(*res.timeseries[["mpc_est_cur_N", "mpc_est_cur_E"]].to_numpy()[-1]) > 0.05
+
+
+class _Spy:
+    """A controller that records its observations (stands by)."""
+
+    name = "spy"
+
+    def __init__(self, asks: bool):
+        self.needs_current_oracle = asks
+        self.seen: list[Observation] = []
+
+    def reset(self, n_auv):
+        pass
+
+    def step(self, obs):
+        from mpcasv.interface import Command
+
+        self.seen.append(obs)
+        return Command(Mode.STANDBY)
+
+
+def test_the_simulator_hands_the_truth_only_to_a_controller_that_asks(scenarios_dir):
+    sc = scenario_with(load_scenario(scenarios_dir / "case3.toml"), duration=5.0,
+                       current=CURRENT)  # fmt: skip
+    plain, asks = _Spy(False), _Spy(True)
+    simulate(sc, plain)
+    simulate(sc, asks)
+    assert all(o.current_oracle is None for o in plain.seen)
+    assert all(o.current_oracle == pytest.approx(CURRENT) for o in asks.seen)
+    # both see the actuators (thrust N, steering rad): what the observer needs
+    assert all(o.actuators is not None for o in plain.seen)
+
+
+def test_an_oracle_mpc_without_the_truth_is_refused():
+    """In the field (no simulator) an oracle controller has nothing to plan with: refused with
+    one clear message rather than planning with a made-up current."""
+    ctrl = make_controller("mpc-single", 1, "mpc-single", overrides={"current": "oracle"})
+    ctrl.reset(1)
+    obs = Observation(0.0, ASVState(0.0, 0.0, 0.0, 1.0), True,
+                      (AUVEstimate(120.0, 0.0, 0.0, 0.5, 0.0),))  # fmt: skip
+    with pytest.raises(ValueError, match="no true current"):
+        ctrl.step(obs)
+
+
+def test_the_plan_starts_from_the_observed_actuators_when_known():
+    """With ``Observation.actuators`` (the simulator's; a deploy with feedback) the plan's
+    initial thrust and steering are the observed ones; without, trim thrust for the speed
+    through the water (the current the plan assumes taken off the ground speed)."""
+    ctrl = make_controller("mpc-single", 1, "mpc-single")
+    ctrl.reset(1)
+    obs = Observation(0.0, ASVState(0.0, 0.0, 0.0, 1.5), True,
+                      (AUVEstimate(150.0, 0.0, 0.0),), actuators=(42.0, 0.05))  # fmt: skip
+    z0 = ctrl.ocp.unpack_par(ctrl.parameters(obs))["z0"]
+    assert (z0[6], z0[7]) == pytest.approx((42.0, 0.05))
+    blind = Observation(obs.t, obs.asv, True, obs.auvs)
+    trim = make_controller("mpc-single", 1, "mpc-single",
+                           overrides={"initial_actuators": "trim"})  # fmt: skip
+    trim.reset(1)
+    z0_trim = trim.ocp.unpack_par(trim.parameters(obs))["z0"]
+    assert z0_trim[6] == pytest.approx(trim.ocp.model.thrust_for_speed(1.5)) and z0_trim[7] == 0
+    model = ctrl.ocp.model
+    assert ctrl.ocp.unpack_par(ctrl.parameters(blind))["z0"][6] == pytest.approx(
+        model.thrust_for_speed(1.5))
+    ctrl.current = np.array([0.5, 0.0])  # 0.5 m/s along the heading: 1.0 m/s through water
+    assert ctrl.ocp.unpack_par(ctrl.parameters(blind))["z0"][6] == pytest.approx(
+        model.thrust_for_speed(1.0))
