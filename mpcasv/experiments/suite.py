@@ -67,6 +67,11 @@ class ControllerEntry:
     so that a controller compared on a case uses the case's published domain (explicit
     ``overrides`` and ``grid`` keys win). ``optional``: skip the entry, saying so, when the
     controller is registered but cannot be imported (e.g. the MPC before it is installed).
+    ``front`` (with ``at`` and ``level``): run the point of a tuned front (the output folder
+    of ``mpcasv tune controller``, relative to the suite) whose mean of metric ``at`` is
+    nearest ``level``, with its preset (:mod:`mpcasv.experiments.tune_match`: comparison at
+    matched operating points); ``preset``, ``presets``, ``overrides``, ``grid`` and
+    ``domain_from`` are then the front's and may not be given.
     """
 
     label: str
@@ -80,6 +85,9 @@ class ControllerEntry:
     scenarios: tuple[str, ...] | None = None
     domain_from: Literal["preset", "scenario"] = "preset"
     optional: bool = False
+    front: str | None = None  # folder of a tuned front (mpcasv.experiments.tune_match)
+    at: str = "energy_J"  # the matched metric of the front
+    level: Float | None = None  # its level (the metric's unit)
 
     @model_validator(mode="after")
     def _check(self) -> ControllerEntry:
@@ -94,6 +102,17 @@ class ControllerEntry:
                 raise ValueError(f"grid.{key}: give a list of values, got {values!r}")
             if len(values) == 0:
                 raise ValueError(f"grid.{key}: empty list of values (an empty grid has no jobs)")
+        if self.front is None and self.level is not None:
+            raise ValueError("'level' without 'front': which tuned front?")
+        if self.front is not None:
+            if self.level is None:
+                raise ValueError("'front' needs 'level': the level of 'at' to match")
+            given = [k for k, v in (("preset", self.preset != "default"),
+                                    ("presets", self.presets), ("overrides", self.overrides),
+                                    ("grid", self.grid),
+                                    ("domain_from", self.domain_from != "preset")) if v]
+            if given:
+                raise ValueError(f"'front' runs the chosen point's preset as it is: drop {given}")
         clash = set(_flatten(self.grid)) & set(_flatten(self.overrides))
         if clash:
             raise ValueError(f"keys both in overrides and grid: {sorted(clash)}")
@@ -214,6 +233,7 @@ class Expansion:
     path: Path
     jobs: list[Job]
     skipped: list[str]
+    fronts: list = dataclasses.field(default_factory=list)  # tune_match.FrontChoice per entry
 
 
 def suite_path(name_or_path: str | Path) -> Path:
@@ -327,8 +347,9 @@ def _usable_controllers(suite: Suite, path: Path, names: list[str]):
     return usable, skipped
 
 
-def _controller_and_preset(entry: ControllerEntry, sc, where: str, base: Path):
-    """The registered controller name and preset reference of ``entry`` on scenario ``sc``."""
+def _controller_and_preset(entry: ControllerEntry, sc, where: str, base: Path, choice=None):
+    """The registered controller name and preset reference of ``entry`` on scenario ``sc``
+    (``choice``: the entry's :class:`~mpcasv.experiments.tune_match.FrontChoice`)."""
     from mpcasv.controllers import controller_kind
 
     n_auv = len(sc.auv)
@@ -340,6 +361,11 @@ def _controller_and_preset(entry: ControllerEntry, sc, where: str, base: Path):
     if n_auv > 1 and not controller_kind(cname).multi:
         raise ConfigError(f"{where}: controller {cname!r} handles one AUV, the scenario has "
                           f"{n_auv}")  # fmt: skip
+    if choice is not None:
+        if cname != choice.controller:
+            raise ConfigError(f"{where}: the front {choice.folder} tuned {choice.controller!r}, "
+                              f"not {cname!r}")  # fmt: skip
+        return cname, choice.preset_for(sc.name, where)
     preset = entry.presets.get(sc.name, entry.preset)
     if preset == "scenario":
         if sc.controller != cname:
@@ -362,6 +388,15 @@ def _scenario_domain(entry: ControllerEntry, sc, where: str) -> dict[str, Any]:
     return _flatten(domain, "domain.")
 
 
+def _front_choices(usable, path: Path) -> dict:
+    """{entry index: FrontChoice} of the entries that name a tuned front."""
+    from mpcasv.experiments.tune_match import choose_front
+
+    return {i: choose_front(e.label, e.front, e.at, e.level, path.parent,
+                            f"{path}: controllers[{i}] ({e.label})")
+            for i, e in usable if e.front is not None}  # fmt: skip
+
+
 def expand(name_or_path: str | Path) -> Expansion:
     """Load, validate and expand a suite into its jobs (nothing runs).
 
@@ -378,6 +413,7 @@ def expand(name_or_path: str | Path) -> Expansion:
     _check_estimators(suite, path)
     scenarios = _load_scenarios(suite, path)
     usable, skipped = _usable_controllers(suite, path, [sc.name for sc, _ in scenarios])
+    fronts = _front_choices(usable, path)
     jobs: list[Job] = []
     seen: dict[str, int] = {}
     for sc0, file in scenarios:
@@ -388,7 +424,8 @@ def expand(name_or_path: str | Path) -> Expansion:
                 if entry.scenarios is not None and sc.name not in entry.scenarios:
                     continue
                 where = f"{path}: controllers[{i}] ({entry.label}) with scenario {sc.name!r}"
-                cname, preset = _controller_and_preset(entry, sc, where, path.parent)
+                cname, preset = _controller_and_preset(entry, sc, where, path.parent,
+                                                       fronts.get(i))  # fmt: skip
                 for combo in entry.combinations():
                     overrides = _scenario_domain(entry, sc, where) | _flatten(entry.overrides)
                     overrides |= combo
@@ -422,4 +459,4 @@ def expand(name_or_path: str | Path) -> Expansion:
                         ))  # fmt: skip
     if not jobs:
         raise ConfigError(f"{path}: the suite expands to no jobs (skipped: {skipped})")
-    return Expansion(suite, path, jobs, skipped)
+    return Expansion(suite, path, jobs, skipped, list(fronts.values()))
