@@ -126,6 +126,24 @@ def test_training_means_are_used_without_held_out_runs(fronts, tmp_path):
     assert c.trial == int(front.loc[front["train.energy_J"] == top, "trial"].min())
 
 
+def test_front_means_training_chooses_by_training_means(fronts, tmp_path):
+    """``front_means = "training"``: the whole training front, its training means, although
+    the folder has held-out runs (expansion only: nothing runs)."""
+    from mpcasv.experiments.suite import expand
+
+    a = fronts[0]
+    front = pd.read_csv(a / "front.csv")
+    t = front["train.energy_J"]
+    level = float(0.5 * (t.min() + t.max()))
+    suite = _suite(tmp_path, _entry("a", a, level, extra='front_means = "training"'))
+    (choice,) = expand(suite).fronts
+    d = (t - level).abs()
+    assert choice.source == "training" and choice.candidates == len(front)
+    assert choice.trial == int(front.loc[d[d == d.min()].index, "trial"].min())
+    assert choice.front_level == float(front.set_index("trial").loc[choice.trial,
+                                                                    "train.energy_J"])
+
+
 def _refused(capsys, suite: Path, out: Path, *causes: str) -> None:
     assert main(["compare", str(suite), "--out", str(out), "--quiet"]) == 2
     err = capsys.readouterr().err.strip()
@@ -150,7 +168,8 @@ def test_bad_front_entries_are_refused_in_one_line(fronts, tmp_path, capsys):
         (_entry("a", a, mid, name="mpc-single"), ["tuned 'hybrid-single'", "not 'mpc-single'"]),
         (_entry("a", a, mid, extra='preset = "paper1-sim"'), ["drop ['preset']"]),
         ('[[controllers]]\nlabel = "a"\nname = "hybrid-single"\nlevel = 1.0\n',
-         ["'level' without 'front'"]),
+         ["'level' or 'front_means' without 'front'"]),
+        (_entry("a", a, mid, extra='front_means = "test"'), ["front_means"]),
         (f'[[controllers]]\nlabel = "a"\nname = "hybrid-single"\nfront = "{a}"\n',
          ["'front' needs 'level'"]),
     ]  # fmt: skip

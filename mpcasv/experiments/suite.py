@@ -71,7 +71,8 @@ class ControllerEntry:
     of ``mpcasv tune controller``, relative to the suite) whose mean of metric ``at`` is
     nearest ``level``, with its preset (:mod:`mpcasv.experiments.tune_match`: comparison at
     matched operating points); ``preset``, ``presets``, ``overrides``, ``grid`` and
-    ``domain_from`` are then the front's and may not be given.
+    ``domain_from`` are then the front's and may not be given. ``front_means = "training"``
+    chooses among the training front by training means even when the folder has held-out runs.
     """
 
     label: str
@@ -88,6 +89,7 @@ class ControllerEntry:
     front: str | None = None  # folder of a tuned front (mpcasv.experiments.tune_match)
     at: str = "energy_J"  # the matched metric of the front
     level: Float | None = None  # its level (the metric's unit)
+    front_means: Literal["heldout", "training"] | None = None  # whose means (default heldout)
 
     @model_validator(mode="after")
     def _check(self) -> ControllerEntry:
@@ -102,8 +104,8 @@ class ControllerEntry:
                 raise ValueError(f"grid.{key}: give a list of values, got {values!r}")
             if len(values) == 0:
                 raise ValueError(f"grid.{key}: empty list of values (an empty grid has no jobs)")
-        if self.front is None and self.level is not None:
-            raise ValueError("'level' without 'front': which tuned front?")
+        if self.front is None and (self.level is not None or self.front_means is not None):
+            raise ValueError("'level' or 'front_means' without 'front': which tuned front?")
         if self.front is not None:
             if self.level is None:
                 raise ValueError("'front' needs 'level': the level of 'at' to match")

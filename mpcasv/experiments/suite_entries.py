@@ -92,5 +92,6 @@ def _front_choices(usable, path: Path) -> dict:
     from mpcasv.experiments.tune_match import choose_front
 
     return {i: choose_front(e.label, e.front, e.at, e.level, path.parent,
-                            f"{path}: controllers[{i}] ({e.label})")
+                            f"{path}: controllers[{i}] ({e.label})",
+                            e.front_means or "heldout")
             for i, e in usable if e.front is not None}  # fmt: skip

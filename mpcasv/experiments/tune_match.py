@@ -18,7 +18,8 @@ compare the controllers at (nearly) equal energy, on the suite's seeds, with the
 statistics of :mod:`mpcasv.experiments.stats`. The means are the **held-out** ones when the
 folder has held-out runs (candidates: the points still feasible and non-dominated on the
 held-out realisations, ``front.csv`` column ``heldout_front``), else the training means (every
-training front point is feasible). The choice, its front level and the level the comparison
+training front point is feasible), or the training means when the entry says
+``front_means = "training"``. The choice, its front level and the level the comparison
 itself achieved are written in the report (:func:`matched_table`).
 
 Refused in one line (:class:`~mpcasv.config.ConfigError`, exit status 2) before anything
@@ -76,11 +77,12 @@ class FrontChoice:
                           f"for scenarios {sorted(table)} only, not {scenario!r}")  # fmt: skip
 
 
-def _candidates(folder: Path, summary: dict, at: str) -> tuple[pd.DataFrame, str, str]:
+def _candidates(folder: Path, at: str, means: str) -> tuple[pd.DataFrame, str, str]:
     """(candidate rows, column of ``at`` to match, source) of a tuning's front table."""
     front = pd.read_csv(folder / "front.csv")
     col = f"heldout.{at}"
-    if "heldout_front" in front and col in front and front[col].notna().any():
+    if (means == "heldout" and "heldout_front" in front and col in front
+            and front[col].notna().any()):  # fmt: skip
         sel = front[front["heldout_front"].astype(bool) & front[col].notna()]
         return sel, col, "held-out"
     return front[front[f"train.{at}"].notna()], f"train.{at}", "training"
@@ -102,10 +104,11 @@ def _presets(folder: Path, trial: int, where: str) -> tuple[tuple[str, str], ...
     return tuple(out)
 
 
-def choose_front(label: str, front: str, at: str, level: float, base: Path,
-                 where: str) -> FrontChoice:  # fmt: skip
+def choose_front(label: str, front: str, at: str, level: float, base: Path, where: str,
+                 means: str = "heldout") -> FrontChoice:  # fmt: skip
     """The point of the tuning in ``front`` (relative to ``base``, the suite's folder) nearest
-    ``level`` of metric ``at`` (see the module docstring).
+    ``level`` of metric ``at`` (see the module docstring); ``means = "training"``: among
+    the training front by training means even when the folder has held-out runs.
 
     Raises
     ------
@@ -130,7 +133,7 @@ def choose_front(label: str, front: str, at: str, level: float, base: Path,
     if at not in summary["objectives"]:
         raise ConfigError(f"{where}: at = {at!r} is not an objective of the search in {folder} "
                           f"(its objectives: {summary['objectives']})")  # fmt: skip
-    rows, col, source = _candidates(folder, summary, at)
+    rows, col, source = _candidates(folder, at, means)
     if not len(rows):
         raise ConfigError(f"{where}: the front in {folder} has no {source} point to choose from")
     low, high = float(rows[col].min()), float(rows[col].max())
