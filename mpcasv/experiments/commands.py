@@ -67,6 +67,9 @@ def run(args: argparse.Namespace) -> int:
     print(f"{stats.ran} jobs run in {stats.jobs_wall_s:.1f} s on {stats.backend or 'nothing'} "
           f"({stats.already_done} were done before); results: {ok} ok, {len(results) - ok} "
           f"errors, of {len(exp.jobs)} jobs")  # fmt: skip
+    for c in exp.fronts:  # entries naming a tuned front (mpcasv.experiments.tune_match)
+        print(f"{c.label}: {c.controller} front point trial {c.trial} of {c.folder} "
+              f"({c.at} {c.front_level:.5g}, {c.source} mean; asked {c.level:.5g})")  # fmt: skip
     print(f"run folders: {stats.runs}")
     for name, err in stats.error_jobs:
         print(f"  error in {name}: {err}")

@@ -260,6 +260,14 @@ def write_report(out: Path, exp, results: pd.DataFrame, stats=None) -> tuple[Pat
             table = paired.paired_table(runs, [*headline, *rest], better)
         except paired.PairingError as exc:  # a table whose columns do not identify pairs
             why = str(exc)
+    fronts = getattr(exp, "fronts", None)  # entries naming a tuned front (tune_match)
+    if fronts:
+        from mpcasv.experiments.tune_match import MATCHED_NOTE, matched_table
+
+        mt = matched_table(fronts, results)
+        both(f"\n## Matched operating points\n\n{MATCHED_NOTE}\n\n{_md_table(mt)}\n",
+             f"<h2>Matched operating points</h2><p>{html.escape(MATCHED_NOTE)}</p>"
+             f"{mt.to_html()}")  # fmt: skip
     both("\n## Headline: paired differences\n", "<h2>Headline: paired differences</h2>")
     if not len(table):
         bullet(f"**No paired comparison**: {why}.")

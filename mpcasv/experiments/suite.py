@@ -27,7 +27,7 @@ from typing import Annotated, Any, Literal
 
 from pydantic import Field, Strict, model_validator
 
-from mpcasv.config import ConfigError, Float, Pos, anchor, frozen, load_toml, parse
+from mpcasv.config import ConfigError, Float, Pos, frozen, load_toml, parse
 
 #: the repository's ``experiments`` folder (scenarios and suites by name)
 EXPERIMENTS_DIR = Path(__file__).resolve().parents[2] / "experiments"
@@ -67,6 +67,12 @@ class ControllerEntry:
     so that a controller compared on a case uses the case's published domain (explicit
     ``overrides`` and ``grid`` keys win). ``optional``: skip the entry, saying so, when the
     controller is registered but cannot be imported (e.g. the MPC before it is installed).
+    ``front`` (with ``at`` and ``level``): run the point of a tuned front (the output folder
+    of ``mpcasv tune controller``, relative to the suite) whose mean of metric ``at`` is
+    nearest ``level``, with its preset (:mod:`mpcasv.experiments.tune_match`: comparison at
+    matched operating points); ``preset``, ``presets``, ``overrides``, ``grid`` and
+    ``domain_from`` are then the front's and may not be given. ``front_means = "training"``
+    chooses among the training front by training means even when the folder has held-out runs.
     """
 
     label: str
@@ -80,6 +86,10 @@ class ControllerEntry:
     scenarios: tuple[str, ...] | None = None
     domain_from: Literal["preset", "scenario"] = "preset"
     optional: bool = False
+    front: str | None = None  # folder of a tuned front (mpcasv.experiments.tune_match)
+    at: str = "energy_J"  # the matched metric of the front
+    level: Float | None = None  # its level (the metric's unit)
+    front_means: Literal["heldout", "training"] | None = None  # whose means (default heldout)
 
     @model_validator(mode="after")
     def _check(self) -> ControllerEntry:
@@ -94,6 +104,17 @@ class ControllerEntry:
                 raise ValueError(f"grid.{key}: give a list of values, got {values!r}")
             if len(values) == 0:
                 raise ValueError(f"grid.{key}: empty list of values (an empty grid has no jobs)")
+        if self.front is None and (self.level is not None or self.front_means is not None):
+            raise ValueError("'level' or 'front_means' without 'front': which tuned front?")
+        if self.front is not None:
+            if self.level is None:
+                raise ValueError("'front' needs 'level': the level of 'at' to match")
+            given = [k for k, v in (("preset", self.preset != "default"),
+                                    ("presets", self.presets), ("overrides", self.overrides),
+                                    ("grid", self.grid),
+                                    ("domain_from", self.domain_from != "preset")) if v]
+            if given:
+                raise ValueError(f"'front' runs the chosen point's preset as it is: drop {given}")
         clash = set(_flatten(self.grid)) & set(_flatten(self.overrides))
         if clash:
             raise ValueError(f"keys both in overrides and grid: {sorted(clash)}")
@@ -214,6 +235,7 @@ class Expansion:
     path: Path
     jobs: list[Job]
     skipped: list[str]
+    fronts: list = dataclasses.field(default_factory=list)  # tune_match.FrontChoice per entry
 
 
 def suite_path(name_or_path: str | Path) -> Path:
@@ -250,9 +272,6 @@ def _scenario_file(entry: str, base: Path, where: str) -> Path:
     return p
 
 
-def _preset_ref(preset: str, base: Path) -> str:
-    """Suite-relative preset paths made absolute (see :func:`mpcasv.config.anchor`); names kept."""
-    return anchor(preset, base)
 
 
 def _digest(obj) -> str:
@@ -299,67 +318,12 @@ def _load_scenarios(suite: Suite, path: Path) -> list:
     return out
 
 
-def _usable_controllers(suite: Suite, path: Path, names: list[str]):
-    """[(i, entry)] whose controllers exist, and the optional entries skipped (with why)."""
-    from mpcasv.controllers import controller_kind
-
-    usable, skipped = [], []
-    for i, entry in enumerate(suite.controllers):
-        where = f"{path}: controllers[{i}] ({entry.label})"
-        for key in ("name", "single", "multi"):
-            cname = getattr(entry, key)
-            if cname is None:
-                continue
-            try:
-                controller_kind(cname)
-            except ConfigError as exc:
-                if entry.optional and "not available" in str(exc):
-                    skipped.append(f"{entry.label} ({cname}): {exc}")
-                    break
-                raise ConfigError(f"{where}: {key}: {exc}") from None
-        else:
-            for field, values in (("scenarios", entry.scenarios or ()), ("presets", entry.presets)):
-                for s in values:
-                    if s not in names:
-                        raise ConfigError(f"{where}: {field}: {s!r} is not among the suite's "
-                                          f"scenarios {names}")  # fmt: skip
-            usable.append((i, entry))
-    return usable, skipped
 
 
-def _controller_and_preset(entry: ControllerEntry, sc, where: str, base: Path):
-    """The registered controller name and preset reference of ``entry`` on scenario ``sc``."""
-    from mpcasv.controllers import controller_kind
-
-    n_auv = len(sc.auv)
-    cname = entry.controller_for(n_auv)
-    if cname is None:
-        key = "multi" if n_auv > 1 else "single"
-        raise ConfigError(f"{where}: no controller for {n_auv} AUV(s): give '{key}' or "
-                          "restrict 'scenarios'")  # fmt: skip
-    if n_auv > 1 and not controller_kind(cname).multi:
-        raise ConfigError(f"{where}: controller {cname!r} handles one AUV, the scenario has "
-                          f"{n_auv}")  # fmt: skip
-    preset = entry.presets.get(sc.name, entry.preset)
-    if preset == "scenario":
-        if sc.controller != cname:
-            raise ConfigError(f"{where}: preset = 'scenario', but the scenario's preset "
-                              f"{sc.preset!r} is for {sc.controller!r}, not {cname!r}")  # fmt: skip
-        preset = sc.preset
-    return cname, (None if preset == "default" else _preset_ref(preset, base))
 
 
-def _scenario_domain(entry: ControllerEntry, sc, where: str) -> dict[str, Any]:
-    """``domain.*`` overrides from the scenario's own preset (``domain_from = "scenario"``)."""
-    from mpcasv.config import load_toml, resolve
 
-    if entry.domain_from != "scenario":
-        return {}
-    domain = load_toml(resolve("presets", sc.preset)).get("domain")
-    if not isinstance(domain, Mapping):
-        raise ConfigError(f"{where}: domain_from = 'scenario', but the scenario's preset "
-                          f"{sc.preset!r} has no [domain] table")  # fmt: skip
-    return _flatten(domain, "domain.")
+
 
 
 def expand(name_or_path: str | Path) -> Expansion:
@@ -373,11 +337,18 @@ def expand(name_or_path: str | Path) -> Expansion:
     """
     from mpcasv.controllers import load_preset
     from mpcasv.experiments.conditions import conditions, realisations
+    from mpcasv.experiments.suite_entries import (
+        _controller_and_preset,
+        _front_choices,
+        _scenario_domain,
+        _usable_controllers,
+    )
 
     suite, path = load_suite(name_or_path)
     _check_estimators(suite, path)
     scenarios = _load_scenarios(suite, path)
     usable, skipped = _usable_controllers(suite, path, [sc.name for sc, _ in scenarios])
+    fronts = _front_choices(usable, path)
     jobs: list[Job] = []
     seen: dict[str, int] = {}
     for sc0, file in scenarios:
@@ -388,7 +359,8 @@ def expand(name_or_path: str | Path) -> Expansion:
                 if entry.scenarios is not None and sc.name not in entry.scenarios:
                     continue
                 where = f"{path}: controllers[{i}] ({entry.label}) with scenario {sc.name!r}"
-                cname, preset = _controller_and_preset(entry, sc, where, path.parent)
+                cname, preset = _controller_and_preset(entry, sc, where, path.parent,
+                                                       fronts.get(i))  # fmt: skip
                 for combo in entry.combinations():
                     overrides = _scenario_domain(entry, sc, where) | _flatten(entry.overrides)
                     overrides |= combo
@@ -422,4 +394,4 @@ def expand(name_or_path: str | Path) -> Expansion:
                         ))  # fmt: skip
     if not jobs:
         raise ConfigError(f"{path}: the suite expands to no jobs (skipped: {skipped})")
-    return Expansion(suite, path, jobs, skipped)
+    return Expansion(suite, path, jobs, skipped, list(fronts.values()))

@@ -187,5 +187,6 @@ def _run(args) -> int:
         plot_fronts([args.ref, args.other], args.plot, args.baseline)
     with pd.option_context("display.width", 200, "display.max_columns", 30):
         print(df.to_string(index=False, float_format=lambda v: f"{v:.4g}") if len(df)
-              else "no held-out front point of the reference")  # fmt: skip
+              else "nothing to pair: the reference has no point on its held-out front, or the "
+              "other no point feasible on the held-out realisations")  # fmt: skip
     return 0
