@@ -199,21 +199,18 @@ def test_cli_writes_worst_cases_that_load_and_reproduce_their_margin(tmp_path):
 # budget 32, seed 0) and rerun from the committed files. The tolerances absorb floating-point
 # differences between machines, not behaviour changes.
 PINNED: dict[str, tuple[float, float]] = {
-    # re-measured after the issue-13 plant (idle-drive drag, steering floor) and the issue-16
-    # MPC changes were merged (session 3): the searches ran on the earlier plant, so these are
-    # the committed worst cases' behaviour today, not the searches' margins (docs/safety.md)
-    "falsified-crossing-multi-hybrid-multi-1": (-31.414, 76),  # search: -30.839 m, 68 s
-    # reproduced in two fresh processes; earlier mpc-multi runs were not (docs/safety.md).
-    # Since the MPC plans with the estimated current (0.26 m/s here) and from the observed
-    # thrust (issue 16 items 1, 4): -7.006 m, 43 s; with current = "zero" and
-    # initial_actuators = "trim" it is -11.519 m, 136 s again (the pin before)
-    "falsified-crossing-multi-mpc-multi-1": (-7.006, 43),  # search: -41.675 m, 149 s
+    # re-measured in session 4 after Gretha's power turn moved to escapes only (issue 13),
+    # the MPC's rescue/escape instead of the hybrid fallback (issue 16 item 7), and its plan
+    # from the estimated current and observed thrust (items 1, 4): these are the committed
+    # worst cases' behaviour today, not the searches' margins (docs/safety.md). Session 3's
+    # pins in brackets.
+    "falsified-crossing-multi-hybrid-multi-1": (-20.105, 43),  # [-31.414, 76]; search -30.839
+    "falsified-crossing-multi-mpc-multi-1": (-2.000, 17),  # [-7.006, 43]; search -41.675 m
     # the worst case of the printed eq. 8 (-46.28 m there), run with S1/S2
-    "falsified-crossing-multi-printed-eq8": (-21.073, 42),  # search: -20.622 m, 39 s
-    "falsified-pursuer-single-hybrid-single-1": (-40.178, 76),  # search: -29.681 m, 59 s
-    # no longer a counterexample on today's plant and MPC (search: -25.858 m, 28 s); 1.332 m
-    # with the estimated current and the observed thrust (1.553 m before)
-    "falsified-pursuer-single-mpc-single-1": (1.332, 0),
+    "falsified-crossing-multi-printed-eq8": (-10.036, 30),  # [-21.073, 42]; search -20.622 m
+    "falsified-pursuer-single-hybrid-single-1": (-40.178, 76),  # unchanged; search -29.681 m
+    # no longer a counterexample (search: -25.858 m, 28 s)
+    "falsified-pursuer-single-mpc-single-1": (0.443, 0),  # [1.332, 0]
 }
 
 

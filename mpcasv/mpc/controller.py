@@ -445,8 +445,6 @@ class MPCController:
                         and getattr(self.solver, "warm_from_failures", False)):  # fmt: skip
             self.w_prev = res.w  # an unconverged NLP iterate warm-starts too
             self.lam_prev = (res.lam_x, res.lam_g) if res.ok else None
-            if res.ok:
-                self._store_plan(obs.t, res.w)
         else:
             self.w_prev, self.lam_prev = None, None  # next step starts from a rollout
         over = int((time.perf_counter() - self._t_step) * 1e3 > self.params.solver.budget_ms)
@@ -473,6 +471,9 @@ class MPCController:
                 return Command.standby(hybrid_cmd.auv, Reason.FALLBACK)
             return Command(Mode.TRANSIT, hybrid_cmd.waypoint, hybrid_cmd.speed, hybrid_cmd.auv,
                            Reason.FALLBACK)  # fmt: skip
+        # the plan commanded (solved, rescued, or the escape manoeuvre) is the one stored:
+        # the plan-tracking metrics compare the boat with what it was told to do
+        self._store_plan(obs.t, res.w)
         return self._command(obs, res.w, p)
 
     def _choose_target(self, obs: Observation, elapsed: float) -> None:
