@@ -1,0 +1,79 @@
+"""From the plan to the command (docs/mpc.md, "Controller step" 5; issue 16 item 4): store
+the plan commanded, turn it into STANDBY or TRANSIT, log its near-horizon predictions for the
+plan-following metrics, and say why it moves. A mixin of
+:class:`~mpcasv.mpc.controller.MPCController`."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from mpcasv.interface import Command, Mode, Observation, PlannedTrajectory, Reason
+from mpcasv.mpc.plan_check import PLAN_CHECK_S, planned_standby
+from mpcasv.mpc.problem import NXV
+from mpcasv.mpc.worldview import ranges
+
+
+class PlanOutput:
+    """The command from the plan (mixin; state in the controller)."""
+
+    def _store_plan(self, t: float, w: np.ndarray) -> None:
+        Z, V = self.ocp.split(w)
+        ts = t + self.ocp.dt * np.arange(Z.shape[0])
+        K = self.ocp.dims.n_auv
+        self.plan = PlannedTrajectory(ts, Z[:, 0].copy(), Z[:, 1].copy(), {
+            "T": Z[:, 6].copy(), "u": Z[:, 3].copy(), "delta": Z[:, 7].copy(),
+            "psi": Z[:, 2].copy(), "tau": Z[:, NXV:NXV + K].copy(),
+            "current": self.current.copy(),
+        })  # fmt: skip
+
+    def _command(self, obs: Observation, w: np.ndarray, p: np.ndarray) -> Command:
+        """STANDBY or TRANSIT from the plan (see the module docstring)."""
+        P, ocp = self.params, self.ocp
+        Z, _ = ocp.split(w)
+        ts = ocp.dt * np.arange(Z.shape[0])
+        par = ocp.unpack_par(p)
+        dist = ranges(Z[:, 0:2], par["pa"])
+        served = int(np.argmin(dist[-1] - par["r_t"]))
+        self._log_plan(obs.t)
+        m = max(1, math.ceil(P.standby_time / ocp.dt - 1e-9))
+        if np.max(Z[1 : m + 1, 6]) < ocp.T_on:
+            return Command.standby(auv=served, standby_time=planned_standby(ts, Z[:, 6],
+                                                                            ocp.T_on))
+        look = min(P.lookahead, ts[-1])
+        target = np.array([np.interp(look, ts, Z[:, 0]), np.interp(look, ts, Z[:, 1])])
+        here = obs.asv.position
+        delta = target - here
+        dn = float(np.hypot(*delta))
+        if dn < 1e-6:  # plan does not move: head along the current heading
+            delta, dn = np.array([math.cos(obs.asv.psi), math.sin(obs.asv.psi)]), 1.0
+        wp = here + delta / dn * max(dn, P.min_carrot)
+        if P.speed_rule == "max":
+            u_cap = np.max(Z[ts <= look + 1e-9, 3])
+        else:  # the time average of the planned speed over the lookahead
+            u_cap = np.mean(np.interp(np.linspace(0.0, look, 31), ts, Z[:, 3]))
+        speed = float(np.clip(u_cap, P.speed_min, ocp.vessel.u_max))
+        reason = self._transit_reason(here, par)
+        return Command(Mode.TRANSIT, (float(wp[0]), float(wp[1])), speed, served, reason)
+
+    def _log_plan(self, t: float) -> None:
+        """This step's command comes from :attr:`plan`: log its near-horizon predictions
+        (``PLAN_CHECK_S``) for the plan-tracking metrics, and keep it for the energy check of
+        the next step."""
+        plan = self._used_plan = self.plan
+        self._diag["mpc_plan_t"] = t
+        for h in PLAN_CHECK_S:
+            th = t + h
+            self._diag |= {f"mpc_plan_N{h}": float(np.interp(th, plan.t, plan.N)),
+                           f"mpc_plan_E{h}": float(np.interp(th, plan.t, plan.E)),
+                           f"mpc_plan_T{h}": float(np.interp(th, plan.t, plan.extra["T"]))}
+
+    def _transit_reason(self, here: np.ndarray, par: dict) -> Reason:
+        """Why the plan moves: AVOIDANCE when an AUV would come within its anti-collision
+        radius plus ``eps_minus`` of the ASV held where it is, at some stage of the horizon
+        (the predicted AUV positions); else TRACKING (following the AUV served, or going to
+        the next one: the MPC has no other reason to run the propeller)."""
+        still = ranges(here, par["pa"])
+        r_avoid = par["r_lo"] - self.params.margin + self.domain.eps_minus
+        return Reason.AVOIDANCE if np.any(still < r_avoid) else Reason.TRACKING

@@ -1,0 +1,135 @@
+"""The MPC's safety check and what it does when a plan may not be used (docs/mpc.md,
+"Fallbacks"): exploration from a guess that heads for the target, the check of the plan's
+first stages against the anti-collision radii, and the rescue solves before the hybrid
+controller takes the step (:mod:`mpcasv.mpc.rescue` builds the guesses). A mixin of
+:class:`~mpcasv.mpc.controller.MPCController`."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+
+from mpcasv.interface import Command, Mode, Observation
+from mpcasv.mpc.rescue import command_guess, escape_guess
+from mpcasv.mpc.solvers import SolveResult
+from mpcasv.mpc.worldview import ranges
+
+
+class Safety:
+    """Check, exploration and rescue of the MPC (mixin; state in the controller)."""
+
+    def _explore(self, obs: Observation, p: np.ndarray, res):
+        """Right after a target change, and while the plan stands still every ``explore_every``
+        s, also solve from a guess that heads for the target AUV's circle (standing still is a
+        local minimum: at rest the rudder has no authority); keep the cheaper plan."""
+        P, ocp = self.params, self.ocp
+        if P.explore_every <= 0:
+            return res
+        if self.t_explore is not None and obs.t - self.t_explore < P.explore_every - 1e-9:
+            return res
+        Z, _ = ocp.split(res.w)
+        if self.t_explore is not None and res.ok and np.max(Z[1:, 6]) >= ocp.T_on:
+            return res  # the plan moves already
+        self.t_explore = obs.t
+        par = ocp.unpack_par(p)
+        j = self.target
+        still = ranges(obs.asv.position, par["pa"])[:, j]  # the ASV held where it is
+        # already there; but inside the anti-collision radius (plus margin) at some stage, as
+        # when an AUV rises under the ASV, the guess heading out to the target circle is needed
+        if np.all(still >= par["r_lo"][:, j]) and self.domain.in_reliable_range(still[0],
+                                                                             par["r_t"][j]):
+            return res
+        if self.deadline is not None and not self._hang_guard and res.status == "deadline":
+            return res  # the field budget is spent
+        alt = self._solve(p, ocp.guided_rollout(p, j, P.speed))
+        self.explored += 1
+        best = alt if alt.ok and (not res.ok or alt.f < res.f) else res
+        return dataclasses.replace(best, ms=res.ms + alt.ms, iters=res.iters + alt.iters)
+
+    def _violation_now(self, p: np.ndarray) -> float:
+        """How far (m) the ASV is outside the plan's range bounds now (0 inside)."""
+        par = self.ocp.unpack_par(p)
+        z0 = par["z0"]
+        d = ranges(z0[0:2], par["pa"][0])
+        gap = np.maximum(par["r_lo"][0] - d, 0.0)
+        if not self.multi:
+            gap = np.maximum(gap, d - par["r_hi"][0])
+        return float(np.max(gap))
+
+    def _check(self, res, p) -> str | None:
+        """Why this step's plan may not be used (None: it may)."""
+        sp = self.params.solver
+        if not res.ok and res.status == "deadline" and self._hang_guard:
+            return f"solver hung: no answer within {sp.hang_s:g} s (hang guard)"
+        if not res.ok and res.status == "deadline":
+            return f"deadline: no plan within the step's {sp.budget_ms:g} ms (field mode)"
+        if not res.ok:
+            return f"solver: {res.status}"
+        # already inside (a pursuer caught up): a plan that gets out of the way is the best
+        # there is; one that goes deeper is not
+        if self._depth(res.w, p) > sp.check_margin:
+            return "plan enters the anti-collision radius"
+        return None
+
+    def _depth(self, w: np.ndarray, p: np.ndarray) -> float:
+        """How far (m) the plan ``w`` goes both inside an anti-collision radius (r_lo without
+        the margin) and deeper than the ASV is now, within its first ``check_stages`` stages
+        (0: nowhere). The safety check refuses a plan when this exceeds ``check_margin``."""
+        Z, _ = self.ocp.split(w)
+        par = self.ocp.unpack_par(p)
+        n = min(self.params.solver.check_stages, self.ocp.dims.N) + 1
+        dist = ranges(Z[:n, 0:2], par["pa"][:n])
+        inside = par["r_lo"][1:n] - self.params.margin - dist[1:]
+        deeper = dist[0] - dist[1:]
+        return float(max(np.max(np.minimum(inside, deeper)), 0.0))
+
+    def _rescue(self, obs: Observation, p_s: np.ndarray, p: np.ndarray, res: SolveResult,
+                reason: str, hybrid_cmd: Command):  # fmt: skip
+        """The warm-started plan cannot be used (``reason``): solve again, within
+        ``solver.rescue_iter`` iterations each, from the unconverged iterate (solver failure),
+        from the escape guess (full thrust away from the AUVs near the ASV, when there are
+        any) and from the hybrid controller's command, in this order; the first plan that
+        passes the check is used. None passes: a converged plan that goes no deeper than the
+        escape manoeuvre's rollout (within ``check_margin``) is used (the hybrid controller
+        could not do better: source ``as-escape``); else the escape manoeuvre itself (source
+        ``escape``); with no AUV near, the hybrid controller's command (``fallback``).
+
+        Returns ``(result, reason or None, source)``; ``p_s`` the solved parameters (funnel),
+        ``p`` those the check uses. docs/mpc.md, "Fallbacks"."""
+        P, ocp = self.params, self.ocp
+        esc = escape_guess(ocp, p_s, P.margin)
+        starts = []
+        if not res.ok and res.status != "deadline" and np.all(np.isfinite(res.w)):
+            starts.append(res.w)  # (a hung solve's "iterate" is its start: not again)
+        if esc is not None:
+            starts.append(esc)
+        wp = None if hybrid_cmd.mode is Mode.STANDBY else hybrid_cmd.waypoint
+        starts.append(command_guess(ocp, p_s, wp, hybrid_cmd.speed or P.speed))
+        tried, ms, iters = [], res.ms, res.iters
+        for w0 in starts:
+            if self.deadline is not None and not self._hang_guard and self._left() <= 0.0:
+                break  # the field budget is spent
+            r = self._solve(p_s, w0, max_iter=P.solver.rescue_iter)
+            ms, iters = ms + r.ms, iters + r.iters
+            if r.status == "deadline" and not self._hang_guard:
+                break  # field budget spent (a hang in simulation: try the next start)
+            if r.ok:
+                tried.append(r)
+                if self._check(r, p) is None:  # the first usable plan ends the rescue
+                    self.rescues += 1
+                    return dataclasses.replace(r, ms=ms, iters=iters), None, "rescue"
+        self.rescues += 1
+        if esc is not None:
+            d_esc = self._depth(esc, p)
+            if tried:
+                best = min(tried, key=lambda r: self._depth(r.w, p))
+                if self._depth(best.w, p) <= d_esc + P.solver.check_margin:
+                    return dataclasses.replace(best, ms=ms, iters=iters), None, "as-escape"
+            return (SolveResult(esc, None, None, math.nan, False, "escape", iters, ms), None,
+                    "escape")  # fmt: skip
+        if tried:  # converged, but into the radius, with no AUV near: cannot happen often
+            res = min(tried, key=lambda r: self._depth(r.w, p))
+            reason = self._check(res, p) or reason
+        return dataclasses.replace(res, ms=ms, iters=iters), reason, "fallback"

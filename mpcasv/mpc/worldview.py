@@ -1,0 +1,177 @@
+"""What the MPC knows of the world each step (docs/mpc.md, "Controller step" 1-2): the
+expected fix ages, the AUVs' depths and their forecast, the anti-collision radii, the current
+the plan assumes, the initial state and the OCP's parameter vector. A mixin of
+:class:`~mpcasv.mpc.controller.MPCController` (its state lives there)."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+
+from mpcasv.estimation.current import measurement
+from mpcasv.hybrid.avoidance import estimate_shape
+from mpcasv.interface import Observation
+
+R_HI_NONE = 1.0e5  # "no outer bound" (m)
+TAU_UNKNOWN = 600.0  # fix age used for an AUV never fixed (s)
+W_MAX_DEPTH = 2.0  # bound on the estimated vertical speed of an AUV (m/s)
+
+
+def ranges(asv_NE: np.ndarray, pa: np.ndarray) -> np.ndarray:
+    """Horizontal ranges (m) from ASV positions ``(..., 2)`` to AUV positions ``(..., K, 2)``
+    (shape ``(..., K)``)."""
+    return np.linalg.norm(np.asarray(asv_NE, float)[..., None, :] - pa, axis=-1)
+
+
+class WorldView:
+    """The per-step world model of the MPC (mixin; state in the controller)."""
+
+    def _fix_ages(self, obs: Observation, elapsed: float) -> np.ndarray:
+        """Propagate (or read) the expected fix ages over ``elapsed`` s (eq. M2, exact for a
+        constant rate)."""
+        if self.params.fix_age_source == "estimate":
+            ages = np.array([obs.t - a.t_last_fix for a in obs.auvs])
+            return np.where(np.isfinite(ages), np.maximum(ages, 0.0), TAU_UNKNOWN)
+        if elapsed <= 0:
+            return self.tau
+        rho = self._rates(obs)
+        decay = np.exp(-rho * elapsed)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            relaxed = 1 / rho + (self.tau - 1 / rho) * decay
+        return np.where(rho > 1e-9, relaxed, self.tau + elapsed)
+
+    def _fix_geometry(self, obs: Observation, r_lo0: np.ndarray):
+        """(depth now, d_fix) per AUV: ``d_fix`` is the reliable-fix range of the ``target``
+        fix model (M3; unused by the ``acoustic`` one, whose range is the channel's)."""
+        K = len(obs.auvs)
+        if self.params.fix.range_kind == "acoustic":
+            depth = np.array([a.depth for a in obs.auvs])
+            return depth, np.full(K, self.acoustics.d1)
+        return np.zeros(K), self.domain.reliable_limit(r_lo0 + self.domain.delta_r)
+
+    def _rates(self, obs: Observation) -> np.ndarray:
+        """Fix rates now (1/s): propeller state as observed, geometry and channel as in the
+        plan (eq. M3)."""
+        r_lo = self._radii(obs, 0.0, obs.asv.position)
+        _, d_fix = self._fix_geometry(obs, r_lo)
+        T = self.ocp.vessel.T_max if obs.propeller_on else 0.0
+        x = np.array([obs.asv.N, obs.asv.E, 0, 0, 0, 0, T, 0])
+        return np.array([float(self.ocp.rho_fun(x, a.position, a.depth, d_fix[i], self.channel))
+                         for i, a in enumerate(obs.auvs)])  # fmt: skip
+
+    def _track_depth(self, obs: Observation) -> None:
+        """Vertical speed of each AUV from its last two distinct depth estimates (exact for a
+        steady climb under the perfect estimator; the mean rate between reports under the
+        acoustic one); back to 0 once the estimate has held longer than twice that interval
+        (the AUV levelled off); bounded by ``W_MAX_DEPTH``."""
+        for i, a in enumerate(obs.auvs):
+            h = self._depth_hist[i]
+            if not math.isfinite(a.depth):
+                continue
+            if not h or abs(a.depth - h[-1][1]) > 1e-6:
+                h.append((obs.t, a.depth))
+                del h[:-2]
+            if len(h) == 2 and h[1][0] > h[0][0]:
+                gap = h[1][0] - h[0][0]
+                w = (h[1][1] - h[0][1]) / gap
+                held = obs.t - h[1][0]
+                self.w_depth[i] = 0.0 if held > 2 * gap + 1e-9 else np.clip(w, -W_MAX_DEPTH,
+                                                                              W_MAX_DEPTH)
+            else:
+                self.w_depth[i] = 0.0
+
+    def depth_forecast(self, obs: Observation, ts: np.ndarray) -> np.ndarray:
+        """Each AUV's depth at offsets ``ts`` (s) from now: the estimate moved at the tracked
+        vertical speed, not above the surface (m, shape ``(len(ts), K)``)."""
+        d0 = np.array([a.depth for a in obs.auvs], float)
+        return np.maximum(d0[None, :] + np.asarray(ts, float)[:, None] * self.w_depth[None, :],
+                          0.0)  # fmt: skip
+
+    def _radii(self, obs: Observation, lookahead: float, asv_NE, depth=None) -> np.ndarray:
+        """Anti-collision radius (r_inner / r_avoid) of each AUV ``lookahead`` s ahead, along
+        the bearing from the AUV to ``asv_NE``, at the AUVs' ``depth`` (forecast; None: the
+        estimates')."""
+        auvs = obs.auvs
+        if depth is not None:
+            auvs = tuple(dataclasses.replace(a, depth=float(d))
+                         for a, d in zip(auvs, depth, strict=True))  # fmt: skip
+        shape = estimate_shape(self.params.avoidance, self.domain, auvs, obs.t, lookahead)
+        rel = np.asarray(asv_NE, float) - shape.center
+        return np.asarray(shape.radius(np.arctan2(rel[..., 1], rel[..., 0])), float)
+
+    def _plan_current(self, obs: Observation) -> np.ndarray:
+        """The current the plan assumes (``params.current``), after the observer has taken
+        this observation: its estimate, the true current the simulator put in the
+        observation (oracle), or zero (m/s, shape (2,)).
+
+        Raises
+        ------
+        ValueError
+            ``current = "oracle"`` and the observation carries no true current (only the
+            simulator provides it, and only to a controller that asks).
+        """
+        est = self.observer.update(measurement(obs))
+        mode = self.params.current
+        if mode == "estimated":
+            return est
+        if mode == "zero":
+            return np.zeros(2)
+        if obs.current_oracle is None:
+            raise ValueError("MPC current = 'oracle': the observation carries no true current "
+                             "(only the simulator provides it, for ablations); use "
+                             "current = 'estimated'")  # fmt: skip
+        return np.asarray(obs.current_oracle, float)
+
+    def _x0(self, obs: Observation) -> np.ndarray:
+        """Plan initial state: the observed thrust and steering (``obs.actuators``) when the
+        observation carries them; else trim thrust for the current speed through the water
+        (ground surge speed less the planned current along the heading) while the propeller
+        runs (at least the on-threshold), else 0, and steering from the previous plan."""
+        a, ocp = obs.asv, self.ocp
+        vp = ocp.vessel
+        T0, d0 = 0.0, 0.0
+        if obs.actuators is not None and self.params.initial_actuators == "observed":
+            # the boat knows its actuators (simulation; deploy with feedback): plan from them
+            T0, d0 = obs.actuators
+            return np.array([a.N, a.E, a.psi, a.u, a.v, a.r, float(np.clip(T0, vp.T_min, vp.T_max)),
+                             float(np.clip(d0, -vp.delta_max, vp.delta_max))])  # fmt: skip
+        if obs.propeller_on:
+            u_c = self.current[0] * math.cos(a.psi) + self.current[1] * math.sin(a.psi)
+            T0 = max(ocp.model.thrust_for_speed(max(a.u - u_c, 0.0)), 1.2 * ocp.T_on)
+            if self.plan is not None:
+                d0 = float(np.interp(obs.t, self.plan.t, self.plan.extra["delta"]))
+        return np.array([a.N, a.E, a.psi, a.u, a.v, a.r, min(T0, ocp.vessel.T_max), d0])
+
+    def parameters(self, obs: Observation) -> np.ndarray:
+        """The parameter vector of the OCP for this observation (after fix-age bookkeeping)."""
+        d, dt = self.ocp.dims, self.ocp.dt
+        K, N = d.n_auv, d.N
+        ts = dt * np.arange(N + 1)
+        # the estimator's forecast (along the known plan) or constant velocity
+        pa = np.stack([a.predict(ts) for a in obs.auvs], axis=1)  # (N+1, K, 2)
+        # bearing of each stage from the previous plan (or the current position)
+        if self.w_prev is not None:
+            Z, _ = self.ocp.split(self.w_prev)
+            asv = Z[:, None, 0:2]
+        else:
+            asv = np.broadcast_to(obs.asv.position, (N + 1, 1, 2))
+        # each AUV's depth over the horizon, and with it the radii: the collision domain of an
+        # AUV rising towards the surface grows (r_inner / r_avoid from 0 below r_in)
+        depth = self.depth_forecast(obs, ts)
+        if self.params.avoidance.kind == "fixed":
+            r_lo = np.stack([self._radii(obs, 0.0, obs.asv.position, depth[k])
+                             for k in range(N + 1)])  # fmt: skip
+        else:
+            r_lo = np.stack([self._radii(obs, float(ts[k]), asv[k], depth[k])
+                             for k in range(N + 1)])  # fmt: skip
+        if self.multi:
+            r_hi = np.full((N + 1, K), R_HI_NONE)
+        else:
+            r_hi = np.asarray(self.domain.outer(depth), float)
+        _, d_fix = self._fix_geometry(obs, r_lo[0])
+        r_t = r_lo[-1] + self.domain.delta_r
+        m = self.params.margin  # the plan keeps this far off the anti-collision radius
+        return self.ocp.pack(self._x0(obs), self.tau, self.current, pa, r_lo + m, r_hi - m,
+                             depth, d_fix, r_t, self.target, self.channel)  # fmt: skip
