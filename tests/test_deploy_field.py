@@ -173,3 +173,48 @@ def test_otter_deploy_config_plans_with_the_identified_otter(monkeypatch):
         build_controller(cfg, log=lambda *a: None)
     assert seen["boat"].vessel.name == "dune-otter"
     assert seen["boat"].acoustics == cfg.acoustics
+
+
+def test_a_step_that_raises_is_logged_not_lost(tmp_path):
+    """Field mode runs each step as a task nobody awaited: an exception in it ended the step
+    without a word (found in review), so the MPC could stop commanding silently. It is now an
+    event ``step_error`` with the exception's first line, counted in ``step_errors``."""
+    import contextlib
+
+    from mpcasv.io.config import deploy_config_from_dict
+
+    cfg = deploy_config_from_dict(_mpc_cfg(tmp_path))
+    dep = Deploy(cfg, dry_run=True, solver_factory=functools.partial(hanging_solver))
+
+    async def boom(ts, now):
+        raise ValueError("the observation carries no true current\nsecond line")
+
+    dep.step_async = boom
+
+    async def run():
+        dep.schedule_step(3.0, 3.0)
+        with contextlib.suppress(ValueError):
+            await dep._step_task
+        await asyncio.sleep(0)  # the done-callback runs
+
+    try:
+        asyncio.run(run())
+    finally:
+        dep.controller.close()
+    dep.jsonl.flush()
+    errors = [e for e in read_jsonl(tmp_path / "log" / "deploy.jsonl", "event")
+              if e["event"] == "step_error"]  # fmt: skip
+    assert [e["error"] for e in errors] == ["ValueError: the observation carries no true current"]
+    assert dep.step_errors == 1
+
+
+def test_an_oracle_current_is_refused_before_any_vehicle(tmp_path, capsys):
+    """Only a simulator knows the true current: `current = "oracle"` passed --prepare and
+    would have failed at every step in the field (found in review); it is refused in one line."""
+    data = _mpc_cfg(tmp_path)
+    data["controller"]["overrides"]["current"] = "oracle"
+    path = tmp_path / "deploy.toml"
+    path.write_text(tomli_w.dumps(data))
+    assert main(["deploy", str(path), "--prepare"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "current = 'oracle'" in err[0]

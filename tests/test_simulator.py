@@ -171,12 +171,16 @@ def test_simulate_duration_cuts_a_scenario_and_manoeuvre_options_are_refused(tmp
     metrics = json.loads((out / "metrics.json").read_text())
     assert metrics["duration_s"] == pytest.approx(20.0)
     capsys.readouterr()
-    for bad in (["--speed", "2"], ["--vessel", "otter"], ["--noise"], ["--duration", "0"],
-                ["--duration", "nan"]):  # fmt: skip
+    for bad in (["--speed", "2"], ["--speed", "0"], ["--vessel", "otter"], ["--noise"],
+                ["--duration", "0"], ["--duration", "nan"], ["--duration", "1e-9"],
+                ["--duration", "1e6"]):  # fmt: skip
         assert main(["simulate", scenario, "--out", str(tmp_path / "x"), *bad]) == 2, bad
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and "error" in err[0], (bad, err)
     assert not (tmp_path / "x").exists()
+    man = ["simulate", "--manoeuvre", "zigzag", "--out", str(tmp_path / "m.csv")]
+    assert main([*man, "--duration", "-3"]) == 2  # a traceback before (review)
+    assert len(capsys.readouterr().err.strip().splitlines()) == 1
 
 
 def test_a_preset_of_another_controller_is_named_as_such(tmp_path, capsys):

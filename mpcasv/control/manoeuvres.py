@@ -158,8 +158,11 @@ MANOEUVRE_ONLY = ("vessel", "speed", "delta", "current", "noise")
 
 def run_cli(args) -> int:
     """``mpcasv simulate --manoeuvre NAME``: write one identification log."""
+    from mpcasv.config import ConfigError
     from mpcasv.models.params import load_vessel
 
+    if args.duration is not None and not (math.isfinite(args.duration) and args.duration > 0):
+        raise ConfigError(f"--duration {args.duration:g}: a duration is a number of seconds > 0")
     model = VesselModel(load_vessel(args.vessel or "gretha"))
     noise = Noise() if args.noise else None
     df = simulate_manoeuvre(model, args.manoeuvre,

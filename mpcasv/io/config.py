@@ -17,7 +17,7 @@ from typing import Annotated, Any, Literal
 
 from pydantic import Field, Strict, field_validator, model_validator
 
-from mpcasv.config import Float, NonNeg, Pos, frozen, load, parse
+from mpcasv.config import ConfigError, Float, NonNeg, Pos, frozen, load, parse
 from mpcasv.models.acoustics import AcousticParams
 
 __all__ = [
@@ -342,6 +342,9 @@ def build_controller(cfg: DeployConfig, speed: float | None = None, log=print):
                               boat=deploy_boat(cfg))  # fmt: skip
     finally:
         done.set()
+    if getattr(ctl, "needs_current_oracle", False):  # only a simulator knows the true current
+        raise ConfigError(f"controller {c.name}: current = 'oracle' needs the simulator's true "
+                          "current; in a deployment use 'estimated' or 'zero'")  # fmt: skip
     log(f"controller {c.name} ready in {time.perf_counter() - t0:.1f} s")
     return ctl
 

@@ -13,6 +13,7 @@ from __future__ import annotations
 import asyncio
 import concurrent.futures
 import contextlib
+import functools
 import logging
 import time
 
@@ -103,6 +104,16 @@ class FieldMode:
             self.event("step_skipped", t=ts, reason="the previous step is still solving")
             return
         self._step_task = asyncio.get_running_loop().create_task(self.step_async(ts, now))
+        self._step_task.add_done_callback(functools.partial(self._step_ended, ts))
+
+    def _step_ended(self, ts: float, task: asyncio.Task) -> None:
+        """A step that raised is never silent: event ``step_error`` with the exception (the
+        next tick tries again; the guard's watchdogs keep running)."""
+        if task.cancelled() or task.exception() is None:
+            return
+        exc = task.exception()
+        self.step_errors = getattr(self, "step_errors", 0) + 1
+        self.event("step_error", t=ts, error=f"{type(exc).__name__}: {exc}".splitlines()[0])
 
     async def step_async(self, ts: float, now: float) -> Command | None:
         """One decision, the controller stepped in the step thread (field mode): the event

@@ -48,7 +48,8 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError("give a SCENARIO (TOML file) or --manoeuvre")
     from mpcasv.control.manoeuvres import MANOEUVRE_ONLY
 
-    given = [f"--{k}" for k in MANOEUVRE_ONLY if getattr(args, k) not in (None, False)]
+    given = [f"--{k}" for k in MANOEUVRE_ONLY
+             if getattr(args, k) is not None and getattr(args, k) is not False]  # 0 is given
     if given:
         raise ConfigError(f"{', '.join(given)}: only with --manoeuvre (a scenario names its own "
                           "vessel, current and noise)")  # fmt: skip
@@ -65,6 +66,10 @@ def run(args: argparse.Namespace) -> int:
 
     scenario = load_scenario(args.scenario)
     if args.duration is not None:  # the first DURATION s: part of the realised scenario
+        if not scenario.sim.control_period <= args.duration <= scenario.duration:
+            raise ConfigError(f"--duration {args.duration:g}: between one control period "
+                              f"({scenario.sim.control_period:g} s) and the scenario's "
+                              f"{scenario.duration:g} s")  # fmt: skip
         scenario = dataclasses.replace(scenario, duration=args.duration)
     if args.seed < 0:
         raise ConfigError(f"--seed {args.seed}: a seed is an integer >= 0")
