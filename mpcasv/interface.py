@@ -82,9 +82,9 @@ class Observation:
     ``actuators`` (optional): the thrust (N) and steering (rad) the execution level applies
     now, as the boat knows them (simulation: the plant's actuator states; deploy: None so
     far, the thruster feedback is not yet passed on, docs/mpc.md). ``current_oracle``
-    (optional): the TRUE current ``(V_N, V_E)`` (m/s) at the ASV, filled by the simulator only for a controller
-    that asks for it (attribute ``needs_current_oracle = True``), for ablations; never in the
-    field.
+    (optional): the TRUE current ``(V_N, V_E)`` (m/s) at the ASV, filled by the simulator
+    only for a controller that asks for it (attribute ``needs_current_oracle = True``), for
+    ablations; never in the field.
     """
 
     t: float
