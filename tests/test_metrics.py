@@ -111,13 +111,12 @@ def test_same_trajectory_gives_the_same_geometric_metrics_whatever_the_labels():
     """The ASV runs East through the collision domain of an AUV waiting 20 m off its track;
     one controller calls it 'avoidance' and carries a huge domain of its own, the other
     'tracking' and none. Safety, liveness and navigation metrics are those of the scenario's
-    domain for both. (The reason is also a command: Gretha's power turn acts in avoidance
-    transits only, docs/tuning.md; the ASV starts heading East, so no hard turn engages it
-    and the two trajectories are the same.)"""
+    domain for both. The labels do not reach the plant either: Gretha's power turn acts in
+    escapes decided from the true ranges (docs/tuning.md), so the hard initial turn is the
+    same under both labels."""
     sc = scenario_from_dict({
         "name": "through", "duration": 200.0, "controller": "hybrid-single",
         "preset": "paper1-field", "estimator": "perfect",
-        "asv": {"start": {"psi_deg": 90.0}},
         "auv": [{"name": "a", "start": {"N": 20.0, "E": 150.0},
                  "behaviour": {"plan": {"speed": 1.0, "route": [
                      {"waypoints": [[20.0, 150.0, 0.0]]}]}}}],

@@ -162,12 +162,14 @@ def closed_loop(model: VesselModel, ep: ExecutionParams, dt: float, n_sub: int) 
     )  # fmt: skip
 
 
-def command_vector(command) -> np.ndarray:
-    """Turn a :class:`mpcasv.interface.Command` into the ``cmd`` vector of :func:`closed_loop`
-    (``transit`` = 2 for a collision-avoidance transit, 1 for any other)."""
-    from mpcasv.interface import Mode, Reason
+def command_vector(command, escaping: bool = False) -> np.ndarray:
+    """Turn a :class:`mpcasv.interface.Command` into the ``cmd`` vector of :func:`closed_loop`:
+    ``transit`` = 2 for a transit while ``escaping`` (the ASV inside a collision domain now,
+    the one rule of the power turn's ``turn_scope = "avoidance"``, decided by the caller from
+    geometry, never from the controller's reason), 1 for any other transit, 0 standby."""
+    from mpcasv.interface import Mode
 
     if command.mode is Mode.STANDBY:
         return np.zeros(NCMD)
-    transit = 2.0 if command.reason is Reason.AVOIDANCE else 1.0
+    transit = 2.0 if escaping else 1.0
     return np.array([transit, command.waypoint[0], command.waypoint[1], command.speed])
