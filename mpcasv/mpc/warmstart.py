@@ -1,0 +1,107 @@
+"""Starting points of the MPC's solves (docs/mpc.md, "Controller step" 3): rollouts of the
+plan model (plain, or steering for an AUV's target circle), slacks filled for a guess, and the
+previous plan and multipliers moved on by the elapsed period. A mixin of
+:class:`~mpcasv.mpc.problem.OCP` (its dimensions and functions live there)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from mpcasv.models.vessel import NX as NXV  # the plan's vessel state is the model's
+
+
+class WarmStart:
+    """Rollouts, slack filling and shifts of the OCP (mixin; state in the OCP)."""
+
+    def rollout(self, p: np.ndarray, rates: np.ndarray | None = None) -> np.ndarray:
+        """A dynamically consistent primal guess: the plan under ``rates`` (N, 2; default 0)
+        from the initial state, slacks and ``m`` at their smallest feasible values."""
+        d = self.dims
+        par = self.unpack_par(p)
+        rates = np.zeros((d.N, 2)) if rates is None else np.asarray(rates, float)
+        Z = np.zeros((d.N + 1, d.nx))
+        Z[0] = par["z0"]
+        for k in range(d.N):
+            Z[k + 1] = np.array(self.F(Z[k], rates[k], self._q(par, k))).ravel()
+        V = np.zeros((d.N, d.nu))
+        V[:, 0:2] = rates
+        return self.fill_slacks(Z, V, p)
+
+    def guided_rollout(self, p: np.ndarray, auv: int, speed: float) -> np.ndarray:
+        """A primal guess that heads for AUV ``auv``'s target circle at ``speed`` and stops
+        there (from outside inwards, from inside outwards): rates from a simple stage-wise
+        steering and thrust law on the plan model.
+
+        Used to escape the local minimum of standing still (at rest the steering has no
+        authority, so first-order information cannot tell the solver to turn and go).
+        """
+        d, vp, dt = self.dims, self.vessel, self.dt
+        par = self.unpack_par(p)
+        Z = np.zeros((d.N + 1, d.nx))
+        Z[0] = par["z0"]
+        rates = np.zeros((d.N, 2))
+        T_go = self.model.thrust_for_speed(speed)
+        for k in range(d.N):
+            z, c = Z[k], par["pa"][k, auv]
+            rel = z[0:2] - c
+            r = max(float(np.hypot(*rel)), 1e-6)
+            goal = c + rel / r * par["r_t"][auv]  # closest point of the target circle
+            arrived = abs(r - par["r_t"][auv]) <= 5.0  # on the circle (inside: head out)
+            e = math.atan2(goal[1] - z[1], goal[0] - z[0]) - z[2]
+            e = math.atan2(math.sin(e), math.cos(e))
+            T_des = 0.0 if arrived else T_go
+            delta_des = 0.0 if arrived else float(np.clip(e, -vp.delta_max, vp.delta_max))
+            rates[k, 0] = np.clip((T_des - z[6]) / dt, -self.dT_max, self.dT_max)
+            rates[k, 1] = np.clip((delta_des - z[7]) / dt, -self.dd_max, self.dd_max)
+            Z[k + 1] = np.array(self.F(z, rates[k], self._q(par, k))).ravel()
+        V = np.zeros((d.N, d.nu))
+        V[:, 0:2] = rates
+        return self.fill_slacks(Z, V, p)
+
+    def fill_slacks(self, Z: np.ndarray, V: np.ndarray, p: np.ndarray) -> np.ndarray:
+        """Primal vector with slacks and epigraph variables set to their smallest feasible
+        values (plus a small margin) for the states ``Z`` and rates ``V[:, :2]``."""
+        d, par = self.dims, self.unpack_par(p)
+        K = d.n_auv
+        dist = np.hypot(Z[:-1, None, 0] - par["pa"][:-1, :, 0],
+                        Z[:-1, None, 1] - par["pa"][:-1, :, 1])  # fmt: skip
+        s = np.maximum(par["r_lo"][:-1] - dist, 0.0)
+        if d.outer:
+            s = np.maximum(s, dist - par["r_hi"][:-1])
+        V = V.copy()
+        V[:, 2 : 2 + K] = s + 1e-3
+        if d.epi:
+            V[:, 2 + K] = Z[:-1, NXV : NXV + K].max(axis=1) + 1e-3
+        return self.join(Z, V)
+
+    def _q(self, par: dict, k: int) -> np.ndarray:
+        pa, pa1 = par["pa"][k].ravel(), par["pa"][k + 1].ravel()
+        dep, dep1 = par["depth"][k], par["depth"][k + 1]
+        return np.concatenate([par["current"], pa, (pa1 - pa) / self.dt, dep,
+                               (dep1 - dep) / self.dt, par["d_fix"], par["channel"]])  # fmt: skip
+
+    def shift(self, w: np.ndarray, frac: float) -> np.ndarray:
+        """Primal warm start moved ``frac`` stages ahead (linear interpolation, end held)."""
+        Z, V = self.split(w)
+        return self.join(interp_rows(Z, frac), interp_rows(V, frac))
+
+    def shift_lam_g(self, lam: np.ndarray, frac: float) -> np.ndarray:
+        """Constraint multipliers moved ``frac`` stages ahead (same rule as :meth:`shift`)."""
+        d = self.dims
+        return interp_rows(np.asarray(lam).reshape(d.N, d.nx + d.nh), frac).ravel()
+
+    def shift_lam_x(self, lam: np.ndarray, frac: float) -> np.ndarray:
+        """Bound multipliers moved ``frac`` stages ahead."""
+        return self.shift(lam, frac)
+
+
+def interp_rows(A: np.ndarray, frac: float) -> np.ndarray:
+    """Rows of ``A`` evaluated at ``k + frac`` by linear interpolation, the last row held."""
+    n = A.shape[0]
+    s = np.minimum(np.arange(n) + frac, n - 1)
+    i0 = np.floor(s).astype(int)
+    i1 = np.minimum(i0 + 1, n - 1)
+    a = (s - i0)[:, None]
+    return (1 - a) * A[i0] + a * A[i1]
