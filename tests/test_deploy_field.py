@@ -12,11 +12,11 @@ import time
 
 import imcpy
 import tomli_w
+from test_io_link import ASV_ID, AUV_ID, Fake, _cfg
 
 from mpcasv.cli import main
 from mpcasv.io.deploy import Deploy
 from mpcasv.io.logs import read_jsonl
-from tests.test_io_link import ASV_ID, AUV_ID, Fake, _cfg
 
 BUDGET_MS = 1500.0  # the step's deadline in these tests (s of wall time, well above a tick)
 
@@ -115,8 +115,9 @@ def test_prepare_starts_the_solver_worker_before_any_vehicle(tmp_path, capsys):
 def test_achievable_speed_caps_a_planned_speed(tmp_path):
     """With ``speed_feedback`` the learned achievable speed caps every transit command sent,
     also a controller whose speed comes from its plan (an MPC) rather than ``params.speed``."""
+    from test_io_asv import _cfg as asv_cfg
+
     from mpcasv.interface import ASVState, AUVEstimate, Command, Mode, Observation
-    from tests.test_io_asv import _cfg as asv_cfg
 
     dep = Deploy(asv_cfg(tmp_path, controller={"speed_feedback": True}), dry_run=True)
 
