@@ -14,13 +14,11 @@ import shutil
 from pathlib import Path
 
 import pytest
+from shared_data import CASES as SHARED_CASES
 
 from mpcasv.cli import build_parser, input_error, main
 
 ROOT = Path(__file__).resolve().parents[1]
-SHARED_CASES = ROOT.parent.parent / "shared" / "cases"  # /work/shared/cases beside the worktree
-if not SHARED_CASES.is_dir():  # a clone at /work/main: shared/ is its sibling
-    SHARED_CASES = ROOT.parent / "shared" / "cases"
 CASE1 = ROOT / "experiments" / "scenarios" / "case1.toml"
 FAMILY = ROOT / "experiments" / "falsify" / "pursuer-single.toml"
 GARBAGE = bytes(range(0x80, 0x100)) * 2  # not UTF-8, not TOML, not an IMC sync

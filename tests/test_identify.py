@@ -3,12 +3,12 @@
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 import imcpy
 import numpy as np
 import pandas as pd
 import pytest
+from shared_data import DATA
 
 from mpcasv.cli import main
 from mpcasv.control.manoeuvres import Noise, simulate_manoeuvre
@@ -26,10 +26,7 @@ from mpcasv.models.identify import (
 from mpcasv.models.params import load_vessel
 from mpcasv.models.vessel import VesselModel
 
-# ../shared beside the checkout (/work/main), or beside the worktrees' folder (/work/wt/NAME)
-SHARED = next((p / "shared" for p in Path(__file__).resolve().parents[2:4]
-               if (p / "shared" / "data").is_dir()), Path("/nonexistent"))  # fmt: skip
-SHARED_LOG = SHARED / "data" / "dune-lauv-followref.lsf.gz"
+SHARED_LOG = DATA / "dune-lauv-followref.lsf.gz"
 CURRENT = (0.2, -0.1)
 PLAN = (("zigzag", 1.5, 20, 150), ("zigzag", 2.2, 20, 150), ("turning-circle", 2.0, 30, 150),
         ("turning-circle", 1.0, 20, 150), ("speed-steps", 1.5, 20, 240))  # fmt: skip

@@ -14,10 +14,10 @@ them by far.
 from __future__ import annotations
 
 import shutil
-from pathlib import Path
 
 import numpy as np
 import pytest
+from shared_data import DATA
 
 from mpcasv.cli import main
 from mpcasv.errors import LogError
@@ -27,9 +27,7 @@ from mpcasv.models.ident_thrust import ThrusterMap, replay_metrics, vsim_structu
 from mpcasv.models.params import load_vessel
 from mpcasv.models.vessel import VesselModel
 
-SHARED = next((p / "shared" for p in Path(__file__).resolve().parents[2:4]
-               if (p / "shared" / "data").is_dir()), Path("/nonexistent"))  # fmt: skip
-IDENT = SHARED / "data" / "dune-otter-ident"
+IDENT = DATA / "dune-otter-ident"
 needs_log = pytest.mark.skipif(not (IDENT / "Data.lsf.gz").is_file(),
                                reason="../shared/data/dune-otter-ident not present")  # fmt: skip
 

@@ -8,6 +8,7 @@ from pathlib import Path
 
 import imcpy
 import pytest
+from shared_data import CASES
 
 from mpcasv.cli import main
 from mpcasv.io.config import deploy_config_from_dict
@@ -16,7 +17,6 @@ from mpcasv.io.imc import NavState, estimated_state, stamp
 from mpcasv.io.link import ImcLink
 from mpcasv.io.logs import read_jsonl
 
-CASES = Path("/work/shared/cases")
 CASE_DIR = Path(__file__).parent / "data" / "cases"  # copies of the case inputs (CI)
 
 

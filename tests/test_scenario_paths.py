@@ -8,6 +8,7 @@ import textwrap
 from pathlib import Path
 
 import pytest
+from shared_data import CASES
 
 from mpcasv.cli import main
 from mpcasv.config import ConfigError
@@ -15,7 +16,6 @@ from mpcasv.experiments.suite import expand
 from mpcasv.sim.scenario import load_scenario
 from mpcasv.sim.world import build_plant
 
-CASES = Path("/work/shared/cases")
 VESSELS = CASES / "vessels"
 
 

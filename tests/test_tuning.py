@@ -189,12 +189,8 @@ def test_cli_refuses_speeds_beyond_the_vessels_top_speed(tmp_path, capsys, what)
     assert rc == 2 and "speeds [3.0] m/s outside (0, 2.5] m/s: gretha cannot hold them" in err
 
 
-# ../shared beside the checkout (/work/main), or beside the worktrees' folder (/work/wt/NAME)
-from pathlib import Path  # noqa: E402
-
-CASES = next((p / "shared" / "cases" for p in Path(__file__).resolve().parents[2:4]
-              if (p / "shared" / "cases").is_dir()), None)  # fmt: skip
-needs_cases = pytest.mark.skipif(CASES is None, reason="../shared/cases not found")
+from shared_data import CASES  # noqa: E402  (../shared beside the checkout)
+from shared_data import needs_shared as needs_cases  # noqa: E402
 
 
 @needs_cases

@@ -8,15 +8,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from shared_data import CASES, needs_shared
 
 from mpcasv.config import ConfigError, load_toml, parse
 from mpcasv.models.params import MODEL_COEFFS, VesselParams, load_vessel
 from mpcasv.models.vessel import IX, NX, VesselModel, idle_weight
 
 DOCS = Path(__file__).resolve().parents[1] / "docs" / "vessel.md"
-# ../shared beside the checkout (/work/main), or beside the worktrees' folder (/work/wt/NAME)
-CASES = next((p / "shared" / "cases" for p in Path(__file__).resolve().parents[2:4]
-              if (p / "shared" / "cases").is_dir()), Path("/nonexistent"))  # fmt: skip
 
 
 @pytest.fixture(scope="module")
@@ -198,6 +196,7 @@ def test_idle_drag_blends_out_smoothly_as_thrust_rises(model):
         assert abs(np.array(model.f(x0, u0, [0, 0])).ravel()[IX["u"]]) < 1e-9
 
 
+@needs_shared
 @pytest.mark.parametrize("name", ["otter.toml", "cybership2.toml"])
 def test_third_party_vessel_files_load_without_idle_drive(name):
     """../shared/cases/vessels/: files written without the optional idle-drive pair load with

@@ -13,6 +13,7 @@ import shutil
 from pathlib import Path
 
 import pytest
+from shared_data import CASES
 
 from mpcasv.cli import main
 from mpcasv.config import DATA_DIR, ConfigError
@@ -20,7 +21,6 @@ from mpcasv.controllers import Boat, check_boat, load_preset, make_controller, p
 from mpcasv.sim.scenario import load_scenario
 from mpcasv.sim.world import build_plant
 
-CASES = Path("/work/shared/cases")
 VESSELS = CASES / "vessels"  # used by mpc-ignores-scenario-vessel
 
 pytestmark = pytest.mark.skipif(not VESSELS.is_dir(), reason=f"{VESSELS} not present")
