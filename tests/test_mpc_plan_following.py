@@ -158,3 +158,19 @@ def test_the_plan_speed_rule_follows_the_plans_thrust_better_in_closed_loop(scen
     assert m["plan"]["plan_thrust_error_N"] < m["max"]["plan_thrust_error_N"]
     off = {r: abs(math.log(m[r]["plan_energy_ratio"])) for r in m}
     assert off["plan"] < off["max"]
+
+
+def test_the_deploy_log_keeps_the_planned_standby_time():
+    """The deploy log's command record carries ``standby_time`` (the Reference sent for a
+    STANDBY has no duration, so the log is where the plan's intention is kept) and reads
+    back exactly; a record written before it was kept reads as None."""
+    from mpcasv.interface import Command
+    from mpcasv.io.records import cmd_from_dict, cmd_to_dict
+
+    sb = Command.standby(auv=0, standby_time=13.25)
+    d = cmd_to_dict(sb)
+    assert d["standby_time"] == 13.25 and cmd_from_dict(d) == sb
+    tr = Command(Mode.TRANSIT, (10.0, 20.0), 1.5, 0, Reason.TRACKING)
+    assert cmd_from_dict(cmd_to_dict(tr)) == tr and cmd_to_dict(tr)["standby_time"] is None
+    old = {k: v for k, v in d.items() if k != "standby_time"}
+    assert cmd_from_dict(old).standby_time is None
