@@ -149,7 +149,8 @@ def test_the_plan_speed_rule_follows_the_plans_thrust_better_in_closed_loop(scen
     better (smaller ``plan_thrust_error_N``), and the energy the boat spends is closer to
     what its plans meant (``plan_energy_ratio`` nearer 1). The presets' cap holds the
     largest speed of the next 15 s while the plan slows down (docs/mpc.md, "Plan
-    following")."""
+    following"). Measured when written: thrust error 194 N (max) against 63 N (plan),
+    energy ratio 1.15 against 1.08."""
     sc = scenario_with(load_scenario(scenarios_dir / "case3.toml"), duration=300.0)
     m = {}
     for rule in ("max", "plan"):
