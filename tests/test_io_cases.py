@@ -221,6 +221,7 @@ def test_case_vehicle_clock_step_twice_and_asv_grid(tmp_path):
         if k % 2:
             dep.watch()
     assert dep.phase == RUNNING
+    dep.jsonl.flush()  # the log is still open: read every record, not the buffer's cut
     offsets = [round(r["offset_s"]) for r in read_jsonl(tmp_path / "deploy.jsonl", "event")
                if r["event"] == "clock_step"]  # fmt: skip
     assert sorted(offsets) == [-600, -600, 3600, 3600]  # both vehicles, both steps

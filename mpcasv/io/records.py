@@ -46,15 +46,22 @@ def obs_from_dict(d: dict) -> Observation:
 
 
 def cmd_to_dict(cmd: Command) -> dict:
+    """A command as the deploy log writes it; ``standby_time`` (s, or None) is what an MPC's
+    STANDBY planned (the field log keeps it: the References sent carry no duration,
+    docs/mpc.md "Plan following")."""
     return {
         "mode": str(cmd.mode), "waypoint": list(cmd.waypoint) if cmd.waypoint else None,
         "speed": cmd.speed, "auv": cmd.auv, "reason": str(cmd.reason),
+        "standby_time": cmd.standby_time,
     }  # fmt: skip
 
 
 def cmd_from_dict(d: dict) -> Command:
+    """Inverse of :func:`cmd_to_dict` (logs written before ``standby_time`` was kept: None)."""
     wp = tuple(d["waypoint"]) if d["waypoint"] is not None else None
-    return Command(Mode(d["mode"]), wp, float(d["speed"]), d["auv"], Reason(d["reason"]))
+    st = d.get("standby_time")
+    return Command(Mode(d["mode"]), wp, float(d["speed"]), d["auv"], Reason(d["reason"]),
+                   None if st is None else float(st))  # fmt: skip
 
 
 def same_command(a: Command, b: Command, tol_m: float = 0.5, tol_speed: float = 1e-6) -> bool:

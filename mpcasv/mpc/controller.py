@@ -24,7 +24,8 @@ Every step (docs/mpc.md, "Controller"):
    solved;
 5. the command: STANDBY while the plan keeps the thrust below the propeller-on threshold for
    ``standby_time``, else TRANSIT to the planned position ``lookahead`` seconds ahead (pushed
-   out to ``min_carrot`` m) at the planned speed, labelled AVOIDANCE or TRACKING (its reason).
+   out to ``min_carrot`` m) at a speed from the plan (``speed_rule``: a cap over the
+   lookahead, or the planned speed one period ahead), labelled AVOIDANCE or TRACKING.
 """
 
 from __future__ import annotations

@@ -241,11 +241,18 @@ class MPCParams:
         guidance has a well-defined bearing.
     speed_min : float
         Lowest speed cap handed to the execution level (m/s).
-    speed_rule : {"max", "mean"}
-        The TRANSIT speed cap: the largest planned surge speed within ``lookahead`` (``max``,
-        the presets) or its time average over ``lookahead`` (``mean``). With ``max`` the
-        execution level holds the speed the plan is about to give up (the plan glides at
-        low thrust while the boat keeps its speed): docs/mpc.md, "Plan following".
+    speed_rule : {"max", "mean", "plan"}
+        The TRANSIT speed: the largest planned surge speed within ``lookahead`` (``max``,
+        the presets) or its time average over ``lookahead`` (``mean``), both caps over the
+        lookahead; or ``plan``: the planned surge speed ``speed_lead`` seconds ahead (linear
+        between stages), a reference that follows the plan's speed profile because the MPC
+        re-issues it every control period. With ``max`` the execution level holds the
+        speed the plan is about to give up (the plan glides at low thrust while the boat
+        keeps its speed): docs/mpc.md, "Plan following". Every rule is clipped to
+        ``[speed_min, u_max]``; the execution level's eq. 3.1 still slows turns below it.
+    speed_lead : float
+        ``speed_rule = "plan"`` only: how far ahead (s) the planned speed is read: the end
+        of the coming control period (1 s in ``simulate`` and the deploy default).
     speed : float
         Transit speed cap of the hybrid fallback controller (m/s).
     T_standby : float
@@ -297,7 +304,8 @@ class MPCParams:
     lookahead: Pos = 15.0
     min_carrot: Pos = 25.0
     speed_min: Pos = 0.5
-    speed_rule: Literal["max", "mean"] = "max"
+    speed_rule: Literal["max", "mean", "plan"] = "max"
+    speed_lead: Pos = 1.0
     speed: Pos = 2.5
     T_standby: Pos = 10.0
     tau_served: Pos = 10.0

@@ -51,8 +51,10 @@ class PlanOutput:
         wp = here + delta / dn * max(dn, P.min_carrot)
         if P.speed_rule == "max":
             u_cap = np.max(Z[ts <= look + 1e-9, 3])
-        else:  # the time average of the planned speed over the lookahead
+        elif P.speed_rule == "mean":  # the time average of the planned speed over the lookahead
             u_cap = np.mean(np.interp(np.linspace(0.0, look, 31), ts, Z[:, 3]))
+        else:  # "plan": the planned speed at the end of the coming control period
+            u_cap = np.interp(min(P.speed_lead, ts[-1]), ts, Z[:, 3])
         speed = float(np.clip(u_cap, P.speed_min, ocp.vessel.u_max))
         reason = self._transit_reason(here, par)
         return Command(Mode.TRANSIT, (float(wp[0]), float(wp[1])), speed, served, reason)
