@@ -15,6 +15,7 @@ from mpcasv.config import NonNeg, Pos, PosInt, frozen
 from mpcasv.estimation.current import CurrentObserverParams
 from mpcasv.hybrid.avoidance import AvoidanceParams
 from mpcasv.hybrid.domains import DomainParams
+from mpcasv.models.acoustics import NavParams
 
 SolverName = Literal["fatrop", "ipopt", "qp"]
 
@@ -209,6 +210,37 @@ class SolverParams:
 
 
 @frozen
+class OrderParams:
+    """The visiting-order top level (``target_rule = "order"``; :mod:`mpcasv.mpc.order`, eq.
+    O1, docs/mpc.md "Visiting order").
+
+    Attributes
+    ----------
+    window : float
+        Window ``W`` over which the orders of visits (repeated tours) are compared (s).
+    stay : float
+        Standby the top level expects at each AUV it visits (s).
+    hysteresis : float
+        A served target gives way only to an order at least this fraction cheaper than the
+        best order that starts by staying with it (issue 16 item 6).
+    nav : float
+        Cost per second of one ``V_ref = eps_a^2 / 8 tau_ref^4`` of an AUV's navigation
+        variance (per axis; ``tau_ref`` of the weights), against the OCP's energy terms at
+        ``U_go`` per second of transit (``e_go``).
+    cv_forecast_max : float
+        Without the estimator's own forecast (along the AUV's plan) an AUV's velocity is
+        extrapolated this far (s) and its position then held (an AUV on a lawn-mower pattern
+        turns every minute or two).
+    """
+
+    window: Pos = 600.0
+    stay: NonNeg = 30.0
+    hysteresis: NonNeg = 0.02
+    nav: Pos = 1.0
+    cv_forecast_max: Pos = 60.0
+
+
+@frozen
 class MPCParams:
     """Preset of ``mpc-single`` / ``mpc-multi``.
 
@@ -257,6 +289,16 @@ class MPCParams:
     dwell_max : float
         ... or once the ASV has spent this long within the target's target domain (s): a
         moving AUV may keep the expected fix age above ``tau_served``.
+    target_rule : {"age", "order"}
+        Which AUV becomes the target once the current one is served: ``age`` (default, the
+        shipped presets): the largest projected fix age ``tau_i + t_go,i`` among those above
+        ``tau_served``; ``order`` (opt-in, preset ``mpc-multi-order``): the first AUV of the
+        cheapest visiting order over ``order.window`` (:mod:`mpcasv.mpc.order`, eq. O1).
+    order : OrderParams
+        The visiting-order top level (``target_rule = "order"`` only).
+    navigation : NavParams
+        The AUVs' inertial navigation as the top level assumes it (``eps_a``, m/s^2: the
+        variance growth of eq. O1; the thesis's MRU value by default, as the scenarios').
     explore_every : float
         While the plan stands still, also solve from a guess heading for the AUV with the
         largest projected fix age this often (s; 0: never). Standing still is a local minimum.
@@ -302,6 +344,9 @@ class MPCParams:
     T_standby: Pos = 10.0
     tau_served: Pos = 10.0
     dwell_max: Pos = 45.0
+    target_rule: Literal["age", "order"] = "age"
+    order: OrderParams = OrderParams()
+    navigation: NavParams = NavParams()
     explore_every: NonNeg = 5.0
     fix_age_source: Literal["model", "estimate"] = "model"
     current: Literal["estimated", "oracle", "zero"] = "estimated"
