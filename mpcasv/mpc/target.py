@@ -75,12 +75,12 @@ class Targeting:
     def forecast(self, a: AUVEstimate) -> Forecast:
         """An AUV's forecast for the visiting order (offsets from now, s, shape (n,) ->
         positions (n, 2), m): the estimator's own (along the AUV's plan) as far as it goes;
-        a constant-velocity extrapolation only up to ``order.cv_forecast_max`` s, then held
+        a constant-velocity extrapolation only up to ``cv_forecast_max`` s, then held
         (an AUV on a lawn-mower pattern turns every minute or two: extrapolated over ten
         minutes it would be hundreds of metres off)."""
         if a.forecast is not None:
             return a.predict
-        cap = self.params.order.cv_forecast_max
+        cap = self.params.cv_forecast_max
         return lambda dt: a.predict(np.minimum(np.asarray(dt, float), cap))
 
     @functools.cached_property
