@@ -4,6 +4,9 @@ The number of switches is reported (``mpc_target_switches`` in the diagnostics).
 
 from __future__ import annotations
 
+import dataclasses
+
+import numpy as np
 import pytest
 
 from mpcasv.controllers import make_controller
@@ -16,8 +19,10 @@ def ctrl():
     return make_controller("mpc-multi", 2, "mpc-multi", overrides={"solver.compiled": False})
 
 
-def _run(ctrl, auvs, steps: int = 40):
+def _run(ctrl, auvs, steps: int = 40, tau0=None):
     ctrl.reset(len(auvs))
+    if tau0 is not None:  # the AUVs' expected fix ages when the run starts (s)
+        ctrl.tau = np.array(tau0, float)
     targets = []
     for k in range(steps):
         obs = Observation(float(k), ASVState(0.0, 0.0, 0.0), False, auvs)
@@ -44,3 +49,55 @@ def test_a_served_target_gives_way_to_an_auv_that_needs_a_visit(ctrl):
     targets = _run(ctrl, auvs, steps=10)
     assert targets[-1] == 1
     assert ctrl.target_switches == 1 == ctrl.diagnostics()["mpc_target_switches"]
+
+
+# ------------------------------------------------ target_rule = "order" (opt-in, issue 16 item 2)
+@pytest.fixture(scope="module")
+def ordered():
+    # the shipped opt-in preset, the SX virtual machine (no compile for this test)
+    return make_controller("mpc-multi", 2, "mpc-multi-order", overrides={"solver.compiled": False})
+
+
+def test_the_order_preset_is_mpc_multi_with_the_order_rule(ctrl, ordered):
+    """The shipped presets keep the age rule; mpc-multi-order differs from mpc-multi only in
+    the rule (same domain, horizon, weights, solver: same compiled library)."""
+    assert ctrl.params.target_rule == "age"
+    assert ordered.params.target_rule == "order"
+    assert dataclasses.replace(ordered.params, target_rule="age") == ctrl.params
+
+
+def test_order_rule_two_served_auvs_do_not_swap(ordered):
+    auvs = (AUVEstimate(15.0, 0.0, 60.0), AUVEstimate(-15.0, 0.0, 60.0))
+    targets = _run(ordered, auvs)
+    assert max(ordered.tau) <= ordered.params.tau_served
+    assert ordered.target_switches == 0, targets
+
+
+def test_order_rule_served_target_gives_way_to_an_auv_that_needs_a_visit(ordered):
+    """As with the age rule: AUV 0 beside the ASV (served), AUV 1 400 m away and 150 s
+    without a fix: the target moves to AUV 1 once, and stays; the order is recorded."""
+    auvs = (AUVEstimate(15.0, 0.0, 60.0), AUVEstimate(400.0, 0.0, 60.0))
+    targets = _run(ordered, auvs, steps=10, tau0=(0.0, 150.0))
+    assert targets[-1] == 1
+    assert ordered.target_switches == 1 == ordered.diagnostics()["mpc_target_switches"]
+    assert ordered.order_plan.order[0] == 1
+
+
+def _first_choice(rule: str) -> int:
+    """Three AUVs: the target (2) beside the ASV and served; AUV 0 oldest (200 s) but 600 m
+    out, AUV 1 (150 s) half-way. The target chosen by ``rule`` (no solve)."""
+    c = make_controller("mpc-multi", 3, "mpc-multi", overrides={
+        "solver.compiled": False, "target_rule": rule})  # fmt: skip
+    c.reset(3)
+    c.target, c.tau = 2, np.array([200.0, 150.0, 0.0])
+    auvs = (AUVEstimate(600.0, 0.0, 60.0), AUVEstimate(300.0, 0.0, 60.0),
+            AUVEstimate(15.0, 0.0, 60.0))  # fmt: skip
+    c._choose_target(Observation(0.0, ASVState(0.0, 0.0, 0.0), False, auvs), 1.0)
+    return c.target
+
+
+def test_the_order_rule_visits_the_auv_on_the_way_where_the_age_rule_goes_past_it():
+    """The age rule heads for the largest projected fix age (AUV 0: 200 s + 530 m / 2.5 m/s);
+    the order rule visits AUV 1 on the way (tests/test_mpc_order.py has the order alone)."""
+    assert _first_choice("age") == 0
+    assert _first_choice("order") == 1

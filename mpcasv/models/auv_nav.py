@@ -43,7 +43,39 @@ import numpy as np
 
 from mpcasv.models.acoustics import NavParams
 
-__all__ = ["AUVNavFilter"]
+__all__ = ["AUVNavFilter", "dr_variance", "dr_variance_integral", "fix_variance",
+           "fix_posterior_variance"]
+
+
+# The filter's laws as pure functions of floats, numpy arrays or CasADi expressions (the MPC's
+# visiting order values them: mpcasv/mpc/order.py, docs/mpc.md "Visiting order").
+def dr_variance(eps_a, t):
+    """Dead-reckoning variance per axis (m^2) ``t`` s after an update (N2, thesis eq. 2.7):
+    ``eps_a^2 / 8 t^4`` (``eps_a`` in m/s^2), so that the 1-sigma radius is ``1/2 eps_a t^2``.
+    Same shape as ``t``."""
+    return eps_a**2 / 8.0 * t**4
+
+
+def dr_variance_integral(eps_a, t0, t1):
+    """``integral of dr_variance(eps_a, s) ds`` from ``t0`` to ``t1`` (s; m^2 s):
+    ``eps_a^2 / 40 (t1^5 - t0^5)``."""
+    return eps_a**2 / 40.0 * (t1**5 - t0**5)
+
+
+def fix_variance(slant, sigma_range, sigma_bearing):
+    """Variances (m^2) of a USBL fix at slant range ``slant`` (m) along and across the line
+    of sight: ``(sigma_range^2, (sigma_bearing slant)^2)`` (``sigma_range`` in m,
+    ``sigma_bearing`` in rad; thesis eq. 2.9, the covariance
+    :func:`mpcasv.models.acoustics.usbl_fix` hands the filter)."""
+    return sigma_range**2, (sigma_bearing * slant) ** 2
+
+
+def fix_posterior_variance(P, R_los, R_perp):
+    """Mean per-axis variance (m^2) of the filter after a fix (N3, the Kalman update of
+    :meth:`AUVNavFilter.update`) from an isotropic prior ``P`` per axis (m^2) and a fix with
+    variances ``R_los`` along and ``R_perp`` across the line of sight (m^2): each axis
+    ``P R / (P + R)``. Exact for an isotropic prior (the dead-reckoning growth N2 is)."""
+    return 0.5 * (P * R_los / (P + R_los) + P * R_perp / (P + R_perp))
 
 
 class AUVNavFilter:
@@ -91,7 +123,7 @@ class AUVNavFilter:
     def _grow(self, t: float) -> np.ndarray:
         """Variance per axis added since each AUV's last update (m^2, shape (n_auv,)), N2."""
         dt = t - self.t_u
-        return self.p.eps_a**2 / 8.0 * dt**4 + 0.5 * (self.p.drift_per_distance * self.dist) ** 2
+        return dr_variance(self.p.eps_a, dt) + 0.5 * (self.p.drift_per_distance * self.dist) ** 2
 
     def cov(self, t: float) -> np.ndarray:
         """The filters' covariances at time ``t``: shape (n_auv, 2, 2), m^2 (N2)."""
@@ -123,7 +155,7 @@ class AUVNavFilter:
         dt = t - self.t_u[k]
         c = self.p.drift_per_distance * self.dist[k]
         e = self.e_u[k] + 0.5 * self.a[k] * dt**2 + c * self.dirn[k]  # (N1)
-        g = self.p.eps_a**2 / 8.0 * dt**4 + 0.5 * c * c  # (N2)
+        g = dr_variance(self.p.eps_a, dt) + 0.5 * c * c  # (N2)
         (p00, p01), (_, p11) = self.P_u[k]
         p00, p11 = p00 + g, p11 + g
         (r00, r01), (_, r11) = np.asarray(R, float).reshape(2, 2)

@@ -51,6 +51,7 @@ from mpcasv.mpc.problem import OCP, channel_vector
 from mpcasv.mpc.rescue import funnel
 from mpcasv.mpc.safety import Safety
 from mpcasv.mpc.solvers import SolveResult, make_solver
+from mpcasv.mpc.target import Targeting
 from mpcasv.mpc.worldview import WorldView
 
 #: field mode: part of the step's budget kept for the fallback and the command after a
@@ -87,7 +88,7 @@ def _worker_solver(params: MPCParams, n_auv: int, multi: bool, boat):
     return build_ocp(params, n_auv, multi, log=lambda *a: None, boat=boat)[1]
 
 
-class MPCController(WorldView, Safety, PlanOutput):
+class MPCController(WorldView, Safety, PlanOutput, Targeting):
     """Fix-age NMPC with donut constraints and a hybrid safety fallback.
 
     Parameters
@@ -216,6 +217,7 @@ class MPCController(WorldView, Safety, PlanOutput):
         self._depth_hist: list[list[tuple[float, float]]] = [[] for _ in range(n_auv)]
         self.w_depth = np.zeros(n_auv)  # estimated vertical speed, positive down (m/s)
         self.dwell = 0.0  # time spent in the target AUV's target domain (s)
+        self.order_plan = None  # target_rule "order": the last cheapest order (mpc/order.py)
         #: if a list: (parameters, elapsed stages) of every step's main solve (benchmarks)
         self.recorder: list | None = getattr(self, "recorder", None)
         self._diag: dict = {}
@@ -320,36 +322,6 @@ class MPCController(WorldView, Safety, PlanOutput):
         # the plan-tracking metrics compare the boat with what it was told to do
         self._store_plan(obs.t, res.w)
         return self._command(obs, res.w, p)
-
-    def _choose_target(self, obs: Observation, elapsed: float) -> None:
-        """The AUV the terminal cost sends the ASV to (M9): kept until it is served (its
-        expected fix age below ``tau_served``, or the ASV has been within its target domain for
-        ``dwell_max``), then the one with the largest projected fix age ``tau_i + t_go,i``
-        (Paper 2's eq. 8 on projected ages) among those whose projected age exceeds
-        ``tau_served``; none such: the target stays (no switching between served AUVs)."""
-        K = len(obs.auvs)
-        if K == 1:
-            return
-        pos = np.array([a.position for a in obs.auvs])
-        r_t = self._radii(obs, 0.0, obs.asv.position) + self.domain.delta_r
-        dist = np.hypot(*(pos - obs.asv.position).T)
-        if self.domain.in_reliable_range(dist[self.target], r_t[self.target]):
-            self.dwell += elapsed
-        served = self.tau[self.target] <= self.params.tau_served
-        if not (served or self.dwell >= self.params.dwell_max):
-            return
-        t_go = np.maximum(dist - r_t, 0.0) / self.params.weights.U_go
-        proj = self.tau + t_go
-        # commitment (issue 16 item 6): leave the target only for an AUV that needs a visit
-        # itself (projected fix age above tau_served); with every other AUV served the target
-        # stays (before, two served AUVs swapped the target every step for a whole run)
-        proj[(np.arange(K) == self.target) | (proj <= self.params.tau_served)] = -np.inf
-        if not np.isfinite(proj).any():
-            return
-        self.dwell = 0.0
-        self.target = int(np.argmax(proj))
-        self.target_switches += 1
-        self.t_explore = None  # new target: also try a guess heading there (_explore)
 
     def diagnostics(self) -> dict:
         """Flat per-step record: solver status, iterations, solve time, cost, fallback."""

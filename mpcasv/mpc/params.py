@@ -15,6 +15,7 @@ from mpcasv.config import NonNeg, Pos, PosInt, frozen
 from mpcasv.estimation.current import CurrentObserverParams
 from mpcasv.hybrid.avoidance import AvoidanceParams
 from mpcasv.hybrid.domains import DomainParams
+from mpcasv.models.acoustics import NavParams
 
 SolverName = Literal["fatrop", "ipopt", "qp"]
 
@@ -57,6 +58,11 @@ class FixRateParams:
         with the propeller off count, as in Paper 2's reliable fix (eq. 9) and the comparison's
         reliable-fix age; with True Case 1's standby fraction fell from 0.88 to 0.47
         (``mpc-single-sim``, seed 0).
+    inset : float
+        ``target`` model: the range sigmoid is centred this far (m) inside ``r_t +
+        eps_plus`` (0, default: on it), so that the plan does not stop a few metres outside
+        the reliable-fix circle, where the smooth rate still promises fixes the simulator
+        does not give (preset mpc-multi-variance: 6 m).
     """
 
     range_kind: Literal["acoustic", "target"] = "acoustic"
@@ -64,6 +70,7 @@ class FixRateParams:
     T_quiet: Pos | None = None
     w_thrust: Pos = 4.0
     noisy_fixes: bool = False
+    inset: NonNeg = 0.0
 
 
 @frozen
@@ -209,6 +216,51 @@ class SolverParams:
 
 
 @frozen
+class OrderParams:
+    """The visiting-order top level (``target_rule = "order"``; :mod:`mpcasv.mpc.order`, eq.
+    O1, docs/mpc.md "Visiting order").
+
+    Attributes
+    ----------
+    window : float
+        Window ``W`` over which the orders of visits (repeated tours) are compared (s).
+    stay : float
+        Standby the top level expects at each AUV it visits (s).
+    hysteresis : float
+        A served target gives way only to an order at least this fraction cheaper than the
+        best order that starts by staying with it (issue 16 item 6).
+    nav : float
+        Cost per second of one ``V_ref = eps_a^2 / 8 tau_ref^4`` of an AUV's navigation
+        variance (per axis; ``tau_ref`` of the weights), against the OCP's energy terms at
+        ``U_go`` per second of transit (``e_go``).
+    """
+
+    window: Pos = 600.0
+    stay: NonNeg = 30.0
+    hysteresis: NonNeg = 0.02
+    nav: Pos = 1.0
+
+
+@frozen
+class VarianceParams:
+    """Weights of the navigation-variance objective (``objective = "variance"``;
+    :mod:`mpcasv.mpc.variance`, docs/mpc.md "Objective: navigation uncertainty"). They enter
+    as parameters (retuning needs no recompilation).
+
+    Attributes
+    ----------
+    nav : float
+        On the sum of the AUVs' navigation variances ``eps_a^2 / 8 tau^4`` (M4n and the tail
+        M7c), per the variance at ``weights.tau_ref``, per s.
+    near : float
+        Per s within ``NEAR_BUFFER`` (10 m) of an AUV's anti-collision bound (M4d).
+    """
+
+    nav: NonNeg = 1.0
+    near: NonNeg = 0.2
+
+
+@frozen
 class MPCParams:
     """Preset of ``mpc-single`` / ``mpc-multi``.
 
@@ -264,6 +316,27 @@ class MPCParams:
     dwell_max : float
         ... or once the ASV has spent this long within the target's target domain (s): a
         moving AUV may keep the expected fix age above ``tau_served``.
+    target_rule : {"age", "order"}
+        Which AUV becomes the target once the current one is served: ``age`` (default, the
+        shipped presets): the largest projected fix age ``tau_i + t_go,i`` among those above
+        ``tau_served``; ``order`` (opt-in, preset ``mpc-multi-order``): the first AUV of the
+        cheapest visiting order over ``order.window`` (:mod:`mpcasv.mpc.order`, eq. O1).
+    order : OrderParams
+        The visiting-order top level (``target_rule = "order"`` only).
+    navigation : NavParams
+        The AUVs' inertial navigation as the top level and the variance objective assume it
+        (``eps_a``, m/s^2: the variance growth of eqs. O1, M2', M4n, M7c; the thesis's MRU
+        value by default, as the scenarios').
+    cv_forecast_max : float
+        Without the estimator's own forecast (along the AUV's plan) the visiting order and
+        the variance tail extrapolate an AUV's velocity this far (s) and then hold its
+        position (an AUV on a lawn-mower pattern turns every minute or two).
+    objective : {"age", "variance"}
+        ``age`` (default, the shipped presets): the expected-fix-age problem (M2, M4, M7);
+        ``variance`` (opt-in, preset ``mpc-multi-variance``): the AUVs' navigation variance
+        (M2', M4n, M4d, M7c; :mod:`mpcasv.mpc.variance`), a different compiled problem.
+    variance : VarianceParams
+        Its weights (``objective = "variance"`` only).
     explore_every : float
         While the plan stands still, also solve from a guess heading for the AUV with the
         largest projected fix age this often (s; 0: never). Standing still is a local minimum.
@@ -310,6 +383,12 @@ class MPCParams:
     T_standby: Pos = 10.0
     tau_served: Pos = 10.0
     dwell_max: Pos = 45.0
+    target_rule: Literal["age", "order"] = "age"
+    order: OrderParams = OrderParams()
+    navigation: NavParams = NavParams()
+    cv_forecast_max: Pos = 60.0
+    objective: Literal["age", "variance"] = "age"
+    variance: VarianceParams = VarianceParams()
     explore_every: NonNeg = 5.0
     fix_age_source: Literal["model", "estimate"] = "model"
     current: Literal["estimated", "oracle", "zero"] = "estimated"

@@ -21,7 +21,7 @@ from mpcasv.mpc.problem import OCP
 #: (fatrop, -O3 -march=native; 'mpcasv simulate' with an empty cache): interpolated between
 COLD_COMPILE_S = {1: 28.0, 3: 40.0}
 
-#: weights that enter the problem as parameters (mpcasv.mpc.problem.WEIGHT_NAMES), not compiled
+#: weights that enter the problem as parameters (mpcasv.mpc.layout.WEIGHT_NAMES), not compiled
 #: in: presets differing only in these share a library (tests/test_first_run.py checks it)
 RUNTIME_WEIGHTS = ("age", "thrust", "power", "dT", "ddelta", "slack", "tail", "U_go",
                    "deadband", "running")  # fmt: skip

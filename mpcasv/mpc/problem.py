@@ -34,53 +34,19 @@ from mpcasv.control.params import load_execution
 from mpcasv.models.acoustics import AcousticParams
 from mpcasv.models.params import load_vessel
 from mpcasv.models.vessel import VesselModel, rk4_expr, xdot_expr
+from mpcasv.mpc.layout import (  # the parameter vector's layout (re-exported names)
+    NCH,
+    NW,
+    WEIGHT_NAMES,
+    ParamLayout,
+    channel_vector,
+)
 from mpcasv.mpc.params import MPCParams
+from mpcasv.mpc.smooth import D_EPS, SOFT_T, SOFTPLUS_M, sigmoid, softplus
+from mpcasv.mpc.variance import N_NAV, VarianceObjective, fix_gain, n_ext
 from mpcasv.mpc.warmstart import WarmStart
 
 NXV = 8  # vessel part of the plan state
-SOFTPLUS_M = 5.0  # smoothing length of the time-to-go softplus (m)
-SOFT_T = 5.0  # smoothing of (T_tail - t_go)+ (s)
-#: the cost weights are parameters (retuning needs no recompilation), in this order
-WEIGHT_NAMES = (
-    "age",
-    "worst",
-    "thrust",
-    "power",
-    "dT",
-    "ddelta",
-    "slack",
-    "tail",
-    "inv_U_go",
-    "deadband",
-    "running",
-)
-NW = len(WEIGHT_NAMES)
-D_EPS = 0.1  # smoothing of the range sqrt (m)
-#: the acoustic channel as it enters the parameters (channel_vector), in this order
-CHANNEL_NAMES = ("rate", "p_good", "p_sporadic", "d1", "d2", "propeller_factor")
-NCH = len(CHANNEL_NAMES)
-
-
-def channel_vector(ac: AcousticParams, noisy: bool = False) -> np.ndarray:
-    """The fix-rate model's channel parameters (eq. M3) from the scenario's (or deploy
-    configuration's) acoustic channel: transmissions per second per AUV (``1 / T0`` with USBL,
-    else the status reports' ``1 / T_report``), success probabilities within ``d1`` and in
-    ``(d1, d2]``, and the factor while the propeller runs when such fixes count (``noisy``,
-    :attr:`~mpcasv.mpc.params.FixRateParams.noisy_fixes`; else 0)."""
-    rate = 1.0 / ac.T0 if ac.usbl else 1.0 / ac.T_report
-    f_prop = ac.propeller_factor if noisy else 0.0
-    return np.array([rate, ac.p_good, ac.p_sporadic, ac.d1, ac.d2, f_prop])
-
-
-def sigmoid(x):
-    """Logistic function (numerically safe for CasADi and numpy)."""
-    return 0.5 + 0.5 * np.tanh(0.5 * x) if not isinstance(x, (ca.SX, ca.MX)) else (
-        0.5 + 0.5 * ca.tanh(0.5 * x))  # fmt: skip
-
-
-def softplus(x):
-    """``log(1 + exp(x))`` without overflow (CasADi expression)."""
-    return ca.fmax(x, 0) + ca.log1p(ca.exp(-ca.fabs(x)))
 
 
 @dataclass(frozen=True)
@@ -91,6 +57,7 @@ class Dims:
     n_auv: int
     outer: bool  # single AUV: the donut's outer bound is a (soft) constraint
     epi: bool  # worst-age epigraph variable present
+    n_ext: int = 0  # objective "variance": its parameter block (mpcasv.mpc.variance.n_ext)
 
     @property
     def nx(self) -> int:
@@ -122,14 +89,15 @@ class Dims:
 
     @property
     def npar(self) -> int:
-        return self.nx + 2 + (self.N + 1) * self.n_stage_par + 3 * self.n_auv + NCH + NW
+        return (self.nx + 2 + (self.N + 1) * self.n_stage_par + 3 * self.n_auv + NCH + NW
+                + self.n_ext)  # fmt: skip
 
     @property
     def n_global_par(self) -> int:
-        return 2 + 3 * self.n_auv + NCH + NW
+        return 2 + 3 * self.n_auv + NCH + NW + self.n_ext
 
 
-class OCP(WarmStart):
+class OCP(WarmStart, VarianceObjective, ParamLayout):
     """The problem for ``n_auv`` AUVs (built once; every per-step quantity is a parameter).
 
     Parameters
@@ -141,6 +109,10 @@ class OCP(WarmStart):
     boat : mpcasv.controllers.Boat, optional
         The run's vessel and execution level; None: ``params.vessel`` / ``params.execution``
         (Gretha when None).
+
+    ``params.objective = "variance"`` builds the navigation-variance problem
+    (:mod:`mpcasv.mpc.variance`: M2', M4n, M4d, M7c; more parameters, another library); the
+    default builds the fix-age problem, unchanged.
 
     Attributes
     ----------
@@ -168,7 +140,9 @@ class OCP(WarmStart):
         self.T_quiet = params.fix.T_quiet if params.fix.T_quiet is not None else self.T_on
         self.dT_max = vp.T_max / params.T_ramp
         self.dd_max = vp.delta_rate_max
-        self.dims = Dims(hz.N, n_auv, outer, wt.worst > 0)
+        self.variance = params.objective == "variance"
+        self.dims = Dims(hz.N, n_auv, outer, wt.worst > 0,
+                         n_ext(n_auv) if self.variance else 0)  # fmt: skip
         self.dt = hz.dt
         self._build()
 
@@ -189,6 +163,9 @@ class OCP(WarmStart):
             depth = q[2 + 4 * K + i] + s * q[2 + 5 * K + i]  # linear within the stage
             dh = ca.sqrt((x[0] - pa[0]) ** 2 + (x[1] - pa[1]) ** 2 + D_EPS**2)
             rho = self.fix_rate(dh, depth, q[2 + 6 * K + i], x[6], ch)  # (M3)
+            if self.variance:  # (M2') a far fix of a fresh AUV removes little
+                nav = ca.vertsplit(q[2 + 7 * K + NCH : 2 + 7 * K + NCH + N_NAV])
+                rho = rho * fix_gain(tau[i], ca.sqrt(dh**2 + depth**2), *nav)
             rows.append(1 - rho * tau[i])  # (M2)
         rows.append(ca.DM(1.0))
         return ca.vertcat(*rows)
@@ -226,7 +203,7 @@ class OCP(WarmStart):
     def _build(self) -> None:
         d, hz, wt, vp = self.dims, self.params.horizon, self.params.weights, self.vessel
         K, N, nx, dt = d.n_auv, d.N, d.nx, hz.dt
-        nq = 2 + 7 * K + NCH
+        nq = 2 + 7 * K + NCH + (N_NAV if self.variance else 0)
         za, wv, q = ca.SX.sym("z", nx + 1), ca.SX.sym("w", 2), ca.SX.sym("q", nq)
         f = ca.Function("f_plan", [za, wv, q], [self.rhs(za, wv, q)])
         z, qs = ca.SX.sym("z", nx), ca.SX.sym("q", nq)
@@ -239,12 +216,19 @@ class OCP(WarmStart):
         sp, sp1 = ca.SX.sym("sp", d.n_stage_par), ca.SX.sym("sp1", d.n_stage_par)
         gp = ca.SX.sym("gp", d.n_global_par)  # current, d_fix, r_t, target, channel, weights
         c, d_fix = gp[0:2], gp[2 : 2 + K]
-        W = dict(zip(WEIGHT_NAMES, ca.vertsplit(gp[2 + 3 * K + NCH :]), strict=True))
+        o_w = 2 + 3 * K + NCH
+        if self.variance:  # the weights, then the variance objective's block
+            W = dict(zip(WEIGHT_NAMES, ca.vertsplit(gp[o_w : o_w + NW]), strict=True))
+            ext = gp[o_w + NW :]
+        else:
+            W = dict(zip(WEIGHT_NAMES, ca.vertsplit(gp[o_w:]), strict=True))
         target = gp[2 + 2 * K : 2 + 3 * K]  # one-hot: the AUV the tail visits next
         ch = gp[2 + 3 * K : 2 + 3 * K + NCH]
         dep, dep1 = sp[4 * K : 5 * K], sp1[4 * K : 5 * K]
         qk = ca.vertcat(c, sp[0 : 2 * K], (sp1[0 : 2 * K] - sp[0 : 2 * K]) / dt, dep,
                         (dep1 - dep) / dt, d_fix, ch)  # fmt: skip
+        if self.variance:
+            qk = ca.vertcat(qk, ext[0:N_NAV])
         h, lbh, ubh = self._path(z, v[2 : 2 + K], v[2 + K] if d.epi else None, sp)
         T, u = z[6], z[3]
         L = W["age"] * ca.sum1(z[NXV : NXV + K])  # (M4)
@@ -259,13 +243,17 @@ class OCP(WarmStart):
         running = sigmoid((T - self.T_on) / w_T)  # ~1 while the propeller runs
         L += W["deadband"] * running * sigmoid((self.T_floor - T) / w_T)
         L += W["running"] * running  # (M4c) propeller time (noise, wear), whatever the thrust
+        if self.variance:
+            L += self._variance_stage(z, sp, ext)  # (M4n, M4d)
         #: stage k: (z_k, v_k, z_{k+1}, stage params k and k+1, global params) -> (dt L_k, g_k)
         self.stage_phys = ca.Function(
             "stage", [z, v, z1, sp, sp1, gp], [dt * L, ca.vertcat(z1 - self.F(z, v[0:2], qk), h)],
             ["z", "v", "z1", "sp", "sp1", "gp"], ["L", "g"],
         )  # fmt: skip
         tau, t_go, T_tail = z[NXV : NXV + K], self._t_go(z, sp, gp), W["tail"]
-        if wt.terminal == "projected":  # (M7a) the target's projected fix age tau + t_go
+        if self.variance:  # (M7c) wait or go, the AUVs' variance over the tail
+            LN = self._tail_cost(z, gp[2 + K : 2 + 2 * K], d_fix, target, ch, W, ext)
+        elif wt.terminal == "projected":  # (M7a) the target's projected fix age tau + t_go
             LN = T_tail * W["age"] * ca.dot(target, tau + t_go)
         else:  # (M7b) ages grow through the tail, minus what the visit of the target saves
             reach = SOFT_T * softplus((T_tail - t_go) / SOFT_T)  # (T_tail - t_go)+, s
@@ -346,7 +334,7 @@ class OCP(WarmStart):
         o = nx + 2
         SP = ca.reshape(p[o : o + (N + 1) * d.n_stage_par], d.n_stage_par, N + 1)
         o += (N + 1) * d.n_stage_par
-        gpx = ca.vertcat(p[nx : nx + 2], p[o : o + 3 * K + NCH + NW])
+        gpx = ca.vertcat(p[nx : nx + 2], p[o : o + 3 * K + NCH + NW + d.n_ext])
         args = [Zs, Vs, ca.horzcat(Zs[:, 1:], zN), SP[:, :N], SP[:, 1:], ca.repmat(gpx, 1, N)]
         return args, zN, [SP[:, N], gpx]
 
@@ -384,71 +372,6 @@ class OCP(WarmStart):
                 lb.append(0.0)
                 ub.append(math.inf)
         return ca.vertcat(*h), np.array(lb), np.array(ub)
-
-    # ------------------------------------------------------------------ numbers
-    def pack(self, x0, tau0, current, pa, r_lo, r_hi, depth, d_fix, r_t,
-             target: int = 0, channel=None) -> np.ndarray:  # fmt: skip
-        """Parameter vector from the per-step data.
-
-        Parameters
-        ----------
-        x0 : array (8,)
-            Vessel state ``[N, E, psi, u, v, r, T, delta]``.
-        tau0 : array (K,)
-            Expected fix ages now (s).
-        current : array (2,)
-            ``[V_N, V_E]`` (m/s).
-        pa : array (N+1, K, 2)
-            Predicted AUV positions at the stage times.
-        r_lo, r_hi : array (N+1, K)
-            Lower (r_inner / r_avoid) and upper (r_outer) range bounds per stage (m).
-        depth : array (N+1, K) or (K,)
-            Forecast AUV depth per stage (m; a (K,) array: constant over the horizon).
-        d_fix, r_t : array (K,)
-            Range of the reliable-fix sigmoid (``target`` fix model), target radius (m).
-        target : int
-            The AUV the terminal cost has the ASV visit next.
-        channel : array (NCH,), optional
-            :func:`channel_vector` of the run's acoustic channel (default: the default
-            :class:`~mpcasv.models.acoustics.AcousticParams`).
-        """
-        d = self.dims
-        K, N = d.n_auv, d.N
-        dep = np.broadcast_to(np.asarray(depth, float), (N + 1, K))
-        ch = (channel_vector(AcousticParams(), self.params.fix.noisy_fixes) if channel is None
-              else np.asarray(channel, float))  # fmt: skip
-        stage = np.concatenate(
-            [np.asarray(pa, float).reshape(N + 1, 2 * K), np.asarray(r_lo, float),
-             np.asarray(r_hi, float), dep], axis=1,
-        )  # fmt: skip
-        return np.concatenate([np.asarray(x0, float), np.asarray(tau0, float),
-                               np.asarray(current, float), stage.ravel(),
-                               np.asarray(d_fix, float), np.asarray(r_t, float),
-                               np.eye(K)[target], ch, self.weight_vector()])  # fmt: skip
-
-    def weight_vector(self) -> np.ndarray:
-        """The cost weights as they enter the parameter vector (normalised, M4)."""
-        wt, vp = self.params.weights, self.vessel
-        return np.array([wt.age / wt.tau_ref, wt.worst / wt.tau_ref, wt.thrust / vp.T_max,
-                         wt.power / (vp.T_max * vp.u_max), wt.dT / self.dT_max**2,
-                         wt.ddelta / self.dd_max**2, wt.slack, wt.tail, 1 / wt.U_go,
-                         wt.deadband, wt.running])  # fmt: skip
-
-    def unpack_par(self, p: np.ndarray) -> dict:
-        """Inverse of :meth:`pack` (arrays)."""
-        d = self.dims
-        K, N, nx = d.n_auv, d.N, d.nx
-        o = nx + 2
-        S = p[o : o + (N + 1) * d.n_stage_par].reshape(N + 1, d.n_stage_par)
-        o += (N + 1) * d.n_stage_par
-        return {
-            "z0": p[:nx], "current": p[nx:nx + 2], "pa": S[:, :2 * K].reshape(N + 1, K, 2),
-            "r_lo": S[:, 2 * K:3 * K], "r_hi": S[:, 3 * K:4 * K], "depth": S[:, 4 * K:5 * K],
-            "d_fix": p[o:o + K], "r_t": p[o + K:o + 2 * K],
-            "target": int(np.argmax(p[o + 2 * K:o + 3 * K])),
-            "channel": p[o + 3 * K:o + 3 * K + NCH],
-            "weights": p[o + 3 * K + NCH:o + 3 * K + NCH + NW],
-        }  # fmt: skip
 
     def bounds(self, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Scaled ``lbx, ubx`` with stage 0 fixed to the initial state in ``p``."""

@@ -10,6 +10,7 @@ import math
 import numpy as np
 
 from mpcasv.models.vessel import NX as NXV  # the plan's vessel state is the model's
+from mpcasv.mpc.variance import N_NAV
 
 
 class WarmStart:
@@ -79,8 +80,10 @@ class WarmStart:
     def _q(self, par: dict, k: int) -> np.ndarray:
         pa, pa1 = par["pa"][k].ravel(), par["pa"][k + 1].ravel()
         dep, dep1 = par["depth"][k], par["depth"][k + 1]
+        # ext: the variance objective's nav constants (M2'); empty for the default objective
         return np.concatenate([par["current"], pa, (pa1 - pa) / self.dt, dep,
-                               (dep1 - dep) / self.dt, par["d_fix"], par["channel"]])  # fmt: skip
+                               (dep1 - dep) / self.dt, par["d_fix"], par["channel"],
+                               par["ext"][:N_NAV]])  # fmt: skip
 
     def shift(self, w: np.ndarray, frac: float) -> np.ndarray:
         """Primal warm start moved ``frac`` stages ahead (linear interpolation, end held)."""

@@ -13,6 +13,8 @@ import numpy as np
 from mpcasv.estimation.current import measurement
 from mpcasv.hybrid.avoidance import estimate_shape
 from mpcasv.interface import Observation
+from mpcasv.mpc.order import meet_time
+from mpcasv.mpc.variance import N_TAIL, fix_gain
 
 R_HI_NONE = 1.0e5  # "no outer bound" (m)
 TAU_UNKNOWN = 600.0  # fix age used for an AUV never fixed (s)
@@ -37,6 +39,13 @@ class WorldView:
         if elapsed <= 0:
             return self.tau
         rho = self._rates(obs)
+        if self.ocp.variance:  # (M2') what a fix at this range removes
+            slant = np.array([math.hypot(*(a.position - obs.asv.position), a.depth)
+                              for a in obs.auvs])  # fmt: skip
+            ac = self.acoustics
+            rho = rho * fix_gain(self.tau, slant, ac.sigma_range,
+                                 math.radians(ac.sigma_bearing_deg),
+                                 self.params.navigation.eps_a)  # fmt: skip
         decay = np.exp(-rho * elapsed)
         with np.errstate(divide="ignore", invalid="ignore"):
             relaxed = 1 / rho + (self.tau - 1 / rho) * decay
@@ -49,7 +58,10 @@ class WorldView:
         if self.params.fix.range_kind == "acoustic":
             depth = np.array([a.depth for a in obs.auvs])
             return depth, np.full(K, self.acoustics.d1)
-        return np.zeros(K), self.domain.reliable_limit(r_lo0 + self.domain.delta_r)
+        d_fix = self.domain.reliable_limit(r_lo0 + self.domain.delta_r)
+        if self.params.fix.inset > 0:  # the sigmoid centred inside the reliable-fix circle
+            d_fix = d_fix - self.params.fix.inset
+        return np.zeros(K), d_fix
 
     def _rates(self, obs: Observation) -> np.ndarray:
         """Fix rates now (1/s): propeller state as observed, geometry and channel as in the
@@ -173,5 +185,26 @@ class WorldView:
         _, d_fix = self._fix_geometry(obs, r_lo[0])
         r_t = r_lo[-1] + self.domain.delta_r
         m = self.params.margin  # the plan keeps this far off the anti-collision radius
+        ext = None
+        if self.ocp.variance:
+            ext = self.ocp.ext_vector(self.acoustics, *self._tail(obs, ts[-1], asv[-1, 0], r_t))
         return self.ocp.pack(self._x0(obs), self.tau, self.current, pa, r_lo + m, r_hi - m,
-                             depth, d_fix, r_t, self.target, self.channel)  # fmt: skip
+                             depth, d_fix, r_t, self.target, self.channel, ext)  # fmt: skip
+
+    def _tail(self, obs: Observation, t_N: float, asv_N: np.ndarray, r_t: np.ndarray):
+        """The variance objective's view past the horizon (M7c; :mod:`mpcasv.mpc.variance`):
+        each AUV's forecast position (K, N_TAIL, 2; m) and depth (K, N_TAIL; m) at the
+        midpoints of the tail's ``N_TAIL`` segments, and where the ASV, leaving the previous
+        plan's end ``asv_N`` (m) at ``t_N`` (s from now), would meet it at ``U_go`` (K, 2;
+        :func:`~mpcasv.mpc.order.meet_time`): an AUV coming towards the ASV is met sooner
+        than its distance says."""
+        wt, K = self.params.weights, len(obs.auvs)
+        mids = t_N + wt.tail * (np.arange(N_TAIL) + 0.5) / N_TAIL
+        fc = [self.forecast(a) for a in obs.auvs]
+        tail_pa = np.stack([f(mids) for f in fc])  # (K, N_TAIL, 2)
+        tail_depth = self.depth_forecast(obs, mids).T  # (K, N_TAIL)
+        meet = np.empty((K, 2))
+        for i, f in enumerate(fc):
+            s = meet_time(asv_N, f, float(r_t[i]), wt.U_go, t_N)
+            meet[i] = f(np.array([t_N + s]))[0]
+        return tail_pa, tail_depth, meet

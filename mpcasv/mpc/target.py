@@ -1,0 +1,98 @@
+"""Which AUV the MPC's terminal cost sends the ASV to (eq. M9; mixin of
+:class:`~mpcasv.mpc.controller.MPCController`, state in the controller).
+
+Two rules (``MPCParams.target_rule``), both with commitment (issue 16 item 6): the target is
+kept until it is served (its expected fix age below ``tau_served``, or the ASV has been within
+its target domain for ``dwell_max``); then
+
+- ``age`` (default, the shipped presets): the AUV with the largest projected fix age
+  ``tau_i + t_go,i`` (Paper 2's eq. 8 on projected ages) among those whose projected age
+  exceeds ``tau_served``; none such: the target stays;
+- ``order`` (opt-in, preset ``mpc-multi-order``): the first AUV of the cheapest visiting order
+  over ``order.window`` (:mod:`mpcasv.mpc.order`, eq. O1), kept unless that order is
+  ``order.hysteresis`` cheaper than the best one that stays.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+
+import numpy as np
+
+from mpcasv.interface import AUVEstimate, Observation
+from mpcasv.models.auv_nav import dr_variance
+from mpcasv.mpc.order import Forecast, OrderModel, best_order, committed_target, transit_cost
+
+
+class Targeting:
+    """The target AUV's choice (mixin; state in the controller: ``target``, ``dwell``,
+    ``target_switches``, ``t_explore``, ``order_plan``)."""
+
+    def _choose_target(self, obs: Observation, elapsed: float) -> None:
+        """Keep or change ``self.target`` after ``elapsed`` s (module docstring)."""
+        K = len(obs.auvs)
+        if K == 1:
+            return
+        pos = np.array([a.position for a in obs.auvs])
+        r_t = self._radii(obs, 0.0, obs.asv.position) + self.domain.delta_r
+        dist = np.hypot(*(pos - obs.asv.position).T)
+        if self.domain.in_reliable_range(dist[self.target], r_t[self.target]):
+            self.dwell += elapsed
+        served = self.tau[self.target] <= self.params.tau_served
+        if not (served or self.dwell >= self.params.dwell_max):
+            return
+        if self.params.target_rule == "order":
+            self._choose_by_order(obs, r_t)
+            return
+        t_go = np.maximum(dist - r_t, 0.0) / self.params.weights.U_go
+        proj = self.tau + t_go
+        # commitment (issue 16 item 6): leave the target only for an AUV that needs a visit
+        # itself (projected fix age above tau_served); with every other AUV served the target
+        # stays (before, two served AUVs swapped the target every step for a whole run)
+        proj[(np.arange(K) == self.target) | (proj <= self.params.tau_served)] = -np.inf
+        if not np.isfinite(proj).any():
+            return
+        self._switch_to(int(np.argmax(proj)))
+
+    def _switch_to(self, new: int) -> None:
+        self.dwell = 0.0
+        self.target = new
+        self.target_switches += 1
+        self.t_explore = None  # new target: also try a guess heading there (_explore)
+
+    def _choose_by_order(self, obs: Observation, r_t: np.ndarray) -> None:
+        """``target_rule = "order"``: the cheapest visiting order's first AUV, with the
+        commitment of :func:`~mpcasv.mpc.order.committed_target`."""
+        plan = best_order(obs.asv.position, [self.forecast(a) for a in obs.auvs],
+                          np.array([a.depth for a in obs.auvs]), self.tau, r_t,
+                          self.order_model)  # fmt: skip
+        self.order_plan = plan
+        new = committed_target(plan, self.target, self.params.order.hysteresis)
+        if new != self.target:
+            self._switch_to(new)
+
+    def forecast(self, a: AUVEstimate) -> Forecast:
+        """An AUV's forecast for the visiting order (offsets from now, s, shape (n,) ->
+        positions (n, 2), m): the estimator's own (along the AUV's plan) as far as it goes;
+        a constant-velocity extrapolation only up to ``cv_forecast_max`` s, then held
+        (an AUV on a lawn-mower pattern turns every minute or two: extrapolated over ten
+        minutes it would be hundreds of metres off)."""
+        if a.forecast is not None:
+            return a.predict
+        cap = self.params.cv_forecast_max
+        return lambda dt: a.predict(np.minimum(np.asarray(dt, float), cap))
+
+    @functools.cached_property
+    def order_model(self) -> OrderModel:
+        """The top level's model (:mod:`mpcasv.mpc.order`) in the OCP's cost units: the run's
+        USBL noise (``self.acoustics``), the preset's ``navigation.eps_a``, the weights'
+        ``U_go`` and ``tau_ref``, the energy terms at the thrust holding ``U_go`` (M4)."""
+        P, ac, ocp = self.params, self.acoustics, self.ocp
+        wt, o, eps_a = P.weights, P.order, P.navigation.eps_a
+        vp = ocp.vessel
+        e_go = transit_cost(wt, ocp.model.thrust_for_speed(wt.U_go), vp.T_max, vp.u_max)
+        return OrderModel(eps_a=eps_a, sigma_range=ac.sigma_range,
+                          sigma_bearing=math.radians(ac.sigma_bearing_deg), U=wt.U_go,
+                          T_stay=o.stay, window=o.window, nav=o.nav,
+                          V_ref=dr_variance(eps_a, wt.tau_ref), e_go=e_go)  # fmt: skip
