@@ -72,6 +72,15 @@ BAD = {
     "single-AUV controller on three AUVs": (
         GOOD.replace('single = "hybrid-single"\nmulti = "hybrid-multi"', 'name = "hybrid-single"')
         .replace('preset = "scenario"', 'preset = "paper1-field"'), ["case8", "handles one AUV"]),
+    # review (session 5): a hybrid preset that validates as an MPC preset ran silently
+    "shipped preset named for another controller": (
+        GOOD.replace('single = "hybrid-single"\nmulti = "hybrid-multi"', 'name = "mpc-single"')
+        .replace('preset = "scenario"', 'preset = "paper1-field"\nscenarios = ["case3"]'),
+        ["paper1-field", "hybrid-single", "'mpc-single'"]),
+    # review (session 5): 'at' (a matched operating point) without 'front' was not refused
+    "at without front": (
+        GOOD.replace('preset = "scenario"', 'preset = "scenario"\nat = "energy_J"'),
+        ["controllers", "['at'] without 'front'"]),
 }  # fmt: skip
 
 

@@ -219,3 +219,63 @@ def test_an_oracle_current_is_refused_before_any_vehicle(tmp_path, capsys):
     assert main(["deploy", str(path), "--prepare"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "current = 'oracle'" in err[0]
+
+
+def test_an_inline_step_that_raises_is_logged_when_it_happens_and_the_deploy_goes_on(
+        tmp_path, caplog):  # fmt: skip
+    """Review (session 5): outside field mode (the hybrid steps inline, in the link's
+    datagram handler) a step that raised was caught by the link as a reject
+    ``internal_error`` of the ASV's (accepted) state: not logged on the console, seen only
+    in the summary at shutdown. Now as in field mode: event ``step_error`` (first line),
+    logged as an error when it happens, counted in ``step_errors``; the deploy goes on and
+    steps again once the controller does."""
+    import logging
+
+    from test_io_link import _start, _until
+
+    async def run():
+        dep, stop, task = await _start(_cfg(tmp_path), tmp_path, dry_run=True)
+        assert not dep.field_mode
+        good = dep.controller.step
+        fail = {"on": True}
+
+        def step(obs):
+            if fail["on"]:
+                raise ValueError("no estimate for AUV 0\nsecond line")
+            return good(obs)
+
+        dep.controller.step = step
+        to = dep.link.endpoint.address
+        asv = await Fake("fake-asv", ASV_ID, imcpy.SystemType.USV).open()
+        auv = await Fake("fake-auv", AUV_ID).open()
+        now = dep.clock.now
+        auv.announce(to, now())
+        asv.announce(to, now())
+        assert await _until(lambda: dep.link.auvs[0].id == AUV_ID and dep.link.asv.addresses)
+
+        async def states_until(pred):
+            for _ in range(40):
+                t = now()
+                auv.send(auv.es(t, 100.0, 50.0), to, t)
+                asv.send(asv.es(t, 0.0, 0.0), to, t)
+                if await _until(pred, 0.25):
+                    return True
+            return False
+
+        assert await states_until(lambda: dep.step_errors >= 2)
+        assert not task.done() and dep.steps == 0
+        fail["on"] = False
+        assert await states_until(lambda: dep.steps >= 1)  # it goes on
+        stop.set()
+        return dep, await task
+
+    with caplog.at_level(logging.ERROR, logger="mpcasv.deploy"):
+        dep, summary = asyncio.run(run())
+    errors = [e for e in read_jsonl(tmp_path / "log" / "deploy.jsonl", "event")
+              if e["event"] == "step_error"]  # fmt: skip
+    assert len(errors) == summary["step_errors"] == dep.step_errors >= 2
+    assert {e["error"] for e in errors} == {"ValueError: no estimate for AUV 0"}
+    assert "internal_error" not in summary["rejects"]  # not an input's fault
+    shown = [r.getMessage() for r in caplog.records if r.levelno == logging.ERROR]
+    assert len(shown) == len(errors) and all("ValueError: no estimate" in m for m in shown)
+    assert summary["steps"] >= 1

@@ -226,5 +226,7 @@ def test_two_thruster_lsf_is_mapped_to_total_and_differential_thrust(tmp_path):
     df = load_log(path, otter)
     assert df["T_cmd"].to_numpy() == pytest.approx(0.4 * otter.T_max)
     assert df["delta_cmd"].to_numpy() == pytest.approx(0.2 * otter.delta_max)
-    with pytest.raises(LogError, match="steering set-points|SetServoPosition"):
+    with pytest.raises(LogError, match="steering set-points|SetServoPosition") as err:
         load_log(path, prior=load_vessel("gretha"))  # a steerable prior needs the servo
+    # ... and the message says why and what to try (review, session 5)
+    assert "thrusters 0 and 1" in str(err.value) and "--vessel otter" in str(err.value)

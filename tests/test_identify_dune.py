@@ -161,3 +161,21 @@ def test_coefficients_the_map_cannot_identify_are_refused_in_one_line(tmp_path, 
     err = capsys.readouterr().err
     assert rc == 2 and "only m, I_z, X_u, X_uu, N_r, N_rr are identified" in err
     assert len(err.strip().splitlines()) == 1 and not (tmp_path / "x.toml").exists()
+
+
+@needs_log
+def test_the_otter_log_with_the_default_steerable_prior_hints_at_a_differential_one(tmp_path,
+                                                                                    capsys):
+    """Review (session 5): `mpcasv identify Data.lsf.gz` of the Otter (two thrusters, no
+    steering servo) without --vessel said only "no SetServoPosition". One line, exit 2, and
+    the hint: the log's two thrusters, and the shipped differential priors to try."""
+    for name in ("Data.lsf.gz", "Config.ini"):
+        (tmp_path / name).symlink_to(IDENT / name)
+    out = tmp_path / "id.toml"
+    rc = main(["identify", str(tmp_path / "Data.lsf.gz"), "--out", str(out), "--quiet"])
+    err = capsys.readouterr().err.strip()
+    assert rc == 2 and "Traceback" not in err and len(err.splitlines()) == 1, err
+    for word in ("Data.lsf.gz", "SetServoPosition", "thrusters 0 and 1", "'gretha'",
+                 "--vessel otter", "--vessel dune-otter"):  # fmt: skip
+        assert word in err, (word, err)
+    assert not out.exists()

@@ -191,6 +191,15 @@ def test_a_preset_of_another_controller_is_named_as_such(tmp_path, capsys):
     out = str(tmp_path / "x")
     assert main(["simulate", scenario, "--controller", "hybrid-single", "--params",
                  "mpc-single", "--out", out, "--quiet"]) == 2  # fmt: skip
+    err = capsys.readouterr().err.strip().splitlines()  # the shipped preset names its controller
+    assert len(err) == 1 and ("a preset for mpc-single (its 'controller' key), not for "
+                              "'hybrid-single'") in err[0], err  # fmt: skip
+    # a user preset without the key: the controllers whose parameters validate it are named
+    mine = tmp_path / "mine.toml"
+    text = (Path(__file__).resolve().parents[1] / "mpcasv/data/presets/mpc-single.toml").read_text()
+    mine.write_text("\n".join(ln for ln in text.splitlines() if not ln.startswith("controller =")))
+    assert main(["simulate", scenario, "--controller", "hybrid-single", "--params", str(mine),
+                 "--out", out, "--quiet"]) == 2  # fmt: skip
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "a preset for mpc-multi, mpc-single, not for 'hybrid-single'" in err[0]
     bad = tmp_path / "bad.toml"

@@ -20,6 +20,7 @@ import pandas as pd
 import pytest
 
 from mpcasv.cli import main
+from mpcasv.config import ConfigError
 
 ROOT = Path(__file__).resolve().parents[1]
 PY = sys.executable
@@ -90,6 +91,10 @@ def test_tiny_search_writes_front_presets_importance_and_report(tiny):
         assert params.domain.eps_plus == pytest.approx(row["domain.eps_plus"], rel=1e-12)
         assert params.speed == pytest.approx(row["speed"], rel=1e-12)
         assert params.domain.alpha_inner == 5.0  # Case 3's own (paper1-field) donut kept
+        # the base preset's controller key is kept: the trial preset is refused for the MPC
+        trial = out / "presets" / f"trial-{row.trial:04d}.toml"
+        with pytest.raises(ConfigError, match="hybrid-single.*not for 'mpc-single'"):
+            load_preset("mpc-single", trial)
     imp = pd.read_csv(out / "importance.csv", index_col=0)
     assert list(imp.index) == ["domain.delta_r", "domain.eps_plus", "speed"]
     report = (out / "report.md").read_text()

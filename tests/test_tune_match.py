@@ -168,7 +168,10 @@ def test_bad_front_entries_are_refused_in_one_line(fronts, tmp_path, capsys):
         (_entry("a", a, mid, name="mpc-single"), ["tuned 'hybrid-single'", "not 'mpc-single'"]),
         (_entry("a", a, mid, extra='preset = "paper1-sim"'), ["drop ['preset']"]),
         ('[[controllers]]\nlabel = "a"\nname = "hybrid-single"\nlevel = 1.0\n',
-         ["'level' or 'front_means' without 'front'"]),
+         ["['level'] without 'front'"]),
+        # review (session 5): 'at' alone (a matched operating point, no front) ran silently
+        ('[[controllers]]\nlabel = "a"\nname = "hybrid-single"\nat = "energy_J"\n',
+         ["['at'] without 'front'"]),
         (_entry("a", a, mid, extra='front_means = "test"'), ["front_means"]),
         (f'[[controllers]]\nlabel = "a"\nname = "hybrid-single"\nfront = "{a}"\n',
          ["'front' needs 'level'"]),

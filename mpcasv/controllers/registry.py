@@ -11,6 +11,13 @@ them (``tests/test_dependencies.py`` checks it), so controllers can import it.
 One vessel per run (issue 13): a controller is built for the run's :class:`Boat` (the vessel
 model's and the execution level's parameters that the simulator integrates or the boat at sea
 has). A preset may not name another vessel or execution level; it is refused with one line.
+
+A preset names the controller(s) it is for (``controller = "hybrid-single"``, or a list when
+one preset serves several): every shipped preset does, and loading it for another controller
+is refused in one line, even when its fields happen to validate for that one (the hybrid's
+``paper1-field`` is also a valid MPC preset: a domain and a speed). A user preset without the
+key is accepted as before, checked by validation only (presets written before the key existed,
+e.g. the trial presets of tuned fronts, keep loading); adding the key is recommended.
 """
 
 from __future__ import annotations
@@ -40,6 +47,10 @@ CONTROLLERS: dict[str, str] = {
 
 #: preset fields that name a file: resolved relative to the preset file that names them
 PATH_FIELDS = ("vessel", "execution")
+
+#: the preset key naming the controller(s) the preset is for (not a parameter: removed before
+#: validation)
+CONTROLLER_KEY = "controller"
 
 
 def parameter_hash(params: Any) -> str:
@@ -135,6 +146,44 @@ def _preset_data(name: str, preset: str | Path | None) -> tuple[Path, dict]:
     return path, data
 
 
+def preset_controllers(data: Mapping[str, Any], path: str | Path) -> tuple[str, ...] | None:
+    """The controllers a preset's ``controller`` key names (None: the key is absent).
+
+    Raises
+    ------
+    ConfigError
+        One line naming ``path``: the key is not a name or a non-empty list of names, or names
+        an unknown controller.
+    """
+    value = data.get(CONTROLLER_KEY)
+    if value is None:
+        return None
+    names = [value] if isinstance(value, str) else value
+    if not isinstance(names, list) or not names or not all(isinstance(n, str) for n in names):
+        raise ConfigError(f"{path}: {CONTROLLER_KEY} = {value!r}: give a controller name or a "
+                          "non-empty list of names")  # fmt: skip
+    unknown = [n for n in names if n not in CONTROLLERS]
+    if unknown:
+        raise ConfigError(f"{path}: {CONTROLLER_KEY} = {value!r}: unknown controller(s) "
+                          f"{unknown}; known: {sorted(CONTROLLERS)}")  # fmt: skip
+    return tuple(names)
+
+
+def check_preset_controller(name: str, data: Mapping[str, Any], path: str | Path) -> None:
+    """Refuse a preset whose ``controller`` key does not name controller ``name``.
+
+    Raises
+    ------
+    ConfigError
+        One line naming the preset, the controllers it is for and ``name``.
+    """
+    declared = preset_controllers(data, path)
+    if declared is not None and name not in declared:
+        raise ConfigError(f"{path}: a preset for {' / '.join(declared)} (its '{CONTROLLER_KEY}' "
+                          f"key), not for {name!r}: choose a preset of {name!r} (its default: "
+                          f"{controller_kind(name).default_preset!r})")  # fmt: skip
+
+
 def load_preset(
     name: str, preset: str | Path | None = None, overrides: Mapping[str, Any] | None = None
 ):
@@ -142,9 +191,18 @@ def load_preset(
 
     ``overrides`` replace top-level or dotted (``"domain.delta_r"``) fields before validation.
     Paths inside the preset (``vessel``, ``execution``) are relative to the preset's folder.
+
+    Raises
+    ------
+    ConfigError
+        Unknown controller or preset; a preset whose ``controller`` key names other
+        controllers; invalid fields (a preset that validates only for other controllers is
+        said to be theirs).
     """
     kind = controller_kind(name)
     path, data = _preset_data(name, preset)
+    check_preset_controller(name, data, path)
+    data.pop(CONTROLLER_KEY, None)
     for key, value in (overrides or {}).items():
         target, *rest = key.split(".")
         node = data

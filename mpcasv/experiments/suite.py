@@ -87,7 +87,7 @@ class ControllerEntry:
     domain_from: Literal["preset", "scenario"] = "preset"
     optional: bool = False
     front: str | None = None  # folder of a tuned front (mpcasv.experiments.tune_match)
-    at: str = "energy_J"  # the matched metric of the front
+    at: str | None = None  # the matched metric of the front (None: energy_J; only with front)
     level: Float | None = None  # its level (the metric's unit)
     front_means: Literal["heldout", "training"] | None = None  # whose means (default heldout)
 
@@ -104,8 +104,12 @@ class ControllerEntry:
                 raise ValueError(f"grid.{key}: give a list of values, got {values!r}")
             if len(values) == 0:
                 raise ValueError(f"grid.{key}: empty list of values (an empty grid has no jobs)")
-        if self.front is None and (self.level is not None or self.front_means is not None):
-            raise ValueError("'level' or 'front_means' without 'front': which tuned front?")
+        if self.front is None and (self.level is not None or self.front_means is not None
+                                   or self.at is not None):
+            given = [k for k, v in (("at", self.at), ("level", self.level),
+                                    ("front_means", self.front_means)) if v is not None]
+            raise ValueError(f"{given} without 'front': which tuned front? ('at', 'level' and "
+                             "'front_means' choose a point of a tuned front)")
         if self.front is not None:
             if self.level is None:
                 raise ValueError("'front' needs 'level': the level of 'at' to match")

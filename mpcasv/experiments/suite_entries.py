@@ -91,7 +91,7 @@ def _front_choices(usable, path: Path) -> dict:
     """{entry index: FrontChoice} of the entries that name a tuned front."""
     from mpcasv.experiments.tune_match import choose_front
 
-    return {i: choose_front(e.label, e.front, e.at, e.level, path.parent,
+    return {i: choose_front(e.label, e.front, e.at or "energy_J", e.level, path.parent,
                             f"{path}: controllers[{i}] ({e.label})",
                             e.front_means or "heldout")
             for i, e in usable if e.front is not None}  # fmt: skip

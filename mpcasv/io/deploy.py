@@ -130,7 +130,10 @@ class Deploy(BoatFeedback, FieldMode):
     # --- reports -------------------------------------------------------------------------
     def _on_event(self, rec: dict) -> None:
         self.jsonl.write(rec)
-        if rec.get("event") != "reject":
+        if rec.get("event") == "step_error":
+            log.error("controller step at t = %.3f failed: %s (no command this tick; the next "
+                      "tick steps again)", rec.get("t"), rec.get("error"))  # fmt: skip
+        elif rec.get("event") != "reject":
             detail = {k: v for k, v in rec.items() if k not in ("kind", "event", "t")}
             log.info("%s %s", rec["event"], detail)
 
@@ -293,11 +296,16 @@ class Deploy(BoatFeedback, FieldMode):
         obs = Observation(ts, ASVState(a.N, a.E, a.psi, a.u, a.v, a.r), on, tuple(ests))
         return obs, status, ages
 
-    def step(self, ts: float, now: float) -> Command:
-        """One decision at ASV-state time ``ts``, the controller stepped inline."""
+    def step(self, ts: float, now: float) -> Command | None:
+        """One decision at ASV-state time ``ts``, the controller stepped inline; None if the
+        controller raised (:meth:`step_failed`: event ``step_error``, as in field mode)."""
         obs, status, ages = self.observation(ts, now)
         c0 = time.perf_counter()
-        raw = self.controller.step(obs)
+        try:
+            raw = self.controller.step(obs)
+        except Exception as exc:  # not the input's fault: not a link reject (internal_error)
+            self.step_failed(ts, exc)
+            return None
         return self._act(ts, now, obs, status, ages, raw, (time.perf_counter() - c0) * 1e3)
 
     def _act(self, ts, now, obs, status, ages, raw: Command, step_ms: float) -> Command:
@@ -392,7 +400,7 @@ class Deploy(BoatFeedback, FieldMode):
         await self.link.stop()
         await self.stop_stepping()
         summary = {"steps": self.steps, "overrides": self.overrides,
-                   "skipped_steps": self.skipped_steps,
+                   "skipped_steps": self.skipped_steps, "step_errors": self.step_errors,
                    "asv_stale_events": self.stale_events,
                    "plan_completed": self.plan_done.is_set(), "load": self.load(),
                    **self.link.counters()}  # fmt: skip

@@ -91,6 +91,7 @@ class FieldMode:
         self._step_task: asyncio.Task | None = None
         self._step_pool: concurrent.futures.ThreadPoolExecutor | None = None
         self.skipped_steps = 0
+        self.step_errors = 0  # steps that raised (both modes: see step_failed)
         if self.field_mode:
             start_field_mode(self.controller, solver_factory)
             self._step_pool = concurrent.futures.ThreadPoolExecutor(
@@ -107,12 +108,19 @@ class FieldMode:
         self._step_task.add_done_callback(functools.partial(self._step_ended, ts))
 
     def _step_ended(self, ts: float, task: asyncio.Task) -> None:
-        """A step that raised is never silent: event ``step_error`` with the exception (the
-        next tick tries again; the guard's watchdogs keep running)."""
+        """Field mode: the step task's exception, if any, goes to :meth:`step_failed`."""
         if task.cancelled() or task.exception() is None:
             return
-        exc = task.exception()
-        self.step_errors = getattr(self, "step_errors", 0) + 1
+        self.step_failed(ts, task.exception())
+
+    def step_failed(self, ts: float, exc: BaseException) -> None:
+        """A step that raised is never silent, in field mode or inline: event ``step_error``
+        with the exception's first line (logged as an error when it happens), counted in
+        ``step_errors`` (and the summary). The deploy goes on: no command this tick, the next
+        tick steps again, the guard's watchdogs keep running, and DUNE holds the last
+        Reference until ``link.followref_timeout``, then ends the maneuver and stops."""
+        self.step_errors += 1
+        log.debug("step at t = %s raised", ts, exc_info=exc)
         self.event("step_error", t=ts, error=f"{type(exc).__name__}: {exc}".splitlines()[0])
 
     async def step_async(self, ts: float, now: float) -> Command | None:

@@ -139,13 +139,31 @@ def _from_lsf(path: Path, prior: VesselParams, vehicle: str | None = None) -> pd
     for col, msg in (("thrust_0", "SetThrusterActuation id 0"), ("fin_cmd_0", "SetServoPosition "
                      "id 0")):  # fmt: skip
         if col not in df.columns or df[col].isna().all():
-            raise LogError(f"{path}: missing messages: no {msg} (thrust/steering set-points)")
+            hint = _no_servo_hint(df, prior) if col == "fin_cmd_0" else ""
+            raise LogError(f"{path}: missing messages: no {msg} (thrust/steering set-points)"
+                           + hint)
     df = df.dropna(subset=["thrust_0", "fin_cmd_0"])
     return pd.DataFrame({
         "t": df["t"], "N": df["N"], "E": df["E"], "psi": df["psi"], "u": df["u"], "v": df["v"],
         "r": df["r"], "T_cmd": df["thrust_0"].astype(float) * prior.T_max,
         "delta_cmd": df["fin_cmd_0"].astype(float),
     })  # fmt: skip
+
+
+def _no_servo_hint(df: pd.DataFrame, prior: VesselParams) -> str:
+    """What to say when a log has thrust but no steering servo: a boat steered by differential
+    thrust (DUNE's Otter: SetThrusterActuation ids 0 and 1) needs a differential prior."""
+    from mpcasv.config import DATA_DIR
+    from mpcasv.models.params import load_vessel
+
+    shipped = sorted(p.stem for p in (DATA_DIR / "vessels").glob("*.toml"))
+    differential = [n for n in shipped if load_vessel(n).actuation == "differential"]
+    two = "thrust_1" in df.columns and df["thrust_1"].notna().any()
+    seen = ("; the log has no steering servo but thrusters 0 and 1 (differential thrust, as "
+            "DUNE's Otter)" if two else "; the log has no steering servo")  # fmt: skip
+    options = " or ".join(f"--vessel {n}" for n in differential)
+    return (f"{seen}: the prior {prior.name!r} steers a drive (actuation {prior.actuation!r}); "
+            f"try a differential-thrust prior: {options}")
 
 
 def _differential_inputs(df: pd.DataFrame, path, prior: VesselParams) -> pd.DataFrame:
