@@ -270,6 +270,16 @@ class VesselModel:
         return x0, np.array([T, 0.0])
 
     @cached_property
+    def fastest_pole(self) -> float:
+        """Largest |eigenvalue| (1/s) of the rigid-body dynamics (the six states N..r, the
+        actuators held) linearised at straight-line trims from rest to ``u_max`` (13 speeds):
+        what bounds an explicit integrator's step (RK4 on a real pole: ``|lambda h| < 2.785``).
+        """
+        speeds = np.linspace(0.0, self.params.u_max, 13)
+        return max(float(np.abs(np.linalg.eigvals(self.linearize(*self.trim(u))[0][:6, :6])).max())
+                   for u in speeds)  # fmt: skip
+
+    @cached_property
     def top_speed(self) -> float:
         """Straight-line speed at full thrust in still water (:func:`top_speed`)."""
         return top_speed(self.params)

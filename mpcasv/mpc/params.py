@@ -24,8 +24,11 @@ SolverName = Literal["fatrop", "ipopt", "qp"]
 class HorizonParams:
     """Prediction horizon: ``N`` stages of ``dt`` s, RK4 with ``n_sub`` sub-steps per stage.
 
-    RK4 is stable on the fast sway-yaw pole (about -2.4 1/s at 2.5 m/s) for sub-steps up to
-    about 1.1 s: keep ``dt / n_sub <= 1``.
+    RK4 is stable on the fast sway-yaw pole (about -2.4 1/s at 2.5 m/s for Gretha) for
+    sub-steps up to about 1.1 s: keep ``dt / n_sub <= 1``. ``n_sub`` is a floor: the plan
+    takes more sub-steps where the run's vessel has a faster rigid-body pole
+    (:attr:`mpcasv.mpc.problem.OCP.n_sub`; the actuators' lags do not count: the plan has
+    none, it drives the set-points through their rates).
     """
 
     N: PosInt = 15

@@ -47,6 +47,8 @@ from mpcasv.mpc.variance import N_NAV, VarianceObjective, fix_gain, n_ext
 from mpcasv.mpc.warmstart import WarmStart
 
 NXV = 8  # vessel part of the plan state
+#: largest |lambda h| of a plan sub-step: RK4's stability bound on the real axis is 2.785
+RK4_LAMBDA_H = 2.5
 
 
 @dataclass(frozen=True)
@@ -200,6 +202,16 @@ class OCP(WarmStart, VarianceObjective, ParamLayout):
         ch = channel_vector(AcousticParams())
         return float(ch[0] * ch[1])
 
+    @property
+    def n_sub(self) -> int:
+        """RK4 sub-steps per stage: the horizon's ``n_sub``, more if the vessel's fastest
+        rigid-body pole needs them (``dt / n_sub * |lambda|max <= RK4_LAMBDA_H``): with
+        Fossen's Otter (3.55 1/s at top speed) 4 sub-steps of 1 s would make the plan's
+        perturbations grow (RK4's gain 2.9 per sub-step) and the MPC plans with 6."""
+        hz = self.params.horizon
+        need = math.ceil(hz.dt * self.model.fastest_pole / RK4_LAMBDA_H - 1e-9)
+        return max(hz.n_sub, need)
+
     def _build(self) -> None:
         d, hz, wt, vp = self.dims, self.params.horizon, self.params.weights, self.vessel
         K, N, nx, dt = d.n_auv, d.N, d.nx, hz.dt
@@ -207,7 +219,7 @@ class OCP(WarmStart, VarianceObjective, ParamLayout):
         za, wv, q = ca.SX.sym("z", nx + 1), ca.SX.sym("w", 2), ca.SX.sym("q", nq)
         f = ca.Function("f_plan", [za, wv, q], [self.rhs(za, wv, q)])
         z, qs = ca.SX.sym("z", nx), ca.SX.sym("q", nq)
-        zn = rk4_expr(f, ca.vertcat(z, 0), wv, qs, dt, hz.n_sub)[0:nx]
+        zn = rk4_expr(f, ca.vertcat(z, 0), wv, qs, dt, self.n_sub)[0:nx]
         #: discrete plan dynamics F(z, [Tdot, deltadot], q) -> z_next
         self.F = ca.Function("F", [z, wv, qs], [zn], ["z", "w", "q"], ["z_next"])
 
