@@ -19,8 +19,8 @@ from pydantic.dataclasses import dataclass as _pydantic_dataclass
 
 T = TypeVar("T")
 
-#: A real number given as a number (int or float), never as a string or a bool.
-Float = Annotated[float, Strict()]
+#: A finite real number given as a number (int or float), never as a string, a bool, nan or inf.
+Float = Annotated[float, Strict(), Field(allow_inf_nan=False)]
 #: A strictly positive number.
 Pos = Annotated[float, Strict(), Field(gt=0)]
 #: A number >= 0.

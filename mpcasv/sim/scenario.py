@@ -85,6 +85,11 @@ class Scenario:
     def _check(self) -> Scenario:
         if not self.auv:
             raise ValueError("a scenario needs at least one [[auv]]")
+        from mpcasv.estimation import ESTIMATORS  # here, not at import: estimation imports sim
+
+        if self.estimator not in ESTIMATORS:
+            raise ValueError(f"estimator: unknown estimator {self.estimator!r}; known: "
+                             f"{sorted(ESTIMATORS)}")  # fmt: skip
         names = [a.name for a in self.auv]
         if len(set(names)) != len(names):
             raise ValueError(f"AUV names must be unique, got {names}")
