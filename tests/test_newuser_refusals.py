@@ -8,6 +8,8 @@ from pathlib import Path
 import pytest
 from refusal import assert_refused_in_one_line
 
+from mpcasv.cli import main
+
 CASE1 = Path(__file__).resolve().parents[1] / "experiments" / "scenarios" / "case1.toml"
 
 
@@ -28,3 +30,25 @@ def test_bad_scenario_values_are_refused_in_one_line(tmp_path, capsys, old, new,
     path = tmp_path / "bad.toml"
     path.write_text(text.replace(old, new, 1))
     assert_refused_in_one_line(path, word, tmp_path / "o", capsys)
+
+
+@pytest.mark.parametrize(
+    ("loop", "option", "value"),
+    [
+        ("yaw", "--wn", "nan"),  # was a pydantic traceback, exit 1
+        ("yaw", "--dt", "-1"),  # was a traceback, exit 1
+        ("yaw", "--T-f", "-1"),  # was a traceback, exit 1
+        ("yaw", "--dt", "0"),  # ran and reported acceptance FAIL, exit 1
+        ("yaw", "--zeta", "-1"),  # exit 2, but blamed the hull ("turns the bow against ...")
+        ("yaw", "--integral-ratio", "0"),  # the same wrong cause
+        ("speed", "--w", "nan"),
+        ("speed", "--distance", "10,-5"),
+    ],
+)
+def test_bad_tuning_numbers_are_refused_in_one_line(tmp_path, capsys, loop, option, value):
+    out = tmp_path / "out"
+    assert main(["tune", loop, f"{option}={value}", "--out", str(out), "--quiet"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "Traceback" not in err[0], err
+    assert option in err[0] and "finite number > 0" in err[0], err
+    assert not out.exists()
