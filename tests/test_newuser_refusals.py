@@ -52,3 +52,18 @@ def test_bad_tuning_numbers_are_refused_in_one_line(tmp_path, capsys, loop, opti
     assert len(err) == 1 and "Traceback" not in err[0], err
     assert option in err[0] and "finite number > 0" in err[0], err
     assert not out.exists()
+
+
+def test_identify_says_which_part_of_the_logs_is_too_short(tmp_path, capsys):
+    # a 100-s zigzag: 750 training samples hold two 30-s windows, the held-out last 25 % (250
+    # samples) none; the refusal said only "logs too short for one 300-sample replay window"
+    log = tmp_path / "zig zag.csv"
+    assert main(["simulate", "--manoeuvre", "zigzag", "--duration", "100", "--out", str(log),
+                 "--quiet"]) == 0  # fmt: skip
+    capsys.readouterr()
+    out = tmp_path / "params.toml"
+    assert main(["identify", str(log), "--out", str(out), "--quiet"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "Traceback" not in err[0], err
+    assert "validation parts" in err[0] and "--validation" in err[0] and "250 samples" in err[0]
+    assert not out.exists()
