@@ -67,3 +67,23 @@ def test_identify_says_which_part_of_the_logs_is_too_short(tmp_path, capsys):
     assert len(err) == 1 and "Traceback" not in err[0], err
     assert "validation parts" in err[0] and "--validation" in err[0] and "250 samples" in err[0]
     assert not out.exists()
+
+
+@pytest.mark.parametrize(
+    ("extra", "word"),
+    [
+        (["--validation", "1.5"], "--validation 1.5"),  # was a traceback (ValueError), exit 1
+        (["--validation", "nan"], "--validation nan"),
+        (["--validation", "0"], "--validation 0"),
+        (["--coeffs", ""], "--coeffs is empty"),  # ran silently with the default subset
+    ],
+)
+def test_bad_identify_options_are_refused_in_one_line(tmp_path, capsys, extra, word):
+    log = tmp_path / "log.csv"
+    log.write_text("t,N,E,psi,u,v,r,T_cmd,delta_cmd\n0,0,0,0,1,0,0,50,0\n")
+    out = tmp_path / "params.toml"
+    assert main(["identify", str(log), "--out", str(out), "--quiet", *extra]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "Traceback" not in err[0], err
+    assert word in err[0], err
+    assert not out.exists()
