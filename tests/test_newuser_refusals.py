@@ -87,3 +87,13 @@ def test_bad_identify_options_are_refused_in_one_line(tmp_path, capsys, extra, w
     assert len(err) == 1 and "Traceback" not in err[0], err
     assert word in err[0], err
     assert not out.exists()
+
+
+def test_replay_of_a_text_file_that_is_not_json_lines_is_refused_in_one_line(tmp_path, capsys):
+    # a TOML file given to `mpcasv replay` was a ValueError traceback, exit 1
+    path = tmp_path / "deploy.toml"
+    path.write_text('name = "x"\nduration = 1.0\n')
+    assert main(["replay", str(path)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "Traceback" not in err[0], err
+    assert str(path) in err[0] and "not JSON" in err[0], err
