@@ -97,3 +97,25 @@ def test_replay_of_a_text_file_that_is_not_json_lines_is_refused_in_one_line(tmp
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "Traceback" not in err[0], err
     assert str(path) in err[0] and "not JSON" in err[0], err
+
+
+@pytest.mark.parametrize(
+    ("option", "value"),
+    [
+        ("--separation", "nan"),  # the search never ended (every trial's margin nan)
+        ("--separation", "-5"),  # ran: "r_sep -5 m"
+        ("--require-margin", "nan"),  # the check always passed, exit 0
+        ("--seed", "-1"),  # a numpy traceback, exit 1
+        ("--timeout", "nan"),
+    ],
+)
+def test_bad_falsify_options_are_refused_in_one_line(tmp_path, capsys, option, value):
+    family = Path(__file__).resolve().parents[1] / "experiments" / "falsify" / "pursuer-single.toml"
+    out = tmp_path / "out"
+    argv = ["falsify", str(family), "--controller", "hybrid-single", "--budget", "1",
+            f"{option}={value}", "--out", str(out), "--quiet"]  # fmt: skip
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "Traceback" not in err[0], err
+    assert option in err[0], err
+    assert not out.exists()
