@@ -119,3 +119,21 @@ def test_bad_falsify_options_are_refused_in_one_line(tmp_path, capsys, option, v
     assert len(err) == 1 and "Traceback" not in err[0], err
     assert option in err[0], err
     assert not out.exists()
+
+
+@pytest.mark.parametrize("command", ["simulate", "compare"])
+def test_an_output_folder_under_a_file_is_refused_saying_so(tmp_path, capsys, command):
+    # `simulate --out FILE/sub` and `compare --out FILE` said only "FILE: File exists" (and
+    # `deploy --log-dir FILE`)
+    blocker = tmp_path / "afile"
+    blocker.write_text("")
+    out = blocker / "sub" if command == "simulate" else blocker
+    if command == "simulate":
+        argv = ["simulate", str(CASE1), "--duration", "20", "--out", str(out), "--quiet",
+                "--no-plots"]  # fmt: skip
+    else:
+        argv = ["compare", "quick", "--out", str(out), "--workers", "1", "--quiet"]
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "Traceback" not in err[0], err
+    assert str(blocker) in err[0] and "a file is there" in err[0], err
