@@ -137,3 +137,21 @@ def test_an_output_folder_under_a_file_is_refused_saying_so(tmp_path, capsys, co
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "Traceback" not in err[0], err
     assert str(blocker) in err[0] and "a file is there" in err[0], err
+
+
+@pytest.mark.parametrize(
+    ("extra", "word"),
+    [
+        (["--delta", "nan"], "--delta nan"),  # wrote a log of nan states, exit 0
+        (["--current", "nan", "0"], "--current nan"),  # the same
+        (["--seed", "-1", "--noise"], "--seed -1"),  # a numpy traceback, exit 1
+    ],
+)
+def test_bad_manoeuvre_options_are_refused_in_one_line(tmp_path, capsys, extra, word):
+    out = tmp_path / "log.csv"
+    argv = ["simulate", "--manoeuvre", "zigzag", "--duration", "5", "--out", str(out), *extra]
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "Traceback" not in err[0], err
+    assert word in err[0], err
+    assert not out.exists()
