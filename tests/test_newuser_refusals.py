@@ -155,3 +155,21 @@ def test_bad_manoeuvre_options_are_refused_in_one_line(tmp_path, capsys, extra, 
     assert len(err) == 1 and "Traceback" not in err[0], err
     assert word in err[0], err
     assert not out.exists()
+
+
+@pytest.mark.parametrize(
+    ("extra", "word"),
+    [
+        (["sim", "--repeat", "0"], "--repeat 0"),  # ran once: "over 1 runs", exit 0
+        (["sim", "--repeat", "-1"], "--repeat -1"),
+        (["mpc", "--steps", "-1", "--quick"], "--steps -1"),  # blamed "case3 (modified)"
+        (["sim", "--json", "/nonexistent-newuser5/x.json"], "--json"),  # after the benchmark
+    ],
+)
+def test_bad_bench_options_are_refused_before_running(capsys, extra, word):
+    assert main(["bench", *extra]) == 2
+    captured = capsys.readouterr()
+    err = captured.err.strip().splitlines()
+    assert len(err) == 1 and "Traceback" not in err[0], err
+    assert word in err[0], err
+    assert "wall time" not in captured.out  # refused before any timing
