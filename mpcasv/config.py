@@ -23,6 +23,8 @@ T = TypeVar("T")
 Float = Annotated[float, Strict(), Field(allow_inf_nan=False)]
 #: A strictly positive number.
 Pos = Annotated[float, Strict(), Field(gt=0)]
+#: A strictly positive finite number (a duration: inf would run for ever).
+FinitePos = Annotated[float, Strict(), Field(gt=0, allow_inf_nan=False)]
 #: A number >= 0.
 NonNeg = Annotated[float, Strict(), Field(ge=0)]
 #: A probability in [0, 1].

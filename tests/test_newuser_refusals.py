@@ -22,6 +22,8 @@ CASE1 = Path(__file__).resolve().parents[1] / "experiments" / "scenarios" / "cas
         ("N = 0.0\n", "N = nan\n", "asv.start.N"),
         ("N = 0.0\n", "N = inf\n", "asv.start.N"),
         ("E = 100.0, depth", "E = nan, depth", "auv[0].start.E"),
+        # was an OverflowError traceback (cannot convert float infinity to integer), exit 1
+        ("duration = 3250.0", "duration = inf", "duration"),
     ],
 )
 def test_bad_scenario_values_are_refused_in_one_line(tmp_path, capsys, old, new, word):
@@ -173,3 +175,16 @@ def test_bad_bench_options_are_refused_before_running(capsys, extra, word):
     assert len(err) == 1 and "Traceback" not in err[0], err
     assert word in err[0], err
     assert "wall time" not in captured.out  # refused before any timing
+
+
+def test_a_suite_with_an_infinite_duration_is_refused_in_one_line(tmp_path, capsys):
+    # `duration = inf` in a suite replaced every scenario's duration: a run for ever
+    suite = tmp_path / "inf.toml"
+    suite.write_text('name = "inf"\nscenarios = ["case3"]\nduration = inf\nseeds = [0]\n'
+                     '[[controllers]]\nlabel = "hybrid"\nsingle = "hybrid-single"\n')
+    out = tmp_path / "out"
+    assert main(["compare", str(suite), "--out", str(out), "--workers", "1", "--quiet"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "Traceback" not in err[0], err
+    assert str(suite) in err[0] and "duration" in err[0], err
+    assert not out.exists()

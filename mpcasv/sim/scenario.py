@@ -13,7 +13,17 @@ from pathlib import Path
 
 from pydantic import model_validator
 
-from mpcasv.config import ConfigError, Float, Pos, anchor, frozen, is_path, load_toml, parse
+from mpcasv.config import (
+    ConfigError,
+    FinitePos,
+    Float,
+    Pos,
+    anchor,
+    frozen,
+    is_path,
+    load_toml,
+    parse,
+)
 from mpcasv.models.acoustics import AcousticParams, NavParams
 from mpcasv.models.current import V_MAX, CurrentField
 from mpcasv.sim.auv_spec import (  # noqa: F401  (re-exported: the format's one namespace)
@@ -61,7 +71,7 @@ class Scenario:
     """A complete simulation scenario."""
 
     name: str
-    duration: Pos  # s
+    duration: FinitePos  # s
     auv: tuple[AUVSpec, ...]
     description: str = ""
     controller: str = "goto"  # default controller for this scenario
