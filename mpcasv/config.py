@@ -21,10 +21,12 @@ T = TypeVar("T")
 
 #: A finite real number given as a number (int or float), never as a string, a bool, nan or inf.
 Float = Annotated[float, Strict(), Field(allow_inf_nan=False)]
-#: A strictly positive number.
-Pos = Annotated[float, Strict(), Field(gt=0)]
-#: A strictly positive finite number (a duration: inf would run for ever).
-FinitePos = Annotated[float, Strict(), Field(gt=0, allow_inf_nan=False)]
+#: A strictly positive finite number (inf in a speed or a weight was a traceback mid-run).
+Pos = Annotated[float, Strict(), Field(gt=0, allow_inf_nan=False)]
+#: A strictly positive number where inf means "none" (e.g. a time constant: no decay).
+PosOrInf = Annotated[float, Strict(), Field(gt=0)]
+#: A duration (s): finite and > 0 (inf would run for ever); the same as :data:`Pos`.
+FinitePos = Pos
 #: A number >= 0.
 NonNeg = Annotated[float, Strict(), Field(ge=0)]
 #: A probability in [0, 1].

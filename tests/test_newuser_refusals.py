@@ -3,12 +3,14 @@ and the cause, exit 2, no traceback and no output folder."""
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import pytest
 from refusal import assert_refused_in_one_line
 
 from mpcasv.cli import main
+from mpcasv.config import ConfigError
 
 CASE1 = Path(__file__).resolve().parents[1] / "experiments" / "scenarios" / "case1.toml"
 
@@ -188,3 +190,30 @@ def test_a_suite_with_an_infinite_duration_is_refused_in_one_line(tmp_path, caps
     assert len(err) == 1 and "Traceback" not in err[0], err
     assert str(suite) in err[0] and "duration" in err[0], err
     assert not out.exists()
+
+
+def test_a_preset_with_an_infinite_speed_is_refused_in_one_line(tmp_path, capsys):
+    # `speed = inf` in a copy of paper1-sim ran until the first transit, then a ValueError
+    # traceback ("transit needs a positive speed, got inf"), exit 1
+    from mpcasv.controllers import load_preset
+
+    src = Path(__file__).resolve().parents[1] / "mpcasv" / "data" / "presets" / "paper1-sim.toml"
+    text = src.read_text()
+    assert "\nspeed = 2.5\n" in text
+    preset = tmp_path / "my preset.toml"
+    preset.write_text(text.replace("\nspeed = 2.5\n", "\nspeed = inf\n"))
+    with pytest.raises(ConfigError, match="speed"):
+        load_preset("hybrid-single", str(preset))
+    out = tmp_path / "o"
+    assert main(["simulate", str(CASE1), "--params", str(preset), "--duration", "200",
+                 "--out", str(out), "--quiet", "--no-plots"]) == 2  # fmt: skip
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "Traceback" not in err[0] and str(preset) in err[0], err
+    assert not out.exists()
+
+
+def test_the_kalman_time_constant_still_takes_inf():
+    # tau_v = inf is the constant-velocity model (docs/estimation.md): not refused with Pos
+    from mpcasv.estimation import KalmanParams
+
+    assert KalmanParams(q=0.01, tau_v=math.inf).tau_v == math.inf
