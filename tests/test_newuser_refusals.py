@@ -26,6 +26,8 @@ CASE1 = Path(__file__).resolve().parents[1] / "experiments" / "scenarios" / "cas
         ("E = 100.0, depth", "E = nan, depth", "auv[0].start.E"),
         # was an OverflowError traceback (cannot convert float infinity to integer), exit 1
         ("duration = 3250.0", "duration = inf", "duration"),
+        # "unknown preset 'nope'" without the file, raised only once the World was built
+        ('preset = "paper1-sim"', 'preset = "nope"', "preset: unknown preset 'nope'"),
     ],
 )
 def test_bad_scenario_values_are_refused_in_one_line(tmp_path, capsys, old, new, word):
@@ -217,3 +219,25 @@ def test_the_kalman_time_constant_still_takes_inf():
     from mpcasv.estimation import KalmanParams
 
     assert KalmanParams(q=0.01, tau_v=math.inf).tau_v == math.inf
+
+
+@pytest.mark.parametrize("controller", [None, "mpc-single"])
+def test_a_controller_or_preset_from_the_scenario_is_refused_naming_the_scenario(
+        tmp_path, capsys, controller):  # fmt: skip
+    # `controller = "bogus"` in a scenario said "unknown controller 'bogus'" as if --controller
+    # had been given; a scenario preset of another controller, likewise without the scenario
+    text = CASE1.read_text()
+    if controller is None:
+        text = text.replace('controller = "hybrid-single"', 'controller = "bogus"', 1)
+        word = "unknown controller 'bogus'"
+    else:
+        text = text.replace('controller = "hybrid-single"', 'controller = "mpc-single"', 1)
+        word = "a preset for hybrid-single"
+    path = tmp_path / "scen.toml"
+    path.write_text(text)
+    out = tmp_path / "o"
+    assert main(["simulate", str(path), "--duration", "5", "--out", str(out), "--quiet",
+                 "--no-plots"]) == 2  # fmt: skip
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "Traceback" not in err[0], err
+    assert err[0].split("error: ")[1].startswith(str(path)) and word in err[0], err

@@ -23,6 +23,7 @@ from mpcasv.config import (
     is_path,
     load_toml,
     parse,
+    resolve,
 )
 from mpcasv.models.acoustics import AcousticParams, NavParams
 from mpcasv.models.current import V_MAX, CurrentField
@@ -145,6 +146,12 @@ def load_scenario(path: str | Path) -> Scenario:
                 where = f"asv.{key}" if table is not data else key
                 raise ConfigError(f"{path}: {where}: no such file {value!r} (looked at "
                                   f"{table[key]}, relative to the scenario's folder)")  # fmt: skip
+    preset = data.get("preset")
+    if isinstance(preset, str) and preset != "default" and not is_path(preset):
+        try:  # the run judges by this preset's domain whatever controller runs: name it now
+            resolve("presets", preset)
+        except ConfigError as exc:
+            raise ConfigError(f"{path}: preset: {exc}") from None
     return parse(Scenario, data, path)
 
 
