@@ -241,3 +241,21 @@ def test_a_controller_or_preset_from_the_scenario_is_refused_naming_the_scenario
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "Traceback" not in err[0], err
     assert err[0].split("error: ")[1].startswith(str(path)) and word in err[0], err
+
+
+@pytest.mark.parametrize(
+    ("extra", "word"),
+    [
+        ([], "no such file"),  # a missing scenario: a ConfigError traceback, exit 1
+        (["--estimators", "bogus"], "unknown estimator(s) ['bogus']"),  # ValueError traceback
+        (["--seeds", "-1"], "--seeds"),  # a numpy traceback
+    ],
+)
+def test_the_estimation_harness_refuses_bad_input_in_one_line(tmp_path, capsys, extra, word):
+    # README: `python -m mpcasv.estimation.evaluate experiments/scenarios/case5.toml`
+    from mpcasv.estimation.evaluate import main as evaluate
+
+    scenario = tmp_path / "nope.toml" if not extra else CASE1
+    assert evaluate([str(scenario), *extra]) == 2
+    err = [ln for ln in capsys.readouterr().err.strip().splitlines() if "error" in ln]
+    assert len(err) == 1 and "Traceback" not in err[0] and word in err[0], err
