@@ -55,6 +55,11 @@ def input_error(exc: BaseException) -> str | None:
     """
     if isinstance(exc, (ConfigError, LogError)):
         return "; ".join(line.strip() for line in str(exc).splitlines() if line.strip())
+    if isinstance(exc, FileExistsError) and exc.filename and not os.path.isdir(exc.filename):
+        # mkdir of an output folder (or of a parent of it) where a file is: "File exists" alone
+        # did not say which option or why
+        return (f"{exc.filename}: a file is there, where an output folder was to be made; "
+                "choose another output folder")  # fmt: skip
     if isinstance(exc, OSError):
         where = f"{exc.filename}: " if exc.filename is not None else ""
         return f"{where}{exc.strerror or exc}"

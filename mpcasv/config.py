@@ -19,10 +19,14 @@ from pydantic.dataclasses import dataclass as _pydantic_dataclass
 
 T = TypeVar("T")
 
-#: A real number given as a number (int or float), never as a string or a bool.
-Float = Annotated[float, Strict()]
-#: A strictly positive number.
-Pos = Annotated[float, Strict(), Field(gt=0)]
+#: A finite real number given as a number (int or float), never as a string, a bool, nan or inf.
+Float = Annotated[float, Strict(), Field(allow_inf_nan=False)]
+#: A strictly positive finite number (inf in a speed or a weight was a traceback mid-run).
+Pos = Annotated[float, Strict(), Field(gt=0, allow_inf_nan=False)]
+#: A strictly positive number where inf means "none" (e.g. a time constant: no decay).
+PosOrInf = Annotated[float, Strict(), Field(gt=0)]
+#: A duration (s): finite and > 0 (inf would run for ever); the same as :data:`Pos`.
+FinitePos = Pos
 #: A number >= 0.
 NonNeg = Annotated[float, Strict(), Field(ge=0)]
 #: A probability in [0, 1].

@@ -176,12 +176,29 @@ def _provenance(old: str, key: str, text: str) -> str:
     return " | ".join(sorted([*parts, f"{key}: {text}"]))
 
 
+#: options of `tune yaw` / `tune speed` that are numbers > 0 (finite); lists: every value
+POSITIVE = ("wn", "wn_per_speed", "zeta", "integral_ratio", "T_f", "dt", "w", "design_speed",
+            "u_ff", "k_u", "distance")  # fmt: skip
+
+
+def _check_positive(args: argparse.Namespace) -> None:
+    """Refuse a number option that is not finite and > 0 in one line (before any work: nan,
+    a negative step or time constant were tracebacks, a negative zeta a wrong cause)."""
+    for key in POSITIVE:
+        v = getattr(args, key, None)
+        for x in v if isinstance(v, list) else ([] if v is None else [v]):
+            if not (math.isfinite(x) and x > 0):
+                opt = "--T-f" if key == "T_f" else "--" + key.replace("_", "-")
+                raise ConfigError(f"{opt} {x:g}: must be a finite number > 0")
+
+
 def _setup(args):
     from mpcasv.control.params import load_execution
     from mpcasv.control.tuning_yaw import check_speeds
     from mpcasv.models.params import load_vessel
     from mpcasv.models.vessel import VesselModel
 
+    _check_positive(args)
     model = VesselModel(load_vessel(args.vessel))
     ep = load_execution(args.base)
     if args.speeds is None:

@@ -163,6 +163,14 @@ def run_cli(args) -> int:
 
     if args.duration is not None and not (math.isfinite(args.duration) and args.duration > 0):
         raise ConfigError(f"--duration {args.duration:g}: a duration is a number of seconds > 0")
+    # nan in --delta or --current wrote a log of nan states with exit 0; --seed -1 with
+    # --noise was a numpy traceback
+    for opt, values in (("--delta", [args.delta]), ("--current", list(args.current or []))):
+        bad = [v for v in values if v is not None and not math.isfinite(v)]
+        if bad:
+            raise ConfigError(f"{opt} {bad[0]:g}: must be a finite number")
+    if args.seed < 0:
+        raise ConfigError(f"--seed {args.seed}: a seed is an integer >= 0")
     model = VesselModel(load_vessel(args.vessel or "gretha"))
     noise = Noise() if args.noise else None
     df = simulate_manoeuvre(model, args.manoeuvre,

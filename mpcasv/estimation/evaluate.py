@@ -24,6 +24,7 @@ Run as a script to print the table (and optionally plot)::
 from __future__ import annotations
 
 import argparse
+import sys
 from collections.abc import Sequence
 from contextlib import contextmanager
 from pathlib import Path
@@ -31,6 +32,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from mpcasv.config import ConfigError
 from mpcasv.estimation.base import ESTIMATORS
 from mpcasv.sim.scenario import Scenario
 
@@ -73,7 +75,7 @@ def run_estimators(
 
     unknown = [e for e in estimators if e not in ESTIMATORS]
     if unknown:
-        raise ValueError(f"unknown estimator(s) {unknown}; known: {sorted(ESTIMATORS)}")
+        raise ConfigError(f"unknown estimator(s) {unknown}; known: {sorted(ESTIMATORS)}")
     name = controller or scenario.controller
     preset = preset or (scenario.preset if name == scenario.controller else None)
     out = {}
@@ -242,6 +244,21 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("--preset")
     ap.add_argument("--plot", type=Path, help="PNG of the first seed's runs")
     args = ap.parse_args(argv)
+    try:
+        return _run(args, load_scenario)
+    except Exception as exc:  # bad input: one line, exit 2, as `mpcasv` (was a traceback)
+        from mpcasv.cli import input_error
+
+        message = input_error(exc)
+        if message is None:
+            raise
+        print(f"mpcasv.estimation.evaluate: error: {message}", file=sys.stderr)
+        return 2
+
+
+def _run(args: argparse.Namespace, load_scenario) -> int:
+    if any(s < 0 for s in args.seeds):
+        raise ConfigError(f"--seeds {args.seeds}: seeds are integers >= 0")
     sc = load_scenario(args.scenario)
     table = compare_estimators(sc, args.estimators, args.seeds, args.controller, args.preset,
                                progress=True)  # fmt: skip

@@ -38,7 +38,7 @@ import math
 
 import numpy as np
 
-from mpcasv.config import NonNeg, Pos, frozen
+from mpcasv.config import NonNeg, Pos, PosOrInf, frozen
 from mpcasv.interface import AUVEstimate
 from mpcasv.models.acoustics import Fix, Report
 
@@ -77,7 +77,7 @@ class KalmanParams:
     """
 
     q: Pos = 0.01
-    tau_v: Pos = 600.0
+    tau_v: PosOrInf = 600.0  # inf: the constant-velocity model
     sigma_v0: NonNeg = 1.0
     sigma_p0: NonNeg = 1.0
     sigma_speed: NonNeg = 0.1

@@ -38,7 +38,7 @@ from typing import Any, Literal
 import numpy as np
 import pandas as pd
 
-from mpcasv.config import ConfigError, Float, Pos, frozen, load_toml, parse
+from mpcasv.config import ConfigError, FinitePos, Float, frozen, load_toml, parse
 from mpcasv.hybrid.domains import r_avoid
 
 BATCH = 4  # trials asked together (independent of the number of workers: reproducible)
@@ -82,7 +82,7 @@ class Family:
     template: str | None = None
     scenario: dict[str, Any] | None = None
     polar: tuple[PolarSpec, ...] = ()
-    duration: Pos | None = None  # replaces the template's duration (s)
+    duration: FinitePos | None = None  # replaces the template's duration (s)
 
 
 @dataclass(frozen=True)

@@ -51,6 +51,17 @@ def run(args: argparse.Namespace) -> int:
     for flag in ("budget", "worst"):
         if getattr(args, flag) < 1:
             raise ConfigError(f"--{flag} must be >= 1, got {getattr(args, flag)}")
+    # nan here was a search that never ended (--separation: every margin nan, Optuna refuses
+    # the value), a check that always passed (--require-margin) or a traceback (--seed -1)
+    if args.seed < 0:
+        raise ConfigError(f"--seed {args.seed}: a seed is an integer >= 0")
+    if args.separation is not None and not (math.isfinite(args.separation)
+                                            and args.separation >= 0):  # fmt: skip
+        raise ConfigError(f"--separation {args.separation:g}: a finite distance >= 0 (m)")
+    if args.require_margin is not None and not math.isfinite(args.require_margin):
+        raise ConfigError(f"--require-margin {args.require_margin:g}: a finite margin (m)")
+    if args.timeout is not None and not (math.isfinite(args.timeout) and args.timeout > 0):
+        raise ConfigError(f"--timeout must be > 0, got {args.timeout}")
     family = load_family(args.family)
     load_preset(args.controller, args.params)  # unknown controller / bad preset: refused now
     out = args.out or Path("results") / "falsify" / f"{family.name}-{args.controller}"

@@ -27,7 +27,7 @@ from typing import Annotated, Any, Literal
 
 from pydantic import Field, Strict, model_validator
 
-from mpcasv.config import ConfigError, Float, Pos, frozen, load_toml, parse
+from mpcasv.config import ConfigError, FinitePos, Float, frozen, load_toml, parse
 
 #: the repository's ``experiments`` folder (scenarios and suites by name)
 EXPERIMENTS_DIR = Path(__file__).resolve().parents[2] / "experiments"
@@ -152,7 +152,7 @@ class Suite:
     description: str = ""
     current: tuple[Current, ...] = ("scenario",)  # "scenario", "off" or [V_N, V_E] (m/s)
     estimator: tuple[str, ...] = ("scenario",)  # "scenario" or an estimator name
-    duration: Pos | None = None  # s; replaces every scenario's duration when given
+    duration: FinitePos | None = None  # s; replaces every scenario's duration when given
     plots: Literal["all", "representative", "none"] = "all"  # run figures (first seed only)
 
     @model_validator(mode="after")

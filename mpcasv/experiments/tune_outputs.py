@@ -165,6 +165,16 @@ def importances(spec: TuneSpec, study) -> pd.DataFrame:
 
 def plot_front(spec: TuneSpec, trials: pd.DataFrame, front: pd.DataFrame, path: Path) -> Path:
     """Pairwise objective scatter: trials, training front, held-out values of the front."""
+    import matplotlib.pyplot as plt
+
+    fig = front_figure(spec, trials, front)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def front_figure(spec: TuneSpec, trials: pd.DataFrame, front: pd.DataFrame):
+    """The figure of :func:`plot_front` (a matplotlib Figure, not yet saved)."""
     import itertools
 
     import matplotlib.pyplot as plt
@@ -195,12 +205,11 @@ def plot_front(spec: TuneSpec, trials: pd.DataFrame, front: pd.DataFrame, path: 
         ax.set_ylabel(f"{b} ({METRIC_INFO[b].unit}, {METRIC_INFO[b].better} is better)")
         ax.grid(alpha=0.3)
     axes[0][0].legend(fontsize=7)
-    fig.suptitle(f"{spec.controller}: {len(done)} complete trials; training means vs held-out "
+    # two lines: on one panel (two objectives, 5.2 in wide) one line was cut at both edges
+    fig.suptitle(f"{spec.controller}: {len(done)} complete trials\ntraining means vs held-out "
                  "means of the training front", fontsize=10)  # fmt: skip
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return fig
 
 
 def _cell(v, fmt: str) -> str:

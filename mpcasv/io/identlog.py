@@ -302,9 +302,16 @@ def run_map_identification(args, prior: VesselParams, tmap) -> int:
 
 def run_cli(args) -> int:
     """``mpcasv identify LOG... --out params.toml``."""
+    from mpcasv.config import ConfigError
     from mpcasv.models.ident_output import plot_replay, report_table, write_params
     from mpcasv.models.params import load_vessel
 
+    if not 0.0 < args.validation < 0.9:  # nan too: it was a traceback from identify()
+        raise ConfigError(f"--validation {args.validation:g}: the fraction of each log held out "
+                          "must be in (0, 0.9)")  # fmt: skip
+    if args.coeffs is not None and not args.coeffs.strip(","):
+        raise ConfigError("--coeffs is empty: name coefficients, or omit it for the documented "
+                          "subset")  # fmt: skip
     prior = load_vessel(args.vessel)
     tmap = _thruster_map_for(args.logs, prior)
     if tmap is not None:
@@ -312,8 +319,6 @@ def run_cli(args) -> int:
     coeffs = tuple(c.strip() for c in args.coeffs.split(",")) if args.coeffs else IDENTIFIED
     unknown = [c for c in coeffs if c not in MODEL_COEFFS]
     if unknown:
-        from mpcasv.config import ConfigError
-
         raise ConfigError(f"--coeffs: not model coefficients: {unknown}")
     logs = [load_log(p, prior, getattr(args, "vehicle_pick", None)) for p in args.logs]
     res = identify(logs, prior, coeffs, current=not args.no_current,

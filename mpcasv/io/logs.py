@@ -17,6 +17,8 @@ from typing import IO, Any
 
 import numpy as np
 
+from mpcasv.errors import LogError
+
 __all__ = ["JsonlWriter", "LsfWriter", "jsonable", "read_jsonl"]
 
 
@@ -92,7 +94,8 @@ class JsonlWriter(_LogFile):
 
 def read_jsonl(path: str | Path, kind: str | None = None) -> list[dict]:
     """Records of a JSON-lines log (optionally only ``kind``); a last line cut by a crash is
-    skipped, any other bad line raises ValueError naming the file and line."""
+    skipped, any other bad line raises :class:`~mpcasv.errors.LogError` (a ValueError) naming
+    the file and line."""
     path = Path(path)
     lines = path.read_text(encoding="utf-8").splitlines()
     out = []
@@ -104,7 +107,8 @@ def read_jsonl(path: str | Path, kind: str | None = None) -> list[dict]:
         except json.JSONDecodeError as exc:
             if i == len(lines):
                 break
-            raise ValueError(f"{path}:{i}: not JSON ({exc})") from None
+            raise LogError(f"{path}:{i}: not JSON ({exc}); a deploy log (deploy.jsonl) is JSON "
+                           "lines") from None  # fmt: skip
         if kind is None or rec.get("kind") == kind:
             out.append(rec)
     return out

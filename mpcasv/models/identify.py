@@ -171,8 +171,9 @@ def split(pr: Prepared, validation: float) -> tuple[Prepared, Prepared]:
 # --- fitting ---------------------------------------------------------------------------------
 
 
-def _windows(parts: list[Prepared], W: int):
-    """Replay windows of ``W`` steps: initial states, inputs, measured outputs."""
+def _windows(parts: list[Prepared], W: int, what: str = "logs"):
+    """Replay windows of ``W`` steps: initial states, inputs, measured outputs (``what``: the
+    parts' name in the error when none holds a window)."""
     x0, U, Y = [], [], []
     out = [IX[c] for c in OUTPUTS]
     for pr in parts:
@@ -181,7 +182,9 @@ def _windows(parts: list[Prepared], W: int):
             U.append(pr.U[k : k + W])
             Y.append(pr.X[k + 1 : k + W + 1, out])
     if not x0:
-        raise LogError(f"logs too short for one {W}-sample replay window")
+        n, dt = max(len(pr.U) for pr in parts), parts[0].dt
+        raise LogError(f"{what} are too short for one {W}-sample ({W * dt:g} s) replay window: the "
+                       f"longest has {n} samples ({n * dt:g} s)")  # fmt: skip
     return np.array(x0).T, np.vstack(U).T, np.vstack(Y).T
 
 
@@ -231,7 +234,8 @@ class Problem:
         res = ca.vec(ca.diag(w) @ (pred[IX["u"] : IX["r"] + 1, :] - nd))
         return ca.Function("ee", [self.theta], [res, ca.jacobian(res, self.theta)])
 
-    def replay(self, parts: list[Prepared], window_s: float) -> tuple[ca.Function, dict]:
+    def replay(self, parts: list[Prepared], window_s: float,
+               what: str = "logs") -> tuple[ca.Function, dict]:  # fmt: skip
         """Simulation-error function ``z -> (res, jac, Ysim)`` over replay windows.
 
         ``z = [theta, dpsi0, du0, dv0, dr0 per window]``: each window starts from the smoothed
@@ -243,7 +247,7 @@ class Problem:
         """
         dt = parts[0].dt
         W = max(10, int(round(window_s / dt)))
-        x0, U, Y = _windows(parts, W)
+        x0, U, Y = _windows(parts, W, what)
         xs, us = ca.SX.sym("x", NX), ca.SX.sym("u", 2)
         cs, ps = ca.SX.sym("c", 2), ca.SX.sym("p", len(MODEL_COEFFS))
         f = lambda x, u, c: self.model.f_param(x, u, c, ps)  # noqa: E731
@@ -338,8 +342,9 @@ def identify(logs: list[pd.DataFrame], prior: VesselParams, coeffs=IDENTIFIED,
     prob = Problem(prior, coeffs, current)
     bounds = prob.bounds()
     th0 = prob.theta0()
-    sim_tr, info_tr = prob.replay(list(train), window_s)
-    sim_va, info_va = prob.replay(list(val), window_s)
+    sim_tr, info_tr = prob.replay(list(train), window_s, "the logs' training parts")
+    held = f"the logs' validation parts (the last {validation:g} of each log, --validation)"
+    sim_va, info_va = prob.replay(list(val), window_s, held)
     metrics = {}
 
     def ext(th, info):  # theta with zero initial-state corrections

@@ -77,8 +77,18 @@ def run(args: argparse.Namespace) -> int:
     name = args.controller or scenario.controller
     preset = args.params or (scenario.preset if name == scenario.controller else None)
     boat = Boat.of_scenario(scenario)  # one vessel per run: the simulator's and the MPC's
-    prepare(needed_libraries([(name, len(scenario.auv), preset, None, boat)]), args.quiet)
-    controller = make_controller(name, len(scenario.auv), preset, boat=boat)
+    try:
+        prepare(needed_libraries([(name, len(scenario.auv), preset, None, boat)]), args.quiet)
+        controller = make_controller(name, len(scenario.auv), preset, boat=boat)
+    except ConfigError as exc:
+        # a name taken from the scenario file: say which file (it read "unknown controller
+        # 'x'" as if --controller had been given)
+        keys = ([] if args.controller else ["controller"]) + (
+            ["preset"] if not args.params and name == scenario.controller else [])
+        if not keys:  # both from the command line: its message as it is
+            raise
+        raise ConfigError(f"{args.scenario} ({' / '.join(keys)} from this scenario): "
+                          f"{exc}") from None  # fmt: skip
     if args.estimator and args.estimator not in ESTIMATORS:
         raise ConfigError(f"unknown estimator {args.estimator!r}; known: {sorted(ESTIMATORS)}")
     out = args.out or Path("runs") / f"{scenario.name}-{name}-{args.seed}"

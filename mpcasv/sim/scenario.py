@@ -13,7 +13,18 @@ from pathlib import Path
 
 from pydantic import model_validator
 
-from mpcasv.config import ConfigError, Float, Pos, anchor, frozen, is_path, load_toml, parse
+from mpcasv.config import (
+    ConfigError,
+    FinitePos,
+    Float,
+    Pos,
+    anchor,
+    frozen,
+    is_path,
+    load_toml,
+    parse,
+    resolve,
+)
 from mpcasv.models.acoustics import AcousticParams, NavParams
 from mpcasv.models.current import V_MAX, CurrentField
 from mpcasv.sim.auv_spec import (  # noqa: F401  (re-exported: the format's one namespace)
@@ -61,7 +72,7 @@ class Scenario:
     """A complete simulation scenario."""
 
     name: str
-    duration: Pos  # s
+    duration: FinitePos  # s
     auv: tuple[AUVSpec, ...]
     description: str = ""
     controller: str = "goto"  # default controller for this scenario
@@ -85,6 +96,11 @@ class Scenario:
     def _check(self) -> Scenario:
         if not self.auv:
             raise ValueError("a scenario needs at least one [[auv]]")
+        from mpcasv.estimation import ESTIMATORS  # here, not at import: estimation imports sim
+
+        if self.estimator not in ESTIMATORS:
+            raise ValueError(f"estimator: unknown estimator {self.estimator!r}; known: "
+                             f"{sorted(ESTIMATORS)}")  # fmt: skip
         names = [a.name for a in self.auv]
         if len(set(names)) != len(names):
             raise ValueError(f"AUV names must be unique, got {names}")
@@ -130,6 +146,12 @@ def load_scenario(path: str | Path) -> Scenario:
                 where = f"asv.{key}" if table is not data else key
                 raise ConfigError(f"{path}: {where}: no such file {value!r} (looked at "
                                   f"{table[key]}, relative to the scenario's folder)")  # fmt: skip
+    preset = data.get("preset")
+    if isinstance(preset, str) and preset != "default" and not is_path(preset):
+        try:  # the run judges by this preset's domain whatever controller runs: name it now
+            resolve("presets", preset)
+        except ConfigError as exc:
+            raise ConfigError(f"{path}: preset: {exc}") from None
     return parse(Scenario, data, path)
 
 
