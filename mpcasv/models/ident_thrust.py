@@ -302,8 +302,9 @@ def replay_metrics(df: pd.DataFrame, params: VesselParams, tmap: ThrusterMap,
 
 
 #: lags of the written vessel (s): VSIM has none (the force follows the actuation at each
-#: 0.04 s step), but the MPC integrates its plan with RK4 sub-steps of up to 1 s, stable only
-#: for poles with |lambda h| < 2.78 (mpcasv.mpc.params.HorizonParams)
+#: 0.04 s step); the simulator's model needs a positive lag, so a short one stands in (the
+#: MPC's plan has no lags: it drives the set-points through their rates, and its RK4
+#: sub-steps follow the hull's fastest pole, mpcasv.mpc.problem.OCP.n_sub)
 LAG_S = 0.5
 #: sway damping of the written vessel (N s/m): with Y_ur = m - X_udot the sway is never
 #: forced, this only makes a disturbance decay (pole -Y_v / m, about -2 1/s for m = 30 kg)
@@ -338,8 +339,8 @@ def vsim_structure(prior: VesselParams, tmap: ThrusterMap) -> tuple[VesselParams
         "Y_uudelta": (0.0, "no steered leg (fixed thrusters)"),
         "alpha_Y": (0.0, "no low-speed fade"), "alpha_N": (0.0, "no low-speed fade"),
         "X_uu_idle": (0.0, "VSIM: no idle-propeller drag"),
-        "T_thrust": (LAG_S, "VSIM has no thrust lag; 0.5 s is the shortest lag the MPC's RK4 "
-                     "sub-step of 1 s integrates stably (|lambda h| < 2.78)"),
+        "T_thrust": (LAG_S, "VSIM has no thrust lag; a short 0.5 s lag stands in (the simulator's "
+                     "model needs one; the MPC's plan has none)"),
         "T_delta": (LAG_S, "as T_thrust"),
         "x_p": (tmap.x, "thrusters' longitudinal position (Engine Position), " + tmap.source),
     }
