@@ -142,6 +142,7 @@ def test_after_a_hung_solve_in_simulation_the_step_is_still_planned(tmp_path):
         assert c.deadline.abandoned == 1
         assert c.fallbacks == 0 and cmd.reason != Reason.FALLBACK
         assert c.diagnostics()["mpc_ok"] == 1
+        assert c.diagnostics()["mpc_hung"] == 1  # counted (metric solver_hangs), not hidden
     finally:
         c.close()
 

@@ -135,6 +135,9 @@ _BASE: dict[str, MetricInfo] = {
     "fallbacks": _i("1", "lower", "MPC steps handed to the fallback controller"),
     "target_switches": _i("1", "lower", "changes of the AUV an MPC targets (0 for the other "
                           "controllers; chattering shows here)", "issue 16 item 6"),
+    "solver_hangs": _i("1", "lower", "MPC solves abandoned as hung by the simulation's hang "
+                       "guard (no answer within solver.hang_s s of wall time; the step then "
+                       "rescued or fell back): where this is not 0 the run depends on wall time"),
     "over_budget_steps": _i("1", "lower", "MPC steps whose solve took longer than the field "
                             "budget_ms (wall clock: measured only, it changes no decision in "
                             "simulation)"),
@@ -380,6 +383,7 @@ def compute_metrics(result) -> dict:
         "controller_step_ms_p99": float(np.percentile(step_ms, 99)),
         "fallbacks": int(result.fallbacks),
         "target_switches": _last_int(ts, "mpc_target_switches"),
+        "solver_hangs": int(ts["mpc_hung"].sum()) if "mpc_hung" in ts else 0,
         "over_budget_steps": int(ts["mpc_over_budget"].sum()) if "mpc_over_budget" in ts else 0,
         **plan_following(ts),
         # per-AUV lists

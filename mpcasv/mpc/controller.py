@@ -208,6 +208,7 @@ class MPCController(WorldView, Safety, PlanOutput, Targeting):
         #: simulation (never a decision); in the field such a step is cut at the deadline
         self.over_budget = 0
         self._t_step = 0.0
+        self._hung = 0
         self.t_explore: float | None = None
         self.explored = 0
         self.rescues = 0  # steps that needed rescue solves (docs/mpc.md, "Fallbacks")
@@ -235,8 +236,10 @@ class MPCController(WorldView, Safety, PlanOutput, Targeting):
                 return self.solver.solve(p, w0, lam_x, lam_g)
             return self.solver.solve(p, w0, lam_x, lam_g, max_iter)
         if self._hang_guard:  # simulation: abandon only a hung solve (SolverParams.hang_s)
-            return self.deadline.solve(p, w0, lam_x, lam_g, max_iter,
-                                       timeout=self.params.solver.hang_s)  # fmt: skip
+            res = self.deadline.solve(p, w0, lam_x, lam_g, max_iter,
+                                      timeout=self.params.solver.hang_s)  # fmt: skip
+            self._hung += int(not res.ok and res.status == "deadline")  # counted, never hidden
+            return res
         return self.deadline.solve(p, w0, lam_x, lam_g, max_iter, timeout=self._left())
 
     def _left(self) -> float:
@@ -247,6 +250,7 @@ class MPCController(WorldView, Safety, PlanOutput, Targeting):
     def step(self, obs: Observation) -> Command:
         ocp = self.ocp
         self._t_step = time.perf_counter()  # wall time: the field deadline and diagnostics only
+        self._hung = 0  # solves abandoned as hung this step (simulation's hang guard)
         elapsed = 0.0 if self.t_prev is None else obs.t - self.t_prev
         self.t_prev = obs.t
         self._track_depth(obs)
@@ -301,7 +305,8 @@ class MPCController(WorldView, Safety, PlanOutput, Targeting):
                       "mpc_cost": res.f, "mpc_status": res.status,
                       "mpc_fallback": int(reason is not None),
                       "mpc_fallback_reason": reason or "", "mpc_over_budget": over,
-                      "mpc_source": source, "mpc_funnel": int(p_s is not p)}  # fmt: skip
+                      "mpc_source": source, "mpc_funnel": int(p_s is not p),
+                      "mpc_hung": self._hung}  # fmt: skip
         self._diag |= {f"mpc_tau{i}": float(v) for i, v in enumerate(self.tau)}
         self._diag |= {"mpc_plan_E_J": e_plan, "mpc_plan_E_t0": t_used, "mpc_plan_E_t1": obs.t,
                        "mpc_plan_t": math.nan}  # fmt: skip

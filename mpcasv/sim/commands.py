@@ -106,4 +106,7 @@ def run(args: argparse.Namespace) -> int:
     for k in keys:
         v = metrics[k]
         print(f"  {k:24s} {v:.3f}" if isinstance(v, float) else f"  {k:24s} {v}")
+    if metrics.get("solver_hangs"):  # a run that met a hang depends on wall time: say so
+        print(f"  {'solver_hangs':24s} {metrics['solver_hangs']} (solves abandoned after "
+              "solver.hang_s s of wall time: this run depends on wall time)")
     return 0
