@@ -32,33 +32,6 @@ from mpcasv.mpc.problem import OCP
 ESCAPE_BUFFER = 20.0
 
 
-def _steer(ocp: OCP, p: np.ndarray, goal_heading, thrust) -> np.ndarray:
-    """Rollout whose stage-``k`` rates drive the steering towards ``goal_heading(k, z)``
-    (rad; None: straight on) and the thrust towards ``thrust(k, z)`` (N), within the rate
-    limits (the plan model, :meth:`OCP.rollout`)."""
-    d, vp, dt = ocp.dims, ocp.vessel, ocp.dt
-    par = ocp.unpack_par(p)
-    Z = np.zeros((d.N + 1, d.nx))
-    Z[0] = par["z0"]
-    rates = np.zeros((d.N, 2))
-    for k in range(d.N):
-        z = Z[k]
-        psi_des = goal_heading(k, z)
-        if psi_des is None:
-            delta_des = 0.0
-        else:
-            e = psi_des - z[2]
-            e = math.atan2(math.sin(e), math.cos(e))
-            delta_des = float(np.clip(e, -vp.delta_max, vp.delta_max))
-        T_des = float(np.clip(thrust(k, z), vp.T_min, vp.T_max))
-        rates[k, 0] = np.clip((T_des - z[6]) / dt, -ocp.dT_max, ocp.dT_max)
-        rates[k, 1] = np.clip((delta_des - z[7]) / dt, -ocp.dd_max, ocp.dd_max)
-        Z[k + 1] = np.array(ocp.F(z, rates[k], ocp._q(par, k))).ravel()
-    V = np.zeros((d.N, d.nu))
-    V[:, 0:2] = rates
-    return ocp.fill_slacks(Z, V, p)
-
-
 def threats(ocp: OCP, p: np.ndarray, margin: float) -> np.ndarray:
     """Which AUVs (bool, shape (K,)) come within their anti-collision radius plus
     ``ESCAPE_BUFFER`` (``r_lo`` in ``p`` includes the plan's ``margin``, taken off here) of the
@@ -91,18 +64,19 @@ def escape_guess(ocp: OCP, p: np.ndarray, margin: float) -> np.ndarray | None:
     if not np.any(near):
         return None
     T_max = ocp.vessel.T_max
-    return _steer(ocp, p, lambda k, z: escape_heading(ocp, p, k, z, near), lambda k, z: T_max)
+    return ocp.steered_rollout(p, lambda k, z: escape_heading(ocp, p, k, z, near),
+                               lambda k, z: T_max)
 
 
 def command_guess(ocp: OCP, p: np.ndarray, waypoint, speed: float) -> np.ndarray:
     """The hybrid controller's command as a plan: steer for ``waypoint`` (N, E; m) with the
     thrust of ``speed`` (m/s), or (``waypoint`` None: STANDBY) thrust and steering to 0."""
     if waypoint is None:
-        return _steer(ocp, p, lambda k, z: None, lambda k, z: 0.0)
+        return ocp.steered_rollout(p, lambda k, z: None, lambda k, z: 0.0)
     wp = np.asarray(waypoint, float)
     T_go = ocp.model.thrust_for_speed(min(speed, ocp.vessel.u_max))
-    return _steer(ocp, p, lambda k, z: math.atan2(wp[1] - z[1], wp[0] - z[0]),
-                  lambda k, z: T_go)  # fmt: skip
+    return ocp.steered_rollout(p, lambda k, z: math.atan2(wp[1] - z[1], wp[0] - z[0]),
+                               lambda k, z: T_go)
 
 
 def funnel(ocp: OCP, p: np.ndarray, max_gap: float, speed: float) -> np.ndarray:

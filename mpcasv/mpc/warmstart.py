@@ -32,28 +32,47 @@ class WarmStart:
 
     def guided_rollout(self, p: np.ndarray, auv: int, speed: float) -> np.ndarray:
         """A primal guess that heads for AUV ``auv``'s target circle at ``speed`` and stops
-        there (from outside inwards, from inside outwards): rates from a simple stage-wise
-        steering and thrust law on the plan model.
+        there (from outside inwards, from inside outwards): :meth:`steered_rollout` towards
+        the closest point of the circle.
 
         Used to escape the local minimum of standing still (at rest the steering has no
         authority, so first-order information cannot tell the solver to turn and go).
         """
+        par = self.unpack_par(p)
+        T_go = self.model.thrust_for_speed(speed)
+
+        def arrived(k, z) -> bool:  # on the circle (inside: head out)
+            return abs(float(np.hypot(*(z[0:2] - par["pa"][k, auv]))) - par["r_t"][auv]) <= 5.0
+
+        def heading(k, z):
+            if arrived(k, z):
+                return None
+            c = par["pa"][k, auv]
+            rel = z[0:2] - c
+            goal = c + rel / max(float(np.hypot(*rel)), 1e-6) * par["r_t"][auv]  # closest point
+            return math.atan2(goal[1] - z[1], goal[0] - z[0])
+
+        return self.steered_rollout(p, heading, lambda k, z: 0.0 if arrived(k, z) else T_go)
+
+    def steered_rollout(self, p: np.ndarray, goal_heading, thrust) -> np.ndarray:
+        """Rollout whose stage-``k`` rates drive the steering towards ``goal_heading(k, z)``
+        (rad; None: straight on) and the thrust towards ``thrust(k, z)`` (N, clipped to the
+        vessel's range), within the rate limits (the plan model, as :meth:`rollout`)."""
         d, vp, dt = self.dims, self.vessel, self.dt
         par = self.unpack_par(p)
         Z = np.zeros((d.N + 1, d.nx))
         Z[0] = par["z0"]
         rates = np.zeros((d.N, 2))
-        T_go = self.model.thrust_for_speed(speed)
         for k in range(d.N):
-            z, c = Z[k], par["pa"][k, auv]
-            rel = z[0:2] - c
-            r = max(float(np.hypot(*rel)), 1e-6)
-            goal = c + rel / r * par["r_t"][auv]  # closest point of the target circle
-            arrived = abs(r - par["r_t"][auv]) <= 5.0  # on the circle (inside: head out)
-            e = math.atan2(goal[1] - z[1], goal[0] - z[0]) - z[2]
-            e = math.atan2(math.sin(e), math.cos(e))
-            T_des = 0.0 if arrived else T_go
-            delta_des = 0.0 if arrived else float(np.clip(e, -vp.delta_max, vp.delta_max))
+            z = Z[k]
+            psi_des = goal_heading(k, z)
+            if psi_des is None:
+                delta_des = 0.0
+            else:
+                e = psi_des - z[2]
+                e = math.atan2(math.sin(e), math.cos(e))
+                delta_des = float(np.clip(e, -vp.delta_max, vp.delta_max))
+            T_des = float(np.clip(thrust(k, z), vp.T_min, vp.T_max))
             rates[k, 0] = np.clip((T_des - z[6]) / dt, -self.dT_max, self.dT_max)
             rates[k, 1] = np.clip((delta_des - z[7]) / dt, -self.dd_max, self.dd_max)
             Z[k + 1] = np.array(self.F(z, rates[k], self._q(par, k))).ravel()
