@@ -15,7 +15,7 @@ import pytest
 from mpcasv.controllers import make_controller
 from mpcasv.experiments.metrics import compute_metrics
 from mpcasv.interface import ASVState, AUVEstimate, Mode, Observation, Reason
-from mpcasv.mpc.bench import record, replay
+from mpcasv.mpc.bench import TIMERS, record, replay, time_shares
 from mpcasv.mpc.qp import QPSolver
 from mpcasv.mpc.rescue import funnel
 from mpcasv.mpc.solvers import SolveResult
@@ -113,6 +113,12 @@ def test_qp_variant_and_default_agree_on_a_simple_case():
     assert ok.mean() >= 0.9
     rel = (b["f"][last] - a["f"][last])[ok] / np.abs(a["f"][last][ok])
     assert np.median(np.abs(rel)) < 0.01
+    # the bench's breakdown of fatrop's time: every timer, shares summing to 100 %
+    shares = time_shares(a["timers"])
+    assert set(shares) == {*TIMERS.values(), "other"}
+    assert shares["Hessian"] > 0 and shares["search direction (Riccati)"] > 0
+    assert abs(sum(shares.values()) - 100.0) < 0.5
+    assert "timers" not in b  # the QP variant has no fatrop timers
 
 
 def test_mpc_commands_standby_when_the_plan_keeps_the_propeller_off(scenarios_dir):

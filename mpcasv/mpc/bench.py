@@ -93,6 +93,7 @@ def step_summary(times: dict, ctrl: MPCController) -> dict:
 def replay(solver, ocp, seq, desc: str) -> dict[str, np.ndarray]:
     """Solve the sequence with ``solver``, each step warm-started from its previous solution."""
     out = {k: [] for k in ("ms", "cpu_ms", "iters", "f", "ok", "w")}
+    timers: dict[str, float] = {}
     w_prev, lam = None, (None, None)
     for p, frac in tqdm(seq, desc=desc, leave=False):
         if w_prev is None:
@@ -108,11 +109,35 @@ def replay(solver, ocp, seq, desc: str) -> dict[str, np.ndarray]:
         for k, v in (("ms", r.ms), ("cpu_ms", cpu), ("iters", r.iters), ("f", r.f),
                      ("ok", r.ok), ("w", r.w)):  # fmt: skip
             out[k].append(v)
+        for k, v in (getattr(solver, "last_stats", None) or {}).get("fatrop", {}).items():
+            if k.endswith("_time") or k == "time_total":
+                timers[k] = timers.get(k, 0.0) + float(v)
         finite = np.all(np.isfinite(r.w))
         keep = r.ok or getattr(solver, "warm_from_failures", False)
         w_prev = r.w if (finite and keep) else None
         lam = (r.lam_x, r.lam_g) if (finite and r.ok) else (None, None)
-    return {k: np.array(v) for k, v in out.items()}
+    res = {k: np.array(v) for k, v in out.items()}
+    if timers:
+        res["timers"] = timers
+    return res
+
+
+#: fatrop's timers (``stats()["fatrop"]``) and what they time
+TIMERS = {"eval_hess_time": "Hessian", "eval_jac_time": "constraint Jacobian",
+          "compute_sd_time": "search direction (Riccati)", "eval_cv_time": "constraints",
+          "eval_obj_time": "objective", "eval_grad_time": "gradient",
+          "initialization_time": "initialisation"}  # fmt: skip
+
+
+def time_shares(timers: dict[str, float]) -> dict[str, float]:
+    """Share (%) of fatrop's total time in each of its timers over a replayed sequence:
+    where a solve's time goes (function evaluations against the linear algebra)."""
+    total = timers.get("time_total", 0.0)
+    if total <= 0:
+        return {}
+    shares = {name: round(100 * timers.get(k, 0.0) / total, 1) for k, name in TIMERS.items()}
+    shares["other"] = round(100 - sum(shares.values()), 1)
+    return shares
 
 
 def summary(res: dict, ref: dict | None) -> dict:
@@ -130,6 +155,8 @@ def summary(res: dict, ref: dict | None) -> dict:
         "failures": int(np.sum(~res["ok"].astype(bool))),
         "solves": int(len(res["ms"])),
     }
+    if "timers" in res:
+        row["time_shares_pct"] = time_shares(res["timers"])
     if ref is not None:
         both = res["ok"].astype(bool) & ref["ok"].astype(bool)
         if not np.any(both):
@@ -221,6 +248,9 @@ def _print(case: str, n: int, rows: dict, speedup: float, steps: int = STEPS) ->
         print(line)
     print(f"default vs Opti + IPOPT: {speedup:.1f}x faster (median)")
     d = next(r for k, r in rows.items() if k.startswith("default"))
+    if d.get("time_shares_pct"):
+        print("where the default's time goes (fatrop's timers): " + ", ".join(
+            f"{k} {v:.0f} %" for k, v in d["time_shares_pct"].items()))  # fmt: skip
     if "polished_rel_median" not in d:
         return
     print(

@@ -84,6 +84,7 @@ class NLPSolver:
         self._solvers: dict[int, ca.Function] = {}
         self.solver = self._nlpsol(sp.max_iter)
         self.duals = sp.solver == "ipopt"
+        self.last_stats: dict | None = None
 
     def _nlpsol(self, max_iter: int) -> ca.Function:
         if max_iter not in self._solvers:
@@ -112,6 +113,7 @@ class NLPSolver:
         r = solver(**args)
         ms = (time.perf_counter() - t0) * 1e3
         st = solver.stats()
+        self.last_stats = st  # this solve's statistics (fatrop: its timers in st["fatrop"])
         return SolveResult(
             self.ocp.physical(np.array(r["x"]).ravel()), np.array(r["lam_x"]).ravel(),
             np.array(r["lam_g"]).ravel(), float(r["f"]), bool(st["success"]),
