@@ -113,9 +113,9 @@ class MPCController(WorldView, Safety, PlanOutput, Targeting, SpeedCap):
         Steps whose command came from the hybrid controller.
     fallback_log : list of FallbackEvent
     u_cap : float or None
-        The plan's speed cap (m/s; :meth:`set_speed_cap`, docs/mpc.md "Speed cap"); None:
-        none (the default). ``u_plan`` / ``T_cap``: the cap (m/s) and its thrust (N) the
-        current step plans with.
+        The plan's speed cap (m/s; :meth:`set_speed_cap`, docs/mpc.md "Variables and
+        dynamics"); None: none (the default). ``u_plan`` / ``T_cap``: the cap (m/s) and its
+        thrust (N) the current step plans with.
     """
 
     def __init__(self, params: MPCParams, n_auv: int = 1, multi: bool = False,

@@ -1,7 +1,7 @@
-"""A runtime speed cap on the MPC's plan (issue 16 item 1; docs/mpc.md, "Speed cap"): the
-speed the boat can actually make, learned in the field (``mpcasv deploy``'s speed watch:
-DUNE's speed loop on the Otter never reaches the model's top speed, docs/deploy.md "Achieved
-speed"). A mixin of :class:`~mpcasv.mpc.controller.MPCController`.
+"""A runtime speed cap on the MPC's plan (issue 16 item 1; docs/mpc.md, "Variables and
+dynamics"): the speed the boat can actually make, learned in the field (``mpcasv deploy``'s
+speed watch: DUNE's speed loop on the Otter never reaches the model's top speed,
+docs/deploy.md "Achieved speed"). A mixin of :class:`~mpcasv.mpc.controller.MPCController`.
 
 A speed loop that cannot exceed ``u_cap`` is modelled by capping the planned thrust at the
 steady thrust for that speed, ``T_cap = thrust_for_speed(u_cap)`` (still water, straight
