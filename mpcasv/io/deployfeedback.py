@@ -56,22 +56,33 @@ class BoatFeedback:
 
     def _speed_feedback(self) -> None:
         """``controller.speed_feedback``: cap the controller's transit speed with the learned
-        achievable speed (:meth:`set_controller_speed`) when it is more than 10 % lower."""
+        achievable speed (:meth:`set_controller_speed`) when it is more than 10 % lower than
+        its ``speed`` or, for an MPC, than the highest speed its plan may use
+        (``speed_limit``: the vessel's top speed until capped)."""
         cap = self.speed.achievable
         if not self.cfg.controller.speed_feedback or cap is None:
             return
         current = float(getattr(self.controller.params, "speed", math.inf))
-        if cap < 0.9 * current:
+        plan = float(getattr(self.controller, "speed_limit", -math.inf))
+        if cap < 0.9 * max(current, plan):
             self.set_controller_speed(round(cap, 2))
 
     def set_controller_speed(self, speed: float) -> None:
-        """Replace ``speed`` in the controller's parameters (and in those of its hybrid
-        fallback, for the MPCs) without rebuilding it: its state (modes, timers, warm start)
-        is kept. Logged as ``controller_speed_cap``."""
+        """Lower ``speed`` in the controller's parameters (and in those of its hybrid
+        fallback, for the MPCs) to ``speed`` (m/s) without rebuilding it: its state (modes,
+        timers, warm start) is kept; an MPC's plan is capped at it too
+        (:meth:`~mpcasv.mpc.controller.MPCController.set_speed_cap`: the planned thrust held
+        to the steady thrust of that speed). Logged as ``controller_speed_cap`` (``plan``:
+        the plan's cap, None for a controller without a plan)."""
         old = float(self.controller.params.speed)
-        self.controller.params = dataclasses.replace(self.controller.params, speed=speed)
+        new = min(old, speed)  # never raised (a cap triggered by the plan's speed alone)
+        self.controller.params = dataclasses.replace(self.controller.params, speed=new)
         fallback = getattr(self.controller, "hybrid", None)
         if fallback is not None and hasattr(getattr(fallback, "params", None), "speed"):
-            fallback.params = dataclasses.replace(fallback.params, speed=speed)
+            fallback.params = dataclasses.replace(fallback.params, speed=new)
+        plan = None
+        if hasattr(self.controller, "set_speed_cap"):
+            self.controller.set_speed_cap(speed)
+            plan = speed
         self.speed_cap = speed
-        self.event("controller_speed_cap", old=old, new=speed)
+        self.event("controller_speed_cap", old=old, new=new, plan=plan)

@@ -51,6 +51,7 @@ from mpcasv.mpc.problem import OCP, channel_vector
 from mpcasv.mpc.rescue import funnel
 from mpcasv.mpc.safety import Safety
 from mpcasv.mpc.solvers import SolveResult, make_solver
+from mpcasv.mpc.speedcap import SpeedCap
 from mpcasv.mpc.target import Targeting
 from mpcasv.mpc.worldview import WorldView
 
@@ -88,7 +89,7 @@ def _worker_solver(params: MPCParams, n_auv: int, multi: bool, boat):
     return build_ocp(params, n_auv, multi, log=lambda *a: None, boat=boat)[1]
 
 
-class MPCController(WorldView, Safety, PlanOutput, Targeting):
+class MPCController(WorldView, Safety, PlanOutput, Targeting, SpeedCap):
     """Fix-age NMPC with donut constraints and a hybrid safety fallback.
 
     Parameters
@@ -111,6 +112,10 @@ class MPCController(WorldView, Safety, PlanOutput, Targeting):
     fallbacks : int
         Steps whose command came from the hybrid controller.
     fallback_log : list of FallbackEvent
+    u_cap : float or None
+        The plan's speed cap (m/s; :meth:`set_speed_cap`, docs/mpc.md "Variables and
+        dynamics"); None: none (the default). ``u_plan`` / ``T_cap``: the cap (m/s) and its
+        thrust (N) the current step plans with.
     """
 
     def __init__(self, params: MPCParams, n_auv: int = 1, multi: bool = False,
@@ -176,6 +181,7 @@ class MPCController(WorldView, Safety, PlanOutput, Targeting):
         P = self.params
         self.ocp, self.solver = build_ocp(P, n_auv, self.multi, boat=self.boat)
         self.observer = CurrentObserver(self.ocp.model, P.observer)
+        self._take_speed_cap(rebuilt=True)  # the speed cap's thrust on this problem's vessel
         if self.deadline is not None and getattr(self, "_deadline_n", n_auv) != n_auv:
             self.use_deadline()  # another number of AUVs: workers for the new problem
         if self.multi:
@@ -231,16 +237,18 @@ class MPCController(WorldView, Safety, PlanOutput, Targeting):
         """One solve (``max_iter``: this solve's iteration limit, None: ``solver.max_iter``):
         in this process (simulation: only the iteration limit decides), or in the field
         mode's worker with what is left of this step's budget."""
+        # the speed cap's thrust bound (passed only when set: no cap, the calls as before)
+        cap = {} if self.T_cap is None else {"T_cap": self.T_cap}
         if self.deadline is None:
-            if max_iter is None:
+            if max_iter is None and not cap:
                 return self.solver.solve(p, w0, lam_x, lam_g)
-            return self.solver.solve(p, w0, lam_x, lam_g, max_iter)
+            return self.solver.solve(p, w0, lam_x, lam_g, max_iter, **cap)
         if self._hang_guard:  # simulation: abandon only a hung solve (SolverParams.hang_s)
             res = self.deadline.solve(p, w0, lam_x, lam_g, max_iter,
-                                      timeout=self.params.solver.hang_s)  # fmt: skip
+                                      timeout=self.params.solver.hang_s, **cap)  # fmt: skip
             self._hung += int(not res.ok and res.status == "deadline")  # counted, never hidden
             return res
-        return self.deadline.solve(p, w0, lam_x, lam_g, max_iter, timeout=self._left())
+        return self.deadline.solve(p, w0, lam_x, lam_g, max_iter, timeout=self._left(), **cap)
 
     def _left(self) -> float:
         """Field mode: seconds left of this step's solve budget."""
@@ -251,6 +259,7 @@ class MPCController(WorldView, Safety, PlanOutput, Targeting):
         ocp = self.ocp
         self._t_step = time.perf_counter()  # wall time: the field deadline and diagnostics only
         self._hung = 0  # solves abandoned as hung this step (simulation's hang guard)
+        self._take_speed_cap()  # one speed cap for the whole step (set_speed_cap)
         elapsed = 0.0 if self.t_prev is None else obs.t - self.t_prev
         self.t_prev = obs.t
         self._track_depth(obs)

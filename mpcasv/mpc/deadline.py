@@ -171,11 +171,13 @@ class DeadlineSolver:
         return self._active.wait_ready(timeout)
 
     def solve(self, p: np.ndarray, w0: np.ndarray, lam_x0=None, lam_g0=None,
-              max_iter: int | None = None, *, timeout: float) -> SolveResult:  # fmt: skip
+              max_iter: int | None = None, *, timeout: float,
+              T_cap: float | None = None) -> SolveResult:  # fmt: skip
         """Solve in the worker (``max_iter``: the solver's iteration limit for this solve,
-        None: its own); after ``timeout`` s without an answer the worker is killed, the
-        spare takes over, and the result is a failure with status ``"deadline"`` and the
-        warm start ``w0`` as its iterate (the next step starts warm from it)."""
+        None: its own; ``T_cap``: the planned thrust's cap, N, None: none); after
+        ``timeout`` s without an answer the worker is killed, the spare takes over, and the
+        result is a failure with status ``"deadline"`` and the warm start ``w0`` as its
+        iterate (the next step starts warm from it)."""
         t0 = time.perf_counter()
         for dead in self._dead:  # killed at an earlier deadline: gone by now
             dead.reap()
@@ -184,6 +186,8 @@ class DeadlineSolver:
         answer = None
         try:
             msg = (p, w0, lam_x0, lam_g0) + (() if max_iter is None else (max_iter,))
+            if T_cap is not None:  # (sent only when set: the solver's call is as before)
+                msg = (p, w0, lam_x0, lam_g0, max_iter, T_cap)
             w.conn.send(msg)
             while answer is None:
                 left = timeout - (time.perf_counter() - t0)

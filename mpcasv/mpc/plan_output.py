@@ -56,6 +56,8 @@ class PlanOutput:
         else:  # "plan": the planned speed at the end of the coming control period
             u_cap = np.interp(min(P.speed_lead, ts[-1]), ts, Z[:, 3])
         speed = float(np.clip(u_cap, P.speed_min, ocp.vessel.u_max))
+        if self.u_plan is not None:  # the plan's speed cap (mpcasv/mpc/speedcap.py)
+            speed = min(speed, self.u_plan)
         reason = self._transit_reason(here, par)
         return Command(Mode.TRANSIT, (float(wp[0]), float(wp[1])), speed, served, reason)
 

@@ -385,12 +385,28 @@ class OCP(WarmStart, VarianceObjective, ParamLayout):
                 ub.append(math.inf)
         return ca.vertcat(*h), np.array(lb), np.array(ub)
 
-    def bounds(self, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Scaled ``lbx, ubx`` with stage 0 fixed to the initial state in ``p``."""
-        nx = self.dims.nx
+    def bounds(self, p: np.ndarray, T_cap: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Scaled ``lbx, ubx`` with stage 0 fixed to the initial state in ``p``; with a thrust
+        cap ``T_cap`` (N; a speed cap, :meth:`thrust_caps`) the thrust's upper bound of
+        stages 1..N lowered to it (None: the vessel's ``T_max``, unchanged)."""
+        d = self.dims
+        nx = d.nx
         lbx, ubx = self.lbx.copy(), self.ubx.copy()
         lbx[:nx] = ubx[:nx] = p[:nx] / self.s_z
+        if T_cap is not None:
+            ubx[d.nb * np.arange(1, d.N + 1) + 6] = self.thrust_caps(p[6], T_cap) / self.s_z[6]
         return lbx, ubx
+
+    def thrust_caps(self, T_0: float, T_cap: float) -> np.ndarray:
+        """Upper thrust bound (N, shape (N,)) of stages 1..N under a speed cap (the thrust
+        ``T_cap`` that holds the capped speed, :meth:`~mpcasv.models.vessel.VesselModel.
+        thrust_for_speed`): ``max(T_cap, T_0 - dT_max t_k)`` with ``t_k`` the stage's time
+        from now, within ``[T_min, T_max]``. A thrust ``T_0`` above the cap comes down at the
+        plan's rate limit ``dT_max`` (an immediate cap would be infeasible); plus 1e-6 N so
+        that the ramp at exactly the rate limit stays inside after rounding."""
+        t = self.dt * np.arange(1, self.dims.N + 1)  # stage k's time (uniform stages)
+        ub = np.maximum(T_cap, T_0 - self.dT_max * t + 1e-6)
+        return np.clip(ub, self.vessel.T_min, self.vessel.T_max)
 
     def split(self, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``Z (N+1, nx), V (N, nu)`` from a primal vector."""

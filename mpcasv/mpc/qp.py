@@ -73,14 +73,14 @@ class QPSolver:
         return sps.block_diag(out, format="csc")
 
     def solve(self, p: np.ndarray, w0: np.ndarray, lam_x0: np.ndarray | None = None,
-              lam_g0: np.ndarray | None = None, max_iter: int | None = None
-              ) -> SolveResult:  # fmt: skip
+              lam_g0: np.ndarray | None = None, max_iter: int | None = None,
+              T_cap: float | None = None) -> SolveResult:  # fmt: skip
         """Up to ``qp_iters`` full SQP steps from ``w0`` (stage 0 set to the initial state;
         ``max_iter``, the NLP solvers' rescue budget, is not used: ``qp_iters`` bounds the
-        work)."""
+        work; ``T_cap``: the planned thrust's cap, N, as :meth:`NLPSolver.solve`)."""
         ocp, sp = self.ocp, self.sp
         t0 = time.perf_counter()
-        lbx, ubx = ocp.bounds(p)
+        lbx, ubx = ocp.bounds(p, T_cap)
         w = np.clip(ocp.scaled(w0), lbx, ubx)  # scaled variables throughout
         lam_g = np.zeros(ocp.dims.ng) if lam_g0 is None else np.asarray(lam_g0, float)
         eq, lbg, ubg = self.is_eq, ocp.lbg, ocp.ubg

@@ -57,15 +57,16 @@ def escape_heading(ocp: OCP, p: np.ndarray, k: int, z: np.ndarray, near: np.ndar
     return math.atan2(v[1], v[0])
 
 
-def escape_guess(ocp: OCP, p: np.ndarray, margin: float) -> np.ndarray | None:
-    """Full thrust away from the AUVs that threaten the ASV (:func:`threats`); None when none
-    does."""
+def escape_guess(ocp: OCP, p: np.ndarray, margin: float,
+                 T_cap: float | None = None) -> np.ndarray | None:  # fmt: skip
+    """Full thrust (``T_cap`` N under a speed cap, :mod:`mpcasv.mpc.speedcap`) away from
+    the AUVs that threaten the ASV (:func:`threats`); None when none does."""
     near = threats(ocp, p, margin)
     if not np.any(near):
         return None
-    T_max = ocp.vessel.T_max
+    T_go = ocp.vessel.T_max if T_cap is None else T_cap
     return ocp.steered_rollout(p, lambda k, z: escape_heading(ocp, p, k, z, near),
-                               lambda k, z: T_max)
+                               lambda k, z: T_go)
 
 
 def command_guess(ocp: OCP, p: np.ndarray, waypoint, speed: float) -> np.ndarray:

@@ -43,7 +43,7 @@ class Safety:
             return res
         if self.deadline is not None and not self._hang_guard and res.status == "deadline":
             return res  # the field budget is spent
-        alt = self._solve(p, ocp.guided_rollout(p, j, P.speed))
+        alt = self._solve(p, ocp.guided_rollout(p, j, self._capped(P.speed)))
         self.explored += 1
         best = alt if alt.ok and (not res.ok or alt.f < res.f) else res
         return dataclasses.replace(best, ms=res.ms + alt.ms, iters=res.iters + alt.iters)
@@ -99,14 +99,14 @@ class Safety:
         Returns ``(result, reason or None, source)``; ``p_s`` the solved parameters (funnel),
         ``p`` those the check uses. docs/mpc.md, "Fallbacks"."""
         P, ocp = self.params, self.ocp
-        esc = escape_guess(ocp, p_s, P.margin)
+        esc = escape_guess(ocp, p_s, P.margin, self.T_cap)
         starts = []
         if not res.ok and res.status != "deadline" and np.all(np.isfinite(res.w)):
             starts.append(res.w)  # (a hung solve's "iterate" is its start: not again)
         if esc is not None:
             starts.append(esc)
         wp = None if hybrid_cmd.mode is Mode.STANDBY else hybrid_cmd.waypoint
-        starts.append(command_guess(ocp, p_s, wp, hybrid_cmd.speed or P.speed))
+        starts.append(command_guess(ocp, p_s, wp, self._capped(hybrid_cmd.speed or P.speed)))
         tried, ms, iters = [], res.ms, res.iters
         for w0 in starts:
             if self.deadline is not None and not self._hang_guard and self._left() <= 0.0:

@@ -98,12 +98,14 @@ class NLPSolver:
         return self._solvers[max_iter]
 
     def solve(self, p: np.ndarray, w0: np.ndarray, lam_x0: np.ndarray | None = None,
-              lam_g0: np.ndarray | None = None, max_iter: int | None = None
-              ) -> SolveResult:  # fmt: skip
+              lam_g0: np.ndarray | None = None, max_iter: int | None = None,
+              T_cap: float | None = None) -> SolveResult:  # fmt: skip
         """Solve for parameters ``p`` from the primal start ``w0`` (physical units) and the
         dual start (the solver's scaled multipliers of a previous result), within ``max_iter``
-        iterations (None: ``SolverParams.max_iter``; a work budget, never a wall-time one)."""
-        lbx, ubx = self.ocp.bounds(p)
+        iterations (None: ``SolverParams.max_iter``; a work budget, never a wall-time one),
+        with the planned thrust capped at ``T_cap`` (N, :meth:`~mpcasv.mpc.problem.OCP.bounds`;
+        None: no cap)."""
+        lbx, ubx = self.ocp.bounds(p, T_cap)
         args = {"x0": np.clip(self.ocp.scaled(w0), lbx, ubx), "p": p, "lbx": lbx, "ubx": ubx,
                 "lbg": self.ocp.lbg, "ubg": self.ocp.ubg}  # fmt: skip
         if self.duals and lam_x0 is not None and lam_g0 is not None:

@@ -15,6 +15,7 @@ its target domain for ``dwell_max``); then
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import math
 
@@ -45,7 +46,7 @@ class Targeting:
         if self.params.target_rule == "order":
             self._choose_by_order(obs, r_t)
             return
-        t_go = np.maximum(dist - r_t, 0.0) / self.params.weights.U_go
+        t_go = np.maximum(dist - r_t, 0.0) / self.U_go  # U_go, at most the speed cap
         proj = self.tau + t_go
         # commitment (issue 16 item 6): leave the target only for an AUV that needs a visit
         # itself (projected fix age above tau_served); with every other AUV served the target
@@ -87,12 +88,16 @@ class Targeting:
     def order_model(self) -> OrderModel:
         """The top level's model (:mod:`mpcasv.mpc.order`) in the OCP's cost units: the run's
         USBL noise (``self.acoustics``), the preset's ``navigation.eps_a``, the weights'
-        ``U_go`` and ``tau_ref``, the energy terms at the thrust holding ``U_go`` (M4)."""
+        ``U_go`` (at most the speed cap, :attr:`U_go`) and ``tau_ref``, the energy terms at the
+        thrust holding ``U_go`` (M4)."""
         P, ac, ocp = self.params, self.acoustics, self.ocp
         wt, o, eps_a = P.weights, P.order, P.navigation.eps_a
         vp = ocp.vessel
-        e_go = transit_cost(wt, ocp.model.thrust_for_speed(wt.U_go), vp.T_max, vp.u_max)
+        U = self.U_go
+        if U != wt.U_go:  # the speed cap's transit speed
+            wt = dataclasses.replace(wt, U_go=U)
+        e_go = transit_cost(wt, ocp.model.thrust_for_speed(U), vp.T_max, vp.u_max)
         return OrderModel(eps_a=eps_a, sigma_range=ac.sigma_range,
-                          sigma_bearing=math.radians(ac.sigma_bearing_deg), U=wt.U_go,
+                          sigma_bearing=math.radians(ac.sigma_bearing_deg), U=U,
                           T_stay=o.stay, window=o.window, nav=o.nav,
                           V_ref=dr_variance(eps_a, wt.tau_ref), e_go=e_go)  # fmt: skip

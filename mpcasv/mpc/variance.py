@@ -24,6 +24,7 @@ per AUV the tail's forecast positions (2 N_TAIL), depths (N_TAIL) and meeting po
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import casadi as ca
@@ -72,13 +73,17 @@ def fix_gain(tau, slant, sigma_range, sigma_bearing, eps_a):
 class VarianceObjective:
     """The terms of ``objective = "variance"`` (mixin of the OCP; state there)."""
 
-    def ext_vector(self, acoustics, tail_pa, tail_depth, meet) -> np.ndarray:
+    def ext_vector(self, acoustics, tail_pa, tail_depth, meet,
+                   U_go: float | None = None) -> np.ndarray:  # fmt: skip
         """The block's numbers (shape ``(n_ext(K),)``): the run's USBL noise (``acoustics``,
         :class:`~mpcasv.models.acoustics.AcousticParams`), the preset's ``eps_a`` and
         weights, and per AUV the tail's forecast positions ``tail_pa`` (K, N_TAIL, 2; m),
-        depths ``tail_depth`` (K, N_TAIL; m) and meeting points ``meet`` (K, 2; m)."""
+        depths ``tail_depth`` (K, N_TAIL; m) and meeting points ``meet`` (K, 2; m); the
+        transit cost ``e_go`` at ``U_go`` (m/s; None: the weights', else a speed cap's)."""
         P, vp = self.params, self.vessel
         wt, eps_a = P.weights, P.navigation.eps_a
+        if U_go is not None and U_go != wt.U_go:
+            wt = dataclasses.replace(wt, U_go=U_go)
         e_go = transit_cost(wt, self.model.thrust_for_speed(wt.U_go), vp.T_max, vp.u_max)
         head = [acoustics.sigma_range, math.radians(acoustics.sigma_bearing_deg), eps_a,
                 P.variance.nav / dr_variance(eps_a, wt.tau_ref), P.variance.near,

@@ -187,9 +187,11 @@ class WorldView:
         m = self.params.margin  # the plan keeps this far off the anti-collision radius
         ext = None
         if self.ocp.variance:
-            ext = self.ocp.ext_vector(self.acoustics, *self._tail(obs, ts[-1], asv[-1, 0], r_t))
-        return self.ocp.pack(self._x0(obs), self.tau, self.current, pa, r_lo + m, r_hi - m,
-                             depth, d_fix, r_t, self.target, self.channel, ext)  # fmt: skip
+            ext = self.ocp.ext_vector(self.acoustics, *self._tail(obs, ts[-1], asv[-1, 0], r_t),
+                                      U_go=self.U_go)  # fmt: skip
+        p = self.ocp.pack(self._x0(obs), self.tau, self.current, pa, r_lo + m, r_hi - m,
+                          depth, d_fix, r_t, self.target, self.channel, ext)  # fmt: skip
+        return self._cap_parameters(p)  # a speed cap's transit speed (mpc/speedcap.py)
 
     def _tail(self, obs: Observation, t_N: float, asv_N: np.ndarray, r_t: np.ndarray):
         """The variance objective's view past the horizon (M7c; :mod:`mpcasv.mpc.variance`):
@@ -205,6 +207,6 @@ class WorldView:
         tail_depth = self.depth_forecast(obs, mids).T  # (K, N_TAIL)
         meet = np.empty((K, 2))
         for i, f in enumerate(fc):
-            s = meet_time(asv_N, f, float(r_t[i]), wt.U_go, t_N)
+            s = meet_time(asv_N, f, float(r_t[i]), self.U_go, t_N)
             meet[i] = f(np.array([t_N + s]))[0]
         return tail_pa, tail_depth, meet
