@@ -104,10 +104,14 @@ class QPSolver:
             h = np.concatenate([-lo[fin_lo], hi[fin_hi]])
             with warnings.catch_warnings():  # OSQP's status is in the result
                 warnings.simplefilter("ignore", UserWarning)
+                # qpsolvers calls OSQP 1.x's solve() without raise_error (a failure is read
+                # from the result below, as OSQP's current default does)
+                warnings.filterwarnings("ignore", "The default value of raise_error",
+                                        PendingDeprecationWarning)  # fmt: skip
                 sol = qpsolvers.solve_problem(
                     qpsolvers.Problem(P, np.array(gf).ravel(), G, h, J[eq], -g[eq],
                                       np.maximum(lbx - w, -TRUST), np.minimum(ubx - w, TRUST)),
-                    solver="osqp", eps_abs=QP_EPS, eps_rel=QP_EPS, max_iter=10000, polish=True,
+                    solver="osqp", eps_abs=QP_EPS, eps_rel=QP_EPS, max_iter=10000, polishing=True,
                     verbose=False,
                 )  # fmt: skip
             if sol.x is None or not np.all(np.isfinite(sol.x)):
