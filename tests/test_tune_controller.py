@@ -237,3 +237,19 @@ def test_tpe_sampler_runs_and_is_reproducible(tmp_path):
     assert set(a["state"]) == {"COMPLETE"} and len(a) == 4
     cols = [c for c in a.columns if c != "datetime_complete"]
     pd.testing.assert_frame_equal(a[cols], b[cols])
+
+
+def test_a_search_without_a_feasible_trial_still_writes_readable_outputs(tmp_path):
+    """No trial meets the constraint (here: energy_J = 0, impossible for a boat that moves; on
+    the acceptance run, hybrid-multi's collision-domain time on full-length Cases 6 and 8):
+    front.csv keeps its header (pandas reads it: an empty file raised EmptyDataError), the
+    report says so and names the least violation."""
+    ranges = _write(tmp_path, trials=2, batch=2, extra='constraint = "energy_J"')
+    out = tmp_path / "out"
+    assert main(["tune", "controller", str(ranges), "--out", str(out), "--workers", "1",
+                 "--quiet"]) == 0  # fmt: skip
+    front = pd.read_csv(out / "front.csv")
+    assert len(front) == 0
+    assert {"trial", "speed", "train.energy_J", "heldout.energy_J", "heldout_front"} <= set(
+        front.columns)  # fmt: skip
+    assert "no feasible trial" in (out / "report.md").read_text()

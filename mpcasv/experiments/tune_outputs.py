@@ -70,8 +70,15 @@ def front_table(spec: TuneSpec, study, heldout: dict) -> pd.DataFrame:
             row[f"heldout.{spec.constraint}"] = h_c
         row["heldout_error"] = h_err or ""
         rows.append(row)
-    df = pd.DataFrame(rows)
-    if len(df):
+    columns = ["trial", *(p.name for p in spec.params),
+               *(f"{s}.{m}" for s in ("train", "heldout") for m in spec.objectives),
+               *([f"heldout.{spec.constraint}"] if spec.constraint else []), "heldout_error",
+               "heldout_front"]  # fmt: skip
+    # the columns also without a front (no feasible trial): front.csv keeps its header
+    df = pd.DataFrame(rows, columns=columns[:-1])
+    if not len(df):
+        df["heldout_front"] = pd.Series(dtype=bool)
+    else:
         signs = np.array([1.0 if d == "minimize" else -1.0 for d in directions(spec)])
         h = df[[f"heldout.{m}" for m in spec.objectives]].to_numpy(float)
         ok = np.all(np.isfinite(h), axis=1)
