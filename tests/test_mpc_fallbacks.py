@@ -124,16 +124,18 @@ def test_case8_needs_the_fallback_at_most_once(scenarios_dir):
 def test_after_a_hung_solve_in_simulation_the_step_is_still_planned(tmp_path):
     """Simulation's hang guard (``hang_s``): a solve that never returns is abandoned (as the
     recorded Case 4 problem that hangs fatrop, docs/mpc.md "Known problems"); the step is then
-    planned by the exploration or rescue solves on the spare worker (that Case 4 problem
-    converges from the escape guess and from a rollout), not handed to the hybrid."""
+    planned by the exploration or rescue solves on a new worker (that Case 4 problem
+    converges from the escape guess and from a rollout), not handed to the hybrid. As
+    use_hang_guard: no spare worker, the successor is started when the hung one is killed."""
     from test_mpc_deadline import hang_once_solver
 
     c = make_controller("mpc-single", 1, "mpc-single", overrides={"solver.hang_s": 5.0})
     flag = tmp_path / "hang"
-    c.use_deadline(functools.partial(hang_once_solver, str(flag), c.params, 1, False))
+    c.use_deadline(functools.partial(hang_once_solver, str(flag), c.params, 1, False),
+                   spare=False)  # fmt: skip
     c._hang_guard = True  # as use_hang_guard, with the hanging solver
     try:
-        assert c.deadline.wait_spare(300.0)
+        assert not c.deadline.wait_spare(0.0)  # no spare process in simulation
         obs = Observation(0.0, ASVState(0.0, 0.0, 0.0, 1.0), True,
                           (AUVEstimate(120.0, 0.0, 30.0, 0.5, 0.0),))  # fmt: skip
         flag.touch()

@@ -137,7 +137,8 @@ class MPCController(WorldView, Safety, PlanOutput, Targeting, SpeedCap):
         self._setup(n_auv)
         self.reset(n_auv)
 
-    def use_deadline(self, factory=None, start_timeout: float = 600.0) -> None:
+    def use_deadline(self, factory=None, start_timeout: float = 600.0,
+                     spare: bool = True) -> None:  # fmt: skip
         """Field mode: every step's solves run in a worker process and are abandoned at the
         step's budget ``solver.budget_ms`` (the step then takes the hybrid fallback's command,
         reason ``deadline``; the next step starts warm from the previous plan, on a spare
@@ -146,6 +147,8 @@ class MPCController(WorldView, Safety, PlanOutput, Targeting, SpeedCap):
 
         ``factory`` (tests): builds the worker's solver (default: this controller's problem,
         its compiled library loaded from the cache). Blocks until the first worker is ready.
+        ``spare``: keep a spare worker ready (:class:`~mpcasv.mpc.deadline.DeadlineSolver`;
+        False for the simulation's hang guard).
 
         Raises
         ------
@@ -156,7 +159,7 @@ class MPCController(WorldView, Safety, PlanOutput, Targeting, SpeedCap):
             self.deadline.close()
         factory = factory or functools.partial(_worker_solver, self.params, self.ocp.dims.n_auv,
                                                self.multi, self.boat)  # fmt: skip
-        self.deadline = DeadlineSolver(factory, start_timeout)
+        self.deadline = DeadlineSolver(factory, start_timeout, spare)
         self._deadline_n = self.ocp.dims.n_auv
         self._hang_guard = False
 
@@ -167,7 +170,7 @@ class MPCController(WorldView, Safety, PlanOutput, Targeting, SpeedCap):
         if self.params.solver.hang_s <= 0:
             self.close()
             return
-        self.use_deadline()
+        self.use_deadline(spare=False)  # no spare: a hang is rare, and wall time decides nothing
         self._hang_guard = True
 
     def close(self) -> None:
@@ -183,7 +186,9 @@ class MPCController(WorldView, Safety, PlanOutput, Targeting, SpeedCap):
         self.observer = CurrentObserver(self.ocp.model, P.observer)
         self._take_speed_cap(rebuilt=True)  # the speed cap's thrust on this problem's vessel
         if self.deadline is not None and getattr(self, "_deadline_n", n_auv) != n_auv:
-            self.use_deadline()  # another number of AUVs: workers for the new problem
+            guard = self._hang_guard  # another number of AUVs: workers for the new problem,
+            self.use_deadline(spare=not guard)  # in the same mode (field or hang guard)
+            self._hang_guard = guard
         if self.multi:
             self.hybrid = HybridMulti(HybridMultiParams(P.domain, P.T_standby, P.speed,
                                                         avoidance=P.avoidance))  # fmt: skip
