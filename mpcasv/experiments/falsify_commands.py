@@ -47,6 +47,7 @@ def run(args: argparse.Namespace) -> int:
     from mpcasv.config import ConfigError
     from mpcasv.controllers import load_preset
     from mpcasv.experiments.falsify import SearchSetup, load_family, search, trials_table
+    from mpcasv.outputs import check_output_folder
 
     for flag in ("budget", "worst"):
         if getattr(args, flag) < 1:
@@ -65,7 +66,7 @@ def run(args: argparse.Namespace) -> int:
     family = load_family(args.family)
     load_preset(args.controller, args.params)  # unknown controller / bad preset: refused now
     out = args.out or Path("results") / "falsify" / f"{family.name}-{args.controller}"
-    out.mkdir(parents=True, exist_ok=True)
+    check_output_folder(out).mkdir(parents=True, exist_ok=True)
     setup = SearchSetup(family, args.controller, args.params, args.seed, args.separation,
                         args.objective)  # fmt: skip
 

@@ -121,12 +121,16 @@ def run_deploy_cli(args: argparse.Namespace) -> int:
 
 def run_sitl_cli(args: argparse.Namespace) -> int:
     from mpcasv.io.sitl import SitlOptions, run_sitl
+    from mpcasv.outputs import check_output_file, check_output_folder
     from mpcasv.sim.scenario import load_scenario
 
     _logging(args.quiet)
     if not 0 <= args.reaction < 1:
         raise ConfigError(f"--reaction must be in [0, 1) periods, got {args.reaction}")
     sc = load_scenario(args.scenario)
+    check_output_folder(args.out)
+    if args.ready_file is not None:
+        check_output_file(args.ready_file, "--ready-file")
     opt = SitlOptions(
         seed=args.seed, speedup=args.speedup, bind=args.bind,
         discovery_port=args.discovery_port, base_port=args.base_port, origin=args.origin,
@@ -144,7 +148,10 @@ def run_sitl_cli(args: argparse.Namespace) -> int:
 
 def run_replay_cli(args: argparse.Namespace) -> int:
     from mpcasv.io.replay import print_replay, replay
+    from mpcasv.outputs import check_output_file
 
+    if args.json is not None:
+        check_output_file(args.json, "--json")
     rep = replay(args.log, args.controller, args.preset, args.tol)
     print_replay(rep, args.show)
     if args.json:

@@ -426,9 +426,12 @@ def run_deploy(config: str | Path, dry_run: bool = False, log_dir: Path | None =
     """Load ``config``, build the controller (compiling what it needs), and run the deploy
     loop until Ctrl-C / SIGTERM (or ``duration``). ``prepare``: stop after building, before
     any socket is opened."""
+    from mpcasv.outputs import check_output_folder
+
     cfg = load_deploy_config(config)
     if prepare:
         return prepare_controller(cfg)
+    check_output_folder(log_dir or cfg.log.dir, "--log-dir" if log_dir else f"log.dir of {config}")
     deploy = Deploy(cfg, dry_run, log_dir)
 
     async def main() -> dict:

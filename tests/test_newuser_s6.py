@@ -1,0 +1,195 @@
+"""A new user's rough edges (session 6, newuser6): bad output places, a scenario given where a
+vessel is expected (and the reverse), a folder named like a file, falsification ranges past
+the run, python-control's warning in `tune yaw`. Each bad input is refused in one line naming
+the option or file and the cause, exit 2, no traceback, before any long work."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from mpcasv.cli import main
+
+ROOT = Path(__file__).resolve().parents[1]
+CASE1 = ROOT / "experiments" / "scenarios" / "case1.toml"
+CASE2 = ROOT / "experiments" / "scenarios" / "case2.toml"
+GRETHA = ROOT / "mpcasv" / "data" / "vessels" / "gretha.toml"
+FAMILY = ROOT / "experiments" / "falsify" / "pursuer-single.toml"
+RANGES = ROOT / "experiments" / "tuning" / "hybrid-single.toml"
+DEPLOY = ROOT / "experiments" / "deploy" / "sitl-case3.toml"
+#: a place nobody can write in, not even root (mkdir there: "No such file or directory")
+UNWRITABLE = Path("/proc/mpcasv-newuser6/out")
+
+#: the functions that start each command's long work: called, they fail the test
+WORK = (
+    "mpcasv.sim.simulator.simulate", "mpcasv.control.manoeuvres.simulate_manoeuvre",
+    "mpcasv.experiments.runner.run_suite", "mpcasv.experiments.falsify.search",
+    "mpcasv.control.tuning_yaw.tune_yaw", "mpcasv.control.tuning_speed.place_speed_pi",
+    "mpcasv.experiments.tune_controller.search", "mpcasv.io.identlog.load_log",
+    "mpcasv.io.sitl.run_sitl", "mpcasv.io.deploy.Deploy", "mpcasv.sim.bench.bench_sim",
+    "mpcasv.experiments.tune_compare.matched_comparison", "mpcasv.io.replay.replay",
+)  # fmt: skip
+
+
+@pytest.fixture
+def no_work(monkeypatch):
+    """Replace every command's long work by a failure: a refusal must come before it."""
+
+    def started(*args, **kwargs):
+        raise AssertionError("the long work started before the output place was checked")
+
+    for target in WORK:
+        monkeypatch.setattr(target, started)
+
+
+def _refused(argv: list[str], capsys, *words: str) -> str:
+    assert main([str(a) for a in argv]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "Traceback" not in err[0], err
+    for word in words:
+        assert word in err[0], (word, err[0])
+    return err[0]
+
+
+def _ident_log(tmp_path: Path) -> Path:
+    log = tmp_path / "log.csv"
+    log.write_text("t,N,E,psi,u,v,r,T_cmd,delta_cmd\n0,0,0,0,1,0,0,50,0\n")
+    return log
+
+
+# --- item 1: an unwritable output place is refused before the run --------------------------
+
+# `simulate case1.toml --duration 50 --out /proc/x` ran the whole simulation, then said
+# "/proc/.x.s2nzvf0o: No such file or directory" (a temporary name, not the option)
+COMMANDS_WITH_OUTPUT = {
+    "simulate": ["simulate", CASE1, "--duration", "20", "--quiet", "--out", "{bad}"],
+    "manoeuvre folder": ["simulate", "--manoeuvre", "zigzag", "--duration", "5", "--out",
+                         "{bad}"],
+    "manoeuvre file": ["simulate", "--manoeuvre", "zigzag", "--duration", "5", "--out",
+                       "{bad}/m.csv"],
+    "paper-table": ["paper-table", "--out", "{bad}"],
+    "compare": ["compare", "quick", "--workers", "1", "--quiet", "--out", "{bad}"],
+    "compare --runs-dir": ["compare", "quick", "--workers", "1", "--quiet", "--out", "{tmp}/c",
+                           "--runs-dir", "{bad}"],
+    "falsify": ["falsify", FAMILY, "--controller", "hybrid-single", "--budget", "1", "--quiet",
+                "--out", "{bad}"],
+    "tune yaw": ["tune", "yaw", "--quiet", "--out", "{bad}"],
+    "tune yaw --toml": ["tune", "yaw", "--quiet", "--out", "{tmp}/y", "--toml", "{bad}/e.toml"],
+    "tune speed": ["tune", "speed", "--quiet", "--out", "{bad}"],
+    "tune controller": ["tune", "controller", RANGES, "--workers", "1", "--quiet", "--out",
+                        "{bad}"],
+    "tune compare --out": ["tune", "compare", "{tmp}/a", "{tmp}/b", "--out", "{bad}/t.csv"],
+    "tune compare --plot": ["tune", "compare", "{tmp}/a", "{tmp}/b", "--plot", "{bad}/f.png"],
+    "identify": ["identify", "{log}", "--quiet", "--out", "{bad}/id.toml"],
+    "bench --json": ["bench", "sim", "--json", "{bad}/b.json"],
+    "sitl": ["sitl", CASE1, "--quiet", "--out", "{bad}"],
+    "deploy --log-dir": ["deploy", DEPLOY, "--dry-run", "--duration", "1", "--log-dir", "{bad}"],
+    "replay --json": ["replay", "{tmp}", "--json", "{bad}/r.jsonl"],
+}  # fmt: skip
+
+
+def _argv(template: list, tmp_path: Path, bad: Path) -> list[str]:
+    log = _ident_log(tmp_path)
+    return [str(a).format(bad=bad, tmp=tmp_path, log=log) for a in template]
+
+
+@pytest.mark.skipif(not Path("/proc/self").is_dir(), reason="needs Linux /proc")
+@pytest.mark.parametrize("name", sorted(COMMANDS_WITH_OUTPUT))
+def test_an_unwritable_output_place_is_refused_before_the_work(name, tmp_path, capsys, no_work):
+    argv = _argv(COMMANDS_WITH_OUTPUT[name], tmp_path, UNWRITABLE)
+    option = next(a for a in reversed(argv) if a.startswith("--") and a != "--quiet")
+    line = _refused(argv, capsys, "cannot write in /proc", str(UNWRITABLE))
+    assert line.split(": error: ", 1)[1].startswith(option), line
+
+
+@pytest.mark.parametrize("name", sorted(COMMANDS_WITH_OUTPUT))
+def test_an_output_place_under_a_file_is_refused_before_the_work(name, tmp_path, capsys,
+                                                                  no_work):  # fmt: skip
+    blocker = tmp_path / "afile"
+    blocker.write_text("")
+    argv = _argv(COMMANDS_WITH_OUTPUT[name], tmp_path, blocker / "sub")
+    _refused(argv, capsys, str(blocker), "a file is there")
+    assert blocker.read_text() == ""
+
+
+def test_the_output_checks_have_one_definition():
+    # every command calls mpcasv.outputs; no command module probes writability itself
+    sources = [p for p in (ROOT / "mpcasv").rglob("*.py") if p.name != "outputs.py"]
+    for path in sources:
+        text = path.read_text()
+        assert "def check_output_folder" not in text and "def check_output_file" not in text
+        assert "os.access(" not in text, path
+
+
+def test_an_existing_writable_output_folder_is_accepted(tmp_path):
+    from mpcasv.outputs import check_output_file, check_output_folder
+
+    (tmp_path / "runs.v1.txt").mkdir()  # a folder the user made, however it is named
+    assert check_output_folder(tmp_path / "runs.v1.txt") == tmp_path / "runs.v1.txt"
+    assert check_output_folder(tmp_path / "new" / "deeper") == tmp_path / "new" / "deeper"
+    assert check_output_file(tmp_path / "x.json", "--json") == tmp_path / "x.json"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["runs.v1.txt"]  # nothing left behind
+
+
+# --- item 3: a folder named like a file -------------------------------------------------------
+
+# `simulate --manoeuvre zigzag --out m.txt` wrote a FOLDER m.txt holding zigzag-0.csv
+FOLDER_COMMANDS = {
+    "simulate": ["simulate", CASE1, "--duration", "20", "--quiet", "--out", "{out}"],
+    "paper-table": ["paper-table", "--out", "{out}"],
+    "compare": ["compare", "quick", "--workers", "1", "--quiet", "--out", "{out}"],
+    "falsify": ["falsify", FAMILY, "--controller", "hybrid-single", "--budget", "1", "--quiet",
+                "--out", "{out}"],
+    "tune yaw": ["tune", "yaw", "--quiet", "--out", "{out}"],
+    "tune speed": ["tune", "speed", "--quiet", "--out", "{out}"],
+    "tune controller": ["tune", "controller", RANGES, "--workers", "1", "--quiet", "--out",
+                        "{out}"],
+    "sitl": ["sitl", CASE1, "--quiet", "--out", "{out}"],
+    "deploy --log-dir": ["deploy", DEPLOY, "--dry-run", "--duration", "1", "--log-dir",
+                         "{out}"],
+}  # fmt: skip
+
+
+@pytest.mark.parametrize("name", sorted(FOLDER_COMMANDS))
+@pytest.mark.parametrize("kind", ["file-like name", "existing file"])
+def test_a_folder_output_named_or_being_a_file_is_refused(name, kind, tmp_path, capsys,
+                                                          no_work):  # fmt: skip
+    out = tmp_path / "results.md"
+    if kind == "existing file":
+        out = tmp_path / "results"
+        out.write_text("keep me\n")
+    argv = [str(a).format(out=out) for a in FOLDER_COMMANDS[name]]
+    option = argv[argv.index(str(out)) - 1]
+    words = ("names a file (.md)",) if kind == "file-like name" else ("a file is there",)
+    _refused(argv, capsys, option, str(out), *words)
+    assert out.exists() == (kind == "existing file")  # neither made nor replaced
+    assert kind == "file-like name" or out.read_text() == "keep me\n"
+
+
+@pytest.mark.parametrize("out", ["m.txt", "m.toml", "m.json"])
+def test_a_manoeuvre_log_named_as_another_kind_of_file_is_refused(out, tmp_path, capsys,
+                                                                  no_work):  # fmt: skip
+    path = tmp_path / out
+    _refused(["simulate", "--manoeuvre", "zigzag", "--duration", "5", "--out", path], capsys,
+             "--out", str(path), "FILE.csv or FILE.parquet")  # fmt: skip
+    assert not path.exists()
+
+
+@pytest.mark.parametrize(("out", "written"), [("m.csv", "m.csv"), ("logs", "logs/zigzag-0.csv"),
+                                              ("m.parquet", "m.parquet")])  # fmt: skip
+def test_a_manoeuvre_log_goes_to_a_csv_parquet_or_folder(out, written, tmp_path, capsys):
+    assert main(["simulate", "--manoeuvre", "zigzag", "--duration", "5", "--out",
+                 str(tmp_path / out)]) == 0  # fmt: skip
+    assert (tmp_path / written).is_file()
+
+
+@pytest.mark.parametrize("out", ["params", "params.csv", "adir"])
+def test_identify_writes_a_toml_file_only(out, tmp_path, capsys, no_work):
+    # `identify --out params` wrote a TOML file called params, which no --vessel option finds
+    path = tmp_path / out
+    if out == "adir":
+        path.mkdir()
+    word = "a folder is there" if out == "adir" else "writes a .toml file"
+    _refused(["identify", _ident_log(tmp_path), "--out", path, "--quiet"], capsys, "--out",
+             str(path), word)  # fmt: skip
