@@ -193,3 +193,78 @@ def test_identify_writes_a_toml_file_only(out, tmp_path, capsys, no_work):
     word = "a folder is there" if out == "adir" else "writes a .toml file"
     _refused(["identify", _ident_log(tmp_path), "--out", path, "--quiet"], capsys, "--out",
              str(path), word)  # fmt: skip
+
+
+# --- item 2: a file of one kind where another kind is expected ---------------------------------
+
+# `simulate --manoeuvre zigzag --vessel case2.toml` printed one line of ~40 problems ("L: Field
+# required; ...; auv: Unexpected keyword argument"), and `simulate gretha.toml` the reverse
+VESSEL_OPTIONS = {
+    "manoeuvre": ["simulate", "--manoeuvre", "zigzag", "--duration", "5", "--out",
+                  "{tmp}/z.csv", "--vessel", CASE2],
+    "tune yaw": ["tune", "yaw", "--quiet", "--out", "{tmp}/y", "--vessel", CASE2],
+    "tune speed": ["tune", "speed", "--quiet", "--out", "{tmp}/s", "--vessel", CASE2],
+    "identify": ["identify", "{log}", "--quiet", "--out", "{tmp}/id.toml", "--vessel", CASE2],
+}  # fmt: skip
+
+
+@pytest.mark.parametrize("name", sorted(VESSEL_OPTIONS))
+def test_a_scenario_given_as_a_vessel_is_named_as_such(name, tmp_path, capsys, no_work):
+    argv = _argv(VESSEL_OPTIONS[name], tmp_path, tmp_path)
+    line = _refused(argv, capsys, str(CASE2), "a scenario file", "not a vessel file")
+    assert "Field required" not in line and len(line) < 300, line
+
+
+WRONG_KIND = {  # (argv, the file, what it is, what was expected)
+    "simulate a vessel": (["simulate", GRETHA, "--out", "{tmp}/o"], GRETHA, "vessel",
+                          "scenario"),
+    "sitl a vessel": (["sitl", GRETHA, "--out", "{tmp}/o"], GRETHA, "vessel", "scenario"),
+    "compare a scenario": (["compare", CASE1, "--out", "{tmp}/o"], CASE1, "scenario", "suite"),
+    "falsify a scenario": (["falsify", CASE1, "--controller", "hybrid-single", "--out",
+                            "{tmp}/o"], CASE1, "scenario", "falsification family"),
+    "tune controller a suite": (["tune", "controller", ROOT / "experiments" / "suites" /
+                                 "quick.toml", "--out", "{tmp}/o"],
+                                ROOT / "experiments" / "suites" / "quick.toml", "suite",
+                                "tuning range"),
+    "deploy a scenario": (["deploy", CASE1, "--dry-run", "--duration", "1"], CASE1, "scenario",
+                          "deploy"),
+    "--params a scenario": (["simulate", CASE1, "--controller", "hybrid-single", "--params",
+                             CASE2, "--out", "{tmp}/o"], CASE2, "scenario", "preset"),
+    "--base a vessel": (["tune", "yaw", "--base", GRETHA, "--out", "{tmp}/o"], GRETHA,
+                        "vessel", "execution"),
+}  # fmt: skip
+
+
+@pytest.mark.parametrize("name", sorted(WRONG_KIND))
+def test_a_file_of_another_kind_is_named_as_such(name, tmp_path, capsys, no_work):
+    template, path, found, expected = WRONG_KIND[name]
+    argv = _argv(template, tmp_path, tmp_path)
+    article = "an" if expected[0] in "aeiou" else "a"
+    line = _refused(argv, capsys, str(path), f"{found} file", f"not {article} {expected} file")
+    assert "Field required" not in line and "Unexpected keyword" not in line, line
+    assert not (tmp_path / "o").exists()
+
+
+def _shipped_kind(path: Path) -> str | None:
+    folder = path.parent.name if path.parent.name != "falsified" else "scenarios"
+    if folder == "tuning":  # range files and the suites they name share the folder
+        return "tuning range" if "objectives" in path.read_text() else "suite"
+    return {"scenarios": "scenario", "vessels": "vessel", "execution": "execution",
+            "suites": "suite", "falsify": "falsification family", "deploy": "deploy",
+            "presets": None}[folder]  # fmt: skip
+
+
+@pytest.mark.parametrize(
+    "path",
+    sorted((ROOT / "experiments").rglob("*.toml")) + sorted((ROOT / "mpcasv" / "data").rglob(
+        "*.toml")),
+    ids=lambda p: f"{p.parent.name}/{p.name}",
+)
+def test_every_shipped_file_is_told_its_own_kind(path):
+    import tomllib
+
+    from mpcasv.config import check_kind, kind_of
+
+    data = tomllib.loads(path.read_text())
+    assert kind_of(data) == _shipped_kind(path)
+    check_kind(data, path, _shipped_kind(path) or "preset")  # its own kind passes
