@@ -268,3 +268,60 @@ def test_every_shipped_file_is_told_its_own_kind(path):
     data = tomllib.loads(path.read_text())
     assert kind_of(data) == _shipped_kind(path)
     check_kind(data, path, _shipped_kind(path) or "preset")  # its own kind passes
+
+
+# --- item 4: falsification ranges of times past the run's duration ------------------------------
+
+# `mpcasv falsify short.toml --controller hybrid-single --budget 1` with the pursuer family cut
+# to `duration = 100.0` searched t_attack in [10, 200] s and the rise in [10, 350] s without a
+# word: half and more of those ranges were events that never happen
+
+
+def _family(tmp_path: Path, duration: float) -> Path:
+    text = FAMILY.read_text()
+    assert text.count("duration = 400.0") == 2
+    path = tmp_path / "family.toml"
+    path.write_text(text.replace("duration = 400.0", f"duration = {duration}"))
+    return path
+
+
+def test_falsify_refuses_a_time_range_wholly_past_the_duration(tmp_path, capsys, no_work):
+    path, out = _family(tmp_path, 5.0), tmp_path / "out"  # t_attack in [10, 200] s: all past
+    argv = ["falsify", path, "--controller", "hybrid-single", "--out", out, "--quiet"]
+    _refused(argv, capsys, str(path), "'t_attack'", "auv.0.events.0.t", "[10, 200] s",
+             "duration 5 s")  # fmt: skip
+    assert not out.exists()
+
+
+def test_falsify_warns_of_a_time_range_partly_past_the_duration(tmp_path, capsys, monkeypatch):
+    from mpcasv.experiments import falsify
+
+    seen = []
+    monkeypatch.setattr(falsify, "search", lambda *a, **k: seen.append(1) or _stop())
+    path = _family(tmp_path, 100.0)
+    with pytest.raises(_Stop):  # the search started: a warning does not stop it
+        main(["falsify", str(path), "--controller", "hybrid-single", "--out",
+              str(tmp_path / "out"), "--quiet"])  # fmt: skip
+    err = capsys.readouterr().err.strip().splitlines()
+    assert seen and len(err) == 2, err
+    assert err[0] == (f"warning: {path}: parameter 't_attack' (field auv.0.events.0.t): times "
+                      "[10, 200] s reach past the run's duration 100 s: 53% of its range "
+                      "changes nothing")  # (200 - 100) / (200 - 10)
+    assert "'rise_after + t_attack' (field auv.0.events.1.t): times [10, 350] s" in err[1]
+
+
+class _Stop(Exception):
+    pass
+
+
+def _stop():
+    raise _Stop
+
+
+@pytest.mark.parametrize("family", sorted((ROOT / "experiments" / "falsify").glob("*.toml")),
+                         ids=lambda p: p.name)  # fmt: skip
+def test_the_shipped_families_search_only_times_inside_their_runs(family):
+    from mpcasv.experiments.falsify import load_family, time_ranges
+
+    ranges = time_ranges(load_family(family))
+    assert ranges and not any(r.past for r in ranges), ranges  # each has event times
