@@ -325,3 +325,59 @@ def test_the_shipped_families_search_only_times_inside_their_runs(family):
 
     ranges = time_ranges(load_family(family))
     assert ranges and not any(r.past for r in ranges), ranges  # each has event times
+
+
+# --- item 5: python-control's fallback warning in `tune yaw` ------------------------------------
+
+# `mpcasv tune yaw --out runs/ty --quiet` printed on the terminal:
+#   .../mpcasv/control/tuning.py:135: UserWarning: stability_margins: Falling back to 'frd'
+#   method because of chance of numerical inaccuracy in 'poly' method.
+#     gm, pm, _, wg, wp, _ = ct.stability_margins(L)
+
+
+def test_tune_yaw_says_in_its_report_what_python_control_warned(tmp_path, capsys):
+    import json
+    import warnings
+
+    out = tmp_path / "ty"
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # a warning reaching the user fails the command
+        assert main(["tune", "yaw", "--speeds", "1", "--out", str(out), "--quiet"]) == 0
+    captured = capsys.readouterr()
+    assert "Falling back" not in captured.err + captured.out
+    note = ("python-control computed the margins at u0 = 1 m/s (sampled) from the frequency "
+            "response: it judged its polynomial method numerically unreliable")
+    assert note in captured.out and note in (out / "yaw.md").read_text()
+    design = json.loads((out / "yaw.json").read_text())[0]
+    assert design["sampled"]["margin_method"] == "frd"
+    assert design["linear"]["margin_method"] == "poly"
+
+
+def test_the_fallback_changes_no_margin_and_other_warnings_pass(monkeypatch):
+    import warnings
+
+    import control as ct
+    import numpy as np
+
+    from mpcasv.control import tuning
+
+    # a sampled Nomoto-like plant with a PI: python-control falls back to 'frd' on it
+    L = ct.c2d(ct.tf([1], [10, 1, 0]), 0.1) * ct.tf([2, -1.9], [1, -1], 0.1)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        expected = ct.stability_margins(L)
+    assert any(str(w.message).startswith(tuning.FRD_FALLBACK) for w in caught)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # the fallback warning does not reach the user
+        gm, pm, wg, wp, method = tuning._stability_margins(L)
+    assert method == "frd"
+    np.testing.assert_equal((gm, pm, wg, wp), (expected[0], expected[1], expected[3],
+                                               expected[4]))  # the same figures (nan == nan)
+
+    def other(*args, **kwargs):  # python-control's other warnings still reach the user
+        warnings.warn("something else", UserWarning, stacklevel=1)
+        return expected
+
+    monkeypatch.setattr(ct, "stability_margins", other)
+    with pytest.warns(UserWarning, match="something else"):
+        assert tuning._stability_margins(L)[4] == "poly"
