@@ -381,3 +381,92 @@ def test_the_fallback_changes_no_margin_and_other_warnings_pass(monkeypatch):
     monkeypatch.setattr(ct, "stability_margins", other)
     with pytest.warns(UserWarning, match="something else"):
         assert tuning._stability_margins(L)[4] == "poly"
+
+
+# --- item 6: tests/test_io_e2e.py::test_case6_rehearsal_matches_simulation under load ----------
+
+# Under load (two `python -c 'while True: pass'` beside the lead's runs, 2 cores) it failed 2 of
+# 2: "assert (85 == 300)" decisions joined. The deploy process, starved of CPU for ~350 ms,
+# ran its watchdog timer before the ASV states waiting in its socket: "asv_stale" (age 7 s
+# > 5 s) with fresh states unread, FollowReference restarted, and every later decision on the
+# half-period grid; and the SITL's reaction window (0.9 period = 45 ms of wall time) let ~100
+# References act a period late.
+
+
+def test_drain_reads_the_datagrams_waiting_in_the_socket():
+    import asyncio
+    import socket
+    import time
+
+    from mpcasv.io.transport import UdpEndpoint
+
+    async def run():
+        got: list[bytes] = []
+        ep = await UdpEndpoint.open("127.0.0.1", 0, lambda data, addr: got.append(data))
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+            for i in range(5):
+                s.sendto(bytes([i]), ep.address)
+        time.sleep(0.05)  # blocking: the event loop has not read them
+        n = ep.drain()
+        ep.close()
+        return n, got
+
+    n, got = asyncio.run(run())
+    assert n == 5 and got == [bytes([i]) for i in range(5)]
+
+
+@pytest.mark.parametrize("waiting", [True, False])
+def test_the_watchdog_reads_waiting_states_before_calling_the_asv_stale(tmp_path, waiting):
+    from test_io_cases import FakeClock, _es
+
+    from mpcasv.io.config import deploy_config_from_dict
+    from mpcasv.io.deploy import ASV_STALE, RUNNING, Deploy
+    from mpcasv.io.logs import read_jsonl
+
+    cfg = deploy_config_from_dict({
+        "identity": {"id": 0x4001},
+        "origin": {"lat_deg": 41.18, "lon_deg": -8.70},
+        "link": {"bind": "127.0.0.1", "port": 0, "announce_to": []},
+        "vehicle": [{"role": "asv", "id": 0x2801, "address": "10.0.10.50:6002"},
+                    {"role": "auv", "id": 0x2811, "address": "10.0.10.60:6002"}],
+        "controller": {"name": "hybrid-single", "preset": "paper1-field"},
+        "watchdog": {"asv_stale_s": 3.0, "auv_stale_s": 3.0},
+        "log": {"dir": str(tmp_path)},
+    })  # fmt: skip
+    dep = Deploy(cfg, dry_run=True)
+    clock = FakeClock()
+    dep.clock = dep.link.clock = clock
+    link = dep.link
+
+    def states(t):
+        link.handle_datagram(_es(clock, 0x2811, t - 5.0, 100.0), ("10.0.10.60", 6002))
+        link.handle_datagram(_es(clock, 0x2801, t, 0.0), ("10.0.10.50", 6002))
+
+    t = clock.t
+    for _ in range(20):  # 10 s at 2 Hz
+        clock.t += 0.5
+        t += 0.5
+        states(t)
+        dep.watch()
+    assert dep.phase == RUNNING
+    n_steps = dep.steps
+    clock.t += 8.0  # the process was starved for 8 s: states arrived, unread
+    pending = [t + 0.5 * k for k in range(1, 17)] if waiting else []
+    drained = []
+
+    def drain():  # what the socket holds (UdpEndpoint.drain, tested above)
+        for tk in pending:
+            states(tk)
+        drained.append(len(pending))
+        return len(pending)
+
+    link.drain = drain
+    dep.watch()
+    dep.jsonl.flush()
+    stale = [r for r in read_jsonl(tmp_path / "deploy.jsonl", "event")
+             if r["event"] == "asv_stale"]  # fmt: skip
+    assert drained == [len(pending)]  # read before judging
+    if waiting:  # fresh states were there: no stale ASV, and the decisions went on
+        assert dep.phase == RUNNING and not stale and dep.steps > n_steps
+    else:  # nothing came: the watchdog still fires
+        assert dep.phase == ASV_STALE and len(stale) == 1

@@ -76,6 +76,10 @@ def register(sub: argparse._SubParsersAction) -> None:
         default=0.9,
         help="longest wait for the Reference answering a state, in periods (0.9)",
     )
+    s.add_argument("--lockstep", action="store_true",
+                   help="wait for the Reference answering each period's state however long it "
+                   "takes (rehearsals compared with 'mpcasv simulate' on a loaded host; a real "
+                   "DUNE does not wait)")  # fmt: skip
     s.add_argument("--reanchor", type=_positive, default=1000.0,
                    help="EstimatedState reference point moves every this many m")  # fmt: skip
     s.add_argument("--asv-name", default="sitl-asv")
@@ -134,7 +138,7 @@ def run_sitl_cli(args: argparse.Namespace) -> int:
     opt = SitlOptions(
         seed=args.seed, speedup=args.speedup, bind=args.bind,
         discovery_port=args.discovery_port, base_port=args.base_port, origin=args.origin,
-        duration=args.duration, hold=args.hold, reaction=args.reaction,
+        duration=args.duration, hold=args.hold, reaction=args.reaction, lockstep=args.lockstep,
         reanchor_m=args.reanchor, asv_name=args.asv_name, asv_id=args.asv_id,
         auv_id_base=args.auv_id_base, tcp=args.tcp, asv_outage=args.asv_outage,
         out=args.out, plots=args.plots, controller=args.controller, preset=args.preset,
