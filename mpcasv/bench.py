@@ -32,14 +32,15 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from mpcasv.config import ConfigError
+    from mpcasv.outputs import check_output_file
 
     # --repeat 0 / -1 ran once and said "over 1 runs"; --steps -1 blamed "case3 (modified):
     # duration"; an unwritable --json was found only after the whole benchmark
     for flag in ("repeat", "steps"):
         if getattr(args, flag) < 1:
             raise ConfigError(f"--{flag} {getattr(args, flag)}: must be >= 1")
-    if args.json is not None and not args.json.parent.is_dir():
-        raise ConfigError(f"--json {args.json}: no folder {args.json.parent} to write it in")
+    if args.json is not None:
+        check_output_file(args.json, "--json")
     module, func = BENCHES[args.which].split(":")
     figures = getattr(importlib.import_module(module), func)(args)
     if args.json:

@@ -68,21 +68,65 @@ def parse(cls: type[T], data: Mapping[str, Any], source: str | Path = "<mapping>
         raise ConfigError("invalid configuration\n  " + "\n  ".join(lines)) from None
 
 
-def load_toml(path: str | Path) -> dict[str, Any]:
-    """Read a TOML file, turning I/O and syntax errors into :class:`ConfigError`."""
+#: The kinds of mpcasv TOML file: the top-level keys every file of the kind has (and no other
+#: kind has all of), and where such a file goes. A file of one kind given where another is
+#: expected was refused with every field of the wrong kind, ~40 problems on one line.
+KINDS: dict[str, tuple[frozenset[str], str]] = {
+    "scenario": (frozenset({"asv", "auv"}), "mpcasv simulate SCENARIO"),
+    "vessel": (frozenset({"m", "I_z", "X_u", "N_r"}), "--vessel"),
+    "execution": (frozenset({"yaw", "speed", "reference"}), "--base, or asv.execution"),
+    "suite": (frozenset({"scenarios", "controllers"}), "mpcasv compare SUITE"),
+    "falsification family": (frozenset({"scenario", "param"}), "mpcasv falsify FAMILY"),
+    "tuning range": (frozenset({"params", "objectives"}), "mpcasv tune controller RANGES"),
+    "deploy": (frozenset({"identity", "link", "vehicle"}), "mpcasv deploy CONFIG"),
+}
+
+
+def kind_of(data: Mapping[str, Any]) -> str | None:
+    """The kind of mpcasv file (a key of :data:`KINDS`) ``data`` (a TOML file's top-level
+    table) is, or None if it has the keys of no kind."""
+    return next((k for k, (keys, _) in KINDS.items() if keys <= data.keys()), None)
+
+
+def check_kind(data: Mapping[str, Any], source: str | Path, expected: str) -> None:
+    """Refuse a file of another kind (:func:`kind_of`) where a file of kind ``expected`` is
+    read (e.g. a scenario given as ``--vessel``), in one line saying what it is and where it
+    goes. A file of no known kind passes: its fields are checked by :func:`parse`.
+
+    Raises
+    ------
+    ConfigError
+        ``source: a scenario file (top-level asv, auv), not a vessel file; it goes to ...``.
+    """
+    found = kind_of(data)
+    if found is None or found == expected:
+        return
+    keys, goes = KINDS[found]
+    a, an = ("an" if k[0] in "aeiou" else "a" for k in (found, expected))
+    raise ConfigError(f"{source}: {a} {found} file (top-level {', '.join(sorted(keys))}), not "
+                      f"{an} {expected} file; {a} {found} file goes to {goes}")  # fmt: skip
+
+
+def load_toml(path: str | Path, kind: str | None = None) -> dict[str, Any]:
+    """Read a TOML file, turning I/O and syntax errors into :class:`ConfigError`; with
+    ``kind`` (``"vessel"``, ``"scenario"``, ``"preset"``, ...), refuse a file of another kind
+    (:func:`check_kind`)."""
     path = Path(path)
     try:
         with path.open("rb") as fh:
-            return tomllib.load(fh)
+            data = tomllib.load(fh)
     except FileNotFoundError:
         raise ConfigError(f"{path}: no such file") from None
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"{path}: not valid TOML: {exc}") from None
+    if kind is not None:
+        check_kind(data, path, kind)
+    return data
 
 
-def load(cls: type[T], path: str | Path) -> T:
-    """Load and validate a TOML file into ``cls``."""
-    return parse(cls, load_toml(path), path)
+def load(cls: type[T], path: str | Path, kind: str | None = None) -> T:
+    """Load and validate a TOML file into ``cls`` (``kind``: see :func:`load_toml`)."""
+    return parse(cls, load_toml(path, kind), path)
 
 
 def replace(obj: T, **changes: Any) -> T:

@@ -181,7 +181,7 @@ def test_an_unwritable_runs_dir_is_refused_before_any_job(tmp_path, capsys):
     out = tmp_path / "out"
     assert main(["compare", "quick", "--out", str(out), "--runs-dir", "/proc/x"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "--runs-dir /proc/x: cannot write run folders" in err[0]
+    assert len(err) == 1 and "--runs-dir /proc/x: cannot write in /proc" in err[0]
     assert not out.exists()
     check_runs_location(f"file://{tmp_path / 'remote'}", None)  # no exception
     assert (tmp_path / "remote").is_dir() and not any((tmp_path / "remote").iterdir())

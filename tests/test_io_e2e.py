@@ -157,17 +157,27 @@ def test_case3_rehearsal_matches_simulation(tmp_path):
 
 def test_case6_rehearsal_matches_simulation(tmp_path):
     base = load_toml(CONFIGS / "sitl-case6.toml")
-    base["watchdog"] |= {"asv_stale_s": 5.0, "auv_stale_s": 5.0}
+    # 20 s of the deploy clock = 1 s of wall time at SPEEDUP 20: with --lockstep (below) the
+    # SITL stops publishing while it waits for the deploy's Reference, so a deploy starved of
+    # CPU for longer than asv_stale_s (5 s = 0.25 s of wall time was the limit) called the
+    # ASV stale, restarted FollowReference and never stepped again (deadlock on a host with
+    # load 7 on 2 cores; newuser6)
+    base["watchdog"] |= {"asv_stale_s": 20.0, "auv_stale_s": 20.0}
     # the deploy's frame 400 m north-east of the SITL's and DUNE-like reference points moved
     # every 100 m: positions must go through absolute lat/lon to agree
     base["origin"] = {"lat_deg": 63.4406 + 400 / 111_000, "lon_deg": 10.3530 + 400 / 49_800}
+    # --lockstep: the world waits for each answering Reference; on a loaded host the default
+    # window (0.9 period = 45 ms of wall time at SPEEDUP 20) let about a third of them act a
+    # period late and the world drift from `mpcasv simulate`'s (newuser6)
     sc, deploy_dir, sitl_dir, sockets = _rehearse(tmp_path, "case6", 300.0, base,
-                                                  "--reanchor", "100")  # fmt: skip
+                                                  "--reanchor", "100", "--lockstep")  # fmt: skip
     _check_bind(sockets)
     _check_logs(deploy_dir, 3)
     m_sim, m_dep = _compare(sc, deploy_dir, sitl_dir)
     table = compare_metrics(m_sim, m_dep)
     print(json.dumps(table, indent=1))
+    info = json.loads((sitl_dir / "run" / "run.json").read_text())["sitl"]
+    assert info["lockstep"] and "late_references" not in info["counts"], info
     assert m_dep["decisions_joined"] == 300 and m_dep["mode_disagreements"] == 0
     assert m_dep["min_range_m"] >= 10.0
     assert all(v["ok"] for v in table.values()), table

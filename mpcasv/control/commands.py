@@ -197,6 +197,7 @@ def _setup(args):
     from mpcasv.control.tuning_yaw import check_speeds
     from mpcasv.models.params import load_vessel
     from mpcasv.models.vessel import VesselModel
+    from mpcasv.outputs import check_output_file, check_output_folder
 
     _check_positive(args)
     model = VesselModel(load_vessel(args.vessel))
@@ -205,8 +206,11 @@ def _setup(args):
         top = min(model.top_speed, model.params.u_max)
         args.speeds = [round(f * top, 4) for f in SPEED_FRACTIONS]
     check_speeds(model, args.speeds)
+    check_output_folder(args.out)
+    toml = check_output_file(args.toml or args.out / "execution.toml", "--toml", (".toml",),
+                             parents=True)  # fmt: skip
     args.out.mkdir(parents=True, exist_ok=True)
-    return model, ep, args.toml or args.out / "execution.toml"
+    return model, ep, toml
 
 
 def run_tune_yaw(args: argparse.Namespace) -> int:

@@ -156,6 +156,23 @@ def add_arguments(p) -> None:
 MANOEUVRE_ONLY = ("vessel", "speed", "delta", "current", "noise")
 
 
+def _log_path(out: Path | None, name: str) -> Path:
+    """Where ``--out`` puts the log: ``FILE.csv`` / ``FILE.parquet`` as given, else a folder
+    that gets ``name`` (default ``runs/NAME``); refused (ConfigError) if it cannot be written,
+    or if it names another kind of file (``--out m.txt`` wrote a folder called m.txt)."""
+    from mpcasv.config import ConfigError
+    from mpcasv.outputs import FILE_SUFFIXES, check_output_file, check_output_folder
+
+    if out is None:
+        return check_output_file(Path("runs") / name, parents=True)
+    if out.suffix in (".csv", ".parquet"):  # as write_log reads it
+        return check_output_file(out, parents=True)
+    if not out.is_dir() and out.suffix.lower() in FILE_SUFFIXES:
+        raise ConfigError(f"--out {out}: a manoeuvre log is written as FILE.csv or "
+                          f"FILE.parquet (or into a folder), not as {out.suffix}")  # fmt: skip
+    return check_output_folder(out) / name
+
+
 def run_cli(args) -> int:
     """``mpcasv simulate --manoeuvre NAME``: write one identification log."""
     from mpcasv.config import ConfigError
@@ -171,6 +188,7 @@ def run_cli(args) -> int:
             raise ConfigError(f"{opt} {bad[0]:g}: must be a finite number")
     if args.seed < 0:
         raise ConfigError(f"--seed {args.seed}: a seed is an integer >= 0")
+    out = _log_path(args.out, f"{args.manoeuvre}-{args.seed}.csv")  # before the work
     model = VesselModel(load_vessel(args.vessel or "gretha"))
     noise = Noise() if args.noise else None
     df = simulate_manoeuvre(model, args.manoeuvre,
@@ -179,9 +197,6 @@ def run_cli(args) -> int:
                             duration=150.0 if args.duration is None else args.duration,
                             current=args.current or (0.0, 0.0), noise=noise,
                             seed=args.seed)  # fmt: skip
-    out = args.out or Path("runs") / f"{args.manoeuvre}-{args.seed}.csv"
-    if out.suffix not in (".csv", ".parquet"):
-        out = out / f"{args.manoeuvre}-{args.seed}.csv"
     write_log(df, out)
     print(f"wrote {out} ({len(df)} samples, {df['t'].iloc[-1]:.0f} s, noise "
           f"{'on' if noise else 'off'}, seed {args.seed})")  # fmt: skip

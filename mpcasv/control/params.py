@@ -84,4 +84,4 @@ class ExecutionParams:
 
 def load_execution(name_or_path: str | Path = "gretha") -> ExecutionParams:
     """Load execution-level parameters: a shipped name or a TOML path."""
-    return load(ExecutionParams, resolve("execution", name_or_path))
+    return load(ExecutionParams, resolve("execution", name_or_path), "execution")

@@ -118,6 +118,31 @@ def sweep_margins(L, omega) -> dict:
     return out
 
 
+#: the start of python-control's warning when it computes a sampled loop's margins from its
+#: frequency response instead of polynomial roots (control.margins, 0.10)
+FRD_FALLBACK = "stability_margins: Falling back to 'frd' method"
+
+
+def _stability_margins(L) -> tuple[float, float, float, float, str]:
+    """``control.stability_margins(L)`` as (gm, pm, w_phase_crossover, w_gain_crossover,
+    method): its fallback warning (:data:`FRD_FALLBACK`) becomes ``method = "frd"``; any
+    other warning is passed on unchanged."""
+    import warnings
+
+    import control as ct
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        gm, pm, _, wg, wp, _ = ct.stability_margins(L)
+    method = "poly"
+    for w in caught:
+        if issubclass(w.category, UserWarning) and str(w.message).startswith(FRD_FALLBACK):
+            method = "frd"
+        else:
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno, source=w.source)
+    return gm, pm, wg, wp, method
+
+
 def loop_margins(L) -> dict:
     """Classical and balanced disk margins of an open loop ``L`` (continuous or sampled).
 
@@ -126,13 +151,16 @@ def loop_margins(L) -> dict:
     discrete-time margins miss gain crossovers: ``inf`` where the loop has one, see
     ../shared/cases/sampled-phase-margin) the sweep's value is reported and
     ``margin_check`` says so; a margin neither can compute is ``nan``, which fails every
-    ``>=`` acceptance test. python-control's warnings are not silenced.
+    ``>=`` acceptance test. ``margin_method`` is the method python-control used: ``"poly"``,
+    or ``"frd"`` where it judged its polynomial method numerically unreliable for the sampled
+    loop (its "Falling back to 'frd'" warning, caught here and said in the report); its
+    other warnings are not silenced.
     ``disk_*`` are the skew-0 disk margins of ``control.disk_margins`` (gain margin in dB, as
     python-control returns it); frequencies in rad/s.
     """
     import control as ct
 
-    gm, pm, _, wg, wp, _ = ct.stability_margins(L)
+    gm, pm, wg, wp, method = _stability_margins(L)
     dt = L.dt if L.isdtime() else None
     omega = np.logspace(-3, math.log10(math.pi / dt if dt else 100.0) - 1e-6, 2000)
     sweep = sweep_margins(L, np.logspace(-4, math.log10(math.pi / dt if dt else 1e3) - 1e-6,
@@ -154,6 +182,7 @@ def loop_margins(L) -> dict:
         "w_gain_crossover": float(sweep["w_gain_crossover"]) if notes else float(wp),
         "w_phase_crossover": float(sweep["w_phase_crossover"]) if notes else float(wg),
         "margin_check": "; ".join(notes) if notes else "python-control = sweep",
+        "margin_method": method,
         "disk_margin": float(dm),
         "disk_gain_margin_db": float(dgm),
         "disk_phase_margin_deg": float(dpm),

@@ -60,15 +60,23 @@ def yaw_table(designs) -> str:
 
 def _margin_notes(items) -> list[str]:
     """Lines for every loop whose margins python-control and the frequency sweep disagree on,
-    and for closed loops that are unstable."""
-    lines = []
+    for closed loops that are unstable, and one for the loops whose margins python-control
+    computed from the frequency response (``margin_method`` "frd")."""
+    lines, frd = [], []
     for u, kind, f in items:
+        if f.get("margin_method") == "frd":
+            frd.append(f"{u:g} m/s ({kind})")
         if f.get("margin_check", "python-control = sweep") != "python-control = sweep":
             lines.append(f"- u0 = {u:g} m/s, {kind}: {f['margin_check']}")
         if not f.get("stable", True):
             lines.append(f"- u0 = {u:g} m/s, {kind}: closed loop UNSTABLE")
-    return (["", "Margin cross-check (python-control vs frequency sweep):", *lines]
-            if lines else ["", "Margin cross-check: python-control and the frequency sweep agree."])
+    out = (["", "Margin cross-check (python-control vs frequency sweep):", *lines]
+           if lines else ["", "Margin cross-check: python-control and the frequency sweep agree."])
+    if frd:
+        out.append(f"python-control computed the margins at u0 = {', '.join(frd)} from the "
+                   "frequency response: it judged its polynomial method numerically unreliable "
+                   "for these sampled loops; the frequency sweep checks them.")  # fmt: skip
+    return out
 
 
 def plot_yaw(model, designs, runs, T_f: float, out: Path) -> list[Path]:

@@ -137,7 +137,7 @@ def controller_kind(name: str) -> ControllerKind:
 def _preset_data(name: str, preset: str | Path | None) -> tuple[Path, dict]:
     kind = controller_kind(name)
     path = resolve("presets", preset or kind.default_preset)
-    data = load_toml(path)
+    data = load_toml(path, "preset")
     for key in PATH_FIELDS:  # a path inside the preset is relative to the preset's folder
         value = data.get(key)
         if isinstance(value, str) and (value.endswith(".toml") or "/" in value):

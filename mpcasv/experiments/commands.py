@@ -50,15 +50,19 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from mpcasv.config import ConfigError
     from mpcasv.experiments.report import READ_LINE
-    from mpcasv.experiments.runner import JOB_TIMEOUT_S, run_suite
+    from mpcasv.experiments.runner import JOB_TIMEOUT_S, is_url, run_suite
     from mpcasv.experiments.suite import load_suite
+    from mpcasv.outputs import check_output_folder
 
     if args.workers < 1:
         raise ConfigError(f"--workers must be >= 1, got {args.workers}")
     if args.job_timeout is not None and args.job_timeout < 0:
         raise ConfigError(f"--job-timeout must be >= 0, got {args.job_timeout}")
     limit = JOB_TIMEOUT_S if args.job_timeout is None else (args.job_timeout or None)
-    out = args.out or Path("results") / load_suite(args.suite)[0].name
+    suite = load_suite(args.suite)[0]  # a bad suite (or another kind of file): refused now
+    out = check_output_folder(args.out or Path("results") / suite.name)
+    if args.runs_dir is not None and not is_url(args.runs_dir) and not args.dask:
+        check_output_folder(args.runs_dir, "--runs-dir")  # (with --dask: the workers' paths)
     stats, exp, results = run_suite(args.suite, out, args.workers, args.dask, args.quiet,
                                     args.retry_errors, not args.no_report,
                                     runs_dir=args.runs_dir, job_timeout=limit)  # fmt: skip

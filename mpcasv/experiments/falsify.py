@@ -29,6 +29,7 @@ resumes without losing a finished run. A search finds counterexamples; it proves
 from __future__ import annotations
 
 import copy
+import fnmatch
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -42,6 +43,9 @@ from mpcasv.config import ConfigError, FinitePos, Float, frozen, load_toml, pars
 from mpcasv.hybrid.domains import r_avoid
 
 BATCH = 4  # trials asked together (independent of the number of workers: reproducible)
+#: scenario fields that are instants of the run (s from its start; fnmatch patterns): a
+#: searched value past the run's duration changes nothing
+RUN_TIME_FIELDS = ("auv.*.events.*.t",)
 
 
 @frozen
@@ -108,11 +112,11 @@ def load_family(path: str | Path) -> LoadedFamily:
         template that the scenario loader refuses (the message names the file).
     """
     path = Path(path)
-    fam = parse(Family, load_toml(path), path)
+    fam = parse(Family, load_toml(path, "falsification family"), path)
     if (fam.template is None) == (fam.scenario is None):
         raise ConfigError(f"{path}: give exactly one of 'template' (a path) or [scenario]")
     if fam.template is not None:
-        template = load_toml(path.parent / fam.template)
+        template = load_toml(path.parent / fam.template, "scenario")
     else:
         template = copy.deepcopy(fam.scenario)
     if fam.duration is not None:
@@ -132,7 +136,56 @@ def load_family(path: str | Path) -> LoadedFamily:
     loaded = LoadedFamily(fam, path, template)
     mid = {p.name: 0.5 * (p.low + p.high) for p in fam.param}
     candidate(loaded, mid, "midpoint")  # validates every field path and the template
+    for r in time_ranges(loaded):
+        if r.low >= r.duration:
+            raise ConfigError(f"{path}: parameter {r.name!r} (field {r.field}): its times "
+                              f"[{r.low:g}, {r.high:g}] s all lie past the run's duration "
+                              f"{r.duration:g} s: nothing searched there happens; lower its "
+                              "range or raise 'duration'")  # fmt: skip
     return loaded
+
+
+@dataclass(frozen=True)
+class TimeRange:
+    """The instants (s) a parameter writes into a :data:`RUN_TIME_FIELDS` field: ``[low,
+    high]``, ``plus`` included (its range added; ``name`` then reads ``"a + b"``), against the
+    run's ``duration`` (s)."""
+
+    name: str
+    field: str
+    low: float
+    high: float
+    duration: float
+
+    @property
+    def past(self) -> bool:
+        """Whether part of the range lies past the duration (that part changes nothing)."""
+        return self.high > self.duration
+
+    def warning(self, source: str | Path) -> str:
+        """One line saying which part of the range lies past the duration."""
+        share = (self.high - max(self.low, self.duration)) / (self.high - self.low)
+        return (f"warning: {source}: parameter {self.name!r} (field {self.field}): times "
+                f"[{self.low:g}, {self.high:g}] s reach past the run's duration "
+                f"{self.duration:g} s: {share:.0%} of its range changes nothing")  # fmt: skip
+
+
+def time_ranges(family: LoadedFamily) -> list[TimeRange]:
+    """The ranges of the parameters written into instants of the run (:data:`RUN_TIME_FIELDS`),
+    with the duration of the run (the family's, else the template's), one per field."""
+    duration = float(family.template["duration"])
+    by_name = {p.name: p for p in family.spec.param}
+    out = []
+    for p in family.spec.param:
+        fields = () if p.field is None else (p.field,) if isinstance(p.field, str) else p.field
+        plus = by_name[p.plus] if p.plus is not None else None
+        low = p.low + (plus.low if plus else 0.0)
+        high = p.high + (plus.high if plus else 0.0)
+        for f in fields:
+            if any(fnmatch.fnmatchcase(f, pattern) for pattern in RUN_TIME_FIELDS):
+                name = p.name if plus is None else f"{p.name} + {plus.name}"
+                out.append(TimeRange(name, f, low, high, duration))
+    return out
 
 
 def set_dotted(data: dict, field: str, value: Any, source: str = "<family>") -> None:

@@ -6,6 +6,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import sys
 from pathlib import Path
 
 
@@ -46,7 +47,14 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from mpcasv.config import ConfigError
     from mpcasv.controllers import load_preset
-    from mpcasv.experiments.falsify import SearchSetup, load_family, search, trials_table
+    from mpcasv.experiments.falsify import (
+        SearchSetup,
+        load_family,
+        search,
+        time_ranges,
+        trials_table,
+    )  # fmt: skip
+    from mpcasv.outputs import check_output_folder
 
     for flag in ("budget", "worst"):
         if getattr(args, flag) < 1:
@@ -62,10 +70,13 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError(f"--require-margin {args.require_margin:g}: a finite margin (m)")
     if args.timeout is not None and not (math.isfinite(args.timeout) and args.timeout > 0):
         raise ConfigError(f"--timeout must be > 0, got {args.timeout}")
-    family = load_family(args.family)
+    family = load_family(args.family)  # a time range wholly past the duration: refused
+    for r in time_ranges(family):  # partly past it: said, the search goes on
+        if r.past:
+            print(r.warning(args.family), file=sys.stderr)
     load_preset(args.controller, args.params)  # unknown controller / bad preset: refused now
     out = args.out or Path("results") / "falsify" / f"{family.name}-{args.controller}"
-    out.mkdir(parents=True, exist_ok=True)
+    check_output_folder(out).mkdir(parents=True, exist_ok=True)
     setup = SearchSetup(family, args.controller, args.params, args.seed, args.separation,
                         args.objective)  # fmt: skip
 

@@ -180,19 +180,19 @@ def check_runs_location(runs: str, dask: str | None) -> None:
     :class:`ConfigError` in one line naming it and the cause (every job would fail on it)."""
     if dask and not is_url(runs):
         return  # a path on the workers' machines: only they can tell
+    if not is_url(runs):
+        from mpcasv.outputs import check_output_folder
+
+        check_output_folder(runs, "--runs-dir")  # the one check of a local output folder
+        return
     probe = ".mpcasv-write-probe"
     try:
-        if is_url(runs):
-            import fsspec
+        import fsspec
 
-            fs, root = fsspec.core.url_to_fs(runs)
-            fs.makedirs(root, exist_ok=True)
-            fs.pipe(f"{root.rstrip('/')}/{probe}", b"")
-            fs.rm(f"{root.rstrip('/')}/{probe}")
-        else:
-            Path(runs).mkdir(parents=True, exist_ok=True)
-            (Path(runs) / probe).write_bytes(b"")
-            (Path(runs) / probe).unlink()
+        fs, root = fsspec.core.url_to_fs(runs)
+        fs.makedirs(root, exist_ok=True)
+        fs.pipe(f"{root.rstrip('/')}/{probe}", b"")
+        fs.rm(f"{root.rstrip('/')}/{probe}")
     except (OSError, ValueError, ImportError) as exc:
         cause = getattr(exc, "strerror", None) or str(exc).splitlines()[0]
         raise ConfigError(f"--runs-dir {runs}: cannot write run folders there ({cause})") from None

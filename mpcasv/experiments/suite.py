@@ -259,7 +259,7 @@ def suite_path(name_or_path: str | Path) -> Path:
 def load_suite(name_or_path: str | Path) -> tuple[Suite, Path]:
     """Load and validate a suite file (not yet expanded)."""
     path = suite_path(name_or_path)
-    return parse(Suite, load_toml(path), path), path
+    return parse(Suite, load_toml(path, "suite"), path), path
 
 
 def _scenario_file(entry: str, base: Path, where: str) -> Path:

@@ -180,6 +180,12 @@ def register_compare(tsub) -> None:
 def _run(args) -> int:
     if not args.tolerance > 0:
         raise ConfigError(f"--tolerance {args.tolerance}: must be > 0")
+    from mpcasv.outputs import check_output_file
+
+    if args.out is not None:
+        check_output_file(args.out, "--out")
+    if args.plot is not None:  # matplotlib picks the format by the suffix
+        check_output_file(args.plot, "--plot", (".png", ".pdf", ".svg"))
     df = matched_comparison(args.ref, args.other, args.at, args.tolerance)
     if args.out:
         df.to_csv(args.out, index=False)

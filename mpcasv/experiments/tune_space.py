@@ -180,7 +180,7 @@ def load_spec(path: str | Path, trials: int | None = None) -> TuneSpec:
     if not path.exists():
         raise ConfigError(f"{path}: no such range file")
     try:
-        data = load_toml(path)
+        data = load_toml(path, "tuning range")
     except ConfigError as exc:
         raise ConfigError(" ".join(str(exc).split())) from None
     unknown = set(data) - _TOP_KEYS

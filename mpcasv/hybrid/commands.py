@@ -29,6 +29,7 @@ def run(args: argparse.Namespace) -> int:
     from mpcasv.controllers import Boat, make_controller
     from mpcasv.experiments.metrics import compute_metrics
     from mpcasv.hybrid.paper import metrics_of, write_table
+    from mpcasv.outputs import check_output_folder
     from mpcasv.sim.record import write_run
     from mpcasv.sim.scenario import load_scenario
     from mpcasv.sim.simulator import simulate
@@ -39,6 +40,7 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError(f"scenario files not found: {missing} (run from the repository root "
                           "or pass --scenarios)")  # fmt: skip
     scenarios = [load_scenario(p) for p in paths]  # validate all before running any
+    check_output_folder(args.out)
     results = {}
     for sc in tqdm(scenarios, desc="paper cases", unit="case"):
         boat = Boat.of_scenario(sc)

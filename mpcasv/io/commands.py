@@ -76,6 +76,10 @@ def register(sub: argparse._SubParsersAction) -> None:
         default=0.9,
         help="longest wait for the Reference answering a state, in periods (0.9)",
     )
+    s.add_argument("--lockstep", action="store_true",
+                   help="wait for the Reference answering each period's state however long it "
+                   "takes (rehearsals compared with 'mpcasv simulate' on a loaded host; a real "
+                   "DUNE does not wait)")  # fmt: skip
     s.add_argument("--reanchor", type=_positive, default=1000.0,
                    help="EstimatedState reference point moves every this many m")  # fmt: skip
     s.add_argument("--asv-name", default="sitl-asv")
@@ -121,16 +125,20 @@ def run_deploy_cli(args: argparse.Namespace) -> int:
 
 def run_sitl_cli(args: argparse.Namespace) -> int:
     from mpcasv.io.sitl import SitlOptions, run_sitl
+    from mpcasv.outputs import check_output_file, check_output_folder
     from mpcasv.sim.scenario import load_scenario
 
     _logging(args.quiet)
     if not 0 <= args.reaction < 1:
         raise ConfigError(f"--reaction must be in [0, 1) periods, got {args.reaction}")
     sc = load_scenario(args.scenario)
+    check_output_folder(args.out)
+    if args.ready_file is not None:
+        check_output_file(args.ready_file, "--ready-file")
     opt = SitlOptions(
         seed=args.seed, speedup=args.speedup, bind=args.bind,
         discovery_port=args.discovery_port, base_port=args.base_port, origin=args.origin,
-        duration=args.duration, hold=args.hold, reaction=args.reaction,
+        duration=args.duration, hold=args.hold, reaction=args.reaction, lockstep=args.lockstep,
         reanchor_m=args.reanchor, asv_name=args.asv_name, asv_id=args.asv_id,
         auv_id_base=args.auv_id_base, tcp=args.tcp, asv_outage=args.asv_outage,
         out=args.out, plots=args.plots, controller=args.controller, preset=args.preset,
@@ -144,7 +152,10 @@ def run_sitl_cli(args: argparse.Namespace) -> int:
 
 def run_replay_cli(args: argparse.Namespace) -> int:
     from mpcasv.io.replay import print_replay, replay
+    from mpcasv.outputs import check_output_file
 
+    if args.json is not None:
+        check_output_file(args.json, "--json")
     rep = replay(args.log, args.controller, args.preset, args.tol)
     print_replay(rep, args.show)
     if args.json:

@@ -283,7 +283,7 @@ class DeployConfig:
 def load_deploy_config(path: str | Path) -> DeployConfig:
     """Load and validate a deploy TOML file; also checks controller, preset and estimator
     names now, so that nothing fails after the vehicles have been contacted."""
-    cfg = load(DeployConfig, path)
+    cfg = load(DeployConfig, path, "deploy")
     check_controller(cfg, path)
     return cfg
 

@@ -213,6 +213,14 @@ class Deploy(BoatFeedback, FieldMode):
             self.event("plan_start_failed", **info)
 
     # --- phases and watchdogs ------------------------------------------------------------
+    def _looks_stale(self, now: float) -> bool:
+        """Whether a watchdog would fire at ``now`` on the states read so far."""
+        asv = self.link.asv
+        if asv.nav is not None and self.phase != ASV_STALE and not self._asv_fresh(now):
+            return True
+        return any(p.nav is not None and auv_status(now - p.nav_recv, self.gp) != self.status[k]
+                   for k, p in enumerate(self.link.auvs))  # fmt: skip
+
     def _asv_fresh(self, now: float) -> bool:
         return now - self.link.asv.nav_recv <= self.cfg.watchdog.asv_stale_s
 
@@ -245,8 +253,16 @@ class Deploy(BoatFeedback, FieldMode):
         self.event("plan_start_sent", request_id=self.request_id)
 
     def watch(self) -> None:
-        """One pass of the watchdogs (called every 0.25 s of the deploy clock)."""
+        """One pass of the watchdogs (called every 0.25 s of the deploy clock).
+
+        Before a vehicle is judged stale, the datagrams already waiting in the socket are
+        read (:meth:`ImcLink.drain`): when this process had been starved of CPU, its timer
+        ran before the states that had arrived meanwhile, and a fresh ASV was called stale
+        (FollowReference restarted, decisions moved off the period grid).
+        """
         now = self.clock.now()
+        if self._looks_stale(now) and self.link.drain():
+            now = self.clock.now()
         wd = self.cfg.watchdog
         asv = self.link.asv
         if asv.nav is not None and self.phase != ASV_STALE and not self._asv_fresh(now):
@@ -426,9 +442,12 @@ def run_deploy(config: str | Path, dry_run: bool = False, log_dir: Path | None =
     """Load ``config``, build the controller (compiling what it needs), and run the deploy
     loop until Ctrl-C / SIGTERM (or ``duration``). ``prepare``: stop after building, before
     any socket is opened."""
+    from mpcasv.outputs import check_output_folder
+
     cfg = load_deploy_config(config)
     if prepare:
         return prepare_controller(cfg)
+    check_output_folder(log_dir or cfg.log.dir, "--log-dir" if log_dir else f"log.dir of {config}")
     deploy = Deploy(cfg, dry_run, log_dir)
 
     async def main() -> dict:

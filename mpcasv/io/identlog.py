@@ -312,6 +312,10 @@ def run_cli(args) -> int:
     if args.coeffs is not None and not args.coeffs.strip(","):
         raise ConfigError("--coeffs is empty: name coefficients, or omit it for the documented "
                           "subset")  # fmt: skip
+    from mpcasv.outputs import check_output_file, check_output_folder
+
+    check_output_file(args.out, "--out", (".toml",), parents=True)  # before the fit
+    check_output_folder(args.out.with_name(args.out.stem + "-report"), "--out's report folder")
     prior = load_vessel(args.vessel)
     tmap = _thruster_map_for(args.logs, prior)
     if tmap is not None:

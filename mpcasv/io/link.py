@@ -266,6 +266,11 @@ class ImcLink(PeerDirectory):
             self.lsf.write(data)
 
     # --- input -----------------------------------------------------------------------------
+    def drain(self) -> int:
+        """Read every datagram waiting in the data socket now (:meth:`UdpEndpoint.drain`);
+        return how many. TCP streams and discovery sockets are left to the event loop."""
+        return self.endpoint.drain() if self.endpoint is not None else 0
+
     def handle_datagram(self, data: bytes, addr: Addr) -> None:
         """Entry point of every UDP datagram (never raises)."""
         self.datagrams += 1

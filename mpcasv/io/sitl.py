@@ -30,7 +30,10 @@ simulator, so that a rehearsal can be compared with it (a Reference that misses 
 acts one period late and is counted in ``late_references``). A real DUNE does not wait: with
 ``--reaction`` small the SITL shows what the deploy loop's latency does. ``--hold`` keeps the
 world at t = 0 until the first Reference (the deploy loop's first decision then sees the scenario's
-initial state, as in ``mpcasv simulate``).
+initial state, as in ``mpcasv simulate``). ``--lockstep`` waits for the Reference answering
+each period's state however long the deploy loop takes (and the clock of the world waits
+with it): no Reference is late and no wall-clock timing changes the world, so a rehearsal on a
+loaded host still decides as ``mpcasv simulate`` does (tests/test_io_e2e.py).
 
 Timestamps are ``epoch + n h`` (integer epoch, h = half a period), so differences of
 timestamps are exact. ``--speedup`` runs the clock faster than the wall clock (the deploy
@@ -91,6 +94,7 @@ class SitlOptions:
     duration: float | None = None  # world seconds (default: the scenario's)
     hold: bool = False
     reaction: float = 0.9  # longest wait for a Reference, in periods
+    lockstep: bool = False  # wait for the answering Reference however long it takes
     reanchor_m: float = 1000.0
     asv_name: str = "sitl-asv"
     asv_id: int = 0x2801
@@ -315,6 +319,7 @@ class Sitl:
         print(json.dumps({"ready": ready}), flush=True)
 
     async def run(self, stop: asyncio.Event) -> dict:
+        self._stop = stop
         await self.start()
         n_steps = int(math.ceil((self.opt.duration or self.sc.duration) / self.Tc - 1e-9))
         per = round(self.Tc / self.h)
@@ -373,6 +378,12 @@ class Sitl:
             return
         self.in_window = True
         try:
+            if self.opt.lockstep:  # until the Reference comes (or the SITL is stopped)
+                waits = [asyncio.ensure_future(e.wait()) for e in (self.ref_event, self._stop)]
+                _, pending = await asyncio.wait(waits, return_when=asyncio.FIRST_COMPLETED)
+                for w in pending:
+                    w.cancel()
+                return
             with contextlib.suppress(asyncio.TimeoutError):
                 await asyncio.wait_for(
                     self.ref_event.wait(), self.clock.wall_seconds(self.opt.reaction * self.Tc)
@@ -413,7 +424,8 @@ class Sitl:
         w = self.world
         info = {"ts_offset": self.ts_offset, "periods": len(self.rows), "speedup":
                 self.opt.speedup, "overruns": overruns, "counts": self.counts,
-                "sitl_wall_s": wall_s}  # fmt: skip
+                "sitl_wall_s": wall_s,
+                **({"lockstep": True} if self.opt.lockstep else {})}  # fmt: skip
         self.event("finished", **info)
         self.jsonl.close()
         self.lsf.close()

@@ -64,6 +64,7 @@ class UdpEndpoint:
         host, port = transport.get_extra_info("sockname")[:2]
         self.address: Addr = (host, port)
         self.send_errors = 0
+        self._reader: socket.socket | None = None  # for drain()
 
     @classmethod
     async def open(cls, host: str, port: int, on_datagram: Callable[[bytes, Addr], None],
@@ -120,8 +121,39 @@ class UdpEndpoint:
     def receive_errors(self) -> int:
         return self._protocol.errors
 
+    def drain(self, limit: int = 10_000) -> int:
+        """Read the datagrams waiting in the socket now (at most ``limit``), each through
+        ``on_datagram`` as the event loop would; return how many.
+
+        The event loop reads one datagram per pass and runs due timers in the same pass: after
+        this process was starved of CPU, a watchdog timer ran before the states that had
+        arrived meanwhile were read, and called fresh vehicles stale (see
+        :meth:`mpcasv.io.deploy.Deploy.watch`).
+        """
+        if self._transport.is_closing():
+            return 0
+        if self._reader is None:  # asyncio's wrapper cannot read: a duplicate of the socket
+            self._reader = self._transport.get_extra_info("socket").dup()
+            self._reader.setblocking(False)
+        sock = self._reader
+        n = 0
+        while n < limit:
+            try:
+                data, addr = sock.recvfrom(65536)
+            except (BlockingIOError, InterruptedError):
+                break
+            except OSError:
+                self._protocol.errors += 1
+                break
+            self._protocol.on_datagram(data, (addr[0], addr[1]))
+            n += 1
+        return n
+
     def close(self) -> None:
         self._transport.close()
+        if self._reader is not None:
+            self._reader.close()
+            self._reader = None
 
 
 class TcpStream:

@@ -149,7 +149,7 @@ def load_vessel(name_or_path: str | Path = "gretha") -> VesselParams:
     number; a missing provenance entry is an error for shipped files.
     """
     path = resolve("vessels", name_or_path)
-    data = load_toml(path)
+    data = load_toml(path, "vessel")
     try:
         params = parse(VesselParams, data, path)
     except ValueError as exc:

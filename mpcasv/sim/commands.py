@@ -59,6 +59,7 @@ def run(args: argparse.Namespace) -> int:
     from mpcasv.controllers.prepare import needed_libraries, prepare
     from mpcasv.estimation import ESTIMATORS
     from mpcasv.experiments.metrics import compute_metrics
+    from mpcasv.outputs import check_output_folder
     from mpcasv.sim.record import check_run_dir, write_run
     from mpcasv.sim.scenario import load_scenario
     from mpcasv.sim.simulator import simulate
@@ -77,6 +78,8 @@ def run(args: argparse.Namespace) -> int:
     name = args.controller or scenario.controller
     preset = args.params or (scenario.preset if name == scenario.controller else None)
     boat = Boat.of_scenario(scenario)  # one vessel per run: the simulator's and the MPC's
+    out = check_output_folder(args.out or Path("runs") / f"{scenario.name}-{name}-{args.seed}")
+    check_run_dir(out)  # before the run (and before compiling an MPC), not after it
     try:
         prepare(needed_libraries([(name, len(scenario.auv), preset, None, boat)]), args.quiet)
         controller = make_controller(name, len(scenario.auv), preset, boat=boat)
@@ -91,8 +94,6 @@ def run(args: argparse.Namespace) -> int:
                           f"{exc}") from None  # fmt: skip
     if args.estimator and args.estimator not in ESTIMATORS:
         raise ConfigError(f"unknown estimator {args.estimator!r}; known: {sorted(ESTIMATORS)}")
-    out = args.out or Path("runs") / f"{scenario.name}-{name}-{args.seed}"
-    check_run_dir(out)  # before the run, not after it
     result = simulate(scenario, controller, args.seed, args.estimator, progress=not args.quiet)
     extra = {"preset": preset, "estimator": args.estimator or scenario.estimator,
              "realisation": real.as_dict(), "boat": boat.describe()}  # fmt: skip

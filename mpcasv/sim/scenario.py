@@ -133,7 +133,7 @@ def load_scenario(path: str | Path) -> Scenario:
     ConfigError
         One line per problem, naming the file and the field.
     """
-    data = load_toml(path)
+    data = load_toml(path, "scenario")
     base = Path(path).resolve().parent
     refs = [(data, "preset")]
     if isinstance(data.get("asv"), dict):

@@ -1,0 +1,119 @@
+"""Output locations of the command line, checked before any long work starts.
+
+Every command that writes a folder (``--out`` of simulate, paper-table, compare, falsify,
+tune ..., sitl; ``--log-dir`` of deploy) or a file (``identify --out``, ``bench --json``,
+``tune compare --out/--plot``, ``replay --json``, ``tune yaw|speed --toml``, ...) calls
+:func:`check_output_folder` or :func:`check_output_file` on it first: an unwritable place
+(``/proc/x``, a read-only file system, a folder without write permission), a file where a
+folder is to be made, or a folder named like a file (``--out m.txt``) were found only after
+the whole run, or silently wrote a folder called ``m.txt``.
+
+Nothing is created: writability is probed by making and removing a temporary folder in the
+nearest existing folder on the way to the output.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from pathlib import Path
+
+from mpcasv.config import ConfigError
+
+#: Suffixes that name a file, not a folder: an output folder ``--out m.txt`` (or ``.csv``,
+#: ``.toml``, ...) is refused unless that folder already exists.
+FILE_SUFFIXES = frozenset({
+    ".txt", ".csv", ".tsv", ".parquet", ".json", ".jsonl", ".toml", ".yaml", ".yml", ".md",
+    ".html", ".png", ".pdf", ".svg", ".jpg", ".jpeg", ".lsf", ".gz", ".zip", ".db", ".log",
+    ".npz", ".npy", ".pkl", ".py", ".xlsx",
+})  # fmt: skip
+
+
+def check_output_folder(path: str | os.PathLike, option: str = "--out") -> Path:
+    """Refuse an output folder that cannot be made or written, before the work that fills it.
+
+    Parameters
+    ----------
+    path : path
+        The folder to be written (it may exist, e.g. a run to resume, or not yet).
+    option : str
+        How the user gave it (``"--out"``, ``"--log-dir"``, ``"log.dir of FILE"``): named in
+        the message.
+
+    Returns
+    -------
+    Path
+        ``path``, unchanged.
+
+    Raises
+    ------
+    ConfigError
+        One line naming the option, the path and the cause: a file is there (at the path or
+        at a folder above it); the name has a file suffix (:data:`FILE_SUFFIXES`) and no such
+        folder exists; the nearest existing folder cannot be written in.
+    """
+    out = Path(path)
+    if out.exists() and not out.is_dir():
+        raise ConfigError(f"{option} {out}: a file is there, where an output folder is written; "
+                          "name a folder")  # fmt: skip
+    if not out.is_dir() and out.suffix.lower() in FILE_SUFFIXES:
+        raise ConfigError(f"{option} {out}: names a file ({out.suffix}), but this command "
+                          "writes a folder there; name a folder (e.g. "
+                          f"{out.with_suffix('')})")  # fmt: skip
+    _probe(out, option)
+    return out
+
+
+def check_output_file(path: str | os.PathLike, option: str = "--out",
+                      suffixes: tuple[str, ...] | None = None,
+                      parents: bool = False) -> Path:  # fmt: skip
+    """Refuse an output file that cannot be written, before the work that produces it.
+
+    Parameters
+    ----------
+    path : path
+        The file to be written (an existing file is replaced).
+    option : str
+        How the user gave it, named in the message.
+    suffixes : tuple of str, optional
+        The suffixes the command writes (e.g. ``(".csv", ".parquet")``); others are refused.
+    parents : bool
+        Whether the command makes the missing folders above the file (else the folder of the
+        file must exist).
+
+    Raises
+    ------
+    ConfigError
+        One line naming the option, the path and the cause: a folder is there; the suffix is
+        not one of ``suffixes``; the folder of the file does not exist (``parents`` False); a
+        file is where a folder above it should be; the nearest existing folder cannot be
+        written in.
+    """
+    out = Path(path)
+    if out.is_dir():
+        raise ConfigError(f"{option} {out}: a folder is there, where a file is written; name a "
+                          "file")  # fmt: skip
+    if suffixes is not None and out.suffix.lower() not in suffixes:
+        raise ConfigError(f"{option} {out}: this command writes a {' or '.join(suffixes)} file; "
+                          f"the name ends in {out.suffix or 'no suffix'}")  # fmt: skip
+    _probe(out.parent, option, out)
+    if not parents and not out.parent.exists():
+        raise ConfigError(f"{option} {out}: no folder {out.parent} to write it in")
+    return out
+
+
+def _probe(folder: Path, option: str, shown: Path | None = None) -> None:
+    """Make and remove a temporary folder in the nearest existing folder on the way to
+    ``folder`` (nothing is left behind); ConfigError if that fails or a file is in the way."""
+    shown = folder if shown is None else shown
+    base = folder
+    while not base.exists() and base != base.parent:
+        base = base.parent
+    if not base.is_dir():
+        raise ConfigError(f"{option} {shown}: {base} is a file: a file is there, where a folder "
+                          "was to be made; choose another place")  # fmt: skip
+    try:
+        os.rmdir(tempfile.mkdtemp(prefix=".mpcasv-probe-", dir=base))
+    except OSError as exc:
+        raise ConfigError(f"{option} {shown}: cannot write in {base} "
+                          f"({exc.strerror or exc})") from None  # fmt: skip
