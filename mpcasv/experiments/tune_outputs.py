@@ -189,7 +189,13 @@ def front_figure(spec: TuneSpec, trials: pd.DataFrame, front: pd.DataFrame):
     from mpcasv.experiments.metrics import METRIC_INFO
 
     pairs = list(itertools.combinations(spec.objectives, 2)) or [(spec.objectives[0],) * 2]
-    fig, axes = plt.subplots(1, len(pairs), figsize=(5.2 * len(pairs), 4.4), squeeze=False)
+    # at most three panels a row: four objectives (six pairs) made a strip too wide to read
+    ncols = min(3, len(pairs))
+    nrows = math.ceil(len(pairs) / ncols)
+    fig, grid = plt.subplots(nrows, ncols, figsize=(5.2 * ncols, 4.4 * nrows), squeeze=False)
+    for ax in grid.ravel()[len(pairs):]:
+        ax.set_visible(False)
+    axes = [grid.ravel()[: len(pairs)]]
     done = trials[trials["state"] == "COMPLETE"]
     feas = (done[spec.constraint] <= 0) if spec.constraint else np.ones(len(done), bool)
     for ax, (a, b) in zip(axes[0], pairs, strict=True):
