@@ -117,3 +117,48 @@ def _probe(folder: Path, option: str, shown: Path | None = None) -> None:
     except OSError as exc:
         raise ConfigError(f"{option} {shown}: cannot write in {base} "
                           f"({exc.strerror or exc})") from None  # fmt: skip
+
+
+#: files at the top of an output folder naming the command that wrote it
+OUTPUT_MARKERS: dict[str, str] = {
+    "study.db": "mpcasv tune controller", "tune.json": "mpcasv tune controller",
+    "sweep.json": "mpcasv compare", "suite.toml": "mpcasv compare",
+    "run.json": "mpcasv simulate",
+}  # fmt: skip
+
+
+def check_not_other_output(path: str | os.PathLike, command: str, option: str = "--out",
+                           own: str | None = None) -> Path:  # fmt: skip
+    """Refuse an existing folder that another command wrote (one of :data:`OUTPUT_MARKERS`),
+    before any work: writing there would replace its report (``report.md``) and mix two
+    commands' files in one folder.
+
+    Parameters
+    ----------
+    path : path
+        The output folder (it may not exist yet).
+    command : str
+        This command, as in :data:`OUTPUT_MARKERS` (e.g. ``"mpcasv compare"``).
+    option : str
+        How the user gave the folder, named in the message.
+    own : str, optional
+        A file this command always writes first: a non-empty folder without it is refused
+        too (``"study.db"`` for ``mpcasv tune controller``).
+
+    Raises
+    ------
+    ConfigError
+        One line naming the option, the folder and the other command (or the missing file).
+    """
+    out = Path(path)
+    if not out.is_dir():
+        return out
+    for name, other in OUTPUT_MARKERS.items():
+        if other != command and (out / name).exists():
+            raise ConfigError(f"{option} {out}: holds the output of '{other}' ({name}); "
+                              f"'{command}' would overwrite its files there: use another "
+                              "folder")  # fmt: skip
+    if own is not None and not (out / own).exists() and any(out.iterdir()):
+        raise ConfigError(f"{option} {out}: not empty and not an output of '{command}' (no "
+                          f"{own}): use a new or empty folder")  # fmt: skip
+    return out

@@ -35,6 +35,9 @@ def _load(d: Path) -> tuple[dict, pd.DataFrame, pd.DataFrame]:
             raise ConfigError(f"{d}: no {name}: not an output folder of 'mpcasv tune controller'")
     summary = json.loads((d / "tune.json").read_text())
     front = pd.read_csv(d / "front.csv")
+    if not len(front):  # no feasible training trial: nothing was run on held-out seeds
+        raise ConfigError(f"{d}: its training front is empty (no feasible trial: see its "
+                          "report.md): no point to compare")  # fmt: skip
     rows = read_parts(d / "heldout")
     if not len(rows) or "heldout_front" not in front:
         raise ConfigError(f"{d}: no held-out runs (rerun without --no-heldout)")
@@ -101,10 +104,40 @@ def matched_comparison(ref_dir: str | Path, other_dir: str | Path, at: str = "en
     return pd.DataFrame(out)
 
 
+def _read_baseline(results: str | Path) -> pd.DataFrame:
+    """An ``mpcasv compare`` results table, or a one-line ConfigError naming the file."""
+    path = Path(results)
+    if path.is_dir() and (path / "results.parquet").exists():
+        path = path / "results.parquet"
+    if not path.is_file():
+        raise ConfigError(f"--baseline {results}: no such file (a results.parquet of "
+                          "'mpcasv compare')")  # fmt: skip
+    try:
+        df = pd.read_parquet(path)
+    except Exception as exc:  # pyarrow raises several types for a file that is not parquet
+        raise ConfigError(f"--baseline {results}: not a parquet table ("
+                          f"{' '.join(str(exc).split())[:120]})") from None  # fmt: skip
+    missing = sorted({"variant", "status", "collision_domain_s"} - set(df.columns))
+    if missing:
+        raise ConfigError(f"--baseline {results}: no columns {missing}: not a results.parquet "
+                          "of 'mpcasv compare'")  # fmt: skip
+    return df
+
+
 def baseline_points(results: str | Path, objectives: list[str]) -> pd.DataFrame:
     """Mean of each objective per variant of an ``mpcasv compare`` results table (e.g. the
-    published presets on the same held-out realisations), and the summed constraint."""
-    df = pd.read_parquet(results)
+    published presets on the same held-out realisations), and the summed constraint.
+
+    Raises
+    ------
+    ConfigError
+        No such file, not a parquet table, or not an ``mpcasv compare`` results table.
+    """
+    df = _read_baseline(results)
+    missing = [m for m in objectives if m not in df.columns]
+    if missing:
+        raise ConfigError(f"--baseline {results}: no columns {missing}: not a results table "
+                          "with the searches' objectives")  # fmt: skip
     df = df[df["status"] == "ok"]
     agg = df.groupby("variant")[list(objectives)].mean()
     agg["collision_domain_s"] = df.groupby("variant")["collision_domain_s"].sum()
@@ -125,7 +158,11 @@ def plot_fronts(dirs: list[str | Path], path: str | Path,
     from mpcasv.experiments.metrics import METRIC_INFO
 
     loaded = [(_load(Path(d))[:2], Path(d)) for d in dirs]
-    objectives = loaded[0][0][0]["objectives"]
+    objectives = [m for m in loaded[0][0][0]["objectives"]  # those of every search
+                  if all(m in s["objectives"] for (s, _), _ in loaded)]  # fmt: skip
+    if len(objectives) < 2:
+        raise ConfigError(f"--plot: the searches in {[str(d) for d in dirs]} share the "
+                          f"objectives {objectives} only: nothing to draw pairwise")  # fmt: skip
     pairs = list(itertools.combinations(objectives, 2))
     fig, axes = plt.subplots(1, len(pairs), figsize=(5.2 * len(pairs), 4.4), squeeze=False)
     for ((summary, front), d), colour in zip(loaded, plt.cm.tab10.colors, strict=False):
@@ -186,6 +223,12 @@ def _run(args) -> int:
         check_output_file(args.out, "--out")
     if args.plot is not None:  # matplotlib picks the format by the suffix
         check_output_file(args.plot, "--plot", (".png", ".pdf", ".svg"))
+    if args.baseline is not None:  # checked before the work; drawn only on the figure
+        if args.plot is None:
+            raise ConfigError(f"--baseline {args.baseline}: is drawn on the figure only; give "
+                              "--plot FILE too")  # fmt: skip
+        summary = _load(Path(args.ref))[0]
+        baseline_points(args.baseline, summary["objectives"])
     df = matched_comparison(args.ref, args.other, args.at, args.tolerance)
     if args.out:
         df.to_csv(args.out, index=False)

@@ -183,6 +183,15 @@ def open_study(spec: TuneSpec, out: Path, train: list[Job]):
         changed = sorted(k for k in fp if fp[k] != old.get(k))
         raise ConfigError(f"{out / 'study.db'}: holds a search with other {changed} than "
                           f"{spec.path}; use another --out")  # fmt: skip
+    n = len(study.get_trials(deepcopy=False))
+    if n > spec.trials:  # a smaller budget cannot be honoured: the trials are there
+        raise ConfigError(f"{out / 'study.db'}: holds {n} trials already, more than the budget "
+                          f"{spec.trials} (trials or --trials); give at least {n}")  # fmt: skip
+    held = study.user_attrs.get("heldout_seeds")  # recorded by the first held-out runs
+    if held is not None and held != list(spec.heldout_seeds):
+        raise ConfigError(f"{out / 'study.db'}: its held-out runs used heldout_seeds {held}, "
+                          f"{spec.path} says {list(spec.heldout_seeds)}: the front's held-out "
+                          "values would mix both; use another --out")  # fmt: skip
     return study
 
 
@@ -324,6 +333,7 @@ def evaluate_heldout(spec: TuneSpec, study, out: str | Path, workers: int = 1,
     jobs = {t.number: trial_jobs(base, t.number, dict(t.params)) for t in front}
     if not jobs:
         return {}
+    study.set_user_attr("heldout_seeds", list(spec.heldout_seeds))  # checked by open_study
     if not quiet:
         print(f"held-out: {len(front)} front trials x {len(base)} runs (seeds "
               f"{list(spec.heldout_seeds)})")  # fmt: skip

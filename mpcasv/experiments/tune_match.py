@@ -139,8 +139,9 @@ def choose_front(label: str, front: str, at: str, level: float, base: Path, wher
     low, high = float(rows[col].min()), float(rows[col].max())
     if not (math.isfinite(level) and low <= level <= high):
         unit = METRIC_INFO[at].unit
-        raise ConfigError(f"{where}: level = {level:g} {unit} is outside the front's {at} range "
-                          f"[{low:.6g}, {high:.6g}] ({source} means of {len(rows)} points in "
+        # full precision: a bound shown rounded (20689.6) could not be typed back as a level
+        raise ConfigError(f"{where}: level = {level!r} {unit} is outside the front's {at} "
+                          f"range [{low!r}, {high!r}] ({source} means of {len(rows)} points in "
                           f"{folder})")  # fmt: skip
     dist = (rows[col] - level).abs()
     best = rows.assign(_d=dist).sort_values(["_d", "trial"]).iloc[0]
