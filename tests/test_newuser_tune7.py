@@ -1,0 +1,206 @@
+"""A new user of the controller tuning (issue 17; docs/tuning-controllers.md) breaking it, and
+the fixes: each refusal is one line with exit status 2, given before any run.
+
+Found by using ``mpcasv tune controller`` / ``tune compare`` / suites with ``front = ...`` on
+tiny budgets (Case 3 cut to 120 s, 2 training seeds, 2-4 trials, batches of 2):
+
+* a per-AUV metric (``reliable_fix_age_p95_s_auv``) as an objective passed the range file and
+  ended in a pandas ``KeyError`` traceback after the first batch had run;
+* a constraint that is also an objective (``energy_J``) put the summed constraint in the
+  objective's ``trials.csv`` column (39208 J where the objective mean was 19604 J) and a
+  duplicate ``heldout.energy_J`` column in ``front.csv``;
+* a better-higher constraint (``min_range_m``: "summed <= 0") made every trial infeasible, and
+  wall-time objectives (``controller_step_ms_median``) made the search depend on the machine;
+* ``trials`` not a multiple of ``batch``: extending 3 -> 6 trials asked trial 4 with speed
+  1.84497 where an uninterrupted 6-trial search asked 1.85195;
+* ``--trials 2`` on a study of 4 trials: exit 0, the report said "budget: 2 trials" over 4;
+* resuming with other ``heldout_seeds``: accepted; the report counted the old seed's run
+  ("3 runs" for 2 seeds) and ``tune compare`` read the folder's held-out parts;
+* ``tune controller --out`` an ``mpcasv compare`` folder (and the reverse) replaced the other
+  command's ``report.md``;
+* ``tune compare --baseline``: ignored without ``--plot``, a pyarrow traceback for a file that
+  is not parquet; a search without a feasible point was "no held-out runs (rerun without
+  --no-heldout)" although it had been run with them;
+* a suite ``front`` entry's range was printed rounded: "level = 20689.6 J is outside the
+  front's energy_J range [20689.6, 20689.6]".
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+from mpcasv.cli import main
+
+SUITE = (
+    'name = "tn7-train"\nscenarios = ["case3"]\nduration = 120.0\nseeds = [0, 1]\n'
+    'plots = "none"\n[[controllers]]\nlabel = "hybrid"\nsingle = "hybrid-single"\n'
+    'preset = "scenario"\n'
+)
+PARAMS = (
+    '[params]\n"domain.delta_r" = { low = 20.0, high = 60.0 }\n'
+    '"speed" = { low = 1.0, high = 2.5 }\n'
+)
+
+
+def _ranges(tmp: Path, extra: str = "", trials: int = 2, batch: int = 2, heldout: str = "[7]",
+            name: str = "ranges.toml") -> Path:  # fmt: skip
+    (tmp / "train.toml").write_text(SUITE)
+    path = tmp / name
+    path.write_text(f'controller = "hybrid-single"\nsuite = "train.toml"\n'
+                    f"heldout_seeds = {heldout}\ntrials = {trials}\nbatch = {batch}\nseed = 1\n"
+                    f"{extra}\n{PARAMS}")  # fmt: skip
+    return path
+
+
+def _tune(ranges: Path, out: Path, *more: str) -> int:
+    return main(["tune", "controller", str(ranges), "--out", str(out), "--workers", "1",
+                 "--quiet", *more])  # fmt: skip
+
+
+def _refused(capsys, code: int, *needles: str) -> str:
+    err = capsys.readouterr().err.strip()
+    assert code == 2, err
+    assert len(err.splitlines()) == 1 and "Traceback" not in err, err
+    for n in needles:
+        assert n in err, err
+    return err
+
+
+@pytest.fixture(scope="module")
+def searched(tmp_path_factory):
+    """A finished 2-trial search with held-out seed 7 (one batch)."""
+    tmp = tmp_path_factory.mktemp("tn7")
+    ranges = _ranges(tmp)
+    out = tmp / "out"
+    assert _tune(ranges, out) == 0
+    return tmp, ranges, out
+
+
+@pytest.mark.parametrize("extra, needles", [
+    ('objectives = ["reliable_fix_age_p95_s_auv", "energy_J"]',
+     ("per-AUV list", "'reliable_fix_age_p95_s'")),
+    ('objectives = ["controller_step_ms_median", "energy_J"]', ("wall time",)),
+    ('constraint = "over_budget_steps"', ("wall time",)),
+    ('constraint = "energy_J"', ("also an objective",)),
+    ('constraint = "min_range_m"', ("lower-is-better", "'min_range_m'")),
+])  # fmt: skip
+def test_range_file_metrics_that_cannot_be_searched_are_refused_before_any_run(
+        tmp_path, capsys, extra, needles):  # fmt: skip
+    """Before the fix the first two ran a batch (the per-AUV one then raised a KeyError
+    traceback), the third and fourth ran to the end with wrong or machine-dependent figures."""
+    out = tmp_path / "o"
+    _refused(capsys, _tune(_ranges(tmp_path, extra), out), str(tmp_path / "ranges.toml"),
+             *needles)  # fmt: skip
+    assert not (out / "train").exists(), "refused before any run"
+
+
+def test_a_budget_that_is_not_a_multiple_of_the_batch_is_refused(tmp_path, capsys):
+    """3 trials in batches of 2, then extended to 6, asked another trial 4 than 6 at once."""
+    _refused(capsys, _tune(_ranges(tmp_path, trials=3), tmp_path / "a"), "trials = 3",
+             "multiple of batch = 2", "use 2 or 4")  # fmt: skip
+    _refused(capsys, _tune(_ranges(tmp_path, trials=4), tmp_path / "b", "--trials", "5"),
+             "--trials = 5", "use 4 or 6")  # fmt: skip
+    assert not (tmp_path / "a").exists() and not (tmp_path / "b").exists()
+
+
+def test_a_budget_below_the_finished_trials_is_refused(searched, tmp_path, capsys):
+    """Before: exit 0 and a report saying 'budget: N trials' over more trials than N."""
+    import shutil
+
+    _, ranges, out = searched
+    copy = tmp_path / "copy"
+    shutil.copytree(out, copy)
+    # a 4-trial budget extends (resumable) ...
+    report_before = (copy / "report.md").read_text()
+    assert "**budget: 2 trials**" in report_before
+    # ... but one below the study's 2 trials cannot be honoured
+    big = _ranges(tmp_path, trials=4, batch=2, name="r4.toml")
+    assert _tune(big, copy, "--no-heldout") == 0
+    _refused(capsys, _tune(ranges, copy), "holds 4 trials already", "give at least 4")
+
+
+def test_resuming_with_other_heldout_seeds_is_refused(searched, tmp_path, capsys):
+    import shutil
+
+    _, _, out = searched
+    copy = tmp_path / "copy"
+    shutil.copytree(out, copy)
+    parts = sorted((copy / "heldout" / "parts").glob("*.parquet"))
+    other = _ranges(tmp_path, heldout="[8]", name="other.toml")
+    _refused(capsys, _tune(other, copy), "heldout_seeds [7]", "says [8]")
+    assert sorted((copy / "heldout" / "parts").glob("*.parquet")) == parts, "nothing ran"
+    # the same seeds still resume (nothing to do) and write the outputs
+    assert _tune(_ranges(tmp_path, name="same.toml"), copy) == 0
+    assert json.loads((copy / "tune.json").read_text())["heldout"]["seeds"] == [7]
+
+
+def test_tune_and_compare_refuse_each_others_output_folder(searched, tmp_path, capsys):
+    """Before: each replaced the other's report.md (and mixed their files)."""
+    tmp, ranges, out = searched
+    report = (out / "report.md").read_text()
+    suite = tmp_path / "s.toml"
+    suite.write_text(SUITE.replace("tn7-train", "tn7-s"))
+    _refused(capsys, main(["compare", str(suite), "--out", str(out), "--workers", "1",
+                           "--quiet"]), "'mpcasv tune controller'", "study.db")  # fmt: skip
+    assert (out / "report.md").read_text() == report
+    cmp_out = tmp_path / "cmp"
+    cmp_out.mkdir()
+    (cmp_out / "sweep.json").write_text("{}\n")
+    (cmp_out / "report.md").write_text("a comparison\n")
+    _refused(capsys, _tune(ranges, cmp_out), "'mpcasv compare'", "sweep.json")
+    other = tmp_path / "other"
+    other.mkdir()
+    (other / "notes.txt").write_text("mine\n")
+    _refused(capsys, _tune(ranges, other), "no study.db")
+    assert (cmp_out / "report.md").read_text() == "a comparison\n"
+    assert not (cmp_out / "study.db").exists() and not (other / "study.db").exists()
+
+
+def test_tune_compare_checks_its_baseline_and_names_an_empty_front(searched, tmp_path,
+                                                                    capsys):  # fmt: skip
+    _, _, out = searched
+    png = tmp_path / "f.png"
+    _refused(capsys, main(["tune", "compare", str(out), str(out), "--baseline",
+                           str(tmp_path / "none.parquet")]), "--baseline")  # fmt: skip
+    _refused(capsys, main(["tune", "compare", str(out), str(out), "--plot", str(png),
+                           "--baseline", str(tmp_path / "none.parquet")]),
+             "no such file")  # fmt: skip
+    _refused(capsys, main(["tune", "compare", str(out), str(out), "--plot", str(png),
+                           "--baseline", str(out / "trials.csv")]), "not a parquet")  # fmt: skip
+    assert not png.exists()
+    # a search without a feasible trial (propeller_on_s = 0 is impossible for a moving boat)
+    empty = tmp_path / "empty"
+    assert _tune(_ranges(tmp_path, 'constraint = "propeller_on_s"', name="e.toml"), empty) == 0
+    assert len(pd.read_csv(empty / "front.csv")) == 0
+    _refused(capsys, main(["tune", "compare", str(out), str(empty)]), "front is empty",
+             "no feasible trial")  # fmt: skip
+
+
+def test_a_suite_front_level_outside_the_range_prints_bounds_that_can_be_typed(
+        searched, tmp_path, capsys):  # fmt: skip
+    """The bounds were rounded to 6 digits: the printed bound, typed back, was refused."""
+    _, _, out = searched
+    front = pd.read_csv(out / "front.csv")
+    cand = front[front["heldout_front"].astype(bool)]["heldout.energy_J"]
+    low, high = float(cand.min()), float(cand.max())
+    suite = tmp_path / "m.toml"
+
+    def write(level: float) -> None:
+        suite.write_text(
+            'name = "tn7-m"\nscenarios = ["case3"]\nduration = 30.0\nseeds = [200]\n'
+            'plots = "none"\n[[controllers]]\nlabel = "t"\nname = "hybrid-single"\n'
+            f'front = "{out}"\nat = "energy_J"\nlevel = {level!r}\n'
+        )  # fmt: skip
+
+    write(high + 1000.0)
+    err = _refused(capsys, main(["compare", str(suite), "--out", str(tmp_path / "c"),
+                                 "--workers", "1", "--quiet"]), "is outside")  # fmt: skip
+    shown = err.split("range [")[1].split("]")[0].split(", ")
+    assert [float(v) for v in shown] == [low, high], err
+    write(float(shown[1]))  # the printed upper bound is accepted as a level
+    assert main(["compare", str(suite), "--out", str(tmp_path / "c"), "--workers", "1",
+                 "--quiet", "--no-report"]) == 0  # fmt: skip
