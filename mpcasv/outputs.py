@@ -120,10 +120,11 @@ def _probe(folder: Path, option: str, shown: Path | None = None) -> None:
 
 
 #: files at the top of an output folder naming the command that wrote it
+#: (``study.db`` is checked by its study name: ``mpcasv falsify`` writes one too)
 OUTPUT_MARKERS: dict[str, str] = {
-    "study.db": "mpcasv tune controller", "tune.json": "mpcasv tune controller",
-    "sweep.json": "mpcasv compare", "suite.toml": "mpcasv compare",
-    "run.json": "mpcasv simulate",
+    "tune.json": "mpcasv tune controller", "sweep.json": "mpcasv compare",
+    "suite.toml": "mpcasv compare", "run.json": "mpcasv simulate",
+    "summary.json": "mpcasv falsify", "trials.md": "mpcasv falsify",
 }  # fmt: skip
 
 

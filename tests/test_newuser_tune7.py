@@ -145,7 +145,7 @@ def test_tune_and_compare_refuse_each_others_output_folder(searched, tmp_path, c
     suite = tmp_path / "s.toml"
     suite.write_text(SUITE.replace("tn7-train", "tn7-s"))
     _refused(capsys, main(["compare", str(suite), "--out", str(out), "--workers", "1",
-                           "--quiet"]), "'mpcasv tune controller'", "study.db")  # fmt: skip
+                           "--quiet"]), "'mpcasv tune controller'", "tune.json")  # fmt: skip
     assert (out / "report.md").read_text() == report
     cmp_out = tmp_path / "cmp"
     cmp_out.mkdir()
@@ -158,6 +158,16 @@ def test_tune_and_compare_refuse_each_others_output_folder(searched, tmp_path, c
     _refused(capsys, _tune(ranges, other), "no study.db")
     assert (cmp_out / "report.md").read_text() == "a comparison\n"
     assert not (cmp_out / "study.db").exists() and not (other / "study.db").exists()
+    # a killed `mpcasv falsify` leaves only its study.db: another Optuna study, not mixed in
+    import optuna
+
+    falsify = tmp_path / "falsify"
+    falsify.mkdir()
+    optuna.create_study(study_name="falsify-x", storage=f"sqlite:///{falsify / 'study.db'}")
+    _refused(capsys, _tune(ranges, falsify), "falsify-x", "not a search of")
+    assert optuna.study.get_all_study_names(f"sqlite:///{falsify / 'study.db'}") == ["falsify-x"]
+    _refused(capsys, main(["compare", str(suite), "--out", str(falsify), "--workers", "1",
+                           "--quiet"]), "Optuna study (study.db)")  # fmt: skip
 
 
 def test_tune_compare_checks_its_baseline_and_names_an_empty_front(searched, tmp_path,

@@ -172,6 +172,11 @@ def open_study(spec: TuneSpec, out: Path, train: list[Job]):
 
     optuna.logging.set_verbosity(optuna.logging.WARNING)
     storage = f"sqlite:///{out / 'study.db'}"
+    if (out / "study.db").exists():  # e.g. mpcasv falsify's: another study in the same file
+        names = optuna.study.get_all_study_names(storage)
+        if names and STUDY_NAME not in names:
+            raise ConfigError(f"{out / 'study.db'}: holds the Optuna studies {names}, not a "
+                              "search of 'mpcasv tune controller'; use another --out")  # fmt: skip
     study = optuna.create_study(study_name=STUDY_NAME, storage=storage, load_if_exists=True,
                                 directions=directions(spec),
                                 sampler=make_sampler(spec, 0))  # fmt: skip
