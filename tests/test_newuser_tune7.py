@@ -214,3 +214,60 @@ def test_a_suite_front_level_outside_the_range_prints_bounds_that_can_be_typed(
     write(float(shown[1]))  # the printed upper bound is accepted as a level
     assert main(["compare", str(suite), "--out", str(tmp_path / "c"), "--workers", "1",
                  "--quiet", "--no-report"]) == 0  # fmt: skip
+
+
+def test_tune_compare_refuses_searches_with_no_objective_but_the_matched_one(searched, tmp_path,
+                                                                            capsys):  # fmt: skip
+    """A one-objective search (energy_J) against another: it printed "nothing to pair: the
+    reference has no point on its held-out front ...", exit 0, though both fronts had one."""
+    _, _, out = searched
+    one = tmp_path / "one"
+    assert _tune(_ranges(tmp_path, 'objectives = ["energy_J"]', name="one.toml"), one) == 0
+    assert pd.read_csv(one / "front.csv")["heldout_front"].any()
+    _refused(capsys, main(["tune", "compare", str(one), str(out), "--at", "energy_J"]),
+             "no objective but --at 'energy_J'")  # fmt: skip
+
+
+def _boxes_overlap(ax, renderer) -> list:
+    boxes = [t.get_window_extent(renderer) for t in ax.get_xticklabels() if t.get_text()]
+    return [(a, b) for a, b in zip(boxes, boxes[1:], strict=False) if a.x1 > b.x0]
+
+
+def test_front_png_one_objective_against_the_trial_and_x_labels_apart():
+    """front.png of a one-objective search drew the objective against itself (a diagonal);
+    with nav_error_rms_m values 0.0072099-0.0073723 (a Case 3 search) the x tick labels
+    ran into each other ("0.007200.00724...")."""
+    from types import SimpleNamespace
+
+    import matplotlib.pyplot as plt
+
+    from mpcasv.experiments.tune_outputs import front_figure
+
+    a, b, c = "reliable_fix_age_p95_s", "nav_error_rms_m", "energy_J"
+    trials = pd.DataFrame({"trial": [0, 1, 2, 3], "state": ["COMPLETE"] * 4,
+                           a: [142.5] * 4, b: [0.0072099, 0.0072099, 0.0072099, 0.0072099],
+                           c: [19604.0, 11633.6, 19392.9, 19603.9],
+                           "collision_domain_s": [0.0] * 4})  # fmt: skip
+    front = pd.DataFrame({"trial": [1], f"train.{a}": [142.5], f"train.{b}": [0.0072099],
+                          f"train.{c}": [11633.6], f"heldout.{a}": [142.5],
+                          f"heldout.{b}": [0.0073723], f"heldout.{c}": [20689.6]})  # fmt: skip
+    spec = SimpleNamespace(controller="hybrid-single", objectives=[a, b, c],
+                           constraint="collision_domain_s")  # fmt: skip
+    fig = front_figure(spec, trials, front)
+    try:
+        fig.canvas.draw()
+        renderer = fig.canvas.get_renderer()
+        for ax in fig.axes:
+            assert not _boxes_overlap(ax, renderer), ax.get_xlabel()
+    finally:
+        plt.close(fig)
+    spec1 = SimpleNamespace(controller="hybrid-single", objectives=[c],
+                            constraint="collision_domain_s")  # fmt: skip
+    fig = front_figure(spec1, trials, front[["trial", f"train.{c}", f"heldout.{c}"]])
+    try:
+        (ax,) = fig.axes
+        assert ax.get_xlabel() == "trial" and ax.get_ylabel().startswith("energy_J")
+        xs = sorted(x for coll in ax.collections for x, _ in coll.get_offsets())
+        assert xs == [0, 1, 1, 1, 2, 3], xs  # 4 trials + the front point, training and held-out
+    finally:
+        plt.close(fig)

@@ -73,6 +73,10 @@ def matched_comparison(ref_dir: str | Path, other_dir: str | Path, at: str = "en
             "pairing needs the same scenarios, conditions and seeds"
         )
     objectives = [m for m in sa["objectives"] if m in sb["objectives"] and m != at]
+    if not objectives:  # it printed "nothing to pair: the reference has no point ..."
+        raise ConfigError(f"{ref_dir} and {other_dir}: no objective but --at {at!r} in both "
+                          f"searches ({sa['objectives']}, {sb['objectives']}): nothing to "
+                          "compare at matched levels")  # fmt: skip
     ca, cb = sa["controller"], sb["controller"]
     fb_ok = fb[fb["heldout_error"].isna() | (fb["heldout_error"] == "")]
     if sb.get("constraint"):  # only points that stayed feasible on the held-out runs

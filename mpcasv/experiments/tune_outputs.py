@@ -185,12 +185,15 @@ def front_figure(spec: TuneSpec, trials: pd.DataFrame, front: pd.DataFrame):
     import itertools
 
     import matplotlib.pyplot as plt
+    from matplotlib.ticker import MaxNLocator
 
     from mpcasv.experiments.metrics import METRIC_INFO
 
-    pairs = list(itertools.combinations(spec.objectives, 2)) or [(spec.objectives[0],) * 2]
+    # one objective: against the trial number (it was drawn against itself, a diagonal)
+    pairs = list(itertools.combinations(spec.objectives, 2)) or [("trial", spec.objectives[0])]
     fig, axes = plt.subplots(1, len(pairs), figsize=(5.2 * len(pairs), 4.4), squeeze=False)
     done = trials[trials["state"] == "COMPLETE"]
+    front = front.assign(**{"train.trial": front["trial"], "heldout.trial": front["trial"]})
     feas = (done[spec.constraint] <= 0) if spec.constraint else np.ones(len(done), bool)
     for ax, (a, b) in zip(axes[0], pairs, strict=True):
         ax.scatter(done.loc[feas, a], done.loc[feas, b], s=14, c="0.6", label="trial (feasible)")
@@ -208,8 +211,11 @@ def front_figure(spec: TuneSpec, trials: pd.DataFrame, front: pd.DataFrame):
             for _, r in front.iterrows():
                 ax.annotate(str(int(r["trial"])), (r[f"train.{a}"], r[f"train.{b}"]),
                             fontsize=7, xytext=(3, 3), textcoords="offset points")  # fmt: skip
-        ax.set_xlabel(f"{a} ({METRIC_INFO[a].unit}, {METRIC_INFO[a].better} is better)")
+        ax.set_xlabel("trial" if a == "trial" else
+                      f"{a} ({METRIC_INFO[a].unit}, {METRIC_INFO[a].better} is better)")
         ax.set_ylabel(f"{b} ({METRIC_INFO[b].unit}, {METRIC_INFO[b].better} is better)")
+        # at most 5 x ticks: 7-digit labels (0.00722, 0.00724, ...) ran into each other
+        ax.xaxis.set_major_locator(MaxNLocator(nbins=5, integer=a == "trial"))
         ax.grid(alpha=0.3)
     axes[0][0].legend(fontsize=7)
     # two lines: on one panel (two objectives, 5.2 in wide) one line was cut at both edges
