@@ -271,3 +271,25 @@ def test_front_png_one_objective_against_the_trial_and_x_labels_apart():
         assert xs == [0, 1, 1, 1, 2, 3], xs  # 4 trials + the front point, training and held-out
     finally:
         plt.close(fig)
+
+
+def test_a_run_without_the_constraint_metric_fails_its_trial(tmp_path):
+    """experiments/scenarios/demo.toml has no collision domain: collision_domain_s is NaN in
+    every run. The summed constraint skipped the NaNs (0.0) and every trial was "feasible"."""
+    (tmp_path / "train.toml").write_text(
+        'name = "tn7-demo"\nscenarios = ["demo"]\nduration = 60.0\nseeds = [0, 1]\n'
+        'plots = "none"\n[[controllers]]\nlabel = "hybrid"\nsingle = "hybrid-single"\n'
+        'preset = "default"\n'
+    )  # fmt: skip
+    ranges = tmp_path / "demo.toml"
+    ranges.write_text('controller = "hybrid-single"\nsuite = "train.toml"\nheldout_seeds = [7]\n'
+                      'objectives = ["energy_J", "nav_error_rms_m"]\ntrials = 2\nbatch = 2\n'
+                      '[params]\n"speed" = { low = 1.0, high = 2.5 }\n')  # fmt: skip
+    out = tmp_path / "out"
+    assert _tune(ranges, out) == 0
+    parts = pd.concat(pd.read_parquet(p) for p in (out / "train" / "parts").glob("*.parquet"))
+    assert len(parts) == 4 and parts["collision_domain_s"].isna().all()
+    trials = pd.read_csv(out / "trials.csv")
+    assert list(trials["state"]) == ["FAIL", "FAIL"], trials
+    assert trials["error"].str.contains("constraint collision_domain_s is missing").all()
+    assert len(pd.read_csv(out / "front.csv")) == 0

@@ -240,8 +240,13 @@ def aggregate(spec: TuneSpec, rows) -> tuple[list[float] | None, float, str | No
         if col.isna().any():
             return None, float("nan"), f"metric {m} is missing (NaN) in a run"
         values.append(float(col.mean()))
-    c = float(rows[spec.constraint].astype(float).sum()) if spec.constraint else 0.0
-    return values, c, None
+    if not spec.constraint:
+        return values, 0.0, None
+    col = rows[spec.constraint].astype(float)
+    if col.isna().any():  # a sum skips NaN: a run without the measure counted as feasible
+        return None, float("nan"), (f"constraint {spec.constraint} is missing (NaN) in a run "
+                                    "(a scenario without that domain?)")  # fmt: skip
+    return values, float(col.sum()), None
 
 
 def _ask_batch(study, spec: TuneSpec) -> list:
