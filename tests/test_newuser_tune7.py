@@ -293,3 +293,13 @@ def test_a_run_without_the_constraint_metric_fails_its_trial(tmp_path):
     assert list(trials["state"]) == ["FAIL", "FAIL"], trials
     assert trials["error"].str.contains("constraint collision_domain_s is missing").all()
     assert len(pd.read_csv(out / "front.csv")) == 0
+
+
+def test_importance_csv_keeps_its_header_when_too_few_trials_are_complete(searched):
+    """2 complete trials (< 4): importance.csv was the one line '""' (pandas: 'Unnamed: 0')."""
+    _, _, out = searched
+    imp = pd.read_csv(out / "importance.csv")
+    assert len(imp) == 0
+    assert list(imp.columns) == ["parameter", "reliable_fix_age_p95_s", "nav_error_rms_m",
+                                 "energy_J", "front"]  # fmt: skip
+    assert "(too few complete trials: fewer than 4)" in (out / "report.md").read_text()

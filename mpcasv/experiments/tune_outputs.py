@@ -155,8 +155,9 @@ def importances(spec: TuneSpec, study) -> pd.DataFrame:
     from mpcasv.experiments.tune_controller import directions
 
     done = study.get_trials(deepcopy=False, states=(TrialState.COMPLETE,))
-    if len(done) < 4:
-        return pd.DataFrame()
+    if len(done) < 4:  # the columns all the same: importance.csv keeps its header (it was '""')
+        return pd.DataFrame(columns=[*spec.objectives, "front"],
+                            index=pd.Index([], name="parameter"))  # fmt: skip
     evaluator = PedAnovaImportanceEvaluator(target_quantile=TARGET_QUANTILE)
     signs = [1.0 if d == "minimize" else -1.0 for d in directions(spec)]
     targets = {m: (lambda t, i=i: signs[i] * t.values[i]) for i, m in enumerate(spec.objectives)}
@@ -323,6 +324,7 @@ def _report(spec: TuneSpec, s: dict, front: pd.DataFrame, imp: pd.DataFrame) -> 
         f"Optuna's PED-ANOVA importance (top {TARGET_QUANTILE:.0%} of the complete trials "
         "against all of them), per objective and for reaching the Pareto front (`front`), "
         "normalised per column. With a small budget these are rough indications.", "",
-        _md(imp.reset_index(), ".2f") if len(imp) else "(too few complete trials)", "",
+        _md(imp.reset_index(), ".2f") if len(imp) else "(too few complete trials: fewer than 4)",
+        "",
     ]  # fmt: skip
     return "\n".join(lines)
