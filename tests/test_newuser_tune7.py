@@ -303,3 +303,17 @@ def test_importance_csv_keeps_its_header_when_too_few_trials_are_complete(search
     assert list(imp.columns) == ["parameter", "reliable_fix_age_p95_s", "nav_error_rms_m",
                                  "energy_J", "front"]  # fmt: skip
     assert "(too few complete trials: fewer than 4)" in (out / "report.md").read_text()
+
+
+def test_tune_compare_of_two_searches_of_one_controller_names_the_folders(searched, tmp_path):
+    """Both sides were "hybrid-single" (and a verdict "hybrid-single better" named neither)."""
+    import shutil
+
+    from mpcasv.experiments.tune_compare import matched_comparison
+
+    _, _, out = searched
+    copy = tmp_path / "again"
+    shutil.copytree(out, copy)
+    df = matched_comparison(out, copy)
+    assert len(df) and set(df["ref"]) == {"hybrid-single (out)"}
+    assert set(df["other"]) == {"hybrid-single (again)"}

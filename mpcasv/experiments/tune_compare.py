@@ -78,6 +78,10 @@ def matched_comparison(ref_dir: str | Path, other_dir: str | Path, at: str = "en
                           f"searches ({sa['objectives']}, {sb['objectives']}): nothing to "
                           "compare at matched levels")  # fmt: skip
     ca, cb = sa["controller"], sb["controller"]
+    if ca == cb:  # two searches of one controller: "hybrid-single better" named neither
+        ca, cb = f"{ca} ({Path(ref_dir).name})", f"{cb} ({Path(other_dir).name})"
+        if ca == cb:
+            ca, cb = f"{ca} [ref]", f"{cb} [other]"
     fb_ok = fb[fb["heldout_error"].isna() | (fb["heldout_error"] == "")]
     if sb.get("constraint"):  # only points that stayed feasible on the held-out runs
         fb_ok = fb_ok[fb_ok[f"heldout.{sb['constraint']}"] <= 0]
