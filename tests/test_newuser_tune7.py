@@ -317,3 +317,23 @@ def test_tune_compare_of_two_searches_of_one_controller_names_the_folders(search
     df = matched_comparison(out, copy)
     assert len(df) and set(df["ref"]) == {"hybrid-single (out)"}
     assert set(df["other"]) == {"hybrid-single (again)"}
+
+
+def test_a_suite_asking_for_heldout_means_of_a_front_without_them_is_refused(tmp_path, capsys):
+    """front_means = "heldout" on a search run with --no-heldout silently matched on the
+    training means (the default, no front_means, still does, and says so)."""
+    out = tmp_path / "nohold"
+    assert _tune(_ranges(tmp_path), out, "--no-heldout") == 0
+    level = float(pd.read_csv(out / "front.csv")["train.energy_J"].iloc[0])
+    suite = tmp_path / "m.toml"
+    body = ('name = "tn7-h"\nscenarios = ["case3"]\nduration = 30.0\nseeds = [200]\n'
+            'plots = "none"\n[[controllers]]\nlabel = "t"\nname = "hybrid-single"\n'
+            f'front = "{out}"\nat = "energy_J"\nlevel = {level!r}\n')  # fmt: skip
+    suite.write_text(body + 'front_means = "heldout"\n')
+    _refused(capsys, main(["compare", str(suite), "--out", str(tmp_path / "c"), "--workers",
+                           "1", "--quiet", "--no-report"]),
+             "front_means = 'heldout'", "no held-out means")  # fmt: skip
+    suite.write_text(body)
+    assert main(["compare", str(suite), "--out", str(tmp_path / "c"), "--workers", "1",
+                 "--quiet", "--no-report"]) == 0  # fmt: skip
+    assert "training mean" in capsys.readouterr().out
