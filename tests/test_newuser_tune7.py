@@ -337,3 +337,16 @@ def test_a_suite_asking_for_heldout_means_of_a_front_without_them_is_refused(tmp
     assert main(["compare", str(suite), "--out", str(tmp_path / "c"), "--workers", "1",
                  "--quiet", "--no-report"]) == 0  # fmt: skip
     assert "training mean" in capsys.readouterr().out
+
+
+def test_resuming_with_another_search_says_what_differs(searched, tmp_path, capsys):
+    """It said "other ['train_jobs']" / "other ['seed']": now the values or what the name
+    covers (a changed suite duration is a change of the training jobs)."""
+    tmp, _, out = searched
+    seed = tmp / "seed.toml"
+    seed.write_text((tmp / "ranges.toml").read_text().replace("seed = 1", "seed = 2"))
+    _refused(capsys, _tune(seed, out), "seed 1 -> 2", "use another --out")
+    (tmp_path / "train.toml").write_text(SUITE.replace("duration = 120.0", "duration = 110.0"))
+    longer = tmp_path / "r.toml"
+    longer.write_text((tmp / "ranges.toml").read_text())
+    _refused(capsys, _tune(longer, out), "training jobs (the suite's scenarios, seeds, duration")

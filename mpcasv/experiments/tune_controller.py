@@ -186,7 +186,11 @@ def open_study(spec: TuneSpec, out: Path, train: list[Job]):
         study.set_user_attr("spec", fp)
     elif old != fp:
         changed = sorted(k for k in fp if fp[k] != old.get(k))
-        raise ConfigError(f"{out / 'study.db'}: holds a search with other {changed} than "
+        said = {"train_jobs": "training jobs (the suite's scenarios, seeds, duration, or the "
+                              "entry's preset or overrides)",
+                "params": "params (the searched fields or their ranges)"}  # fmt: skip
+        what = "; ".join(said.get(k, f"{k} {old.get(k)!r} -> {fp[k]!r}") for k in changed)
+        raise ConfigError(f"{out / 'study.db'}: holds a search with other {what} than "
                           f"{spec.path}; use another --out")  # fmt: skip
     n = len(study.get_trials(deepcopy=False))
     if n > spec.trials:  # a smaller budget cannot be honoured: the trials are there
