@@ -350,3 +350,23 @@ def test_resuming_with_another_search_says_what_differs(searched, tmp_path, caps
     longer = tmp_path / "r.toml"
     longer.write_text((tmp / "ranges.toml").read_text())
     _refused(capsys, _tune(longer, out), "training jobs (the suite's scenarios, seeds, duration")
+
+
+@pytest.mark.parametrize("controller, field, ok", [
+    ("hybrid-single", "avoidance.r_keep", True),  # float | None: None = off
+    ("mpc-single", "fix.T_quiet", True),
+    ("mpc-single", "vessel", False),  # str | None: not a number
+])  # fmt: skip
+def test_an_optional_number_field_can_be_searched(tmp_path, controller, field, ok):
+    """"avoidance.r_keep" was refused: "the preset field is not a number (Optional)"."""
+    from mpcasv.config import ConfigError
+    from mpcasv.experiments.tune_space import load_spec
+
+    path = tmp_path / "r.toml"
+    path.write_text(f'controller = "{controller}"\nsuite = "train.toml"\nheldout_seeds = [7]\n'
+                    f'trials = 2\nbatch = 2\n[params]\n"{field}" = {{ low = 20.0, high = 80.0 }}\n')
+    if ok:
+        assert [p.name for p in load_spec(path).params] == [field]
+    else:
+        with pytest.raises(ConfigError, match="not a number \\(str\\)"):
+            load_spec(path)

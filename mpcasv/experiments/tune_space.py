@@ -176,6 +176,9 @@ def _field_type(cls: type, dotted: str):
         if part not in hints:
             return None
         cls = hints[part]
+    args = typing.get_args(cls)  # Optional[float] (None: off): a number when searched
+    if type(None) in args and len(args) == 2:
+        cls = next(a for a in args if a is not type(None))
     return cls
 
 
