@@ -370,3 +370,24 @@ def test_an_optional_number_field_can_be_searched(tmp_path, controller, field, o
     else:
         with pytest.raises(ConfigError, match="not a number \\(str\\)"):
             load_spec(path)
+
+
+def test_presets_of_trials_no_longer_on_the_front_are_removed(searched, tmp_path):
+    """Extending a search can push a point off the front (a 2-trial search of Case 3, seed 1:
+    front {0}; extended to 6: front {5}); its presets/trial-0000.toml stayed, still saying
+    "trial 0 of the training front"."""
+    import shutil
+
+    tmp, ranges, out = searched
+    copy = tmp_path / "copy"
+    shutil.copytree(out, copy)
+    front = set(pd.read_csv(copy / "front.csv")["trial"])
+    kept = {p.name for p in (copy / "presets").glob("*.toml")}
+    assert kept == {f"trial-{n:04d}.toml" for n in front}
+    stale = copy / "presets" / "trial-0099.toml"
+    stale.write_text((copy / "presets" / sorted(kept)[0]).read_text())
+    mine = copy / "presets" / "trial-0098.toml"
+    mine.write_text('controller = "hybrid-single"\n')
+    assert _tune(ranges, copy) == 0  # nothing to run: the outputs are rewritten
+    assert not stale.exists() and mine.exists()
+    assert {p.name for p in (copy / "presets").glob("*.toml")} == kept | {mine.name}
