@@ -391,3 +391,22 @@ def test_presets_of_trials_no_longer_on_the_front_are_removed(searched, tmp_path
     assert _tune(ranges, copy) == 0  # nothing to run: the outputs are rewritten
     assert not stale.exists() and mine.exists()
     assert {p.name for p in (copy / "presets").glob("*.toml")} == kept | {mine.name}
+
+
+def test_a_second_search_on_a_busy_folder_is_refused(searched, tmp_path, capsys):
+    """Two `mpcasv tune controller` on one --out (started twice by mistake) both ran the same
+    trials; the second ended on a traceback "ValueError: Cannot tell a COMPLETE trial"."""
+    import shutil
+
+    from mpcasv.outputs import folder_lock
+
+    _, ranges, out = searched
+    copy = tmp_path / "copy"
+    shutil.copytree(out, copy)
+    bigger = _ranges(tmp_path, trials=4, name="r4.toml")
+    with folder_lock(copy, "mpcasv tune controller", "tune.lock"):  # the first command
+        _refused(capsys, _tune(bigger, copy, "--no-heldout"), "another 'mpcasv tune "
+                 "controller' is working in this folder", "(pid ")  # fmt: skip
+    assert len(pd.read_csv(copy / "trials.csv")) == 2, "nothing ran"
+    assert _tune(bigger, copy, "--no-heldout") == 0  # free again
+    assert len(pd.read_csv(copy / "trials.csv")) == 4
