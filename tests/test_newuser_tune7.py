@@ -410,3 +410,15 @@ def test_a_second_search_on_a_busy_folder_is_refused(searched, tmp_path, capsys)
     assert len(pd.read_csv(copy / "trials.csv")) == 2, "nothing ran"
     assert _tune(bigger, copy, "--no-heldout") == 0  # free again
     assert len(pd.read_csv(copy / "trials.csv")) == 4
+
+
+def test_simulating_a_tuned_preset_of_another_controller_says_how(searched, tmp_path, capsys):
+    """`mpcasv simulate case3.toml --params presets/trial-N.toml` of an mpc-single search
+    (Case 3's controller is hybrid-single) only said "choose a preset of 'hybrid-single'";
+    here a hybrid-single point's preset given to mpc-single."""
+    _, _, out = searched
+    preset = sorted((out / "presets").glob("*.toml"))[0]
+    case3 = Path(__file__).resolve().parents[1] / "experiments" / "scenarios" / "case3.toml"
+    code = main(["simulate", str(case3), "--controller", "mpc-single", "--params", str(preset),
+                 "--duration", "5", "--out", str(tmp_path / "s"), "--no-plots", "--quiet"])
+    _refused(capsys, code, "not for 'mpc-single'", "simulate: --controller hybrid-single")
