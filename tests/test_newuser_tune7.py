@@ -182,6 +182,20 @@ def test_tune_compare_checks_its_baseline_and_names_an_empty_front(searched, tmp
     _refused(capsys, main(["tune", "compare", str(out), str(out), "--plot", str(png),
                            "--baseline", str(out / "trials.csv")]), "not a parquet")  # fmt: skip
     assert not png.exists()
+    # a baseline on other realisations (an `mpcasv compare` on seeds 200-201 beside fronts
+    # held out on others) was drawn without a word
+    real = json.loads((out / "tune.json").read_text())["heldout"]["realisations"]
+    row = {"variant": "published", "status": "ok", "collision_domain_s": 0.0,
+           "reliable_fix_age_p95_s": 1.0, "nav_error_rms_m": 1.0, "energy_J": 1.0}  # fmt: skip
+    other = tmp_path / "other.parquet"
+    pd.DataFrame([row | {"realisation": "9d4b06b59c"}]).to_parquet(other)
+    _refused(capsys, main(["tune", "compare", str(out), str(out), "--plot", str(png),
+                           "--baseline", str(other)]), "its runs are on realisations")  # fmt: skip
+    assert not png.exists()
+    same = tmp_path / "same.parquet"
+    pd.DataFrame([row | {"realisation": r} for r in real]).to_parquet(same)
+    assert main(["tune", "compare", str(out), str(out), "--plot", str(png), "--baseline",
+                 str(same)]) == 0 and png.exists()  # fmt: skip
     # a search without a feasible trial (propeller_on_s = 0 is impossible for a moving boat)
     empty = tmp_path / "empty"
     assert _tune(_ranges(tmp_path, 'constraint = "propeller_on_s"', name="e.toml"), empty) == 0

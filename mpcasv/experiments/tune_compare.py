@@ -125,7 +125,7 @@ def _read_baseline(results: str | Path) -> pd.DataFrame:
     except Exception as exc:  # pyarrow raises several types for a file that is not parquet
         raise ConfigError(f"--baseline {results}: not a parquet table ("
                           f"{' '.join(str(exc).split())[:120]})") from None  # fmt: skip
-    missing = sorted({"variant", "status", "collision_domain_s"} - set(df.columns))
+    missing = sorted({"variant", "status", "realisation", "collision_domain_s"} - set(df.columns))
     if missing:
         raise ConfigError(f"--baseline {results}: no columns {missing}: not a results.parquet "
                           "of 'mpcasv compare'")  # fmt: skip
@@ -237,6 +237,14 @@ def _run(args) -> int:
                               "--plot FILE too")  # fmt: skip
         summary = _load(Path(args.ref))[0]
         baseline_points(args.baseline, summary["objectives"])
+        # drawn beside the held-out fronts: it must be run on the same realisations
+        got = set(_read_baseline(args.baseline)["realisation"].astype(str))
+        want = set(summary["heldout"]["realisations"])
+        if got != want:
+            raise ConfigError(f"--baseline {args.baseline}: its runs are on realisations "
+                              f"{sorted(got)}, the held-out ones of {args.ref} are "
+                              f"{sorted(want)}: run the baseline on the searches' held-out "
+                              "seeds and scenarios")  # fmt: skip
     df = matched_comparison(args.ref, args.other, args.at, args.tolerance)
     if args.out:
         df.to_csv(args.out, index=False)
