@@ -436,3 +436,22 @@ def test_simulating_a_tuned_preset_of_another_controller_says_how(searched, tmp_
     code = main(["simulate", str(case3), "--controller", "mpc-single", "--params", str(preset),
                  "--duration", "5", "--out", str(tmp_path / "s"), "--no-plots", "--quiet"])
     _refused(capsys, code, "not for 'mpc-single'", "simulate: --controller hybrid-single")
+
+
+def test_tune_compare_finds_the_runs_a_repeated_trial_shares(searched, tmp_path):
+    """NSGA-II repeats points (Case 3 at 150 s, seed 5, 8 trials: trials 4 and 7 the same
+    values); a repeat reuses the runs, stored under the first runner's name (here trial 7's).
+    `tune compare` selected runs by name: matched to trial 4 it had "n 0, no pairs"."""
+    import shutil
+
+    from mpcasv.experiments.tune_compare import matched_comparison
+
+    _, _, out = searched
+    copy = tmp_path / "copy"
+    shutil.copytree(out, copy)
+    for part in (copy / "heldout" / "parts").glob("*.parquet"):  # runs stored by another
+        df = pd.read_parquet(part)  # trial with the same values
+        df["variant"] = "hybrid[trial=99]"
+        df.to_parquet(part)
+    df = matched_comparison(out, copy)
+    assert len(df) and (df["n"] == 1).all(), df[["other_trial", "metric", "n", "note"]]

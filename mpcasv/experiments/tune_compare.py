@@ -44,9 +44,16 @@ def _load(d: Path) -> tuple[dict, pd.DataFrame, pd.DataFrame]:
     return summary, front, rows
 
 
-def _runs(rows: pd.DataFrame, trial: int) -> pd.DataFrame:
-    sel = rows[rows["variant"].str.endswith(f"[trial={trial}]") & (rows["status"] == "ok")]
-    return sel.set_index(list(PAIR_COLUMNS))
+def _runs(rows: pd.DataFrame, trial: int, summary: dict) -> pd.DataFrame:
+    """The ok held-out runs of ``trial``: by the job ids tune.json lists (a trial repeating
+    another's values shares its runs, stored under the other's name: selected by name, it had
+    none and was compared on "no pairs"); by name in a folder written before those ids."""
+    ids = summary["heldout"].get("job_ids", {}).get(str(trial))
+    if ids is not None:
+        sel = rows[rows["job_id"].isin(ids)]
+    else:
+        sel = rows[rows["variant"].str.endswith(f"[trial={trial}]")]
+    return sel[sel["status"] == "ok"].set_index(list(PAIR_COLUMNS))
 
 
 def matched_comparison(ref_dir: str | Path, other_dir: str | Path, at: str = "energy_J",
@@ -99,7 +106,7 @@ def matched_comparison(ref_dir: str | Path, other_dir: str | Path, at: str = "en
         if rel > tolerance:
             out.append(base | {"metric": "", "verdict": f"no match within {tolerance:.0%}"})
             continue
-        a, b = _runs(ra, int(pa["trial"])), _runs(rb, int(pb["trial"]))
+        a, b = _runs(ra, int(pa["trial"]), sa), _runs(rb, int(pb["trial"]), sb)
         both = a.index.intersection(b.index)
         for m in objectives:
             s = paired_stat(a.loc[both, m].to_numpy(float), b.loc[both, m].to_numpy(float))

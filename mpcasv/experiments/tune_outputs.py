@@ -23,7 +23,12 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from mpcasv.experiments.tune_controller import front_trials, heldout_jobs, training_jobs
+from mpcasv.experiments.tune_controller import (
+    front_trials,
+    heldout_jobs,
+    training_jobs,
+    trial_jobs,
+)
 from mpcasv.experiments.tune_space import TuneSpec
 
 
@@ -286,7 +291,12 @@ def write_outputs(spec: TuneSpec, study, heldout: dict, out: str | Path) -> Path
                      "realisations": sorted({j.realisation for j in train})},
         "heldout": {"runs_per_trial": len(held), "seeds": list(spec.heldout_seeds),
                     "realisations": sorted({j.realisation for j in held}),
-                    "front_trials_run": len(heldout)},
+                    "front_trials_run": len(heldout),
+                    # each front trial's held-out runs (mpcasv tune compare): a trial that
+                    # repeats another's values shares its runs, stored under that trial's name
+                    "job_ids": {str(t.number): [j.job_id for j in trial_jobs(held, t.number,
+                                                                             dict(t.params))]
+                                for t in front_trials(study) if t.number in heldout}},
         "runs": {"training": runs["train"], "heldout": runs["heldout"]},
         "wall_s": {"search": float(study.user_attrs.get("wall_s", math.nan)),
                    "heldout": float(study.user_attrs.get("heldout_wall_s", 0.0)),
