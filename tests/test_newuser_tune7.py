@@ -131,8 +131,17 @@ def test_resuming_with_other_heldout_seeds_is_refused(searched, tmp_path, capsys
     shutil.copytree(out, copy)
     parts = sorted((copy / "heldout" / "parts").glob("*.parquet"))
     other = _ranges(tmp_path, heldout="[8]", name="other.toml")
-    _refused(capsys, _tune(other, copy), "heldout_seeds [7]", "says [8]")
+    _refused(capsys, _tune(other, copy), "heldout_seeds [7]", "says [8]", "copy study.db")
     assert sorted((copy / "heldout" / "parts").glob("*.parquet")) == parts, "nothing ran"
+    # the way the message gives: the search's trials and runs, evaluated on seed 8
+    fresh = tmp_path / "fresh"
+    fresh.mkdir()
+    shutil.copy(copy / "study.db", fresh / "study.db")
+    shutil.copytree(copy / "train", fresh / "train")
+    assert _tune(other, fresh) == 0
+    assert json.loads((fresh / "tune.json").read_text())["heldout"]["seeds"] == [8]
+    assert len(list((fresh / "train" / "parts").glob("*.parquet"))) == len(
+        list((copy / "train" / "parts").glob("*.parquet"))), "no training run was redone"
     # the same seeds still resume (nothing to do) and write the outputs
     assert _tune(_ranges(tmp_path, name="same.toml"), copy) == 0
     assert json.loads((copy / "tune.json").read_text())["heldout"]["seeds"] == [7]

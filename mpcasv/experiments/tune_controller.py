@@ -196,11 +196,13 @@ def open_study(spec: TuneSpec, out: Path, train: list[Job]):
     if n > spec.trials:  # a smaller budget cannot be honoured: the trials are there
         raise ConfigError(f"{out / 'study.db'}: holds {n} trials already, more than the budget "
                           f"{spec.trials} (trials or --trials); give at least {n}")  # fmt: skip
-    held = study.user_attrs.get("heldout_seeds")  # recorded by the first held-out runs
+    seeds = out / "heldout" / "seeds.json"  # written by the first held-out runs
+    held = json.loads(seeds.read_text()) if seeds.exists() else None
     if held is not None and held != list(spec.heldout_seeds):
-        raise ConfigError(f"{out / 'study.db'}: its held-out runs used heldout_seeds {held}, "
-                          f"{spec.path} says {list(spec.heldout_seeds)}: the front's held-out "
-                          "values would mix both; use another --out")  # fmt: skip
+        raise ConfigError(f"{out / 'heldout'}: its runs used heldout_seeds {held}, {spec.path} "
+                          f"says {list(spec.heldout_seeds)}: the folder would hold both; use "
+                          "another --out (copy study.db and train/ there to keep the search's "
+                          "trials and runs)")  # fmt: skip
     return study
 
 
@@ -347,7 +349,8 @@ def evaluate_heldout(spec: TuneSpec, study, out: str | Path, workers: int = 1,
     jobs = {t.number: trial_jobs(base, t.number, dict(t.params)) for t in front}
     if not jobs:
         return {}
-    study.set_user_attr("heldout_seeds", list(spec.heldout_seeds))  # checked by open_study
+    (out / "heldout").mkdir(parents=True, exist_ok=True)  # checked by open_study
+    (out / "heldout" / "seeds.json").write_text(json.dumps(list(spec.heldout_seeds)) + "\n")
     if not quiet:
         print(f"held-out: {len(front)} front trials x {len(base)} runs (seeds "
               f"{list(spec.heldout_seeds)})")  # fmt: skip
