@@ -14,6 +14,7 @@ nearest existing folder on the way to the output.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import tempfile
 from pathlib import Path
@@ -117,3 +118,83 @@ def _probe(folder: Path, option: str, shown: Path | None = None) -> None:
     except OSError as exc:
         raise ConfigError(f"{option} {shown}: cannot write in {base} "
                           f"({exc.strerror or exc})") from None  # fmt: skip
+
+
+#: files at the top of an output folder naming the command that wrote it
+#: (``study.db`` is checked by its study name: ``mpcasv falsify`` writes one too)
+OUTPUT_MARKERS: dict[str, str] = {
+    "tune.json": "mpcasv tune controller", "sweep.json": "mpcasv compare",
+    "suite.toml": "mpcasv compare", "run.json": "mpcasv simulate",
+    "summary.json": "mpcasv falsify", "trials.md": "mpcasv falsify",
+}  # fmt: skip
+
+
+def check_not_other_output(path: str | os.PathLike, command: str, option: str = "--out",
+                           own: tuple[str, ...] = ()) -> Path:  # fmt: skip
+    """Refuse an existing folder that another command wrote (one of :data:`OUTPUT_MARKERS`),
+    before any work: writing there would replace its report (``report.md``) and mix two
+    commands' files in one folder.
+
+    Parameters
+    ----------
+    path : path
+        The output folder (it may not exist yet).
+    command : str
+        This command, as in :data:`OUTPUT_MARKERS` (e.g. ``"mpcasv compare"``).
+    option : str
+        How the user gave the folder, named in the message.
+    own : tuple of str
+        Files this command writes first: a non-empty folder without any of them is refused
+        too (``("study.db", "tune.lock")`` for ``mpcasv tune controller``).
+
+    Raises
+    ------
+    ConfigError
+        One line naming the option, the folder and the other command (or the missing file).
+    """
+    out = Path(path)
+    if not out.is_dir():
+        return out
+    for name, other in OUTPUT_MARKERS.items():
+        if other != command and (out / name).exists():
+            raise ConfigError(f"{option} {out}: holds the output of '{other}' ({name}); "
+                              f"'{command}' would overwrite its files there: use another "
+                              "folder")  # fmt: skip
+    if own and not any((out / f).exists() for f in own) and any(out.iterdir()):
+        raise ConfigError(f"{option} {out}: not empty and not an output of '{command}' (no "
+                          f"{' or '.join(own)}): use a new or empty folder")  # fmt: skip
+    return out
+
+
+@contextlib.contextmanager
+def folder_lock(out: str | os.PathLike, command: str, name: str):
+    """Hold an exclusive lock (``fcntl.flock``) on ``out/name`` while the block runs: a second
+    ``command`` on the same folder is refused at once instead of redoing the first one's
+    work and failing on its results.
+
+    Raises
+    ------
+    ConfigError
+        Another process holds the lock (its pid is named when it wrote it).
+    """
+    import fcntl
+
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    with open(out / name, "a+") as f:
+        try:
+            fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            f.seek(0)
+            pid = f.read().strip()
+            raise ConfigError(f"{out}: another '{command}' is working in this folder"
+                              f"{f' (pid {pid})' if pid else ''}: wait for it to end, or use "
+                              "another folder") from None  # fmt: skip
+        f.seek(0)
+        f.truncate()
+        f.write(f"{os.getpid()}\n")
+        f.flush()
+        try:
+            yield out
+        finally:
+            fcntl.flock(f, fcntl.LOCK_UN)

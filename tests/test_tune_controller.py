@@ -240,11 +240,12 @@ def test_tpe_sampler_runs_and_is_reproducible(tmp_path):
 
 
 def test_a_search_without_a_feasible_trial_still_writes_readable_outputs(tmp_path):
-    """No trial meets the constraint (here: energy_J = 0, impossible for a boat that moves; on
+    """No trial meets the constraint (here: propeller_on_s = 0, impossible for a boat that
+    moves; energy_J was used until it was refused as a constraint that is also an objective; on
     the acceptance run, hybrid-multi's collision-domain time on full-length Cases 6 and 8):
     front.csv keeps its header (pandas reads it: an empty file raised EmptyDataError), the
     report says so and names the least violation."""
-    ranges = _write(tmp_path, trials=2, batch=2, extra='constraint = "energy_J"')
+    ranges = _write(tmp_path, trials=2, batch=2, extra='constraint = "propeller_on_s"')
     out = tmp_path / "out"
     assert main(["tune", "controller", str(ranges), "--out", str(out), "--workers", "1",
                  "--quiet"]) == 0  # fmt: skip

@@ -181,7 +181,8 @@ def check_preset_controller(name: str, data: Mapping[str, Any], path: str | Path
     if declared is not None and name not in declared:
         raise ConfigError(f"{path}: a preset for {' / '.join(declared)} (its '{CONTROLLER_KEY}' "
                           f"key), not for {name!r}: choose a preset of {name!r} (its default: "
-                          f"{controller_kind(name).default_preset!r})")  # fmt: skip
+                          f"{controller_kind(name).default_preset!r}), or run the preset's "
+                          f"controller (simulate: --controller {declared[0]})")  # fmt: skip
 
 
 def load_preset(

@@ -52,7 +52,7 @@ def run(args: argparse.Namespace) -> int:
     from mpcasv.experiments.report import READ_LINE
     from mpcasv.experiments.runner import JOB_TIMEOUT_S, is_url, run_suite
     from mpcasv.experiments.suite import load_suite
-    from mpcasv.outputs import check_output_folder
+    from mpcasv.outputs import check_not_other_output, check_output_folder
 
     if args.workers < 1:
         raise ConfigError(f"--workers must be >= 1, got {args.workers}")
@@ -61,6 +61,11 @@ def run(args: argparse.Namespace) -> int:
     limit = JOB_TIMEOUT_S if args.job_timeout is None else (args.job_timeout or None)
     suite = load_suite(args.suite)[0]  # a bad suite (or another kind of file): refused now
     out = check_output_folder(args.out or Path("results") / suite.name)
+    check_not_other_output(out, "mpcasv compare")
+    if (out / "study.db").exists():  # an Optuna study: tune controller's or falsify's
+        raise ConfigError(f"--out {out}: holds an Optuna study (study.db) of 'mpcasv tune "
+                          "controller' or 'mpcasv falsify'; 'mpcasv compare' would overwrite "
+                          "files there: use another folder")  # fmt: skip
     if args.runs_dir is not None and not is_url(args.runs_dir) and not args.dask:
         check_output_folder(args.runs_dir, "--runs-dir")  # (with --dask: the workers' paths)
     stats, exp, results = run_suite(args.suite, out, args.workers, args.dask, args.quiet,

@@ -171,6 +171,11 @@ METRIC_INFO: dict[str, MetricInfo] = _BASE | {
     f"{m}_auv": _per_auv(_BASE[m]) for m in _PER_AUV
 }
 
+#: metrics measured in wall time (machine- and load-dependent): a search toward them would
+#: not be reproducible (``mpcasv tune controller`` refuses them as objectives or constraint)
+WALL_CLOCK: tuple[str, ...] = ("controller_step_ms_median", "controller_step_ms_p99",
+                               "over_budget_steps", "solver_hangs")  # fmt: skip
+
 #: the headline metrics of the report, in order
 HEADLINE: tuple[str, ...] = (
     "min_range_m", "collision_domain_s", "reliable_fix_age_p95_s", "reliable_fix_age_max_s",

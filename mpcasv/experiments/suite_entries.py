@@ -93,5 +93,5 @@ def _front_choices(usable, path: Path) -> dict:
 
     return {i: choose_front(e.label, e.front, e.at or "energy_J", e.level, path.parent,
                             f"{path}: controllers[{i}] ({e.label})",
-                            e.front_means or "heldout")
+                            e.front_means)  # None: held-out means when there are some
             for i, e in usable if e.front is not None}  # fmt: skip

@@ -61,16 +61,20 @@ def run_tune_controller(args: argparse.Namespace) -> int:
     from mpcasv.experiments.tune_controller import evaluate_heldout, search
     from mpcasv.experiments.tune_outputs import write_outputs
     from mpcasv.experiments.tune_space import load_spec
-    from mpcasv.outputs import check_output_folder
+    from mpcasv.outputs import check_not_other_output, check_output_folder, folder_lock
 
     if args.workers < 1:
         raise ConfigError(f"--workers {args.workers}: must be >= 1")
     spec = load_spec(args.ranges, args.trials)
     out = check_output_folder((args.out or Path("results") / f"tune-{spec.path.stem}").resolve())
-    study = search(spec, out, args.workers, args.dask, args.quiet)
-    heldout = {} if args.no_heldout else evaluate_heldout(spec, study, out, args.workers,
-                                                          args.dask, args.quiet)  # fmt: skip
-    report = write_outputs(spec, study, heldout, out)
+    check_not_other_output(out, "mpcasv tune controller", own=("study.db", "tune.lock"))
+    # two commands on one folder ran the same trials; the second died on a traceback
+    # ("Cannot tell a COMPLETE trial")
+    with folder_lock(out, "mpcasv tune controller", "tune.lock"):
+        study = search(spec, out, args.workers, args.dask, args.quiet)
+        heldout = {} if args.no_heldout else evaluate_heldout(spec, study, out, args.workers,
+                                                              args.dask, args.quiet)  # fmt: skip
+        report = write_outputs(spec, study, heldout, out)
     if not args.quiet:
         print(f"report: {report}")
     return 0

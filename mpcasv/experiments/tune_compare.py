@@ -35,15 +35,25 @@ def _load(d: Path) -> tuple[dict, pd.DataFrame, pd.DataFrame]:
             raise ConfigError(f"{d}: no {name}: not an output folder of 'mpcasv tune controller'")
     summary = json.loads((d / "tune.json").read_text())
     front = pd.read_csv(d / "front.csv")
+    if not len(front):  # no feasible training trial: nothing was run on held-out seeds
+        raise ConfigError(f"{d}: its training front is empty (no feasible trial: see its "
+                          "report.md): no point to compare")  # fmt: skip
     rows = read_parts(d / "heldout")
     if not len(rows) or "heldout_front" not in front:
         raise ConfigError(f"{d}: no held-out runs (rerun without --no-heldout)")
     return summary, front, rows
 
 
-def _runs(rows: pd.DataFrame, trial: int) -> pd.DataFrame:
-    sel = rows[rows["variant"].str.endswith(f"[trial={trial}]") & (rows["status"] == "ok")]
-    return sel.set_index(list(PAIR_COLUMNS))
+def _runs(rows: pd.DataFrame, trial: int, summary: dict) -> pd.DataFrame:
+    """The ok held-out runs of ``trial``: by the job ids tune.json lists (a trial repeating
+    another's values shares its runs, stored under the other's name: selected by name, it had
+    none and was compared on "no pairs"); by name in a folder written before those ids."""
+    ids = summary["heldout"].get("job_ids", {}).get(str(trial))
+    if ids is not None:
+        sel = rows[rows["job_id"].isin(ids)]
+    else:
+        sel = rows[rows["variant"].str.endswith(f"[trial={trial}]")]
+    return sel[sel["status"] == "ok"].set_index(list(PAIR_COLUMNS))
 
 
 def matched_comparison(ref_dir: str | Path, other_dir: str | Path, at: str = "energy_J",
@@ -70,7 +80,15 @@ def matched_comparison(ref_dir: str | Path, other_dir: str | Path, at: str = "en
             "pairing needs the same scenarios, conditions and seeds"
         )
     objectives = [m for m in sa["objectives"] if m in sb["objectives"] and m != at]
+    if not objectives:  # it printed "nothing to pair: the reference has no point ..."
+        raise ConfigError(f"{ref_dir} and {other_dir}: no objective but --at {at!r} in both "
+                          f"searches ({sa['objectives']}, {sb['objectives']}): nothing to "
+                          "compare at matched levels")  # fmt: skip
     ca, cb = sa["controller"], sb["controller"]
+    if ca == cb:  # two searches of one controller: "hybrid-single better" named neither
+        ca, cb = f"{ca} ({Path(ref_dir).name})", f"{cb} ({Path(other_dir).name})"
+        if ca == cb:
+            ca, cb = f"{ca} [ref]", f"{cb} [other]"
     fb_ok = fb[fb["heldout_error"].isna() | (fb["heldout_error"] == "")]
     if sb.get("constraint"):  # only points that stayed feasible on the held-out runs
         fb_ok = fb_ok[fb_ok[f"heldout.{sb['constraint']}"] <= 0]
@@ -88,7 +106,7 @@ def matched_comparison(ref_dir: str | Path, other_dir: str | Path, at: str = "en
         if rel > tolerance:
             out.append(base | {"metric": "", "verdict": f"no match within {tolerance:.0%}"})
             continue
-        a, b = _runs(ra, int(pa["trial"])), _runs(rb, int(pb["trial"]))
+        a, b = _runs(ra, int(pa["trial"]), sa), _runs(rb, int(pb["trial"]), sb)
         both = a.index.intersection(b.index)
         for m in objectives:
             s = paired_stat(a.loc[both, m].to_numpy(float), b.loc[both, m].to_numpy(float))
@@ -101,10 +119,40 @@ def matched_comparison(ref_dir: str | Path, other_dir: str | Path, at: str = "en
     return pd.DataFrame(out)
 
 
+def _read_baseline(results: str | Path) -> pd.DataFrame:
+    """An ``mpcasv compare`` results table, or a one-line ConfigError naming the file."""
+    path = Path(results)
+    if path.is_dir() and (path / "results.parquet").exists():
+        path = path / "results.parquet"
+    if not path.is_file():
+        raise ConfigError(f"--baseline {results}: no such file (a results.parquet of "
+                          "'mpcasv compare')")  # fmt: skip
+    try:
+        df = pd.read_parquet(path)
+    except Exception as exc:  # pyarrow raises several types for a file that is not parquet
+        raise ConfigError(f"--baseline {results}: not a parquet table ("
+                          f"{' '.join(str(exc).split())[:120]})") from None  # fmt: skip
+    missing = sorted({"variant", "status", "realisation", "collision_domain_s"} - set(df.columns))
+    if missing:
+        raise ConfigError(f"--baseline {results}: no columns {missing}: not a results.parquet "
+                          "of 'mpcasv compare'")  # fmt: skip
+    return df
+
+
 def baseline_points(results: str | Path, objectives: list[str]) -> pd.DataFrame:
     """Mean of each objective per variant of an ``mpcasv compare`` results table (e.g. the
-    published presets on the same held-out realisations), and the summed constraint."""
-    df = pd.read_parquet(results)
+    published presets on the same held-out realisations), and the summed constraint.
+
+    Raises
+    ------
+    ConfigError
+        No such file, not a parquet table, or not an ``mpcasv compare`` results table.
+    """
+    df = _read_baseline(results)
+    missing = [m for m in objectives if m not in df.columns]
+    if missing:
+        raise ConfigError(f"--baseline {results}: no columns {missing}: not a results table "
+                          "with the searches' objectives")  # fmt: skip
     df = df[df["status"] == "ok"]
     agg = df.groupby("variant")[list(objectives)].mean()
     agg["collision_domain_s"] = df.groupby("variant")["collision_domain_s"].sum()
@@ -125,7 +173,11 @@ def plot_fronts(dirs: list[str | Path], path: str | Path,
     from mpcasv.experiments.metrics import METRIC_INFO
 
     loaded = [(_load(Path(d))[:2], Path(d)) for d in dirs]
-    objectives = loaded[0][0][0]["objectives"]
+    objectives = [m for m in loaded[0][0][0]["objectives"]  # those of every search
+                  if all(m in s["objectives"] for (s, _), _ in loaded)]  # fmt: skip
+    if len(objectives) < 2:
+        raise ConfigError(f"--plot: the searches in {[str(d) for d in dirs]} share the "
+                          f"objectives {objectives} only: nothing to draw pairwise")  # fmt: skip
     pairs = list(itertools.combinations(objectives, 2))
     fig, axes = plt.subplots(1, len(pairs), figsize=(5.2 * len(pairs), 4.4), squeeze=False)
     for ((summary, front), d), colour in zip(loaded, plt.cm.tab10.colors, strict=False):
@@ -186,6 +238,20 @@ def _run(args) -> int:
         check_output_file(args.out, "--out")
     if args.plot is not None:  # matplotlib picks the format by the suffix
         check_output_file(args.plot, "--plot", (".png", ".pdf", ".svg"))
+    if args.baseline is not None:  # checked before the work; drawn only on the figure
+        if args.plot is None:
+            raise ConfigError(f"--baseline {args.baseline}: is drawn on the figure only; give "
+                              "--plot FILE too")  # fmt: skip
+        summary = _load(Path(args.ref))[0]
+        baseline_points(args.baseline, summary["objectives"])
+        # drawn beside the held-out fronts: it must be run on the same realisations
+        got = set(_read_baseline(args.baseline)["realisation"].astype(str))
+        want = set(summary["heldout"]["realisations"])
+        if got != want:
+            raise ConfigError(f"--baseline {args.baseline}: its runs are on realisations "
+                              f"{sorted(got)}, the held-out ones of {args.ref} are "
+                              f"{sorted(want)}: run the baseline on the searches' held-out "
+                              "seeds and scenarios")  # fmt: skip
     df = matched_comparison(args.ref, args.other, args.at, args.tolerance)
     if args.out:
         df.to_csv(args.out, index=False)

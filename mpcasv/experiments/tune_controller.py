@@ -172,6 +172,11 @@ def open_study(spec: TuneSpec, out: Path, train: list[Job]):
 
     optuna.logging.set_verbosity(optuna.logging.WARNING)
     storage = f"sqlite:///{out / 'study.db'}"
+    if (out / "study.db").exists():  # e.g. mpcasv falsify's: another study in the same file
+        names = optuna.study.get_all_study_names(storage)
+        if names and STUDY_NAME not in names:
+            raise ConfigError(f"{out / 'study.db'}: holds the Optuna studies {names}, not a "
+                              "search of 'mpcasv tune controller'; use another --out")  # fmt: skip
     study = optuna.create_study(study_name=STUDY_NAME, storage=storage, load_if_exists=True,
                                 directions=directions(spec),
                                 sampler=make_sampler(spec, 0))  # fmt: skip
@@ -181,8 +186,23 @@ def open_study(spec: TuneSpec, out: Path, train: list[Job]):
         study.set_user_attr("spec", fp)
     elif old != fp:
         changed = sorted(k for k in fp if fp[k] != old.get(k))
-        raise ConfigError(f"{out / 'study.db'}: holds a search with other {changed} than "
+        said = {"train_jobs": "training jobs (the suite's scenarios, seeds, duration, or the "
+                              "entry's preset or overrides)",
+                "params": "params (the searched fields or their ranges)"}  # fmt: skip
+        what = "; ".join(said.get(k, f"{k} {old.get(k)!r} -> {fp[k]!r}") for k in changed)
+        raise ConfigError(f"{out / 'study.db'}: holds a search with other {what} than "
                           f"{spec.path}; use another --out")  # fmt: skip
+    n = len(study.get_trials(deepcopy=False))
+    if n > spec.trials:  # a smaller budget cannot be honoured: the trials are there
+        raise ConfigError(f"{out / 'study.db'}: holds {n} trials already, more than the budget "
+                          f"{spec.trials} (trials or --trials); give at least {n}")  # fmt: skip
+    seeds = out / "heldout" / "seeds.json"  # written by the first held-out runs
+    held = json.loads(seeds.read_text()) if seeds.exists() else None
+    if held is not None and held != list(spec.heldout_seeds):
+        raise ConfigError(f"{out / 'heldout'}: its runs used heldout_seeds {held}, {spec.path} "
+                          f"says {list(spec.heldout_seeds)}: the folder would hold both; use "
+                          "another --out (copy study.db and train/ there to keep the search's "
+                          "trials and runs)")  # fmt: skip
     return study
 
 
@@ -226,8 +246,13 @@ def aggregate(spec: TuneSpec, rows) -> tuple[list[float] | None, float, str | No
         if col.isna().any():
             return None, float("nan"), f"metric {m} is missing (NaN) in a run"
         values.append(float(col.mean()))
-    c = float(rows[spec.constraint].astype(float).sum()) if spec.constraint else 0.0
-    return values, c, None
+    if not spec.constraint:
+        return values, 0.0, None
+    col = rows[spec.constraint].astype(float)
+    if col.isna().any():  # a sum skips NaN: a run without the measure counted as feasible
+        return None, float("nan"), (f"constraint {spec.constraint} is missing (NaN) in a run "
+                                    "(a scenario without that domain?)")  # fmt: skip
+    return values, float(col.sum()), None
 
 
 def _ask_batch(study, spec: TuneSpec) -> list:
@@ -324,6 +349,8 @@ def evaluate_heldout(spec: TuneSpec, study, out: str | Path, workers: int = 1,
     jobs = {t.number: trial_jobs(base, t.number, dict(t.params)) for t in front}
     if not jobs:
         return {}
+    (out / "heldout").mkdir(parents=True, exist_ok=True)  # checked by open_study
+    (out / "heldout" / "seeds.json").write_text(json.dumps(list(spec.heldout_seeds)) + "\n")
     if not quiet:
         print(f"held-out: {len(front)} front trials x {len(base)} runs (seeds "
               f"{list(spec.heldout_seeds)})")  # fmt: skip

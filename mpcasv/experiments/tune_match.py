@@ -77,12 +77,21 @@ class FrontChoice:
                           f"for scenarios {sorted(table)} only, not {scenario!r}")  # fmt: skip
 
 
-def _candidates(folder: Path, at: str, means: str) -> tuple[pd.DataFrame, str, str]:
-    """(candidate rows, column of ``at`` to match, source) of a tuning's front table."""
+def _candidates(folder: Path, at: str, means: str | None,
+                where: str = "") -> tuple[pd.DataFrame, str, str]:  # fmt: skip
+    """(candidate rows, column of ``at`` to match, source) of a tuning's front table;
+    ``means``: "heldout" (refused without held-out runs), "training", or None (held-out
+    when the folder has held-out runs, else training)."""
     front = pd.read_csv(folder / "front.csv")
     col = f"heldout.{at}"
-    if (means == "heldout" and "heldout_front" in front and col in front
-            and front[col].notna().any()):  # fmt: skip
+    has_heldout = ("heldout_front" in front and col in front
+                   and bool(front[col].notna().any()))  # fmt: skip
+    if means == "heldout" and not has_heldout:  # asked for: it used the training means
+        raise ConfigError(f"{where}: front_means = 'heldout', but {folder} has no held-out "
+                          "means of its front (searched with --no-heldout, or no feasible "
+                          "point): rerun it without --no-heldout, or say "
+                          "front_means = 'training'")  # fmt: skip
+    if means != "training" and has_heldout:
         sel = front[front["heldout_front"].astype(bool) & front[col].notna()]
         return sel, col, "held-out"
     return front[front[f"train.{at}"].notna()], f"train.{at}", "training"
@@ -105,7 +114,7 @@ def _presets(folder: Path, trial: int, where: str) -> tuple[tuple[str, str], ...
 
 
 def choose_front(label: str, front: str, at: str, level: float, base: Path, where: str,
-                 means: str = "heldout") -> FrontChoice:  # fmt: skip
+                 means: str | None = None) -> FrontChoice:  # fmt: skip
     """The point of the tuning in ``front`` (relative to ``base``, the suite's folder) nearest
     ``level`` of metric ``at`` (see the module docstring); ``means = "training"``: among
     the training front by training means even when the folder has held-out runs.
@@ -133,14 +142,15 @@ def choose_front(label: str, front: str, at: str, level: float, base: Path, wher
     if at not in summary["objectives"]:
         raise ConfigError(f"{where}: at = {at!r} is not an objective of the search in {folder} "
                           f"(its objectives: {summary['objectives']})")  # fmt: skip
-    rows, col, source = _candidates(folder, at, means)
+    rows, col, source = _candidates(folder, at, means, where)
     if not len(rows):
         raise ConfigError(f"{where}: the front in {folder} has no {source} point to choose from")
     low, high = float(rows[col].min()), float(rows[col].max())
     if not (math.isfinite(level) and low <= level <= high):
         unit = METRIC_INFO[at].unit
-        raise ConfigError(f"{where}: level = {level:g} {unit} is outside the front's {at} range "
-                          f"[{low:.6g}, {high:.6g}] ({source} means of {len(rows)} points in "
+        # full precision: a bound shown rounded (20689.6) could not be typed back as a level
+        raise ConfigError(f"{where}: level = {level!r} {unit} is outside the front's {at} "
+                          f"range [{low!r}, {high!r}] ({source} means of {len(rows)} points in "
                           f"{folder})")  # fmt: skip
     dist = (rows[col] - level).abs()
     best = rows.assign(_d=dist).sort_values(["_d", "trial"]).iloc[0]

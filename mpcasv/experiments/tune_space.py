@@ -126,7 +126,7 @@ def _int_list(path: Path, key: str, v: Any) -> tuple[int, ...]:
 def _check_fields(path: Path, spec: TuneSpec) -> None:
     """Every field exists in the controller's preset and accepts both bounds."""
     from mpcasv.controllers import controller_kind
-    from mpcasv.experiments.metrics import METRIC_INFO
+    from mpcasv.experiments.metrics import METRIC_INFO, WALL_CLOCK
 
     try:
         controller_kind(spec.controller)
@@ -137,6 +137,19 @@ def _check_fields(path: Path, spec: TuneSpec) -> None:
             _fail(path, f"unknown metric {m!r} (metrics.json keys: see docs/metrics.md)")
         if METRIC_INFO[m].better not in ("lower", "higher"):
             _fail(path, f"metric {m!r} has no better direction: it cannot be an objective")
+        if m.endswith("_auv"):  # a list per AUV in metrics.json, not one number per run
+            _fail(path, f"metric {m!r} is a per-AUV list: use the run's scalar "
+                        f"{m.removesuffix('_auv')!r} (its value over the AUVs)")  # fmt: skip
+        if m in WALL_CLOCK:
+            _fail(path, f"metric {m!r} is measured in wall time (machine- and load-dependent): "
+                        "a search toward it would not be reproducible")  # fmt: skip
+    if spec.constraint in spec.objectives:  # its column would hold the sum, not the mean
+        _fail(path, f"constraint: {spec.constraint!r} is also an objective; 'summed <= 0' would "
+                    "fix that objective at 0 on every feasible trial: drop one of them")
+    if spec.constraint and METRIC_INFO[spec.constraint].better != "lower":
+        _fail(path, f"constraint: {spec.constraint!r} is better higher; the constraint is "
+                    "'summed over the training runs <= 0', so it must be a lower-is-better "
+                    "amount (a time or a count, e.g. collision_domain_s)")  # fmt: skip
     params_cls = controller_kind(spec.controller).params_cls
     for p in spec.params:
         kind = _field_type(params_cls, p.name)
@@ -163,6 +176,9 @@ def _field_type(cls: type, dotted: str):
         if part not in hints:
             return None
         cls = hints[part]
+    args = typing.get_args(cls)  # Optional[float] (None: off): a number when searched
+    if type(None) in args and len(args) == 2:
+        cls = next(a for a in args if a is not type(None))
     return cls
 
 
@@ -214,6 +230,13 @@ def load_spec(path: str | Path, trials: int | None = None) -> TuneSpec:
         if trials < 1:
             raise ConfigError(f"--trials {trials}: must be >= 1")
         n_trials = trials
+    if n_trials % batch:  # a partial last batch: extending it later would ask its trials
+        # after the earlier ones are told, not as an uninterrupted search does (measured)
+        lo, hi = (n_trials // batch) * batch, (n_trials // batch + 1) * batch
+        where = "--trials" if trials is not None else f"{path}: trials"
+        raise ConfigError(f"{where} = {n_trials} is not a multiple of batch = {batch}: a "
+                          "partial last batch makes a later extension ask other trials than an "
+                          f"uninterrupted search; use {' or '.join(str(v) for v in (lo, hi) if v)}")
     suite = data["suite"]
     if suite.endswith(".toml") and not Path(suite).is_absolute():
         suite = str((path.parent / suite).resolve())
