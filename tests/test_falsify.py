@@ -223,7 +223,12 @@ def test_falsified_worst_cases_keep_todays_margin(name):
     from mpcasv.sim.simulator import simulate
 
     sc = load_scenario(FALSIFIED / f"{name}.toml")
-    ctrl = make_controller(sc.controller, len(sc.auv), sc.preset, boat=Boat.of_scenario(sc))
+    # the mpc-multi case meets 3 fatrop hangs (docs/mpc.md "Known problems"): each held the
+    # default hang guard's 30 s (109 s for the test); its solves take < 0.3 s, so 5 s abandons
+    # the same three solves and nothing else (the pinned margin and stay are unchanged)
+    overrides = {"solver.hang_s": 5.0} if sc.controller.startswith("mpc") else None
+    ctrl = make_controller(sc.controller, len(sc.auv), sc.preset, overrides,
+                           boat=Boat.of_scenario(sc))  # fmt: skip
     result = simulate(sc, ctrl, 0)
     rob = robustness(result.timeseries, len(sc.auv), required_separation(ctrl), 1.0)
     margin, stay = PINNED[name]

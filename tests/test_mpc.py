@@ -33,7 +33,7 @@ def run(scenarios_dir, case, overrides=None, duration=None, seed=0, preset=None)
     return res, compute_metrics(res), ctrl
 
 
-@pytest.mark.parametrize("case", ["case4", "case8"])
+@pytest.mark.parametrize("case", ["case4"])  # case8: the same run in test_mpc_fallbacks.py
 def test_mpc_keeps_pursuers_at_least_10_m_away(scenarios_dir, case):
     res, m, _ = run(scenarios_dir, case)
     assert m["min_range_m"] >= 10.0
