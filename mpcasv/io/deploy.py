@@ -52,6 +52,7 @@ from mpcasv.interface import ASVState, Command, Mode, Observation
 from mpcasv.io.asvwatch import SpeedWatch, Thrusters
 from mpcasv.io.config import DeployConfig, build_controller, load_deploy_config
 from mpcasv.io.deployfeedback import BoatFeedback
+from mpcasv.io.deployphases import ASV_STALE, RUNNING, STARTING, WAITING, Phases
 from mpcasv.io.deploystep import FieldMode, guard_params, known_plans, prepare_controller
 from mpcasv.io.imc import RF, reference
 from mpcasv.io.link import ImcLink, Peer
@@ -61,14 +62,13 @@ from mpcasv.io.transport import Clock
 from mpcasv.io.watchdog import OK, auv_status, guard, inflate
 from mpcasv.models.acoustics import Report
 
-__all__ = ["Deploy", "guard_params", "run_deploy"]  # guard_params: from deploystep
+__all__ = ["ASV_STALE", "RUNNING", "STARTING", "WAITING", "Deploy", "guard_params",
+           "run_deploy"]  # guard_params: from deploystep; the phases: from deployphases
 
 log = logging.getLogger("mpcasv.deploy")
-WAITING, STARTING, RUNNING, ASV_STALE = "waiting", "starting", "running", "asv_stale"
-_PC = imcpy.PlanControl
 
 
-class Deploy(BoatFeedback, FieldMode):
+class Deploy(Phases, BoatFeedback, FieldMode):
     """The deploy loop (see the module docstring).
 
     Parameters
@@ -189,103 +189,6 @@ class Deploy(BoatFeedback, FieldMode):
                 self.event("followref_timeout", vehicle=p.label)
         elif isinstance(msg, imcpy.SetThrusterActuation):
             self.thrusters.update(msg.id, msg.value, now)
-
-    def _plan_control(self, msg: imcpy.PlanControl, now: float) -> None:
-        ours = self.pending is not None and msg.request_id == self.pending[0]
-        info = {"type": int(msg.type), "op": int(msg.op), "request_id": msg.request_id,
-                "plan_id": msg.plan_id, "info": msg.info}  # fmt: skip
-        answer = msg.type in (_PC.TypeEnum.SUCCESS, _PC.TypeEnum.FAILURE)
-        if self.closing and answer and msg.request_id == self.plan_request:
-            self.event("plan_completed", **info)  # DUNE's answer to our MANDONE
-            self.plan_done.set()
-            return
-        if not ours or self.phase != STARTING:
-            self.event("plan_control", ours=ours, **info)
-            return
-        if msg.type == _PC.TypeEnum.SUCCESS:
-            self.plan_request = self.pending[0]
-            self.pending, self.phase, self.started = None, RUNNING, True
-            self.t_next = -math.inf
-            self.event("plan_started", **info)
-        elif msg.type == _PC.TypeEnum.FAILURE:
-            self.pending, self.phase = None, WAITING
-            self.retry_at = now + self.cfg.link.plan_start_timeout
-            self.event("plan_start_failed", **info)
-
-    # --- phases and watchdogs ------------------------------------------------------------
-    def _looks_stale(self, now: float) -> bool:
-        """Whether a watchdog would fire at ``now`` on the states read so far."""
-        asv = self.link.asv
-        if asv.nav is not None and self.phase != ASV_STALE and not self._asv_fresh(now):
-            return True
-        return any(p.nav is not None and auv_status(now - p.nav_recv, self.gp) != self.status[k]
-                   for k, p in enumerate(self.link.auvs))  # fmt: skip
-
-    def _asv_fresh(self, now: float) -> bool:
-        return now - self.link.asv.nav_recv <= self.cfg.watchdog.asv_stale_s
-
-    def _advance(self, now: float) -> None:
-        if self.phase != WAITING or now < self.retry_at:
-            return
-        missing = []
-        if not self._asv_fresh(now) or self.link.asv.id is None:
-            missing.append(self.link.asv.label)
-        missing += [p.label for p in self.link.auvs if p.nav is None]
-        if missing:
-            if tuple(missing) != self._waiting_for:
-                self._waiting_for = tuple(missing)
-                self.event("waiting", missing=missing)
-            return
-        if self.dry_run:
-            self.phase, self.t_next = RUNNING, -math.inf
-            self.event("running", dry_run=True)
-            return
-        self.request_id = (self.request_id + 1) % 0x10000
-        pc = imcpy.PlanControl()
-        pc.type, pc.op = _PC.TypeEnum.REQUEST, _PC.OperationEnum.START
-        pc.request_id, pc.plan_id, pc.flags = self.request_id, self.cfg.link.plan_id, 0
-        fr = imcpy.FollowReference()
-        fr.control_src, fr.control_ent = self.link.id, 0xFF
-        fr.timeout, fr.loiter_radius, fr.altitude_interval = self.cfg.link.followref_timeout, 0, 0
-        pc.arg = fr
-        self.link.send(self.link.asv, pc)
-        self.pending, self.phase = (self.request_id, now), STARTING
-        self.event("plan_start_sent", request_id=self.request_id)
-
-    def watch(self) -> None:
-        """One pass of the watchdogs (called every 0.25 s of the deploy clock).
-
-        Before a vehicle is judged stale, the datagrams already waiting in the socket are
-        read (:meth:`ImcLink.drain`): when this process had been starved of CPU, its timer
-        ran before the states that had arrived meanwhile, and a fresh ASV was called stale
-        (FollowReference restarted, decisions moved off the period grid).
-        """
-        now = self.clock.now()
-        if self._looks_stale(now) and self.link.drain():
-            now = self.clock.now()
-        wd = self.cfg.watchdog
-        asv = self.link.asv
-        if asv.nav is not None and self.phase != ASV_STALE and not self._asv_fresh(now):
-            self.event("asv_stale", vehicle=asv.label, age_s=now - asv.nav_recv,
-                       limit_s=wd.asv_stale_s)  # fmt: skip
-            self.phase, self.pending = ASV_STALE, None
-            self.stale_events += 1
-        for k, p in enumerate(self.link.auvs):
-            if p.nav is None:
-                continue
-            st = auv_status(now - p.nav_recv, self.gp)
-            if st != self.status[k]:
-                if st != OK:
-                    self.event(f"auv_{st}", vehicle=p.label, auv=k, age_s=now - p.nav_recv)
-                self.status[k] = st
-        if self.phase == STARTING and now - self.pending[1] > self.cfg.link.plan_start_timeout:
-            self.event("plan_start_timeout", request_id=self.pending[0])
-            self.phase, self.pending = WAITING, None
-        self._advance(now)
-        if time.monotonic() - self._load_mark[1] >= self.clock.wall_seconds(
-                self.cfg.log.load_report_s):  # fmt: skip
-            self.event("load", **self.load(since=self._load_mark))
-            self._load_mark = (time.process_time(), time.monotonic(), self.link.datagrams)
 
     # --- the supervisory step ------------------------------------------------------------
     def _maybe_step(self, ts: float, now: float) -> None:
