@@ -31,6 +31,27 @@ class FakeClock:  # the deploy clock, advanced by hand
         return s
 
 
+def dry_deploy(tmp_path, **extra):
+    """A dry-run deploy loop (one ASV 0x2801 at 10.0.10.50, one AUV 0x2811 at 10.0.10.60,
+    hybrid-single) on a :class:`FakeClock`, logging into ``tmp_path``; ``extra``: more
+    configuration tables (e.g. ``watchdog``). Returns ``(deploy, clock)``."""
+    from mpcasv.io.deploy import Deploy
+
+    cfg = deploy_config_from_dict({
+        "identity": {"id": 0x4001},
+        "origin": {"lat_deg": 41.18, "lon_deg": -8.70},
+        "link": {"bind": "127.0.0.1", "port": 0, "announce_to": []},
+        "vehicle": [{"role": "asv", "id": 0x2801, "address": "10.0.10.50:6002"},
+                    {"role": "auv", "id": 0x2811, "address": "10.0.10.60:6002"}],
+        "controller": {"name": "hybrid-single", "preset": "paper1-field"},
+        "log": {"dir": str(tmp_path)},
+    } | extra)  # fmt: skip
+    dep = Deploy(cfg, dry_run=True)
+    clock = FakeClock()
+    dep.clock = dep.link.clock = clock
+    return dep, clock
+
+
 def _link(vehicles, port=0):
     cfg = deploy_config_from_dict({
         "identity": {"id": 0x4001},
@@ -193,20 +214,9 @@ def test_case_vehicle_clock_step_twice_and_asv_grid(tmp_path):
     """Case vehicle-clock-step on the ASV, backward then forward: the deploy keeps deciding
     once per control period on the re-anchored timestamps (a backward step would otherwise
     stop its decision grid until the vehicle clock caught up)."""
-    from mpcasv.io.deploy import RUNNING, Deploy
+    from mpcasv.io.deploy import RUNNING
 
-    cfg = deploy_config_from_dict({
-        "identity": {"id": 0x4001},
-        "origin": {"lat_deg": 41.18, "lon_deg": -8.70},
-        "link": {"bind": "127.0.0.1", "port": 0, "announce_to": []},
-        "vehicle": [{"role": "asv", "id": 0x2801, "address": "10.0.10.50:6002"},
-                    {"role": "auv", "id": 0x2811, "address": "10.0.10.60:6002"}],
-        "controller": {"name": "hybrid-single", "preset": "paper1-field"},
-        "log": {"dir": str(tmp_path)},
-    })  # fmt: skip
-    dep = Deploy(cfg, dry_run=True)
-    clock = FakeClock()
-    dep.clock = dep.link.clock = clock
+    dep, clock = dry_deploy(tmp_path)
     vclock = clock.t
     for k in range(120):  # 60 s at 2 Hz
         clock.t += 0.5

@@ -417,25 +417,12 @@ def test_drain_reads_the_datagrams_waiting_in_the_socket():
 
 @pytest.mark.parametrize("waiting", [True, False])
 def test_the_watchdog_reads_waiting_states_before_calling_the_asv_stale(tmp_path, waiting):
-    from test_io_cases import FakeClock, _es
+    from test_io_cases import _es, dry_deploy
 
-    from mpcasv.io.config import deploy_config_from_dict
-    from mpcasv.io.deploy import ASV_STALE, RUNNING, Deploy
+    from mpcasv.io.deploy import ASV_STALE, RUNNING
     from mpcasv.io.logs import read_jsonl
 
-    cfg = deploy_config_from_dict({
-        "identity": {"id": 0x4001},
-        "origin": {"lat_deg": 41.18, "lon_deg": -8.70},
-        "link": {"bind": "127.0.0.1", "port": 0, "announce_to": []},
-        "vehicle": [{"role": "asv", "id": 0x2801, "address": "10.0.10.50:6002"},
-                    {"role": "auv", "id": 0x2811, "address": "10.0.10.60:6002"}],
-        "controller": {"name": "hybrid-single", "preset": "paper1-field"},
-        "watchdog": {"asv_stale_s": 3.0, "auv_stale_s": 3.0},
-        "log": {"dir": str(tmp_path)},
-    })  # fmt: skip
-    dep = Deploy(cfg, dry_run=True)
-    clock = FakeClock()
-    dep.clock = dep.link.clock = clock
+    dep, clock = dry_deploy(tmp_path, watchdog={"asv_stale_s": 3.0, "auv_stale_s": 3.0})
     link = dep.link
 
     def states(t):

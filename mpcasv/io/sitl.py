@@ -69,7 +69,8 @@ from mpcasv.io.dune import FollowRefManeuver
 from mpcasv.io.geo import Origin, to_local, to_wgs84
 from mpcasv.io.imc import BadInput, NavState, decode, estimated_state, udp_services
 from mpcasv.io.logs import JsonlWriter, LsfWriter
-from mpcasv.io.simvehicle import Node, SimVehicle
+from mpcasv.io.simvehicle import SimVehicle
+from mpcasv.io.sitlasv import AsvDune
 from mpcasv.io.transport import Clock, UdpEndpoint
 from mpcasv.sim.scenario import Scenario
 
@@ -77,7 +78,6 @@ __all__ = ["Sitl", "SitlOptions"]
 
 log = logging.getLogger("mpcasv.sitl")
 Addr = tuple[str, int]
-_PC = imcpy.PlanControl
 ANNOUNCE_S = 10.0
 
 
@@ -108,7 +108,7 @@ class SitlOptions:
     ready_file: Path | None = None
 
 
-class Sitl:
+class Sitl(AsvDune):
     """The SITL runner (see the module docstring)."""
 
     def __init__(self, scenario: Scenario, opt: SitlOptions) -> None:
@@ -164,63 +164,6 @@ class Sitl:
         if v.role == "asv":
             return float(self.world.x[0]), float(self.world.x[1])
         return float(self.world.S[0, v.index]), float(self.world.S[1, v.index])
-
-    # --- the ASV's DUNE ------------------------------------------------------------------
-    def asv_message(self, v: SimVehicle, msg, node: Node | None, stream) -> None:
-        now = self.now()
-        if isinstance(msg, imcpy.PlanControl):
-            if msg.type != _PC.TypeEnum.REQUEST:
-                return
-            ans = imcpy.PlanControl()
-            ans.op, ans.request_id, ans.plan_id = msg.op, msg.request_id, msg.plan_id
-            if msg.op == _PC.OperationEnum.START and isinstance(msg.arg, imcpy.FollowReference):
-                self.maneuver = FollowRefManeuver(msg.arg, now, self.origin,
-                                                  self.world.model.params.u_max)  # fmt: skip
-                self.plan_owner = (msg.request_id, msg.plan_id, node, stream)
-                self.event("maneuver_started", src=msg.src, timeout=msg.arg.timeout)
-                for info in ("plan loaded", "FollowReference: executing maneuver"):  # DUNE's
-                    ans.type, ans.info = _PC.TypeEnum.SUCCESS, info
-                    v.reply(ans, node, stream)
-                v.publish(self.maneuver.state_message())
-            elif msg.op == _PC.OperationEnum.STOP:
-                self.maneuver = None
-                ans.type, ans.info = _PC.TypeEnum.SUCCESS, "plan stopped"
-                self.event("maneuver_stopped", src=msg.src)
-                v.reply(ans, node, stream)
-            else:
-                ans.type, ans.info = _PC.TypeEnum.FAILURE, "only START FollowReference / STOP"
-                v.reply(ans, node, stream)
-        elif isinstance(msg, imcpy.Reference):
-            m = self.maneuver
-            if m is None or m.done:
-                self.count("reference_without_maneuver")
-                return
-            if m.on_reference(msg, now, self.position(self.asv)):
-                self.count("references")
-                if not self.in_window and not self.held:
-                    self.count("late_references")
-                self.ref_event.set()
-                v.publish(m.state_message(msg))
-                if m.done:
-                    self.event("maneuver_done", how="MANDONE")
-                    self._plan_completed(v)
-
-    def _plan_completed(self, v: SimVehicle) -> None:
-        """DUNE answers MANDONE with PlanControl SUCCESS "plan completed" (op START, the
-        request id of the start) to the system that started the plan."""
-        if self.plan_owner is None:
-            return
-        req, plan_id, node, stream = self.plan_owner
-        ans = imcpy.PlanControl()
-        ans.type, ans.op, ans.request_id = _PC.TypeEnum.SUCCESS, _PC.OperationEnum.START, req
-        ans.plan_id, ans.info = plan_id, "plan completed"
-        v.reply(ans, node, stream)
-        self.plan_owner = None
-
-    def command_vector(self) -> np.ndarray:
-        if not self.asv.alive or self.maneuver is None:
-            return np.zeros(4)
-        return self.maneuver.command_vector()
 
     # --- states ----------------------------------------------------------------------------
     def _nav_asv(self, x: np.ndarray) -> NavState:
