@@ -108,8 +108,11 @@ def test_robustness_margin_and_longest_stay_from_the_time_series():
 
 def _finished(db: Path) -> dict[int, tuple]:
     """(params, value) of every COMPLETE trial in a study file (read without Optuna)."""
-    con = sqlite3.connect(f"file:{db}?mode=ro", uri=True)
+    # one read transaction: two separate SELECTs could see a trial finish between them
+    # (its params without its value: KeyError, seen once in CI)
+    con = sqlite3.connect(f"file:{db}?mode=ro", uri=True, isolation_level=None)
     try:
+        con.execute("BEGIN")
         rows = con.execute(
             "SELECT t.number, v.value FROM trials t JOIN trial_values v USING (trial_id) "
             "WHERE t.state = 'COMPLETE'").fetchall()  # fmt: skip
@@ -120,7 +123,8 @@ def _finished(db: Path) -> dict[int, tuple]:
         con.close()
     out = {n: ({}, v) for n, v in rows}
     for n, name, value in params:
-        out[n][0][name] = value
+        if n in out:  # a trial with a value (COMPLETE is told with its value)
+            out[n][0][name] = value
     return out
 
 
