@@ -31,24 +31,20 @@ import casadi as ca
 import numpy as np
 
 from mpcasv.control.params import load_execution
-from mpcasv.models.acoustics import AcousticParams
 from mpcasv.models.params import load_vessel
-from mpcasv.models.vessel import VesselModel, rk4_expr, xdot_expr
+from mpcasv.models.vessel import VesselModel
+from mpcasv.mpc.dynamics import NXV, RK4_LAMBDA_H, PlanDynamics  # noqa: F401 (re-exported)
 from mpcasv.mpc.layout import (  # the parameter vector's layout (re-exported names)
     NCH,
     NW,
     WEIGHT_NAMES,
     ParamLayout,
-    channel_vector,
+    channel_vector,  # noqa: F401
 )
 from mpcasv.mpc.params import MPCParams
 from mpcasv.mpc.smooth import D_EPS, SOFT_T, SOFTPLUS_M, sigmoid, softplus
-from mpcasv.mpc.variance import N_NAV, VarianceObjective, fix_gain, n_ext
+from mpcasv.mpc.variance import N_NAV, VarianceObjective, n_ext
 from mpcasv.mpc.warmstart import WarmStart
-
-NXV = 8  # vessel part of the plan state
-#: largest |lambda h| of a plan sub-step: RK4's stability bound on the real axis is 2.785
-RK4_LAMBDA_H = 2.5
 
 
 @dataclass(frozen=True)
@@ -99,7 +95,7 @@ class Dims:
         return 2 + 3 * self.n_auv + NCH + NW + self.n_ext
 
 
-class OCP(WarmStart, VarianceObjective, ParamLayout):
+class OCP(PlanDynamics, WarmStart, VarianceObjective, ParamLayout):
     """The problem for ``n_auv`` AUVs (built once; every per-step quantity is a parameter).
 
     Parameters
@@ -148,79 +144,13 @@ class OCP(WarmStart, VarianceObjective, ParamLayout):
         self.dt = hz.dt
         self._build()
 
-    # ------------------------------------------------------------------ dynamics
-    def rhs(self, z, w, q):
-        """Continuous dynamics of the augmented state ``[z; s]`` (``s``: time into the stage).
-
-        ``q = [c (2), pa_k (2K), va (2K), depth_k (K), depth rate (K), d_fix (K), channel]``.
-        """
-        K = self.dims.n_auv
-        x, tau, s = z[0:NXV], z[NXV : NXV + K], z[NXV + K]
-        c = q[0:2]
-        xd = xdot_expr(x, x[6:8], c, self.model.p)  # actuators at their set-points
-        rows = [xd[0:6], w[0], w[1]]
-        ch = q[2 + 7 * K : 2 + 7 * K + NCH]
-        for i in range(K):
-            pa = q[2 + 2 * i : 4 + 2 * i] + s * q[2 + 2 * K + 2 * i : 4 + 2 * K + 2 * i]
-            depth = q[2 + 4 * K + i] + s * q[2 + 5 * K + i]  # linear within the stage
-            dh = ca.sqrt((x[0] - pa[0]) ** 2 + (x[1] - pa[1]) ** 2 + D_EPS**2)
-            rho = self.fix_rate(dh, depth, q[2 + 6 * K + i], x[6], ch)  # (M3)
-            if self.variance:  # (M2') a far fix of a fresh AUV removes little
-                nav = ca.vertsplit(q[2 + 7 * K + NCH : 2 + 7 * K + NCH + N_NAV])
-                rho = rho * fix_gain(tau[i], ca.sqrt(dh**2 + depth**2), *nav)
-            rows.append(1 - rho * tau[i])  # (M2)
-        rows.append(ca.DM(1.0))
-        return ca.vertcat(*rows)
-
-    def fix_rate(self, dh, depth, d_fix, T, ch):
-        """Smooth expected fix rate (1/s, eq. M3) of one AUV at horizontal range ``dh`` and
-        depth ``depth`` (m) with thrust ``T`` (N), channel ``ch`` (:func:`channel_vector`):
-
-        ``rate * P(slant) * prop(T)`` with ``P = p_good sig((d1 - slant) / w) + p_sporadic
-        (sig((d2 - slant) / w) - sig((d1 - slant) / w))`` (the simulator's success against
-        slant range, smoothed); ``acoustic``: ``prop = quiet + f_prop (1 - quiet)`` (with
-        ``noisy_fixes`` the propeller's noise scales the success, else ``f_prop = 0``: only
-        quiet fixes count); ``target``: ``prop = quiet``
-        times ``sig((d_fix - dh) / w)``, Paper 2's reliable fix (eq. 9: within
-        ``r_t + eps_plus`` with the propeller off). ``quiet = sig((T_quiet - T) / w_T)``.
-        """
-        fp = self.params.fix
-        rate, p_good, p_spor, d1, d2, f_prop = (ch[j] for j in range(NCH))
-        slant = ca.sqrt(dh**2 + depth**2)
-        s1 = sigmoid((d1 - slant) / fp.w_range)
-        s2 = sigmoid((d2 - slant) / fp.w_range)
-        P = p_good * s1 + p_spor * (s2 - s1)
-        quiet = sigmoid((self.T_quiet - T) / fp.w_thrust)
-        if fp.range_kind == "acoustic":
-            return rate * P * (quiet + f_prop * (1 - quiet))
-        return rate * P * quiet * sigmoid((d_fix - dh) / fp.w_range)
-
-    @property
-    def rho0(self) -> float:
-        """Fix rate with the propeller off in range, ``p_good / T0`` (1/s) of the default
-        channel (the run's: :func:`channel_vector`)."""
-        ch = channel_vector(AcousticParams())
-        return float(ch[0] * ch[1])
-
-    @property
-    def n_sub(self) -> int:
-        """RK4 sub-steps per stage: the horizon's ``n_sub``, more if the vessel's fastest
-        rigid-body pole needs them (``dt / n_sub * |lambda|max <= RK4_LAMBDA_H``): with
-        Fossen's Otter (3.55 1/s at top speed) 4 sub-steps of 1 s would make the plan's
-        perturbations grow (RK4's gain 2.9 per sub-step) and the MPC plans with 6."""
-        hz = self.params.horizon
-        need = math.ceil(hz.dt * self.model.fastest_pole / RK4_LAMBDA_H - 1e-9)
-        return max(hz.n_sub, need)
-
     def _build(self) -> None:
         d, hz, wt, vp = self.dims, self.params.horizon, self.params.weights, self.vessel
         K, N, nx, dt = d.n_auv, d.N, d.nx, hz.dt
         nq = 2 + 7 * K + NCH + (N_NAV if self.variance else 0)
-        za, wv, q = ca.SX.sym("z", nx + 1), ca.SX.sym("w", 2), ca.SX.sym("q", nq)
-        f = ca.Function("f_plan", [za, wv, q], [self.rhs(za, wv, q)])
-        z, qs = ca.SX.sym("z", nx), ca.SX.sym("q", nq)
-        zn = rk4_expr(f, ca.vertcat(z, 0), wv, qs, dt, self.n_sub)[0:nx]
-        #: discrete plan dynamics F(z, [Tdot, deltadot], q) -> z_next
+        z, wv, qs = ca.SX.sym("z", nx), ca.SX.sym("w", 2), ca.SX.sym("q", nq)
+        zn = self.discrete(z, wv, qs, dt, self.n_sub)
+        #: discrete plan dynamics F(z, [Tdot, deltadot], q) -> z_next (mpcasv.mpc.dynamics)
         self.F = ca.Function("F", [z, wv, qs], [zn], ["z", "w", "q"], ["z_next"])
 
         # one stage: L_k and g_k = [z_{k+1} - F(z_k, v_k), h_k]; the terminal stage: L_N, h_N
