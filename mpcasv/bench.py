@@ -27,6 +27,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--quick", action="store_true",
                    help="'mpc': only Opti + IPOPT and the default solver (no QP variant, no "
                         "IPOPT polish of the default's solutions)")  # fmt: skip
+    p.add_argument("--threads", type=int, default=None,
+                   help="'mpc': the default solver's stage-evaluation threads (solver.threads) "
+                        "in the recorded run and its replay (default: the presets', 1)")
     p.set_defaults(func=run)
 
 
@@ -36,8 +39,8 @@ def run(args: argparse.Namespace) -> int:
 
     # --repeat 0 / -1 ran once and said "over 1 runs"; --steps -1 blamed "case3 (modified):
     # duration"; an unwritable --json was found only after the whole benchmark
-    for flag in ("repeat", "steps"):
-        if getattr(args, flag) < 1:
+    for flag in ("repeat", "steps", "threads"):
+        if (getattr(args, flag) or 1) < 1:
             raise ConfigError(f"--{flag} {getattr(args, flag)}: must be >= 1")
     if args.json is not None:
         check_output_file(args.json, "--json")

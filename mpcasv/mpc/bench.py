@@ -52,15 +52,20 @@ def record(case: str, preset: str, multi: bool, steps: int = STEPS):
     return record_run(case, preset, multi, steps)[:3]
 
 
-def record_run(case: str, preset: str, multi: bool, steps: int = STEPS):
+def record_run(case: str, preset: str, multi: bool, steps: int = STEPS,
+               threads: int | None = None):  # fmt: skip
     """:func:`record` plus the run's whole controller step times: wall and CPU time (ms) of
     each ``step`` (solves, rescues, the fallback's bookkeeping). The solves run in this
     process (``hang_s = 0``; no decision depends on it), so the CPU time is the step's own
-    work, which a loaded machine stretches far less than the wall time."""
+    work, which a loaded machine stretches far less than the wall time. ``threads``: the
+    solver's ``threads`` (None: the preset's); the run is the same, only faster."""
     sc = load_scenario(SCENARIOS / f"{case}.toml")
     sc = scenario_with(sc, duration=float(steps))
     params = load_preset(preset, preset)
-    params = dataclasses.replace(params, solver=dataclasses.replace(params.solver, hang_s=0.0))
+    sp = dataclasses.replace(params.solver, hang_s=0.0)
+    if threads is not None:
+        sp = dataclasses.replace(sp, threads=threads)
+    params = dataclasses.replace(params, solver=sp)
     ctrl = MPCController(params, len(sc.auv), multi, boat=Boat.of_scenario(sc))
     ctrl.recorder = []
     step, cpu = ctrl.step, []
@@ -198,11 +203,14 @@ def bench_mpc(args: argparse.Namespace) -> dict:
     steps = getattr(args, "steps", STEPS) or STEPS
     quick = getattr(args, "quick", False)
     figures: dict = {"machine": platform.processor() or platform.machine(), "steps": steps,
+                     "threads": getattr(args, "threads", None) or 1,
                      "load_average": [round(x, 2) for x in os.getloadavg()],
                      "cases": {}}  # fmt: skip
+    print(f"default solver: {figures['threads']} stage-evaluation thread(s) (solver.threads)")
     for case, preset, multi in CASES:
         t0 = time.perf_counter()
-        params, ctrl, seq, step_ms = record_run(case, preset, multi, steps)
+        params, ctrl, seq, step_ms = record_run(case, preset, multi, steps,
+                                                getattr(args, "threads", None))
         step = step_summary(step_ms, ctrl)
         ocp, default = build_ocp(params, ctrl.ocp.dims.n_auv, multi, boat=ctrl.boat)
         ref = OptiReference(ocp)

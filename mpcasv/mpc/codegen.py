@@ -47,6 +47,34 @@ def _cpu() -> str:
     return platform.processor() or platform.machine()
 
 
+#: how the generated C's OpenMP loops get their thread count (``thread_cflags``)
+_THREADS_DEFINE = "MPCASV_THREADS"
+_OMP_LOOP = "#pragma omp parallel for"
+
+
+def thread_cflags(cflags: str, threads: int) -> str:
+    """Compiler flags for a library whose horizon loops run on ``threads`` threads
+    (``SolverParams.threads``): ``cflags`` unchanged for 1, else with ``-fopenmp`` and the
+    thread count, which the generated OpenMP loops are given as ``num_threads`` (so a
+    library's parallelism is fixed by its flags, part of the cache key, not by the
+    environment)."""
+    if threads <= 1:
+        return cflags
+    # -z nodelete: the library stays mapped after dlclose, for OpenMP's threads outlive it
+    # (unloaded, the process crashed at exit)
+    return f"{cflags} -fopenmp -D{_THREADS_DEFINE}={int(threads)} -Wl,-z,nodelete"
+
+
+def with_thread_count(c_source: str, cflags: str) -> str:
+    """The generated C with its OpenMP loops given the thread count of ``cflags``
+    (:func:`thread_cflags`; CasADi writes them without one), statically scheduled: one
+    equal share of the stages per thread. Unchanged without that flag."""
+    if f"-D{_THREADS_DEFINE}=" not in cflags:
+        return c_source
+    return c_source.replace(_OMP_LOOP, f"{_OMP_LOOP} num_threads({_THREADS_DEFINE}) "
+                                       "schedule(static)")  # fmt: skip
+
+
 def library_key(functions: dict[str, ca.Function], solver: str, cflags: str) -> str:
     """SHA-256 (hex, 24 characters) of everything that determines the compiled library."""
     h = hashlib.sha256()
@@ -105,6 +133,7 @@ def _compile(functions: dict[str, ca.Function], target: Path, compiler: str, cfl
         for fun in functions.values():
             gen.add(fun)
         gen.generate(str(Path(tmp)) + os.sep)
+        src.write_text(with_thread_count(src.read_text(), cflags))
         out = Path(tmp) / target.name
         cmd = [compiler, *shlex.split(cflags), "-fPIC", "-shared", str(src), "-o", str(out),
                "-lm"]  # fmt: skip

@@ -10,6 +10,9 @@ for in a compiled library (``nlpsol(name, "fatrop", "lib.so")``).
 
 from __future__ import annotations
 
+import contextlib
+import io
+
 import casadi as ca
 
 from mpcasv.mpc.problem import OCP
@@ -42,12 +45,25 @@ def _stage_functions(ocp: OCP) -> dict[str, ca.Function]:
     }
 
 
-def nlp_functions(ocp: OCP, solver: str) -> dict[str, ca.Function]:
+def _over_horizon(f: ca.Function, N: int, threads: int) -> ca.Function:
+    """``f`` mapped over the ``N`` stages: a loop, or with ``threads > 1`` an OpenMP loop in
+    the generated C (:func:`mpcasv.mpc.codegen.thread_cflags` sets its threads). CasADi's
+    Python build has no OpenMP and warns that its own evaluation of such a map stays serial;
+    that is expected (the compiled library is what runs in parallel) and the warning is
+    silenced."""
+    if threads <= 1:
+        return f.map(N)
+    with contextlib.redirect_stderr(io.StringIO()):
+        return f.map(N, "openmp")
+
+
+def nlp_functions(ocp: OCP, solver: str, threads: int = 1) -> dict[str, ca.Function]:
     """The functions a compiled library for ``solver`` must contain.
 
     ``fatrop`` and ``ipopt``: ``nlp`` and the ``nlp_*`` oracle functions of their CasADi
     plugins; ``qp``: ``qp_eval(x, p, lam_g) -> (f, grad_f, g, jac_g, hess_l)`` for the
-    linearise-and-solve variant (:mod:`mpcasv.mpc.qp`).
+    linearise-and-solve variant (:mod:`mpcasv.mpc.qp`). ``threads > 1`` (fatrop, ipopt):
+    the stages as OpenMP loops (``SolverParams.threads``).
     """
     d = ocp.dims
     N, nx, nb, nw = d.N, d.nx, d.nb, d.nw
@@ -56,7 +72,7 @@ def nlp_functions(ocp: OCP, solver: str) -> dict[str, ca.Function]:
     x, p = ca.MX.sym("x", nw), ca.MX.sym("p", d.npar)
     lam_f, lam_g = ca.MX.sym("lam_f"), ca.MX.sym("lam_g", d.ng)
     args, zN, targs = ocp.horizon_args(x, p)
-    Ls, Gs = ocp.stage.map(N)(*args)
+    Ls, Gs = _over_horizon(ocp.stage, N, threads)(*args)
     f = ca.sum2(Ls) + ocp.term(zN, *targs)
     g = ca.vec(Gs)
     # +I on z_{k+1} in the gap-closing rows: a constant block
@@ -76,11 +92,11 @@ def nlp_functions(ocp: OCP, solver: str) -> dict[str, ca.Function]:
     out: dict[str, ca.Function] = {}
     xp, xpl = ["x", "p"], ["x", "p", "lam_f", "lam_g"]
     if solver in ("fatrop", "ipopt"):
-        _, dLs = S["grad"].map(N)(*args)
+        _, dLs = _over_horizon(S["grad"], N, threads)(*args)
         LN, dLN = S["term_grad"](zN, *targs)
         grad_f = ca.vertcat(ca.vec(dLs), dLN)
-        g2, Js = S["jac"].map(N)(*args)
-        gls, Hs = S["hess"].map(N)(*args, ca.repmat(lam_f, 1, N), LG)
+        g2, Js = _over_horizon(S["jac"], N, threads)(*args)
+        gls, Hs = _over_horizon(S["hess"], N, threads)(*args, ca.repmat(lam_f, 1, N), LG)
         grad_lag = ca.vertcat(ca.vec(gls), lam_f * dLN) + ca.mtimes(E.T, lam_g)
         H = hess_of(Hs, lam_f * S["term_hess"](zN, *targs))
         out["nlp"] = ca.Function("nlp", [x, p], [f, g], xp, ["f", "g"])

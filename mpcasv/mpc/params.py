@@ -145,6 +145,14 @@ class SolverParams:
     cflags : str
         Compiler flags of the cached library (``-march=native``: the cache key includes the
         CPU model).
+    threads : int
+        Threads that evaluate the horizon's stages (the functions, their Jacobian and
+        Hessian: about three quarters of a solve, docs/mpc.md "Benchmark") in the compiled
+        library: 1 (default) a plain loop; more, an OpenMP loop (``-fopenmp``; another
+        library). The results are the same bit for bit: each stage is evaluated alone and the
+        sums are taken afterwards in the same order. For a field computer with a core to
+        spare; in ``simulate`` and ``compare`` parallel runs use the cores better. Needs
+        ``compiled`` and ``fatrop`` or ``ipopt``.
     max_iter : int
         Iteration limit of the NLP solver (0 forces a failure: the fallback test).
     tol : float
@@ -204,6 +212,7 @@ class SolverParams:
     solver: SolverName = "fatrop"
     compiled: bool = True
     cflags: str = "-O3 -march=native"
+    threads: PosInt = 1
     max_iter: Annotated[int, Strict(), Field(ge=0)] = 50
     tol: Pos = 1e-4
     mu_init: Pos = 1e-4
@@ -216,6 +225,11 @@ class SolverParams:
     check_margin: NonNeg = 2.0
     max_violation: Pos = 60.0
     funnel_speed: Pos = 1.25
+
+    def __post_init__(self) -> None:
+        if self.threads > 1 and not (self.compiled and self.solver in ("fatrop", "ipopt")):
+            raise ValueError("threads > 1 needs compiled = true and solver 'fatrop' or 'ipopt' "
+                             "(the stages run in parallel in the compiled library only)")
 
 
 @frozen

@@ -12,7 +12,7 @@ import dataclasses
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from mpcasv.mpc.codegen import cache_dir, compiled_library, library_path
+from mpcasv.mpc.codegen import cache_dir, compiled_library, library_path, thread_cflags
 from mpcasv.mpc.derivatives import nlp_functions
 from mpcasv.mpc.params import MPCParams
 from mpcasv.mpc.problem import OCP
@@ -83,8 +83,9 @@ def libraries(params: MPCParams, n_auv: int, multi: bool, boat=None) -> list[Lib
 def _libraries(params: MPCParams, n_auv: int, multi: bool, boat) -> list[Library]:
     sp = params.solver
     ocp = OCP(params, n_auv, outer=not multi, boat=boat)
-    funs = nlp_functions(ocp, sp.solver)
+    funs = nlp_functions(ocp, sp.solver, sp.threads)
+    cflags = thread_cflags(sp.cflags, sp.threads)
     name = "mpc-multi" if multi else "mpc-single"
     label = f"{name}, {n_auv} AUV{'s' if n_auv > 1 else ''}, {sp.solver}, vessel {ocp.vessel.name}"
-    return [Library(library_path(funs, sp.solver, sp.cflags), label, n_auv, sp.solver,
-                    sp.cflags, funs)]  # fmt: skip
+    return [Library(library_path(funs, sp.solver, cflags), label, n_auv, sp.solver, cflags,
+                    funs)]  # fmt: skip

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from mpcasv.mpc.codegen import compiled_library
+from mpcasv.mpc.codegen import compiled_library, thread_cflags
 from mpcasv.mpc.derivatives import nlp_functions
 from mpcasv.mpc.params import SolverParams
 from mpcasv.mpc.problem import OCP
@@ -78,8 +78,8 @@ class NLPSolver:
         self.ocp, self.sp = ocp, sp
         self._lib = None
         if sp.compiled:
-            self._lib = compiled_library(nlp_functions(ocp, sp.solver), sp.solver, sp.cflags,
-                                         log=log)  # fmt: skip
+            self._lib = compiled_library(nlp_functions(ocp, sp.solver, sp.threads), sp.solver,
+                                         thread_cflags(sp.cflags, sp.threads), log=log)  # fmt: skip
         #: one CasADi solver per iteration limit (the rescue solves' larger budget)
         self._solvers: dict[int, ca.Function] = {}
         self.solver = self._nlpsol(sp.max_iter)
