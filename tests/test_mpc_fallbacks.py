@@ -166,3 +166,9 @@ def test_the_benchmark_records_wall_and_cpu_time_of_each_whole_step():
     s = step_summary(times, ctrl)
     assert s["steps"] == 12 and sum(s["sources"].values()) == 12
     assert s["cpu_p99_ms"] >= s["cpu_median_ms"] > 0.0 and s["wall_p99_ms"] >= s["wall_median_ms"]
+    # each step is classified once: the warm-started solve alone, with exploration, rescued
+    assert len(times["kind"]) == 12
+    by = s["by_kind"]
+    assert sum(v["steps"] for v in by.values()) == 11  # the cold first step left out
+    assert by.get("rescue", {"steps": 0})["steps"] <= 11 - s["sources"].get("plan", 0) + 1
+    assert ctrl.explored >= by.get("explore", {"steps": 0})["steps"]

@@ -68,30 +68,45 @@ def record_run(case: str, preset: str, multi: bool, steps: int = STEPS,
     params = dataclasses.replace(params, solver=sp)
     ctrl = MPCController(params, len(sc.auv), multi, boat=Boat.of_scenario(sc))
     ctrl.recorder = []
-    step, cpu = ctrl.step, []
+    step, cpu, kinds = ctrl.step, [], []
 
     def timed_step(obs):
+        explored, plans = ctrl.explored, ctrl.sources.get("plan", 0)
         c0 = time.process_time()
         cmd = step(obs)
         cpu.append((time.process_time() - c0) * 1e3)
+        rescued = ctrl.sources.get("plan", 0) == plans  # rescue, escape or fallback
+        kinds.append("rescue" if rescued else "explore" if ctrl.explored > explored else "solve")
         return cmd
 
     ctrl.step = timed_step
     result = simulate(sc, ctrl, seed=0)
-    times = {"wall": np.asarray(result.step_ms, float), "cpu": np.asarray(cpu, float)}
+    times = {"wall": np.asarray(result.step_ms, float), "cpu": np.asarray(cpu, float),
+             "kind": np.asarray(kinds)}  # fmt: skip
     return params, ctrl, list(ctrl.recorder), times
 
 
 def step_summary(times: dict, ctrl: MPCController) -> dict:
     """Median / p99 / max of the whole controller step, wall and CPU time (ms; the first
-    step, cold, left out), and the run's plan sources (docs/mpc.md, "Fallbacks")."""
+    step, cold, left out), and the run's plan sources (docs/mpc.md, "Fallbacks"); and what
+    the steps were: the warm-started solve alone (``solve``), with the exploration solve
+    (``explore``) or with rescue solves (``rescue``): their counts and wall p99 / max."""
     out = {"steps": int(len(times["wall"])), "fallbacks": int(ctrl.fallbacks),
            "sources": dict(ctrl.sources)}  # fmt: skip
-    for kind, ms in times.items():
-        ms = ms[1:]
+    for kind in ("wall", "cpu"):
+        ms = times[kind][1:]
         out |= {f"{kind}_median_ms": round(float(np.median(ms)), 3),
                 f"{kind}_p99_ms": round(float(np.percentile(ms, 99)), 3),
                 f"{kind}_max_ms": round(float(np.max(ms)), 2)}  # fmt: skip
+    if "kind" in times:
+        wall, kinds = times["wall"][1:], times["kind"][1:]
+        out["by_kind"] = {}
+        for k in ("solve", "explore", "rescue"):
+            ms = wall[kinds == k]
+            if len(ms):
+                out["by_kind"][k] = {"steps": len(ms),
+                                     "wall_p99_ms": round(float(np.percentile(ms, 99)), 2),
+                                     "wall_max_ms": round(float(np.max(ms)), 2)}  # fmt: skip
     return out
 
 
@@ -237,6 +252,9 @@ def bench_mpc(args: argparse.Namespace) -> dict:
         print(f"whole controller step in the recorded run: wall median {step['wall_median_ms']:.2f}"
               f" / p99 {step['wall_p99_ms']:.2f} ms, CPU median {step['cpu_median_ms']:.2f} / "
               f"p99 {step['cpu_p99_ms']:.2f} ms; plan sources {step['sources']}")
+        print("  by what the step did (wall p99 / max ms): " + ", ".join(
+            f"{k} {v['steps']} steps {v['wall_p99_ms']:.1f} / {v['wall_max_ms']:.1f}"
+            for k, v in step.get("by_kind", {}).items()))  # fmt: skip
     figures["load_average_end"] = [round(x, 2) for x in os.getloadavg()]
     return figures
 
