@@ -99,23 +99,28 @@ def test_a_capped_plan_stays_below_the_cap_and_the_uncapped_one_does_not(scenari
 
 
 def test_a_cap_below_the_current_speed_mid_run_keeps_every_solve_feasible(scenarios_dir):
-    """Capped at 1 m/s at t = 60 s of Case 3, while the boat runs at about 2.4 m/s at full
-    thrust: every solve after it converges (no fallback, no rescue), every plan's thrust
-    stays within max(T_cap, T_0 - dT_max t_k), and the boat is at the cap 35 s later. (The
-    preset's T_ramp = dt lets the thrust fall from T_max to the cap within stage 0: the
-    ramp itself is the next test's.)"""
-    ts, ctrl, steps = case3(scenarios_dir, 100.0, cap=U_CAP, cap_at=60.0)
+    """Capped at 1 m/s in Case 3 at the first whole second the uncapped boat runs above
+    2 m/s (a run is the same up to the cap: found from an uncapped run first): every solve
+    after it converges (no fallback, no rescue), every plan's thrust stays within
+    max(T_cap, T_0 - dT_max t_k), and the boat is at the cap 35 s later. (The preset's
+    T_ramp = dt lets the thrust fall from T_max to the cap within stage 0: the ramp itself
+    is the next test's.)"""
+    free = case3(scenarios_dir, 150.0)[0]
+    fast = free.loc[(free["u"] > 2.0) & (free["t"] % 1.0 == 0.0), "t"]
+    assert len(fast), "the uncapped boat never ran above 2 m/s in 150 s"
+    t_cap = float(fast.iloc[0])
+    ts, ctrl, steps = case3(scenarios_dir, t_cap + 40.0, cap=U_CAP, cap_at=t_cap)
     ocp = ctrl.ocp
     T_cap = ocp.model.thrust_for_speed(U_CAP)
-    first = next(s for s in steps if s[0] >= 60.0)
-    assert first[3] > 2 * T_cap and ts.loc[ts["t"] == 60.0, "u"].item() > 2.0
-    after = [s for s in steps if s[0] >= 60.0]
+    first = next(s for s in steps if s[0] >= t_cap)
+    assert first[3] > 2 * T_cap and ts.loc[ts["t"] == t_cap, "u"].item() > 2.0
+    after = [s for s in steps if s[0] >= t_cap]
     assert all(d["mpc_ok"] == 1 and d["mpc_source"] == "plan" for _, _, d, _, _ in after)
     assert ctrl.fallbacks == 0
     for t, plan, _, _, _ in after:
         bound = ocp.thrust_caps(plan.extra["T"][0], T_cap)
         assert np.all(plan.extra["T"][1:] <= bound + 1e-3), t
-    assert ts.loc[ts["t"] >= 95.0, "u"].max() <= U_CAP + 0.1
+    assert ts.loc[ts["t"] >= t_cap + 35.0, "u"].max() <= U_CAP + 0.1
 
 
 def test_the_thrust_comes_down_along_the_rate_limit_when_the_cap_is_below_it():
