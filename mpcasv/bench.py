@@ -40,7 +40,7 @@ def run(args: argparse.Namespace) -> int:
     # --repeat 0 / -1 ran once and said "over 1 runs"; --steps -1 blamed "case3 (modified):
     # duration"; an unwritable --json was found only after the whole benchmark
     for flag in ("repeat", "steps", "threads"):
-        if (getattr(args, flag) or 1) < 1:
+        if getattr(args, flag) is not None and getattr(args, flag) < 1:
             raise ConfigError(f"--{flag} {getattr(args, flag)}: must be >= 1")
     if args.json is not None:
         check_output_file(args.json, "--json")

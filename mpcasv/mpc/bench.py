@@ -68,7 +68,7 @@ def record_run(case: str, preset: str, multi: bool, steps: int = STEPS,
     params = dataclasses.replace(params, solver=sp)
     ctrl = MPCController(params, len(sc.auv), multi, boat=Boat.of_scenario(sc))
     ctrl.recorder = []
-    step, cpu, kinds = ctrl.step, [], []
+    step, cpu, kinds, sources = ctrl.step, [], [], []
 
     def timed_step(obs):
         explored, plans = ctrl.explored, ctrl.sources.get("plan", 0)
@@ -77,12 +77,13 @@ def record_run(case: str, preset: str, multi: bool, steps: int = STEPS,
         cpu.append((time.process_time() - c0) * 1e3)
         rescued = ctrl.sources.get("plan", 0) == plans  # rescue, escape or fallback
         kinds.append("rescue" if rescued else "explore" if ctrl.explored > explored else "solve")
+        sources.append(ctrl.diagnostics()["mpc_source"])
         return cmd
 
     ctrl.step = timed_step
     result = simulate(sc, ctrl, seed=0)
     times = {"wall": np.asarray(result.step_ms, float), "cpu": np.asarray(cpu, float),
-             "kind": np.asarray(kinds)}  # fmt: skip
+             "kind": np.asarray(kinds), "source": np.asarray(sources)}  # fmt: skip
     return params, ctrl, list(ctrl.recorder), times
 
 
@@ -218,15 +219,14 @@ def bench_mpc(args: argparse.Namespace) -> dict:
     steps = getattr(args, "steps", STEPS) or STEPS
     quick = getattr(args, "quick", False)
     figures: dict = {"machine": platform.processor() or platform.machine(), "steps": steps,
-                     "threads": getattr(args, "threads", None) or 1,
                      "load_average": [round(x, 2) for x in os.getloadavg()],
                      "cases": {}}  # fmt: skip
-    print(f"default solver: {figures['threads']} stage-evaluation thread(s) (solver.threads)")
     for case, preset, multi in CASES:
         t0 = time.perf_counter()
         params, ctrl, seq, step_ms = record_run(case, preset, multi, steps,
                                                 getattr(args, "threads", None))
         step = step_summary(step_ms, ctrl)
+        figures["threads"] = params.solver.threads  # the recorded run's and the replay's
         ocp, default = build_ocp(params, ctrl.ocp.dims.n_auv, multi, boat=ctrl.boat)
         ref = OptiReference(ocp)
         n = ocp.dims.n_auv
@@ -235,7 +235,7 @@ def bench_mpc(args: argparse.Namespace) -> dict:
         rows = {"opti_ipopt": summary(res_ref, None),
                 f"default_{params.solver.solver}": summary(res_def, res_ref)}  # fmt: skip
         if not quick:
-            qp = QPSolver(ocp, dataclasses.replace(params.solver, solver="qp"))
+            qp = QPSolver(ocp, dataclasses.replace(params.solver, solver="qp", threads=1))
             rows["qp_osqp"] = summary(replay(qp, ocp, seq, f"{case} qp/osqp"), res_ref)
             rows[f"default_{params.solver.solver}"] |= polish(OptiReference(ocp, POLISH), seq,
                                                               res_def)  # fmt: skip
@@ -248,7 +248,7 @@ def bench_mpc(args: argparse.Namespace) -> dict:
             "speedup_cpu_median": round(speedup_cpu, 1), "controller_step": step,
             "wall_s": round(time.perf_counter() - t0, 1),
         }  # fmt: skip
-        _print(case, n, rows, speedup, len(seq))
+        _print(case, n, rows, speedup, len(seq), params.solver.threads)
         print(f"whole controller step in the recorded run: wall median {step['wall_median_ms']:.2f}"
               f" / p99 {step['wall_p99_ms']:.2f} ms, CPU median {step['cpu_median_ms']:.2f} / "
               f"p99 {step['cpu_p99_ms']:.2f} ms; plan sources {step['sources']}")
@@ -259,8 +259,10 @@ def bench_mpc(args: argparse.Namespace) -> dict:
     return figures
 
 
-def _print(case: str, n: int, rows: dict, speedup: float, steps: int = STEPS) -> None:
-    print(f"\n{case}: {n} AUV(s), {steps} receding-horizon problems")
+def _print(case: str, n: int, rows: dict, speedup: float, steps: int = STEPS,
+           threads: int = 1) -> None:  # fmt: skip
+    print(f"\n{case}: {n} AUV(s), {steps} receding-horizon problems; default solver on "
+          f"{threads} thread(s) (solver.threads)")
     head = f"{'solver':<16}{'median ms':>10}{'p99 ms':>9}{'CPU med':>9}{'CPU p99':>9}{'iters':>7}"
     head += f"{'fail':>6}"
     print(head + f"{'cost vs ref (median / p95 |rel|)':>36}{'<=+1 %':>8}")

@@ -119,6 +119,17 @@ def compiled_library(functions: dict[str, ca.Function], solver: str, cflags: str
     return target
 
 
+def write_source(functions: dict[str, ca.Function], src: Path, cflags: str) -> Path:
+    """Generate the C of ``functions`` into ``src`` (what the cache compiles with ``cflags``:
+    OpenMP loops given their thread count, :func:`with_thread_count`)."""
+    gen = ca.CodeGenerator(src.name)
+    for fun in functions.values():
+        gen.add(fun)
+    gen.generate(str(src.parent) + os.sep)
+    src.write_text(with_thread_count(src.read_text(), cflags))
+    return src
+
+
 def _compile(functions: dict[str, ca.Function], target: Path, compiler: str, cflags: str,
              solver: str, log) -> None:
     """Generate C for ``functions`` and compile it into ``target`` (atomic rename)."""
@@ -128,12 +139,7 @@ def _compile(functions: dict[str, ca.Function], target: Path, compiler: str, cfl
                            "solver.compiled = false in the MPC preset")  # fmt: skip
     t0 = time.perf_counter()
     with tempfile.TemporaryDirectory(dir=folder) as tmp:
-        src = Path(tmp) / f"{stem}.c"
-        gen = ca.CodeGenerator(src.name)
-        for fun in functions.values():
-            gen.add(fun)
-        gen.generate(str(Path(tmp)) + os.sep)
-        src.write_text(with_thread_count(src.read_text(), cflags))
+        src = write_source(functions, Path(tmp) / f"{stem}.c", cflags)
         out = Path(tmp) / target.name
         cmd = [compiler, *shlex.split(cflags), "-fPIC", "-shared", str(src), "-o", str(out),
                "-lm"]  # fmt: skip
