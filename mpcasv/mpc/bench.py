@@ -234,6 +234,12 @@ def bench_mpc(args: argparse.Namespace) -> dict:
         res_def = replay(default, ocp, seq, f"{case} {params.solver.solver}")
         rows = {"opti_ipopt": summary(res_ref, None),
                 f"default_{params.solver.solver}": summary(res_def, res_ref)}  # fmt: skip
+        if params.solver.threads > 1:  # the same solver on one thread, same sequence and run
+            one = dataclasses.replace(params, solver=dataclasses.replace(params.solver,
+                                                                         threads=1))  # fmt: skip
+            _, serial = build_ocp(one, n, multi, boat=ctrl.boat)
+            rows["default_1_thread"] = summary(replay(serial, ocp, seq, f"{case} 1 thread"),
+                                               res_ref)  # fmt: skip
         if not quick:
             qp = QPSolver(ocp, dataclasses.replace(params.solver, solver="qp", threads=1))
             rows["qp_osqp"] = summary(replay(qp, ocp, seq, f"{case} qp/osqp"), res_ref)
@@ -275,6 +281,12 @@ def _print(case: str, n: int, rows: dict, speedup: float, steps: int = STEPS,
             line += f"{100 * r['not_worse_1pct']:>7.1f}%"
         print(line)
     print(f"default vs Opti + IPOPT: {speedup:.1f}x faster (median)")
+    if "default_1_thread" in rows:
+        one = rows["default_1_thread"]
+        d0 = next(r for k, r in rows.items() if k.startswith("default"))
+        print(f"{threads} threads against 1 on the same sequence: median "
+              f"{one['median_ms'] / d0['median_ms']:.2f}x, p99 "
+              f"{one['p99_ms'] / d0['p99_ms']:.2f}x faster")
     d = next(r for k, r in rows.items() if k.startswith("default"))
     if d.get("time_shares_pct"):
         print("where the default's time goes (fatrop's timers): " + ", ".join(

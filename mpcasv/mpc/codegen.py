@@ -50,6 +50,9 @@ def _cpu() -> str:
 #: how the generated C's OpenMP loops get their thread count (``thread_cflags``)
 _THREADS_DEFINE = "MPCASV_THREADS"
 _OMP_LOOP = "#pragma omp parallel for"
+#: version of ``with_thread_count``'s rewrite, in the flags and so in the cache key: change it
+#: when the rewrite changes, or libraries compiled with the old one are loaded from the cache
+_OMP_REWRITE = 1
 
 
 def thread_cflags(cflags: str, threads: int) -> str:
@@ -62,7 +65,8 @@ def thread_cflags(cflags: str, threads: int) -> str:
         return cflags
     # -z nodelete: the library stays mapped after dlclose, for OpenMP's threads outlive it
     # (unloaded, the process crashed at exit)
-    return f"{cflags} -fopenmp -D{_THREADS_DEFINE}={int(threads)} -Wl,-z,nodelete"
+    return (f"{cflags} -fopenmp -D{_THREADS_DEFINE}={int(threads)} "
+            f"-DMPCASV_OMP_REWRITE={_OMP_REWRITE} -Wl,-z,nodelete")
 
 
 def with_thread_count(c_source: str, cflags: str) -> str:
