@@ -146,15 +146,23 @@ def xdot_expr(x, u, c, p):
     return ca.vertcat(eta_dot, nu_dot, act_dot)
 
 
+def rk4_step(f, x, u, c, h):
+    """One classic Runge-Kutta 4 step of ``h``, input held: ``(x_next, x_mid)`` with
+    ``x_mid = x + h/2 k2``, the step's own estimate of the state at ``h/2`` (the point its
+    third stage is evaluated at)."""
+    k1 = f(x, u, c)
+    k2 = f(x + h / 2 * k1, u, c)
+    x_mid = x + h / 2 * k2
+    k3 = f(x_mid, u, c)
+    k4 = f(x + h * k3, u, c)
+    return x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4), x_mid
+
+
 def rk4_expr(f, x, u, c, dt, n_sub=1):
     """Classic Runge-Kutta 4 over ``dt`` in ``n_sub`` equal sub-steps, input held (ZOH)."""
     h = dt / n_sub
     for _ in range(n_sub):
-        k1 = f(x, u, c)
-        k2 = f(x + h / 2 * k1, u, c)
-        k3 = f(x + h / 2 * k2, u, c)
-        k4 = f(x + h * k3, u, c)
-        x = x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+        x = rk4_step(f, x, u, c, h)[0]
     return x
 
 

@@ -25,7 +25,7 @@ import math
 import casadi as ca
 
 from mpcasv.models.acoustics import AcousticParams
-from mpcasv.models.vessel import xdot_expr
+from mpcasv.models.vessel import rk4_step, xdot_expr
 from mpcasv.mpc.layout import NCH, channel_vector
 from mpcasv.mpc.smooth import D_EPS, sigmoid
 from mpcasv.mpc.variance import N_NAV, fix_gain
@@ -63,12 +63,7 @@ class PlanDynamics:
         x, tau = z[0:NXV], [z[NXV + i] for i in range(K)]
         r0 = self._rates(x, tau, 0.0, q)
         for j in range(n_sub):
-            k1 = self._vessel_rhs(x, w, q)
-            k2 = self._vessel_rhs(x + h / 2 * k1, w, q)
-            xm = x + h / 2 * k2
-            k3 = self._vessel_rhs(xm, w, q)
-            k4 = self._vessel_rhs(x + h * k3, w, q)
-            x1 = x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+            x1, xm = rk4_step(self._vessel_rhs, x, w, q, h)
             rm = self._rates(xm, tau, (j + 0.5) * h, q)
             r1 = self._rates(x1, tau, (j + 1) * h, q)
             for i in range(K):
