@@ -71,13 +71,14 @@ def record_run(case: str, preset: str, multi: bool, steps: int = STEPS,
     step, cpu, kinds, sources = ctrl.step, [], [], []
 
     def timed_step(obs):
-        explored, plans = ctrl.explored, ctrl.sources.get("plan", 0)
+        explored = ctrl.explored
         c0 = time.process_time()
         cmd = step(obs)
         cpu.append((time.process_time() - c0) * 1e3)
-        rescued = ctrl.sources.get("plan", 0) == plans  # rescue, escape or fallback
-        kinds.append("rescue" if rescued else "explore" if ctrl.explored > explored else "solve")
-        sources.append(ctrl.diagnostics()["mpc_source"])
+        source = ctrl.diagnostics()["mpc_source"]  # not "plan": rescue, escape or fallback
+        sources.append(source)
+        kinds.append("rescue" if source != "plan" else
+                     "explore" if ctrl.explored > explored else "solve")  # fmt: skip
         return cmd
 
     ctrl.step = timed_step
@@ -281,13 +282,12 @@ def _print(case: str, n: int, rows: dict, speedup: float, steps: int = STEPS,
             line += f"{100 * r['not_worse_1pct']:>7.1f}%"
         print(line)
     print(f"default vs Opti + IPOPT: {speedup:.1f}x faster (median)")
+    d = next(r for k, r in rows.items() if k.startswith("default"))
     if "default_1_thread" in rows:
         one = rows["default_1_thread"]
-        d0 = next(r for k, r in rows.items() if k.startswith("default"))
         print(f"{threads} threads against 1 on the same sequence: median "
-              f"{one['median_ms'] / d0['median_ms']:.2f}x, p99 "
-              f"{one['p99_ms'] / d0['p99_ms']:.2f}x faster")
-    d = next(r for k, r in rows.items() if k.startswith("default"))
+              f"{one['median_ms'] / d['median_ms']:.2f}x, p99 "
+              f"{one['p99_ms'] / d['p99_ms']:.2f}x faster")
     if d.get("time_shares_pct"):
         print("where the default's time goes (fatrop's timers): " + ", ".join(
             f"{k} {v:.0f} %" for k, v in d["time_shares_pct"].items()))  # fmt: skip
