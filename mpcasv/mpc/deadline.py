@@ -163,10 +163,7 @@ class DeadlineSolver:
         self.start_timeout = start_timeout
         self.abandoned = 0
         self._dead: list[_Worker] = []  # killed workers not yet reaped
-        self._active = _Worker(factory, self._ctx)
-        if not self._active.wait_ready(start_timeout):
-            self._active.kill()
-            raise RuntimeError(f"MPC solver worker not ready within {start_timeout:g} s")
+        self._active = self._started()
         self._spare = _Worker(factory, self._ctx, background=True) if spare else None
 
     def wait_spare(self, timeout: float) -> bool:
@@ -217,6 +214,15 @@ class DeadlineSolver:
             self.abandoned += 1
         return SolveResult(np.asarray(w0, float), None, None, math.nan, False, status, 0, ms)
 
+    def _started(self) -> _Worker:
+        """A new worker, waited for until ready (RuntimeError, the worker killed, if it is
+        not within ``start_timeout``)."""
+        w = _Worker(self.factory, self._ctx)
+        if not w.wait_ready(self.start_timeout):
+            w.kill()
+            raise RuntimeError(f"MPC solver worker not ready within {self.start_timeout:g} s")
+        return w
+
     def _replace(self) -> None:
         """Kill the active worker (reaped at the next call); the spare takes over; a new spare
         starts in the background (the step's time is not spent on it). Without a spare: a new
@@ -230,10 +236,7 @@ class DeadlineSolver:
         self._active.kill(wait=False)
         self._dead.append(self._active)
         if self._spare is None:
-            self._active = _Worker(self.factory, self._ctx)
-            if not self._active.wait_ready(self.start_timeout):
-                raise RuntimeError("MPC solver worker not ready within "
-                                   f"{self.start_timeout:g} s")  # fmt: skip
+            self._active = self._started()
             return
         self._active = self._spare
         self._spare = _Worker(self.factory, self._ctx, background=True, delay=SPARE_DELAY_S)
