@@ -26,7 +26,7 @@ from mpcasv.sim.scenario import load_scenario, scenario_with
 from mpcasv.sim.simulator import simulate
 
 #: columns that hold measured wall time (reported, never used for a decision)
-WALL_COLUMNS = ("step_ms", "mpc_ms", "mpc_over_budget")
+WALL_COLUMNS = ("step_ms", "mpc_ms", "mpc_over_budget", "mpc_explore_ms")
 
 
 def _decisions(ts: pd.DataFrame) -> pd.DataFrame:

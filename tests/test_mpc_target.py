@@ -101,3 +101,24 @@ def test_the_order_rule_visits_the_auv_on_the_way_where_the_age_rule_goes_past_i
     the order rule visits AUV 1 on the way (tests/test_mpc_order.py has the order alone)."""
     assert _first_choice("age") == 0
     assert _first_choice("order") == 1
+
+
+@pytest.mark.parametrize("rule", ["age", "order"])
+def test_a_run_that_starts_with_every_fix_age_zero_commits_to_one_target(rule):
+    """Case 6's start (measured before the fix: the target swapped between AUVs 1 and 2 every
+    step for the first 26 s, 25 switches): three AUVs 120-270 m from the ASV, no fix yet
+    since the run began, so every expected fix age is below ``tau_served`` for the first
+    10 s. A newly chosen AUV is not served until the ASV has been in its target domain:
+    one choice, kept while the ASV is on its way (the ages grow; no solve needed)."""
+    c = make_controller("mpc-multi", 3, "mpc-multi", overrides={
+        "solver.compiled": False, "target_rule": rule})  # fmt: skip
+    c.reset(3)
+    auvs = (AUVEstimate(95.0, -75.0, 0.0), AUVEstimate(-160.0, 72.0, 0.0),
+            AUVEstimate(-160.0, -222.0, 0.0))  # fmt: skip
+    targets = []
+    for k in range(30):
+        c.tau = np.full(3, float(k))  # no fixes on the way: the ages grow with the time
+        c._choose_target(Observation(float(k), ASVState(0.0, 0.0, 0.0), False, auvs), 1.0)
+        targets.append(c.target)
+    assert c.target_switches <= 1, targets
+    assert len(set(targets)) <= 2 and targets[1:] == [targets[-1]] * 29, targets

@@ -92,9 +92,14 @@ def one_auv():
 
 
 def _planned_move(ctrl, auv):
-    """(distance the plan moves the ASV over the horizon (m), its top speed (m/s))."""
+    """(distance the plan moves the ASV over the horizon (m), its top speed (m/s)): the plan
+    of the second step, warm-started from the first step's exploration solve if that was
+    cheaper (it runs between the steps: docs/mpc.md, "Controller step")."""
     ctrl.reset(1)
     ctrl.step(Observation(0.0, ASVState(0.0, 0.0, 0.0), False, (auv,)))
+    ctrl.between_steps()
+    moved = dataclasses.replace(auv, N=auv.N + auv.v_N, E=auv.E + auv.v_E)  # 1 s on
+    ctrl.step(Observation(1.0, ASVState(0.0, 0.0, 0.0), False, (moved,)))
     assert ctrl.fallbacks == 0
     return float(np.hypot(ctrl.plan.N[-1], ctrl.plan.E[-1])), float(ctrl.plan.extra["u"].max())
 

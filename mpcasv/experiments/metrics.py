@@ -132,6 +132,10 @@ _BASE: dict[str, MetricInfo] = {
     "controller_step_ms_median": _i("ms", "lower", "median wall time of a controller step "
                                     "(machine-dependent)"),
     "controller_step_ms_p99": _i("ms", "lower", "99th percentile of that time"),
+    "between_steps_ms_max": _i("ms", "lower", "longest wall time of the work a controller "
+                               "does after a step's command, for the next step (an MPC's "
+                               "exploration solve; 0: none); it must fit in the control "
+                               "period"),
     "fallbacks": _i("1", "lower", "MPC steps handed to the fallback controller"),
     "target_switches": _i("1", "lower", "changes of the AUV an MPC targets (0 for the other "
                           "controllers; chattering shows here)", "issue 16 item 6"),
@@ -174,7 +178,8 @@ METRIC_INFO: dict[str, MetricInfo] = _BASE | {
 #: metrics measured in wall time (machine- and load-dependent): a search toward them would
 #: not be reproducible (``mpcasv tune controller`` refuses them as objectives or constraint)
 WALL_CLOCK: tuple[str, ...] = ("controller_step_ms_median", "controller_step_ms_p99",
-                               "over_budget_steps", "solver_hangs")  # fmt: skip
+                               "between_steps_ms_max", "over_budget_steps",
+                               "solver_hangs")  # fmt: skip
 
 #: the headline metrics of the report, in order
 HEADLINE: tuple[str, ...] = (
@@ -386,6 +391,8 @@ def compute_metrics(result) -> dict:
         "energy_J": float(result.energy_J),
         "controller_step_ms_median": float(np.median(step_ms)),
         "controller_step_ms_p99": float(np.percentile(step_ms, 99)),
+        "between_steps_ms_max": (float(np.nanmax(ts["mpc_explore_ms"].to_numpy(), initial=0.0))
+                                 if "mpc_explore_ms" in ts else 0.0),
         "fallbacks": int(result.fallbacks),
         "target_switches": _last_int(ts, "mpc_target_switches"),
         "solver_hangs": int(ts["mpc_hung"].sum()) if "mpc_hung" in ts else 0,

@@ -225,7 +225,11 @@ class Deploy(Phases, BoatFeedback, FieldMode):
         except Exception as exc:  # not the input's fault: not a link reject (internal_error)
             self.step_failed(ts, exc)
             return None
-        return self._act(ts, now, obs, status, ages, raw, (time.perf_counter() - c0) * 1e3)
+        cmd = self._act(ts, now, obs, status, ages, raw, (time.perf_counter() - c0) * 1e3)
+        between = getattr(self.controller, "between_steps", None)
+        if between is not None:  # after the command is sent (an MPC's exploration)
+            between()
+        return cmd
 
     def _act(self, ts, now, obs, status, ages, raw: Command, step_ms: float) -> Command:
         """Guard, cap the speed (``speed_feedback``), send (unless dry run), log."""

@@ -132,7 +132,11 @@ class FieldMode:
         raw = await loop.run_in_executor(self._step_pool, self.controller.step, obs)
         if self.closing:
             return None
-        return self._act(ts, now, obs, status, ages, raw, (time.perf_counter() - c0) * 1e3)
+        cmd = self._act(ts, now, obs, status, ages, raw, (time.perf_counter() - c0) * 1e3)
+        between = getattr(self.controller, "between_steps", None)
+        if between is not None and not self.closing:  # after the command is sent: an MPC's
+            await loop.run_in_executor(self._step_pool, between)  # exploration (own budget)
+        return cmd
 
     async def stop_stepping(self) -> None:
         """Field mode: let a step in flight end (its solve is cut at the deadline), stop the

@@ -68,7 +68,7 @@ def record_run(case: str, preset: str, multi: bool, steps: int = STEPS,
     params = dataclasses.replace(params, solver=sp)
     ctrl = MPCController(params, len(sc.auv), multi, boat=Boat.of_scenario(sc))
     ctrl.recorder = []
-    step, cpu, kinds, sources = ctrl.step, [], [], []
+    step, between, cpu, kinds, sources, idle = ctrl.step, ctrl.between_steps, [], [], [], []
 
     def timed_step(obs):
         explored = ctrl.explored
@@ -81,18 +81,27 @@ def record_run(case: str, preset: str, multi: bool, steps: int = STEPS,
                      "explore" if ctrl.explored > explored else "solve")  # fmt: skip
         return cmd
 
-    ctrl.step = timed_step
+    def timed_between():
+        explored, c0 = ctrl.explored, time.perf_counter()
+        between()
+        if ctrl.explored > explored:  # an exploration solve ran after the step
+            idle.append((time.perf_counter() - c0) * 1e3)
+
+    ctrl.step, ctrl.between_steps = timed_step, timed_between
     result = simulate(sc, ctrl, seed=0)
     times = {"wall": np.asarray(result.step_ms, float), "cpu": np.asarray(cpu, float),
-             "kind": np.asarray(kinds), "source": np.asarray(sources)}  # fmt: skip
+             "kind": np.asarray(kinds), "source": np.asarray(sources),
+             "between": np.asarray(idle, float)}  # fmt: skip
     return params, ctrl, list(ctrl.recorder), times
 
 
 def step_summary(times: dict, ctrl: MPCController) -> dict:
     """Median / p99 / max of the whole controller step, wall and CPU time (ms; the first
-    step, cold, left out), and the run's plan sources (docs/mpc.md, "Fallbacks"); and what
-    the steps were: the warm-started solve alone (``solve``), with the exploration solve
-    (``explore``) or with rescue solves (``rescue``): their counts and wall p99 / max."""
+    step, cold, left out), and the run's plan sources (docs/mpc.md, "Fallbacks"); what the
+    steps were: the warm-started solve alone (``solve``), with the exploration solve
+    (``explore``: only when the warm-started plan may not be used) or with rescue solves
+    (``rescue``): their counts and wall p99 / max; and the exploration solves run between
+    steps, after the command (``between``: count, wall p99 / max)."""
     out = {"steps": int(len(times["wall"])), "fallbacks": int(ctrl.fallbacks),
            "sources": dict(ctrl.sources)}  # fmt: skip
     for kind in ("wall", "cpu"):
@@ -109,6 +118,10 @@ def step_summary(times: dict, ctrl: MPCController) -> dict:
                 out["by_kind"][k] = {"steps": len(ms),
                                      "wall_p99_ms": round(float(np.percentile(ms, 99)), 2),
                                      "wall_max_ms": round(float(np.max(ms)), 2)}  # fmt: skip
+    ms = times.get("between", np.zeros(0))
+    if len(ms):
+        out["between"] = {"solves": len(ms), "wall_p99_ms": round(float(np.percentile(ms, 99)), 2),
+                          "wall_max_ms": round(float(np.max(ms)), 2)}  # fmt: skip
     return out
 
 
@@ -262,6 +275,10 @@ def bench_mpc(args: argparse.Namespace) -> dict:
         print("  by what the step did (wall p99 / max ms): " + ", ".join(
             f"{k} {v['steps']} steps {v['wall_p99_ms']:.1f} / {v['wall_max_ms']:.1f}"
             for k, v in step.get("by_kind", {}).items()))  # fmt: skip
+        if "between" in step:
+            b = step["between"]
+            print(f"  between steps, after the command: {b['solves']} exploration solves, wall "
+                  f"p99 {b['wall_p99_ms']:.1f} / max {b['wall_max_ms']:.1f} ms")  # fmt: skip
     figures["load_average_end"] = [round(x, 2) for x in os.getloadavg()]
     return figures
 

@@ -221,9 +221,14 @@ class MPCController(WorldView, Safety, PlanOutput, Targeting, SpeedCap):
         self._t_step = 0.0
         self._hung = 0
         self.t_explore: float | None = None
-        self.explored = 0
+        self.explored = 0  # exploration solves run (in a step or between steps)
+        self.explore_adopted = 0  # exploration plans that warm-started the next step
+        #: (observation, solved parameters, result) of a step whose exploration is due
+        #: (between_steps)
+        self._pending: tuple | None = None
         self.rescues = 0  # steps that needed rescue solves (docs/mpc.md, "Fallbacks")
         self.target = 0  # the AUV the terminal cost visits next
+        self.committed = False  # the target chosen by the rule (kept until served)
         self.target_switches = 0  # changes of target this run (diagnostic, issue 16 item 6)
         #: per AUV: the last two distinct depth estimates (t, depth) and the vertical speed
         self._depth_hist: list[list[tuple[float, float]]] = [[] for _ in range(n_auv)]
@@ -261,9 +266,10 @@ class MPCController(WorldView, Safety, PlanOutput, Targeting, SpeedCap):
                 - (time.perf_counter() - self._t_step))  # fmt: skip
 
     def step(self, obs: Observation) -> Command:
+        self._hung = 0  # solves abandoned as hung this step (simulation's hang guard)
+        self.between_steps()  # the previous step's exploration, if nobody ran it yet
         ocp = self.ocp
         self._t_step = time.perf_counter()  # wall time: the field deadline and diagnostics only
-        self._hung = 0  # solves abandoned as hung this step (simulation's hang guard)
         self._take_speed_cap()  # one speed cap for the whole step (set_speed_cap)
         elapsed = 0.0 if self.t_prev is None else obs.t - self.t_prev
         self.t_prev = obs.t
@@ -297,8 +303,12 @@ class MPCController(WorldView, Safety, PlanOutput, Targeting, SpeedCap):
             Z, V = ocp.split(w0)
             w0 = ocp.fill_slacks(Z, V, p_s)
         res = self._solve(p_s, w0, *lam)
-        res = self._explore(obs, p_s, res)
         reason = self._check(res, p)
+        if reason is not None:  # the exploration now, before any rescue (as part of it)
+            res = self._cheaper(res, self._explore(obs, p_s, res))
+            reason = self._check(res, p)
+        else:  # the plan may be used: its exploration waits for the idle time (between_steps)
+            self._pending = (obs, p_s, res)
         source = "plan" if reason is None else "fallback"
         # rescue, except after a missed field deadline (no time left); after a hang in
         # simulation too (the Case 4 problem that hangs fatrop converges from the escape guess)
@@ -320,7 +330,8 @@ class MPCController(WorldView, Safety, PlanOutput, Targeting, SpeedCap):
                       "mpc_fallback": int(reason is not None),
                       "mpc_fallback_reason": reason or "", "mpc_over_budget": over,
                       "mpc_source": source, "mpc_funnel": int(p_s is not p),
-                      "mpc_hung": self._hung}  # fmt: skip
+                      "mpc_hung": self._hung, "mpc_explore_ms": math.nan,
+                      "mpc_explore_iter": 0, "mpc_explore_adopted": 0}  # fmt: skip
         self._diag |= {f"mpc_tau{i}": float(v) for i, v in enumerate(self.tau)}
         self._diag |= {"mpc_plan_E_J": e_plan, "mpc_plan_E_t0": t_used, "mpc_plan_E_t1": obs.t,
                        "mpc_plan_t": math.nan}  # fmt: skip

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import time
 
 import numpy as np
 
@@ -20,18 +21,20 @@ from mpcasv.mpc.worldview import ranges
 class Safety:
     """Check, exploration and rescue of the MPC (mixin; state in the controller)."""
 
-    def _explore(self, obs: Observation, p: np.ndarray, res):
+    def _explore(self, obs: Observation, p: np.ndarray, res) -> SolveResult | None:
         """Right after a target change, and while the plan stands still every ``explore_every``
         s, also solve from a guess that heads for the target AUV's circle (standing still is a
-        local minimum: at rest the rudder has no authority); keep the cheaper plan."""
+        local minimum: at rest the rudder has no authority). Returns that solve's result (None:
+        no exploration due); the caller keeps the cheaper plan (:meth:`between_steps`, or
+        :meth:`_cheaper` when the warm-started plan may not be used)."""
         P, ocp = self.params, self.ocp
         if P.explore_every <= 0:
-            return res
+            return None
         if self.t_explore is not None and obs.t - self.t_explore < P.explore_every - 1e-9:
-            return res
+            return None
         Z, _ = ocp.split(res.w)
         if self.t_explore is not None and res.ok and np.max(Z[1:, 6]) >= ocp.T_on:
-            return res  # the plan moves already
+            return None  # the plan moves already
         self.t_explore = obs.t
         par = ocp.unpack_par(p)
         j = self.target
@@ -40,13 +43,44 @@ class Safety:
         # when an AUV rises under the ASV, the guess heading out to the target circle is needed
         if np.all(still >= par["r_lo"][:, j]) and self.domain.in_reliable_range(still[0],
                                                                              par["r_t"][j]):
-            return res
+            return None
         if self.deadline is not None and not self._hang_guard and res.status == "deadline":
-            return res  # the field budget is spent
-        alt = self._solve(p, ocp.guided_rollout(p, j, self._capped(P.speed)))
+            return None  # the field budget is spent
         self.explored += 1
+        return self._solve(p, ocp.guided_rollout(p, j, self._capped(P.speed)))
+
+    @staticmethod
+    def _cheaper(res: SolveResult, alt: SolveResult | None) -> SolveResult:
+        """The exploration's plan ``alt`` if it converged and costs less (or ``res`` did not
+        converge), else ``res``; the two solves' time and iterations summed."""
+        if alt is None:
+            return res
         best = alt if alt.ok and (not res.ok or alt.f < res.f) else res
         return dataclasses.replace(best, ms=res.ms + alt.ms, iters=res.iters + alt.iters)
+
+    def between_steps(self) -> None:
+        """The exploration solve of the step just taken, run after its command was handed
+        over, in the idle part of the control period (simulator and deploy loop call this
+        after each ``step``; a ``step`` called first runs it itself, so the decisions never
+        depend on whether, or when, it was called). If its plan is cheaper than the one the
+        step used, the next step is warm-started from it instead: the cheaper plan is taken
+        one control period later than if it were solved within the step, and the step's
+        latency is the warm-started solve alone. In the field it has the step's budget
+        (``solver.budget_ms``) of its own. docs/mpc.md, "Controller"."""
+        pending, self._pending = self._pending, None
+        if pending is None:
+            return
+        obs, p_s, res = pending
+        self._t_step = time.perf_counter()  # the field deadline of this solve
+        alt = self._explore(obs, p_s, res)
+        if alt is None:
+            return
+        adopt = alt.ok and alt.f < res.f
+        if adopt:  # the next step starts from the exploration's plan
+            self.w_prev, self.lam_prev = alt.w, (alt.lam_x, alt.lam_g)
+        self.explore_adopted += int(adopt)
+        self._diag |= {"mpc_explore_ms": alt.ms, "mpc_explore_iter": alt.iters,
+                       "mpc_explore_adopted": int(adopt), "mpc_hung": self._hung}  # fmt: skip
 
     def _violation_now(self, p: np.ndarray) -> float:
         """How far (m) the ASV is outside the plan's range bounds now (0 inside)."""

@@ -1,9 +1,14 @@
 """Which AUV the MPC's terminal cost sends the ASV to (eq. M9; mixin of
 :class:`~mpcasv.mpc.controller.MPCController`, state in the controller).
 
-Two rules (``MPCParams.target_rule``), both with commitment (issue 16 item 6): the target is
-kept until it is served (its expected fix age below ``tau_served``, or the ASV has been within
-its target domain for ``dwell_max``); then
+Two rules (``MPCParams.target_rule``), both with commitment (issue 16 item 6): a target chosen
+by the rule is kept until it is served: the ASV has been within its target domain since the
+choice and its expected fix age is below ``tau_served``, or the ASV has been there for
+``dwell_max``. (A fix age below ``tau_served`` alone is not enough: when a run starts every
+age is 0, and each newly chosen AUV counted as served at once, so the target swapped between
+two AUVs every step until the first fix ages grew past ``tau_served``: 25 switches in the
+first 26 s of Case 6.) The target the run starts with (AUV 0) is not committed: it is served
+as soon as its fix age is below ``tau_served``. Then
 
 - ``age`` (default, the shipped presets): the AUV with the largest projected fix age
   ``tau_i + t_go,i`` (Paper 2's eq. 8 on projected ages) among those whose projected age
@@ -27,8 +32,8 @@ from mpcasv.mpc.order import Forecast, OrderModel, best_order, committed_target,
 
 
 class Targeting:
-    """The target AUV's choice (mixin; state in the controller: ``target``, ``dwell``,
-    ``target_switches``, ``t_explore``, ``order_plan``)."""
+    """The target AUV's choice (mixin; state in the controller: ``target``, ``committed``,
+    ``dwell``, ``target_switches``, ``t_explore``, ``order_plan``)."""
 
     def _choose_target(self, obs: Observation, elapsed: float) -> None:
         """Keep or change ``self.target`` after ``elapsed`` s (module docstring)."""
@@ -40,7 +45,8 @@ class Targeting:
         dist = np.hypot(*(pos - obs.asv.position).T)
         if self.domain.in_reliable_range(dist[self.target], r_t[self.target]):
             self.dwell += elapsed
-        served = self.tau[self.target] <= self.params.tau_served
+        visited = self.dwell > 0.0 or not self.committed  # (module docstring)
+        served = visited and self.tau[self.target] <= self.params.tau_served
         if not (served or self.dwell >= self.params.dwell_max):
             return
         if self.params.target_rule == "order":
@@ -51,12 +57,18 @@ class Targeting:
         # commitment (issue 16 item 6): leave the target only for an AUV that needs a visit
         # itself (projected fix age above tau_served); with every other AUV served the target
         # stays (before, two served AUVs swapped the target every step for a whole run)
-        proj[(np.arange(K) == self.target) | (proj <= self.params.tau_served)] = -np.inf
+        proj[proj <= self.params.tau_served] = -np.inf
+        if self.committed:
+            proj[self.target] = -np.inf
         if not np.isfinite(proj).any():
             return
         self._switch_to(int(np.argmax(proj)))
 
     def _switch_to(self, new: int) -> None:
+        """Commit to ``new`` (a switch, counted, if it is not the target already)."""
+        self.committed = True
+        if new == self.target:
+            return
         self.dwell = 0.0
         self.target = new
         self.target_switches += 1
@@ -69,9 +81,7 @@ class Targeting:
                           np.array([a.depth for a in obs.auvs]), self.tau, r_t,
                           self.order_model)  # fmt: skip
         self.order_plan = plan
-        new = committed_target(plan, self.target, self.params.order.hysteresis)
-        if new != self.target:
-            self._switch_to(new)
+        self._switch_to(committed_target(plan, self.target, self.params.order.hysteresis))
 
     def forecast(self, a: AUVEstimate) -> Forecast:
         """An AUV's forecast for the visiting order (offsets from now, s, shape (n,) ->

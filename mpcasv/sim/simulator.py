@@ -62,6 +62,7 @@ def simulate(
     guard = getattr(controller, "use_hang_guard", None)  # an MPC: a hung solve must not
     if guard is not None:  # stall the run (mpcasv.mpc.params.SolverParams.hang_s)
         guard()
+    between = getattr(controller, "between_steps", None)  # (timed by the controller)
     rows, step_ms, plans = [], [], []
     next_plan_t = 0.0
     bar = None
@@ -75,6 +76,8 @@ def simulate(
         c0 = time.perf_counter()
         cmd = controller.step(obs)
         step_ms.append((time.perf_counter() - c0) * 1e3)
+        if between is not None:  # an MPC's work for the next step, after the command
+            between()
         plan = getattr(controller, "plan", None)
         if plan is not None and obs.t >= next_plan_t:
             plans.append((obs.t, plan))

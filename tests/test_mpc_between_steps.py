@@ -1,0 +1,87 @@
+"""Issue 16 item 8: the MPC's exploration solve runs after the step's command, in the idle part
+of the control period (``between_steps``), so a step's latency is the warm-started solve
+alone. The decisions must not depend on who runs it: the simulator calls ``between_steps``
+after each step; a caller that does not (a replay, a test) gets it run at the start of the
+next ``step``, with the same result."""
+
+from __future__ import annotations
+
+import pandas as pd
+import pytest
+from test_mpc_deadline import WALL_COLUMNS
+
+from mpcasv.controllers import make_controller
+from mpcasv.sim.scenario import load_scenario, scenario_with
+from mpcasv.sim.simulator import simulate
+
+
+class _NoHook:
+    """The controller without ``between_steps``: its ``step`` must run the exploration."""
+
+    def __init__(self, ctrl):
+        self._ctrl = ctrl
+
+    def __getattr__(self, name):
+        if name == "between_steps":
+            raise AttributeError(name)
+        return getattr(self._ctrl, name)
+
+
+@pytest.fixture(scope="module")
+def runs(scenarios_dir):
+    sc = scenario_with(load_scenario(scenarios_dir / "case3.toml"), duration=40.0)
+    hooked = make_controller("mpc-single", 1, "mpc-single")
+    log = _instrument(hooked)
+    ts_hooked = simulate(sc, hooked, seed=0).timeseries
+    lazy = make_controller("mpc-single", 1, "mpc-single")
+    ts_lazy = simulate(sc, _NoHook(lazy), seed=0).timeseries
+    return hooked, ts_hooked, lazy, ts_lazy, log
+
+
+def _instrument(ctrl) -> dict:
+    """Count the solves inside ``step`` and inside ``between_steps``, and record what each
+    ``between_steps`` did to the next step's warm start."""
+    log = {"phase": None, "step": [], "between": [], "warm": []}
+    step, between, solve = ctrl.step, ctrl.between_steps, ctrl._solve
+
+    def counted_solve(*a, **k):
+        log[log["phase"]][-1] += 1
+        return solve(*a, **k)
+
+    def counted_step(obs):
+        log["phase"] = "step"
+        log["step"].append(0)
+        return step(obs)
+
+    def counted_between():  # (also called at the start of each step: nothing left to do)
+        phase, log["phase"] = log["phase"], "between"
+        log["between"].append(0)
+        w_before, adopted = ctrl.w_prev, ctrl.explore_adopted
+        between()
+        log["warm"].append((ctrl.explore_adopted > adopted, ctrl.w_prev is not w_before))
+        log["phase"] = phase
+
+    ctrl._solve, ctrl.step, ctrl.between_steps = counted_solve, counted_step, counted_between
+    return log
+
+
+def test_the_exploration_runs_between_steps_and_its_plan_starts_the_next_step(runs):
+    """Case 3 from rest: the ASV stands by, so every ``explore_every`` = 5 s an exploration
+    solve heads for the AUV (measured: 5 in 40 s, the one at t = 21 s cheaper). None of them
+    ran inside a step (no step here needed a rescue: one solve each); each ran after its
+    step's command, and the cheaper one, only it, became the next step's warm start."""
+    hooked, ts, _, _, log = runs
+    assert (ts["mpc_source"] == "plan").all()
+    assert log["step"] == [1] * len(ts)  # the warm-started solve alone
+    assert sum(log["between"]) == hooked.explored >= 2
+    assert int((ts["mpc_explore_iter"] > 0).sum()) == hooked.explored
+    assert ts["mpc_explore_ms"].notna().sum() == hooked.explored
+    assert hooked.explore_adopted == int(ts["mpc_explore_adopted"].sum()) >= 1
+    assert all(adopted == replaced for adopted, replaced in log["warm"])
+
+
+def test_the_decisions_are_the_same_whether_or_not_the_caller_runs_between_steps(runs):
+    hooked, ts_hooked, lazy, ts_lazy, _ = runs
+    assert lazy.explored == hooked.explored and lazy.explore_adopted == hooked.explore_adopted
+    keep = [c for c in ts_hooked.columns if c not in WALL_COLUMNS and "explore" not in c]
+    pd.testing.assert_frame_equal(ts_hooked[keep], ts_lazy[keep])
