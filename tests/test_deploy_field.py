@@ -9,6 +9,7 @@ import asyncio
 import functools
 import json
 import time
+from types import SimpleNamespace
 
 import imcpy
 import tomli_w
@@ -16,6 +17,7 @@ from test_io_link import ASV_ID, AUV_ID, Fake, _cfg
 
 from mpcasv.cli import main
 from mpcasv.io.deploy import Deploy
+from mpcasv.io.deploystep import FieldMode, check_budget
 from mpcasv.io.logs import read_jsonl
 
 BUDGET_MS = 1500.0  # the step's deadline in these tests (s of wall time, well above a tick)
@@ -279,3 +281,64 @@ def test_an_inline_step_that_raises_is_logged_when_it_happens_and_the_deploy_goe
     shown = [r.getMessage() for r in caplog.records if r.levelno == logging.ERROR]
     assert len(shown) == len(errors) and all("ValueError: no estimate" in m for m in shown)
     assert summary["steps"] >= 1
+
+
+class _Host(FieldMode):
+    """The field mode's bookkeeping without a link: events and records kept in lists."""
+
+    def __init__(self, controller):
+        self.controller, self.events, self.records, self.step_errors = controller, [], [], 0
+        self.jsonl = SimpleNamespace(write=self.records.append)
+
+    def event(self, name, **info):
+        self.events.append((name, info))
+
+
+class _Explorer:
+    """``between_steps``: an exploration solve, then nothing due, then an exception."""
+
+    def __init__(self):
+        self.calls, self.diag = 0, {}
+
+    def between_steps(self):
+        self.calls += 1
+        if self.calls == 1:
+            self.diag = {"mpc_explore_iter": 12, "mpc_explore_ms": 3.0, "mpc_explore_adopted": 1}
+        elif self.calls == 2:
+            self.diag = {"mpc_explore_iter": 0, "mpc_explore_ms": float("nan")}
+        else:
+            raise RuntimeError("boom\nsecond line")
+
+    def diagnostics(self):
+        return dict(self.diag) | {"mpc_ok": 1}
+
+
+def test_the_work_after_a_step_is_logged_and_never_raises():
+    """An exploration solve after the command gives a ``between`` record (nothing when none
+    ran); one that raises is event ``between_error`` (counted in ``step_errors``), not an
+    exception out of the step: the command was sent, the next tick steps as usual."""
+    host = _Host(_Explorer())
+    for t in (1.0, 2.0, 3.0):
+        host.log_between(t, host.run_between())
+    assert len(host.records) == 1
+    rec = host.records[0]
+    assert rec["kind"] == "between" and rec["t"] == 1.0 and rec["mpc_explore_iter"] == 12
+    assert rec["ms"] >= 0.0 and "mpc_ok" not in rec
+    assert host.events == [("between_error", {"t": 3.0, "error": "RuntimeError: boom"})]
+    assert host.step_errors == 1
+
+
+def test_a_budget_that_leaves_no_room_for_the_exploration_is_reported():
+    """A step and its exploration each have ``solver.budget_ms``: with a 1-s period, 200 ms
+    (the presets) fits; 500 ms may not (a tick may come 0.9 s after the last)."""
+    said = []
+    cfg = SimpleNamespace(controller=SimpleNamespace(control_period=1.0))
+
+    def ctl(ms):
+        return SimpleNamespace(params=SimpleNamespace(solver=SimpleNamespace(budget_ms=ms)))
+
+    assert check_budget(cfg, ctl(200.0), log=said.append)
+    assert not said
+    assert not check_budget(cfg, ctl(500.0), log=said.append)
+    assert len(said) == 1 and "solver.budget_ms = 500 ms" in said[0]
+    assert check_budget(cfg, SimpleNamespace(), log=said.append)  # no solver: nothing to say

@@ -2,7 +2,8 @@
 of the control period (``between_steps``), so a step's latency is the warm-started solve
 alone. The decisions must not depend on who runs it: the simulator calls ``between_steps``
 after each step; a caller that does not (a replay, a test) gets it run at the start of the
-next ``step``, with the same result."""
+next ``step``, with the same result (the simulator does not call it after the last step).
+"""
 
 from __future__ import annotations
 
@@ -78,6 +79,10 @@ def test_the_exploration_runs_between_steps_and_its_plan_starts_the_next_step(ru
     assert ts["mpc_explore_ms"].notna().sum() == hooked.explored
     assert hooked.explore_adopted == int(ts["mpc_explore_adopted"].sum()) >= 1
     assert all(adopted == replaced for adopted, replaced in log["warm"])
+    # adopted only when cheaper than the plan the step used (the same problem)
+    adopted = ts[ts["mpc_explore_adopted"] == 1]
+    assert (adopted["mpc_explore_cost"] < adopted["mpc_cost"]).all()
+    assert len(adopted) < hooked.explored  # not every exploration wins
 
 
 def test_the_decisions_are_the_same_whether_or_not_the_caller_runs_between_steps(runs):

@@ -122,3 +122,33 @@ def test_a_run_that_starts_with_every_fix_age_zero_commits_to_one_target(rule):
         targets.append(c.target)
     assert c.target_switches <= 1, targets
     assert len(set(targets)) <= 2 and targets[1:] == [targets[-1]] * 29, targets
+
+
+def test_a_committed_target_is_left_once_it_has_had_a_fix_since_it_was_chosen():
+    """Case 6's AUVs; the first choice commits to one of them. Then the ASV lies 20 m beside
+    that AUV with its propeller off, and the fix ages and the expected fixes since the
+    choice follow the plan's own fix-rate model (eq. M2-M3). The target is kept while its
+    age is low only because the run has just begun, and left, once, as soon as an expected
+    fix has come since the choice (``fixes_since`` >= 1)."""
+    c = make_controller("mpc-multi", 3, "mpc-multi", overrides={"solver.compiled": False})
+    c.reset(3)
+    auvs = (AUVEstimate(95.0, -75.0, 0.0), AUVEstimate(-160.0, 72.0, 0.0),
+            AUVEstimate(-160.0, -222.0, 0.0))  # fmt: skip
+    c._choose_target(Observation(0.0, ASVState(0.0, 0.0, 0.0), False, auvs), 1.0)
+    j = c.target
+    assert c.committed and c.tau[j] <= c.params.tau_served  # age 0: "served" by age alone
+    beside = ASVState(auvs[j].N - 20.0, auvs[j].E, 0.0)
+    fixes_when_kept, switched_at = [], None
+    for k in range(1, 120):
+        obs = Observation(float(k), beside, False, auvs)
+        c.tau = c._fix_ages(obs, 1.0)
+        before = float(c.fixes_since[j])
+        c._choose_target(obs, 1.0)
+        if c.target != j:
+            switched_at, fixes_at_switch = k, before
+            break
+        fixes_when_kept.append(before)
+    assert switched_at is not None
+    assert c.target_switches == (1 if j == 0 else 2)  # the first choice (if a switch), the leave
+    assert fixes_at_switch >= 1.0 and max(fixes_when_kept) < 1.0
+    assert switched_at >= 3  # not at once: the old rule left it at the first step

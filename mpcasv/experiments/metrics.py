@@ -132,10 +132,10 @@ _BASE: dict[str, MetricInfo] = {
     "controller_step_ms_median": _i("ms", "lower", "median wall time of a controller step "
                                     "(machine-dependent)"),
     "controller_step_ms_p99": _i("ms", "lower", "99th percentile of that time"),
-    "between_steps_ms_max": _i("ms", "lower", "longest wall time of the work a controller "
-                               "does after a step's command, for the next step (an MPC's "
-                               "exploration solve; 0: none); it must fit in the control "
-                               "period"),
+    "between_steps_ms_max": _i("ms", "lower", "longest wall time of a solve a controller "
+                               "runs after a step's command, for the next step (an MPC's "
+                               "exploration solve; 0: none, or the caller left it to the next "
+                               "step); in the field it has the step's budget_ms of its own"),
     "fallbacks": _i("1", "lower", "MPC steps handed to the fallback controller"),
     "target_switches": _i("1", "lower", "changes of the AUV an MPC targets (0 for the other "
                           "controllers; chattering shows here)", "issue 16 item 6"),

@@ -133,6 +133,9 @@ class Deploy(Phases, BoatFeedback, FieldMode):
         if rec.get("event") == "step_error":
             log.error("controller step at t = %.3f failed: %s (no command this tick; the next "
                       "tick steps again)", rec.get("t"), rec.get("error"))  # fmt: skip
+        elif rec.get("event") == "between_error":
+            log.error("controller's work after the step at t = %.3f failed: %s (the command "
+                      "was sent; the next tick steps again)", rec.get("t"), rec.get("error"))
         elif rec.get("event") != "reject":
             detail = {k: v for k, v in rec.items() if k not in ("kind", "event", "t")}
             log.info("%s %s", rec["event"], detail)
@@ -226,9 +229,8 @@ class Deploy(Phases, BoatFeedback, FieldMode):
             self.step_failed(ts, exc)
             return None
         cmd = self._act(ts, now, obs, status, ages, raw, (time.perf_counter() - c0) * 1e3)
-        between = getattr(self.controller, "between_steps", None)
-        if between is not None:  # after the command is sent (an MPC's exploration)
-            between()
+        if hasattr(self.controller, "between_steps"):  # after the command is sent
+            self.log_between(ts, self.run_between())
         return cmd
 
     def _act(self, ts, now, obs, status, ages, raw: Command, step_ms: float) -> Command:

@@ -34,6 +34,22 @@ def start_field_mode(controller, factory=None, log=log.info) -> None:
     log(f"solver worker ready in {time.perf_counter() - t0:.1f} s")
 
 
+def check_budget(cfg: DeployConfig, controller, log=log.warning) -> bool:
+    """Field mode: a step's solves and, after its command, the exploration solve each have the
+    preset's ``solver.budget_ms``; both should fit in 90 % of ``controller.control_period``
+    (a tick may come that soon after the last, and one that finds the step thread busy is
+    skipped, event ``step_skipped``). Says so (``log``) and returns False if they may not."""
+    sp = getattr(getattr(controller, "params", None), "solver", None)
+    budget = getattr(sp, "budget_ms", None)
+    Tc = cfg.controller.control_period
+    if budget is not None and 2.0 * budget / 1e3 > 0.9 * Tc:
+        log(f"solver.budget_ms = {budget:g} ms: a step and its exploration solve may take "
+            f"{2 * budget:g} ms, more than 90 % of controller.control_period = {Tc:g} s: the "
+            "ticks that come meanwhile will be skipped")  # fmt: skip
+        return False
+    return True
+
+
 def guard_params(cfg: DeployConfig, controller) -> GuardParams:
     """Guard parameters: watchdog limits, and the keep-out sphere of the controller's
     ``avoid`` option (:class:`mpcasv.hybrid.avoidance.AvoidanceParams`), else its domain's
@@ -73,6 +89,7 @@ def prepare_controller(cfg: DeployConfig) -> dict:
     ctl = build_controller(cfg, log=log.warning)
     field = hasattr(ctl, "use_deadline")
     if field:
+        check_budget(cfg, ctl)
         start_field_mode(ctl, log=log.warning)
         ctl.close()
     return {"controller": cfg.controller.name, "vessel": cfg.controller.vessel or "gretha",
@@ -80,8 +97,8 @@ def prepare_controller(cfg: DeployConfig) -> dict:
 
 
 class FieldMode:
-    """Mixin of :class:`~mpcasv.io.deploy.Deploy` (uses its ``controller``, ``closing``,
-    ``event``, ``observation`` and ``_act``)."""
+    """Mixin of :class:`~mpcasv.io.deploy.Deploy` (uses its ``cfg``, ``controller``,
+    ``closing``, ``event``, ``jsonl``, ``observation`` and ``_act``)."""
 
     def init_field_mode(self, solver_factory=None) -> None:
         """Field mode if the controller has ``use_deadline``: start its solver worker
@@ -93,6 +110,7 @@ class FieldMode:
         self.skipped_steps = 0
         self.step_errors = 0  # steps that raised (both modes: see step_failed)
         if self.field_mode:
+            check_budget(self.cfg, self.controller)
             start_field_mode(self.controller, solver_factory)
             self._step_pool = concurrent.futures.ThreadPoolExecutor(
                 1, thread_name_prefix="mpcasv-step")
@@ -133,10 +151,34 @@ class FieldMode:
         if self.closing:
             return None
         cmd = self._act(ts, now, obs, status, ages, raw, (time.perf_counter() - c0) * 1e3)
-        between = getattr(self.controller, "between_steps", None)
-        if between is not None and not self.closing:  # after the command is sent: an MPC's
-            await loop.run_in_executor(self._step_pool, between)  # exploration (own budget)
+        if hasattr(self.controller, "between_steps") and not self.closing:
+            # after the command is sent: an MPC's exploration solve (with its own budget)
+            self.log_between(ts, await loop.run_in_executor(self._step_pool, self.run_between))
         return cmd
+
+    def run_between(self) -> dict:
+        """The controller's ``between_steps`` (an MPC's exploration solve, after the step's
+        command was sent: docs/mpc.md, "Controller step"), never raising: what it did, for
+        :meth:`log_between` (wall ``ms``; the diagnostics ``mpc_explore_*``; or ``error``)."""
+        c0 = time.perf_counter()
+        try:
+            self.controller.between_steps()
+        except Exception as exc:  # the command is sent already: logged, the next step goes on
+            log.debug("between_steps raised", exc_info=exc)
+            return {"error": f"{type(exc).__name__}: {exc}".splitlines()[0]}
+        diag = getattr(self.controller, "diagnostics", None)
+        out = {k: v for k, v in (diag() if diag else {}).items() if k.startswith("mpc_explore")}
+        return out | {"ms": (time.perf_counter() - c0) * 1e3}
+
+    def log_between(self, ts: float, rec: dict) -> None:
+        """A ``between`` record in deploy.jsonl when an exploration solve ran; event
+        ``between_error`` (an error on the console, counted in ``step_errors``) if it
+        raised: the step's command was sent already, the next step starts as usual."""
+        if "error" in rec:
+            self.step_errors += 1
+            self.event("between_error", t=ts, error=rec["error"])
+        elif rec.get("mpc_explore_iter", 0) > 0:
+            self.jsonl.write({"kind": "between", "t": ts} | rec)
 
     async def stop_stepping(self) -> None:
         """Field mode: let a step in flight end (its solve is cut at the deadline), stop the

@@ -215,8 +215,9 @@ class MPCController(WorldView, Safety, PlanOutput, Targeting, SpeedCap):
         #: rescue solve), "as-escape" (a refused plan no deeper than the escape manoeuvre),
         #: "escape" (the escape manoeuvre), "fallback" (the hybrid's command)
         self.sources: dict[str, int] = {}
-        #: steps whose solves took longer than ``budget_ms`` of wall time: a diagnostic in
-        #: simulation (never a decision); in the field such a step is cut at the deadline
+        #: steps whose solves (or the exploration solve after them) took longer than
+        #: ``budget_ms`` of wall time: a diagnostic in simulation (never a decision); in the
+        #: field such a solve is cut at the deadline
         self.over_budget = 0
         self._t_step = 0.0
         self._hung = 0
@@ -229,6 +230,9 @@ class MPCController(WorldView, Safety, PlanOutput, Targeting, SpeedCap):
         self.rescues = 0  # steps that needed rescue solves (docs/mpc.md, "Fallbacks")
         self.target = 0  # the AUV the terminal cost visits next
         self.committed = False  # the target chosen by the rule (kept until served)
+        self.t_commit = -math.inf  # when it was chosen (s)
+        #: per AUV: expected fixes since then (the fix rate of eq. M3 integrated; mpc/target.py)
+        self.fixes_since = np.zeros(n_auv)
         self.target_switches = 0  # changes of target this run (diagnostic, issue 16 item 6)
         #: per AUV: the last two distinct depth estimates (t, depth) and the vertical speed
         self._depth_hist: list[list[tuple[float, float]]] = [[] for _ in range(n_auv)]
@@ -331,7 +335,8 @@ class MPCController(WorldView, Safety, PlanOutput, Targeting, SpeedCap):
                       "mpc_fallback_reason": reason or "", "mpc_over_budget": over,
                       "mpc_source": source, "mpc_funnel": int(p_s is not p),
                       "mpc_hung": self._hung, "mpc_explore_ms": math.nan,
-                      "mpc_explore_iter": 0, "mpc_explore_adopted": 0}  # fmt: skip
+                      "mpc_explore_iter": 0, "mpc_explore_cost": math.nan,
+                      "mpc_explore_adopted": 0}  # fmt: skip
         self._diag |= {f"mpc_tau{i}": float(v) for i, v in enumerate(self.tau)}
         self._diag |= {"mpc_plan_E_J": e_plan, "mpc_plan_E_t0": t_used, "mpc_plan_E_t1": obs.t,
                        "mpc_plan_t": math.nan}  # fmt: skip

@@ -328,9 +328,9 @@ class MPCParams:
         Minimum standby time of the hybrid fallback (multi-AUV) controller (s).
     tau_served : float
         Several AUVs: the target AUV (the one the terminal cost sends the ASV to) is kept until
-        the ASV has been within its target domain and its expected fix age has fallen below
-        this (s); then the AUV with the largest projected fix age becomes the target
-        (:mod:`mpcasv.mpc.target`).
+        it has had a fix since it was chosen (in expectation) and its expected fix age is
+        below this (s); then the AUV with the largest projected fix age becomes the target
+        (:mod:`mpcasv.mpc.target`; the run's first target, AUV 0, needs no fix since).
     dwell_max : float
         ... or once the ASV has spent this long within the target's target domain (s): a
         moving AUV may keep the expected fix age above ``tau_served``.

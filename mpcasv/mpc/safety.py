@@ -79,8 +79,13 @@ class Safety:
         if adopt:  # the next step starts from the exploration's plan
             self.w_prev, self.lam_prev = alt.w, (alt.lam_x, alt.lam_g)
         self.explore_adopted += int(adopt)
+        # longer than a step's budget: its step counts as over budget (never a decision)
+        over = int((time.perf_counter() - self._t_step) * 1e3 > self.params.solver.budget_ms)
+        step_over = int(self._diag.get("mpc_over_budget", 0))
+        self.over_budget += int(over and not step_over)
         self._diag |= {"mpc_explore_ms": alt.ms, "mpc_explore_iter": alt.iters,
-                       "mpc_explore_adopted": int(adopt), "mpc_hung": self._hung}  # fmt: skip
+                       "mpc_explore_cost": alt.f, "mpc_explore_adopted": int(adopt),
+                       "mpc_hung": self._hung, "mpc_over_budget": max(step_over, over)}
 
     def _violation_now(self, p: np.ndarray) -> float:
         """How far (m) the ASV is outside the plan's range bounds now (0 inside)."""

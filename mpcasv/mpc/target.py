@@ -2,13 +2,15 @@
 :class:`~mpcasv.mpc.controller.MPCController`, state in the controller).
 
 Two rules (``MPCParams.target_rule``), both with commitment (issue 16 item 6): a target chosen
-by the rule is kept until it is served: the ASV has been within its target domain since the
-choice and its expected fix age is below ``tau_served``, or the ASV has been there for
-``dwell_max``. (A fix age below ``tau_served`` alone is not enough: when a run starts every
-age is 0, and each newly chosen AUV counted as served at once, so the target swapped between
-two AUVs every step until the first fix ages grew past ``tau_served``: 25 switches in the
-first 26 s of Case 6.) The target the run starts with (AUV 0) is not committed: it is served
-as soon as its fix age is below ``tau_served``. Then
+by the rule is kept until it is served: it has had a fix since it was chosen (in expectation,
+``fixes_since``: the fix rate of eq. M3 integrated since the choice reaches 1; with
+``fix_age_source = "estimate"``, a fix time after the choice) and its expected fix age is
+below ``tau_served``; or the ASV has spent ``dwell_max`` within its target domain. (A fix age
+below ``tau_served`` alone is not enough: when a run starts every age is 0, and each newly
+chosen AUV counted as served at once, so the target swapped between two AUVs every step
+until the first fix ages grew past ``tau_served``: 25 switches in the first 26 s of Case 6.)
+The target the run starts with (AUV 0) is not committed: it is served as soon as its fix age
+is below ``tau_served``. Then
 
 - ``age`` (default, the shipped presets): the AUV with the largest projected fix age
   ``tau_i + t_go,i`` (Paper 2's eq. 8 on projected ages) among those whose projected age
@@ -33,7 +35,8 @@ from mpcasv.mpc.order import Forecast, OrderModel, best_order, committed_target,
 
 class Targeting:
     """The target AUV's choice (mixin; state in the controller: ``target``, ``committed``,
-    ``dwell``, ``target_switches``, ``t_explore``, ``order_plan``)."""
+    ``t_commit``, ``fixes_since``, ``dwell``, ``target_switches``, ``t_explore``,
+    ``order_plan``)."""
 
     def _choose_target(self, obs: Observation, elapsed: float) -> None:
         """Keep or change ``self.target`` after ``elapsed`` s (module docstring)."""
@@ -45,8 +48,12 @@ class Targeting:
         dist = np.hypot(*(pos - obs.asv.position).T)
         if self.domain.in_reliable_range(dist[self.target], r_t[self.target]):
             self.dwell += elapsed
-        visited = self.dwell > 0.0 or not self.committed  # (module docstring)
-        served = visited and self.tau[self.target] <= self.params.tau_served
+        j = self.target
+        if self.params.fix_age_source == "estimate":
+            fixed = obs.auvs[j].t_last_fix > self.t_commit
+        else:
+            fixed = self.fixes_since[j] >= 1.0
+        served = (fixed or not self.committed) and self.tau[j] <= self.params.tau_served
         if not (served or self.dwell >= self.params.dwell_max):
             return
         if self.params.target_rule == "order":
@@ -62,11 +69,14 @@ class Targeting:
             proj[self.target] = -np.inf
         if not np.isfinite(proj).any():
             return
-        self._switch_to(int(np.argmax(proj)))
+        self._switch_to(int(np.argmax(proj)), obs.t)
 
-    def _switch_to(self, new: int) -> None:
-        """Commit to ``new`` (a switch, counted, if it is not the target already)."""
+    def _switch_to(self, new: int, t: float) -> None:
+        """Commit to ``new`` at time ``t`` (a switch, counted, if it is not the target
+        already)."""
         self.committed = True
+        self.t_commit = t
+        self.fixes_since[:] = 0.0
         if new == self.target:
             return
         self.dwell = 0.0
@@ -81,7 +91,8 @@ class Targeting:
                           np.array([a.depth for a in obs.auvs]), self.tau, r_t,
                           self.order_model)  # fmt: skip
         self.order_plan = plan
-        self._switch_to(committed_target(plan, self.target, self.params.order.hysteresis))
+        self._switch_to(committed_target(plan, self.target, self.params.order.hysteresis),
+                        obs.t)  # fmt: skip
 
     def forecast(self, a: AUVEstimate) -> Forecast:
         """An AUV's forecast for the visiting order (offsets from now, s, shape (n,) ->

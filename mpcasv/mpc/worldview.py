@@ -39,6 +39,7 @@ class WorldView:
         if elapsed <= 0:
             return self.tau
         rho = self._rates(obs)
+        self.fixes_since += rho * elapsed  # expected fixes since the target's choice (M9)
         if self.ocp.variance:  # (M2') what a fix at this range removes
             slant = np.array([math.hypot(*(a.position - obs.asv.position), a.depth)
                               for a in obs.auvs])  # fmt: skip

@@ -72,12 +72,12 @@ def simulate(
         desc = f"{scenario.name} [{controller.name}]"
         bar = tqdm(total=scenario.n_steps, desc=desc, unit="s", leave=False)
     obs = world.observation()
-    for _ in range(scenario.n_steps):
+    for k in range(scenario.n_steps):
         c0 = time.perf_counter()
         cmd = controller.step(obs)
         step_ms.append((time.perf_counter() - c0) * 1e3)
-        if between is not None:  # an MPC's work for the next step, after the command
-            between()
+        if between is not None and k < scenario.n_steps - 1:  # an MPC's work for the next
+            between()  # step, after the command (none after the last)
         plan = getattr(controller, "plan", None)
         if plan is not None and obs.t >= next_plan_t:
             plans.append((obs.t, plan))
