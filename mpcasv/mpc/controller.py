@@ -12,7 +12,9 @@ Every step (docs/mpc.md, "Controller"):
 3. a warm-started solve from the previous plan moved one control period ahead;
    while the plan stands still, every ``explore_every`` s a second solve starts from a guess
    heading for the AUV with the largest projected fix age (standing still is a local minimum:
-   at rest the rudder has no authority, so the gradient cannot say "turn and go");
+   at rest the rudder has no authority, so the gradient cannot say "turn and go"); that
+   periodic one runs after the command (:meth:`between_steps`) and warm-starts the next step
+   when cheaper; after a target change, with a threat, or before a rescue it runs in the step;
 4. the safety check and, when the plan cannot be used (a failed solve, or a plan entering
    r_inner / r_avoid within its first ``check_stages`` stages, or, already inside, closing
    the range further), the rescue: solves from the unconverged iterate, an escape guess and
@@ -308,10 +310,15 @@ class MPCController(WorldView, Safety, PlanOutput, Targeting, SpeedCap):
             w0 = ocp.fill_slacks(Z, V, p_s)
         res = self._solve(p_s, w0, *lam)
         reason = self._check(res, p)
-        if reason is not None:  # the exploration now, before any rescue (as part of it)
+        # the exploration now when the plan may not be used (before any rescue, as part of
+        # it), right after a target change, or when an AUV threatens the ASV held where it is;
+        # else (the periodic one while the plan stands still) after the command
+        here = obs.asv.position
+        if (reason is not None or self.t_explore is None
+                or self._transit_reason(here, ocp.unpack_par(p)) is Reason.AVOIDANCE):
             res = self._cheaper(res, self._explore(obs, p_s, res))
             reason = self._check(res, p)
-        else:  # the plan may be used: its exploration waits for the idle time (between_steps)
+        else:
             self._pending = (obs, p_s, res)
         source = "plan" if reason is None else "fallback"
         # rescue, except after a missed field deadline (no time left); after a hang in
