@@ -46,6 +46,29 @@ def test_a_failed_warm_solve_is_rescued_with_the_larger_budget(ctrl, monkeypatch
     assert ctrl.diagnostics()["mpc_source"] == "rescue" and ctrl.diagnostics()["mpc_ok"] == 1
 
 
+def test_a_failed_warm_solve_tries_the_due_exploration_in_the_step_before_a_rescue(
+        ctrl, monkeypatch):  # fmt: skip
+    """A periodic exploration is due (the last one 10 s ago; it would otherwise wait until
+    after the command, ``between_steps``) and the warm-started solve stops at its iteration
+    limit: the exploration runs in the step, first; its converged plan is used, so no rescue
+    is needed and nothing is left for after the command."""
+    real, calls = ctrl.solver.solve, []
+
+    def solve(p, w0, lx=None, lg=None, max_iter=None):
+        calls.append(max_iter)
+        if len(calls) == 1:  # the warm-started solve: at the iteration limit
+            return SolveResult(np.asarray(w0, float), None, None, 1.0, False, "1", 50, 1.0)
+        return real(p, w0, lx, lg, max_iter)
+
+    monkeypatch.setattr(ctrl.solver, "solve", solve)
+    ctrl.t_explore = -10.0
+    obs = Observation(0.0, ASVState(0.0, 0.0, 0.0), False, (AUVEstimate(400.0, 0.0, 0.0),))
+    ctrl.step(obs)
+    assert ctrl.explored == 1 and calls == [None, None] and ctrl.rescues == 0
+    assert ctrl.sources == {"plan": 1} and ctrl._pending is None
+    assert ctrl.diagnostics()["mpc_ok"] == 1 and ctrl.diagnostics()["mpc_iter"] > 50
+
+
 def _always(monkeypatch, ctrl, plan):
     """Every solve 'converges' to ``plan(p)``."""
     monkeypatch.setattr(ctrl.solver, "solve", lambda p, w0, *a: SolveResult(
