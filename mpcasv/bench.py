@@ -42,6 +42,9 @@ def run(args: argparse.Namespace) -> int:
     for flag in ("repeat", "steps", "threads"):
         if getattr(args, flag) is not None and getattr(args, flag) < 1:
             raise ConfigError(f"--{flag} {getattr(args, flag)}: must be >= 1")
+    if args.which == "mpc" and args.steps < 2:  # (--steps 1 crashed in the step summary)
+        raise ConfigError(f"--steps {args.steps}: 'mpc' needs >= 2 (the first, cold step is "
+                          "left out of the figures)")
     if args.json is not None:
         check_output_file(args.json, "--json")
     module, func = BENCHES[args.which].split(":")

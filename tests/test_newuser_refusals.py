@@ -169,6 +169,7 @@ def test_bad_manoeuvre_options_are_refused_in_one_line(tmp_path, capsys, extra, 
         (["sim", "--repeat", "0"], "--repeat 0"),  # ran once: "over 1 runs", exit 0
         (["sim", "--repeat", "-1"], "--repeat -1"),
         (["mpc", "--steps", "-1", "--quick"], "--steps -1"),  # blamed "case3 (modified)"
+        (["mpc", "--steps", "1", "--quick"], "--steps 1"),  # crashed: an empty step summary
         (["sim", "--json", "/nonexistent-newuser5/x.json"], "--json"),  # after the benchmark
     ],
 )

@@ -275,12 +275,20 @@ def bench_mpc(args: argparse.Namespace) -> dict:
         print("  by what the step did (wall p99 / max ms): " + ", ".join(
             f"{k} {v['steps']} steps {v['wall_p99_ms']:.1f} / {v['wall_max_ms']:.1f}"
             for k, v in step.get("by_kind", {}).items()))  # fmt: skip
-        if "between" in step:
-            b = step["between"]
-            print(f"  between steps, after the command: {b['solves']} exploration solves, wall "
-                  f"p99 {b['wall_p99_ms']:.1f} / max {b['wall_max_ms']:.1f} ms")  # fmt: skip
+        b = step.get("between")
+        print("  between steps, after the command: " + (
+            "no exploration solve" if b is None else f"{b['solves']} exploration solves, wall "
+            f"p99 {b['wall_p99_ms']:.1f} / max {b['wall_max_ms']:.1f} ms"))  # fmt: skip
     figures["load_average_end"] = [round(x, 2) for x in os.getloadavg()]
+    print(f"load average at the end: {figures['load_average_end'][0]:.2f} on "
+          f"{os.cpu_count()} cores (wall times from a loaded machine are not comparable; "
+          f"compare the ratios within one run)")  # fmt: skip
     return figures
+
+
+def _speed(ratio: float) -> str:
+    """A time ratio (other / this) as 'N.NNx faster' or 'N.NNx slower'."""
+    return f"{ratio:.2f}x faster" if ratio >= 1.0 else f"{1.0 / ratio:.2f}x slower"
 
 
 def _print(case: str, n: int, rows: dict, speedup: float, steps: int = STEPS,
@@ -303,8 +311,8 @@ def _print(case: str, n: int, rows: dict, speedup: float, steps: int = STEPS,
     if "default_1_thread" in rows:
         one = rows["default_1_thread"]
         print(f"{threads} threads against 1 on the same sequence: median "
-              f"{one['median_ms'] / d['median_ms']:.2f}x, p99 "
-              f"{one['p99_ms'] / d['p99_ms']:.2f}x faster")
+              f"{_speed(one['median_ms'] / d['median_ms'])}, p99 "
+              f"{_speed(one['p99_ms'] / d['p99_ms'])}")
     if d.get("time_shares_pct"):
         print("where the default's time goes (fatrop's timers): " + ", ".join(
             f"{k} {v:.0f} %" for k, v in d["time_shares_pct"].items()))  # fmt: skip
