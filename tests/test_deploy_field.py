@@ -288,6 +288,7 @@ class _Host(FieldMode):
 
     def __init__(self, controller):
         self.controller, self.events, self.records, self.step_errors = controller, [], [], 0
+        self.between_solves, self.between_ms_max = 0, 0.0
         self.jsonl = SimpleNamespace(write=self.records.append)
 
     def event(self, name, **info):
@@ -326,6 +327,7 @@ def test_the_work_after_a_step_is_logged_and_never_raises():
     assert rec["ms"] >= 0.0 and "mpc_ok" not in rec
     assert host.events == [("between_error", {"t": 3.0, "error": "RuntimeError: boom"})]
     assert host.step_errors == 1
+    assert host.between_solves == 1 and host.between_ms_max == rec["ms"]  # the summary's
 
 
 def test_a_budget_that_leaves_no_room_for_the_exploration_is_reported():

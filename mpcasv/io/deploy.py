@@ -326,6 +326,8 @@ class Deploy(Phases, BoatFeedback, FieldMode):
         await self.stop_stepping()
         summary = {"steps": self.steps, "overrides": self.overrides,
                    "skipped_steps": self.skipped_steps, "step_errors": self.step_errors,
+                   "between_solves": self.between_solves,
+                   "between_ms_max": round(self.between_ms_max, 3),
                    "asv_stale_events": self.stale_events,
                    "plan_completed": self.plan_done.is_set(), "load": self.load(),
                    **self.link.counters()}  # fmt: skip

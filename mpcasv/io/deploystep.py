@@ -109,6 +109,8 @@ class FieldMode:
         self._step_pool: concurrent.futures.ThreadPoolExecutor | None = None
         self.skipped_steps = 0
         self.step_errors = 0  # steps that raised (both modes: see step_failed)
+        self.between_solves = 0  # exploration solves after a step's command (log_between)
+        self.between_ms_max = 0.0  # the longest of them, wall ms
         if self.field_mode:
             check_budget(self.cfg, self.controller)
             start_field_mode(self.controller, solver_factory)
@@ -171,13 +173,16 @@ class FieldMode:
         return out | {"ms": (time.perf_counter() - c0) * 1e3}
 
     def log_between(self, ts: float, rec: dict) -> None:
-        """A ``between`` record in deploy.jsonl when an exploration solve ran; event
+        """A ``between`` record in deploy.jsonl when an exploration solve ran (counted in the
+        summary's ``between_solves``, its wall time in ``between_ms_max``); event
         ``between_error`` (an error on the console, counted in ``step_errors``) if it
         raised: the step's command was sent already, the next step starts as usual."""
         if "error" in rec:
             self.step_errors += 1
             self.event("between_error", t=ts, error=rec["error"])
         elif rec.get("mpc_explore_iter", 0) > 0:
+            self.between_solves += 1
+            self.between_ms_max = max(self.between_ms_max, float(rec["ms"]))
             self.jsonl.write({"kind": "between", "t": ts} | rec)
 
     async def stop_stepping(self) -> None:
