@@ -231,8 +231,8 @@ class MPCController(WorldView, Safety, PlanOutput, Targeting, SpeedCap):
         self._pending: tuple | None = None
         self.rescues = 0  # steps that needed rescue solves (docs/mpc.md, "Fallbacks")
         self.target = 0  # the AUV the terminal cost visits next
-        self.committed = False  # the target chosen by the rule (kept until served)
-        self.t_commit = -math.inf  # when it was chosen (s)
+        #: when the target was chosen by the rule (s; -inf: not yet, ``committed``)
+        self.t_commit = -math.inf
         #: per AUV: expected fixes since then (the fix rate of eq. M3 integrated; mpc/target.py)
         self.fixes_since = np.zeros(n_auv)
         self.target_switches = 0  # changes of target this run (diagnostic, issue 16 item 6)
@@ -265,6 +265,11 @@ class MPCController(WorldView, Safety, PlanOutput, Targeting, SpeedCap):
             self._hung += int(not res.ok and res.status == "deadline")  # counted, never hidden
             return res
         return self.deadline.solve(p, w0, lam_x, lam_g, max_iter, timeout=self._left(), **cap)
+
+    def _over_budget(self) -> int:
+        """1 if more than ``budget_ms`` of wall time has passed since ``_t_step`` (a
+        diagnostic in simulation, never a decision), else 0."""
+        return int((time.perf_counter() - self._t_step) * 1e3 > self.params.solver.budget_ms)
 
     def _left(self) -> float:
         """Field mode: seconds left of this step's solve budget."""
@@ -333,7 +338,7 @@ class MPCController(WorldView, Safety, PlanOutput, Targeting, SpeedCap):
             self.lam_prev = (res.lam_x, res.lam_g) if res.ok else None
         else:
             self.w_prev, self.lam_prev = None, None  # next step starts from a rollout
-        over = int((time.perf_counter() - self._t_step) * 1e3 > self.params.solver.budget_ms)
+        over = self._over_budget()
         self.over_budget += over  # measured, never a decision in simulation
         self.sources[source] = self.sources.get(source, 0) + 1
         self._diag = {"mpc_ok": int(res.ok), "mpc_iter": res.iters, "mpc_ms": res.ms,

@@ -83,7 +83,7 @@ class Safety:
             self.w_prev, self.lam_prev = alt.w, (alt.lam_x, alt.lam_g)
         self.explore_adopted += int(adopt)
         # longer than a step's budget: its step counts as over budget (never a decision)
-        over = int((time.perf_counter() - self._t_step) * 1e3 > self.params.solver.budget_ms)
+        over = self._over_budget()
         step_over = int(self._diag.get("mpc_over_budget", 0))
         self.over_budget += int(over and not step_over)
         self._diag |= {"mpc_explore_ms": alt.ms, "mpc_explore_iter": alt.iters,

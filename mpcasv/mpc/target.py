@@ -34,7 +34,7 @@ from mpcasv.mpc.order import Forecast, OrderModel, best_order, committed_target,
 
 
 class Targeting:
-    """The target AUV's choice (mixin; state in the controller: ``target``, ``committed``,
+    """The target AUV's choice (mixin; state in the controller: ``target``,
     ``t_commit``, ``fixes_since``, ``dwell``, ``target_switches``, ``t_explore``,
     ``order_plan``)."""
 
@@ -74,7 +74,6 @@ class Targeting:
     def _switch_to(self, new: int, t: float) -> None:
         """Commit to ``new`` at time ``t`` (a switch, counted, if it is not the target
         already)."""
-        self.committed = True
         self.t_commit = t
         self.fixes_since[:] = 0.0
         if new == self.target:
@@ -93,6 +92,11 @@ class Targeting:
         self.order_plan = plan
         self._switch_to(committed_target(plan, self.target, self.params.order.hysteresis),
                         obs.t)  # fmt: skip
+
+    @property
+    def committed(self) -> bool:
+        """Whether the target was chosen by the rule (kept until served; module docstring)."""
+        return self.t_commit > -math.inf
 
     def forecast(self, a: AUVEstimate) -> Forecast:
         """An AUV's forecast for the visiting order (offsets from now, s, shape (n,) ->
