@@ -12,6 +12,7 @@ import time
 from types import SimpleNamespace
 
 import imcpy
+import pytest
 import tomli_w
 from test_io_link import ASV_ID, AUV_ID, Fake, _cfg
 
@@ -344,3 +345,26 @@ def test_a_budget_that_leaves_no_room_for_the_exploration_is_reported():
     assert not check_budget(cfg, ctl(500.0), log=said.append)
     assert len(said) == 1 and "solver.budget_ms = 500 ms" in said[0]
     assert check_budget(cfg, SimpleNamespace(), log=said.append)  # no solver: nothing to say
+
+
+def test_a_budget_that_leaves_the_solves_no_time_is_refused(tmp_path, capsys):
+    """New-user check: ``solver.budget_ms = 0.5`` was accepted silently; in the field a step
+    keeps ``STEP_RESERVE_S`` (30 ms) of its budget for the fallback, so every solve would be
+    abandoned at once. Refused with the configuration (also by ``--prepare``), in one line."""
+    from mpcasv.config import ConfigError
+    from mpcasv.io.config import deploy_config_from_dict
+
+    data = _mpc_cfg(tmp_path)
+    for ms in (0.5, 30.0, 30.5):
+        data["controller"]["overrides"] = {"solver.budget_ms": ms}
+        with pytest.raises(ConfigError, match=f"budget_ms = {ms:g} ms can never work in the"):
+            deploy_config_from_dict(data)
+    data["controller"]["overrides"] = {"solver.budget_ms": 31.0}
+    deploy_config_from_dict(data)  # leaves the solves 1 ms: accepted
+    data["controller"]["overrides"] = {"solver.budget_ms": 0.5}
+    path = tmp_path / "deploy.toml"
+    path.write_text(tomli_w.dumps(data))
+    assert main(["deploy", str(path), "--prepare"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "give at least 31 ms" in err[0], err
+    assert not (tmp_path / "log").exists()

@@ -154,9 +154,10 @@ def test_config_names_the_vessel(tmp_path):
         _cfg(tmp_path, controller={"vessel": "no-such-boat"})
 
 
-def test_deploy_prepare_builds_and_contacts_nobody(tmp_path, capsys):
+def test_deploy_prepare_builds_and_contacts_nobody(tmp_path, capsys, caplog):
     """``mpcasv deploy CONFIG --prepare``: the controller is built (with progress lines),
-    nothing is bound, no log is written, exit 0."""
+    nothing is bound, no log is written, exit 0. A hybrid controller has nothing to compile,
+    and the progress line says so (it said "an MPC compiles its library now")."""
     import json
 
     import tomli_w
@@ -176,3 +177,6 @@ def test_deploy_prepare_builds_and_contacts_nobody(tmp_path, capsys):
     out = capsys.readouterr()
     assert json.loads(out.out)["prepared"]["controller"] == "hybrid-single"
     assert not (tmp_path / "log").exists()
+    said = [r.getMessage() for r in caplog.records if r.name == "mpcasv.deploy"]
+    assert any("hybrid-single" in m and "nothing to compile" in m for m in said), said
+    assert not any("MPC compiles" in m or "compiling" in m for m in said), said

@@ -253,3 +253,47 @@ def test_revisit_interval_is_between_real_reliable_fixes_with_several_auvs():
     m = compute_metrics(hand)
     assert m["revisit_interval_max_s"] == math.inf  # written as null in metrics.json
     assert m["reliable_fix_age_max_s"] == 55.0  # b: 5 -> 60 (the end) without a fix
+
+
+def test_between_steps_ms_max_is_null_when_no_solve_ran_between_steps(tmp_path):
+    """New-user check: a run without an exploration solve after a step's command (a hybrid
+    controller; an MPC whose exploration never came due) had ``between_steps_ms_max`` = 0,
+    read as "took 0 ms". It is null (not measured), as the other undefined metrics; the
+    results table, the summary and the paired statistics take it as missing."""
+    import json
+
+    from mpcasv.experiments.report import summary_table
+    from mpcasv.experiments.runner import _metric_columns
+    from mpcasv.experiments.stats import paired_table
+    from mpcasv.experiments.store import read_parts, write_part
+    from mpcasv.sim.record import write_run
+
+    res = simulate(_pass_by(duration=30.0), _standing(), seed=0)
+    m = compute_metrics(res)
+    assert "mpc_explore_ms" not in res.timeseries and m["between_steps_ms_max"] is None
+    nan = np.full(len(res.timeseries), np.nan)  # an MPC's column, no exploration ran
+    m = compute_metrics(dataclasses.replace(res, timeseries=res.timeseries.assign(
+        mpc_explore_ms=nan)))  # fmt: skip
+    assert m["between_steps_ms_max"] is None
+    some = nan.copy()
+    some[[3, 7]] = [4.5, 2.0]
+    m = compute_metrics(dataclasses.replace(res, timeseries=res.timeseries.assign(
+        mpc_explore_ms=some)))  # fmt: skip
+    assert m["between_steps_ms_max"] == 4.5
+    written = write_run(res, tmp_path / "run", compute_metrics(res), plots=False)
+    assert written["between_steps_ms_max"] is None
+    assert json.loads((tmp_path / "run" / "metrics.json").read_text())[
+        "between_steps_ms_max"] is None  # fmt: skip
+    # the results store: rows of hybrid runs (missing) and MPC runs (a value) side by side
+    for i, (variant, value) in enumerate([("H", None), ("M", 4.5)] * 5):
+        row = {"job_id": f"j{i}", "scenario": "s", "variant": variant, "current": "off",
+               "estimator": "perfect", "seed": i // 2, "status": "ok"}  # fmt: skip
+        write_part(tmp_path / "sweep", row | _metric_columns({"between_steps_ms_max": value}))
+    df = read_parts(tmp_path / "sweep")
+    col = df["between_steps_ms_max"]
+    assert col.dtype == float and col.isna().sum() == 5 and (col.dropna() == 4.5).all()
+    summ = summary_table(df).set_index("variant")
+    assert summ.loc["H", "n"] == 0 and math.isnan(summ.loc["H", "mean"])
+    assert summ.loc["M", "n"] == 5 and summ.loc["M", "mean"] == 4.5
+    stat = paired_table(df, ["between_steps_ms_max"], {"between_steps_ms_max": "lower"})
+    assert stat.loc[0, "n"] == 0 and stat.loc[0, "note"] == "no pairs", stat

@@ -130,3 +130,33 @@ def test_falsify_refuses_a_preset_of_another_controller(tmp_path, capsys):
     err = capsys.readouterr().err
     assert code == 2 and "Traceback" not in err, err
     assert "paper1-field" in err and "hybrid-single" in err and "mpc-single" in err
+
+
+@pytest.mark.parametrize("key,word", [
+    ("solver.threads", "has no parameter 'solver' (its parameters: avoidance, domain, speed)"),
+    ("nosuch", "has no parameter 'nosuch'"),
+    ("domain.nosuch", "has no parameter 'domain.nosuch' ('domain' has parameters: "),
+    ("speed.x", "has no parameter 'speed.x' ('speed' is a single value)"),  # was a traceback
+])  # fmt: skip
+def test_an_override_of_a_parameter_the_controller_lacks_is_refused_in_one_line(key, word):
+    """New-user check: ``solver.threads`` (an MPC parameter) given to the hybrid's preset came
+    out as pydantic's "solver: Unexpected keyword argument"."""
+    with pytest.raises(ConfigError) as err:
+        load_preset("hybrid-single", "paper1-field", {key: 2})
+    lines = str(err.value).splitlines()
+    assert len(lines) == 1 and f"override {key!r}: controller 'hybrid-single'" in lines[0]
+    assert word in lines[0] and "Unexpected keyword" not in lines[0], lines[0]
+    assert load_preset("mpc-single", "mpc-single", {"solver.threads": 2}).solver.threads == 2
+
+
+def test_deploy_refuses_a_solver_override_of_a_hybrid_controller(tmp_path, capsys):
+    text = (ROOT / "experiments" / "deploy" / "sitl-case3.toml").read_text()
+    assert text.count('estimator = "perfect"\n') == 1
+    bad = tmp_path / "deploy.toml"
+    bad.write_text(text.replace('estimator = "perfect"\n', 'estimator = "perfect"\n'
+                                'overrides = { "solver.threads" = 2 }\n'))  # fmt: skip
+    code = main(["deploy", str(bad), "--prepare"])
+    err = capsys.readouterr().err
+    assert code == 2 and "Traceback" not in err and len(err.strip().splitlines()) == 1, err
+    assert (f"{bad}: controller: override 'solver.threads': controller 'hybrid-single' has no "
+            "parameter 'solver'") in err, err  # fmt: skip

@@ -26,6 +26,7 @@ import dataclasses
 import hashlib
 import importlib
 import json
+import typing
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -197,13 +198,15 @@ def load_preset(
     ------
     ConfigError
         Unknown controller or preset; a preset whose ``controller`` key names other
-        controllers; invalid fields (a preset that validates only for other controllers is
-        said to be theirs).
+        controllers; an override naming no parameter of the controller
+        (:func:`check_override_keys`); invalid fields (a preset that validates only for other
+        controllers is said to be theirs).
     """
     kind = controller_kind(name)
     path, data = _preset_data(name, preset)
     check_preset_controller(name, data, path)
     data.pop(CONTROLLER_KEY, None)
+    check_override_keys(name, kind.params_cls, overrides or {})
     for key, value in (overrides or {}).items():
         target, *rest = key.split(".")
         node = data
@@ -220,6 +223,35 @@ def load_preset(
             raise ConfigError(f"{path}: a preset for {', '.join(fits)}, not for {name!r} "
                               "(choose a preset of that controller)") from None  # fmt: skip
         raise
+
+
+def check_override_keys(name: str, params_cls: type, overrides: Mapping[str, Any]) -> None:
+    """Refuse an override whose dotted key names no parameter of controller ``name``
+    (``params_cls``), e.g. ``solver.threads`` for a hybrid controller (it has no solver): it
+    came out as pydantic's "Unexpected keyword argument", or a traceback for a key below a
+    single value (``speed.x``).
+
+    Raises
+    ------
+    ConfigError
+        One line naming the key, the controller and the parameter it does not have, with the
+        parameters there are at that level.
+    """
+    for key in overrides:
+        parts = key.split(".")
+        node: Any = params_cls
+        for i, part in enumerate(parts):
+            fields = getattr(node, "__pydantic_fields__", None)
+            if fields is None and typing.get_origin(node) in (dict, Mapping):
+                break  # a table of free keys: its values are validated by pydantic
+            if fields is None or part not in fields:
+                where = ".".join(parts[:i])
+                there = (f"'{where}' is a single value" if fields is None else
+                         f"{'its' if not where else repr(where) + ' has'} parameters: "
+                         f"{', '.join(sorted(fields))}")  # fmt: skip
+                raise ConfigError(f"override {key!r}: controller {name!r} has no parameter "
+                                  f"{'.'.join(parts[: i + 1])!r} ({there})")  # fmt: skip
+            node = fields[part].annotation
 
 
 def _kinds_that_accept(data: dict, kind: ControllerKind) -> list[str]:

@@ -134,8 +134,9 @@ _BASE: dict[str, MetricInfo] = {
     "controller_step_ms_p99": _i("ms", "lower", "99th percentile of that time"),
     "between_steps_ms_max": _i("ms", "lower", "longest wall time of a solve a controller "
                                "runs after a step's command, for the next step (an MPC's "
-                               "exploration solve; 0: none, or the caller left it to the next "
-                               "step); in the field it has the step's budget_ms of its own"),
+                               "exploration solve; null: none ran, or the caller left it to "
+                               "the next step); in the field it has the step's budget_ms of "
+                               "its own"),
     "fallbacks": _i("1", "lower", "MPC steps handed to the fallback controller"),
     "target_switches": _i("1", "lower", "changes of the AUV an MPC targets (0 for the other "
                           "controllers; chattering shows here)", "issue 16 item 6"),
@@ -242,6 +243,13 @@ def _update_jumps(ts: pd.DataFrame, k: int) -> np.ndarray:
     t_fix = ts[col].to_numpy()
     updated = np.flatnonzero(t_fix[1:] != t_fix[:-1])
     return d_est[updated[1:]]
+
+
+def _max_or_none(ts: pd.DataFrame, col: str) -> float | None:
+    """Largest value of a time-series column; None if it is absent or has no value (NaN:
+    nothing measured, e.g. no exploration solve ran), not 0, which reads as "took 0 ms"."""
+    v = ts[col].to_numpy(float) if col in ts else np.array([])
+    return float(np.nanmax(v)) if (~np.isnan(v)).any() else None
 
 
 def _sum(ts: pd.DataFrame, col: str) -> float | None:
@@ -391,8 +399,7 @@ def compute_metrics(result) -> dict:
         "energy_J": float(result.energy_J),
         "controller_step_ms_median": float(np.median(step_ms)),
         "controller_step_ms_p99": float(np.percentile(step_ms, 99)),
-        "between_steps_ms_max": (float(np.nanmax(ts["mpc_explore_ms"].to_numpy(), initial=0.0))
-                                 if "mpc_explore_ms" in ts else 0.0),
+        "between_steps_ms_max": _max_or_none(ts, "mpc_explore_ms"),
         "fallbacks": int(result.fallbacks),
         "target_switches": _last_int(ts, "mpc_target_switches"),
         "solver_hangs": int(ts["mpc_hung"].sum()) if "mpc_hung" in ts else 0,

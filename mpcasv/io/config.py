@@ -319,17 +319,20 @@ def deploy_boat(cfg: DeployConfig):
 
 def build_controller(cfg: DeployConfig, speed: float | None = None, log=print):
     """The deploy's controller (compiles an MPC's library now if it is not cached: progress
-    on ``log``)."""
+    on ``log``; the other controllers have nothing to compile, and ``log`` says so)."""
     import threading
     import time
 
-    from mpcasv.controllers import make_controller
+    from mpcasv.controllers import controller_kind, make_controller
 
     c = cfg.controller
     t0 = time.perf_counter()
+    what = ("nothing to compile (only an MPC has a compiled library)"
+            if controller_kind(c.name).libraries is None else
+            "an MPC compiles its library now if it is not cached (about a minute the first "
+            "time)")  # fmt: skip
     log(f"preparing controller {c.name} (preset {c.preset or 'default'}"
-        f"{', vessel ' + c.vessel if c.vessel else ''}): an MPC compiles its library now "
-        "if it is not cached (about a minute the first time)")  # fmt: skip
+        f"{', vessel ' + c.vessel if c.vessel else ''}): {what}")  # fmt: skip
     done = threading.Event()
 
     def progress() -> None:  # a line every 10 s while building (compiling)
@@ -349,9 +352,41 @@ def build_controller(cfg: DeployConfig, speed: float | None = None, log=print):
     return ctl
 
 
+#: the least time (ms) a step's solves can work with in the field: a warm-started solve's
+#: median is 2-7 ms (docs/deploy.md, ``solver.threads``)
+MIN_SOLVE_MS = 1.0
+
+
+def check_field_budget(params) -> None:
+    """Refuse a ``solver.budget_ms`` that can never work in the field: the deadline keeps
+    :data:`~mpcasv.mpc.controller.STEP_RESERVE_S` of every step's budget for the fallback and
+    its command, and the solves need :data:`MIN_SOLVE_MS` of the rest; with less, each solve
+    would be abandoned at once (its worker killed and replaced) and every step would take the
+    fallback. Parameters without ``solver`` (the hybrid controllers) pass.
+
+    Raises
+    ------
+    ConfigError
+        One line with the budget, the reserve and the least budget accepted.
+    """
+    budget = getattr(getattr(params, "solver", None), "budget_ms", None)
+    if budget is None:
+        return
+    from mpcasv.mpc.controller import STEP_RESERVE_S
+
+    reserve = STEP_RESERVE_S * 1e3
+    if budget < reserve + MIN_SOLVE_MS:
+        raise ConfigError(f"solver.budget_ms = {budget:g} ms can never work in the field: a "
+                          f"step keeps {reserve:g} ms of its budget for the fallback, which "
+                          f"leaves the solves {max(budget - reserve, 0.0):g} ms (every step "
+                          f"would take the fallback); give at least {reserve + MIN_SOLVE_MS:g} "
+                          "ms (the presets: 200)")  # fmt: skip
+
+
 def check_controller(cfg: DeployConfig, source: str | Path) -> None:
-    """Validate the controller's name, preset, overrides, vessel and the AUV count (the
-    controller itself is built by :func:`build_controller`, before any vehicle is contacted)."""
+    """Validate the controller's name, preset, overrides, vessel, an MPC's field budget
+    (:func:`check_field_budget`) and the AUV count (the controller itself is built by
+    :func:`build_controller`, before any vehicle is contacted)."""
     from mpcasv.config import ConfigError, resolve
     from mpcasv.controllers import check_boat, controller_kind, load_preset
     from mpcasv.estimation import ESTIMATORS
@@ -370,6 +405,7 @@ def check_controller(cfg: DeployConfig, source: str | Path) -> None:
             resolve("vessels", c.vessel)
         params = load_preset(c.name, c.preset, controller_overrides(cfg))
         check_boat(params, deploy_boat(cfg), str(c.preset or c.name))
+        check_field_budget(params)
     except ConfigError as exc:
         raise ConfigError(f"{source}: controller: {exc}") from None
     if c.speed_feedback and not hasattr(params, "speed"):
