@@ -21,6 +21,7 @@ import casadi as ca
 import numpy as np
 
 from mpcasv.control.params import ExecutionParams
+from mpcasv.models.envelope import rk4_sub_steps
 from mpcasv.models.vessel import NC, NX, VesselModel, rk4_expr, sabs
 
 NZ = 3
@@ -145,14 +146,17 @@ def closed_loop(model: VesselModel, ep: ExecutionParams, dt: float, n_sub: int) 
     ``CL(x, z, cmd, c) -> (x_next, z_next, X, U, Y)`` where ``X`` (NX x n_sub), ``U``
     (NU x n_sub) and ``Y`` (2 x n_sub) hold the state after, and the input and guidance
     outputs during, each plant step. Inputs are held over each plant step (ZOH) and the
-    plant is integrated by RK4.
+    plant is integrated by RK4, in as many sub-steps as the vessel's fastest pole over its
+    manoeuvring envelope needs (:func:`~mpcasv.models.envelope.rk4_sub_steps`; 1 for the
+    shipped vessels at 0.1 s).
     """
+    k = rk4_sub_steps(model, dt)
     x0, z0 = ca.SX.sym("x", NX), ca.SX.sym("z", NZ)
     cmd, c = ca.SX.sym("cmd", NCMD), ca.SX.sym("c", NC)
     x, z, Xs, Us, Ys = x0, z0, [], [], []
     for _ in range(n_sub):
         u, z, y = execution_law(x, z, cmd, model, ep, dt)
-        x = rk4_expr(model.f, x, u, c, dt)
+        x = rk4_expr(model.f, x, u, c, dt, k)
         Xs.append(x)
         Us.append(u)
         Ys.append(y)

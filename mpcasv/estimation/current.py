@@ -11,7 +11,7 @@ State (5): ``s = [u_r, v_r, r, V_N, V_E]``: surge and sway speed through the wat
 axes), yaw rate (rad/s), current (m/s, NED; constant in space over the boat's length).
 
 Motion model over ``dt`` (the time between two observations, RK4 in sub-steps of at most
-``h_max`` s):
+``h_max`` s, shorter for a stiff hull):
 
     nu_r(t + dt) = Phi(nu_r(t); T, delta, dt)                                         (C1)
 
@@ -57,6 +57,7 @@ import numpy as np
 
 from mpcasv.config import Pos, frozen
 from mpcasv.interface import Observation
+from mpcasv.models.envelope import rk4_sub_steps
 from mpcasv.models.vessel import NX, VesselModel
 
 __all__ = [
@@ -92,8 +93,9 @@ class CurrentObserverParams:
     sigma_c0 : float
         Initial standard deviation of the current per axis (m/s); the initial estimate is 0.
     h_max : float
-        Longest RK4 sub-step of (C1) (s): RK4 is stable on the fast sway-yaw pole (about
-        -2.4 1/s at 2.5 m/s) for sub-steps up to about 1.1 s.
+        Longest RK4 sub-step of (C1) (s): RK4 is stable on Gretha's fast sway-yaw pole (about
+        -2.4 1/s at 2.5 m/s) for sub-steps up to about 1.1 s; a stiffer hull takes shorter
+        ones (:func:`~mpcasv.models.envelope.rk4_sub_steps`).
     """
 
     q_nu: Pos = 1e-4
@@ -236,7 +238,8 @@ class CurrentObserver:
             act, q_nu = np.zeros(2), P.q_nu
         else:  # propeller running, thrust unknown: the model cannot predict nu_r
             act, q_nu = np.zeros(2), P.q_blind
-        n = max(1, math.ceil(dt / P.h_max - 1e-9))
+        # sub-steps of at most h_max, more where the hull is stiff (a turn of Fossen's Otter)
+        n = max(1, math.ceil(dt / P.h_max - 1e-9), rk4_sub_steps(self.model, dt, lags=False))
         h = dt / n
         nu, J = self.s[0:3], np.eye(3)
         for _ in range(n):

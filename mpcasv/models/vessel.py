@@ -250,11 +250,17 @@ class VesselModel:
             [ca.jacobian(self.f(x, u, c), x), ca.jacobian(self.f(x, u, c), u)],
         )
 
-    def rk4(self, dt: float, n_sub: int = 1) -> ca.Function:
-        """Discrete step ``F(x, u, c) -> x_next`` by RK4 over ``dt`` (``n_sub`` sub-steps)."""
+    def rk4(self, dt: float, n_sub: int | None = None) -> ca.Function:
+        """Discrete step ``F(x, u, c) -> x_next`` by RK4 over ``dt`` in ``n_sub`` sub-steps;
+        None (default): as many as the vessel's fastest pole over its manoeuvring envelope
+        needs (:func:`~mpcasv.models.envelope.rk4_sub_steps`: 1 for Gretha up to 0.75 s, more
+        for a stiff hull in a turn)."""
+        from mpcasv.models.envelope import rk4_sub_steps
+
+        n = rk4_sub_steps(self, dt) if n_sub is None else n_sub
         x, u, c = ca.SX.sym("x", NX), ca.SX.sym("u", NU), ca.SX.sym("c", NC)
         return ca.Function(
-            "F_rk4", [x, u, c], [rk4_expr(self.f, x, u, c, dt, n_sub)],
+            "F_rk4", [x, u, c], [rk4_expr(self.f, x, u, c, dt, n)],
             ["x", "u", "c"], ["x_next"],
         )  # fmt: skip
 
@@ -277,15 +283,32 @@ class VesselModel:
         x0 = np.array([0.0, 0.0, 0.0, u, 0.0, 0.0, T, 0.0])
         return x0, np.array([T, 0.0])
 
-    @cached_property
+    @property
+    def fastest_trim_pole(self) -> float:
+        """Largest |eigenvalue| (1/s) of the rigid-body dynamics (N..r, the actuators held)
+        at straight-line trims from rest to ``u_max`` (:mod:`mpcasv.models.envelope`)."""
+        from mpcasv.models.envelope import poles
+
+        return poles(self).trim
+
+    @property
     def fastest_pole(self) -> float:
-        """Largest |eigenvalue| (1/s) of the rigid-body dynamics (the six states N..r, the
-        actuators held) linearised at straight-line trims from rest to ``u_max`` (13 speeds):
-        what bounds an explicit integrator's step (RK4 on a real pole: ``|lambda h| < 2.785``).
-        """
-        speeds = np.linspace(0.0, self.params.u_max, 13)
-        return max(float(np.abs(np.linalg.eigvals(self.linearize(*self.trim(u))[0][:6, :6])).max())
-                   for u in speeds)  # fmt: skip
+        """Largest |eigenvalue| (1/s) of the rigid-body dynamics (N..r, the actuators held)
+        over the manoeuvring envelope, straight-line trims and full-steering turns
+        (:mod:`mpcasv.models.envelope`): what bounds an explicit integrator's step (RK4 on a
+        real pole: ``|lambda h| < 2.785``). Gretha 2.7 1/s (2.4 straight ahead), Fossen's
+        Otter 17-18 in a full-steering turn (3.6 straight ahead)."""
+        from mpcasv.models.envelope import poles
+
+        return poles(self).envelope
+
+    @property
+    def fastest_plant_pole(self) -> float:
+        """As :attr:`fastest_pole` with the actuators' lags (all eight states): what bounds
+        the simulator's plant step, which integrates the lags too."""
+        from mpcasv.models.envelope import poles
+
+        return poles(self).plant
 
     @cached_property
     def top_speed(self) -> float:

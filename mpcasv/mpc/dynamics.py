@@ -25,14 +25,13 @@ import math
 import casadi as ca
 
 from mpcasv.models.acoustics import AcousticParams
+from mpcasv.models.envelope import RK4_LAMBDA_H, RK4_STABLE
 from mpcasv.models.vessel import rk4_step, xdot_expr
 from mpcasv.mpc.layout import NCH, channel_vector
 from mpcasv.mpc.smooth import D_EPS, sigmoid
 from mpcasv.mpc.variance import N_NAV, fix_gain
 
 NXV = 8  # vessel part of the plan state
-#: largest |lambda h| of a plan sub-step: RK4's stability bound on the real axis is 2.785
-RK4_LAMBDA_H = 2.5
 
 
 class PlanDynamics:
@@ -139,10 +138,16 @@ class PlanDynamics:
 
     @property
     def n_sub(self) -> int:
-        """RK4 sub-steps per stage: the horizon's ``n_sub``, more if the vessel's fastest
-        rigid-body pole needs them (``dt / n_sub * |lambda|max <= RK4_LAMBDA_H``): with
-        Fossen's Otter (3.55 1/s at top speed) 4 sub-steps of 1 s would make the plan's
-        perturbations grow (RK4's gain 2.9 per sub-step) and the MPC plans with 6."""
-        hz = self.params.horizon
-        need = math.ceil(hz.dt * self.model.fastest_pole / RK4_LAMBDA_H - 1e-9)
-        return max(hz.n_sub, need)
+        """RK4 sub-steps per stage: the horizon's ``n_sub``, more if the vessel needs them.
+
+        Two bounds on the sub-step ``h = dt / n_sub``: RK4 stable on every rigid-body pole of
+        the manoeuvring envelope, turns included (``|lambda|max h < RK4_STABLE``, 2.785), and
+        with a margin on the straight-line trims, where the plan spends most of its time
+        (``|lambda|max h <= RK4_LAMBDA_H``, 2.5). Gretha: 4 (2.72 1/s in a full-rudder turn
+        from top speed, 2.38 straight ahead). Fossen's Otter: 26 (18 1/s in a full-steering
+        turn: with 6, the sub-steps of the straight-line bound, a turning stage returned NaN
+        and fatrop hung on it)."""
+        hz, m = self.params.horizon, self.model
+        need_turn = math.ceil(hz.dt * m.fastest_pole / RK4_STABLE - 1e-9)
+        need_trim = math.ceil(hz.dt * m.fastest_trim_pole / RK4_LAMBDA_H - 1e-9)
+        return max(hz.n_sub, need_turn, need_trim)

@@ -37,11 +37,13 @@ def structure_key(params: MPCParams) -> str:
     return repr(dataclasses.replace(params, weights=dataclasses.replace(wt, **fixed)))
 
 
-def compile_estimate(n_auv: int) -> float:
+def compile_estimate(n_auv: int, n_sub: int = 4) -> float:
     """Seconds a cold compile takes on an idle machine (linear in the AUVs through the two
-    measured points; a busy machine takes longer)."""
+    points measured with 4 RK4 sub-steps per stage, and proportional to the sub-steps: a stiff
+    hull's plan takes more, :attr:`~mpcasv.mpc.problem.OCP.n_sub`; a busy machine takes
+    longer)."""
     (n0, t0), (n1, t1) = sorted(COLD_COMPILE_S.items())
-    return max(t0, t0 + (t1 - t0) * (n_auv - n0) / (n1 - n0))
+    return max(t0, t0 + (t1 - t0) * (n_auv - n0) / (n1 - n0)) * max(n_sub, 4) / 4
 
 
 @dataclass(frozen=True)
@@ -54,6 +56,7 @@ class Library:
     solver: str
     cflags: str
     functions: dict = field(repr=False, compare=False)
+    n_sub: int = 4
 
     @property
     def cached(self) -> bool:
@@ -61,7 +64,7 @@ class Library:
 
     @property
     def estimate_s(self) -> float:
-        return compile_estimate(self.n_auv)
+        return compile_estimate(self.n_auv, self.n_sub)
 
     def compile(self, log=print) -> Path:
         """Compile (or load, if another process did meanwhile) under the cache's lock."""
@@ -88,4 +91,4 @@ def _libraries(params: MPCParams, n_auv: int, multi: bool, boat) -> list[Library
     name = "mpc-multi" if multi else "mpc-single"
     label = f"{name}, {n_auv} AUV{'s' if n_auv > 1 else ''}, {sp.solver}, vessel {ocp.vessel.name}"
     return [Library(library_path(funs, sp.solver, cflags), label, n_auv, sp.solver, cflags,
-                    funs)]  # fmt: skip
+                    funs, ocp.n_sub)]  # fmt: skip

@@ -1,0 +1,102 @@
+"""A vessel's manoeuvring envelope and its fastest poles: what bounds an explicit integrator's
+step (the MPC plan's RK4 sub-steps, the simulator's plant step).
+
+Classic RK4 is stable on a real pole ``lambda`` while ``|lambda h| < 2.785``
+(:data:`RK4_STABLE`, where ``|R(z)| = 1`` on the negative real axis). The poles of a hull with
+quadratic damping grow with its speeds: the yaw pole of ``N_rr |r| r`` is ``2 N_rr |r|`` over
+the yaw inertia, so a hull that is slow on a straight line can be stiff in a turn. Fossen's
+Otter: 3.6 1/s at its top speed straight ahead, 15-18 1/s in a full-rudder turn (docs/mpc.md,
+"Variables and dynamics"). The envelope is therefore sampled along manoeuvres, not only at
+straight-line trims.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numpy as np
+from scipy.integrate import solve_ivp
+
+#: |lambda h| on the negative real axis where classic RK4's gain reaches 1 (2.7853)
+RK4_STABLE = 2.785
+#: largest |lambda h| of an RK4 step with a margin (the plan's sub-steps on straight-line
+#: trims, the plant's steps)
+RK4_LAMBDA_H = 2.5
+#: manoeuvres of the envelope: seconds simulated and the sampling interval (s)
+T_MANOEUVRE, T_SAMPLE = 60.0, 0.25
+N_TRIMS = 13  # straight-line trims from rest to u_max
+
+
+def trim_states(model) -> np.ndarray:
+    """Straight-line trims heading north at ``N_TRIMS`` speeds from rest to ``u_max``
+    (``N_TRIMS x 8``)."""
+    return np.array([model.trim(u)[0] for u in np.linspace(0.0, model.params.u_max, N_TRIMS)])
+
+
+def turn_states(model) -> np.ndarray:
+    """States (``n x 8``) of full-steering turns in still water, sampled every ``T_SAMPLE`` s
+    over ``T_MANOEUVRE`` s: steering ``+-delta_max`` at full and half thrust, from rest and from
+    the trim at top speed. Integrated by scipy's LSODA (stiff hulls included), the actuators
+    following their set-points through their lags as in the plant.
+
+    Raises ValueError if a manoeuvre cannot be integrated (the message names the vessel).
+    """
+    P = model.params
+    t_eval = np.arange(0.0, T_MANOEUVRE + 1e-9, T_SAMPLE)
+    starts = [np.zeros(8), model.trim(min(P.u_max, model.top_speed))[0]]
+    out = []
+    for T in (P.T_max, 0.5 * P.T_max):
+        for delta in (P.delta_max, -P.delta_max):
+            u = np.array([T, delta])
+            rhs = lambda _t, x, u=u: np.asarray(model.f(x, u, np.zeros(2))).ravel()  # noqa: E731
+            for x0 in starts:
+                sol = solve_ivp(rhs, (0.0, T_MANOEUVRE), x0, method="LSODA", t_eval=t_eval,
+                                rtol=1e-6, atol=1e-8)  # fmt: skip
+                if not sol.success or not np.all(np.isfinite(sol.y)):
+                    raise ValueError(f"vessel {P.name}: a full-steering turn cannot be "
+                                     f"integrated ({sol.message})")  # fmt: skip
+                out.append(sol.y.T)
+    return np.vstack(out)
+
+
+def fastest_pole(model, states: np.ndarray, n: int = 6) -> float:
+    """Largest |eigenvalue| (1/s) of the model's Jacobian's first ``n`` states (6: the rigid
+    body N..r with the actuators held; 8: with the actuators' lags) over ``states``
+    (``m x 8``), the actuator set-points at the actuators' states."""
+    return max(float(np.abs(np.linalg.eigvals(model.linearize(x, x[6:8])[0][:n, :n])).max())
+               for x in states)  # fmt: skip
+
+
+class Poles(NamedTuple):
+    """Fastest poles (1/s) of a vessel: ``trim`` at straight-line trims, ``envelope`` over
+    trims and turns (rigid body), ``plant`` over both with the actuators' lags."""
+
+    trim: float
+    envelope: float
+    plant: float
+
+
+_POLES: dict[str, Poles] = {}
+
+
+def poles(model) -> Poles:
+    """The vessel's :class:`Poles`, computed once per process and parameter set (about 1 s)."""
+    key = repr(model.params)
+    if key not in _POLES:
+        trims = trim_states(model)
+        states = np.vstack([trims, turn_states(model)])
+        _POLES[key] = Poles(fastest_pole(model, trims), fastest_pole(model, states),
+                            fastest_pole(model, states, n=8))  # fmt: skip
+    return _POLES[key]
+
+
+def rk4_sub_steps(model, dt: float, lags: bool = True) -> int:
+    """RK4 sub-steps for a step of ``dt`` s on ``model``: ``|lambda|max h <= RK4_LAMBDA_H``
+    (2.5, inside RK4's stability bound 2.785) on the vessel's fastest pole over its
+    manoeuvring envelope, with the actuators' lags (``lags``: the plant, :meth:`VesselModel.
+    rk4`) or without (the actuators at their set-points: the current observer). A stiff hull
+    or a long step is integrated more finely instead of diverging in a full-steering turn
+    (Fossen's Otter, 18 1/s: 1 sub-step of 0.1 s, 2 of 0.2 s; Gretha 1 up to 0.75 s)."""
+    p = poles(model)
+    return max(1, math.ceil(dt * (p.plant if lags else p.envelope) / RK4_LAMBDA_H - 1e-9))
