@@ -262,7 +262,7 @@ def test_the_plan_takes_enough_rk4_sub_steps_for_the_vessels_fastest_pole(vessel
     presets' 4 sub-steps, or the 6 its straight-line poles need (session 5's rule), decaying
     perturbations grow (the gain below exceeds 1) and a turning stage went NaN; the plan takes
     24 there, and the presets' 4 everywhere else (Gretha: the default problems are unchanged).
-    (The Otter's hull is also straight-line unstable, +2.5 1/s at top speed: a growing mode RK4
+    (The Otter's hull is also straight-line unstable, +2.6 1/s at top speed: a growing mode RK4
     must follow, not damp, so it is left out of the check.)"""
     from mpcasv.controllers import Boat
     from mpcasv.models.envelope import trim_states, turn_states

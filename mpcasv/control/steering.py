@@ -70,7 +70,8 @@ def full_lock_turns(model: VesselModel) -> FullLockTurns:
     """Steady turns at ``delta = +delta_max`` for thrusts up to ``T_max`` (cached per model).
 
     Thrusts ``T_max k / (N_GRID - 1)``, ``k = 1 ...``; each turn is the end of a 400 s
-    open-loop run (RK4, 0.2 s) from 0.5 m/s straight ahead, settled when ``|nu_dot|`` is below
+    open-loop run (RK4, 0.2 s, in the sub-steps a stiff hull needs: :meth:`VesselModel.rk4`)
+    from 0.5 m/s straight ahead, settled when ``|nu_dot|`` is below
     1e-4 (m/s^2, rad/s^2). The grid ends before the first thrust whose turn does not settle
     (a course-unstable hull may circle in a limit cycle at high thrust).
 

@@ -5,9 +5,16 @@ Classic RK4 is stable on a real pole ``lambda`` while ``|lambda h| < 2.785``
 (:data:`RK4_STABLE`, where ``|R(z)| = 1`` on the negative real axis). The poles of a hull with
 quadratic damping grow with its speeds: the yaw pole of ``N_rr |r| r`` is ``2 N_rr |r|`` over
 the yaw inertia, so a hull that is slow on a straight line can be stiff in a turn. Fossen's
-Otter: 3.6 1/s at its top speed straight ahead, 15-18 1/s in a full-rudder turn (docs/mpc.md,
+Otter: 3.6 1/s at its top speed straight ahead, 16.5 1/s in a full-steering turn (18.0 with
+the steerable-drive mapping of ../shared/cases/vessels/otter.toml) (docs/mpc.md,
 "Variables and dynamics"). The envelope is therefore sampled along manoeuvres, not only at
 straight-line trims.
+
+Not sampled (a session-9 review): speeds through the water above top speed (a boat running
+with a current it does not know of), astern thrust (no shipped vessel has ``T_min < 0``) and
+complex poles' smaller RK4 bound (2.62 at 122 degrees). Gretha's 4 plan sub-steps of 1 s
+leave no margin there: from a top-speed trim in an unmodelled 0.6 m/s current a plan stage is
+off by 100, as it was before this module; covering it would take her plan to 5 sub-steps.
 """
 
 from __future__ import annotations
@@ -77,12 +84,19 @@ class Poles(NamedTuple):
     plant: float
 
 
-_POLES: dict[str, Poles] = {}
+_POLES: dict[bytes, Poles] = {}
 
 
 def poles(model) -> Poles:
-    """The vessel's :class:`Poles`, computed once per process and parameter set (about 1 s)."""
-    key = repr(model.params)
+    """The vessel's :class:`Poles`, computed once per process and parameter vector (about
+    1 s).
+
+    Raises
+    ------
+    ValueError
+        A full-steering turn cannot be integrated (:func:`turn_states`).
+    """
+    key = model.p.tobytes()
     if key not in _POLES:
         trims = trim_states(model)
         states = np.vstack([trims, turn_states(model)])
@@ -97,6 +111,22 @@ def rk4_sub_steps(model, dt: float, lags: bool = True) -> int:
     manoeuvring envelope, with the actuators' lags (``lags``: the plant, :meth:`VesselModel.
     rk4`) or without (the actuators at their set-points: the current observer). A stiff hull
     or a long step is integrated more finely instead of diverging in a full-steering turn
-    (Fossen's Otter, 18 1/s: 1 sub-step of 0.1 s, 2 of 0.2 s; Gretha 1 up to 0.75 s)."""
+    (Fossen's Otter, 16.5 1/s: 1 sub-step of 0.1 s, 2 of 0.2 s; Gretha 1 up to 0.75 s).
+    Raises ValueError as :func:`poles`."""
     p = poles(model)
     return max(1, math.ceil(dt * (p.plant if lags else p.envelope) / RK4_LAMBDA_H - 1e-9))
+
+
+def course_instability(model) -> tuple[float, float] | None:
+    """``(u, lambda)``: the lowest straight-line speed (m/s) at which the sway-yaw subsystem has
+    an eigenvalue with positive real part, and the largest such real part (1/s) up to
+    ``u_max`` (the trims of :func:`trim_states`); None for a course-stable hull. Fossen's
+    Otter: from 0.26 m/s (the first trim), +2.6 1/s (cross-flow drag only, no linear
+    sway damping);
+    Gretha and dune-otter: None."""
+    out = []
+    for x in trim_states(model)[1:]:
+        lam = float(np.max(model.sway_yaw_eigenvalues(x[3]).real))
+        if lam > 1e-9:
+            out.append((float(x[3]), lam))
+    return (out[0][0], max(lam for _, lam in out)) if out else None

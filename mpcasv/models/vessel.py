@@ -31,6 +31,7 @@ from functools import cached_property
 import casadi as ca
 import numpy as np
 
+from mpcasv.models.envelope import poles, rk4_sub_steps
 from mpcasv.models.params import MODEL_COEFFS, VesselParams
 
 STATE_NAMES = ("N", "E", "psi", "u", "v", "r", "T", "delta")
@@ -254,9 +255,9 @@ class VesselModel:
         """Discrete step ``F(x, u, c) -> x_next`` by RK4 over ``dt`` in ``n_sub`` sub-steps;
         None (default): as many as the vessel's fastest pole over its manoeuvring envelope
         needs (:func:`~mpcasv.models.envelope.rk4_sub_steps`: 1 for Gretha up to 0.75 s, more
-        for a stiff hull in a turn)."""
-        from mpcasv.models.envelope import rk4_sub_steps
-
+        for a stiff hull in a turn; the first call per vessel and process takes about 1 s).
+        Raises ValueError if the envelope cannot be integrated
+        (:func:`~mpcasv.models.envelope.poles`)."""
         n = rk4_sub_steps(self, dt) if n_sub is None else n_sub
         x, u, c = ca.SX.sym("x", NX), ca.SX.sym("u", NU), ca.SX.sym("c", NC)
         return ca.Function(
@@ -287,8 +288,6 @@ class VesselModel:
     def fastest_trim_pole(self) -> float:
         """Largest |eigenvalue| (1/s) of the rigid-body dynamics (N..r, the actuators held)
         at straight-line trims from rest to ``u_max`` (:mod:`mpcasv.models.envelope`)."""
-        from mpcasv.models.envelope import poles
-
         return poles(self).trim
 
     @property
@@ -297,17 +296,13 @@ class VesselModel:
         over the manoeuvring envelope, straight-line trims and full-steering turns
         (:mod:`mpcasv.models.envelope`): what bounds an explicit integrator's step (RK4 on a
         real pole: ``|lambda h| < 2.785``). Gretha 2.7 1/s (2.4 straight ahead), Fossen's
-        Otter 17-18 in a full-steering turn (3.6 straight ahead)."""
-        from mpcasv.models.envelope import poles
-
+        Otter 16.5 in a full-steering turn (3.6 straight ahead)."""
         return poles(self).envelope
 
     @property
     def fastest_plant_pole(self) -> float:
         """As :attr:`fastest_pole` with the actuators' lags (all eight states): what bounds
         the simulator's plant step, which integrates the lags too."""
-        from mpcasv.models.envelope import poles
-
         return poles(self).plant
 
     @cached_property

@@ -46,6 +46,7 @@ from mpcasv.hybrid.single import HybridSingle, HybridSingleParams
 from mpcasv.interface import Command, Mode, Observation, PlannedTrajectory, Reason
 from mpcasv.models.acoustics import AcousticParams
 from mpcasv.mpc.deadline import DeadlineSolver
+from mpcasv.mpc.dynamics import warn_course_unstable
 from mpcasv.mpc.params import MPCParams
 from mpcasv.mpc.plan_check import PLAN_CHECK_S, plan_energy
 from mpcasv.mpc.plan_output import PlanOutput
@@ -138,6 +139,7 @@ class MPCController(WorldView, Safety, PlanOutput, Targeting, SpeedCap):
         self.needs_current_oracle = params.current == "oracle"
         self._setup(n_auv)
         self.reset(n_auv)
+        warn_course_unstable(self.ocp)
 
     def use_deadline(self, factory=None, start_timeout: float = 600.0,
                      spare: bool = True) -> None:  # fmt: skip

@@ -21,11 +21,12 @@ discrete` is what the solvers differentiate:
 from __future__ import annotations
 
 import math
+import sys
 
 import casadi as ca
 
 from mpcasv.models.acoustics import AcousticParams
-from mpcasv.models.envelope import RK4_LAMBDA_H, RK4_STABLE
+from mpcasv.models.envelope import RK4_LAMBDA_H, RK4_STABLE, course_instability
 from mpcasv.models.vessel import rk4_step, xdot_expr
 from mpcasv.mpc.layout import NCH, channel_vector
 from mpcasv.mpc.smooth import D_EPS, sigmoid
@@ -151,3 +152,23 @@ class PlanDynamics:
         need_turn = math.ceil(hz.dt * m.fastest_pole / RK4_STABLE - 1e-9)
         need_trim = math.ceil(hz.dt * m.fastest_trim_pole / RK4_LAMBDA_H - 1e-9)
         return max(hz.n_sub, need_turn, need_trim)
+
+
+_WARNED: set[str] = set()
+
+
+def warn_course_unstable(ocp, file=None) -> None:
+    """One line on stderr (once per vessel and process) when the plan's vessel is
+    straight-line (course) unstable: the plan steers it open loop over stages of ``dt`` s,
+    where its yaw diverges within a fraction of a second. Fossen's Otter on case3-otter
+    (session 9): the plan stands still for minutes beyond r_outer, or its solves need
+    hundreds of iterations and the fallback drives (docs/mpc.md, "Known problems")."""
+    unstable = course_instability(ocp.model)
+    if unstable is None or repr(ocp.vessel) in _WARNED:
+        return
+    _WARNED.add(repr(ocp.vessel))
+    u, lam = unstable
+    print(f"mpcasv: warning: vessel {ocp.vessel.name!r} is straight-line unstable (a sway-yaw "
+          f"pole up to +{lam:.1f} 1/s, from {u:.2f} m/s): the MPC steers it open loop over "
+          f"{ocp.dt:g}-s stages and does not hold it well (docs/mpc.md, Known problems); the "
+          "hybrid controllers close the yaw loop", file=file or sys.stderr)  # fmt: skip

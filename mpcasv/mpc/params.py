@@ -24,9 +24,10 @@ SolverName = Literal["fatrop", "ipopt", "qp"]
 class HorizonParams:
     """Prediction horizon: ``N`` stages of ``dt`` s, RK4 with ``n_sub`` sub-steps per stage.
 
-    RK4 is stable on the fast sway-yaw pole (about -2.4 1/s at 2.5 m/s for Gretha) for
-    sub-steps up to about 1.1 s: keep ``dt / n_sub <= 1``. ``n_sub`` is a floor: the plan
-    takes more sub-steps where the run's vessel has a faster rigid-body pole
+    RK4 is stable on Gretha's fastest pole (2.4 1/s straight ahead at 2.5 m/s, 2.7 in a
+    full-rudder turn) for sub-steps up to about 1.0 s: keep ``dt / n_sub <= 1``. ``n_sub`` is
+    a floor: the plan takes more sub-steps where the run's vessel has a faster rigid-body pole
+    over its manoeuvring envelope
     (:attr:`mpcasv.mpc.problem.OCP.n_sub`; the actuators' lags do not count: the plan has
     none, it drives the set-points through their rates).
     """
@@ -190,6 +191,12 @@ class SolverParams:
         it hands the step to the hybrid controller. A work budget, like ``max_iter``: on the
         Case 6 run (seed 0) every one of the 54 solves stopped at 50 iterations converged
         within 200 (median 76). 0 forces failures (tests).
+    explore_iter : int or None
+        Iteration limit of the exploration solve (docs/mpc.md, "Controller step"; None:
+        ``max_iter``): it starts from a guess far from the warm-started plan, and an
+        unconverged one is discarded. A third of the explorations stop at 50; 150 was
+        measured on the paper suite (session 9) and was no better in the closed loop, with
+        longer solves: the default stays ``max_iter``.
     check_stages : int
         Stages of the plan checked against r_inner / r_avoid before it is used.
     check_margin : float
@@ -221,6 +228,7 @@ class SolverParams:
     budget_ms: Pos = 200.0
     hang_s: NonNeg = 30.0
     rescue_iter: Annotated[int, Strict(), Field(ge=0)] = 200
+    explore_iter: Annotated[int, Strict(), Field(ge=0)] | None = None
     check_stages: PosInt = 2
     check_margin: NonNeg = 2.0
     max_violation: Pos = 60.0

@@ -47,7 +47,8 @@ class Safety:
         if self.deadline is not None and not self._hang_guard and res.status == "deadline":
             return None  # the field budget is spent
         self.explored += 1
-        return self._solve(p, ocp.guided_rollout(p, j, self._capped(P.speed)))
+        limit = P.solver.explore_iter  # None: the warm solve's max_iter
+        return self._solve(p, ocp.guided_rollout(p, j, self._capped(P.speed)), max_iter=limit)
 
     @staticmethod
     def _cheaper(res: SolveResult, alt: SolveResult | None) -> SolveResult:
