@@ -23,15 +23,14 @@ import math
 from typing import NamedTuple
 
 import numpy as np
-from scipy.integrate import solve_ivp
 
 #: |lambda h| on the negative real axis where classic RK4's gain reaches 1 (2.7853)
 RK4_STABLE = 2.785
 #: largest |lambda h| of an RK4 step with a margin (the plan's sub-steps on straight-line
 #: trims, the plant's steps)
 RK4_LAMBDA_H = 2.5
-#: manoeuvres of the envelope: seconds simulated and the sampling interval (s)
-T_MANOEUVRE, T_SAMPLE = 60.0, 0.25
+#: manoeuvres of the envelope: seconds simulated, the sampling interval and the RK4 step (s)
+T_MANOEUVRE, T_SAMPLE, H_FINE = 60.0, 0.25, 0.01
 N_TRIMS = 13  # straight-line trims from rest to u_max
 
 
@@ -44,35 +43,39 @@ def trim_states(model) -> np.ndarray:
 def turn_states(model) -> np.ndarray:
     """States (``n x 8``) of full-steering turns in still water, sampled every ``T_SAMPLE`` s
     over ``T_MANOEUVRE`` s: steering ``+-delta_max`` at full and half thrust, from rest and from
-    the trim at top speed. Integrated by scipy's LSODA (stiff hulls included), the actuators
-    following their set-points through their lags as in the plant.
+    the trim at top speed, the actuators following their set-points through their lags as in
+    the plant. Integrated by RK4 in steps of ``H_FINE`` (stable up to 278 1/s, 15 times the
+    Otter's fastest pole), in one CasADi call per manoeuvre.
 
-    Raises ValueError if a manoeuvre cannot be integrated (the message names the vessel).
+    Raises ValueError if a manoeuvre leaves the finite numbers (the message names the vessel).
     """
     P = model.params
-    t_eval = np.arange(0.0, T_MANOEUVRE + 1e-9, T_SAMPLE)
+    n = round(T_MANOEUVRE / T_SAMPLE)
+    step = model.rk4(T_SAMPLE, round(T_SAMPLE / H_FINE))  # an explicit count: no recursion
+    run = step.mapaccum("turn", n, [0], [0])  # the state accumulated, u and c repeated
     starts = [np.zeros(8), model.trim(min(P.u_max, model.top_speed))[0]]
     out = []
     for T in (P.T_max, 0.5 * P.T_max):
         for delta in (P.delta_max, -P.delta_max):
-            u = np.array([T, delta])
-            rhs = lambda _t, x, u=u: np.asarray(model.f(x, u, np.zeros(2))).ravel()  # noqa: E731
+            U = np.tile([[T], [delta]], (1, n))
             for x0 in starts:
-                sol = solve_ivp(rhs, (0.0, T_MANOEUVRE), x0, method="LSODA", t_eval=t_eval,
-                                rtol=1e-6, atol=1e-8)  # fmt: skip
-                if not sol.success or not np.all(np.isfinite(sol.y)):
-                    raise ValueError(f"vessel {P.name}: a full-steering turn cannot be "
-                                     f"integrated ({sol.message})")  # fmt: skip
-                out.append(sol.y.T)
+                X = np.asarray(run(x0, U, np.zeros((2, n)))).T
+                if not np.all(np.isfinite(X)):
+                    raise ValueError(f"vessel {P.name}: a full-steering turn (T = {T:g} N, "
+                                     f"delta = {delta:g} rad) cannot be integrated in RK4 "
+                                     f"steps of {H_FINE} s")  # fmt: skip
+                out.append(np.vstack([x0, X]))
     return np.vstack(out)
 
 
 def fastest_pole(model, states: np.ndarray, n: int = 6) -> float:
     """Largest |eigenvalue| (1/s) of the model's Jacobian's first ``n`` states (6: the rigid
     body N..r with the actuators held; 8: with the actuators' lags) over ``states``
-    (``m x 8``), the actuator set-points at the actuators' states."""
-    return max(float(np.abs(np.linalg.eigvals(model.linearize(x, x[6:8])[0][:n, :n])).max())
-               for x in states)  # fmt: skip
+    (``m x 8``), the actuator set-points at the actuators' states (one mapped CasADi call)."""
+    m = len(states)
+    A = np.asarray(model.jacobians.map(m)(states.T, states[:, 6:8].T, np.zeros((2, m)))[0])
+    A = A.reshape(8, m, 8).transpose(1, 0, 2)  # (m, 8, 8): the blocks side by side
+    return float(np.abs(np.linalg.eigvals(A[:, :n, :n])).max())
 
 
 class Poles(NamedTuple):

@@ -265,6 +265,12 @@ class VesselModel:
             ["x", "u", "c"], ["x_next"],
         )  # fmt: skip
 
+    @property
+    def jacobians(self) -> ca.Function:
+        """``(x, u, c) -> (df/dx, df/du)``, exact by AD (CasADi; ``.map(m)`` evaluates ``m``
+        points in one call)."""
+        return self._jac
+
     def linearize(self, x0, u0, c0=(0.0, 0.0)) -> tuple[np.ndarray, np.ndarray]:
         """Jacobians ``A = df/dx``, ``B = df/du`` at an operating point (exact, by AD)."""
         A, B = self._jac(np.asarray(x0, float), np.asarray(u0, float), np.asarray(c0, float))
