@@ -6,8 +6,8 @@ Classic RK4 is stable on a real pole ``lambda`` while ``|lambda h| < 2.785``
 quadratic damping grow with its speeds: the yaw pole of ``N_rr |r| r`` is ``2 N_rr |r|`` over
 the yaw inertia, so a hull that is slow on a straight line can be stiff in a turn. Fossen's
 Otter: 3.6 1/s at its top speed straight ahead, 16.5 1/s in a full-steering turn (18.0 with
-the steerable-drive mapping of ../shared/cases/vessels/otter.toml) (docs/mpc.md,
-"Variables and dynamics"). The envelope is therefore sampled along manoeuvres, not only at
+the steerable-drive mapping of ../shared/cases/vessels/otter.toml) (docs/mpc.md, "Known
+problems"). The envelope is therefore sampled along manoeuvres, not only at
 straight-line trims.
 
 Not sampled (a session-9 review): speeds through the water above top speed (a boat running
