@@ -239,7 +239,7 @@ class CurrentObserver:
         else:  # propeller running, thrust unknown: the model cannot predict nu_r
             act, q_nu = np.zeros(2), P.q_blind
         # sub-steps of at most h_max, more where the hull is stiff (a turn of Fossen's Otter)
-        n = max(1, math.ceil(dt / P.h_max - 1e-9), rk4_sub_steps(self.model, dt, lags=False))
+        n = max(math.ceil(dt / P.h_max - 1e-9), rk4_sub_steps(self.model, dt, lags=False))
         h = dt / n
         nu, J = self.s[0:3], np.eye(3)
         for _ in range(n):

@@ -92,7 +92,7 @@ _POLES: dict[bytes, Poles] = {}
 
 def poles(model) -> Poles:
     """The vessel's :class:`Poles`, computed once per process and parameter vector (about
-    1 s).
+    0.1 s).
 
     Raises
     ------
@@ -108,6 +108,12 @@ def poles(model) -> Poles:
     return _POLES[key]
 
 
+def sub_steps(dt: float, pole: float, bound: float) -> int:
+    """Fewest RK4 sub-steps of a step of ``dt`` s with ``pole h <= bound`` (``pole`` in 1/s,
+    ``bound`` :data:`RK4_STABLE` or :data:`RK4_LAMBDA_H`); at least 1."""
+    return max(1, math.ceil(dt * pole / bound - 1e-9))
+
+
 def rk4_sub_steps(model, dt: float, lags: bool = True) -> int:
     """RK4 sub-steps for a step of ``dt`` s on ``model``: ``|lambda|max h <= RK4_LAMBDA_H``
     (2.5, inside RK4's stability bound 2.785) on the vessel's fastest pole over its
@@ -117,7 +123,7 @@ def rk4_sub_steps(model, dt: float, lags: bool = True) -> int:
     (Fossen's Otter, 16.5 1/s: 1 sub-step of 0.1 s, 2 of 0.2 s; Gretha 1 up to 0.75 s).
     Raises ValueError as :func:`poles`."""
     p = poles(model)
-    return max(1, math.ceil(dt * (p.plant if lags else p.envelope) / RK4_LAMBDA_H - 1e-9))
+    return sub_steps(dt, p.plant if lags else p.envelope, RK4_LAMBDA_H)
 
 
 def course_instability(model) -> tuple[float, float] | None:
@@ -125,8 +131,7 @@ def course_instability(model) -> tuple[float, float] | None:
     an eigenvalue with positive real part, and the largest such real part (1/s) up to
     ``u_max`` (the trims of :func:`trim_states`); None for a course-stable hull. Fossen's
     Otter: from 0.26 m/s (the first trim), +2.6 1/s (cross-flow drag only, no linear
-    sway damping);
-    Gretha and dune-otter: None."""
+    sway damping); Gretha and dune-otter: None."""
     out = []
     for x in trim_states(model)[1:]:
         lam = float(np.max(model.sway_yaw_eigenvalues(x[3]).real))

@@ -255,7 +255,7 @@ class VesselModel:
         """Discrete step ``F(x, u, c) -> x_next`` by RK4 over ``dt`` in ``n_sub`` sub-steps;
         None (default): as many as the vessel's fastest pole over its manoeuvring envelope
         needs (:func:`~mpcasv.models.envelope.rk4_sub_steps`: 1 for Gretha up to 0.75 s, more
-        for a stiff hull in a turn; the first call per vessel and process takes about 1 s).
+        for a stiff hull in a turn; the first call per vessel and process takes about 0.1 s).
         Raises ValueError if the envelope cannot be integrated
         (:func:`~mpcasv.models.envelope.poles`)."""
         n = rk4_sub_steps(self, dt) if n_sub is None else n_sub

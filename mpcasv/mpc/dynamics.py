@@ -20,13 +20,12 @@ discrete` is what the solvers differentiate:
 
 from __future__ import annotations
 
-import math
 import sys
 
 import casadi as ca
 
 from mpcasv.models.acoustics import AcousticParams
-from mpcasv.models.envelope import RK4_LAMBDA_H, RK4_STABLE, course_instability
+from mpcasv.models.envelope import RK4_LAMBDA_H, RK4_STABLE, course_instability, sub_steps
 from mpcasv.models.vessel import rk4_step, xdot_expr
 from mpcasv.mpc.layout import NCH, channel_vector
 from mpcasv.mpc.smooth import D_EPS, sigmoid
@@ -149,12 +148,11 @@ class PlanDynamics:
         turn: with 6, the sub-steps of the straight-line bound, a turning stage returned NaN
         and fatrop hung on it)."""
         hz, m = self.params.horizon, self.model
-        need_turn = math.ceil(hz.dt * m.fastest_pole / RK4_STABLE - 1e-9)
-        need_trim = math.ceil(hz.dt * m.fastest_trim_pole / RK4_LAMBDA_H - 1e-9)
-        return max(hz.n_sub, need_turn, need_trim)
+        return max(hz.n_sub, sub_steps(hz.dt, m.fastest_pole, RK4_STABLE),
+                   sub_steps(hz.dt, m.fastest_trim_pole, RK4_LAMBDA_H))
 
 
-_WARNED: set[str] = set()
+_WARNED: set[bytes] = set()  # parameter vectors warned about (the poles' cache key)
 
 
 def warn_course_unstable(ocp, file=None) -> None:
@@ -164,9 +162,10 @@ def warn_course_unstable(ocp, file=None) -> None:
     (session 9): the plan stands still for minutes beyond r_outer, or its solves need
     hundreds of iterations and the fallback drives (docs/mpc.md, "Known problems")."""
     unstable = course_instability(ocp.model)
-    if unstable is None or repr(ocp.vessel) in _WARNED:
+    key = ocp.model.p.tobytes()
+    if unstable is None or key in _WARNED:
         return
-    _WARNED.add(repr(ocp.vessel))
+    _WARNED.add(key)
     u, lam = unstable
     print(f"mpcasv: warning: vessel {ocp.vessel.name!r} is straight-line unstable (a sway-yaw "
           f"pole up to +{lam:.1f} 1/s, from {u:.2f} m/s): the MPC steers it open loop over "
