@@ -263,11 +263,13 @@ def test_the_plan_takes_enough_rk4_sub_steps_for_the_vessels_fastest_pole(vessel
     perturbations grow (the gain below exceeds 1) and a turning stage went NaN; the plan takes
     24 there, and the presets' 4 everywhere else (Gretha: the default problems are unchanged).
     (The Otter's hull is also straight-line unstable, +2.6 1/s at top speed: a growing mode RK4
-    must follow, not damp, so it is left out of the check.)"""
+    must follow, not damp, so it is left out of the check. By default its plan closes the yaw
+    loop instead, with sub-steps from that loop's poles: tests/test_mpc_heading.py.)"""
     from mpcasv.controllers import Boat
     from mpcasv.models.envelope import trim_states, turn_states
 
-    ocp = OCP(load_preset("mpc-single", "mpc-single"), 1, outer=True, boat=Boat.load(vessel))
+    P = load_preset("mpc-single", "mpc-single", {"horizon.steering": "rudder"})
+    ocp = OCP(P, 1, outer=True, boat=Boat.load(vessel))
     assert ocp.n_sub == n_sub
     h = ocp.dt / ocp.n_sub
     gains, gains_6 = [], []

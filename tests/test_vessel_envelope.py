@@ -30,8 +30,9 @@ VESSELS = ["gretha", "dune-otter", "otter",
                                                  reason=f"{CASE_OTTER} not present"))]  # fmt: skip
 
 
-def _ocp(vessel: str) -> OCP:
-    return OCP(load_preset("mpc-single", "mpc-single"), 1, outer=True, boat=Boat.load(vessel))
+def _ocp(vessel: str, steering: str = "auto") -> OCP:
+    P = load_preset("mpc-single", "mpc-single", {"horizon.steering": steering})
+    return OCP(P, 1, outer=True, boat=Boat.load(vessel))
 
 
 def test_a_full_steering_turn_is_part_of_the_envelope():
@@ -49,7 +50,7 @@ def test_the_plans_stage_follows_a_fine_integration_through_full_steering_turns(
     """``OCP.F`` (the plan's stage, rates zero) from states of the envelope's full-steering
     turns against the shared model integrated in 0.02-s RK4 steps: finite and close. With the
     Otter's sub-steps chosen from its straight-line trims (6) the same stages are NaN."""
-    ocp = _ocp(vessel)
+    ocp = _ocp(vessel, "rudder")
     model = ocp.model
     fine = model.rk4(ocp.dt, round(ocp.dt / 0.02))
     ch = channel_vector(AcousticParams())
@@ -145,11 +146,13 @@ def test_the_current_observer_follows_a_stiff_hull_through_a_full_steering_turn(
         x = np.asarray(F(x, u, [0.0, 0.0])).ravel()
 
 
-def test_the_mpc_says_once_that_a_straight_line_unstable_hull_is_not_held_well(monkeypatch):
+def test_the_mpc_says_once_that_it_steers_a_straight_line_unstable_hull_open_loop(monkeypatch):
     """Fossen's Otter has no linear sway damping: straight-line unstable at every speed (up to
-    +2.6 1/s). The MPC steers it open loop over 4-s stages and does not hold it (docs/mpc.md,
-    Known problems): building an MPC for it says so in one line, once per vessel; Gretha and
-    dune-otter are course-stable and nothing is said."""
+    +2.6 1/s). Planned with its steering angle (``steering = "rudder"``) the MPC steers it
+    open loop over 4-s stages and does not hold it (docs/mpc.md, Known problems): building
+    such an MPC says so in one line, once per vessel. By default (``"auto"``) the plan closes
+    the yaw loop for it (M1h, tests/test_mpc_heading.py) and nothing is said; Gretha and
+    dune-otter are course-stable and nothing is said either."""
     import io
 
     from mpcasv.mpc import dynamics
@@ -160,8 +163,9 @@ def test_the_mpc_says_once_that_a_straight_line_unstable_hull_is_not_held_well(m
     u, lam = envelope.course_instability(VesselModel(Boat.load("otter").vessel))
     assert u < 0.3 and lam == pytest.approx(2.61, abs=0.01)
     out = io.StringIO()
+    dynamics.warn_course_unstable(_ocp("otter"), file=out)
     for vessel in ("gretha", "dune-otter", "otter", "otter"):
-        dynamics.warn_course_unstable(_ocp(vessel), file=out)
+        dynamics.warn_course_unstable(_ocp(vessel, "rudder"), file=out)
     lines = out.getvalue().splitlines()
     assert len(lines) == 1 and "'otter' is straight-line unstable" in lines[0], lines
     assert "+2.6 1/s" in lines[0] and "4-s stages" in lines[0]

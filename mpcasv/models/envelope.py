@@ -101,11 +101,23 @@ def poles(model) -> Poles:
     """
     key = model.p.tobytes()
     if key not in _POLES:
-        trims = trim_states(model)
-        states = np.vstack([trims, turn_states(model)])
+        trims, states = trim_states(model), envelope_states(model)
         _POLES[key] = Poles(fastest_pole(model, trims), fastest_pole(model, states),
                             fastest_pole(model, states, n=8))  # fmt: skip
     return _POLES[key]
+
+
+_STATES: dict[bytes, np.ndarray] = {}
+
+
+def envelope_states(model) -> np.ndarray:
+    """The manoeuvring envelope's states (``m x 8``): :func:`trim_states` and
+    :func:`turn_states`, computed once per process and parameter vector. Raises ValueError as
+    :func:`turn_states`."""
+    key = model.p.tobytes()
+    if key not in _STATES:
+        _STATES[key] = np.vstack([trim_states(model), turn_states(model)])
+    return _STATES[key]
 
 
 def sub_steps(dt: float, pole: float, bound: float) -> int:

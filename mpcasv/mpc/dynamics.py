@@ -20,18 +20,34 @@ discrete` is what the solvers differentiate:
 
 from __future__ import annotations
 
+import functools
+import math
 import sys
 
 import casadi as ca
+import numpy as np
 
+from mpcasv.control.execution import pwlinear
 from mpcasv.models.acoustics import AcousticParams
-from mpcasv.models.envelope import RK4_LAMBDA_H, RK4_STABLE, course_instability, sub_steps
+from mpcasv.models.envelope import (
+    RK4_LAMBDA_H,
+    RK4_STABLE,
+    course_instability,
+    envelope_states,
+    sub_steps,
+)
 from mpcasv.models.vessel import rk4_step, xdot_expr
 from mpcasv.mpc.layout import NCH, channel_vector
 from mpcasv.mpc.smooth import D_EPS, sigmoid
 from mpcasv.mpc.variance import N_NAV, fix_gain
 
 NXV = 8  # vessel part of the plan state
+#: rate bound (rad/s) of the heading reference with ``steering = "heading"`` (M1h): the plan's
+#: sanity bound on the yaw rate
+R_REF_MAX = 0.5
+#: largest |lambda h| of the plan's RK4 sub-steps on the closed loop of M1h: its fast poles are
+#: everywhere, and near the stability bound a stage is stable but not accurate
+RK4_ACCURATE = 2.0
 
 
 class PlanDynamics:
@@ -78,9 +94,32 @@ class PlanDynamics:
 
     def _vessel_rhs(self, x, w, q):
         """The vessel part of M1: the shared model's rigid body (actuators at their set-points)
-        and the set-points' rates."""
-        xd = xdot_expr(x, x[6:8], q[0:2], self.model.p)
+        and the set-points' rates; with ``steering = "heading"`` the steering angle from the
+        heading reference ``x[7]`` (M1h, :meth:`steering_angle`)."""
+        xa = ca.vertcat(x[0:7], self.steering_angle(x)) if self.heading else x
+        xd = xdot_expr(xa, xa[6:8], q[0:2], self.model.p)
         return ca.vertcat(xd[0:6], w[0], w[1])
+
+    def steering_angle(self, x):
+        """The steering angle (rad) of plan state ``x`` (SX/MX/DM, ``x[0:8]``): ``x[7]`` with
+        ``steering = "rudder"``; with ``"heading"`` the execution level's yaw PD on the
+        heading reference ``psi_ref = x[7]`` (eq. M1h, the run's gains scheduled on the surge
+        speed as in :func:`~mpcasv.control.execution.execution_law`, without its integral and
+        rate filter, saturated smoothly):
+        ``delta = delta_max tanh((Kp(u) (psi_ref - psi) - Kd(u) r) / delta_max)``."""
+        if not self.heading:
+            return x[7]
+        ys, dm = self.execution.yaw, self.vessel.delta_max
+        Kp, Kd = (pwlinear(x[3], ys.speeds, g) for g in (ys.Kp, ys.Kd))
+        return dm * ca.tanh((Kp * (x[7] - x[2]) - Kd * x[5]) / dm)  # (M1h)
+
+    def heading_reference(self, x: np.ndarray, delta: float) -> float:
+        """Inverse of M1h: the heading reference (rad) whose yaw PD gives the steering angle
+        ``delta`` (rad, clipped to 0.99 ``delta_max``) at vessel state ``x`` (``x[0:6]``)."""
+        ys, dm = self.execution.yaw, self.vessel.delta_max
+        Kp, Kd = (float(np.interp(x[3], ys.speeds, g)) for g in (ys.Kp, ys.Kd))
+        a = dm * math.atanh(float(np.clip(delta / dm, -0.99, 0.99)))
+        return float(x[2] + (a + Kd * x[5]) / max(Kp, 1e-6))
 
     def _rates(self, x, tau, s, q):
         """Each AUV's expected fix rate (1/s, M3; with "variance" times the fix's gain M2' at
@@ -136,20 +175,40 @@ class PlanDynamics:
         ch = channel_vector(AcousticParams())
         return float(ch[0] * ch[1])
 
-    @property
+    @functools.cached_property
     def n_sub(self) -> int:
         """RK4 sub-steps per stage: the horizon's ``n_sub``, more if the vessel needs them.
 
-        Two bounds on the sub-step ``h = dt / n_sub``: RK4 stable on every rigid-body pole of
-        the manoeuvring envelope, turns included (``|lambda|max h < RK4_STABLE``, 2.785), and
-        with a margin on the straight-line trims, where the plan spends most of its time
-        (``|lambda|max h <= RK4_LAMBDA_H``, 2.5). Gretha: 4 (2.72 1/s in a full-rudder turn
-        from top speed, 2.38 straight ahead). Fossen's Otter: 26 (18 1/s in a full-steering
-        turn: with 6, the sub-steps of the straight-line bound, a turning stage returned NaN
-        and fatrop hung on it)."""
+        Steering angle planned (``"rudder"``): two bounds on the sub-step ``h = dt / n_sub``:
+        RK4 stable on every rigid-body pole of the manoeuvring envelope, turns included
+        (``|lambda|max h < RK4_STABLE``, 2.785), and with a margin on the straight-line trims,
+        where the plan spends most of its time (``|lambda|max h <= RK4_LAMBDA_H``, 2.5).
+        Gretha: 4 (2.72 1/s in a full-rudder turn from top speed, 2.38 straight ahead).
+        Fossen's Otter: 26 (18 1/s in a full-steering turn: with 6, the sub-steps of the
+        straight-line bound, a turning stage returned NaN and fatrop hung on it).
+
+        Heading reference planned (``"heading"``, M1h): the margin on the closed loop's
+        fastest pole over the whole envelope (the PD's fast poles are everywhere, not only in
+        hard turns: the Otter's 13.9 1/s straight ahead, 16.7 in a turn; 0.43 m off in a
+        4-s stage at the stability bound's 24 sub-steps, 0.04 m at 28): the Otter 27, the
+        case's Otter 31."""
         hz, m = self.params.horizon, self.model
+        if self.heading:
+            return max(hz.n_sub, sub_steps(hz.dt, self._closed_loop_pole(), RK4_ACCURATE))
         return max(hz.n_sub, sub_steps(hz.dt, m.fastest_pole, RK4_STABLE),
                    sub_steps(hz.dt, m.fastest_trim_pole, RK4_LAMBDA_H))
+
+    def _closed_loop_pole(self) -> float:
+        """Fastest rigid-body pole (1/s) of M1h's closed loop over the manoeuvring envelope
+        (:func:`~mpcasv.models.envelope.envelope_states`), the heading reference at each state
+        the one whose PD gives the state's steering angle."""
+        X = envelope_states(self.model).copy()
+        X[:, 7] = [self.heading_reference(x, x[7]) for x in X]
+        x = ca.SX.sym("x", NXV)
+        J = ca.Function("J", [x], [ca.jacobian(self._vessel_rhs(x, ca.DM.zeros(2),
+                                                                ca.DM.zeros(2)), x)])
+        A = np.asarray(J.map(len(X))(X.T)).reshape(NXV, len(X), NXV).transpose(1, 0, 2)
+        return float(np.abs(np.linalg.eigvals(A[:, :6, :6])).max())
 
 
 _WARNED: set[bytes] = set()  # parameter vectors warned about (the poles' cache key)
@@ -163,7 +222,7 @@ def warn_course_unstable(ocp, file=None) -> None:
     hundreds of iterations and the fallback drives (docs/mpc.md, "Known problems")."""
     unstable = course_instability(ocp.model)
     key = ocp.model.p.tobytes()
-    if unstable is None or key in _WARNED:
+    if unstable is None or ocp.heading or key in _WARNED:
         return
     _WARNED.add(key)
     u, lam = unstable

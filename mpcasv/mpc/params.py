@@ -30,11 +30,20 @@ class HorizonParams:
     over its manoeuvring envelope
     (:attr:`mpcasv.mpc.problem.OCP.n_sub`; the actuators' lags do not count: the plan has
     none, it drives the set-points through their rates).
+
+    ``steering`` says what the plan's eighth state is (docs/mpc.md, "Variables and dynamics",
+    M1h): ``"rudder"`` the steering angle, driven open loop through its rate; ``"heading"``
+    the heading reference handed to the execution level, whose yaw PD (the run's execution
+    gains) sets the steering angle inside the prediction; ``"auto"`` (default) ``"heading"``
+    for a course-unstable hull (:func:`~mpcasv.models.envelope.course_instability`: Fossen's
+    Otter, whose yaw an open-loop plan cannot hold over 4-s stages), else ``"rudder"``
+    (Gretha, dune-otter: the plan as before).
     """
 
     N: PosInt = 15
     dt: Pos = 4.0
     n_sub: PosInt = 4
+    steering: Literal["auto", "rudder", "heading"] = "auto"
 
 
 @frozen

@@ -22,8 +22,10 @@ class PlanOutput:
         Z, V = self.ocp.split(w)
         ts = t + self.ocp.dt * np.arange(Z.shape[0])
         K = self.ocp.dims.n_auv
+        delta = np.array([float(self.ocp.steering_angle(z)) for z in Z]) if self.ocp.heading \
+            else Z[:, 7].copy()  # fmt: skip
         self.plan = PlannedTrajectory(ts, Z[:, 0].copy(), Z[:, 1].copy(), {
-            "T": Z[:, 6].copy(), "u": Z[:, 3].copy(), "delta": Z[:, 7].copy(),
+            "T": Z[:, 6].copy(), "u": Z[:, 3].copy(), "delta": delta,
             "psi": Z[:, 2].copy(), "tau": Z[:, NXV:NXV + K].copy(),
             "current": self.current.copy(),
         })  # fmt: skip

@@ -31,9 +31,15 @@ import casadi as ca
 import numpy as np
 
 from mpcasv.control.params import load_execution
+from mpcasv.models.envelope import course_instability
 from mpcasv.models.params import load_vessel
 from mpcasv.models.vessel import VesselModel
-from mpcasv.mpc.dynamics import NXV, RK4_LAMBDA_H, PlanDynamics  # noqa: F401 (re-exported)
+from mpcasv.mpc.dynamics import (  # noqa: F401 (NXV, RK4_LAMBDA_H re-exported)
+    NXV,
+    R_REF_MAX,
+    RK4_LAMBDA_H,
+    PlanDynamics,
+)
 from mpcasv.mpc.layout import (  # the parameter vector's layout (re-exported names)
     NCH,
     NW,
@@ -137,7 +143,12 @@ class OCP(PlanDynamics, WarmStart, VarianceObjective, ParamLayout):
         self.T_floor = ep.thrust_floor * vp.T_max  # its least thrust in transit (N)
         self.T_quiet = params.fix.T_quiet if params.fix.T_quiet is not None else self.T_on
         self.dT_max = vp.T_max / params.T_ramp
-        self.dd_max = vp.delta_rate_max
+        steering = hz.steering
+        if steering == "auto":  # an open-loop plan cannot hold a course-unstable hull
+            steering = "heading" if course_instability(self.model) else "rudder"
+        #: the plan's eighth state is the heading reference of the execution level (M1h)
+        self.heading = steering == "heading"
+        self.dd_max = R_REF_MAX if self.heading else vp.delta_rate_max
         self.variance = params.objective == "variance"
         self.dims = Dims(hz.N, n_auv, outer, wt.worst > 0,
                          n_ext(n_auv) if self.variance else 0)  # fmt: skip
@@ -232,7 +243,10 @@ class OCP(PlanDynamics, WarmStart, VarianceObjective, ParamLayout):
         zlb = [-math.inf, -math.inf, -math.inf, -0.5, -1.0, -0.5, 0, 0] + [0.0] * K
         zub = [math.inf, math.inf, math.inf, vp.u_max + 0.5, 1.0, 0.5, 0, 0] + [1e4] * K
         zlb[6], zub[6] = vp.T_min, vp.T_max
-        zlb[7], zub[7] = -vp.delta_max, vp.delta_max
+        if not self.heading:  # a heading reference (M1h) is unbounded
+            zlb[7], zub[7] = -vp.delta_max, vp.delta_max
+        else:
+            zlb[7], zub[7] = -math.inf, math.inf
         ulb = [-self.dT_max, -self.dd_max] + [0.0] * K + ([-math.inf] if d.epi else [])
         uub = [self.dT_max, self.dd_max] + [math.inf] * K + ([math.inf] if d.epi else [])
         lbx = (zlb + ulb) * N + zlb
@@ -249,7 +263,8 @@ class OCP(PlanDynamics, WarmStart, VarianceObjective, ParamLayout):
         """Typical magnitudes of the state, control and path-constraint entries (M8)."""
         d, vp, tr = self.dims, self.vessel, self.params.weights.tau_ref
         K = d.n_auv
-        s_z = np.r_[100.0, 100.0, 1.0, 1.0, 0.5, 0.2, vp.T_max / 4, vp.delta_max, [tr] * K]
+        s_z = np.r_[100.0, 100.0, 1.0, 1.0, 0.5, 0.2, vp.T_max / 4,
+                    1.0 if self.heading else vp.delta_max, [tr] * K]  # fmt: skip
         s_v = np.r_[self.dT_max, self.dd_max, [10.0] * K, [tr] * int(d.epi)]
         s_h = np.r_[[10.0] * (K * (2 if d.outer else 1)), [tr] * (K if d.epi else 0)]
         return s_z, s_v, s_h

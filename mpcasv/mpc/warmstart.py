@@ -56,7 +56,8 @@ class WarmStart:
 
     def steered_rollout(self, p: np.ndarray, goal_heading, thrust) -> np.ndarray:
         """Rollout whose stage-``k`` rates drive the steering towards ``goal_heading(k, z)``
-        (rad; None: straight on) and the thrust towards ``thrust(k, z)`` (N, clipped to the
+        (rad; None: straight on; with ``steering = "heading"`` the heading reference to it,
+        None: to the present heading) and the thrust towards ``thrust(k, z)`` (N, clipped to the
         vessel's range), within the rate limits (the plan model, as :meth:`rollout`)."""
         d, vp, dt = self.dims, self.vessel, self.dt
         par = self.unpack_par(p)
@@ -66,15 +67,18 @@ class WarmStart:
         for k in range(d.N):
             z = Z[k]
             psi_des = goal_heading(k, z)
-            if psi_des is None:
-                delta_des = 0.0
+            if self.heading:  # the heading reference (M1h) towards the goal, else the heading
+                e = (z[2] if psi_des is None else psi_des) - z[7]
+                steer_des = z[7] + math.atan2(math.sin(e), math.cos(e))
+            elif psi_des is None:
+                steer_des = 0.0
             else:
                 e = psi_des - z[2]
                 e = math.atan2(math.sin(e), math.cos(e))
-                delta_des = float(np.clip(e, -vp.delta_max, vp.delta_max))
+                steer_des = float(np.clip(e, -vp.delta_max, vp.delta_max))
             T_des = float(np.clip(thrust(k, z), vp.T_min, vp.T_max))
             rates[k, 0] = np.clip((T_des - z[6]) / dt, -self.dT_max, self.dT_max)
-            rates[k, 1] = np.clip((delta_des - z[7]) / dt, -self.dd_max, self.dd_max)
+            rates[k, 1] = np.clip((steer_des - z[7]) / dt, -self.dd_max, self.dd_max)
             Z[k + 1] = np.array(self.F(z, rates[k], self._q(par, k))).ravel()
         V = np.zeros((d.N, d.nu))
         V[:, 0:2] = rates

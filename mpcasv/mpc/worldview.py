@@ -141,21 +141,27 @@ class WorldView:
         """Plan initial state: the observed thrust and steering (``obs.actuators``) when the
         observation carries them; else trim thrust for the current speed through the water
         (ground surge speed less the planned current along the heading) while the propeller
-        runs (at least the on-threshold), else 0, and steering from the previous plan."""
+        runs (at least the on-threshold), else 0, and steering from the previous plan. With
+        ``steering = "heading"`` the eighth state is the heading reference whose yaw PD gives
+        that steering angle (M1h)."""
         a, ocp = obs.asv, self.ocp
         vp = ocp.vessel
         T0, d0 = 0.0, 0.0
         if obs.actuators is not None and self.params.initial_actuators == "observed":
             # the boat knows its actuators (simulation; deploy with feedback): plan from them
             T0, d0 = obs.actuators
-            return np.array([a.N, a.E, a.psi, a.u, a.v, a.r, float(np.clip(T0, vp.T_min, vp.T_max)),
-                             float(np.clip(d0, -vp.delta_max, vp.delta_max))])  # fmt: skip
-        if obs.propeller_on:
+            T0, d0 = (float(np.clip(T0, vp.T_min, vp.T_max)),
+                      float(np.clip(d0, -vp.delta_max, vp.delta_max)))  # fmt: skip
+        elif obs.propeller_on:
             u_c = self.current[0] * math.cos(a.psi) + self.current[1] * math.sin(a.psi)
-            T0 = max(ocp.model.thrust_for_speed(max(a.u - u_c, 0.0)), 1.2 * ocp.T_on)
+            T0 = min(max(ocp.model.thrust_for_speed(max(a.u - u_c, 0.0)), 1.2 * ocp.T_on),
+                     vp.T_max)  # fmt: skip
             if self.plan is not None:
                 d0 = float(np.interp(obs.t, self.plan.t, self.plan.extra["delta"]))
-        return np.array([a.N, a.E, a.psi, a.u, a.v, a.r, min(T0, ocp.vessel.T_max), d0])
+        x = np.array([a.N, a.E, a.psi, a.u, a.v, a.r, T0, d0])
+        if ocp.heading:  # the heading reference whose yaw PD gives that steering (M1h)
+            x[7] = ocp.heading_reference(x, x[7])
+        return x
 
     def parameters(self, obs: Observation) -> np.ndarray:
         """The parameter vector of the OCP for this observation (after fix-age bookkeeping)."""
