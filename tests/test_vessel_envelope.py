@@ -164,6 +164,7 @@ def test_the_mpc_says_once_that_it_steers_a_straight_line_unstable_hull_open_loo
     assert u < 0.3 and lam == pytest.approx(2.61, abs=0.01)
     out = io.StringIO()
     dynamics.warn_course_unstable(_ocp("otter"), file=out)
+    assert out.getvalue() == ""  # "auto": the plan closes the yaw loop (M1h)
     for vessel in ("gretha", "dune-otter", "otter", "otter"):
         dynamics.warn_course_unstable(_ocp(vessel, "rudder"), file=out)
     lines = out.getvalue().splitlines()

@@ -105,17 +105,22 @@ class PlanDynamics:
         ``steering = "rudder"``; with ``"heading"`` the execution level's yaw PD on the
         heading reference ``psi_ref = x[7]`` (eq. M1h, the run's gains scheduled on the surge
         speed as in :func:`~mpcasv.control.execution.execution_law`, without its integral and
-        rate filter, saturated smoothly):
-        ``delta = delta_max tanh((Kp(u) (psi_ref - psi) - Kd(u) r) / delta_max)``."""
+        rate filter, saturated smoothly, and zero while the propeller is off (STANDBY: the
+        execution level centres the steering; the running sigmoid of M4c):
+        ``delta = delta_max tanh((Kp(u) (psi_ref - psi) - Kd(u) r) / delta_max)
+        sig((T - T_on) / w_T)``."""
         if not self.heading:
             return x[7]
         ys, dm = self.execution.yaw, self.vessel.delta_max
         Kp, Kd = (pwlinear(x[3], ys.speeds, g) for g in (ys.Kp, ys.Kd))
-        return dm * ca.tanh((Kp * (x[7] - x[2]) - Kd * x[5]) / dm)  # (M1h)
+        running = sigmoid((x[6] - self.T_on) / self.params.fix.w_thrust)
+        return dm * ca.tanh((Kp * (x[7] - x[2]) - Kd * x[5]) / dm) * running  # (M1h)
 
     def heading_reference(self, x: np.ndarray, delta: float) -> float:
-        """Inverse of M1h: the heading reference (rad) whose yaw PD gives the steering angle
-        ``delta`` (rad, clipped to 0.99 ``delta_max``) at vessel state ``x`` (``x[0:6]``)."""
+        """Inverse of M1h's PD: the heading reference (rad) whose yaw PD gives the steering
+        angle ``delta`` (rad, clipped to 0.99 ``delta_max``) at vessel state ``x`` (``x[0:6]``)
+        with the propeller running (with it off M1h's steering is zero whatever the
+        reference: then ``psi + Kd r / Kp`` for ``delta = 0``)."""
         ys, dm = self.execution.yaw, self.vessel.delta_max
         Kp, Kd = (float(np.interp(x[3], ys.speeds, g)) for g in (ys.Kp, ys.Kd))
         a = dm * math.atanh(float(np.clip(delta / dm, -0.99, 0.99)))
@@ -184,14 +189,16 @@ class PlanDynamics:
         (``|lambda|max h < RK4_STABLE``, 2.785), and with a margin on the straight-line trims,
         where the plan spends most of its time (``|lambda|max h <= RK4_LAMBDA_H``, 2.5).
         Gretha: 4 (2.72 1/s in a full-rudder turn from top speed, 2.38 straight ahead).
-        Fossen's Otter: 26 (18 1/s in a full-steering turn: with 6, the sub-steps of the
-        straight-line bound, a turning stage returned NaN and fatrop hung on it).
+        Fossen's Otter: 24, the case's 26 (16.5-18 1/s in a full-steering turn: with 6, the
+        sub-steps of the straight-line bound, a turning stage returned NaN and fatrop hung
+        on it).
 
         Heading reference planned (``"heading"``, M1h): the margin on the closed loop's
         fastest pole over the whole envelope (the PD's fast poles are everywhere, not only in
-        hard turns: the Otter's 13.9 1/s straight ahead, 16.7 in a turn; 0.43 m off in a
-        4-s stage at the stability bound's 24 sub-steps, 0.04 m at 28): the Otter 27, the
-        case's Otter 31."""
+        hard turns: the shipped Otter's 13.9 1/s straight ahead, 16.7 in a turn; 0.43 m off
+        in a 4-s stage at the stability bound's 24 sub-steps), ``|lambda|max h <= 2.0``
+        (:data:`RK4_ACCURATE`): the shipped Otter 34 (1e-3 m), the case's Otter 38 (0.02 m),
+        dune-otter 12."""
         hz, m = self.params.horizon, self.model
         if self.heading:
             return max(hz.n_sub, sub_steps(hz.dt, self._closed_loop_pole(), RK4_ACCURATE))

@@ -55,7 +55,8 @@ class ParamLayout:
         Parameters
         ----------
         x0 : array (8,)
-            Vessel state ``[N, E, psi, u, v, r, T, delta]``.
+            Vessel state ``[N, E, psi, u, v, r, T, delta]`` (with ``steering = "heading"``
+            the last is the heading reference ``psi_ref``, rad: M1h).
         tau0 : array (K,)
             Expected fix ages now (s).
         current : array (2,)

@@ -48,7 +48,11 @@ class PlanOutput:
         here = obs.asv.position
         delta = target - here
         dn = float(np.hypot(*delta))
-        if dn < 1e-6:  # plan does not move: head along the current heading
+        if ocp.heading:  # M1h: the execution level's line of sight is the planned psi_ref
+            psi_ref = float(np.interp(min(P.speed_lead, ts[-1]), ts, Z[:, 7]))
+            delta = np.array([math.cos(psi_ref), math.sin(psi_ref)]) * max(dn, 1.0)
+            dn = float(np.hypot(*delta))
+        elif dn < 1e-6:  # plan does not move: head along the current heading
             delta, dn = np.array([math.cos(obs.asv.psi), math.sin(obs.asv.psi)]), 1.0
         wp = here + delta / dn * max(dn, P.min_carrot)
         if P.speed_rule == "max":

@@ -6,7 +6,9 @@ Stage-interleaved layout (what fatrop's structure detection and a Riccati recurs
     g = [z_1 - F(z_0, v_0), h_0, z_2 - F(z_1, v_1), h_1, ..., h_N]
 
 - state ``z = [N, E, psi, u, v, r, T, delta, tau_1..tau_K]`` (the vessel with thrust and
-  steering as states, plus each AUV's expected fix age);
+  steering as states, plus each AUV's expected fix age; for a course-unstable hull ``delta``
+  is replaced by the heading reference ``psi_ref`` of the execution level, whose yaw PD sets
+  the steering inside the prediction: M1h, ``horizon.steering``);
 - control ``v = [Tdot, deltadot, s_1..s_K, m]`` (command rates, one L1 slack per AUV, the
   worst-age epigraph variable ``m`` when its weight is positive); ``v_N = [s, m]``;
 - path constraints ``h_k``: ``d_i + s_i >= r_lo,i`` and (single AUV) ``d_i - s_i <= r_hi,i``,
