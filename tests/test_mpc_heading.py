@@ -78,6 +78,26 @@ def test_the_plans_pd_is_the_execution_levels(vessel):
             assert plan == pytest.approx(plant, rel=5e-3, abs=1e-6), (u, e, r)  # tanh: 0.3 %
 
 
+def test_the_plans_pd_turns_the_shorter_way_round_as_the_execution_level():
+    """The execution level wraps its heading error to (-pi, pi]; so does M1h: a reference
+    3.5 rad to port turns the boat 2.78 rad to starboard (full steering, the plant's sign),
+    and a reference a full turn ahead steers as the same reference without it."""
+    from mpcasv.control.execution import execution_law
+
+    ocp = _ocp("otter", "heading")
+    x = np.r_[0.0, 0.0, 0.4, 2.0, 0.0, 0.0, 0.6 * ocp.vessel.T_max, 0.0]
+    for e in (3.5, -3.5, 0.1 + 2 * np.pi):
+        psi_ref = x[2] + e
+        wp = 100.0 * np.array([np.cos(psi_ref), np.sin(psi_ref)])
+        plant = float(execution_law(x, [0.0, 0.0, 0.0], np.r_[1.0, wp, 3.0], ocp.model,
+                                    ocp.execution, 0.1)[0][1])  # fmt: skip
+        plan = float(ocp.steering_angle(np.r_[x[:7], psi_ref]))
+        assert np.sign(plan) == np.sign(plant) != 0, (e, plan, plant)
+    z = np.r_[x[:7], x[2] + 0.1]
+    assert float(ocp.steering_angle(z + np.r_[[0] * 7, 2 * np.pi])) == pytest.approx(
+        float(ocp.steering_angle(z)))
+
+
 @pytest.mark.parametrize("vessel, n_sub", [("otter", 34), ("dune-otter", 11),
                                             pytest.param(str(CASE_OTTER), 38, id="case-otter",
                                                          marks=pytest.mark.skipif(
@@ -125,6 +145,22 @@ def test_the_closed_loop_plan_stage_follows_a_fine_integration(vessel, n_sub):
         assert max(errs_open) > 0.1, max(errs_open)
 
 
+def _turn_east(ocp: OCP) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(x0, p, w)``: the vessel at 2 m/s heading north (origin), an AUV 150 m north, and the
+    plan's guess ``steered_rollout`` for the heading east (+90 deg) at the trim thrust."""
+    import math
+
+    N = ocp.dims.N
+    x0 = ocp.model.trim(2.0)[0]
+    if ocp.heading:
+        x0[7] = ocp.heading_reference(x0, x0[7])
+    pa = np.zeros((N + 1, 1, 2))
+    pa[:, 0, 0] = 150.0
+    p = ocp.pack(x0, [100.0], (0.0, 0.0), pa, np.full((N + 1, 1), 20.0),
+                 np.full((N + 1, 1), 500.0), [0.0], [70.0], [70.0])  # fmt: skip
+    return x0, p, ocp.steered_rollout(p, lambda k, z: math.pi / 2, lambda k, z: x0[6])
+
+
 def test_the_plans_guess_holds_the_otter_on_a_new_course_only_with_the_loop_closed():
     """The guesses the MPC starts from (exploration, rescue, escape) steer stage by stage for a
     goal heading (``steered_rollout``). The Otter at 2 m/s heading north, goal east (+90 deg):
@@ -137,15 +173,7 @@ def test_the_plans_guess_holds_the_otter_on_a_new_course_only_with_the_loop_clos
     errs = {}
     for steering in ("heading", "rudder"):
         ocp = _ocp("otter", steering)
-        N = ocp.dims.N
-        x0 = ocp.model.trim(2.0)[0]
-        if ocp.heading:
-            x0[7] = ocp.heading_reference(x0, x0[7])
-        pa = np.zeros((N + 1, 1, 2))
-        pa[:, 0, 0] = 150.0
-        p = ocp.pack(x0, [100.0], (0.0, 0.0), pa, np.full((N + 1, 1), 20.0),
-                     np.full((N + 1, 1), 500.0), [0.0], [70.0], [70.0])  # fmt: skip
-        Z, _ = ocp.split(ocp.steered_rollout(p, lambda k, z: math.pi / 2, lambda k, z, T=x0[6]: T))
+        Z, _ = ocp.split(_turn_east(ocp)[2])
         assert np.all(np.isfinite(Z))
         errs[steering] = (np.abs(Z[4:, 2] - math.pi / 2).max(), np.abs(Z[4:, 5]).max())
     assert errs["heading"][0] < 0.05 and errs["heading"][1] < 0.02, errs
@@ -174,3 +202,67 @@ def test_the_plan_starts_on_the_previous_plans_branch_of_a_wrapped_heading():
                                    "T": np.full(16, 100.0)})  # fmt: skip
     x0 = ctrl._x0(obs)
     assert x0[2] == pytest.approx(2 * math.pi - 3.1) and x0[7] == 0.05
+
+
+@pytest.mark.parametrize("steering", ["heading", "rudder"])
+def test_the_transit_waypoint_hands_the_execution_level_the_planned_reference(steering):
+    """With M1h the TRANSIT command's waypoint lies along the planned heading reference at
+    ``speed_lead`` (1 s), at least ``min_carrot`` out: the execution level's line of sight from
+    the ASV is then the reference the plan predicted with. With the steering angle planned,
+    the waypoint is towards the planned position ``lookahead`` s ahead (as before). The Otter's plan
+    rolled out from 2 m/s north with its reference turning east (no solve: the command is a
+    function of the plan)."""
+    import math
+
+    from mpcasv.controllers import load_preset
+    from mpcasv.interface import ASVState, AUVEstimate, Mode, Observation
+    from mpcasv.mpc.plan_output import PlanOutput
+
+    P = load_preset("mpc-single", "mpc-single", {"horizon.steering": steering})
+    ocp = OCP(P, 1, outer=True, boat=Boat.load("otter"))
+    out = PlanOutput()
+    out.params, out.ocp, out.domain, out.u_plan, out._diag = P, ocp, P.domain, None, {}
+    out.current = np.zeros(2)
+    N = ocp.dims.N
+    x0, p, w = _turn_east(ocp)
+    out._store_plan(0.0, w)
+    obs = Observation(0.0, ASVState(*x0[0:6]), True, (AUVEstimate(150.0, 0.0, 0.0, 0.0, 0.0),))
+    cmd = out._command(obs, w, p)
+    assert cmd.mode == Mode.TRANSIT
+    Z, _ = ocp.split(w)
+    ts = ocp.dt * np.arange(N + 1)
+    wp = np.asarray(cmd.waypoint)
+    if steering == "heading":
+        los = math.atan2(wp[1] - x0[1], wp[0] - x0[0])
+        assert los == pytest.approx(float(np.interp(P.speed_lead, ts, Z[:, 7])), abs=1e-9)
+        assert 0.0 < los < math.pi / 2  # turning east: the reference has not reached it yet
+        assert np.hypot(*wp) >= P.min_carrot - 1e-9
+    else:
+        ahead = np.array([np.interp(P.lookahead, ts, Z[:, 0]),
+                          np.interp(P.lookahead, ts, Z[:, 1])])  # fmt: skip
+        d = np.hypot(*ahead)  # (the swinging hull of the other test is 7 m out at 15 s)
+        assert wp == pytest.approx(ahead / d * max(d, P.min_carrot))
+
+
+@pytest.mark.skipif(not (CASES / "vessels" / "cybership2.toml").exists(),
+                    reason="../shared/cases/vessels/cybership2.toml not present")
+def test_a_hull_the_execution_levels_pd_does_not_hold_is_named_in_one_line(monkeypatch):
+    """CyberShip II (a 1:70 model ship, course-unstable) run with Gretha's execution level:
+    her yaw PD does not stabilise it (M1h's loop at the trims up to +0.76 1/s), so neither
+    the plant nor the plan holds a course (session 10: 157 fallbacks in 400 s). Building the
+    MPC says so once, naming what it needs; the Otter's loop is held and nothing is said."""
+    import io
+
+    from mpcasv.mpc import dynamics
+
+    monkeypatch.setattr(dynamics, "_WARNED", set())
+    cs2 = _ocp(str(CASES / "vessels" / "cybership2.toml"))
+    assert cs2.heading and _ocp("otter").closed_loop_instability() is None
+    u, lam = cs2.closed_loop_instability()
+    assert lam == pytest.approx(0.76, abs=0.01)
+    out = io.StringIO()
+    for ocp in (_ocp("otter"), cs2, cs2):
+        dynamics.warn_course_unstable(ocp, file=out)
+    lines = out.getvalue().splitlines()
+    assert len(lines) == 1 and "'cybership2'" in lines[0] and "does not stabilise" in lines[0]
+    assert "needs an execution level tuned for it" in lines[0]

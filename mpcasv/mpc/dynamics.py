@@ -27,7 +27,7 @@ import sys
 import casadi as ca
 import numpy as np
 
-from mpcasv.control.execution import pwlinear
+from mpcasv.control.execution import pwlinear, wrap
 from mpcasv.models.acoustics import AcousticParams
 from mpcasv.models.envelope import (
     RK4_LAMBDA_H,
@@ -35,6 +35,7 @@ from mpcasv.models.envelope import (
     course_instability,
     envelope_states,
     sub_steps,
+    trim_states,
 )
 from mpcasv.models.vessel import rk4_step, xdot_expr
 from mpcasv.mpc.layout import NCH, channel_vector
@@ -107,14 +108,16 @@ class PlanDynamics:
         speed as in :func:`~mpcasv.control.execution.execution_law`, without its integral and
         rate filter, saturated smoothly, and zero while the propeller is off (STANDBY: the
         execution level centres the steering; the running sigmoid of M4c):
-        ``delta = delta_max tanh((Kp(u) (psi_ref - psi) - Kd(u) r) / delta_max)
-        sig((T - T_on) / w_T)``."""
+        ``delta = delta_max tanh((Kp(u) wrap(psi_ref - psi) - Kd(u) r) / delta_max)
+        sig((T - T_on) / w_T)``, the heading error wrapped to (-pi, pi] as the execution level
+        wraps it (a reference more than pi ahead turns the boat the shorter way round)."""
         if not self.heading:
             return x[7]
         ys, dm = self.execution.yaw, self.vessel.delta_max
         Kp, Kd = (pwlinear(x[3], ys.speeds, g) for g in (ys.Kp, ys.Kd))
         running = sigmoid((x[6] - self.T_on) / self.params.fix.w_thrust)
-        return dm * ca.tanh((Kp * (x[7] - x[2]) - Kd * x[5]) / dm) * running  # (M1h)
+        e = wrap(x[7] - x[2])  # as the execution level: the shorter way round
+        return dm * ca.tanh((Kp * e - Kd * x[5]) / dm) * running  # (M1h)
 
     def heading_reference(self, x: np.ndarray, delta: float) -> float:
         """Inverse of M1h's PD: the heading reference (rad) whose yaw PD gives the steering
@@ -205,6 +208,22 @@ class PlanDynamics:
         return max(hz.n_sub, sub_steps(hz.dt, m.fastest_pole, RK4_STABLE),
                    sub_steps(hz.dt, m.fastest_trim_pole, RK4_LAMBDA_H))
 
+    def closed_loop_instability(self) -> tuple[float, float] | None:
+        """``(u, lambda)``: with M1h, the straight-line trim speed (m/s) where the loop closed
+        by the execution level's yaw PD has its largest eigenvalue real part (1/s, heading,
+        surge, sway and yaw rate), if positive; None when the PD holds every trim (Fossen's
+        Otter under Gretha's gains; not CyberShip II, up to +0.76 1/s)."""
+        x = ca.SX.sym("x", NXV)
+        J = ca.Function("J", [x], [ca.jacobian(self._vessel_rhs(x, ca.DM.zeros(2),
+                                                                ca.DM.zeros(2)), x)])
+        worst = None
+        for s in trim_states(self.model)[1:]:
+            s = np.r_[s[:7], self.heading_reference(s, s[7])]
+            lam = float(np.linalg.eigvals(np.asarray(J(s))[2:6, 2:6]).real.max())
+            if lam > 1e-9 and (worst is None or lam > worst[1]):
+                worst = (float(s[3]), lam)
+        return worst
+
     def _closed_loop_pole(self) -> float:
         """Fastest rigid-body pole (1/s) of M1h's closed loop over the manoeuvring envelope
         (:func:`~mpcasv.models.envelope.envelope_states`), the heading reference at each state
@@ -218,22 +237,42 @@ class PlanDynamics:
         return float(np.abs(np.linalg.eigvals(A[:, :6, :6])).max())
 
 
-_WARNED: set[bytes] = set()  # parameter vectors warned about (the poles' cache key)
+_WARNED: set[bytes] = set()  # (vessel, execution) parameters warned about
 
 
 def warn_course_unstable(ocp, file=None) -> None:
-    """One line on stderr (once per vessel and process) when the plan's vessel is
-    straight-line (course) unstable: the plan steers it open loop over stages of ``dt`` s,
-    where its yaw diverges within a fraction of a second. Fossen's Otter on case3-otter
-    (session 9): the plan stands still for minutes beyond r_outer, or its solves need
-    hundreds of iterations and the fallback drives (docs/mpc.md, "Known problems")."""
+    """One line on stderr (once per vessel, execution level and process) when the plan cannot
+    hold a straight-line (course) unstable vessel:
+
+    - planned with its steering angle (``steering = "rudder"``): the plan steers it open loop
+      over stages of ``dt`` s, where its yaw diverges within a fraction of a second (Fossen's
+      Otter on case3-otter, session 9: the plan stood still for minutes beyond r_outer);
+    - planned with the heading reference (M1h), when the execution level's yaw PD does not
+      stabilise it either (:meth:`PlanDynamics.closed_loop_instability`; CyberShip II under
+      Gretha's gains, session 10: 157 fallbacks in 400 s): the plan predicts, and the plant
+      runs, a loop that diverges; the vessel needs its own execution level (``mpcasv tune
+      yaw`` refuses this one: its first-order Nomoto design does not stabilise it).
+
+    docs/mpc.md, "Known problems"."""
     unstable = course_instability(ocp.model)
-    key = ocp.model.p.tobytes()
-    if unstable is None or ocp.heading or key in _WARNED:
+    key = ocp.model.p.tobytes() + repr(ocp.execution.yaw).encode()
+    if unstable is None or key in _WARNED:
         return
+    name = ocp.vessel.name
+    if ocp.heading:
+        loop = ocp.closed_loop_instability()
+        if loop is None:
+            return
+        u, lam = loop
+        msg = (f"vessel {name!r} is straight-line unstable and its execution level's yaw PD "
+               f"does not stabilise it (a pole at +{lam:.2f} 1/s with the PD, at {u:.2f} m/s): "
+               "no controller holds it well; it needs an execution level tuned for it "
+               "(docs/mpc.md, Known problems)")  # fmt: skip
+    else:
+        u, lam = unstable
+        msg = (f"vessel {name!r} is straight-line unstable (a sway-yaw pole up to +{lam:.1f} "
+               f"1/s, from {u:.2f} m/s): the MPC steers it open loop over {ocp.dt:g}-s stages "
+               "and does not hold it well (docs/mpc.md, Known problems); the hybrid "
+               "controllers close the yaw loop, and so does horizon.steering = 'heading'")
     _WARNED.add(key)
-    u, lam = unstable
-    print(f"mpcasv: warning: vessel {ocp.vessel.name!r} is straight-line unstable (a sway-yaw "
-          f"pole up to +{lam:.1f} 1/s, from {u:.2f} m/s): the MPC steers it open loop over "
-          f"{ocp.dt:g}-s stages and does not hold it well (docs/mpc.md, Known problems); the "
-          "hybrid controllers close the yaw loop", file=file or sys.stderr)  # fmt: skip
+    print(f"mpcasv: warning: {msg}", file=file or sys.stderr)
