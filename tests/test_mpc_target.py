@@ -51,6 +51,21 @@ def test_a_served_target_gives_way_to_an_auv_that_needs_a_visit(ctrl):
     assert ctrl.target_switches == 1 == ctrl.diagnostics()["mpc_target_switches"]
 
 
+def test_an_auv_the_asv_cannot_reach_does_not_keep_the_target(ctrl):
+    """AUV 0 (the run's first target) 100 m north going away north at 4 m/s, faster than the
+    plan's transit speed U_go (2.5 m/s); AUV 1 300 m east, still, a little younger. AUV 0 has
+    the larger projected fix age, but the ASV can never meet it: the target moves to AUV 1
+    at the first step and stays (before, AUV 0 kept the target for good: not served, its
+    age growing)."""
+    auvs = (AUVEstimate(100.0, 0.0, 60.0, 4.0, 0.0), AUVEstimate(0.0, 300.0, 60.0))
+    targets = _run(ctrl, auvs, steps=5, tau0=[500.0, 400.0])
+    assert targets == [1] * 5, targets
+    assert ctrl.target_switches == 1
+    # the same AUV 0 at 2 m/s (reachable): it keeps the target, as the age rule says
+    auvs = (AUVEstimate(100.0, 0.0, 60.0, 2.0, 0.0), AUVEstimate(0.0, 300.0, 60.0))
+    assert _run(ctrl, auvs, steps=3, tau0=[500.0, 400.0]) == [0] * 3
+
+
 # ------------------------------------------------ target_rule = "order" (opt-in, issue 16 item 2)
 @pytest.fixture(scope="module")
 def ordered():

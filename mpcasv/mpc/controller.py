@@ -213,6 +213,8 @@ class MPCController(WorldView, Safety, PlanOutput, Targeting, SpeedCap):
         self.w_prev: np.ndarray | None = None
         self.lam_prev: tuple | None = None
         self.plan: PlannedTrajectory | None = None
+        #: the previous plan start's heading (rad, unwrapped; worldview._x0)
+        self.psi_prev: float | None = None
         self.fallbacks = 0
         self.fallback_log: list[FallbackEvent] = []
         #: steps per plan source: "plan" (warm-started or exploration solve), "rescue" (a

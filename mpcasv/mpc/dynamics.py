@@ -107,15 +107,17 @@ class PlanDynamics:
         heading reference ``psi_ref = x[7]`` (eq. M1h, the run's gains scheduled on the surge
         speed as in :func:`~mpcasv.control.execution.execution_law`, without its integral and
         rate filter, saturated smoothly, and zero while the propeller is off (STANDBY: the
-        execution level centres the steering; the running sigmoid of M4c):
+        execution level centres the steering):
         ``delta = delta_max tanh((Kp(u) wrap(psi_ref - psi) - Kd(u) r) / delta_max)
-        sig((T - T_on) / w_T)``, the heading error wrapped to (-pi, pi] as the execution level
+        sig(4 (T - T_on) / T_on)`` (the width scaled to the vessel's propeller-on threshold:
+        2 % at rest, 98 % at twice the threshold; M4c's absolute 4 N halved a 2-N model
+        ship's PD at every trim), the heading error wrapped to (-pi, pi] as the execution level
         wraps it (a reference more than pi ahead turns the boat the shorter way round)."""
         if not self.heading:
             return x[7]
         ys, dm = self.execution.yaw, self.vessel.delta_max
         Kp, Kd = (pwlinear(x[3], ys.speeds, g) for g in (ys.Kp, ys.Kd))
-        running = sigmoid((x[6] - self.T_on) / self.params.fix.w_thrust)
+        running = sigmoid(4 * (x[6] - self.T_on) / self.T_on)  # width T_on / 4
         e = wrap(x[7] - x[2])  # as the execution level: the shorter way round
         return dm * ca.tanh((Kp * e - Kd * x[5]) / dm) * running  # (M1h)
 
@@ -201,7 +203,7 @@ class PlanDynamics:
         hard turns: the shipped Otter's 13.9 1/s straight ahead, 16.7 in a turn; 0.43 m off
         in a 4-s stage at the stability bound's 24 sub-steps), ``|lambda|max h <= 2.0``
         (:data:`RK4_ACCURATE`): the shipped Otter 34 (1e-3 m), the case's Otter 38 (0.02 m),
-        dune-otter 12."""
+        dune-otter 11."""
         hz, m = self.params.horizon, self.model
         if self.heading:
             return max(hz.n_sub, sub_steps(hz.dt, self._closed_loop_pole(), RK4_ACCURATE))
@@ -212,7 +214,7 @@ class PlanDynamics:
         """``(u, lambda)``: with M1h, the straight-line trim speed (m/s) where the loop closed
         by the execution level's yaw PD has its largest eigenvalue real part (1/s, heading,
         surge, sway and yaw rate), if positive; None when the PD holds every trim (Fossen's
-        Otter under Gretha's gains; not CyberShip II, up to +0.76 1/s)."""
+        Otter under Gretha's gains; not CyberShip II, up to +0.47 1/s)."""
         x = ca.SX.sym("x", NXV)
         J = ca.Function("J", [x], [ca.jacobian(self._vessel_rhs(x, ca.DM.zeros(2),
                                                                 ca.DM.zeros(2)), x)])
@@ -220,7 +222,7 @@ class PlanDynamics:
         for s in trim_states(self.model)[1:]:
             s = np.r_[s[:7], self.heading_reference(s, s[7])]
             lam = float(np.linalg.eigvals(np.asarray(J(s))[2:6, 2:6]).real.max())
-            if lam > 1e-9 and (worst is None or lam > worst[1]):
+            if lam > 1e-6 and (worst is None or lam > worst[1]):  # (structural zeros: 1e-17)
                 worst = (float(s[3]), lam)
         return worst
 
@@ -237,25 +239,25 @@ class PlanDynamics:
         return float(np.abs(np.linalg.eigvals(A[:, :6, :6])).max())
 
 
-_WARNED: set[bytes] = set()  # (vessel, execution) parameters warned about
+_WARNED: set[bytes] = set()  # (vessel, execution, steering) warned about
 
 
 def warn_course_unstable(ocp, file=None) -> None:
-    """One line on stderr (once per vessel, execution level and process) when the plan cannot
-    hold a straight-line (course) unstable vessel:
+    """One line on stderr (once per vessel, execution level, steering and process) when the
+    plan cannot hold a straight-line (course) unstable vessel:
 
     - planned with its steering angle (``steering = "rudder"``): the plan steers it open loop
       over stages of ``dt`` s, where its yaw diverges within a fraction of a second (Fossen's
       Otter on case3-otter, session 9: the plan stood still for minutes beyond r_outer);
     - planned with the heading reference (M1h), when the execution level's yaw PD does not
       stabilise it either (:meth:`PlanDynamics.closed_loop_instability`; CyberShip II under
-      Gretha's gains, session 10: 157 fallbacks in 400 s): the plan predicts, and the plant
+      Gretha's gains, session 10: 142 fallbacks in 400 s): the plan predicts, and the plant
       runs, a loop that diverges; the vessel needs its own execution level (``mpcasv tune
       yaw`` refuses this one: its first-order Nomoto design does not stabilise it).
 
     docs/mpc.md, "Known problems"."""
     unstable = course_instability(ocp.model)
-    key = ocp.model.p.tobytes() + repr(ocp.execution.yaw).encode()
+    key = ocp.model.p.tobytes() + repr((ocp.execution.yaw, ocp.heading)).encode()
     if unstable is None or key in _WARNED:
         return
     name = ocp.vessel.name

@@ -337,8 +337,9 @@ class MPCParams:
         keeps its speed): docs/mpc.md, "Plan following". Every rule is clipped to
         ``[speed_min, u_max]``; the execution level's eq. 3.1 still slows turns below it.
     speed_lead : float
-        ``speed_rule = "plan"`` only: how far ahead (s) the planned speed is read: the end
-        of the coming control period (1 s in ``simulate`` and the deploy default).
+        How far ahead (s) the planned speed (``speed_rule = "plan"``) and, with M1h
+        (``horizon.steering``), the planned heading reference are read for the command: the
+        end of the coming control period (1 s in ``simulate`` and the deploy default).
     speed : float
         Transit speed cap of the hybrid fallback controller (m/s).
     T_standby : float

@@ -49,8 +49,9 @@ class PlanOutput:
         delta = target - here
         dn = float(np.hypot(*delta))
         if ocp.heading:  # M1h: the execution level's line of sight is the planned psi_ref
-            psi_ref = float(np.interp(min(P.speed_lead, ts[-1]), ts, Z[:, 7]))
-            delta = np.array([math.cos(psi_ref), math.sin(psi_ref)]) * max(dn, 1.0)
+            psi_cmd = self._heading_command(obs, float(np.interp(min(P.speed_lead, ts[-1]), ts,
+                                                                 Z[:, 7])))  # fmt: skip
+            delta = np.array([math.cos(psi_cmd), math.sin(psi_cmd)]) * max(dn, 1.0)
             dn = float(np.hypot(*delta))
         elif dn < 1e-6:  # plan does not move: head along the current heading
             delta, dn = np.array([math.cos(obs.asv.psi), math.sin(obs.asv.psi)]), 1.0
@@ -66,6 +67,18 @@ class PlanOutput:
             speed = min(speed, self.u_plan)
         reason = self._transit_reason(here, par)
         return Command(Mode.TRANSIT, (float(wp[0]), float(wp[1])), speed, served, reason)
+
+    def _heading_command(self, obs: Observation, psi_ref: float) -> float:
+        """The heading (rad) the TRANSIT waypoint lies along with M1h: the planned reference
+        ``psi_ref``, its error from the present heading clipped to ``3 delta_max / Kp(u)``,
+        where M1h's PD has saturated (tanh 0.995): the plant's PD steers the same full lock,
+        and its speed reference (eq. 3.1, lower as the error grows) and power turn (beyond
+        pi/4) are not driven by an error the plan does not model."""
+        ocp = self.ocp
+        Kp = float(np.interp(obs.asv.u, ocp.execution.yaw.speeds, ocp.execution.yaw.Kp))
+        e_max = 3 * ocp.vessel.delta_max / max(Kp, 1e-6)
+        e = math.atan2(math.sin(psi_ref - obs.asv.psi), math.cos(psi_ref - obs.asv.psi))
+        return obs.asv.psi + float(np.clip(e, -e_max, e_max))
 
     def _log_plan(self, t: float) -> None:
         """This step's command comes from :attr:`plan`: log its near-horizon predictions

@@ -10,7 +10,10 @@ below ``tau_served`` alone is not enough: when a run starts every age is 0, and 
 chosen AUV counted as served at once, so the target swapped between two AUVs every step
 until the first fix ages grew past ``tau_served``: 25 switches in the first 26 s of Case 6.)
 The target the run starts with (AUV 0) is not committed: it is served as soon as its fix age
-is below ``tau_served``. Then
+is below ``tau_served``. With the ``age`` rule a committed target that the ASV cannot reach
+(going away faster than ``U_go``: :meth:`Targeting._reachable`) is left for a reachable AUV
+that needs a visit, and AUVs that cannot be reached are chosen only when none can (before,
+such an AUV kept the target for good, its age growing). Then
 
 - ``age`` (default, the shipped presets): the AUV with the largest projected fix age
   ``tau_i + t_go,i`` (Paper 2's eq. 8 on projected ages) among those whose projected age
@@ -30,7 +33,15 @@ import numpy as np
 
 from mpcasv.interface import AUVEstimate, Observation
 from mpcasv.models.auv_nav import dr_variance
-from mpcasv.mpc.order import Forecast, OrderModel, best_order, committed_target, transit_cost
+from mpcasv.mpc.order import (
+    MEET_MAX,
+    Forecast,
+    OrderModel,
+    best_order,
+    committed_target,
+    meet_time,
+    transit_cost,
+)
 
 
 class Targeting:
@@ -54,9 +65,14 @@ class Targeting:
         else:
             fixed = self.fixes_since[j] >= 1.0
         served = (fixed or not self.committed) and self.tau[j] <= self.params.tau_served
+        order = self.params.target_rule == "order"
+        reach = None if order else self._reachable(obs, r_t)
         if not (served or self.dwell >= self.params.dwell_max):
-            return
-        if self.params.target_rule == "order":
+            # a committed target the ASV cannot reach (going away faster than U_go) is left
+            # for a reachable AUV that needs a visit; before, it kept the target for good
+            if reach is None or reach[j] or not reach.any():
+                return
+        if order:
             self._choose_by_order(obs, r_t)
             return
         t_go = np.maximum(dist - r_t, 0.0) / self.U_go  # U_go, at most the speed cap
@@ -65,11 +81,22 @@ class Targeting:
         # itself (projected fix age above tau_served); with every other AUV served the target
         # stays (before, two served AUVs swapped the target every step for a whole run)
         proj[proj <= self.params.tau_served] = -np.inf
+        if reach.any():  # the largest projected age among the AUVs the ASV can reach
+            proj[~reach] = -np.inf
         if self.committed:
             proj[self.target] = -np.inf
         if not np.isfinite(proj).any():
             return
         self._switch_to(int(np.argmax(proj)), obs.t)
+
+    def _reachable(self, obs: Observation, r_t: np.ndarray) -> np.ndarray:
+        """Whether the ASV, leaving now at ``U_go`` (m/s, at most the speed cap), meets each
+        AUV's target circle ``r_t`` (m, shape (K,)) along its estimate's forecast
+        (:func:`~mpcasv.mpc.order.meet_time` below ``MEET_MAX``): an AUV going away faster
+        than that is met "never" (shape (K,), bool)."""
+        here = obs.asv.position
+        return np.array([meet_time(here, a.predict, float(r_t[i]), self.U_go) < MEET_MAX
+                         for i, a in enumerate(obs.auvs)])  # fmt: skip
 
     def _switch_to(self, new: int, t: float) -> None:
         """Commit to ``new`` at time ``t`` (a switch, counted, if it is not the target

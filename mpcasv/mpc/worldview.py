@@ -143,9 +143,11 @@ class WorldView:
         (ground surge speed less the planned current along the heading) while the propeller
         runs (at least the on-threshold), else 0, and steering from the previous plan. With
         ``steering = "heading"`` the eighth state is the heading reference whose yaw PD gives
-        that steering angle (M1h). The heading is taken on the previous plan's branch (within
-        pi of it): the warm start continues that plan, and an observed heading wrapped to
-        (-pi, pi] (deploy: IMC's ``psi``) would put 2 pi between them."""
+        that steering angle (M1h). The heading is taken on the previous step's branch (within
+        pi of the heading this method returned last, whether that step's plan was used or
+        not): the warm start continues from it, and an observed heading wrapped to (-pi, pi]
+        (deploy: IMC's ``psi``) would put 2 pi between them. The simulator's heading is
+        continuous, so there nothing changes."""
         a, ocp = obs.asv, self.ocp
         vp = ocp.vessel
         T0, d0 = 0.0, 0.0
@@ -160,10 +162,10 @@ class WorldView:
                      vp.T_max)  # fmt: skip
             if self.plan is not None:
                 d0 = float(np.interp(obs.t, self.plan.t, self.plan.extra["delta"]))
-        psi = a.psi
-        if self.plan is not None:  # the plan's branch of the heading (a deploy's is wrapped)
-            psi += 2 * math.pi * round((np.interp(obs.t, self.plan.t, self.plan.extra["psi"])
-                                        - psi) / (2 * math.pi))  # fmt: skip
+        psi = a.psi  # on the branch of the previous step's (a deploy's heading is wrapped)
+        if self.psi_prev is not None:
+            psi += 2 * math.pi * round((self.psi_prev - psi) / (2 * math.pi))
+        self.psi_prev = psi
         x = np.array([a.N, a.E, psi, a.u, a.v, a.r, T0, d0])
         if ocp.heading:  # the heading reference whose yaw PD gives that steering (M1h)
             x[7] = ocp.heading_reference(x, x[7])
