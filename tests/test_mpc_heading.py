@@ -263,7 +263,7 @@ def test_the_transit_waypoint_hands_the_execution_level_the_planned_reference(st
 def test_a_hull_the_execution_levels_pd_does_not_hold_is_named_in_one_line(monkeypatch):
     """CyberShip II (a 1:70 model ship, course-unstable) run with Gretha's execution level:
     her yaw PD does not stabilise it (M1h's loop at the trims up to +0.47 1/s), so neither
-    the plant nor the plan holds a course (session 10: 142 fallbacks in 400 s). Building the
+    the plant nor the plan holds a course (the hybrid oscillates at full steering). Building the
     MPC says so once, naming what it needs; the Otter's loop is held and nothing is said."""
     import io
 

@@ -251,7 +251,7 @@ def warn_course_unstable(ocp, file=None) -> None:
       Otter on case3-otter, session 9: the plan stood still for minutes beyond r_outer);
     - planned with the heading reference (M1h), when the execution level's yaw PD does not
       stabilise it either (:meth:`PlanDynamics.closed_loop_instability`; CyberShip II under
-      Gretha's gains, session 10: 142 fallbacks in 400 s): the plan predicts, and the plant
+      Gretha's gains, +0.47 1/s): the plan predicts, and the plant
       runs, a loop that diverges; the vessel needs its own execution level (``mpcasv tune
       yaw`` refuses this one: its first-order Nomoto design does not stabilise it).
 
