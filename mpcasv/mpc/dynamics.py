@@ -203,7 +203,7 @@ class PlanDynamics:
         hard turns: the shipped Otter's 13.9 1/s straight ahead, 16.7 in a turn; 0.43 m off
         in a 4-s stage at the stability bound's 24 sub-steps), ``|lambda|max h <= 2.0``
         (:data:`RK4_ACCURATE`): the shipped Otter 34 (1e-3 m), the case's Otter 38 (0.02 m),
-        dune-otter 11."""
+        dune-otter 12."""
         hz, m = self.params.horizon, self.model
         if self.heading:
             return max(hz.n_sub, sub_steps(hz.dt, self._closed_loop_pole(), RK4_ACCURATE))
@@ -215,10 +215,7 @@ class PlanDynamics:
         by the execution level's yaw PD has its largest eigenvalue real part (1/s, heading,
         surge, sway and yaw rate), if positive; None when the PD holds every trim (Fossen's
         Otter under Gretha's gains; not CyberShip II, up to +0.47 1/s)."""
-        x = ca.SX.sym("x", NXV)
-        J = ca.Function("J", [x], [ca.jacobian(self._vessel_rhs(x, ca.DM.zeros(2),
-                                                                ca.DM.zeros(2)), x)])
-        worst = None
+        J, worst = self._vessel_jacobian, None
         for s in trim_states(self.model)[1:]:
             s = np.r_[s[:7], self.heading_reference(s, s[7])]
             lam = float(np.linalg.eigvals(np.asarray(J(s))[2:6, 2:6]).real.max())
@@ -232,11 +229,17 @@ class PlanDynamics:
         the one whose PD gives the state's steering angle."""
         X = envelope_states(self.model).copy()
         X[:, 7] = [self.heading_reference(x, x[7]) for x in X]
-        x = ca.SX.sym("x", NXV)
-        J = ca.Function("J", [x], [ca.jacobian(self._vessel_rhs(x, ca.DM.zeros(2),
-                                                                ca.DM.zeros(2)), x)])
-        A = np.asarray(J.map(len(X))(X.T)).reshape(NXV, len(X), NXV).transpose(1, 0, 2)
+        A = np.asarray(self._vessel_jacobian.map(len(X))(X.T))
+        A = A.reshape(NXV, len(X), NXV).transpose(1, 0, 2)  # (m, 8, 8): the blocks side by side
         return float(np.abs(np.linalg.eigvals(A[:, :6, :6])).max())
+
+    @functools.cached_property
+    def _vessel_jacobian(self) -> ca.Function:
+        """``J(x) -> d(vessel rhs)/dx`` (8 x 8) of the plan's vessel part, rates zero and
+        still water (M1 or M1h)."""
+        x = ca.SX.sym("x", NXV)
+        return ca.Function("J", [x], [ca.jacobian(self._vessel_rhs(x, ca.DM.zeros(2),
+                                                                   ca.DM.zeros(2)), x)])
 
 
 _WARNED: set[bytes] = set()  # (vessel, execution, steering) warned about
