@@ -101,7 +101,8 @@ def poles(model) -> Poles:
     """
     key = model.p.tobytes()
     if key not in _POLES:
-        trims, states = trim_states(model), envelope_states(model)
+        states = envelope_states(model)
+        trims = states[:N_TRIMS]
         _POLES[key] = Poles(fastest_pole(model, trims), fastest_pole(model, states),
                             fastest_pole(model, states, n=8))  # fmt: skip
     return _POLES[key]

@@ -30,12 +30,12 @@ import numpy as np
 from mpcasv.control.execution import pwlinear, wrap
 from mpcasv.models.acoustics import AcousticParams
 from mpcasv.models.envelope import (
+    N_TRIMS,
     RK4_LAMBDA_H,
     RK4_STABLE,
     course_instability,
     envelope_states,
     sub_steps,
-    trim_states,
 )
 from mpcasv.models.vessel import rk4_step, xdot_expr
 from mpcasv.mpc.layout import NCH, channel_vector
@@ -121,13 +121,26 @@ class PlanDynamics:
         e = wrap(x[7] - x[2])  # as the execution level: the shorter way round
         return dm * ca.tanh((Kp * e - Kd * x[5]) / dm) * running  # (M1h)
 
+    def pd_gains(self, u: float) -> tuple[float, float]:
+        """The execution level's yaw gains ``(Kp, Kd)`` at surge speed ``u`` (m/s), scheduled
+        and clamped as :func:`~mpcasv.control.execution.pwlinear` does (numbers)."""
+        ys = self.execution.yaw
+        return float(np.interp(u, ys.speeds, ys.Kp)), float(np.interp(u, ys.speeds, ys.Kd))
+
+    @functools.cached_property
+    def plan_steering(self) -> ca.Function:
+        """:meth:`steering_angle` along a plan: vessel states ``(8, N + 1)`` -> ``(1, N + 1)``
+        (rad)."""
+        x = ca.SX.sym("x", NXV)
+        return ca.Function("steering", [x], [self.steering_angle(x)]).map(self.dims.N + 1)
+
     def heading_reference(self, x: np.ndarray, delta: float) -> float:
         """Inverse of M1h's PD: the heading reference (rad) whose yaw PD gives the steering
         angle ``delta`` (rad, clipped to 0.99 ``delta_max``) at vessel state ``x`` (``x[0:6]``)
         with the propeller running (with it off M1h's steering is zero whatever the
         reference: then ``psi + Kd r / Kp`` for ``delta = 0``)."""
-        ys, dm = self.execution.yaw, self.vessel.delta_max
-        Kp, Kd = (float(np.interp(x[3], ys.speeds, g)) for g in (ys.Kp, ys.Kd))
+        dm = self.vessel.delta_max
+        Kp, Kd = self.pd_gains(x[3])
         a = dm * math.atanh(float(np.clip(delta / dm, -0.99, 0.99)))
         return float(x[2] + (a + Kd * x[5]) / max(Kp, 1e-6))
 
@@ -216,7 +229,7 @@ class PlanDynamics:
         surge, sway and yaw rate), if positive; None when the PD holds every trim (Fossen's
         Otter under Gretha's gains; not CyberShip II, up to +0.47 1/s)."""
         J, worst = self._vessel_jacobian, None
-        for s in trim_states(self.model)[1:]:
+        for s in envelope_states(self.model)[1:N_TRIMS]:  # the trims above rest
             s = np.r_[s[:7], self.heading_reference(s, s[7])]
             lam = float(np.linalg.eigvals(np.asarray(J(s))[2:6, 2:6]).real.max())
             if lam > 1e-6 and (worst is None or lam > worst[1]):  # (structural zeros: 1e-17)

@@ -19,11 +19,12 @@ class PlanOutput:
     """The command from the plan (mixin; state in the controller)."""
 
     def _store_plan(self, t: float, w: np.ndarray) -> None:
-        Z, V = self.ocp.split(w)
-        ts = t + self.ocp.dt * np.arange(Z.shape[0])
-        K = self.ocp.dims.n_auv
-        delta = np.array([float(self.ocp.steering_angle(z)) for z in Z]) if self.ocp.heading \
-            else Z[:, 7].copy()  # fmt: skip
+        ocp = self.ocp
+        Z, V = ocp.split(w)
+        ts = t + ocp.dt * np.arange(Z.shape[0])
+        K = ocp.dims.n_auv
+        delta = (np.asarray(ocp.plan_steering(Z[:, :NXV].T)).ravel() if ocp.heading
+                 else Z[:, 7].copy())  # fmt: skip
         self.plan = PlannedTrajectory(ts, Z[:, 0].copy(), Z[:, 1].copy(), {
             "T": Z[:, 6].copy(), "u": Z[:, 3].copy(), "delta": delta,
             "psi": Z[:, 2].copy(), "tau": Z[:, NXV:NXV + K].copy(),
@@ -75,7 +76,7 @@ class PlanOutput:
         and its speed reference (eq. 3.1, lower as the error grows) and power turn (beyond
         pi/4) are not driven by an error the plan does not model."""
         ocp = self.ocp
-        Kp = float(np.interp(obs.asv.u, ocp.execution.yaw.speeds, ocp.execution.yaw.Kp))
+        Kp = ocp.pd_gains(obs.asv.u)[0]
         e_max = 3 * ocp.vessel.delta_max / max(Kp, 1e-6)
         e = math.atan2(math.sin(psi_ref - obs.asv.psi), math.cos(psi_ref - obs.asv.psi))
         return obs.asv.psi + float(np.clip(e, -e_max, e_max))
