@@ -7,6 +7,7 @@ next ``step``, with the same result (the simulator does not call it after the la
 
 from __future__ import annotations
 
+import numpy as np
 import pandas as pd
 import pytest
 from test_mpc_deadline import WALL_COLUMNS
@@ -110,3 +111,36 @@ def test_the_exploration_has_an_iteration_limit_of_its_own(scenarios_dir):
     assert runs[50].loc[6.0, "mpc_explore_iter"] in (50, 51)  # at the limit
     assert 51 < runs[150].loc[6.0, "mpc_explore_iter"] < 150  # converged past 50
     pd.testing.assert_series_equal(runs[50]["mpc_iter"], runs[150]["mpc_iter"])
+
+
+def test_a_plan_stuck_at_rest_outside_the_bounds_is_explored(scenarios_dir):
+    """A plan that stands by now (the STANDBY rule), moves later and leaves the range bounds
+    meanwhile (a slack above ``STUCK_SLACK``) is explored every ``explore_every`` s, as one
+    that stands still; one that stands by and moves later inside the bounds (the usual
+    standby) is not, nor one that moves now. Until session 11 a plan with thrust anywhere in
+    its horizon was never explored: a solve stuck at rest that put its start off step after
+    step (dune-otter on Case 3: it stood by from 190 m to 260 m with r_outer at 200 m) kept
+    its plan."""
+    from mpcasv.mpc.solvers import SolveResult
+    from mpcasv.sim.world import World
+
+    sc = scenario_with(load_scenario(scenarios_dir / "case3.toml"), duration=2.0)
+    ctrl = make_controller("mpc-single", 1, "mpc-single")
+    ctrl.reset(1)
+    obs = World(sc, 0, None).observation()  # the AUV 158 m away: not in the target domain
+    p = ctrl.parameters(obs)
+    ocp = ctrl.ocp
+    Z, V = ocp.split(ocp.rollout(p))
+    n = Z.shape[0]
+
+    def explored(T, slack):
+        Z[:, 6], V[:, 2] = T, slack
+        res = SolveResult(ocp.join(Z, V), None, None, 1.0, True, "ok", 5, 1.0)
+        ctrl.t_explore = obs.t - 10.0  # the last exploration 10 s ago
+        return ctrl._explore(obs, p, res) is not None
+
+    later = [0.0] * 8 + [ocp.vessel.T_max] * (n - 8)  # stands by 28 s, then moves
+    outside = np.r_[np.zeros(6), np.full(n - 7, 20.0)]  # 20 m beyond r_outer from 24 s on
+    assert explored(later, outside)
+    assert not explored(later, 0.0)  # inside the bounds: the usual standby
+    assert not explored([0.0] + [ocp.vessel.T_max] * (n - 1), outside)  # moves now

@@ -140,7 +140,7 @@ def test_expected_fix_age_relaxes_when_quiet_in_range_and_grows_otherwise(single
     # another channel (status reports only, every 60 s): the exact relaxation from 300 s
     slow = channel_vector(AcousticParams(usbl=False, T_report=60.0))
     Z = ages(single, x0, pa, channel=slow)
-    rho = ac.p_good / 60.0 * sigmoid(single.T_quiet / single.params.fix.w_thrust)  # T = 0
+    rho = ac.p_good / 60.0 * sigmoid(single.T_quiet / single.w_T)  # T = 0
     horizon = N * single.dt
     expected = 1 / rho + (300.0 - 1 / rho) * np.exp(-rho * horizon)
     assert Z[-1, NXV] == pytest.approx(expected, rel=0.005)

@@ -28,7 +28,8 @@ def _stage_functions(ocp: OCP) -> dict[str, ca.Function]:
     L, g = ocp.stage(z, v, z1, sp, sp1, gp)
     zv = ca.vertcat(z, v)
     H, grad_lag = ca.hessian(lf * L + ca.dot(lg, g), zv)
-    LN = ocp.term(z, sp, gp)
+    sp0 = ca.SX.sym("sp0", d.n_stage_par)
+    LN = ocp.term(z, sp0, sp, gp)
     HN, dLN = ca.hessian(LN, z)
     a = [z, v, z1, sp, sp1, gp]
     return {
@@ -40,8 +41,8 @@ def _stage_functions(ocp: OCP) -> dict[str, ca.Function]:
             [*a, lg],
             [L, ca.gradient(L, zv), g, ca.jacobian(g, zv), ca.substitute(H, lf, 1.0)],
         ),  # fmt: skip
-        "term_grad": ca.Function("te_grad", [z, sp, gp], [LN, dLN]),
-        "term_hess": ca.Function("te_hess", [z, sp, gp], [HN]),
+        "term_grad": ca.Function("te_grad", [z, sp0, sp, gp], [LN, dLN]),
+        "term_hess": ca.Function("te_hess", [z, sp0, sp, gp], [HN]),
     }
 
 

@@ -164,7 +164,7 @@ class PlanDynamics:
 
     def _quiet(self, T):
         """``sig((T_quiet - T) / w_T)``: ~1 with the propeller off (M3)."""
-        return sigmoid((self.T_quiet - T) / self.params.fix.w_thrust)
+        return sigmoid((self.T_quiet - T) / self.w_T)
 
     def fix_rate(self, dh, depth, d_fix, T, ch, quiet=None):
         """Smooth expected fix rate (1/s, eq. M3) of one AUV at horizontal range ``dh`` and

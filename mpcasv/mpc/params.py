@@ -64,7 +64,13 @@ class FixRateParams:
         Thrust below which the propeller counts as off (N); None: the execution level's
         propeller-on threshold.
     w_thrust : float
-        Width of the thrust sigmoid (N).
+        Width of the plan's thrust sigmoids (N: quiet M3, deadband M4b, running M4c), at most
+        a third of the execution level's propeller-on threshold ``T_on``
+        (:data:`~mpcasv.mpc.smooth.W_T_OF_T_ON`), so that a stopped propeller counts as
+        quiet (>= 95 %) on any boat. The presets' 4 N is Gretha's (0.29 of her 14-N
+        threshold); uncapped, it was 3.4 times dune-otter's 1.2 N: its plan counted 57 % of
+        the fixes with the propeller off and 28 % while running at a fifth of full thrust,
+        and hovered at r_outer (session 11).
     noisy_fixes : bool
         ``acoustic`` model only: fixes while the propeller runs count too, at the channel's
         ``propeller_factor`` (every fix the simulator delivers). False (presets): only fixes
@@ -122,6 +128,12 @@ class WeightParams:
         with ages beyond ``tail`` it rewards arriving late).
     U_go : float
         Speed used to turn the distance to an AUV's target circle into a time to go (m/s).
+    stand : float
+        One AUV (docs/mpc.md eq. M7s): seconds of fix age, per ``tau_ref``, for each second
+        by which the ASV, standing still where the plan ends, could stand less than one
+        horizon before the AUV (constant velocity) reaches ``r_outer``. Without it (0) the
+        terminal cost sees the fix age where the plan ends but not that the ASV must leave
+        soon after: each plan moved first and stood by last, and the next plan did the same.
     """
 
     age: NonNeg = 1.0
@@ -137,6 +149,7 @@ class WeightParams:
     tail: NonNeg = 60.0
     terminal: Literal["projected", "visit"] = "projected"
     U_go: Pos = 2.5
+    stand: NonNeg = 0.0
 
 
 @frozen

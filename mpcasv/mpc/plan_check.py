@@ -5,11 +5,13 @@ each used plan is logged for the plan-following metrics
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from mpcasv.interface import PlannedTrajectory
 
-__all__ = ["PLAN_CHECK_S", "plan_energy", "planned_standby"]
+__all__ = ["PLAN_CHECK_S", "commands_standby", "plan_energy", "planned_standby"]
 
 #: offsets (s) at which each used plan's position and thrust are logged (``mpc_plan_N<h>``,
 #: ``mpc_plan_E<h>``, ``mpc_plan_T<h>``) and compared with what the boat did
@@ -31,6 +33,14 @@ def plan_energy(plan: PlannedTrajectory, t1: float, n: int = 20) -> float:
     c = x["current"]
     power = T * np.abs(u - (c[0] * np.cos(psi) + c[1] * np.sin(psi)))
     return float(np.sum(0.5 * (power[1:] + power[:-1]) * np.diff(t)))
+
+
+def commands_standby(T: np.ndarray, dt: float, standby_time: float, T_on: float) -> bool:
+    """The STANDBY rule: a plan whose thrust ``T`` (N, at stages of ``dt`` s, ``T[0]`` the
+    observed state) stays below the propeller-on threshold ``T_on`` over the next
+    ``standby_time`` s (at least one stage) is handed over as STANDBY, whatever it does later."""
+    m = max(1, math.ceil(standby_time / dt - 1e-9))
+    return bool(np.max(np.asarray(T, float)[1 : m + 1]) < T_on)
 
 
 def planned_standby(ts: np.ndarray, T: np.ndarray, T_on: float) -> float:

@@ -10,7 +10,7 @@ import math
 import numpy as np
 
 from mpcasv.interface import Command, Mode, Observation, PlannedTrajectory, Reason
-from mpcasv.mpc.plan_check import PLAN_CHECK_S, planned_standby
+from mpcasv.mpc.plan_check import PLAN_CHECK_S, commands_standby, planned_standby
 from mpcasv.mpc.problem import NXV
 from mpcasv.mpc.worldview import ranges
 
@@ -40,8 +40,7 @@ class PlanOutput:
         dist = ranges(Z[:, 0:2], par["pa"])
         served = int(np.argmin(dist[-1] - par["r_t"]))
         self._log_plan(obs.t)
-        m = max(1, math.ceil(P.standby_time / ocp.dt - 1e-9))
-        if np.max(Z[1 : m + 1, 6]) < ocp.T_on:
+        if commands_standby(Z[:, 6], ocp.dt, P.standby_time, ocp.T_on):
             return Command.standby(auv=served, standby_time=planned_standby(ts, Z[:, 6],
                                                                             ocp.T_on))
         look = min(P.lookahead, ts[-1])

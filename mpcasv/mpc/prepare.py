@@ -24,7 +24,7 @@ COLD_COMPILE_S = {1: 28.0, 3: 40.0}
 #: weights that enter the problem as parameters (mpcasv.mpc.layout.WEIGHT_NAMES), not compiled
 #: in: presets differing only in these share a library (tests/test_first_run.py checks it)
 RUNTIME_WEIGHTS = ("age", "thrust", "power", "dT", "ddelta", "slack", "tail", "U_go",
-                   "deadband", "running")  # fmt: skip
+                   "deadband", "running", "stand")  # fmt: skip
 
 _MEMO: dict = {}
 

@@ -50,9 +50,12 @@ from mpcasv.mpc.layout import (  # the parameter vector's layout (re-exported na
     channel_vector,  # noqa: F401
 )
 from mpcasv.mpc.params import MPCParams
-from mpcasv.mpc.smooth import D_EPS, SOFT_T, SOFTPLUS_M, sigmoid, softplus
+from mpcasv.mpc.smooth import D_EPS, SOFT_T, SOFTPLUS_M, W_T_OF_T_ON, sigmoid, softplus
 from mpcasv.mpc.variance import N_NAV, VarianceObjective, n_ext
 from mpcasv.mpc.warmstart import WarmStart
+
+#: eq. M7s's smoothing: of the square root (m^2/s) and of the room inside the bound (m^2)
+STAND_EPS, STAND_ROOM = 1.0, 100.0
 
 
 @dataclass(frozen=True)
@@ -144,6 +147,9 @@ class OCP(PlanDynamics, WarmStart, VarianceObjective, ParamLayout):
         self.T_on = ep.propeller_on_threshold * vp.T_max  # execution level's threshold (N)
         self.T_floor = ep.thrust_floor * vp.T_max  # its least thrust in transit (N)
         self.T_quiet = params.fix.T_quiet if params.fix.T_quiet is not None else self.T_on
+        #: width (N) of the thrust sigmoids of M3, M4b, M4c: the preset's, at most a third of
+        #: the propeller-on threshold (a stopped propeller >= 95 % quiet on any boat, M3)
+        self.w_T = min(params.fix.w_thrust, self.T_on / W_T_OF_T_ON)
         self.dT_max = vp.T_max / params.T_ramp
         steering = hz.steering
         if steering == "auto":  # an open-loop plan cannot hold a course-unstable hull
@@ -194,7 +200,7 @@ class OCP(PlanDynamics, WarmStart, VarianceObjective, ParamLayout):
         L += W["slack"] * ca.sum1(v[2 : 2 + K])
         # (M4b) thrusts the execution level cannot hold (between the propeller-on threshold and
         # its transit thrust floor): without this the plan "creeps" quietly at a few newtons
-        w_T = self.params.fix.w_thrust
+        w_T = self.w_T
         running = sigmoid((T - self.T_on) / w_T)  # ~1 while the propeller runs
         L += W["deadband"] * running * sigmoid((self.T_floor - T) / w_T)
         L += W["running"] * running  # (M4c) propeller time (noise, wear), whatever the thrust
@@ -214,8 +220,13 @@ class OCP(PlanDynamics, WarmStart, VarianceObjective, ParamLayout):
             reach = SOFT_T * softplus((T_tail - t_go) / SOFT_T)  # (T_tail - t_go)+, s
             saved = reach * (tau + t_go)  # fix age-time saved by visiting that AUV, s^2
             LN = W["age"] * (T_tail * ca.sum1(tau) - ca.dot(target, saved))
-        #: terminal stage: (z_N, stage params N, global params) -> L_N
-        self.term_phys = ca.Function("term", [z, sp, gp], [LN], ["z", "sp", "gp"], ["L"])
+        sp0 = ca.SX.sym("sp0", d.n_stage_par)  # stage N - 1's parameters: the AUV's velocity
+        if d.outer:  # (M7s) one AUV: the standing time the plan's end leaves, short of a horizon
+            short = N * dt - self._standing_time(z, sp0, sp, dt)
+            LN += W["stand"] * W["age"] * SOFT_T * softplus(short / SOFT_T)
+        #: terminal stage: (z_N, stage params N - 1 and N, global params) -> L_N
+        self.term_phys = ca.Function("term", [z, sp0, sp, gp], [LN], ["z", "sp0", "sp", "gp"],
+                                     ["L"])  # fmt: skip
 
         # the solvers see scaled variables w_s = w / s_w and constraints g_s = g / s_g (M8)
         self.s_z, self.s_v, self.s_h = self._scales()
@@ -226,8 +237,9 @@ class OCP(PlanDynamics, WarmStart, VarianceObjective, ParamLayout):
         self.stage = ca.Function("stage_s", [zs, vs, z1s, sp, sp1, gp], [Ls, gs / s_g],
                                  ["z", "v", "z1", "sp", "sp1", "gp"], ["L", "g"])  # fmt: skip
         #: terminal cost in scaled variables
-        self.term = ca.Function("term_s", [zs, sp, gp], [self.term_phys(self.s_z * zs, sp, gp)],
-                                ["z", "sp", "gp"], ["L"])  # fmt: skip
+        self.term = ca.Function("term_s", [zs, sp0, sp, gp],
+                                [self.term_phys(self.s_z * zs, sp0, sp, gp)],
+                                ["z", "sp0", "sp", "gp"], ["L"])  # fmt: skip
         self.s_w = np.concatenate([np.tile(np.r_[self.s_z, self.s_v], N), self.s_z])
 
         # the whole NLP: MX over the stage functions mapped along the horizon (compact code)
@@ -295,13 +307,28 @@ class OCP(PlanDynamics, WarmStart, VarianceObjective, ParamLayout):
         o += (N + 1) * d.n_stage_par
         gpx = ca.vertcat(p[nx : nx + 2], p[o : o + 3 * K + NCH + NW + d.n_ext])
         args = [Zs, Vs, ca.horzcat(Zs[:, 1:], zN), SP[:, :N], SP[:, 1:], ca.repmat(gpx, 1, N)]
-        return args, zN, [SP[:, N], gpx]
+        return args, zN, [SP[:, N - 1], SP[:, N], gpx]
 
     def _dist(self, z, sp):
         """Smooth horizontal ranges from the ASV to each AUV at one stage (m)."""
         K = self.dims.n_auv
         return [ca.sqrt((z[0] - sp[2 * i]) ** 2 + (z[1] - sp[2 * i + 1]) ** 2 + D_EPS**2)
                 for i in range(K)]  # fmt: skip
+
+    def _standing_time(self, z, sp0, sp, dt):
+        """How long (s) the ASV could stand still at ``z``'s position before the AUV, moving on
+        at its velocity over the last stage (``sp0`` -> ``sp``, ``dt`` s), reaches the outer
+        bound ``r_hi`` (eq. M7s; one AUV): the root ``t >= 0`` of ``|d - v t| = r_hi``, ``d``
+        the ASV's offset from the AUV, in the form ``room / (sqrt((d.v)^2 + |v|^2 room) -
+        d.v)`` with ``room = r_hi^2 - |d|^2`` (no ``1 / |v|^2``: a still AUV gives a very long
+        time). ``room`` enters as a softplus (``STAND_ROOM`` m^2), so the time is positive and
+        smooth everywhere and about 0 outside the bound (where the donut's slack acts)."""
+        d = z[0:2] - sp[0:2]
+        v = (sp[0:2] - sp0[0:2]) / dt
+        r = sp[3]  # the single AUV's r_hi (layout: pa (2), r_lo, r_hi, depth)
+        room = STAND_ROOM * softplus((r**2 - ca.sumsqr(d)) / STAND_ROOM)
+        dv = ca.dot(d, v)
+        return room / (ca.sqrt(dv**2 + ca.sumsqr(v) * room + STAND_EPS**2) - dv)  # (M7s)
 
     def _t_go(self, z, sp, gp):
         """Time to reach each AUV's target circle from the stage's position (s, smooth)."""

@@ -52,7 +52,7 @@ class OptiReference:
             if k > 0:
                 self._bounds(opti, Z[k], lb[base : base + nx], ub[base : base + nx])
         self._bounds(opti, Z[N], lb[N * d.nb :], ub[N * d.nb :])
-        J += ocp.term(Z[N], SP[:, N], gp)
+        J += ocp.term(Z[N], SP[:, N - 1], SP[:, N], gp)
         opti.minimize(J)
         opts = {"print_time": False, "ipopt.print_level": 0, "ipopt.sb": "yes"}
         opti.solver("ipopt", opts | (ipopt_options or {}))

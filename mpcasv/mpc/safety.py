@@ -13,9 +13,13 @@ import time
 import numpy as np
 
 from mpcasv.interface import Command, Mode, Observation
+from mpcasv.mpc.plan_check import commands_standby
 from mpcasv.mpc.rescue import command_guess, escape_guess
 from mpcasv.mpc.solvers import SolveResult
 from mpcasv.mpc.worldview import ranges
+
+#: a plan's range-bound slack (m) above which a plan standing by now counts as stuck
+STUCK_SLACK = 1.0
 
 
 class Safety:
@@ -34,7 +38,8 @@ class Safety:
             return None
         Z, _ = ocp.split(res.w)
         if self.t_explore is not None and res.ok and np.max(Z[1:, 6]) >= ocp.T_on:
-            return None  # the plan moves already
+            if not self._stuck(res):
+                return None  # the plan moves already
         self.t_explore = obs.t
         par = ocp.unpack_par(p)
         j = self.target
@@ -49,6 +54,20 @@ class Safety:
         self.explored += 1
         limit = P.solver.explore_iter  # None: the warm solve's max_iter
         return self._solve(p, ocp.guided_rollout(p, j, self._capped(P.speed)), max_iter=limit)
+
+    def _stuck(self, res: SolveResult) -> bool:
+        """Whether the plan stands by now (the STANDBY rule) and leaves the range bounds
+        later (a slack above ``STUCK_SLACK``): a solve stuck at rest that puts its start off,
+        step after step, while the AUV leaves (dune-otter on Case 3: it stood by from 190 m to
+        260 m with r_outer at 200 m, its plan's cost growing to 1e5). Such a plan is explored
+        like one that stands still; a plan that stands by and moves later inside the bounds
+        (the usual standby) is not: exploring those too was measured on the paper suite
+        (more propeller time, no better fix age; docs/mpc.md, "Controller step")."""
+        ocp, P = self.ocp, self.params
+        Z, V = ocp.split(res.w)
+        K = ocp.dims.n_auv
+        return (commands_standby(Z[:, 6], ocp.dt, P.standby_time, ocp.T_on)
+                and float(np.max(V[:, 2 : 2 + K])) > STUCK_SLACK)
 
     @staticmethod
     def _cheaper(res: SolveResult, alt: SolveResult | None) -> SolveResult:
@@ -79,9 +98,14 @@ class Safety:
         alt = self._explore(obs, p_s, res)
         if alt is None:
             return
-        adopt = alt.ok and alt.f < res.f
-        if adopt:  # the next step starts from the exploration's plan
-            self.w_prev, self.lam_prev = alt.w, (alt.lam_x, alt.lam_g)
+        # the next step starts from the exploration's plan if it is cheaper; an unconverged
+        # one too (at its iteration limit, finite): only a start, as any unconverged iterate
+        # (``warm_from_failures``), and the way out of a plan stuck at rest that costs more
+        # every step while each exploration stops at its limit far cheaper (docs/mpc.md)
+        adopt = alt.f < res.f and (alt.ok or bool(np.all(np.isfinite(alt.w))))
+        if adopt:
+            self.w_prev = alt.w
+            self.lam_prev = (alt.lam_x, alt.lam_g) if alt.ok else None
         self.explore_adopted += int(adopt)
         # longer than a step's budget: its step counts as over budget (never a decision)
         over = self._over_budget()
