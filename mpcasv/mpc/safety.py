@@ -59,7 +59,7 @@ class Safety:
         """Whether the plan stands by now (the STANDBY rule) and leaves the range bounds
         later (a slack above ``STUCK_SLACK``): a solve stuck at rest that puts its start off,
         step after step, while the AUV leaves (dune-otter on Case 3: it stood by from 190 m to
-        260 m with r_outer at 200 m, its plan's cost growing to 1e5). Such a plan is explored
+        260 m with r_outer at 200 m, its plan's cost growing to 2.5e5). Such a plan is explored
         like one that stands still; a plan that stands by and moves later inside the bounds
         (the usual standby) is not: exploring those too was measured on the paper suite
         (more propeller time, no better fix age; docs/mpc.md, "Controller step")."""
