@@ -88,7 +88,7 @@ def test_the_fix_rate_model_uses_the_scenarios_acoustic_channel(scenarios_dir):
     par = ctrl.ocp.unpack_par(ctrl.parameters(obs))
     np.testing.assert_allclose(par["channel"], channel_vector(sc.acoustics))
     assert par["channel"][0] == pytest.approx(1 / 30.0)
-    # the smooth thrust factor of eq. M3 at zero thrust: sig(T_quiet / w_T) (0.98)
+    # the smooth thrust factor of eq. M3 at zero thrust: sig(T_quiet / w_T) (0.97)
     quiet = float(sigmoid(ctrl.ocp.T_quiet / ctrl.ocp.w_T))
     rate = ctrl._rates(obs)[0]
     assert rate == pytest.approx(sc.acoustics.p_good / 30.0 * quiet, rel=1e-3)

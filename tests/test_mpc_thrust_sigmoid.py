@@ -6,7 +6,7 @@ presets' width is 4 N: 29 % of Gretha's 14-N threshold, but until session 11 als
 dune-otter's 1.2 N, whose plan then counted only 57 % of the fixes with the propeller off,
 28 % while running at a fifth of full thrust, and charged the deadband cost while stopped; on
 Case 3 it hovered at r_outer and had no reliable fix in 1500 s. The width is now at most
-``T_on / 3`` (Gretha's 4 N unchanged).
+``T_on / 3`` (Gretha's 4 N unchanged; the shipped Otter's 3.99 N).
 """
 
 from __future__ import annotations
@@ -33,8 +33,7 @@ def test_a_stopped_propeller_is_quiet_and_a_running_one_loud_on_any_boat(vessel)
 
 
 def test_the_presets_width_is_kept_where_it_fits():
-    """Gretha's plan keeps the presets' 4 N (her libraries and runs are unchanged); a width
-    set below the cap is used as it is."""
+    """Gretha's plan keeps the presets' 4 N; a width set below the cap is used as it is."""
     assert _ocp("gretha").w_T == 4.0
     assert _ocp("dune-otter", {"fix.w_thrust": 0.2}).w_T == 0.2
     dune = _ocp("dune-otter")

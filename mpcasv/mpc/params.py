@@ -65,7 +65,8 @@ class FixRateParams:
         propeller-on threshold.
     w_thrust : float
         Width of the plan's thrust sigmoids (N: quiet M3, deadband M4b, running M4c), at most
-        a third of the execution level's propeller-on threshold ``T_on``
+        a third of the execution level's propeller-on threshold ``T_on`` (or of ``T_quiet``
+        if lower)
         (:data:`~mpcasv.mpc.smooth.W_T_OF_T_ON`), so that a stopped propeller counts as
         quiet (>= 95 %) on any boat. The presets' 4 N is Gretha's (0.29 of her 14-N
         threshold); uncapped, it was 3.4 times dune-otter's 1.2 N: its plan counted 57 % of

@@ -148,8 +148,9 @@ class OCP(PlanDynamics, WarmStart, VarianceObjective, ParamLayout):
         self.T_floor = ep.thrust_floor * vp.T_max  # its least thrust in transit (N)
         self.T_quiet = params.fix.T_quiet if params.fix.T_quiet is not None else self.T_on
         #: width (N) of the thrust sigmoids of M3, M4b, M4c: the preset's, at most a third of
-        #: the propeller-on threshold (a stopped propeller >= 95 % quiet on any boat, M3)
-        self.w_T = min(params.fix.w_thrust, self.T_on / W_T_OF_T_ON)
+        #: the lower of the propeller-on and quiet thresholds (a stopped propeller >= 95 %
+        #: quiet and not running on any boat, M3)
+        self.w_T = min(params.fix.w_thrust, min(self.T_on, self.T_quiet) / W_T_OF_T_ON)
         self.dT_max = vp.T_max / params.T_ramp
         steering = hz.steering
         if steering == "auto":  # an open-loop plan cannot hold a course-unstable hull

@@ -56,8 +56,9 @@ class Safety:
         return self._solve(p, ocp.guided_rollout(p, j, self._capped(P.speed)), max_iter=limit)
 
     def _stuck(self, res: SolveResult) -> bool:
-        """Whether the plan stands by now (the STANDBY rule) and leaves the range bounds
-        later (a slack above ``STUCK_SLACK``): a solve stuck at rest that puts its start off,
+        """Whether the plan stands by now (the STANDBY rule) and is outside the range bounds
+        now or later (a slack above ``STUCK_SLACK``, stage 0 included: standing by outside
+        the bounds is stuck too): a solve stuck at rest that puts its start off,
         step after step, while the AUV leaves (dune-otter on Case 3: it stood by from 190 m to
         260 m with r_outer at 200 m, its plan's cost growing to 2.5e5). Such a plan is explored
         like one that stands still; a plan that stands by and moves later inside the bounds

@@ -9,7 +9,8 @@ import numpy as np
 SOFTPLUS_M = 5.0  # smoothing length of the time-to-go softplus (m)
 SOFT_T = 5.0  # smoothing of (T_tail - t_go)+ (s)
 D_EPS = 0.1  # smoothing of the range sqrt (m)
-#: the thrust sigmoids' width (M3, M4b, M4c) is at most the propeller-on threshold over this:
+#: the thrust sigmoids' width (M3, M4b, M4c) is at most the lower of the propeller-on and quiet
+#: thresholds over this:
 #: a stopped propeller then counts as >= 95 % quiet (sig(3)) on any boat
 W_T_OF_T_ON = 3.0
 
