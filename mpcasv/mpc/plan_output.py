@@ -9,6 +9,7 @@ import math
 
 import numpy as np
 
+from mpcasv.control.execution import wrap
 from mpcasv.interface import Command, Mode, Observation, PlannedTrajectory, Reason
 from mpcasv.mpc.plan_check import PLAN_CHECK_S, commands_standby, planned_standby
 from mpcasv.mpc.problem import NXV
@@ -77,7 +78,7 @@ class PlanOutput:
         ocp = self.ocp
         Kp = ocp.pd_gains(obs.asv.u)[0]
         e_max = 3 * ocp.vessel.delta_max / max(Kp, 1e-6)
-        e = math.atan2(math.sin(psi_ref - obs.asv.psi), math.cos(psi_ref - obs.asv.psi))
+        e = float(wrap(psi_ref - obs.asv.psi))
         return obs.asv.psi + float(np.clip(e, -e_max, e_max))
 
     def _log_plan(self, t: float) -> None:

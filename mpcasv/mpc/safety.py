@@ -36,9 +36,9 @@ class Safety:
             return None
         if self.t_explore is not None and obs.t - self.t_explore < P.explore_every - 1e-9:
             return None
-        Z, _ = ocp.split(res.w)
+        Z, V = ocp.split(res.w)
         if self.t_explore is not None and res.ok and np.max(Z[1:, 6]) >= ocp.T_on:
-            if not self._stuck(res):
+            if not self._stuck(Z, V):
                 return None  # the plan moves already
         self.t_explore = obs.t
         par = ocp.unpack_par(p)
@@ -55,17 +55,17 @@ class Safety:
         limit = P.solver.explore_iter  # None: the warm solve's max_iter
         return self._solve(p, ocp.guided_rollout(p, j, self._capped(P.speed)), max_iter=limit)
 
-    def _stuck(self, res: SolveResult) -> bool:
-        """Whether the plan stands by now (the STANDBY rule) and is outside the range bounds
-        now or later (a slack above ``STUCK_SLACK``, stage 0 included: standing by outside
-        the bounds is stuck too): a solve stuck at rest that puts its start off,
-        step after step, while the AUV leaves (dune-otter on Case 3: it stood by from 190 m to
-        260 m with r_outer at 200 m, its plan's cost growing to 2.5e5). Such a plan is explored
-        like one that stands still; a plan that stands by and moves later inside the bounds
-        (the usual standby) is not: exploring those too was measured on the paper suite
-        (more propeller time, no better fix age; docs/mpc.md, "Controller step")."""
+    def _stuck(self, Z: np.ndarray, V: np.ndarray) -> bool:
+        """Whether the plan (``Z``, ``V``: :meth:`OCP.split`) stands by now (the STANDBY rule)
+        and is outside the range bounds now or later (a slack above ``STUCK_SLACK``, stage 0
+        included: standing by outside the bounds is stuck too): a solve stuck at rest that
+        puts its start off, step after step, while the AUV leaves (dune-otter on Case 3: it
+        stood by from 190 m to 260 m with r_outer at 200 m, its plan's cost growing to
+        2.5e5). Such a plan is explored like one that stands still; a plan that stands by and
+        moves later inside the bounds (the usual standby) is not: exploring those too was
+        measured on the paper suite (more propeller time, no better fix age; docs/mpc.md,
+        "Controller step")."""
         ocp, P = self.ocp, self.params
-        Z, V = ocp.split(res.w)
         K = ocp.dims.n_auv
         return (commands_standby(Z[:, 6], ocp.dt, P.standby_time, ocp.T_on)
                 and float(np.max(V[:, 2 : 2 + K])) > STUCK_SLACK)
