@@ -68,7 +68,8 @@ def test_a_capped_plan_stays_below_the_cap_and_the_uncapped_one_does_not(scenari
     """Case 3 from rest for 90 s: capped at 1 m/s every plan's surge speed stays within TOL
     of the cap once the thrust has come down, every command is at or below the cap, and the
     boat too; without the cap the plans go faster (measured: 2.13 m/s at stage 1, the boat
-    2.50 m/s; capped: 1.20 m/s at stage 1, 0.94 m/s after the thrust is down)."""
+    2.50 m/s; capped: 1.20 m/s at stage 1, 0.94 m/s after the thrust is down; since session
+    12, with the standing-time term in the preset, the free plans top at 1.94 m/s)."""
     ts_free, _, free = case3(scenarios_dir, 90.0)
     ts, ctrl, capped = case3(scenarios_dir, 90.0, cap=U_CAP)
     ocp = ctrl.ocp
@@ -78,7 +79,7 @@ def test_a_capped_plan_stays_below_the_cap_and_the_uncapped_one_does_not(scenari
     def top(steps):
         return max(plan.extra["u"][1:].max() for t, plan, *_ in steps if plan is not None)
 
-    assert top(free) > 2.0
+    assert top(free) > 1.8  # the cap binds: well below the free plans' speed
     assert top(capped) <= U_CAP + 0.25  # even while the speed loop's thrust comes down
     assert ts_free["u"].max() > 2.0
     u = _planned_u(capped, ocp, T_cap)

@@ -29,21 +29,42 @@ def _sp(N_, E_, r_hi=195.0):
     return np.array([N_, E_, 50.0, r_hi, 0.0])  # pa (2), r_lo, r_hi, depth
 
 
-@pytest.mark.parametrize(("auv_from", "expected"), [
-    ((-105.4, 0.0), 295.0 / 1.35),  # coming towards the ASV: passes it, leaves 195 m beyond
-    ((-94.6, 0.0), 95.0 / 1.35),  # going away from 100 m
-    ((-100.0, 20.0), None),  # across the line: |(100, -E(t))| = 195
+@pytest.mark.parametrize(("auv_from", "auv_to", "expected"), [
+    # coming towards the ASV, passing 60 m beside it: leaves 195 m beyond
+    ((-105.4, 60.0), (-100.0, 60.0), (100.0 + np.sqrt(195.0**2 - 60.0**2)) / 1.35),
+    ((-94.6, 0.0), (-100.0, 0.0), 95.0 / 1.35),  # going away from 100 m
+    ((-100.0, 20.0), (-100.0, 0.0), np.sqrt(195.0**2 - 100.0**2) / 5.0),  # across, 5 m/s
 ])
-def test_the_standing_time_is_when_the_auv_reaches_the_outer_bound(auv_from, expected):
+def test_the_standing_time_is_when_the_auv_reaches_the_outer_bound(auv_from, auv_to, expected):
     ocp = _ocp()
     z = ca.SX.sym("z", ocp.dims.nx)
     s0, s1 = ca.SX.sym("s0", 5), ca.SX.sym("s1", 5)
     f = ca.Function("t_s", [z, s0, s1], [ocp._standing_time(z, s0, s1, 4.0)])
-    v = (np.array([-100.0, 0.0]) - np.array(auv_from)) / 4.0
-    if expected is None:  # 1.35 m/s... here 5 m/s west: E(t) = 5 t, 100^2 + (5 t)^2 = 195^2
-        expected = float(np.sqrt(195.0**2 - 100.0**2) / np.hypot(*v))
-    t = float(f(np.zeros(ocp.dims.nx), _sp(*auv_from), _sp(-100.0, 0.0)))
+    t = float(f(np.zeros(ocp.dims.nx), _sp(*auv_from), _sp(*auv_to)))
     assert t == pytest.approx(expected, rel=1e-3)
+
+
+@pytest.mark.parametrize("offset", [0.0, 20.0, 40.0])
+def test_an_auv_whose_path_crosses_the_collision_domain_ends_the_standing_at_its_entry(offset):
+    """Coming towards the ASV at 1.35 m/s from 150 m, passing ``offset`` m to the side: with a
+    miss distance below ``r_lo`` (50 m) the ASV can stand only until the AUV enters the
+    collision domain, not until it leaves 195 m beyond (the falsified pursuer, session 12)."""
+    ocp = _ocp()
+    z = ca.SX.sym("z", ocp.dims.nx)
+    s0, s1 = ca.SX.sym("s0", 5), ca.SX.sym("s1", 5)
+    f = ca.Function("t_s", [z, s0, s1], [ocp._standing_time(z, s0, s1, 4.0)])
+    t = float(f(np.zeros(ocp.dims.nx), _sp(-155.4, offset), _sp(-150.0, offset)))
+    assert t == pytest.approx((150.0 - np.sqrt(50.0**2 - offset**2)) / 1.35, rel=1e-3)
+
+
+@pytest.mark.parametrize("offset", [60.0, 120.0])
+def test_an_auv_passing_outside_the_collision_domain_leaves_the_whole_pass(offset):
+    ocp = _ocp()
+    z = ca.SX.sym("z", ocp.dims.nx)
+    s0, s1 = ca.SX.sym("s0", 5), ca.SX.sym("s1", 5)
+    f = ca.Function("t_s", [z, s0, s1], [ocp._standing_time(z, s0, s1, 4.0)])
+    t = float(f(np.zeros(ocp.dims.nx), _sp(-155.4, offset), _sp(-150.0, offset)))
+    assert t == pytest.approx((150.0 + np.sqrt(195.0**2 - offset**2)) / 1.35, rel=1e-3)
 
 
 def test_a_still_auv_leaves_a_long_time_and_one_beyond_the_bound_none():
@@ -58,19 +79,46 @@ def test_a_still_auv_leaves_a_long_time_and_one_beyond_the_bound_none():
 
 def test_the_terminal_cost_prefers_ending_ahead_of_the_auv_only_with_stand():
     """The same distance (150 m) and fix age: ending ahead of the AUV (it comes towards the
-    ASV: 256 s to stand) costs less than ending behind it (33 s) with ``stand`` > 0, the same
-    without."""
+    ASV and passes 60 m beside it: 239 s to stand) costs less than ending behind it (33 s)
+    with ``stand`` > 0, the same without; ending in its path (it enters the 50-m collision
+    domain after 74 s) costs more than beside it."""
     costs = {}
     for stand in (0.0, 20.0):
         ocp = _ocp(stand)
         gp = np.r_[0.0, 0.0, 80.0, 70.0, 1.0, np.zeros(6), ocp.weight_vector()]
         x = np.zeros(ocp.dims.nx)
         x[3], x[8] = 0.0, 30.0  # at rest, fix age 30 s
-        s0 = np.r_[ocp.s_z]
-        zs = x / s0  # the terminal function takes scaled states
-        ahead = float(ocp.term(zs, _sp(-155.4, 0.0), _sp(-150.0, 0.0), gp))
+        zs = x / ocp.s_z  # the terminal function takes scaled states
+        N_a = -np.sqrt(150.0**2 - 60.0**2)
+        ahead = float(ocp.term(zs, _sp(N_a - 5.4, 60.0), _sp(N_a, 60.0), gp))
         behind = float(ocp.term(zs, _sp(144.6, 0.0), _sp(150.0, 0.0), gp))
-        costs[stand] = (ahead, behind)
+        in_path = float(ocp.term(zs, _sp(-155.4, 0.0), _sp(-150.0, 0.0), gp))
+        costs[stand] = (ahead, behind, in_path)
     assert costs[0.0][0] == pytest.approx(costs[0.0][1], rel=1e-9)
+    assert costs[0.0][2] == pytest.approx(costs[0.0][1], rel=1e-9)
     assert costs[20.0][0] < costs[20.0][1] - 1e-3
-    assert costs[20.0][0] == pytest.approx(costs[0.0][0], abs=1e-6)  # 256 s: nothing short
+    assert costs[20.0][0] < costs[20.0][2] - 1e-3
+    assert costs[20.0][0] == pytest.approx(costs[0.0][0], abs=1e-6)  # 239 s: nothing short
+
+
+@pytest.mark.parametrize(("auv_N", "stand_off"), [
+    (60.0, True), (-60.0, True), (64.0, True), (68.0, False), (150.0, False),
+])
+def test_the_standing_time_is_off_while_an_auv_threatens_the_asv(auv_N, stand_off):
+    """M7s extrapolates the AUV in a straight line past the horizon; a pursuer re-aims at the
+    ASV, so while an AUV comes within its anti-collision radius plus 20 m of the ASV held
+    where it is (at some stage), the step's ``stand`` weight is 0 (runtime, no recompile).
+    A still AUV at 20 m depth (r_inner 45.8 m): the threshold is 65.8 m."""
+    from mpcasv.controllers import make_controller
+    from mpcasv.interface import ASVState, AUVEstimate, Observation
+    from mpcasv.mpc.layout import WEIGHT_NAMES
+
+    ctrl = make_controller("mpc-single", 1, "mpc-single", boat=Boat.load("gretha"))
+    ctrl.reset(1)
+    assert ctrl.params.weights.stand == 20.0  # the preset's
+    obs = Observation(0.0, ASVState(0.0, 0.0, 0.0), False, (AUVEstimate(auv_N, 0.0, 20.0),))
+    r_inner = float(ctrl.domain.inner(20.0))
+    assert r_inner + 20.0 == pytest.approx(65.8, abs=0.05)
+    stand = ctrl.ocp.unpack_par(ctrl.parameters(obs))["weights"][WEIGHT_NAMES.index("stand")]
+    assert ctrl.stand_off is stand_off
+    assert stand == (0.0 if stand_off else 20.0)

@@ -209,6 +209,7 @@ class MPCController(WorldView, Safety, PlanOutput, Targeting, SpeedCap):
         #: the current the plan assumes (V_N, V_E), m/s (``params.current``; set each step)
         self.current = np.zeros(2)
         self.tau = np.zeros(n_auv)  # expected fix ages (s)
+        self.stand_off = False  # the standing-time term off this step (worldview, M7s)
         self.t_prev: float | None = None
         self.w_prev: np.ndarray | None = None
         self.lam_prev: tuple | None = None
@@ -358,6 +359,7 @@ class MPCController(WorldView, Safety, PlanOutput, Targeting, SpeedCap):
                        "mpc_plan_t": math.nan}  # fmt: skip
         self._diag |= {f"mpc_plan_{q}{h}": math.nan for h in PLAN_CHECK_S for q in "NET"}
         self._diag["mpc_target"] = self.target
+        self._diag["mpc_stand_off"] = int(self.stand_off)  # M7s off: an AUV threatens (M7s)
         c_est = self.observer.current
         self._diag |= {"mpc_cur_N": float(self.current[0]), "mpc_cur_E": float(self.current[1]),
                        "mpc_est_cur_N": float(c_est[0]), "mpc_est_cur_E": float(c_est[1])}

@@ -132,9 +132,12 @@ class WeightParams:
     stand : float
         One AUV (docs/mpc.md eq. M7s): seconds of fix age, per ``tau_ref``, for each second
         by which the ASV, standing still where the plan ends, could stand less than one
-        horizon before the AUV (constant velocity) reaches ``r_outer``. Without it (0) the
-        terminal cost sees the fix age where the plan ends but not that the ASV must leave
-        soon after: each plan moved first and stood by last, and the next plan did the same.
+        horizon before the AUV (constant velocity) reaches ``r_outer`` or, if its path
+        crosses it, the collision domain. Without it (0, the default here; 20 in the
+        single-AUV presets since session 12) the terminal cost sees the fix age where the
+        plan ends but not that the ASV must leave soon after: each plan moved first and
+        stood by last, and the next plan did the same. Set to 0 for a step while an AUV
+        threatens the ASV held where it is (a pursuer re-aims at the ASV).
     """
 
     age: NonNeg = 1.0

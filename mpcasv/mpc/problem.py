@@ -54,8 +54,9 @@ from mpcasv.mpc.smooth import D_EPS, SOFT_T, SOFTPLUS_M, W_T_OF_T_ON, sigmoid, s
 from mpcasv.mpc.variance import N_NAV, VarianceObjective, n_ext
 from mpcasv.mpc.warmstart import WarmStart
 
-#: eq. M7s's smoothing: of the square root (m^2/s) and of the room inside the bound (m^2)
-STAND_EPS, STAND_ROOM = 1.0, 100.0
+#: eq. M7s's smoothing: of the square root (m^2/s), of the room inside the bound (m^2), of
+#: the sign of the approach d.v (m^2/s) and of the AUV's squared speed (m^2/s^2)
+STAND_EPS, STAND_ROOM, STAND_DV, STAND_V2 = 1.0, 100.0, 10.0, 1e-4
 
 
 @dataclass(frozen=True)
@@ -318,18 +319,41 @@ class OCP(PlanDynamics, WarmStart, VarianceObjective, ParamLayout):
 
     def _standing_time(self, z, sp0, sp, dt):
         """How long (s) the ASV could stand still at ``z``'s position before the AUV, moving on
-        at its velocity over the last stage (``sp0`` -> ``sp``, ``dt`` s), reaches the outer
-        bound ``r_hi`` (eq. M7s; one AUV): the root ``t >= 0`` of ``|d - v t| = r_hi``, ``d``
-        the ASV's offset from the AUV, in the form ``room / (sqrt((d.v)^2 + |v|^2 room) -
-        d.v)`` with ``room = r_hi^2 - |d|^2`` (no ``1 / |v|^2``: a still AUV gives a very long
-        time). ``room`` enters as a softplus (``STAND_ROOM`` m^2), so the time is positive and
-        smooth everywhere and about 0 outside the bound (where the donut's slack acts)."""
+        at its velocity over the last stage (``sp0`` -> ``sp``, ``dt`` s), leaves the donut
+        (eq. M7s; one AUV): it reaches the outer bound ``r_hi`` (the root ``t >= 0`` of
+        ``|d - v t| = r_hi``, ``d`` the ASV's offset from the AUV, in the form
+        ``room / (sqrt((d.v)^2 + |v|^2 room) - d.v)`` with ``room = r_hi^2 - |d|^2``: no
+        ``1 / |v|^2``, so a still AUV gives a very long time) or, first, if its path passes
+        within the inner bound ``r_lo``, it enters the collision domain (the first root of
+        ``|d - v t| = r_lo``, :meth:`_entry_time`). ``room`` enters as a softplus
+        (``STAND_ROOM`` m^2), so the time is positive and smooth everywhere and about 0 outside
+        the bound (where the donut's slack acts)."""
         d = z[0:2] - sp[0:2]
         v = (sp[0:2] - sp0[0:2]) / dt
-        r = sp[3]  # the single AUV's r_hi (layout: pa (2), r_lo, r_hi, depth)
-        room = STAND_ROOM * softplus((r**2 - ca.sumsqr(d)) / STAND_ROOM)
+        r_lo, r_hi = sp[2], sp[3]  # the single AUV's bounds (layout: pa (2), r_lo, r_hi, depth)
+        room = STAND_ROOM * softplus((r_hi**2 - ca.sumsqr(d)) / STAND_ROOM)
         dv = ca.dot(d, v)
-        return room / (ca.sqrt(dv**2 + ca.sumsqr(v) * room + STAND_EPS**2) - dv)  # (M7s)
+        t_out = room / (ca.sqrt(dv**2 + ca.sumsqr(v) * room + STAND_EPS**2) - dv)  # (M7s)
+        t_in, enters = self._entry_time(d, v, r_lo)
+        return t_out - enters * SOFT_T * softplus((t_out - t_in) / SOFT_T)  # ~min(t_out, t_in)
+
+    @staticmethod
+    def _entry_time(d, v, r_lo):
+        """When (s) an AUV at offset ``-d`` (m) from the ASV, moving at ``v`` (m/s), enters the
+        inner bound ``r_lo`` (m) around a still ASV, and a smooth indicator (0..1) that its
+        path does (approaching, ``d.v > 0``, with a miss distance below ``r_lo``; eq. M7s):
+        ``t_in = (|d|^2 - r_lo^2) / (d.v + sqrt(disc))``, ``disc = (d.v)^2 - |v|^2 (|d|^2 -
+        r_lo^2)``. The squares are softplus-smoothed (``STAND_ROOM`` m^2), the sign of ``d.v``
+        over ``STAND_DV`` m^2/s."""
+        dv, vv, dd = ca.dot(d, v), ca.sumsqr(v), ca.sumsqr(d)
+        outside = dd - r_lo**2
+        disc = dv**2 - vv * outside
+        miss = dv**2 / (vv + STAND_V2) - outside  # r_lo^2 - miss distance^2, m^2
+        enters = sigmoid(miss / STAND_ROOM) * sigmoid(dv / STAND_DV)
+        dv_pos = STAND_DV * softplus(dv / STAND_DV)
+        root = ca.sqrt(STAND_ROOM * softplus(disc / STAND_ROOM) + STAND_EPS**2)
+        t_in = STAND_ROOM * softplus(outside / STAND_ROOM) / (dv_pos + root)
+        return t_in, enters
 
     def _t_go(self, z, sp, gp):
         """Time to reach each AUV's target circle from the stage's position (s, smooth)."""

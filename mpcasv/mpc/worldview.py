@@ -13,8 +13,12 @@ import numpy as np
 from mpcasv.estimation.current import measurement
 from mpcasv.hybrid.avoidance import estimate_shape
 from mpcasv.interface import Observation
+from mpcasv.mpc.layout import WEIGHT_NAMES
 from mpcasv.mpc.order import meet_time
+from mpcasv.mpc.rescue import threats
 from mpcasv.mpc.variance import N_TAIL, fix_gain
+
+_STAND = WEIGHT_NAMES.index("stand")
 
 R_HI_NONE = 1.0e5  # "no outer bound" (m)
 TAU_UNKNOWN = 600.0  # fix age used for an AUV never fixed (s)
@@ -206,7 +210,20 @@ class WorldView:
                                       U_go=self.U_go)  # fmt: skip
         p = self.ocp.pack(self._x0(obs), self.tau, self.current, pa, r_lo + m, r_hi - m,
                           depth, d_fix, r_t, self.target, self.channel, ext)  # fmt: skip
+        self._stand_off_under_threat(p)
         return self._cap_parameters(p)  # a speed cap's transit speed (mpc/speedcap.py)
+
+    def _stand_off_under_threat(self, p: np.ndarray) -> None:
+        """``p`` without the standing-time term (M7s, ``weights.stand`` set to 0, in place)
+        while an AUV threatens the ASV held where it is (:func:`~mpcasv.mpc.rescue.threats`:
+        within its anti-collision radius plus 20 m at some stage). M7s extrapolates the AUV
+        in a straight line past the horizon; an AUV that closes in on the ASV may be turning
+        towards it (a pursuer re-aims), and no place is then one to stand at (docs/mpc.md,
+        M7s)."""
+        W = self.ocp.unpack_par(p)["weights"]
+        self.stand_off = bool(W[_STAND] > 0 and threats(self.ocp, p, self.params.margin).any())
+        if self.stand_off:
+            W[_STAND] = 0.0
 
     def _tail(self, obs: Observation, t_N: float, asv_N: np.ndarray, r_t: np.ndarray):
         """The variance objective's view past the horizon (M7c; :mod:`mpcasv.mpc.variance`):
