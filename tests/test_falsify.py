@@ -217,8 +217,19 @@ PINNED: dict[str, tuple[float, float]] = {
     # the worst case of the printed eq. 8 (-46.28 m there), run with S1/S2
     "falsified-crossing-multi-printed-eq8": (-8.830, 28),  # [-21.073, 42]; search -20.622 m
     "falsified-pursuer-single-hybrid-single-1": (-40.178, 76),  # unchanged; search -29.681 m
-    # no longer a counterexample (search: -25.858 m, 28 s)
-    "falsified-pursuer-single-mpc-single-1": (4.987, 0),  # {0.443, 0} [1.553, 0]
+    # no longer a counterexample (search: -25.858 m, 28 s); session 12: the standing-time
+    # term (M7s, off while an AUV threatens the ASV) in the preset, 4.987 m without it
+    "falsified-pursuer-single-mpc-single-1": (3.091, 0),  # {0.443, 0} [1.553, 0]
+}
+#: the same run measured on another CPU: the mpc-multi case is chaotic and its last bits
+#: depend on the CPU (the solver library is compiled with -march=native, and numpy picks its
+#: SIMD kernels at run time: on an AVX-512 CPU, AMD family 26, session 12, it meets no fatrop
+#: hang and ends at -16.072 m, 97 s; with numpy's AVX-512 kernels disabled -16.051 m, 98 s).
+#: Each value is a measurement; a change of behaviour matches neither (docs/safety.md).
+#: The other pins here were the same on both CPUs (mpc-single's at its session-11 value,
+#: 4.987 m; its session-12 value was measured on the AVX-512 CPU only).
+PINNED_OTHER_CPU: dict[str, tuple[float, float]] = {
+    "falsified-crossing-multi-mpc-multi-1": (-16.072, 97),
 }
 
 
@@ -238,9 +249,11 @@ def test_falsified_worst_cases_keep_todays_margin(name):
                            boat=Boat.of_scenario(sc))  # fmt: skip
     result = simulate(sc, ctrl, 0)
     rob = robustness(result.timeseries, len(sc.auv), required_separation(ctrl), 1.0)
-    margin, stay = PINNED[name]
-    assert rob.margin_m == pytest.approx(margin, abs=0.5)
-    assert rob.longest_stay_s == pytest.approx(stay, abs=3.0)
+    measured = [PINNED[name]] + ([PINNED_OTHER_CPU[name]] if name in PINNED_OTHER_CPU else [])
+    got = (rob.margin_m, rob.longest_stay_s)
+    assert any(got[0] == pytest.approx(margin, abs=0.5)
+               and got[1] == pytest.approx(stay, abs=3.0) for margin, stay in measured), (
+        f"margin {got[0]:.3f} m, longest stay {got[1]:.0f} s; measured {measured}")
 
 
 def test_every_committed_worst_case_is_pinned():
