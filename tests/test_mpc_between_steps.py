@@ -166,3 +166,47 @@ def test_a_plan_stuck_at_rest_outside_the_bounds_is_explored(scenarios_dir):
     assert explored(later, outside)
     assert not explored(later, 0.0)  # inside the bounds: the usual standby
     assert not explored([0.0] + [ocp.vessel.T_max] * (n - 1), outside)  # moves now
+
+
+@pytest.mark.parametrize(("ok", "finite", "cheaper", "adopted"), [
+    (True, True, True, True),  # converged and cheaper: its plan and multipliers
+    (False, True, True, True),  # at its iteration limit, finite, cheaper: its plan alone
+    (False, False, True, False),  # a non-finite iterate: never a warm start
+    (True, True, False, False),  # dearer: the step's own plan stays
+])
+def test_which_exploration_warm_starts_the_next_step(scenarios_dir, ok, finite, cheaper,
+                                                     adopted):
+    """``between_steps`` adopts the exploration's plan as the next warm start when it costs
+    less than the plan the step used and is finite, converged or not (an unconverged one
+    without multipliers): the way out of a plan stuck at rest (session 11, docs/mpc.md
+    "Controller step"). Its cost is compared alone, not its dynamics gaps (a known problem,
+    docs/mpc.md)."""
+    from mpcasv.mpc.solvers import SolveResult
+    from mpcasv.sim.world import World
+
+    sc = scenario_with(load_scenario(scenarios_dir / "case3.toml"), duration=2.0)
+    ctrl = make_controller("mpc-single", 1, "mpc-single")
+    ctrl.reset(1)
+    obs = World(sc, 0, None).observation()
+    p = ctrl.parameters(obs)
+    w_step = ctrl.ocp.rollout(p)
+    res = SolveResult(w_step, np.zeros(len(w_step)), np.zeros(3), 100.0, True, "ok", 5, 1.0)
+    w_alt = w_step + 1.0
+    if not finite:
+        w_alt[3] = np.nan
+    lam = (np.ones(len(w_step)), np.ones(3)) if ok else (None, None)
+    alt = SolveResult(w_alt, *lam, 50.0 if cheaper else 150.0, ok,
+                      "ok" if ok else "max_iter", 50, 1.0)  # fmt: skip
+    ctrl.w_prev, ctrl.lam_prev = w_step, (res.lam_x, res.lam_g)
+    ctrl._pending = (obs, p, res)
+    ctrl._explore = lambda *a: alt
+    ctrl.between_steps()
+    assert ctrl.explore_adopted == int(adopted)
+    assert ctrl.diagnostics()["mpc_explore_adopted"] == int(adopted)
+    if adopted:
+        assert ctrl.w_prev is w_alt
+        assert (ctrl.lam_prev is None) == (not ok)
+        if ok:
+            assert ctrl.lam_prev[0] is alt.lam_x
+    else:
+        assert ctrl.w_prev is w_step and ctrl.lam_prev[0] is res.lam_x
