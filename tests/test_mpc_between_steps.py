@@ -135,6 +135,17 @@ def test_the_exploration_has_an_iteration_limit_of_its_own(scenarios_dir):
     pd.testing.assert_series_equal(runs[50]["mpc_iter"], runs[150]["mpc_iter"])
 
 
+def _case3_start(scenarios_dir):
+    """A fresh mpc-single controller, Case 3's first observation and its parameters."""
+    from mpcasv.sim.world import World
+
+    sc = scenario_with(load_scenario(scenarios_dir / "case3.toml"), duration=2.0)
+    ctrl = make_controller("mpc-single", 1, "mpc-single")
+    ctrl.reset(1)
+    obs = World(sc, 0, None).observation()
+    return ctrl, obs, ctrl.parameters(obs)
+
+
 def test_a_plan_stuck_at_rest_outside_the_bounds_is_explored(scenarios_dir):
     """A plan that stands by now (the STANDBY rule), moves later and leaves the range bounds
     meanwhile (a slack above ``STUCK_SLACK``) is explored every ``explore_every`` s, as one
@@ -144,13 +155,8 @@ def test_a_plan_stuck_at_rest_outside_the_bounds_is_explored(scenarios_dir):
     step (dune-otter on Case 3: it stood by from 190 m to 260 m with r_outer at 200 m) kept
     its plan."""
     from mpcasv.mpc.solvers import SolveResult
-    from mpcasv.sim.world import World
 
-    sc = scenario_with(load_scenario(scenarios_dir / "case3.toml"), duration=2.0)
-    ctrl = make_controller("mpc-single", 1, "mpc-single")
-    ctrl.reset(1)
-    obs = World(sc, 0, None).observation()  # the AUV 158 m away: not in the target domain
-    p = ctrl.parameters(obs)
+    ctrl, obs, p = _case3_start(scenarios_dir)  # the AUV 158 m away: not in its target domain
     ocp = ctrl.ocp
     Z, V = ocp.split(ocp.rollout(p))
     n = Z.shape[0]
@@ -182,13 +188,8 @@ def test_which_exploration_warm_starts_the_next_step(scenarios_dir, ok, finite, 
     "Controller step"). Its cost is compared alone, not its dynamics gaps (a known problem,
     docs/mpc.md)."""
     from mpcasv.mpc.solvers import SolveResult
-    from mpcasv.sim.world import World
 
-    sc = scenario_with(load_scenario(scenarios_dir / "case3.toml"), duration=2.0)
-    ctrl = make_controller("mpc-single", 1, "mpc-single")
-    ctrl.reset(1)
-    obs = World(sc, 0, None).observation()
-    p = ctrl.parameters(obs)
+    ctrl, obs, p = _case3_start(scenarios_dir)
     w_step = ctrl.ocp.rollout(p)
     res = SolveResult(w_step, np.zeros(len(w_step)), np.zeros(3), 100.0, True, "ok", 5, 1.0)
     w_alt = w_step + 1.0

@@ -25,6 +25,15 @@ def _ocp(stand: float | None = None) -> OCP:
                boat=Boat.load("gretha"))  # fmt: skip
 
 
+def _t_s():
+    """The OCP and its standing time as a function of (z, stage N - 1 and N parameters),
+    stages 4 s apart."""
+    ocp = _ocp()
+    z = ca.SX.sym("z", ocp.dims.nx)
+    s0, s1 = ca.SX.sym("s0", 5), ca.SX.sym("s1", 5)
+    return ocp, ca.Function("t_s", [z, s0, s1], [ocp._standing_time(z, s0, s1, 4.0)])
+
+
 def _sp(N_, E_, r_hi=195.0):
     return np.array([N_, E_, 50.0, r_hi, 0.0])  # pa (2), r_lo, r_hi, depth
 
@@ -36,10 +45,7 @@ def _sp(N_, E_, r_hi=195.0):
     ((-100.0, 20.0), (-100.0, 0.0), np.sqrt(195.0**2 - 100.0**2) / 5.0),  # across, 5 m/s
 ])
 def test_the_standing_time_is_when_the_auv_reaches_the_outer_bound(auv_from, auv_to, expected):
-    ocp = _ocp()
-    z = ca.SX.sym("z", ocp.dims.nx)
-    s0, s1 = ca.SX.sym("s0", 5), ca.SX.sym("s1", 5)
-    f = ca.Function("t_s", [z, s0, s1], [ocp._standing_time(z, s0, s1, 4.0)])
+    ocp, f = _t_s()
     t = float(f(np.zeros(ocp.dims.nx), _sp(*auv_from), _sp(*auv_to)))
     assert t == pytest.approx(expected, rel=1e-3)
 
@@ -49,29 +55,20 @@ def test_an_auv_whose_path_crosses_the_collision_domain_ends_the_standing_at_its
     """Coming towards the ASV at 1.35 m/s from 150 m, passing ``offset`` m to the side: with a
     miss distance below ``r_lo`` (50 m) the ASV can stand only until the AUV enters the
     collision domain, not until it leaves 195 m beyond (the falsified pursuer, session 12)."""
-    ocp = _ocp()
-    z = ca.SX.sym("z", ocp.dims.nx)
-    s0, s1 = ca.SX.sym("s0", 5), ca.SX.sym("s1", 5)
-    f = ca.Function("t_s", [z, s0, s1], [ocp._standing_time(z, s0, s1, 4.0)])
+    ocp, f = _t_s()
     t = float(f(np.zeros(ocp.dims.nx), _sp(-155.4, offset), _sp(-150.0, offset)))
     assert t == pytest.approx((150.0 - np.sqrt(50.0**2 - offset**2)) / 1.35, rel=1e-3)
 
 
 @pytest.mark.parametrize("offset", [60.0, 120.0])
 def test_an_auv_passing_outside_the_collision_domain_leaves_the_whole_pass(offset):
-    ocp = _ocp()
-    z = ca.SX.sym("z", ocp.dims.nx)
-    s0, s1 = ca.SX.sym("s0", 5), ca.SX.sym("s1", 5)
-    f = ca.Function("t_s", [z, s0, s1], [ocp._standing_time(z, s0, s1, 4.0)])
+    ocp, f = _t_s()
     t = float(f(np.zeros(ocp.dims.nx), _sp(-155.4, offset), _sp(-150.0, offset)))
     assert t == pytest.approx((150.0 + np.sqrt(195.0**2 - offset**2)) / 1.35, rel=1e-3)
 
 
 def test_a_still_auv_leaves_a_long_time_and_one_beyond_the_bound_none():
-    ocp = _ocp()
-    z = ca.SX.sym("z", ocp.dims.nx)
-    s0, s1 = ca.SX.sym("s0", 5), ca.SX.sym("s1", 5)
-    f = ca.Function("t_s", [z, s0, s1], [ocp._standing_time(z, s0, s1, 4.0)])
+    ocp, f = _t_s()
     x = np.zeros(ocp.dims.nx)
     assert float(f(x, _sp(-100.0, 0.0), _sp(-100.0, 0.0))) > 1e4
     assert float(f(x, _sp(-300.0, 0.0), _sp(-294.6, 0.0))) < 1e-3
