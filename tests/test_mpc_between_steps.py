@@ -135,13 +135,14 @@ def test_the_exploration_has_an_iteration_limit_of_its_own(scenarios_dir):
     pd.testing.assert_series_equal(runs[50]["mpc_iter"], runs[150]["mpc_iter"])
 
 
-def _case3_start(scenarios_dir):
-    """A fresh mpc-single controller, Case 3's first observation and its parameters."""
+def _start(scenarios_dir, case="case3", kind="mpc-single"):
+    """A fresh controller (``kind``), the first observation of ``case`` and its parameters."""
     from mpcasv.sim.world import World
 
-    sc = scenario_with(load_scenario(scenarios_dir / "case3.toml"), duration=2.0)
-    ctrl = make_controller("mpc-single", 1, "mpc-single")
-    ctrl.reset(1)
+    sc = scenario_with(load_scenario(scenarios_dir / f"{case}.toml"), duration=2.0)
+    n_auv = len(sc.auv)
+    ctrl = make_controller(kind, n_auv, kind)
+    ctrl.reset(n_auv)
     obs = World(sc, 0, None).observation()
     return ctrl, obs, ctrl.parameters(obs)
 
@@ -156,7 +157,7 @@ def test_a_plan_stuck_at_rest_outside_the_bounds_is_explored(scenarios_dir):
     its plan."""
     from mpcasv.mpc.solvers import SolveResult
 
-    ctrl, obs, p = _case3_start(scenarios_dir)  # the AUV 158 m away: not in its target domain
+    ctrl, obs, p = _start(scenarios_dir)  # the AUV 158 m away: not in its target domain
     ocp = ctrl.ocp
     Z, V = ocp.split(ocp.rollout(p))
     n = Z.shape[0]
@@ -174,6 +175,79 @@ def test_a_plan_stuck_at_rest_outside_the_bounds_is_explored(scenarios_dir):
     assert not explored([0.0] + [ocp.vessel.T_max] * (n - 1), outside)  # moves now
 
 
+def test_a_standby_that_puts_its_start_off_is_explored(scenarios_dir):
+    """Several AUVs: a standby plan that moves later (no range bound: no slack) is not
+    explored while the ASV stands by within the time the streak's first standby plan meant
+    to stand by (plus one stage); past it, the plan is late (each plan puts its start off)
+    and is explored, once per promise. Until session 13 nothing explored it, and Case 7,
+    seed 1 stood by for 795 s drifting in the current. With one AUV the rule is off (the
+    outer bound's slack shows a stuck plan; ``_stuck``)."""
+    import dataclasses
+
+    from mpcasv.mpc.solvers import SolveResult
+
+    one, obs1, _ = _start(scenarios_dir)
+    one.t_depart = obs1.t - 100.0  # a promise long broken
+    assert not one._late(obs1.t)
+    ctrl, obs, p = _start(scenarios_dir, "case6", "mpc-multi")  # 66-316 m off
+    ocp = ctrl.ocp
+    Z, V = ocp.split(ocp.rollout(p))
+    n = Z.shape[0]
+    Z[:, 6] = [0.0] * 8 + [ocp.vessel.T_max] * (n - 8)  # stands by 28 s, then moves
+    V[:, 2:5] = 0.0  # no slack: not stuck
+    res = SolveResult(ocp.join(Z, V), None, None, 1.0, True, "ok", 5, 1.0)
+
+    def command(t, w):  # the step's end: the plan stored, then its command
+        ctrl._store_plan(t, w)
+        return ctrl._command(dataclasses.replace(obs, t=t), w, p)
+
+    command(obs.t, res.w)  # STANDBY: the streak's first plan sets its departure
+    # where the thrust reaches the propeller-on threshold between 28 and 32 s
+    assert ctrl.t_depart == pytest.approx(obs.t + 28.0 + 4.0 * ocp.T_on / ocp.vessel.T_max)
+
+    def explored(t):
+        ctrl.t_explore = t - 10.0  # the last exploration 10 s ago
+        return ctrl._explore(dataclasses.replace(obs, t=t), p, res) is not None
+
+    for dt in (10.0, 28.0, 31.0):  # within the promise and its one-stage (4 s) grace
+        command(obs.t + dt, res.w)  # a plan standing by as long: the promise stays
+        assert not explored(obs.t + dt)
+    assert explored(obs.t + 33.0)  # late
+    assert ctrl.t_depart is None  # explored once: the next standby plan promises anew
+    command(obs.t + 34.0, res.w)
+    assert not explored(obs.t + 34.0)
+    Z[:, 6] = ocp.vessel.T_max  # a plan that moves now ends the streak
+    command(obs.t + 35.0, ocp.join(Z, V))
+    assert ctrl.t_depart is None
+
+
+def test_several_auvs_no_standby_far_from_the_target_for_minutes(tmp_path):
+    """Case 7, seed 1 (three AUVs, a 0.29 m/s current) for 900 s: before session 13 the MPC
+    stood by from t = 701 s to the end, drifting away from its target AUV (400-700 m off),
+    each plan moving off later (795 s in all over 1500 s). Now no standby away from the
+    target's reliable range lasts two minutes (59 s at most over the whole run)."""
+    from mpcasv.controllers import Boat
+    from mpcasv.experiments.suite import expand
+
+    suite = tmp_path / "c7.toml"
+    suite.write_text('name = "c7"\ndescription = "Case 7, seed 1"\nscenarios = ["case7"]\n'
+                     'seeds = [1]\nduration = 900.0\n[[controllers]]\nlabel = "mpc"\n'
+                     'multi = "mpc-multi"\npreset = "default"\ndomain_from = "scenario"\n')
+    job = expand(suite).jobs[0]
+    scenario, _ = job.realised_scenario()
+    ctrl = make_controller(job.controller, job.n_auv, job.preset, dict(job.overrides),
+                           boat=Boat.of_scenario(scenario))  # fmt: skip
+    d = simulate(scenario, ctrl, job.seed, job.estimator).timeseries
+    target = d["mpc_target"].to_numpy(int)
+    i = np.arange(len(d))
+    rng = np.stack([d[f"range{k}"] for k in range(3)], 1)[i, target]
+    r_t = np.stack([d[f"r_t{k}"] for k in range(3)], 1)[i, target]
+    far = (d["mode"].to_numpy() == "standby") & (rng > r_t + ctrl.params.domain.eps_plus)
+    longest = max((len(s) for s in "".join("x" if f else " " for f in far).split()),
+                  default=0)  # fmt: skip
+    assert longest < 120, f"stood by {longest} s away from the target's reliable range"
+
+
 @pytest.mark.parametrize(("ok", "finite", "cheaper", "adopted"), [
     (True, True, True, True),  # converged and cheaper: its plan and multipliers
     (False, True, True, True),  # at its iteration limit, finite, cheaper: its plan alone
@@ -189,7 +263,7 @@ def test_which_exploration_warm_starts_the_next_step(scenarios_dir, ok, finite, 
     docs/mpc.md)."""
     from mpcasv.mpc.solvers import SolveResult
 
-    ctrl, obs, p = _case3_start(scenarios_dir)
+    ctrl, obs, p = _start(scenarios_dir)
     w_step = ctrl.ocp.rollout(p)
     res = SolveResult(w_step, np.zeros(len(w_step)), np.zeros(3), 100.0, True, "ok", 5, 1.0)
     w_alt = w_step + 1.0

@@ -229,6 +229,10 @@ class MPCController(WorldView, Safety, PlanOutput, Targeting, SpeedCap):
         self._t_step = 0.0
         self._hung = 0
         self.t_explore: float | None = None
+        #: when the first plan of the present standby streak meant to move off (s; None: the
+        #: plan commanded was no standby); a later plan still standing by past it is late
+        #: (:meth:`Safety._late`)
+        self.t_depart: float | None = None
         self.explored = 0  # exploration solves run (in a step or between steps)
         self.explore_adopted = 0  # exploration plans that warm-started the next step
         #: (observation, solved parameters, result) of a step whose exploration is due
@@ -365,6 +369,7 @@ class MPCController(WorldView, Safety, PlanOutput, Targeting, SpeedCap):
                        "mpc_est_cur_N": float(c_est[0]), "mpc_est_cur_E": float(c_est[1])}
         self._diag["mpc_target_switches"] = self.target_switches  # cumulative
         if reason is not None:
+            self.t_depart = None  # the hybrid's step: no standby promise of the plan
             self.fallbacks += 1
             self.fallback_log.append(FallbackEvent(obs.t, reason, res.status, res.ms))
             if hybrid_cmd.mode is Mode.STANDBY:

@@ -42,8 +42,11 @@ class PlanOutput:
         served = int(np.argmin(dist[-1] - par["r_t"]))
         self._log_plan(obs.t)
         if commands_standby(Z[:, 6], ocp.dt, P.standby_time, ocp.T_on):
-            return Command.standby(auv=served, standby_time=planned_standby(ts, Z[:, 6],
-                                                                            ocp.T_on))
+            t_stand = planned_standby(ts, Z[:, 6], ocp.T_on)
+            if self.t_depart is None:  # the streak's first standby plan: when it moves off
+                self.t_depart = obs.t + t_stand
+            return Command.standby(auv=served, standby_time=t_stand)
+        self.t_depart = None
         look = min(P.lookahead, ts[-1])
         target = np.array([np.interp(look, ts, Z[:, 0]), np.interp(look, ts, Z[:, 1])])
         here = obs.asv.position
