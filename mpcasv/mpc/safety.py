@@ -36,13 +36,15 @@ class Safety:
             return None
         if self.t_explore is not None and obs.t - self.t_explore < P.explore_every - 1e-9:
             return None
+        if self.deadline is not None and not self._hang_guard and res.status == "deadline":
+            return None  # the field budget is spent: nothing explored, no promise used up
         Z, V = ocp.split(res.w)
         late = self._late(obs.t)
         if self.t_explore is not None and res.ok and np.max(Z[1:, 6]) >= ocp.T_on:
             if not (self._stuck(Z, V) or late):
                 return None  # the plan moves already
-        if late:
-            self.t_depart = None  # a new promise from the next standby plan
+        if late:  # explored now (or already in the target domain): the next standby plan
+            self.t_depart = None  # makes a new promise
         self.t_explore = obs.t
         par = ocp.unpack_par(p)
         j = self.target
@@ -52,8 +54,6 @@ class Safety:
         if np.all(still >= par["r_lo"][:, j]) and self.domain.in_reliable_range(still[0],
                                                                              par["r_t"][j]):
             return None
-        if self.deadline is not None and not self._hang_guard and res.status == "deadline":
-            return None  # the field budget is spent
         self.explored += 1
         limit = P.solver.explore_iter  # None: the warm solve's max_iter
         return self._solve(p, ocp.guided_rollout(p, j, self._capped(P.speed)), max_iter=limit)
@@ -75,11 +75,15 @@ class Safety:
 
     def _late(self, t: float) -> bool:
         """Whether the ASV still stands by one stage after the first plan of this standby
-        streak meant to move off (``t_depart``, set by the command): each plan stood by now
-        and moved later, putting its start off step after step. With several AUVs no range
-        bound holds the ASV (no slack: :meth:`_stuck` cannot see it): Case 7, seed 1 drifted
-        in a 0.29 m/s current for 780 s, its plans always moving 8-60 s later, the target
-        AUV 400-700 m off (docs/mpc.md, "Controller step"). Several AUVs only: with one the
+        streak meant to move off (``t_depart``: the time, set by the command): each plan
+        stood by now and moved later, putting its start off step after step. With several
+        AUVs no range bound holds the ASV (no slack: :meth:`_stuck` cannot see it): Case 7,
+        seed 1 stood by for the last 795 s of its run, drifting in a 0.29 m/s current, its
+        plans moving 8-60 s later, the target AUV 400-700 m off (docs/mpc.md, "Controller
+        step"). A streak spans target changes (it is the boat's standby, whatever AUV it
+        serves). The exploration inside the step reads the promise before the step's command
+        (the previous plan's), the one after the command (``between_steps``) after it; both
+        are the same whoever calls ``between_steps``. Several AUVs only: with one the
         outer bound's slack shows a plan stuck at rest (:meth:`_stuck`), and a standby
         stretched as the AUV comes on is the usual one; explored, on Cases 1-5 (10 seeds
         each) it let a pursuer in (Case 4, seed 0: 114 s inside the collision domain against
