@@ -210,10 +210,12 @@ PINNED: dict[str, tuple[float, float]] = {
     # cases' behaviour today, not the searches' margins (docs/safety.md). Session 3's pins
     # in brackets.
     "falsified-crossing-multi-hybrid-multi-1": (-19.370, 42),  # [-31.414, 76]; search -30.839
-    # session 8: the target commitment that needs a fix since the choice (docs/mpc.md, M9):
-    # re-measured (it meets one fatrop hang, abandoned by the 5-s guard below); session 7's
-    # in angle brackets, session 4's in braces
-    "falsified-crossing-multi-mpc-multi-1": (-14.621, 46),  # <-15.211, 38> {-25.038, 68}
+    # session 13: the exploration's guess goes round the other AUVs (docs/mpc.md, "Controller
+    # step" 3): -7.713 m, 39 s on the AVX-512 CPU of sessions 12-13 (-16.072 m, 97 s
+    # before); checked against the envelope below, not this value. Session 8's value on
+    # the CPU of sessions 8-11 in brackets, session 7's in angle brackets, session 4's in
+    # braces
+    "falsified-crossing-multi-mpc-multi-1": (-7.713, 39),  # [-14.621, 46] <-15.211, 38>
     # the worst case of the printed eq. 8 (-46.28 m there), run with S1/S2
     "falsified-crossing-multi-printed-eq8": (-8.830, 28),  # [-21.073, 42]; search -20.622 m
     "falsified-pursuer-single-hybrid-single-1": (-40.178, 76),  # unchanged; search -29.681 m
@@ -221,15 +223,17 @@ PINNED: dict[str, tuple[float, float]] = {
     # term (M7s, off while an AUV threatens the ASV) in the preset, 4.987 m without it
     "falsified-pursuer-single-mpc-single-1": (3.091, 0),  # {0.443, 0} [1.553, 0]
 }
-#: the same run measured on another CPU: the mpc-multi case is chaotic and its last bits
-#: depend on the CPU (the solver library is compiled with -march=native, and numpy picks its
-#: SIMD kernels at run time: on an AVX-512 CPU, AMD family 26, session 12, it meets no fatrop
-#: hang and ends at -16.072 m, 97 s; with numpy's AVX-512 kernels disabled -16.051 m, 98 s).
-#: Each value is a measurement; a change of behaviour matches neither (docs/safety.md).
-#: The other pins here were the same on both CPUs (mpc-single's at its session-11 value,
-#: 4.987 m; its session-12 value was measured on the AVX-512 CPU only).
-PINNED_OTHER_CPU: dict[str, tuple[float, float]] = {
-    "falsified-crossing-multi-mpc-multi-1": (-16.072, 97),
+#: chaotic cases: the bounds (margin at least, longest stay at most) of the run's envelope over
+#: the last bits of the floating point. The mpc-multi case's last bits depend on the CPU
+#: (the solver library is compiled with -march=native, and numpy picks its SIMD kernels at run
+#: time; docs/mpc.md "Known problems"), and its behaviour on them: session 13 measured it on
+#: one CPU under eight builds (library -march=native, x86-64-v3, x86-64-v2, -O3, -O2, -O1;
+#: numpy's AVX-512 kernels off; OpenBLAS as Haswell): margin -4.505 to -7.713 m, longest
+#: stay 17 to 56 s. Before session 13 it ended at -14.621 m / 46 s on the CPU of sessions
+#: 8-11 and -16.072 m / 97 s on that of session 12: outside the envelope, so a return of
+#: that behaviour fails. An exact pin matched one kind of CPU only.
+ENVELOPE: dict[str, tuple[float, float]] = {
+    "falsified-crossing-multi-mpc-multi-1": (-9.0, 70.0),
 }
 
 
@@ -249,11 +253,16 @@ def test_falsified_worst_cases_keep_todays_margin(name):
                            boat=Boat.of_scenario(sc))  # fmt: skip
     result = simulate(sc, ctrl, 0)
     rob = robustness(result.timeseries, len(sc.auv), required_separation(ctrl), 1.0)
-    measured = [PINNED[name]] + ([PINNED_OTHER_CPU[name]] if name in PINNED_OTHER_CPU else [])
     got = (rob.margin_m, rob.longest_stay_s)
-    assert any(got[0] == pytest.approx(margin, abs=0.5)
-               and got[1] == pytest.approx(stay, abs=3.0) for margin, stay in measured), (
-        f"margin {got[0]:.3f} m, longest stay {got[1]:.0f} s; measured {measured}")
+    if name in ENVELOPE:
+        low, high = ENVELOPE[name]
+        assert got[0] >= low and got[1] <= high, (
+            f"margin {got[0]:.3f} m, longest stay {got[1]:.0f} s; envelope: margin >= {low} m,"
+            f" stay <= {high} s")
+        return
+    margin, stay = PINNED[name]
+    assert got[0] == pytest.approx(margin, abs=0.5) and got[1] == pytest.approx(stay, abs=3.0), (
+        f"margin {got[0]:.3f} m, longest stay {got[1]:.0f} s; measured {PINNED[name]}")
 
 
 def test_every_committed_worst_case_is_pinned():

@@ -12,6 +12,49 @@ import numpy as np
 from mpcasv.models.vessel import NX as NXV  # the plan's vessel state is the model's
 from mpcasv.mpc.variance import N_NAV
 
+#: clearance (m) of the exploration's guess beyond an AUV's anti-collision radius (the plan's
+#: margin, 5 m, and as much again)
+CLEAR = 10.0
+
+
+def around(here: np.ndarray, goal: np.ndarray, centres: np.ndarray, radii: np.ndarray) -> float:
+    """Heading (rad, from North) from ``here`` towards ``goal`` (m, (2,)), around discs
+    (``centres`` (n, 2), ``radii`` (n,), m): straight on if the segment misses every disc;
+    else along the tangent to the first disc it meets, on the side nearer the straight
+    heading; from inside a disc, straight on if that leads away from its centre, else along
+    its circle on the side nearer the straight heading."""
+    d = goal - here
+    dist = float(np.hypot(*d))
+    psi = math.atan2(d[1], d[0])
+    if dist < 1e-6:
+        return psi
+    u = d / dist
+    first, t_first = None, math.inf
+    for c, R in zip(np.asarray(centres, float).reshape(-1, 2), np.asarray(radii, float),
+                    strict=True):
+        w = c - here
+        r = float(np.hypot(*w))
+        if r <= R:  # within the clearance: straight on if that leads away, else round it
+            if float(w @ u) <= 0.0:
+                continue
+            psi_c = math.atan2(w[1], w[0])
+            sides = (psi_c + math.pi / 2, psi_c - math.pi / 2)
+            return min(sides, key=lambda a: _turn(a, psi))
+        t = float(w @ u)  # along the segment
+        if 0.0 < t < dist + R and float(np.hypot(*(w - t * u))) < R and t < t_first:
+            first, t_first = (w, r, R), t
+    if first is None:
+        return psi
+    w, r, R = first
+    psi_c, alpha = math.atan2(w[1], w[0]), math.asin(min(R / r, 1.0))
+    sides = (psi_c + alpha, psi_c - alpha)
+    return min(sides, key=lambda a: _turn(a, psi))
+
+
+def _turn(a: float, b: float) -> float:
+    """The angle (rad, 0 to pi) between headings ``a`` and ``b``."""
+    return abs(math.atan2(math.sin(a - b), math.cos(a - b)))
+
 
 class WarmStart:
     """Rollouts, slack filling and shifts of the OCP (mixin; state in the OCP)."""
@@ -33,7 +76,11 @@ class WarmStart:
     def guided_rollout(self, p: np.ndarray, auv: int, speed: float) -> np.ndarray:
         """A primal guess that heads for AUV ``auv``'s target circle at ``speed`` and stops
         there (from outside inwards, from inside outwards): :meth:`steered_rollout` towards
-        the closest point of the circle.
+        the closest point of the circle, around the other AUVs' anti-collision radii
+        (:func:`around`; before session 13 straight through them, and the solve from such a
+        guess kept its way through: Case 6, seed 14 stood by for the last 262 s beside a
+        stopped AUV that lay across the way to its target, every exploration costing 18
+        times the standing plan).
 
         Used to escape the local minimum of standing still (at rest the steering has no
         authority, so first-order information cannot tell the solver to turn and go).
@@ -50,7 +97,8 @@ class WarmStart:
             c = par["pa"][k, auv]
             rel = z[0:2] - c
             goal = c + rel / max(float(np.hypot(*rel)), 1e-6) * par["r_t"][auv]  # closest point
-            return math.atan2(goal[1] - z[1], goal[0] - z[0])
+            others = [i for i in range(self.dims.n_auv) if i != auv]
+            return around(z[0:2], goal, par["pa"][k, others], par["r_lo"][k, others] + CLEAR)
 
         return self.steered_rollout(p, heading, lambda k, z: 0.0 if arrived(k, z) else T_go)
 

@@ -1,0 +1,72 @@
+"""The exploration's guess (``OCP.guided_rollout``) goes round the other AUVs' anti-collision
+radii (session 13): from a guess straight through a stopped AUV's domain the solve kept its
+way through, and Case 6, seed 14 stood by for its last 262 s beside a stopped AUV that lay
+across the way to its target (docs/mpc.md, "Controller step")."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from test_mpc_between_steps import _start
+
+from mpcasv.mpc.warmstart import CLEAR, around
+
+NORTH = np.array([100.0, 0.0])
+
+
+def _ray_miss(here, psi, c):
+    """Distance (m) from ``c`` to the ray from ``here`` along heading ``psi``."""
+    u = np.array([math.cos(psi), math.sin(psi)])
+    w = np.asarray(c, float) - here
+    return float(np.hypot(*(w - max(float(w @ u), 0.0) * u)))
+
+
+def test_straight_on_when_nothing_is_in_the_way():
+    here = np.zeros(2)
+    assert around(here, NORTH, np.empty((0, 2)), np.empty(0)) == pytest.approx(0.0)
+    # a disc beside the way, and one behind
+    centres, radii = np.array([[50.0, 40.0], [-60.0, 0.0]]), np.array([30.0, 50.0])
+    assert around(here, NORTH, centres, radii) == pytest.approx(0.0)
+
+
+@pytest.mark.parametrize("offset", [-10.0, 0.5, 10.0])
+def test_round_a_disc_in_the_way_on_the_nearer_side(offset):
+    """The tangent: the new heading's ray touches the disc, on the side away from its
+    centre's offset (the shorter way round)."""
+    here, c, R = np.zeros(2), np.array([50.0, offset]), 30.0
+    psi = around(here, NORTH, c[None, :], np.array([R]))
+    assert _ray_miss(here, psi, c) == pytest.approx(R, abs=1e-6)
+    assert math.copysign(1.0, psi) == -math.copysign(1.0, offset)
+    assert abs(psi) < math.pi / 2  # still forwards
+
+
+def test_within_the_clearance():
+    """Inside a disc: straight on when that leads away from its centre, else along its
+    circle (perpendicular to the centre's bearing), on the side nearer the goal."""
+    here = np.zeros(2)
+    behind = np.array([[-20.0, 0.0]])
+    assert around(here, NORTH, behind, np.array([30.0])) == pytest.approx(0.0)
+    ahead_left = np.array([[20.0, -5.0]])
+    psi = around(here, NORTH, ahead_left, np.array([30.0]))
+    psi_c = math.atan2(-5.0, 20.0)
+    assert psi == pytest.approx(psi_c + math.pi / 2)
+
+
+def test_the_guess_keeps_out_of_a_stopped_auv_in_the_way(scenarios_dir):
+    """Case 6's first step with AUV 1 as the target and AUV 0 moved onto the straight way
+    there, 90 m ahead, stopped: the guess keeps out of its anti-collision radius plus half
+    the clearance at every stage (straight through it before session 13)."""
+    ctrl, obs, p = _start(scenarios_dir, "case6", "mpc-multi")
+    ocp, p = ctrl.ocp, p.copy()
+    par = ocp.unpack_par(p)  # views into p
+    here = par["z0"][:2].copy()
+    to = par["pa"][0, 1] - here
+    block = here + 90.0 * to / np.hypot(*to)
+    par["pa"][:, 0] = block
+    Z, _ = ocp.split(ocp.guided_rollout(p, 1, 2.5))
+    gap = np.hypot(*(Z[:, :2] - block).T) - par["r_lo"][:, 0]
+    assert gap.min() > CLEAR / 2, f"the guess comes within {gap.min():.1f} m of r_lo"
+    start, end = (np.hypot(*(Z[i, :2] - par["pa"][i, 1])) for i in (0, -1))
+    assert start - end > 25.0  # and it gets on (from rest and round the disc: 38 m in 60 s)
