@@ -12,43 +12,61 @@ import numpy as np
 from mpcasv.models.vessel import NX as NXV  # the plan's vessel state is the model's
 from mpcasv.mpc.variance import N_NAV
 
-#: clearance (m) of the exploration's guess beyond an AUV's anti-collision radius (the plan's
-#: margin, 5 m, and as much again)
+#: clearance (m) of the exploration's guess beyond the plan's inner range bound ``r_lo`` (which
+#: already holds the plan's 5 m margin): 15 m beyond the anti-collision radius in all
 CLEAR = 10.0
 
 
 def around(here: np.ndarray, goal: np.ndarray, centres: np.ndarray, radii: np.ndarray) -> float:
     """Heading (rad, from North) from ``here`` towards ``goal`` (m, (2,)), around discs
-    (``centres`` (n, 2), ``radii`` (n,), m): straight on if the segment misses every disc;
-    else along the tangent to the first disc it meets, on the side nearer the straight
-    heading; from inside a disc, straight on if that leads away from its centre, else along
-    its circle on the side nearer the straight heading."""
+    (``centres`` (n, 2), ``radii`` (n,), m). Straight on if the way to the goal meets no
+    disc. Else along the tangent to the disc it enters first, on the side nearer the
+    straight heading; if that ray meets another disc before the goal, along that disc's
+    tangent on the same side (the turn only widens; at most one pass per disc). From inside
+    a disc whose centre lies ahead: along its circle, on the side nearer the straight
+    heading (inside one whose centre lies behind: as if it were not there)."""
     d = goal - here
     dist = float(np.hypot(*d))
     psi = math.atan2(d[1], d[0])
     if dist < 1e-6:
         return psi
-    u = d / dist
-    first, t_first = None, math.inf
-    for c, R in zip(np.asarray(centres, float).reshape(-1, 2), np.asarray(radii, float),
-                    strict=True):
-        w = c - here
-        r = float(np.hypot(*w))
-        if r <= R:  # within the clearance: straight on if that leads away, else round it
-            if float(w @ u) <= 0.0:
-                continue
+    discs = [(np.asarray(c, float) - here, float(R))
+             for c, R in zip(np.asarray(centres, float).reshape(-1, 2),
+                             np.asarray(radii, float), strict=True)]  # fmt: skip
+    outside = []
+    for w, R in discs:
+        if float(np.hypot(*w)) > R:
+            outside.append((w, R))
+        elif math.cos(math.atan2(w[1], w[0]) - psi) > 0.0:  # inside, its centre ahead
             psi_c = math.atan2(w[1], w[0])
-            sides = (psi_c + math.pi / 2, psi_c - math.pi / 2)
-            return min(sides, key=lambda a: _turn(a, psi))
-        t = float(w @ u)  # along the segment
-        if 0.0 < t < dist + R and float(np.hypot(*(w - t * u))) < R and t < t_first:
-            first, t_first = (w, r, R), t
-    if first is None:
-        return psi
-    w, r, R = first
-    psi_c, alpha = math.atan2(w[1], w[0]), math.asin(min(R / r, 1.0))
-    sides = (psi_c + alpha, psi_c - alpha)
-    return min(sides, key=lambda a: _turn(a, psi))
+            return min((psi_c + math.pi / 2, psi_c - math.pi / 2), key=lambda a: _turn(a, psi))
+    side = 0.0
+    for _ in range(len(outside)):
+        hit = _first_entry(psi, dist, outside)
+        if hit is None:
+            break
+        w, R = hit
+        psi_c, alpha = math.atan2(w[1], w[0]), math.asin(min(R / float(np.hypot(*w)), 1.0))
+        if not side:  # the side nearer the straight heading, kept for the later discs
+            side = 1.0 if _turn(psi_c + alpha, psi) <= _turn(psi_c - alpha, psi) else -1.0
+        psi = psi_c + side * alpha
+    return psi
+
+
+def _first_entry(psi: float, dist: float, discs: list) -> tuple | None:
+    """The disc (offset from here, radius) that the ray along ``psi`` enters first within
+    ``dist`` m, or None."""
+    u = np.array([math.cos(psi), math.sin(psi)])
+    best, entry_best = None, dist
+    for w, R in discs:
+        t = float(w @ u)
+        m = float(np.hypot(*(w - t * u)))  # miss distance of the line
+        if t <= 0.0 or m >= R - 1e-9:
+            continue
+        entry = t - math.sqrt(R * R - m * m)
+        if entry < entry_best:
+            best, entry_best = (w, R), entry
+    return best
 
 
 def _turn(a: float, b: float) -> float:
