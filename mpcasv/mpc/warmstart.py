@@ -9,6 +9,7 @@ import math
 
 import numpy as np
 
+from mpcasv.control.execution import wrap
 from mpcasv.models.vessel import NX as NXV  # the plan's vessel state is the model's
 from mpcasv.mpc.variance import N_NAV
 
@@ -39,7 +40,7 @@ def around(here: np.ndarray, goal: np.ndarray, centres: np.ndarray, radii: np.nd
             outside.append((w, R))
         elif math.cos(math.atan2(w[1], w[0]) - psi) > 0.0:  # inside, its centre ahead
             psi_c = math.atan2(w[1], w[0])
-            return min((psi_c + math.pi / 2, psi_c - math.pi / 2), key=lambda a: _turn(a, psi))
+            return min((psi_c + math.pi / 2, psi_c - math.pi / 2), key=lambda a: abs(wrap(a - psi)))
     side = 0.0
     for _ in range(len(outside)):
         hit = _first_entry(psi, dist, outside)
@@ -48,7 +49,7 @@ def around(here: np.ndarray, goal: np.ndarray, centres: np.ndarray, radii: np.nd
         w, R = hit
         psi_c, alpha = math.atan2(w[1], w[0]), math.asin(min(R / float(np.hypot(*w)), 1.0))
         if not side:  # the side nearer the straight heading, kept for the later discs
-            side = 1.0 if _turn(psi_c + alpha, psi) <= _turn(psi_c - alpha, psi) else -1.0
+            side = 1.0 if abs(wrap(psi_c + alpha - psi)) <= abs(wrap(psi_c - alpha - psi)) else -1.0
         psi = psi_c + side * alpha
     return psi
 
@@ -67,11 +68,6 @@ def _first_entry(psi: float, dist: float, discs: list) -> tuple | None:
         if entry < entry_best:
             best, entry_best = (w, R), entry
     return best
-
-
-def _turn(a: float, b: float) -> float:
-    """The angle (rad, 0 to pi) between headings ``a`` and ``b``."""
-    return abs(math.atan2(math.sin(a - b), math.cos(a - b)))
 
 
 class WarmStart:
@@ -109,14 +105,16 @@ class WarmStart:
         def arrived(k, z) -> bool:  # on the circle (inside: head out)
             return abs(float(np.hypot(*(z[0:2] - par["pa"][k, auv]))) - par["r_t"][auv]) <= 5.0
 
+        others = [i for i in range(self.dims.n_auv) if i != auv]  # the discs to go round
+        pa_o, r_o = par["pa"][:, others], par["r_lo"][:, others] + CLEAR
+
         def heading(k, z):
             if arrived(k, z):
                 return None
             c = par["pa"][k, auv]
             rel = z[0:2] - c
             goal = c + rel / max(float(np.hypot(*rel)), 1e-6) * par["r_t"][auv]  # closest point
-            others = [i for i in range(self.dims.n_auv) if i != auv]
-            return around(z[0:2], goal, par["pa"][k, others], par["r_lo"][k, others] + CLEAR)
+            return around(z[0:2], goal, pa_o[k], r_o[k])
 
         return self.steered_rollout(p, heading, lambda k, z: 0.0 if arrived(k, z) else T_go)
 
