@@ -75,16 +75,17 @@ def record_run(case: str, preset: str, multi: bool, steps: int = STEPS,
         c0 = time.process_time()
         cmd = step(obs)
         cpu.append((time.process_time() - c0) * 1e3)
-        source = ctrl.diagnostics()["mpc_source"]  # not "plan": rescue, escape or fallback
+        source = ctrl.diagnostics()["mpc_source"]  # else: rescue, escape or fallback
         sources.append(source)
-        kinds.append("rescue" if source != "plan" else
+        kinds.append("carried" if source == "carried" else
+                     "rescue" if source != "plan" else
                      "explore" if ctrl.explored > explored else "solve")  # fmt: skip
         return cmd
 
     def timed_between():
-        explored, c0 = ctrl.explored, time.perf_counter()
+        explored, deferred, c0 = ctrl.explored, ctrl.deferred, time.perf_counter()
         between()
-        if ctrl.explored > explored:  # an exploration solve ran after the step
+        if ctrl.explored > explored or deferred is not None:  # solves ran after the step
             idle.append((time.perf_counter() - c0) * 1e3)
 
     ctrl.step, ctrl.between_steps = timed_step, timed_between
@@ -100,8 +101,9 @@ def step_summary(times: dict, ctrl: MPCController) -> dict:
     step, cold, left out), and the run's plan sources (docs/mpc.md, "Fallbacks"); what the
     steps were: the warm-started solve alone (``solve``), with the exploration solve
     (``explore``: only when the warm-started plan may not be used) or with rescue solves
-    (``rescue``): their counts and wall p99 / max; and the exploration solves run between
-    steps, after the command (``between``: count, wall p99 / max)."""
+    (``rescue``), or the previous plan carried (``carried``: ``solver.step_iter``): their
+    counts and wall p99 / max; and the solves run between steps, after the command (the
+    periodic exploration, a carried step's work; ``between``: count, wall p99 / max)."""
     out = {"steps": int(len(times["wall"])), "fallbacks": int(ctrl.fallbacks),
            "sources": dict(ctrl.sources)}  # fmt: skip
     for kind in ("wall", "cpu"):
@@ -112,7 +114,7 @@ def step_summary(times: dict, ctrl: MPCController) -> dict:
     if "kind" in times:
         wall, kinds = times["wall"][1:], times["kind"][1:]
         out["by_kind"] = {}
-        for k in ("solve", "explore", "rescue"):
+        for k in ("solve", "explore", "rescue", "carried"):
             ms = wall[kinds == k]
             if len(ms):
                 out["by_kind"][k] = {"steps": len(ms),

@@ -32,6 +32,7 @@ Every step (docs/mpc.md, "Controller"):
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import math
 import time
@@ -45,6 +46,7 @@ from mpcasv.hybrid.multi import HybridMulti, HybridMultiParams
 from mpcasv.hybrid.single import HybridSingle, HybridSingleParams
 from mpcasv.interface import Command, Mode, Observation, PlannedTrajectory, Reason
 from mpcasv.models.acoustics import AcousticParams
+from mpcasv.mpc.carry import Carry, Deferred
 from mpcasv.mpc.deadline import DeadlineSolver
 from mpcasv.mpc.dynamics import warn_course_unstable
 from mpcasv.mpc.params import MPCParams
@@ -92,7 +94,7 @@ def _worker_solver(params: MPCParams, n_auv: int, multi: bool, boat):
     return build_ocp(params, n_auv, multi, log=lambda *a: None, boat=boat)[1]
 
 
-class MPCController(WorldView, Safety, PlanOutput, Targeting, SpeedCap):
+class MPCController(WorldView, Safety, PlanOutput, Targeting, SpeedCap, Carry):
     """Fix-age NMPC with donut constraints and a hybrid safety fallback.
 
     Parameters
@@ -212,6 +214,9 @@ class MPCController(WorldView, Safety, PlanOutput, Targeting, SpeedCap):
         self.stand_off = False  # the standing-time term off this step (worldview, M7s)
         self.t_prev: float | None = None
         self.w_prev: np.ndarray | None = None
+        self.w_ok = False  # w_prev is a converged plan the check let through (mpc/carry.py)
+        #: a carried step's work, done after its command (mpc/carry.py; between_steps)
+        self.deferred: Deferred | None = None
         self.lam_prev: tuple | None = None
         self.plan: PlannedTrajectory | None = None
         #: the previous plan start's heading (rad, unwrapped; worldview._x0)
@@ -285,6 +290,43 @@ class MPCController(WorldView, Safety, PlanOutput, Targeting, SpeedCap):
         return (self.params.solver.budget_ms / 1e3 - STEP_RESERVE_S
                 - (time.perf_counter() - self._t_step))  # fmt: skip
 
+    def _work(self, obs: Observation, p_s: np.ndarray, p: np.ndarray, res: SolveResult,
+              hybrid_cmd: Command) -> tuple[SolveResult, str | None, str]:  # fmt: skip
+        """The step's work after its warm-started solve ``res`` (``p_s``: the parameters
+        solved, ``p``: checked): the safety check, the exploration when it belongs in the
+        step, the rescue. Returns ``(result, reason the plan may not be used or None,
+        source)``."""
+        reason = self._check(res, p)
+        # the exploration now when the plan may not be used (before any rescue, as part of
+        # it), right after a target change, or when an AUV threatens the ASV held where it is;
+        # else (the periodic one while the plan stands still) after the command
+        here = obs.asv.position
+        if (reason is not None or self.t_explore is None
+                or self._transit_reason(here, self.ocp.unpack_par(p)) is Reason.AVOIDANCE):
+            res = self._cheaper(res, self._explore(obs, p_s, res))
+            reason = self._check(res, p)
+        else:
+            self._pending = (obs, p_s, res)
+        source = "plan" if reason is None else "fallback"
+        # rescue, except after a missed field deadline (no time left); after a hang in
+        # simulation too (the Case 4 problem that hangs fatrop converges from the escape guess)
+        if reason is not None and (res.status != "deadline" or self._hang_guard):
+            res, reason, source = self._rescue(obs, p_s, p, res, reason, hybrid_cmd)
+        return res, reason, source
+
+    def _keep_start(self, res: SolveResult, source: str) -> None:
+        """The next step's warm start from this step's result (``w_ok``: a converged plan the
+        safety check let through, which a later step may carry)."""
+        if source == "escape":  # the escape manoeuvre's rollout: warm-starts the next step
+            self.w_prev, self.lam_prev = res.w, None
+        elif res.ok or (np.all(np.isfinite(res.w))
+                        and getattr(self.solver, "warm_from_failures", False)):  # fmt: skip
+            self.w_prev = res.w  # an unconverged NLP iterate warm-starts too
+            self.lam_prev = (res.lam_x, res.lam_g) if res.ok else None
+        else:
+            self.w_prev, self.lam_prev = None, None  # next step starts from a rollout
+        self.w_ok = bool(res.ok) and source in ("plan", "rescue", "as-escape")
+
     def step(self, obs: Observation) -> Command:
         self._hung = 0  # solves abandoned as hung this step (simulation's hang guard)
         self.between_steps()  # the previous step's exploration, if nobody ran it yet
@@ -322,31 +364,19 @@ class MPCController(WorldView, Safety, PlanOutput, Targeting, SpeedCap):
         if p_s is not p:
             Z, V = ocp.split(w0)
             w0 = ocp.fill_slacks(Z, V, p_s)
-        res = self._solve(p_s, w0, *lam)
-        reason = self._check(res, p)
-        # the exploration now when the plan may not be used (before any rescue, as part of
-        # it), right after a target change, or when an AUV threatens the ASV held where it is;
-        # else (the periodic one while the plan stands still) after the command
-        here = obs.asv.position
-        if (reason is not None or self.t_explore is None
-                or self._transit_reason(here, ocp.unpack_par(p)) is Reason.AVOIDANCE):
-            res = self._cheaper(res, self._explore(obs, p_s, res))
-            reason = self._check(res, p)
-        else:
-            self._pending = (obs, p_s, res)
-        source = "plan" if reason is None else "fallback"
-        # rescue, except after a missed field deadline (no time left); after a hang in
-        # simulation too (the Case 4 problem that hangs fatrop converges from the escape guess)
-        if reason is not None and (res.status != "deadline" or self._hang_guard):
-            res, reason, source = self._rescue(obs, p_s, p, res, reason, hybrid_cmd)
-        if source == "escape":  # the escape manoeuvre's rollout: warm-starts the next step
-            self.w_prev, self.lam_prev = res.w, None
-        elif res.ok or (np.all(np.isfinite(res.w))
-                        and getattr(self.solver, "warm_from_failures", False)):  # fmt: skip
-            self.w_prev = res.w  # an unconverged NLP iterate warm-starts too
-            self.lam_prev = (res.lam_x, res.lam_g) if res.ok else None
-        else:
-            self.w_prev, self.lam_prev = None, None  # next step starts from a rollout
+        cap = self._step_limit()  # the step's iteration budget (None: none)
+        res = self._solve(p_s, w0, *lam, max_iter=cap)
+        carried = self._carried(res, cap, w0, p)
+        if carried is not None:  # the previous plan this step; the work after the command
+            self.deferred = Deferred(obs, p_s, p, w0, lam, hybrid_cmd)
+            res, reason, source = carried, None, "carried"
+        else:  # as without a budget (a solve stopped at it: solved again in full)
+            stopped = cap is not None and not res.ok and res.iters >= cap
+            full = self._solve(p_s, w0, *lam) if stopped else None
+            res = res if full is None else dataclasses.replace(
+                full, ms=res.ms + full.ms, iters=res.iters + full.iters)
+            res, reason, source = self._work(obs, p_s, p, res, hybrid_cmd)
+            self._keep_start(res, source)
         over = self._over_budget()
         self.over_budget += over  # measured, never a decision in simulation
         self.sources[source] = self.sources.get(source, 0) + 1
@@ -357,7 +387,8 @@ class MPCController(WorldView, Safety, PlanOutput, Targeting, SpeedCap):
                       "mpc_source": source, "mpc_funnel": int(p_s is not p),
                       "mpc_hung": self._hung, "mpc_explore_ms": math.nan,
                       "mpc_explore_iter": 0, "mpc_explore_cost": math.nan,
-                      "mpc_explore_adopted": 0}  # fmt: skip
+                      "mpc_explore_adopted": 0, "mpc_deferred_iter": 0,
+                      "mpc_deferred_ms": math.nan, "mpc_deferred_source": ""}  # fmt: skip
         self._diag |= {f"mpc_tau{i}": float(v) for i, v in enumerate(self.tau)}
         self._diag |= {"mpc_plan_E_J": e_plan, "mpc_plan_E_t0": t_used, "mpc_plan_E_t1": obs.t,
                        "mpc_plan_t": math.nan}  # fmt: skip

@@ -223,6 +223,16 @@ class SolverParams:
         unconverged one is discarded. A third of the explorations stop at 50; 150 was
         measured on the paper suite (session 9) and was no better in the closed loop, with
         longer solves: the default stays ``max_iter``.
+    step_iter : int or None
+        Iterations the step's warm-started solve may take before the step follows the
+        previous plan instead (None: off, every solve finishes in the step; docs/mpc.md
+        "Controller step" 3b; issue 16 item 8). A work budget, not a wall-time one. When that
+        solve stops at ``step_iter`` iterations, no AUV threatens the ASV, and the previous
+        step's converged plan moved one period on passes the safety check, the step commands
+        that plan (source ``carried``) and the step's whole work (the warm-started solve with
+        ``max_iter``, the exploration, any rescue) is done after the command
+        (``between_steps``), its plan warm-starting the next step. A solve that converges
+        within ``step_iter`` gives the same plan as without the budget.
     check_stages : int
         Stages of the plan checked against r_inner / r_avoid before it is used.
     check_margin : float
@@ -255,6 +265,7 @@ class SolverParams:
     hang_s: NonNeg = 30.0
     rescue_iter: Annotated[int, Strict(), Field(ge=0)] = 200
     explore_iter: Annotated[int, Strict(), Field(ge=0)] | None = None
+    step_iter: Annotated[int, Strict(), Field(ge=1)] | None = None
     check_stages: PosInt = 2
     check_margin: NonNeg = 2.0
     max_violation: Pos = 60.0
@@ -264,6 +275,9 @@ class SolverParams:
         if self.threads > 1 and not (self.compiled and self.solver in ("fatrop", "ipopt")):
             raise ValueError("threads > 1 needs compiled = true and solver 'fatrop' or 'ipopt' "
                              "(the stages run in parallel in the compiled library only)")
+        if self.step_iter is not None and self.solver == "qp":
+            raise ValueError("step_iter needs solver 'fatrop' or 'ipopt' (the qp variant's "
+                             "work is bounded by qp_iters)")
 
 
 @frozen

@@ -112,6 +112,13 @@ class Safety:
         runs inside the step: deferring those cost Case 8 39 s of reliable-fix age p95.) In
         the field it has the step's budget (``solver.budget_ms``) of its own. docs/mpc.md,
         "Controller step"."""
+        if self.deferred is not None:  # a carried step's work first (mpc/carry.py)
+            self._t_step = time.perf_counter()  # the field deadline of its solves
+            self._finish_deferred()
+            step_over = int(self._diag.get("mpc_over_budget", 0))
+            over = self._over_budget()
+            self.over_budget += int(over and not step_over)
+            self._diag["mpc_over_budget"] = max(step_over, over)
         pending, self._pending = self._pending, None
         if pending is None:
             return
@@ -126,7 +133,7 @@ class Safety:
         # every step while each exploration stops at its limit far cheaper (docs/mpc.md)
         adopt = alt.f < res.f and (alt.ok or bool(np.all(np.isfinite(alt.w))))
         if adopt:
-            self.w_prev = alt.w
+            self.w_prev, self.w_ok = alt.w, alt.ok
             self.lam_prev = (alt.lam_x, alt.lam_g) if alt.ok else None
         self.explore_adopted += int(adopt)
         # longer than a step's budget: its step counts as over budget (never a decision)

@@ -1,0 +1,71 @@
+"""A bounded step: a slow solve is finished after the command (docs/mpc.md, "Controller
+step" 3b; issue 16 item 8). A mixin of :class:`~mpcasv.mpc.controller.MPCController`.
+
+With ``solver.step_iter`` set, the step's warm-started solve may take that many iterations.
+Most solves converge well within it (the same plan as without the budget: the solver's
+iterates do not depend on its iteration limit). One that stops there (the arrival at an AUV,
+where the plan turns from transit to standby and the warm start needs 25-50 iterations) is
+not waited for when the previous step's converged plan, moved one control period on, may
+still be followed: it passes the safety check (:meth:`~mpcasv.mpc.safety.Safety._check`) and
+no AUV threatens the ASV held where it is. The step then commands that plan (source
+``carried``), and everything the step would have done without the budget (the warm-started
+solve with ``max_iter``, the exploration, any rescue) runs after the command
+(:meth:`~mpcasv.mpc.safety.Safety.between_steps`, in the idle part of the control period),
+its plan warm-starting the next step. Only iteration counts decide, never wall time: the
+runs are reproduced exactly.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from mpcasv.interface import Observation
+from mpcasv.mpc.solvers import SolveResult
+
+
+@dataclasses.dataclass(frozen=True, slots=True)
+class Deferred:
+    """The work a carried step left for after its command: its observation, the parameters
+    solved (``p_s``, funnel) and checked (``p``), the warm start ``w0`` and its duals
+    ``lam``, and the hybrid controller's command of that step (the rescue's last guess)."""
+
+    obs: Observation
+    p_s: np.ndarray
+    p: np.ndarray
+    w0: np.ndarray
+    lam: tuple
+    hybrid_cmd: object
+
+
+class Carry:
+    """The step's iteration budget and the previous plan carried (mixin; state in the
+    controller: ``w_ok``, whether ``w_prev`` is a converged plan; ``deferred``)."""
+
+    def _step_limit(self) -> int | None:
+        """``solver.step_iter`` when this step may carry the previous plan (a converged plan
+        the safety check let through), else None (the step's solves finish in it)."""
+        cap = self.params.solver.step_iter
+        return None if cap is None or self.w_prev is None or not self.w_ok else cap
+
+    def _carried(self, res: SolveResult, cap: int | None, w0: np.ndarray,
+                 p: np.ndarray) -> SolveResult | None:  # fmt: skip
+        """The previous plan ``w0`` (moved one period on) as this step's plan when the warm
+        solve ``res`` stopped at the step's budget ``cap`` and that plan passes the safety
+        check; else None (the step's work goes on as without a budget)."""
+        if cap is None or res.ok or res.status == "deadline" or res.iters < cap:
+            return None
+        carried = SolveResult(w0, None, None, float("nan"), True, "carried", res.iters, res.ms)
+        return carried if self._check(carried, p) is None else None
+
+    def _finish_deferred(self) -> None:
+        """After a carried step's command: the step's whole work without the budget; its
+        plan (or unconverged iterate) warm-starts the next step, as it would have in the
+        step."""
+        d, self.deferred = self.deferred, None
+        res = self._solve(d.p_s, d.w0, *d.lam)
+        res, _, source = self._work(d.obs, d.p_s, d.p, res, d.hybrid_cmd)
+        self._keep_start(res, source)
+        self._diag |= {"mpc_deferred_iter": res.iters, "mpc_deferred_ms": res.ms,
+                       "mpc_deferred_source": source}  # fmt: skip
