@@ -30,6 +30,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--threads", type=int, default=None,
                    help="'mpc': the default solver's stage-evaluation threads (solver.threads) "
                         "in the recorded run and its replay (default: the presets', 1)")
+    p.add_argument("--step-iter", type=int, default=None,
+                   help="'mpc': the recorded run's step iteration budget (solver.step_iter; "
+                        "0: none; default: the presets')")
     p.set_defaults(func=run)
 
 
@@ -42,6 +45,8 @@ def run(args: argparse.Namespace) -> int:
     for flag in ("repeat", "steps", "threads"):
         if getattr(args, flag) is not None and getattr(args, flag) < 1:
             raise ConfigError(f"--{flag} {getattr(args, flag)}: must be >= 1")
+    if args.step_iter is not None and args.step_iter < 0:
+        raise ConfigError(f"--step-iter {args.step_iter}: must be >= 0 (0: no budget)")
     if args.which == "mpc" and args.steps < 2:  # (--steps 1 crashed in the step summary)
         raise ConfigError(f"--steps {args.steps}: 'mpc' needs >= 2 (the first, cold step is "
                           "left out of the figures)")

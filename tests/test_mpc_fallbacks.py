@@ -195,26 +195,39 @@ def test_the_benchmark_records_wall_and_cpu_time_of_each_whole_step():
     assert sum(v["steps"] for v in by.values()) == 11  # the cold first step left out
 
 
-def test_the_benchmark_classifies_each_step_by_what_it_did():
+@pytest.mark.parametrize("step_iter", [0, None])
+def test_the_benchmark_classifies_each_step_by_what_it_did(step_iter):
     """Case 6 with three AUVs for 110 s (measured: the first step explores, the target being
-    new; the ASV arrives at its first AUV at t = 105-106 s, where two steps need a rescue):
-    "rescue" exactly on the steps whose plan did not come from the warm-started or
-    exploration solve, "explore" on the steps that ran the exploration solve inside the
-    step, "solve" on the rest; exploration solves run between steps (none here: the periodic
-    one is for a plan standing still away from its target) are counted apart; the summary
-    counts them."""
+    new; the ASV arrives at its first AUV at t = 98-106 s, where the warm-started solves need
+    17-73 iterations). Without a step budget (``step_iter`` 0) two steps there need a rescue;
+    with the preset's (15) the steps whose solve stops at it carry the previous plan, and
+    their work runs after the command. "rescue" exactly on the steps whose plan came from
+    neither the warm-started or exploration solve nor the carried plan, "carried" on the
+    carried ones, "explore" on the steps that ran the exploration solve inside the step,
+    "solve" on the rest; the solves run between steps (a carried step's work, or the
+    periodic exploration, for a plan standing still away from its target) are counted
+    apart; the summary counts them."""
     import mpcasv.mpc.bench as bench
 
-    params, ctrl, seq, times = bench.record_run("case6", "mpc-multi", True, steps=110)
+    params, ctrl, seq, times = bench.record_run("case6", "mpc-multi", True, steps=110,
+                                                step_iter=step_iter)  # fmt: skip
     kinds, sources = times["kind"], times["source"]
     assert len(kinds) == len(sources) == 110
-    assert np.any(sources != "plan"), "no rescued step in this window: the test needs one"
-    np.testing.assert_array_equal(kinds == "rescue", sources != "plan")
+    carried = sources == "carried"
+    if step_iter == 0:
+        assert params.solver.step_iter is None and not np.any(carried)
+        assert np.any(sources != "plan"), "no rescued step in this window: the test needs one"
+    else:
+        assert params.solver.step_iter == 15 and np.any(carried)
+    np.testing.assert_array_equal(kinds == "rescue", (sources != "plan") & ~carried)
+    np.testing.assert_array_equal(kinds == "carried", carried)
     n_between, n_explore = len(times["between"]), int(np.sum(kinds == "explore"))
     assert kinds[0] == "explore" and n_explore >= 1
-    assert n_between + n_explore <= ctrl.explored  # (a rescued step may have explored too)
+    assert n_between >= int(np.sum(carried))  # every carried step's work after its command
+    if step_iter == 0:
+        assert n_between + n_explore <= ctrl.explored  # (a rescued step may have explored too)
     s = bench.step_summary(times, ctrl)
     assert {k: v["steps"] for k, v in s["by_kind"].items()} == {
-        k: int(np.sum(kinds[1:] == k)) for k in ("solve", "explore", "rescue")
+        k: int(np.sum(kinds[1:] == k)) for k in ("solve", "explore", "rescue", "carried")
         if np.any(kinds[1:] == k)}  # fmt: skip
     assert s.get("between", {"solves": 0})["solves"] == n_between

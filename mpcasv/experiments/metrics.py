@@ -134,10 +134,14 @@ _BASE: dict[str, MetricInfo] = {
     "controller_step_ms_p99": _i("ms", "lower", "99th percentile of that time"),
     "between_steps_ms_max": _i("ms", "lower", "longest wall time of a solve a controller "
                                "runs after a step's command, for the next step (an MPC's "
-                               "exploration solve; null: none ran, or the caller left it to "
+                               "exploration solve and a carried step's work, "
+                               "solver.step_iter; null: none ran, or the caller left it to "
                                "the next step); in the field it has the step's budget_ms of "
                                "its own"),
     "fallbacks": _i("1", "lower", "MPC steps handed to the fallback controller"),
+    "carried_steps": _i("1", "lower", "MPC steps that followed the previous plan while their "
+                        "solve, past solver.step_iter iterations, finished after the command "
+                        "(an iteration count: no wall time)", "issue 16 item 8"),
     "target_switches": _i("1", "lower", "changes of the AUV an MPC targets (0 for the other "
                           "controllers; chattering shows here)", "issue 16 item 6"),
     "solver_hangs": _i("1", "lower", "MPC solves abandoned as hung by the simulation's hang "
@@ -245,11 +249,16 @@ def _update_jumps(ts: pd.DataFrame, k: int) -> np.ndarray:
     return d_est[updated[1:]]
 
 
-def _max_or_none(ts: pd.DataFrame, col: str) -> float | None:
-    """Largest value of a time-series column; None if it is absent or has no value (NaN:
-    nothing measured, e.g. no exploration solve ran), not 0, which reads as "took 0 ms"."""
-    v = ts[col].to_numpy(float) if col in ts else np.array([])
-    return float(np.nanmax(v)) if (~np.isnan(v)).any() else None
+def _max_or_none(ts: pd.DataFrame, *cols: str) -> float | None:
+    """Largest per-step sum of time-series columns (absent or NaN values left out); None if
+    no step has a value (NaN: nothing measured, e.g. no exploration solve ran), not 0, which
+    reads as "took 0 ms"."""
+    vals = [ts[c].to_numpy(float) for c in cols if c in ts]
+    if not vals:
+        return None
+    v = np.stack(vals)
+    some = (~np.isnan(v)).any(axis=0)
+    return float(np.nansum(v, axis=0)[some].max()) if some.any() else None
 
 
 def _sum(ts: pd.DataFrame, col: str) -> float | None:
@@ -399,8 +408,9 @@ def compute_metrics(result) -> dict:
         "energy_J": float(result.energy_J),
         "controller_step_ms_median": float(np.median(step_ms)),
         "controller_step_ms_p99": float(np.percentile(step_ms, 99)),
-        "between_steps_ms_max": _max_or_none(ts, "mpc_explore_ms"),
+        "between_steps_ms_max": _max_or_none(ts, "mpc_deferred_ms", "mpc_explore_ms"),
         "fallbacks": int(result.fallbacks),
+        "carried_steps": int((ts["mpc_source"] == "carried").sum()) if "mpc_source" in ts else 0,
         "target_switches": _last_int(ts, "mpc_target_switches"),
         "solver_hangs": int(ts["mpc_hung"].sum()) if "mpc_hung" in ts else 0,
         "over_budget_steps": int(ts["mpc_over_budget"].sum()) if "mpc_over_budget" in ts else 0,

@@ -53,18 +53,22 @@ def record(case: str, preset: str, multi: bool, steps: int = STEPS):
 
 
 def record_run(case: str, preset: str, multi: bool, steps: int = STEPS,
-               threads: int | None = None):  # fmt: skip
+               threads: int | None = None, step_iter: int | None = None):  # fmt: skip
     """:func:`record` plus the run's whole controller step times: wall and CPU time (ms) of
     each ``step`` (solves, rescues, the fallback's bookkeeping). The solves run in this
     process (``hang_s = 0``; no decision depends on it), so the CPU time is the step's own
     work, which a loaded machine stretches far less than the wall time. ``threads``: the
-    solver's ``threads`` (None: the preset's); the run is the same, only faster."""
+    solver's ``threads`` (None: the preset's); the run is the same, only faster.
+    ``step_iter``: the solver's ``step_iter`` (None: the preset's; 0: none); the run
+    changes where a step carries its plan (docs/mpc.md, "Controller step" 3b)."""
     sc = load_scenario(SCENARIOS / f"{case}.toml")
     sc = scenario_with(sc, duration=float(steps))
     params = load_preset(preset, preset)
     sp = dataclasses.replace(params.solver, hang_s=0.0)
     if threads is not None:
         sp = dataclasses.replace(sp, threads=threads)
+    if step_iter is not None:
+        sp = dataclasses.replace(sp, step_iter=step_iter or None)
     params = dataclasses.replace(params, solver=sp)
     ctrl = MPCController(params, len(sc.auv), multi, boat=Boat.of_scenario(sc))
     ctrl.recorder = []
@@ -240,7 +244,8 @@ def bench_mpc(args: argparse.Namespace) -> dict:
     for case, preset, multi in CASES:
         t0 = time.perf_counter()
         params, ctrl, seq, step_ms = record_run(case, preset, multi, steps,
-                                                getattr(args, "threads", None))
+                                                getattr(args, "threads", None),
+                                                getattr(args, "step_iter", None))  # fmt: skip
         step = step_summary(step_ms, ctrl)
         figures["threads"] = params.solver.threads  # the recorded run's and the replay's
         ocp, default = build_ocp(params, ctrl.ocp.dims.n_auv, multi, boat=ctrl.boat)
@@ -268,6 +273,7 @@ def bench_mpc(args: argparse.Namespace) -> dict:
         figures["cases"][f"{case}_{n}auv"] = {
             "solvers": rows, "speedup_median": round(speedup, 1),
             "speedup_cpu_median": round(speedup_cpu, 1), "controller_step": step,
+            "step_iter": params.solver.step_iter,
             "wall_s": round(time.perf_counter() - t0, 1),
         }  # fmt: skip
         _print(case, n, rows, speedup, len(seq), params.solver.threads)
@@ -279,8 +285,10 @@ def bench_mpc(args: argparse.Namespace) -> dict:
             for k, v in step.get("by_kind", {}).items()))  # fmt: skip
         b = step.get("between")
         print("  between steps, after the command: " + (
-            "no exploration solve" if b is None else f"{b['solves']} exploration solves, wall "
-            f"p99 {b['wall_p99_ms']:.1f} / max {b['wall_max_ms']:.1f} ms"))  # fmt: skip
+            "no solve" if b is None else f"solves after {b['solves']} steps (explorations, "
+            f"carried steps' work), wall p99 {b['wall_p99_ms']:.1f} / max "
+            f"{b['wall_max_ms']:.1f} ms"
+        ) + f"; solver.step_iter {params.solver.step_iter}")  # fmt: skip
     figures["load_average_end"] = [round(x, 2) for x in os.getloadavg()]
     print(f"load average at the end: {figures['load_average_end'][0]:.2f} on "
           f"{os.cpu_count()} cores (wall times from a loaded machine are not comparable; "
