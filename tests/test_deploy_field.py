@@ -297,17 +297,24 @@ class _Host(FieldMode):
 
 
 class _Explorer:
-    """``between_steps``: an exploration solve, then nothing due, then an exception."""
+    """``between_steps``: an exploration solve, then nothing due, then a carried step's work
+    (``solver.step_iter``), then an exception."""
 
     def __init__(self):
         self.calls, self.diag = 0, {}
 
     def between_steps(self):
         self.calls += 1
+        nothing = {"mpc_explore_iter": 0, "mpc_explore_ms": float("nan"),
+                   "mpc_deferred_iter": 0, "mpc_deferred_ms": float("nan")}  # fmt: skip
         if self.calls == 1:
-            self.diag = {"mpc_explore_iter": 12, "mpc_explore_ms": 3.0, "mpc_explore_adopted": 1}
+            self.diag = nothing | {"mpc_explore_iter": 12, "mpc_explore_ms": 3.0,
+                                   "mpc_explore_adopted": 1}  # fmt: skip
         elif self.calls == 2:
-            self.diag = {"mpc_explore_iter": 0, "mpc_explore_ms": float("nan")}
+            self.diag = nothing
+        elif self.calls == 3:
+            self.diag = nothing | {"mpc_deferred_iter": 40, "mpc_deferred_ms": 20.0,
+                                   "mpc_deferred_source": "plan"}  # fmt: skip
         else:
             raise RuntimeError("boom\nsecond line")
 
@@ -316,19 +323,23 @@ class _Explorer:
 
 
 def test_the_work_after_a_step_is_logged_and_never_raises():
-    """An exploration solve after the command gives a ``between`` record (nothing when none
-    ran); one that raises is event ``between_error`` (counted in ``step_errors``), not an
-    exception out of the step: the command was sent, the next tick steps as usual."""
+    """An exploration solve or a carried step's work after the command gives a ``between``
+    record (nothing when none ran); one that raises is event ``between_error`` (counted in
+    ``step_errors``), not an exception out of the step: the command was sent, the next tick
+    steps as usual."""
     host = _Host(_Explorer())
-    for t in (1.0, 2.0, 3.0):
+    for t in (1.0, 2.0, 3.0, 4.0):
         host.log_between(t, host.run_between())
-    assert len(host.records) == 1
-    rec = host.records[0]
+    assert len(host.records) == 2
+    rec, deferred = host.records
     assert rec["kind"] == "between" and rec["t"] == 1.0 and rec["mpc_explore_iter"] == 12
     assert rec["ms"] >= 0.0 and "mpc_ok" not in rec
-    assert host.events == [("between_error", {"t": 3.0, "error": "RuntimeError: boom"})]
+    assert deferred["t"] == 3.0 and deferred["mpc_deferred_iter"] == 40
+    assert deferred["mpc_deferred_source"] == "plan"
+    assert host.events == [("between_error", {"t": 4.0, "error": "RuntimeError: boom"})]
     assert host.step_errors == 1
-    assert host.between_solves == 1 and host.between_ms_max == rec["ms"]  # the summary's
+    assert host.between_solves == 2  # the summary's
+    assert host.between_ms_max == max(rec["ms"], deferred["ms"])
 
 
 def test_a_budget_that_leaves_no_room_for_the_exploration_is_reported():

@@ -93,9 +93,10 @@ def test_a_solve_within_the_budget_gives_the_plan_it_gives_without_one(scenarios
 def test_a_slow_solve_carries_the_previous_plan(carried):
     """Steps whose warm-started solve stopped at the budget (fatrop counts ``CAP + 1``)
     followed the previous step's plan moved one period on: the same positions at the same
-    times (stages 0 to N-1; the last is held by the shift). That plan is the one the previous
-    step commanded, or, when that step was carried too, the one its work after the command
-    found."""
+    times (stages 1 to N-1; the first is the state now, as in every solved plan, the last is
+    held by the shift). That plan is the one the previous step commanded, or, when that step
+    was carried too, the one its work after the command found. No target change is carried
+    (its exploration belongs in the step)."""
     ctrl, ts, log = carried
     steps = [t for t, (*_, source) in log["plans"].items() if source == "carried"]
     assert len(steps) >= 2, "no step carried its plan: the test sees nothing"
@@ -116,10 +117,14 @@ def test_a_slow_solve_carries_the_previous_plan(carried):
         else:
             t_prev, N_prev, E_prev, _ = log["plans"][before]
         t_now, N_now, E_now, _ = log["plans"][t]
-        np.testing.assert_allclose(N_now[:-1], np.interp(t_now[:-1], t_prev, N_prev), atol=1e-6)
-        np.testing.assert_allclose(E_now[:-1], np.interp(t_now[:-1], t_prev, E_prev), atol=1e-6)
+        np.testing.assert_allclose(N_now[1:-1], np.interp(t_now[1:-1], t_prev, N_prev),
+                                   atol=1e-6)  # fmt: skip
+        np.testing.assert_allclose(E_now[1:-1], np.interp(t_now[1:-1], t_prev, E_prev),
+                                   atol=1e-6)  # fmt: skip
         checked += 1
     assert checked >= 2
+    switched = ts["mpc_target_switches"].diff().fillna(0).to_numpy() > 0
+    assert not np.any(switched & (ts["mpc_source"] == "carried").to_numpy())
 
 
 def test_the_work_after_a_carried_step_is_the_step_without_a_budget(carried):
@@ -176,3 +181,51 @@ def test_a_carry_the_check_refuses_leaves_the_run_as_without_a_budget(scenarios_
 def test_step_iter_is_refused_where_it_means_nothing():
     with pytest.raises(ValueError, match="step_iter"):
         dataclasses.replace(SolverParams(), solver="qp", step_iter=CAP)
+
+
+def test_no_carry_at_a_target_change_or_from_a_plan_that_is_not_a_converged_one(scenarios_dir):
+    """The rule itself: the budget applies only when the warm start is a converged plan the
+    check let through (``w_ok``) and the target did not just change (``t_explore`` None:
+    its exploration runs in the step, and deferring it cost Case 8 39 s of fix age in
+    session 8)."""
+    ctrl = make_controller("mpc-multi", 3, "mpc-multi", {"solver.step_iter": CAP})
+    ctrl.w_prev, ctrl.w_ok, ctrl.t_explore = np.zeros(3), True, 10.0
+    assert ctrl._step_limit() == CAP
+    ctrl.t_explore = None
+    assert ctrl._step_limit() is None
+    ctrl.t_explore, ctrl.w_ok = 10.0, False
+    assert ctrl._step_limit() is None
+    with pytest.raises(ValueError, match="below max_iter"):
+        dataclasses.replace(SolverParams(), step_iter=50, max_iter=50)
+
+
+def test_work_cut_short_after_a_carried_step_leaves_a_warm_start_in_step(scenarios_dir):
+    """The deploy loop swallows an exception in ``between_steps`` (the command was sent).
+    If a carried step's work is cut short so, the next step starts from the carried plan
+    (moved one period on, as any warm start), not from the plan of two steps before, and may
+    not carry it again without a solve."""
+    ctrl = make_controller("mpc-multi", 3, "mpc-multi", {"solver.step_iter": CAP,
+                                                         "solver.hang_s": 0.0})  # fmt: skip
+    finish, between, cut = ctrl._finish_deferred, ctrl.between_steps, []
+
+    def cut_short():
+        if not cut:
+            d, ctrl.deferred = ctrl.deferred, None
+            cut.append((d, ctrl.w_prev, ctrl.w_ok))
+            raise RuntimeError("cut short (test)")
+        finish()
+
+    def swallowing():
+        try:
+            between()
+        except RuntimeError:
+            pass
+
+    ctrl._finish_deferred, ctrl.between_steps = cut_short, swallowing
+    ts = simulate(_case6(scenarios_dir), ctrl, seed=0).timeseries
+    assert cut, "no step carried its plan: the test sees nothing"
+    d, w_prev, w_ok = cut[0]
+    assert w_prev is d.w0 and not w_ok
+    row = ts.index[np.isclose(ts["t"] - 1.0, d.obs.t)][0]  # rows at t + Tc
+    assert ts.loc[row, "mpc_source"] == "carried"
+    assert ts.loc[row + 1, "mpc_source"] != "carried"

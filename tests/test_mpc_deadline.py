@@ -118,3 +118,56 @@ def test_field_deadline_abandons_a_hung_solve_and_the_next_step_starts_warm(tmp_
         assert took1 < budget + 0.25
     finally:
         ctrl.close()
+
+
+_ORPHAN_SCRIPT = '''
+import functools, sys
+from mpcasv.mpc.deadline import DeadlineSolver
+
+class Spin:  # a solve that never returns, as fatrop hung on NaN (here in Python)
+    def solve(self, *args):
+        while True:
+            pass
+
+def spin():
+    return Spin()
+
+if __name__ == "__main__":
+    ds = DeadlineSolver(spin, start_timeout=60.0, spare=False)
+    print(ds._active.proc.pid, flush=True)
+    ds.solve(None, None, timeout=600.0)  # blocks: killed before it returns
+'''
+
+
+def _alive(pid: int) -> bool:
+    """Whether process ``pid`` exists and is not a zombie."""
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().split(")")[-1].split()[0] != "Z"
+    except FileNotFoundError:
+        return False
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="PR_SET_PDEATHSIG is Linux's")
+def test_a_solver_worker_dies_with_the_process_that_started_it(tmp_path):
+    """A solver worker stuck in a hung solve while its parent is killed (a sweep stopped with
+    a signal, a job past ``--job-timeout``) must not spin on for ever: it is killed with its
+    parent (session 14 found one left at 70 % of a core for 20 min)."""
+    script = tmp_path / "orphan.py"
+    script.write_text(_ORPHAN_SCRIPT)
+    parent = subprocess.Popen([sys.executable, str(script)], stdout=subprocess.PIPE, text=True)
+    worker = None
+    try:
+        worker = int(parent.stdout.readline())
+        time.sleep(1.0)  # the worker is now inside the spinning solve
+        assert _alive(worker)
+        parent.kill()
+        parent.wait(timeout=10)
+        deadline = time.monotonic() + 10.0
+        while _alive(worker) and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert not _alive(worker), "the solver worker outlived its parent"
+    finally:
+        parent.kill()
+        if worker is not None and _alive(worker):  # (the test failed: do not leave it)
+            os.kill(worker, 9)

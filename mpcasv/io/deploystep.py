@@ -109,7 +109,7 @@ class FieldMode:
         self._step_pool: concurrent.futures.ThreadPoolExecutor | None = None
         self.skipped_steps = 0
         self.step_errors = 0  # steps that raised (both modes: see step_failed)
-        self.between_solves = 0  # exploration solves after a step's command (log_between)
+        self.between_solves = 0  # steps with solves after their command (log_between)
         self.between_ms_max = 0.0  # the longest of them, wall ms
         if self.field_mode:
             check_budget(self.cfg, self.controller)
@@ -159,9 +159,10 @@ class FieldMode:
         return cmd
 
     def run_between(self) -> dict:
-        """The controller's ``between_steps`` (an MPC's exploration solve, after the step's
-        command was sent: docs/mpc.md, "Controller step"), never raising: what it did, for
-        :meth:`log_between` (wall ``ms``; the diagnostics ``mpc_explore_*``; or ``error``)."""
+        """The controller's ``between_steps`` (an MPC's exploration solve, or a carried
+        step's work, after the step's command was sent: docs/mpc.md, "Controller step" 3 and
+        3b), never raising: what it did, for :meth:`log_between` (wall ``ms``; the
+        diagnostics ``mpc_explore_*`` and ``mpc_deferred_*``; or ``error``)."""
         c0 = time.perf_counter()
         try:
             self.controller.between_steps()
@@ -169,18 +170,19 @@ class FieldMode:
             log.debug("between_steps raised", exc_info=exc)
             return {"error": f"{type(exc).__name__}: {exc}".splitlines()[0]}
         diag = getattr(self.controller, "diagnostics", None)
-        out = {k: v for k, v in (diag() if diag else {}).items() if k.startswith("mpc_explore")}
+        out = {k: v for k, v in (diag() if diag else {}).items()
+               if k.startswith(("mpc_explore", "mpc_deferred"))}  # fmt: skip
         return out | {"ms": (time.perf_counter() - c0) * 1e3}
 
     def log_between(self, ts: float, rec: dict) -> None:
-        """A ``between`` record in deploy.jsonl when an exploration solve ran (counted in the
+        """A ``between`` record in deploy.jsonl when a solve ran (counted in the
         summary's ``between_solves``, its wall time in ``between_ms_max``); event
         ``between_error`` (an error on the console, counted in ``step_errors``) if it
         raised: the step's command was sent already, the next step starts as usual."""
         if "error" in rec:
             self.step_errors += 1
             self.event("between_error", t=ts, error=rec["error"])
-        elif rec.get("mpc_explore_iter", 0) > 0:
+        elif rec.get("mpc_explore_iter", 0) > 0 or rec.get("mpc_deferred_source"):
             self.between_solves += 1
             self.between_ms_max = max(self.between_ms_max, float(rec["ms"]))
             self.jsonl.write({"kind": "between", "t": ts} | rec)

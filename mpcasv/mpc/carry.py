@@ -5,9 +5,12 @@ With ``solver.step_iter`` set, the step's warm-started solve may take that many 
 Most solves converge well within it (the same plan as without the budget: the solver's
 iterates do not depend on its iteration limit). One that stops there (the arrival at an AUV,
 where the plan turns from transit to standby and the warm start needs 25-50 iterations) is
-not waited for when the previous step's converged plan, moved one control period on, may
-still be followed: it passes the safety check (:meth:`~mpcasv.mpc.safety.Safety._check`) and
-no AUV threatens the ASV held where it is. The step then commands that plan (source
+not waited for when the last converged plan, moved one control period on (its first stage
+the state now), may still be followed: it passes the safety check
+(:meth:`~mpcasv.mpc.safety.Safety._check`, which looks at it against the AUVs' present
+forecast, so it is allowed under a threat too), and the step is no target change (whose
+exploration belongs in the step: deferring it cost Case 8 39 s of fix age, docs/mpc.md
+"Controller step" 3). The step then commands that plan (source
 ``carried``), and everything the step would have done without the budget (the warm-started
 solve with ``max_iter``, the exploration, any rescue) runs after the command
 (:meth:`~mpcasv.mpc.safety.Safety.between_steps`, in the idle part of the control period),
@@ -45,27 +48,44 @@ class Carry:
 
     def _step_limit(self) -> int | None:
         """``solver.step_iter`` when this step may carry the previous plan (a converged plan
-        the safety check let through), else None (the step's solves finish in it)."""
+        the safety check let through, and no target change: ``t_explore`` None), else None
+        (the step's solves finish in it)."""
         cap = self.params.solver.step_iter
-        return None if cap is None or self.w_prev is None or not self.w_ok else cap
+        if cap is None or self.w_prev is None or not self.w_ok or self.t_explore is None:
+            return None
+        return cap
 
     def _carried(self, res: SolveResult, cap: int | None, w0: np.ndarray,
                  p: np.ndarray) -> SolveResult | None:  # fmt: skip
-        """The previous plan ``w0`` (moved one period on) as this step's plan when the warm
-        solve ``res`` stopped at the step's budget ``cap`` and that plan passes the safety
-        check; else None (the step's work goes on as without a budget)."""
+        """The previous plan ``w0`` (moved one period on), its first stage set to the state
+        now, as this step's plan when the warm solve ``res`` stopped at the step's budget
+        ``cap`` and that plan passes the safety check; else None (the step's work goes on as
+        without a budget)."""
         if cap is None or res.ok or res.status == "deadline" or res.iters < cap:
             return None
-        carried = SolveResult(w0, None, None, float("nan"), True, "carried", res.iters, res.ms)
+        Z, V = self.ocp.split(w0)
+        Z = Z.copy()
+        Z[0] = self.ocp.unpack_par(p)["z0"]  # a solved plan's first stage is the state now
+        carried = SolveResult(self.ocp.join(Z, V), None, None, float("nan"), True, "carried",
+                              res.iters, res.ms)  # fmt: skip
         return carried if self._check(carried, p) is None else None
+
+    def _defer(self, deferred: Deferred) -> None:
+        """Leave ``deferred`` for after the command. Until it is done the next step starts
+        from the carried plan, and may not carry it again (the work may be cut short: an
+        exception in the deploy loop's ``between_steps``)."""
+        self.deferred = deferred
+        self.w_prev, self.lam_prev, self.w_ok = deferred.w0, deferred.lam, False
 
     def _finish_deferred(self) -> None:
         """After a carried step's command: the step's whole work without the budget; its
         plan (or unconverged iterate) warm-starts the next step, as it would have in the
-        step."""
+        step. Its source says what the step would have done (``fallback``, ``escape``: the
+        hybrid's command or the escape manoeuvre, one step later if the next step needs them
+        too)."""
         d, self.deferred = self.deferred, None
         res = self._solve(d.p_s, d.w0, *d.lam)
         res, _, source = self._work(d.obs, d.p_s, d.p, res, d.hybrid_cmd)
         self._keep_start(res, source)
         self._diag |= {"mpc_deferred_iter": res.iters, "mpc_deferred_ms": res.ms,
-                       "mpc_deferred_source": source}  # fmt: skip
+                       "mpc_deferred_source": source, "mpc_hung": self._hung}  # fmt: skip

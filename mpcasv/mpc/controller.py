@@ -368,7 +368,7 @@ class MPCController(WorldView, Safety, PlanOutput, Targeting, SpeedCap, Carry):
         res = self._solve(p_s, w0, *lam, max_iter=cap)
         carried = self._carried(res, cap, w0, p)
         if carried is not None:  # the previous plan this step; the work after the command
-            self.deferred = Deferred(obs, p_s, p, w0, lam, hybrid_cmd)
+            self._defer(Deferred(obs, p_s, p, w0, lam, hybrid_cmd))
             res, reason, source = carried, None, "carried"
         else:  # as without a budget (a solve stopped at it: solved again in full)
             stopped = cap is not None and not res.ok and res.iters >= cap

@@ -10,6 +10,9 @@ through a pipe and waits at most the remaining budget. A worker that has not ans
 is killed (SIGKILL) and replaced by a spare that was started beforehand (its compiled library
 already loaded), so the next step has a ready solver; a new spare is started at once.
 
+A worker started from the main thread dies with the process that started it (Linux,
+:func:`_die_with`): one left inside a hung native solve would otherwise spin for ever.
+
 The warm start stays in the controller (the previous plan moved one period ahead), so the
 step after an overrun starts warm whatever happened to the worker.
 
@@ -22,6 +25,9 @@ from __future__ import annotations
 
 import math
 import multiprocessing
+import os
+import signal
+import sys
 import threading
 import time
 from collections.abc import Callable
@@ -37,8 +43,28 @@ _READY = "ready"
 SPARE_DELAY_S = 0.1
 
 
-def _serve(factory: Callable, conn) -> None:  # pragma: no cover - runs in the worker
-    """Worker process: build the solver, say so, then answer solve requests until None."""
+def _die_with(parent: int | None) -> None:  # pragma: no cover - runs in the worker
+    """Linux: have the kernel SIGKILL this process when the thread that started it ends
+    (``PR_SET_PDEATHSIG``). A worker whose parent is gone would otherwise live on, and one
+    stuck in a hung native solve (which holds the GIL: no Python watchdog can run) spins for
+    ever: a killed ``mpcasv compare`` left one at 70 % of a core for 20 min (session 14).
+    ``parent``: the parent's pid if it was started from its main thread (None: from another
+    thread, whose end would kill it; the field mode's spares, in a long-lived process)."""
+    if parent is None or not sys.platform.startswith("linux"):
+        return
+    import ctypes
+
+    libc = ctypes.CDLL(None, use_errno=True)
+    if libc.prctl(1, int(signal.SIGKILL), 0, 0, 0) != 0:  # 1: PR_SET_PDEATHSIG
+        return
+    if os.getppid() != parent:  # the parent died before the call: nobody will ask
+        os._exit(1)
+
+
+def _serve(factory: Callable, conn, parent: int | None = None) -> None:  # pragma: no cover
+    """Worker process: build the solver, say so, then answer solve requests until None
+    (``parent``: :func:`_die_with`)."""
+    _die_with(parent)
     try:
         solver = factory()
     except BaseException as exc:
@@ -63,8 +89,11 @@ class _Worker:
 
     def __init__(self, factory: Callable, ctx, background: bool = False, delay: float = 0.0):
         self.conn, self._child = ctx.Pipe()
-        self.proc = ctx.Process(target=_serve, args=(factory, self._child), daemon=True,
-                                name="mpcasv-mpc-solver")  # fmt: skip
+        # started from the main thread: it dies with this process (a thread's spare cannot)
+        main = not background and threading.current_thread() is threading.main_thread()
+        self.proc = ctx.Process(target=_serve, args=(factory, self._child,
+                                                     os.getpid() if main else None),
+                                daemon=True, name="mpcasv-mpc-solver")  # fmt: skip
         self.ready = False
         self._started = threading.Event()
         if background:  # starting a process takes tens of ms (and the GIL): not on the step's time

@@ -226,13 +226,13 @@ class SolverParams:
     step_iter : int or None
         Iterations the step's warm-started solve may take before the step follows the
         previous plan instead (None: off, every solve finishes in the step; docs/mpc.md
-        "Controller step" 3b; issue 16 item 8). A work budget, not a wall-time one. When that
-        solve stops at ``step_iter`` iterations, no AUV threatens the ASV, and the previous
-        step's converged plan moved one period on passes the safety check, the step commands
-        that plan (source ``carried``) and the step's whole work (the warm-started solve with
-        ``max_iter``, the exploration, any rescue) is done after the command
-        (``between_steps``), its plan warm-starting the next step. A solve that converges
-        within ``step_iter`` gives the same plan as without the budget.
+        "Controller step" 3b; issue 16 item 8). A work budget, not a wall-time one, below
+        ``max_iter``. When that solve stops at ``step_iter`` iterations, the step is no
+        target change, and the last converged plan moved one period on passes the safety
+        check, the step commands that plan (source ``carried``) and the step's whole work
+        (the warm-started solve with ``max_iter``, the exploration, any rescue) is done after
+        the command (``between_steps``), its plan warm-starting the next step. A solve that
+        converges within ``step_iter`` gives the same plan as without the budget.
     check_stages : int
         Stages of the plan checked against r_inner / r_avoid before it is used.
     check_margin : float
@@ -275,6 +275,10 @@ class SolverParams:
         if self.threads > 1 and not (self.compiled and self.solver in ("fatrop", "ipopt")):
             raise ValueError("threads > 1 needs compiled = true and solver 'fatrop' or 'ipopt' "
                              "(the stages run in parallel in the compiled library only)")
+        if self.step_iter is not None and self.step_iter >= self.max_iter:
+            raise ValueError(f"step_iter ({self.step_iter}) must be below max_iter "
+                             f"({self.max_iter}): a solve stopped there is finished with "
+                             "max_iter after the command")
         if self.step_iter is not None and self.solver == "qp":
             raise ValueError("step_iter needs solver 'fatrop' or 'ipopt' (the qp variant's "
                              "work is bounded by qp_iters)")

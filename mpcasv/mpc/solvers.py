@@ -88,7 +88,7 @@ class NLPSolver:
 
     def _nlpsol(self, max_iter: int) -> ca.Function:
         if max_iter not in self._solvers:
-            sp = dataclasses.replace(self.sp, max_iter=max_iter)
+            sp = dataclasses.replace(self.sp, max_iter=max_iter, step_iter=None)
             opts = solver_options(self.ocp, sp)
             if self._lib is not None:
                 s = ca.nlpsol("mpc", sp.solver, str(self._lib), opts)
