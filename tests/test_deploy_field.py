@@ -356,6 +356,13 @@ def test_a_budget_that_leaves_no_room_for_the_exploration_is_reported():
     assert not check_budget(cfg, ctl(500.0), log=said.append)
     assert len(said) == 1 and "solver.budget_ms = 500 ms" in said[0]
     assert check_budget(cfg, SimpleNamespace(), log=said.append)  # no solver: nothing to say
+    # with a step budget (solver.step_iter) a carried step's work comes after the command too
+    three = SimpleNamespace(params=SimpleNamespace(solver=SimpleNamespace(budget_ms=200.0,
+                                                                          step_iter=15)))
+    assert check_budget(cfg, three, log=said.append) and len(said) == 1
+    three.params.solver.budget_ms = 400.0
+    assert not check_budget(cfg, three, log=said.append)
+    assert len(said) == 2 and "1200 ms" in said[1] and "carried" in said[1]
 
 
 def test_a_budget_that_leaves_the_solves_no_time_is_refused(tmp_path, capsys):

@@ -89,3 +89,16 @@ class Carry:
         self._keep_start(res, source)
         self._diag |= {"mpc_deferred_iter": res.iters, "mpc_deferred_ms": res.ms,
                        "mpc_deferred_source": source, "mpc_hung": self._hung}  # fmt: skip
+
+    def _keep_start(self, res: SolveResult, source: str) -> None:
+        """The next step's warm start from this step's result (``w_ok``: a converged plan the
+        safety check let through, which a later step may carry)."""
+        if source == "escape":  # the escape manoeuvre's rollout: warm-starts the next step
+            self.w_prev, self.lam_prev = res.w, None
+        elif res.ok or (np.all(np.isfinite(res.w))
+                        and getattr(self.solver, "warm_from_failures", False)):  # fmt: skip
+            self.w_prev = res.w  # an unconverged NLP iterate warm-starts too
+            self.lam_prev = (res.lam_x, res.lam_g) if res.ok else None
+        else:
+            self.w_prev, self.lam_prev = None, None  # next step starts from a rollout
+        self.w_ok = bool(res.ok) and source in ("plan", "rescue", "as-escape")

@@ -15,6 +15,8 @@ Every step (docs/mpc.md, "Controller"):
    at rest the rudder has no authority, so the gradient cannot say "turn and go"); that
    periodic one runs after the command (:meth:`between_steps`) and warm-starts the next step
    when cheaper; after a target change, with a threat, or before a rescue it runs in the step;
+   with ``solver.step_iter`` a warm solve that stops there is finished after the command and
+   the step follows the last converged plan instead (:mod:`mpcasv.mpc.carry`);
 4. the safety check and, when the plan cannot be used (a failed solve, or a plan entering
    r_inner / r_avoid within its first ``check_stages`` stages, or, already inside, closing
    the range further), the rescue: solves from the unconverged iterate, an escape guess and
@@ -289,43 +291,6 @@ class MPCController(WorldView, Safety, PlanOutput, Targeting, SpeedCap, Carry):
         """Field mode: seconds left of this step's solve budget."""
         return (self.params.solver.budget_ms / 1e3 - STEP_RESERVE_S
                 - (time.perf_counter() - self._t_step))  # fmt: skip
-
-    def _work(self, obs: Observation, p_s: np.ndarray, p: np.ndarray, res: SolveResult,
-              hybrid_cmd: Command) -> tuple[SolveResult, str | None, str]:  # fmt: skip
-        """The step's work after its warm-started solve ``res`` (``p_s``: the parameters
-        solved, ``p``: checked): the safety check, the exploration when it belongs in the
-        step, the rescue. Returns ``(result, reason the plan may not be used or None,
-        source)``."""
-        reason = self._check(res, p)
-        # the exploration now when the plan may not be used (before any rescue, as part of
-        # it), right after a target change, or when an AUV threatens the ASV held where it is;
-        # else (the periodic one while the plan stands still) after the command
-        here = obs.asv.position
-        if (reason is not None or self.t_explore is None
-                or self._transit_reason(here, self.ocp.unpack_par(p)) is Reason.AVOIDANCE):
-            res = self._cheaper(res, self._explore(obs, p_s, res))
-            reason = self._check(res, p)
-        else:
-            self._pending = (obs, p_s, res)
-        source = "plan" if reason is None else "fallback"
-        # rescue, except after a missed field deadline (no time left); after a hang in
-        # simulation too (the Case 4 problem that hangs fatrop converges from the escape guess)
-        if reason is not None and (res.status != "deadline" or self._hang_guard):
-            res, reason, source = self._rescue(obs, p_s, p, res, reason, hybrid_cmd)
-        return res, reason, source
-
-    def _keep_start(self, res: SolveResult, source: str) -> None:
-        """The next step's warm start from this step's result (``w_ok``: a converged plan the
-        safety check let through, which a later step may carry)."""
-        if source == "escape":  # the escape manoeuvre's rollout: warm-starts the next step
-            self.w_prev, self.lam_prev = res.w, None
-        elif res.ok or (np.all(np.isfinite(res.w))
-                        and getattr(self.solver, "warm_from_failures", False)):  # fmt: skip
-            self.w_prev = res.w  # an unconverged NLP iterate warm-starts too
-            self.lam_prev = (res.lam_x, res.lam_g) if res.ok else None
-        else:
-            self.w_prev, self.lam_prev = None, None  # next step starts from a rollout
-        self.w_ok = bool(res.ok) and source in ("plan", "rescue", "as-escape")
 
     def step(self, obs: Observation) -> Command:
         self._hung = 0  # solves abandoned as hung this step (simulation's hang guard)

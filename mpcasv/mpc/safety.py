@@ -12,7 +12,7 @@ import time
 
 import numpy as np
 
-from mpcasv.interface import Command, Mode, Observation
+from mpcasv.interface import Command, Mode, Observation, Reason
 from mpcasv.mpc.plan_check import commands_standby
 from mpcasv.mpc.rescue import command_guess, escape_guess
 from mpcasv.mpc.solvers import SolveResult
@@ -143,6 +143,30 @@ class Safety:
         self._diag |= {"mpc_explore_ms": alt.ms, "mpc_explore_iter": alt.iters,
                        "mpc_explore_cost": alt.f, "mpc_explore_adopted": int(adopt),
                        "mpc_hung": self._hung, "mpc_over_budget": max(step_over, over)}
+
+    def _work(self, obs: Observation, p_s: np.ndarray, p: np.ndarray, res: SolveResult,
+              hybrid_cmd: Command) -> tuple[SolveResult, str | None, str]:  # fmt: skip
+        """The step's work after its warm-started solve ``res`` (``p_s``: the parameters
+        solved, ``p``: checked): the safety check, the exploration when it belongs in the
+        step, the rescue. Returns ``(result, reason the plan may not be used or None,
+        source)``."""
+        reason = self._check(res, p)
+        # the exploration now when the plan may not be used (before any rescue, as part of
+        # it), right after a target change, or when an AUV threatens the ASV held where it is;
+        # else (the periodic one while the plan stands still) after the command
+        here = obs.asv.position
+        if (reason is not None or self.t_explore is None
+                or self._transit_reason(here, self.ocp.unpack_par(p)) is Reason.AVOIDANCE):
+            res = self._cheaper(res, self._explore(obs, p_s, res))
+            reason = self._check(res, p)
+        else:
+            self._pending = (obs, p_s, res)
+        source = "plan" if reason is None else "fallback"
+        # rescue, except after a missed field deadline (no time left); after a hang in
+        # simulation too (the Case 4 problem that hangs fatrop converges from the escape guess)
+        if reason is not None and (res.status != "deadline" or self._hang_guard):
+            res, reason, source = self._rescue(obs, p_s, p, res, reason, hybrid_cmd)
+        return res, reason, source
 
     def _violation_now(self, p: np.ndarray) -> float:
         """How far (m) the ASV is outside the plan's range bounds now (0 inside)."""
