@@ -46,7 +46,8 @@ SPARE_DELAY_S = 0.1
 def _die_with(parent: int | None) -> None:  # pragma: no cover - runs in the worker
     """Linux: have the kernel SIGKILL this process when the thread that started it ends
     (``PR_SET_PDEATHSIG``). A worker whose parent is gone would otherwise live on, and one
-    stuck in a hung native solve (which holds the GIL: no Python watchdog can run) spins for
+    stuck in a hung native solve (which may hold the GIL: a Python thread ran 89 of 511
+    10-ms ticks during a 5-s CasADi 3.8.2 call, session 14) spins for
     ever: a killed ``mpcasv compare`` left one at 70 % of a core for 20 min (session 14).
     ``parent``: the parent's pid if it was started from its main thread (None: from another
     thread, whose end would kill it; the field mode's spares, in a long-lived process)."""
