@@ -141,7 +141,7 @@ _BASE: dict[str, MetricInfo] = {
     "fallbacks": _i("1", "lower", "MPC steps handed to the fallback controller"),
     "carried_steps": _i("1", "lower", "MPC steps that followed the previous plan while their "
                         "solve, past solver.step_iter iterations, finished after the command "
-                        "(an iteration count: no wall time)", "issue 16 item 8"),
+                        "(decided by iteration counts, never by wall time)", "issue 16 item 8"),
     "target_switches": _i("1", "lower", "changes of the AUV an MPC targets (0 for the other "
                           "controllers; chattering shows here)", "issue 16 item 6"),
     "solver_hangs": _i("1", "lower", "MPC solves abandoned as hung by the simulation's hang "
