@@ -297,3 +297,45 @@ def test_between_steps_ms_max_is_null_when_no_solve_ran_between_steps(tmp_path):
     assert summ.loc["M", "n"] == 5 and summ.loc["M", "mean"] == 4.5
     stat = paired_table(df, ["between_steps_ms_max"], {"between_steps_ms_max": "lower"})
     assert stat.loc[0, "n"] == 0 and stat.loc[0, "note"] == "no pairs", stat
+
+
+class _Flagged:
+    """A go-to controller whose diagnostics flag every third step as carried, hung and over
+    budget (as an MPC's ``mpc_source``, ``mpc_hung``, ``mpc_over_budget``)."""
+
+    name = "goto"
+
+    def __init__(self):
+        self._c = make_controller("goto", 1, None, overrides={"waypoint": [0.0, 300.0]})
+        self.k = 0
+
+    def reset(self, n_auv):
+        self._c.reset(n_auv)
+        self.k = 0
+
+    def step(self, obs):
+        self.k += 1
+        return self._c.step(obs)
+
+    def diagnostics(self):
+        f = self.k % 3 == 0
+        return {"mpc_source": "carried" if f else "plan", "mpc_hung": int(f),
+                "mpc_over_budget": int(f)}  # fmt: skip
+
+
+@pytest.mark.parametrize("every_step", [False, True])
+def test_step_counts_count_controller_steps_whatever_the_log(every_step):
+    """``carried_steps``, ``solver_hangs`` and ``over_budget_steps`` count controller steps:
+    the same with one row per plant step (``log_every_step``, 10 rows per step here) as with
+    one per step (they counted rows before session 14: ten times too many)."""
+    sc = scenario_from_dict({
+        "name": "flags", "duration": 30.0, "controller": "hybrid-single",
+        "preset": "paper1-field", "sim": {"log_every_step": every_step},
+        "auv": [{"name": "a", "start": {"N": 20.0, "E": 150.0},
+                 "behaviour": {"plan": {"speed": 1.0, "route": [
+                     {"waypoints": [[20.0, 150.0, 0.0]]}]}}}],
+    })  # fmt: skip
+    res = simulate(sc, _Flagged(), seed=0)
+    assert len(res.timeseries) == (300 if every_step else 30)
+    m = compute_metrics(res)
+    assert m["carried_steps"] == m["solver_hangs"] == m["over_budget_steps"] == 10

@@ -335,6 +335,10 @@ def compute_metrics(result) -> dict:
     if result.scenario.sim.log_every_step:  # one row per plant step: weight rows by dt
         Tc = result.scenario.sim.dt
     t_end = float(ts["t"].iloc[-1])
+    # one row per controller step (the diagnostics' counts): with one row per plant step the
+    # period's last (each holds its period's diagnostics)
+    n_sub = result.scenario.sim.n_sub if result.scenario.sim.log_every_step else 1
+    steps = ts.iloc[n_sub - 1 :: n_sub]
     mode, reason = ts["mode"].to_numpy(), ts["reason"].to_numpy()
     standby = mode == "standby"
     transit = ~standby
@@ -410,10 +414,12 @@ def compute_metrics(result) -> dict:
         "controller_step_ms_p99": float(np.percentile(step_ms, 99)),
         "between_steps_ms_max": _max_or_none(ts, "mpc_deferred_ms", "mpc_explore_ms"),
         "fallbacks": int(result.fallbacks),
-        "carried_steps": int((ts["mpc_source"] == "carried").sum()) if "mpc_source" in ts else 0,
+        "carried_steps": int((steps["mpc_source"] == "carried").sum())
+        if "mpc_source" in steps else 0,
         "target_switches": _last_int(ts, "mpc_target_switches"),
-        "solver_hangs": int(ts["mpc_hung"].sum()) if "mpc_hung" in ts else 0,
-        "over_budget_steps": int(ts["mpc_over_budget"].sum()) if "mpc_over_budget" in ts else 0,
+        "solver_hangs": int(steps["mpc_hung"].sum()) if "mpc_hung" in steps else 0,
+        "over_budget_steps": int(steps["mpc_over_budget"].sum())
+        if "mpc_over_budget" in steps else 0,
         **plan_following(ts),
         # per-AUV lists
         "auv_distance_m_auv": auv_d,
