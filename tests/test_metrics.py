@@ -135,17 +135,23 @@ def test_same_trajectory_gives_the_same_geometric_metrics_whatever_the_labels():
             np.testing.assert_equal(a[name], b[name], err_msg=name)  # NaN == NaN here
 
 
-def test_collision_time_is_counted_at_plant_step_resolution():
-    """A stationary AUV; the ASV passes it. The account's time inside r_inner equals the
-    plant steps logged inside (an independent count from the per-step log), and a single
-    pass is one stay."""
-    sc = scenario_from_dict({
-        "name": "through", "duration": 150.0, "controller": "hybrid-single",
-        "preset": "paper1-field", "sim": {"log_every_step": True},
+def _stationary_auv(name: str, duration: float, every_step: bool):
+    """One AUV held at (20, 150) m at the surface; ``every_step``: one log row per plant
+    step (``log_every_step``)."""
+    return scenario_from_dict({
+        "name": name, "duration": duration, "controller": "hybrid-single",
+        "preset": "paper1-field", "sim": {"log_every_step": every_step},
         "auv": [{"name": "a", "start": {"N": 20.0, "E": 150.0},
                  "behaviour": {"plan": {"speed": 1.0, "route": [
                      {"waypoints": [[20.0, 150.0, 0.0]]}]}}}],
     })  # fmt: skip
+
+
+def test_collision_time_is_counted_at_plant_step_resolution():
+    """A stationary AUV; the ASV passes it. The account's time inside r_inner equals the
+    plant steps logged inside (an independent count from the per-step log), and a single
+    pass is one stay."""
+    sc = _stationary_auv("through", 150.0, every_step=True)
     res = simulate(sc, make_controller("goto", 1, None, overrides={"waypoint": [0.0, 300.0]}),
                    seed=0)  # fmt: skip
     ts = res.timeseries
@@ -328,14 +334,7 @@ def test_step_counts_count_controller_steps_whatever_the_log(every_step):
     """``carried_steps``, ``solver_hangs`` and ``over_budget_steps`` count controller steps:
     the same with one row per plant step (``log_every_step``, 10 rows per step here) as with
     one per step (they counted rows before session 14: ten times too many)."""
-    sc = scenario_from_dict({
-        "name": "flags", "duration": 30.0, "controller": "hybrid-single",
-        "preset": "paper1-field", "sim": {"log_every_step": every_step},
-        "auv": [{"name": "a", "start": {"N": 20.0, "E": 150.0},
-                 "behaviour": {"plan": {"speed": 1.0, "route": [
-                     {"waypoints": [[20.0, 150.0, 0.0]]}]}}}],
-    })  # fmt: skip
-    res = simulate(sc, _Flagged(), seed=0)
+    res = simulate(_stationary_auv("flags", 30.0, every_step), _Flagged(), seed=0)
     assert len(res.timeseries) == (300 if every_step else 30)
     m = compute_metrics(res)
     assert m["carried_steps"] == m["solver_hangs"] == m["over_budget_steps"] == 10
