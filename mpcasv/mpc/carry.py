@@ -5,8 +5,9 @@ With ``solver.step_iter`` set, the step's warm-started solve may take that many 
 Most solves converge well within it (the same plan as without the budget: the solver's
 iterates do not depend on its iteration limit). One that stops there (the arrival at an AUV,
 where the plan turns from transit to standby and the warm start needs 17 to more than 50
-iterations) is not waited for when the last converged plan, moved one control period on
-(its first stage the state now), may still be followed: it passes the safety check
+iterations; stretches of transit) is not waited for when the last converged plan, moved
+one control period on (its first stage the state now), may still be followed: it passes the
+safety check
 (:meth:`~mpcasv.mpc.safety.Safety._check`, which looks at it against the AUVs' present
 forecast, so it is allowed under a threat too), and the step is no target change (whose
 exploration belongs in the step: deferring it cost Case 8 39 s of fix age, docs/mpc.md
