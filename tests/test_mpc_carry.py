@@ -17,7 +17,7 @@ from test_mpc_between_steps import _NoHook, _same_decisions
 from test_mpc_deadline import WALL_COLUMNS
 
 from mpcasv.controllers import make_controller
-from mpcasv.mpc.params import SolverParams
+from mpcasv.mpc.solver_params import SolverParams
 from mpcasv.sim.scenario import load_scenario, scenario_with
 from mpcasv.sim.simulator import simulate
 

@@ -24,8 +24,8 @@ from mpcasv.mpc.codegen import (
     write_source,
 )
 from mpcasv.mpc.derivatives import _over_horizon, nlp_functions
-from mpcasv.mpc.params import SolverParams
 from mpcasv.mpc.problem import OCP
+from mpcasv.mpc.solver_params import SolverParams
 
 
 def test_thread_flags_add_openmp_and_the_thread_count_only_above_one():

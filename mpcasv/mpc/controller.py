@@ -173,7 +173,7 @@ class MPCController(WorldView, Safety, PlanOutput, Targeting, SpeedCap, Carry):
 
     def use_hang_guard(self) -> None:
         """Simulation: the solves run in a worker process and only one that has not answered
-        after ``solver.hang_s`` s is abandoned (:class:`~mpcasv.mpc.params.SolverParams`;
+        after ``solver.hang_s`` s is abandoned (:class:`~mpcasv.mpc.solver_params.SolverParams`;
         ``hang_s = 0``: solves stay in this process, unguarded)."""
         if self.params.solver.hang_s <= 0:
             self.close()

@@ -30,8 +30,8 @@ import scipy.sparse as sps
 
 from mpcasv.mpc.codegen import compiled_library
 from mpcasv.mpc.derivatives import nlp_functions
-from mpcasv.mpc.params import SolverParams
 from mpcasv.mpc.problem import OCP
+from mpcasv.mpc.solver_params import SolverParams
 from mpcasv.mpc.solvers import SolveResult
 
 EIG_MIN = 1e-4  # smallest eigenvalue of a convexified Hessian block

@@ -18,8 +18,8 @@ import numpy as np
 
 from mpcasv.mpc.codegen import compiled_library, thread_cflags
 from mpcasv.mpc.derivatives import nlp_functions
-from mpcasv.mpc.params import SolverParams
 from mpcasv.mpc.problem import OCP
+from mpcasv.mpc.solver_params import SolverParams
 
 
 @dataclass(frozen=True)

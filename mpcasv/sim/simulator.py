@@ -60,7 +60,7 @@ def simulate(
     world.oracle_current = bool(getattr(controller, "needs_current_oracle", False))
     controller.reset(world.n_auv)
     guard = getattr(controller, "use_hang_guard", None)  # an MPC: a hung solve must not
-    if guard is not None:  # stall the run (mpcasv.mpc.params.SolverParams.hang_s)
+    if guard is not None:  # stall the run (mpcasv.mpc.solver_params.SolverParams.hang_s)
         guard()
     between = getattr(controller, "between_steps", None)  # (timed by the controller)
     rows, step_ms, plans = [], [], []
