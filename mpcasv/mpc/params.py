@@ -1,8 +1,9 @@
 """Parameters of the MPC (frozen, validated from the ``mpc-*.toml`` presets).
 
 Every weight and horizon setting of :mod:`mpcasv.mpc` lives here, the solver's in
-:mod:`mpcasv.mpc.solver_params`; docs/mpc.md gives the equations each one enters. Units are SI; costs are per second of the horizon (the stage cost is
-multiplied by the stage length ``dt``).
+:mod:`mpcasv.mpc.solver_params`; docs/mpc.md gives the equations each one enters. Units are
+SI; costs are per second of the horizon (the stage cost is multiplied by the stage length
+``dt``).
 """
 
 from __future__ import annotations
