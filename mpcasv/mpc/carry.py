@@ -56,13 +56,20 @@ class Carry:
             return None
         return cap
 
+    @staticmethod
+    def _stopped(res: SolveResult, cap: int | None) -> bool:
+        """Whether the solve ``res`` stopped at the step's budget ``cap`` (None: no budget;
+        a missed field deadline is no stop at the budget)."""
+        return (cap is not None and not res.ok and res.status != "deadline"
+                and res.iters >= cap)  # fmt: skip
+
     def _carried(self, res: SolveResult, cap: int | None, w0: np.ndarray,
                  p: np.ndarray) -> SolveResult | None:  # fmt: skip
         """The previous plan ``w0`` (moved one period on), its first stage set to the state
         now, as this step's plan when the warm solve ``res`` stopped at the step's budget
         ``cap`` and that plan passes the safety check; else None (the step's work goes on as
         without a budget)."""
-        if cap is None or res.ok or res.status == "deadline" or res.iters < cap:
+        if not self._stopped(res, cap):
             return None
         Z, V = self.ocp.split(w0)
         Z = Z.copy()

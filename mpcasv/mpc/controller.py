@@ -336,8 +336,7 @@ class MPCController(WorldView, Safety, PlanOutput, Targeting, SpeedCap, Carry):
             self._defer(Deferred(obs, p_s, p, w0, lam, hybrid_cmd))
             res, reason, source = carried, None, "carried"
         else:  # as without a budget (a solve stopped at it: solved again in full)
-            stopped = cap is not None and not res.ok and res.iters >= cap
-            full = self._solve(p_s, w0, *lam) if stopped else None
+            full = self._solve(p_s, w0, *lam) if self._stopped(res, cap) else None
             res = res if full is None else dataclasses.replace(
                 full, ms=res.ms + full.ms, iters=res.iters + full.iters)
             res, reason, source = self._work(obs, p_s, p, res, hybrid_cmd)

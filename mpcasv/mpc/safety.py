@@ -111,14 +111,12 @@ class Safety:
         change, with a threat, or when the step's plan may not be used, the exploration
         runs inside the step: deferring those cost Case 8 39 s of reliable-fix age p95.) In
         the field it has the step's budget (``solver.budget_ms``) of its own. docs/mpc.md,
-        "Controller step"."""
+        "Controller step". Before it, a carried step's work (``solver.step_iter``,
+        :mod:`mpcasv.mpc.carry`), with a field budget of its own."""
         if self.deferred is not None:  # a carried step's work first (mpc/carry.py)
             self._t_step = time.perf_counter()  # the field deadline of its solves
             self._finish_deferred()
-            step_over = int(self._diag.get("mpc_over_budget", 0))
-            over = self._over_budget()
-            self.over_budget += int(over and not step_over)
-            self._diag["mpc_over_budget"] = max(step_over, over)
+            self._note_over_budget()
         pending, self._pending = self._pending, None
         if pending is None:
             return
@@ -136,13 +134,18 @@ class Safety:
             self.w_prev, self.w_ok = alt.w, alt.ok
             self.lam_prev = (alt.lam_x, alt.lam_g) if alt.ok else None
         self.explore_adopted += int(adopt)
-        # longer than a step's budget: its step counts as over budget (never a decision)
-        over = self._over_budget()
-        step_over = int(self._diag.get("mpc_over_budget", 0))
-        self.over_budget += int(over and not step_over)
+        self._note_over_budget()
         self._diag |= {"mpc_explore_ms": alt.ms, "mpc_explore_iter": alt.iters,
                        "mpc_explore_cost": alt.f, "mpc_explore_adopted": int(adopt),
-                       "mpc_hung": self._hung, "mpc_over_budget": max(step_over, over)}
+                       "mpc_hung": self._hung}  # fmt: skip
+
+    def _note_over_budget(self) -> None:
+        """Work after the command that took longer than a step's budget (since ``_t_step``):
+        its step counts as over budget, once (a diagnostic, never a decision)."""
+        step_over = int(self._diag.get("mpc_over_budget", 0))
+        over = self._over_budget()
+        self.over_budget += int(over and not step_over)
+        self._diag["mpc_over_budget"] = max(step_over, over)
 
     def _work(self, obs: Observation, p_s: np.ndarray, p: np.ndarray, res: SolveResult,
               hybrid_cmd: Command) -> tuple[SolveResult, str | None, str]:  # fmt: skip
