@@ -87,7 +87,9 @@ class Safety:
         outer bound's slack shows a plan stuck at rest (:meth:`_stuck`), and a standby
         stretched as the AUV comes on is the usual one; explored, on Cases 1-5 (10 seeds
         each) it let a pursuer in (Case 4, seed 0: 114 s inside the collision domain against
-        5 s)."""
+        5 s). A late standby's exploration is kept if it converged, cheaper or not
+        (:meth:`between_steps`; session 15: cheaper alone left Case 6, seed 0 standing by
+        166 s beside an AUV that had finished, its target 250 m off)."""
         return (self.multi and self.t_depart is not None
                 and t > self.t_depart + self.ocp.dt + 1e-9)
 
@@ -105,7 +107,8 @@ class Safety:
         taken, run after its command was handed over, in the idle part of the control period
         (simulator and deploy loop call this after each ``step``; a ``step`` called first
         runs it itself, so the decisions never depend on whether, or when, it was called).
-        If its plan is cheaper than the one the step used, the next step is warm-started
+        If its plan is cheaper than the one the step used (or converged, for a standby past
+        its promise: :meth:`_late`), the next step is warm-started
         from it instead: taken one control period later than if it were solved within the
         step, and the step's latency is the warm-started solve alone. (After a target
         change, with a threat, or when the step's plan may not be used, the exploration
@@ -122,14 +125,19 @@ class Safety:
             return
         obs, p_s, res = pending
         self._t_step = time.perf_counter()  # the field deadline of this solve
+        late = self._late(obs.t)  # read first: an exploration makes the next promise anew
         alt = self._explore(obs, p_s, res)
         if alt is None:
             return
         # the next step starts from the exploration's plan if it is cheaper; an unconverged
         # one too (at its iteration limit, finite): only a start, as any unconverged iterate
         # (``warm_from_failures``), and the way out of a plan stuck at rest that costs more
-        # every step while each exploration stops at its limit far cheaper (docs/mpc.md)
-        adopt = alt.f < res.f and (alt.ok or bool(np.all(np.isfinite(alt.w))))
+        # every step while each exploration stops at its limit far cheaper (docs/mpc.md).
+        # A standby past its promise (several AUVs, :meth:`_late`) keeps the promise: the
+        # exploration's converged plan, heading for the target, is taken even if dearer
+        # (each plan put its start off, priced only over the horizon; docs/mpc.md)
+        cheaper = alt.f < res.f or (late and alt.ok)
+        adopt = cheaper and (alt.ok or bool(np.all(np.isfinite(alt.w))))
         if adopt:
             self.w_prev, self.w_ok = alt.w, alt.ok
             self.lam_prev = (alt.lam_x, alt.lam_g) if alt.ok else None
