@@ -76,6 +76,9 @@ def test_reliable_fix_age_of_a_hand_built_trajectory():
     assert m["reliable_fixes"] == 21 and m["fixes"] == 80
     assert m["fix_age_max_s"] == 5.0
     assert m["revisit_interval_max_s"] is None  # one AUV: Paper 1 has no such notion
+    # a reliable fix was possible for 2 sqrt(80^2 - 60^2) / (1 m/s) = 105.83 s (plant steps)
+    assert m["fix_possible_s"] == pytest.approx(2 * math.sqrt(80**2 - 60**2), abs=0.11)
+    assert m["fix_possible_s_auv"] == [m["fix_possible_s"]]
     ts = res.timeseries
     np.testing.assert_allclose(ts["rfix_age0"].iloc[149], 0.0)  # t = 150: reset
     np.testing.assert_allclose(ts["rfix_age0"].iloc[148], 149.0)
@@ -87,7 +90,9 @@ def test_a_fix_is_reliable_only_with_the_propeller_off():
     res = simulate(_pass_by(duration=120.0), ctrl, seed=3)
     assert res.timeseries["propeller_on"].iloc[20:].all()
     assert len(res.fix_times[0]) > 10 and res.reliable_fix_times[0] == []
-    assert compute_metrics(res)["reliable_fix_age_max_s"] == 120.0
+    m = compute_metrics(res)
+    assert m["reliable_fix_age_max_s"] == 120.0
+    assert m["fix_possible_s"] == 0.0  # in reach only while motoring
 
 
 # --- one geometric account, whatever the controller's labels --------------------------------
@@ -189,7 +194,8 @@ def test_without_an_evaluation_domain_the_domain_metrics_are_null(scenarios_dir:
     sc = scenario_with(demo, duration=20.0)
     m = compute_metrics(simulate(sc, make_controller("goto", len(sc.auv), "goto"), seed=0))
     for name in ("collision_domain_s", "beyond_outer_s", "transit_escape_s",
-                 "reliable_fix_age_max_s", "reliable_fix_age_p95_s"):  # fmt: skip
+                 "reliable_fix_age_max_s", "reliable_fix_age_p95_s",
+                 "fix_possible_s"):  # fmt: skip
         assert m[name] is None, name
     assert m["fix_age_max_s"] is not None and m["nav_error_rms_m"] is not None
 

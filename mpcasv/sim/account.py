@@ -9,6 +9,8 @@ depth ``d_k`` give, with the SCENARIO's evaluation domain (:func:`evaluation_dom
 - in the target domain: ``r_k in [r_t,k - eps_minus, r_t,k + eps_plus]`` (Paper 1 eq. 10,
   Paper 2 eq. 7; :func:`mpcasv.hybrid.domains.in_target_domain`);
 - beyond the outer boundary: ``r_k > r_outer(d_k)`` (Paper 1 eq. 5);
+- a reliable fix possible: ``r_k < r_t,k + eps_plus`` with the propeller off (Paper 2 eq. 9,
+  :func:`mpcasv.hybrid.domains.reliable_fix_possible`: the rule of the reliable-fix ages);
 
 and the propeller is on when the actual thrust exceeds the execution level's threshold
 (``n_p != 0``). A controller's own domain and its reason labels play no part.
@@ -21,7 +23,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from mpcasv.config import load_toml, parse, resolve
-from mpcasv.hybrid.domains import DomainParams, in_target_domain, r_inner, r_outer
+from mpcasv.hybrid.domains import (
+    DomainParams,
+    in_target_domain,
+    r_inner,
+    r_outer,
+    reliable_fix_possible,
+)
 
 __all__ = ["StepAccount", "classify", "evaluation_domain", "stay_lengths", "unknown_seconds"]
 
@@ -60,6 +68,7 @@ class StepAccount:
     target: np.ndarray  # (m, n) in AUV k's target domain
     beyond: np.ndarray  # (m, n) beyond AUV k's r_outer
     stay: np.ndarray  # (n,) s
+    possible: np.ndarray  # (m, n) a reliable fix of AUV k possible (Paper 2 eq. 9)
 
     @property
     def any_coll(self) -> np.ndarray:
@@ -73,7 +82,8 @@ class StepAccount:
         """Seconds of each class over the plant steps ``j`` (all by default): the time-series
         columns ``prop_on_s``, ``coll_s``, ``coll_stay_s`` (longest stay reached),
         ``beyond_s``, ``escape_s`` (propeller on inside a collision domain), ``track_s``
-        (propeller on beyond every r_outer), and per AUV ``coll{k}_s``, ``target{k}_s``."""
+        (propeller on beyond every r_outer), and per AUV ``coll{k}_s``, ``target{k}_s``,
+        ``possible{k}_s`` (a reliable fix possible)."""
         dt, cnt = self.dt, np.count_nonzero
         prop, coll, beyond = self.prop[j], self.any_coll[j], self.all_beyond[j]
         out = {
@@ -82,9 +92,11 @@ class StepAccount:
             "escape_s": cnt(prop & coll) * dt, "track_s": cnt(prop & beyond) * dt,
         }  # fmt: skip
         per_coll, per_target = cnt(self.coll[:, j], axis=1), cnt(self.target[:, j], axis=1)
+        per_possible = cnt(self.possible[:, j], axis=1)
         for k in range(self.coll.shape[0]):
             out[f"coll{k}_s"] = float(per_coll[k] * dt)
             out[f"target{k}_s"] = float(per_target[k] * dt)
+            out[f"possible{k}_s"] = float(per_possible[k] * dt)
         return out
 
 
@@ -121,12 +133,14 @@ def classify(domain: DomainParams, ranges: np.ndarray, depths: np.ndarray, prop:
     r_t = inner + domain.delta_r  # Paper 1 eq. 8; Paper 2 eq. 6
     target = in_target_domain(ranges, r_t, domain.eps_minus, domain.eps_plus)
     beyond = ranges > r_outer(depths, domain.r_out)
+    prop = np.asarray(prop, bool)
+    possible = reliable_fix_possible(ranges, r_t, domain.eps_plus, prop[None, :])  # eq. 9
     inside = coll.any(axis=0)
     if inside.any() or carry > 0:
         stay = stay_lengths(inside, carry, dt)
     else:
         stay = np.zeros(inside.shape[0])
-    return StepAccount(dt, np.asarray(prop, bool), coll, target, beyond, stay)
+    return StepAccount(dt, prop, coll, target, beyond, stay, possible)
 
 
 def unknown_seconds(n_auv: int) -> dict[str, float]:
@@ -134,5 +148,5 @@ def unknown_seconds(n_auv: int) -> dict[str, float]:
     evaluation domain: NaN (unknown). ``prop_on_s`` needs no domain (set by the caller)."""
     out = dict.fromkeys(("coll_s", "coll_stay_s", "beyond_s", "escape_s", "track_s"), np.nan)
     for k in range(n_auv):
-        out[f"coll{k}_s"] = out[f"target{k}_s"] = np.nan
+        out[f"coll{k}_s"] = out[f"target{k}_s"] = out[f"possible{k}_s"] = np.nan
     return out
