@@ -269,6 +269,9 @@ def test_several_auvs_no_standby_far_from_the_target_for_minutes(tmp_path, case,
     assert longest < 120, f"stood by {longest} s away from the target's reliable range"
     if hooks:
         _same_decisions(ctrl, d, *run(False))
+    else:  # the promise kept: a dearer exploration was taken (before session 15: never)
+        assert ((d["mpc_explore_adopted"] == 1)
+                & (d["mpc_explore_cost"] > d["mpc_cost"])).any()  # fmt: skip
 
 
 @pytest.mark.parametrize(("ok", "finite", "cheaper", "adopted"), [
@@ -310,30 +313,42 @@ def test_which_exploration_warm_starts_the_next_step(scenarios_dir, ok, finite, 
         assert ctrl.w_prev is w_step and ctrl.lam_prev[0] is res.lam_x
 
 
-@pytest.mark.parametrize(("late", "ok", "adopted"), [
-    (True, True, True),  # a late standby: the converged exploration, dearer, is kept
-    (True, False, False),  # ... but not a dearer iterate that did not converge
-    (False, True, False),  # a standby within its promise: dearer is not kept
+@pytest.mark.parametrize(("kind", "late", "ok", "slack", "adopted"), [
+    ("mpc-multi", True, True, 0.0, True),  # late: the converged exploration, dearer, is kept
+    ("mpc-multi", True, False, 0.0, False),  # ... not a dearer iterate that did not converge
+    ("mpc-multi", True, True, 5.0, False),  # ... nor a dearer way through an AUV's domain
+    ("mpc-multi", False, True, 0.0, False),  # a standby within its promise: dearer not kept
+    ("mpc-single", True, True, 0.0, False),  # one AUV: no promise rule
 ])
-def test_a_late_standby_keeps_its_exploration_even_if_dearer(scenarios_dir, late, ok,
-                                                             adopted):
+def test_a_late_standby_keeps_its_exploration_even_if_dearer(scenarios_dir, kind, late, ok,
+                                                             slack, adopted):
     """Several AUVs, a standby past the streak's promise (``_late``): the exploration heading
-    for the target warm-starts the next step if it converged, dearer or not. Each plan put
-    its start off, priced over a horizon that does not reach the target; taking the cheaper
-    plan alone left Case 6, seed 0 standing by 166 s beside a finished AUV (docs/mpc.md,
-    "Controller step")."""
+    for the target warm-starts the next step if it converged within the range bounds, dearer
+    or not. Each plan put its start off, priced over a horizon that does not reach the
+    target; taking the cheaper plan alone left Case 6, seed 0 standing by 166 s beside a
+    finished AUV (docs/mpc.md, "Controller step"). The lateness is read before the
+    exploration, which makes the next promise anew (as the fake does here)."""
     from mpcasv.mpc.solvers import SolveResult
 
-    ctrl, obs, p = _start(scenarios_dir, "case6", "mpc-multi")
-    w_step = ctrl.ocp.rollout(p)
+    ctrl, obs, p = _start(scenarios_dir, *(("case6", kind) if kind == "mpc-multi" else ()))
+    ocp = ctrl.ocp
+    w_step = ocp.rollout(p)
     res = SolveResult(w_step, np.zeros(len(w_step)), np.zeros(3), 100.0, True, "ok", 5, 1.0)
+    Z, V = ocp.split(w_step + 1.0)
+    V[:, 2 : 2 + ocp.dims.n_auv] = 0.0  # within the range bounds ...
+    V[:, 2] = slack  # ... but for AUV 0's slack (m) at every stage
     lam = (np.ones(len(w_step)), np.ones(3)) if ok else (None, None)
-    alt = SolveResult(w_step + 1.0, *lam, 150.0, ok, "ok" if ok else "max_iter", 50, 1.0)
+    alt = SolveResult(ocp.join(Z, V), *lam, 150.0, ok, "ok" if ok else "max_iter", 50, 1.0)
     ctrl.w_prev, ctrl.lam_prev = w_step, (res.lam_x, res.lam_g)
     ctrl.t_depart = obs.t - (100.0 if late else 0.0)  # the promise: long broken, or now
-    assert ctrl._late(obs.t) == late
+    assert ctrl._late(obs.t) == (late and kind == "mpc-multi")
     ctrl._pending = (obs, p, res)
-    ctrl._explore = lambda *a: alt
+
+    def explore(*_):  # as the real one: exploring makes the next standby promise anew
+        ctrl.t_depart = None
+        return alt
+
+    ctrl._explore = explore
     ctrl.between_steps()
     assert ctrl.explore_adopted == int(adopted)
     assert (ctrl.w_prev is alt.w) == adopted

@@ -81,10 +81,11 @@ _BASE: dict[str, MetricInfo] = {
                                  "for the saw-tooth), worst AUV", "Paper 2 eq. 9"),
     "reliable_fix_age_mean_s": _i("s", "lower", "time average of tau_k, worst AUV",
                                   "Paper 2 eq. 9"),
-    "fix_possible_s": _i("s", "higher", "time a reliable fix was possible: r_k < r_t,k + "
+    "fix_possible_s": _i("s", None, "time a reliable fix was possible: r_k < r_t,k + "
                          "eps_plus with the propeller off (the rule of reliable_fix_age_*), "
-                         "true range and depth, plant-step resolution; the AUV with least",
-                         "Paper 2 eq. 9"),
+                         "true range and depth, plant-step resolution; the AUV with least "
+                         "(descriptive: what the fix ages come from; inside the collision "
+                         "domain counts too, eq. 9 has no lower limit)", "Paper 2 eq. 9"),
     "revisit_interval_max_s": _i("s", "lower", "longest time between two consecutive "
                                  "reliable fixes of one AUV, worst AUV; several AUVs only "
                                  "(null with one AUV, and infinite/null if an AUV had fewer "

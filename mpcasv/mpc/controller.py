@@ -14,7 +14,8 @@ Every step (docs/mpc.md, "Controller"):
    heading for the AUV with the largest projected fix age (standing still is a local minimum:
    at rest the rudder has no authority, so the gradient cannot say "turn and go"); that
    periodic one runs after the command (:meth:`between_steps`) and warm-starts the next step
-   when cheaper; after a target change, with a threat, or before a rescue it runs in the step;
+   when cheaper (a late standby's, with several AUVs: when converged within the bounds);
+   after a target change, with a threat, or before a rescue it runs in the step;
    with ``solver.step_iter`` a warm solve that stops there is finished after the command and
    the step follows the last converged plan instead (:mod:`mpcasv.mpc.carry`);
 4. the safety check and, when the plan cannot be used (a failed solve, or a plan entering

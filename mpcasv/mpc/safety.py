@@ -29,7 +29,8 @@ class Safety:
         """Right after a target change, and while the plan stands still every ``explore_every``
         s, also solve from a guess that heads for the target AUV's circle (standing still is a
         local minimum: at rest the rudder has no authority). Returns that solve's result (None:
-        no exploration due); the caller keeps the cheaper plan (:meth:`between_steps`, or
+        no exploration due); the caller keeps the cheaper plan (:meth:`between_steps`, which
+        keeps a late standby's converged one within the bounds even if dearer, or
         :meth:`_cheaper` when the warm-started plan may not be used)."""
         P, ocp = self.params, self.ocp
         if P.explore_every <= 0:
@@ -69,9 +70,13 @@ class Safety:
         measured on the paper suite (more propeller time, no better fix age; docs/mpc.md,
         "Controller step")."""
         ocp, P = self.ocp, self.params
-        K = ocp.dims.n_auv
         return (commands_standby(Z[:, 6], ocp.dt, P.standby_time, ocp.T_on)
-                and float(np.max(V[:, 2 : 2 + K])) > STUCK_SLACK)
+                and self._slack(V) > STUCK_SLACK)
+
+    def _slack(self, V: np.ndarray) -> float:
+        """A plan's largest range-bound slack (m; ``V`` from :meth:`OCP.split`): how far it
+        goes outside a bound (inside an anti-collision radius, beyond r_outer) at any stage."""
+        return float(np.max(V[:, 2 : 2 + self.ocp.dims.n_auv]))
 
     def _late(self, t: float) -> bool:
         """Whether the ASV still stands by one stage after the first plan of this standby
@@ -107,8 +112,8 @@ class Safety:
         taken, run after its command was handed over, in the idle part of the control period
         (simulator and deploy loop call this after each ``step``; a ``step`` called first
         runs it itself, so the decisions never depend on whether, or when, it was called).
-        If its plan is cheaper than the one the step used (or converged, for a standby past
-        its promise: :meth:`_late`), the next step is warm-started
+        If its plan is cheaper than the one the step used (or converged and within the range
+        bounds, for a standby past its promise: :meth:`_late`), the next step is warm-started
         from it instead: taken one control period later than if it were solved within the
         step, and the step's latency is the warm-started solve alone. (After a target
         change, with a threat, or when the step's plan may not be used, the exploration
@@ -135,8 +140,10 @@ class Safety:
         # every step while each exploration stops at its limit far cheaper (docs/mpc.md).
         # A standby past its promise (several AUVs, :meth:`_late`) keeps the promise: the
         # exploration's converged plan, heading for the target, is taken even if dearer
-        # (each plan put its start off, priced only over the horizon; docs/mpc.md)
-        cheaper = alt.f < res.f or (late and alt.ok)
+        # (each plan put its start off, priced only over the horizon; docs/mpc.md), unless
+        # it leaves the range bounds (a way through an AUV's domain is never kept dearer)
+        kept = late and alt.ok and self._slack(self.ocp.split(alt.w)[1]) <= STUCK_SLACK
+        cheaper = alt.f < res.f or kept
         adopt = cheaper and (alt.ok or bool(np.all(np.isfinite(alt.w))))
         if adopt:
             self.w_prev, self.w_ok = alt.w, alt.ok
