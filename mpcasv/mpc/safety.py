@@ -92,9 +92,10 @@ class Safety:
         outer bound's slack shows a plan stuck at rest (:meth:`_stuck`), and a standby
         stretched as the AUV comes on is the usual one; explored, on Cases 1-5 (10 seeds
         each) it let a pursuer in (Case 4, seed 0: 114 s inside the collision domain against
-        5 s). A late standby's exploration is kept if it converged, cheaper or not
-        (:meth:`between_steps`; session 15: cheaper alone left Case 6, seed 0 standing by
-        166 s beside an AUV that had finished, its target 250 m off)."""
+        5 s). A late standby's exploration after the command is kept if it converged within
+        the range bounds, cheaper or not (:meth:`between_steps`; session 15: cheaper alone
+        left Case 6, seed 0 standing by 166 s beside an AUV that had finished, its target
+        250 m off); one inside the step (a threat) only if cheaper."""
         return (self.multi and self.t_depart is not None
                 and t > self.t_depart + self.ocp.dt + 1e-9)
 
