@@ -385,3 +385,29 @@ def test_an_infinite_value_is_the_worst_run_not_a_missing_one():
     assert s.median == np.inf and s.ci_high == np.inf and s.p < 0.05
     assert stats.verdict(s, "lower", "ref", "new") == "ref better"
     assert paired_stat(np.array([np.inf] * 6), np.array([np.inf] * 6)).note.startswith("all 6")
+
+
+def test_each_per_auv_column_is_one_row_of_the_scenario_table(tmp_path):
+    """A per-AUV list column (``fixes_auv0``) is a row under its scalar's name, once: it
+    was listed again as ``fixes_auv [auv1]``; a list with no scalar keeps its own name, and
+    the paired table's summed list is still built from the per-AUV columns."""
+    from mpcasv.experiments.report import summary_table, with_list_summaries
+
+    df = results({"min_range_m": 1.0, "fixes_auv0": 1.0, "fixes_auv1": 2.0,
+                  "target_domain_s_auv0": 3.0, "collision_domain_s": 0.0,
+                  "collision_domain_s_auv0": 0.0})  # fmt: skip
+    df["auv_names"] = "auv1,auv2"
+    summ = summary_table(df)
+    one = summ[(summ.scenario == "c1") & (summ.variant == "new") & (summ.current == "off")]
+    assert one.groupby("column").size().max() == 1
+    rows = {c: (m, None if pd.isna(k) else int(k))
+            for c, m, k in zip(one.column, one.metric, one.auv, strict=True)}  # fmt: skip
+    assert rows == {"min_range_m": ("min_range_m", None),
+                    "fixes_auv0": ("fixes", 0), "fixes_auv1": ("fixes", 1),
+                    "target_domain_s_auv0": ("target_domain_s_auv", 0),
+                    "collision_domain_s": ("collision_domain_s", None),
+                    "collision_domain_s_auv0": ("collision_domain_s", 0)}  # fmt: skip
+    summed = with_list_summaries(df)["fixes_auv"]
+    assert np.allclose(summed, df["fixes_auv0"] + df["fixes_auv1"])
+    md = write_report(tmp_path, _exp(df), df)[0].read_text()
+    assert "| fixes [auv1] |" in md and "fixes_auv [" not in md

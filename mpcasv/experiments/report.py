@@ -52,16 +52,28 @@ READ_LINE = 'pd.read_parquet("{out}/results.parquet")'
 
 def metric_columns(df: pd.DataFrame) -> list[tuple[str, str, int | None]]:
     """(column, metric, AUV index or None) for every metric column present, in
-    :data:`METRIC_NAMES` order."""
-    out = []
+    :data:`METRIC_NAMES` order, each column once: a per-AUV column goes with its scalar
+    (``fixes_auv0`` is listed as ``fixes`` AUV 0, not again as ``fixes_auv`` AUV 0); a list
+    with no scalar (``target_domain_s_auv``) keeps its own name."""
+    out, seen = [], set()
     for m in METRIC_NAMES:
         if m in df:
             out.append((m, m, None))
-        k = 0
-        while auv_column(m, k) in df:
-            out.append((auv_column(m, k), m, k))
-            k += 1
+            seen.add(m)
+        for k, col in enumerate(_auv_columns(df, m)):
+            if col not in seen:
+                out.append((col, m, k))
+                seen.add(col)
     return out
+
+
+def _auv_columns(df: pd.DataFrame, m: str) -> list[str]:
+    """The columns of AUVs 0, 1, ... of metric ``m`` present in ``df``, up to the first
+    missing one."""
+    cols: list[str] = []
+    while auv_column(m, len(cols)) in df:
+        cols.append(auv_column(m, len(cols)))
+    return cols
 
 
 def with_list_summaries(df: pd.DataFrame) -> pd.DataFrame:
@@ -69,7 +81,7 @@ def with_list_summaries(df: pd.DataFrame) -> pd.DataFrame:
     maxed over the per-AUV columns of each run) where it has no scalar column."""
     out = df.copy()
     for m, how in LIST_SUMMARY.items():
-        cols = [c for c, name, k in metric_columns(df) if name == m and k is not None]
+        cols = _auv_columns(df, m)
         if m not in df and cols:
             out[m] = getattr(df[cols].astype(float), how)(axis=1, skipna=True)
     return out
