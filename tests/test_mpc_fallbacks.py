@@ -195,11 +195,11 @@ def test_the_benchmark_records_wall_and_cpu_time_of_each_whole_step():
     assert sum(v["steps"] for v in by.values()) == 11  # the cold first step left out
 
 
-@pytest.mark.parametrize("step_iter", [None, 15])
+@pytest.mark.parametrize("step_iter", [0, 15])
 def test_the_benchmark_classifies_each_step_by_what_it_did(step_iter):
     """Case 6 with three AUVs for 110 s (measured: the first step explores, the target being
     new; the ASV arrives at its first AUV at t = 98-106 s, where the warm-started solves
-    need 17 to more than 50 iterations). Without a step budget (the preset's) two steps
+    need 17 to more than 50 iterations). Without a step budget (``step_iter`` 0) two steps
     there need a rescue; with ``step_iter`` 15 the steps whose solve stops at it carry the
     previous plan, and their work runs after the command. "rescue" exactly on the steps
     whose plan came from neither the warm-started or exploration solve nor the carried plan,
@@ -214,7 +214,7 @@ def test_the_benchmark_classifies_each_step_by_what_it_did(step_iter):
     kinds, sources = times["kind"], times["source"]
     assert len(kinds) == len(sources) == 110
     carried = sources == "carried"
-    if step_iter is None:
+    if not step_iter:
         assert params.solver.step_iter is None and not np.any(carried)
         assert np.any(sources != "plan"), "no rescued step in this window: the test needs one"
     else:
@@ -224,7 +224,7 @@ def test_the_benchmark_classifies_each_step_by_what_it_did(step_iter):
     n_between, n_explore = len(times["between"]), int(np.sum(kinds == "explore"))
     assert kinds[0] == "explore" and n_explore >= 1
     assert n_between >= int(np.sum(carried))  # every carried step's work after its command
-    if step_iter is None:
+    if not step_iter:
         assert n_between + n_explore <= ctrl.explored  # (a rescued step may have explored too)
     s = bench.step_summary(times, ctrl)
     assert {k: v["steps"] for k, v in s["by_kind"].items()} == {
