@@ -81,6 +81,16 @@ BAD = {
     "at without front": (
         GOOD.replace('preset = "scenario"', 'preset = "scenario"\nat = "energy_J"'),
         ["controllers", "['at'] without 'front'"]),
+    "acceptance target of an unknown metric": (
+        GOOD + "[acceptance]\ntargets = { reliable_fix_age_p96_s = -0.3 }\n",
+        ["reliable_fix_age_p96_s", "not a metric with a direction"]),
+    "acceptance target of a metric without a direction": (
+        GOOD + "[acceptance]\ntargets = { fix_possible_s = -0.3 }\n",
+        ["fix_possible_s", "not a metric with a direction"]),
+    "acceptance target at -100 %": (
+        GOOD + "[acceptance]\ntargets = { propeller_on_s = -1.0 }\n",
+        ["propeller_on_s", "-100 %"]),
+    "acceptance without targets": (GOOD + "[acceptance]\nsource = \"x\"\n", ["targets"]),
 }  # fmt: skip
 
 

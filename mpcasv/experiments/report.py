@@ -23,25 +23,28 @@ from __future__ import annotations
 
 import base64
 import html
-import math
 import re
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
+from mpcasv.experiments import acceptance
 from mpcasv.experiments import report_figures as rf
 from mpcasv.experiments import stats as paired
-from mpcasv.experiments.metrics import METRIC_INFO, METRIC_NAMES, auv_column
+from mpcasv.experiments.metrics import METRIC_INFO
 from mpcasv.experiments.report_figures import CONDITION, num
+from mpcasv.experiments.report_tables import (  # noqa: F401 (re-exported)
+    LIST_SUMMARY,
+    cases_without_fixes,
+    metric_columns,
+    summary_table,
+    with_list_summaries,
+)
 
 #: which way is better, per metric: "higher", "lower", or None (defined once, in
 #: :data:`mpcasv.experiments.metrics.METRIC_INFO`)
 BETTER: dict[str, str | None] = {name: info.better for name, info in METRIC_INFO.items()}
-
-#: how a per-AUV list metric is summarised per run for wins and losses
-LIST_SUMMARY = {"fixes_auv": "sum", "reliable_fixes_auv": "sum",
-                "reliable_fix_age_max_s_auv": "max", "auv_distance_m_auv": "sum"}  # fmt: skip
 
 #: metrics shown as box plots across seeds
 BOX_METRICS = ("min_range_m", "reliable_fix_age_max_s", "reliable_fix_age_p95_s",
@@ -50,68 +53,10 @@ BOX_METRICS = ("min_range_m", "reliable_fix_age_max_s", "reliable_fix_age_p95_s"
 READ_LINE = 'pd.read_parquet("{out}/results.parquet")'
 
 
-def metric_columns(df: pd.DataFrame) -> list[tuple[str, str, int | None]]:
-    """(column, metric, AUV index or None) for every metric column present, in
-    :data:`METRIC_NAMES` order, each column once: a per-AUV column goes with its scalar
-    (``fixes_auv0`` is listed as ``fixes`` AUV 0, not again as ``fixes_auv`` AUV 0); a list
-    with no scalar (``target_domain_s_auv``) keeps its own name."""
-    out, seen = [], set()
-    for m in METRIC_NAMES:
-        if m in df:
-            out.append((m, m, None))
-            seen.add(m)
-        for k, col in enumerate(_auv_columns(df, m)):
-            if col not in seen:
-                out.append((col, m, k))
-                seen.add(col)
-    return out
-
-
-def _auv_columns(df: pd.DataFrame, m: str) -> list[str]:
-    """The columns of AUVs 0, 1, ... of metric ``m`` present in ``df``, up to the first
-    missing one."""
-    cols: list[str] = []
-    while auv_column(m, len(cols)) in df:
-        cols.append(auv_column(m, len(cols)))
-    return cols
-
-
-def with_list_summaries(df: pd.DataFrame) -> pd.DataFrame:
-    """``df`` plus one column per per-AUV list metric of :data:`LIST_SUMMARY` (summed or
-    maxed over the per-AUV columns of each run) where it has no scalar column."""
-    out = df.copy()
-    for m, how in LIST_SUMMARY.items():
-        cols = _auv_columns(df, m)
-        if m not in df and cols:
-            out[m] = getattr(df[cols].astype(float), how)(axis=1, skipna=True)
-    return out
-
-
 def directions() -> dict[str, str | None]:
     """Which way is better for every metric the report knows (:data:`BETTER` and the
     headline's)."""
     return {**BETTER, **{h.name: h.better for h in paired.HEADLINE}}
-
-
-def summary_table(df: pd.DataFrame) -> pd.DataFrame:
-    """Long table: scenario, condition, variant, column, metric, auv, mean, sd, n (seeds)."""
-    rows = []
-    ok = df[df["status"] == "ok"]
-    keys = ["scenario", *CONDITION, "variant"]
-    for key, g in ok.groupby(keys, sort=False):
-        for col, m, k in metric_columns(g):
-            v = g[col].astype(float).dropna()
-            if not len(v):  # e.g. a per-AUV column of another scenario: left out; a scalar
-                if k is None:  # metric not defined for these runs (null): a row saying so
-                    rows.append(dict(zip(keys, key, strict=True)) | {
-                        "column": col, "metric": m, "auv": k, "mean": math.nan,
-                        "sd": math.nan, "n": 0})  # fmt: skip
-                continue
-            rows.append(dict(zip(keys, key, strict=True)) | {
-                "column": col, "metric": m, "auv": k, "mean": float(v.mean()),
-                "sd": float(v.std(ddof=1)) if len(v) > 1 else math.nan, "n": len(v),
-            })  # fmt: skip
-    return pd.DataFrame(rows)
 
 
 # ----------------------------------------------------------------------------- text
@@ -191,17 +136,6 @@ def win_loss_table(wl: pd.DataFrame) -> pd.DataFrame:
     t.columns = ["better", f"{other} better", f"{ref} better", "no significant difference",
                  "n/a"]  # fmt: skip
     return t
-
-
-def cases_without_fixes(ok: pd.DataFrame) -> list[str]:
-    """Scenarios in which no USBL fix arrived in any ok run (``fixes`` 0 everywhere): there
-    the fix ages are the run's clock and the AUVs' navigation does not depend on the
-    controller, so their liveness and navigation comparisons say nothing about it."""
-    if "fixes" not in ok or not len(ok):
-        return []
-    n = pd.to_numeric(ok["fixes"], errors="coerce")
-    return [c for c, g in n.groupby(ok["scenario"], sort=False) if g.notna().all() and
-            (g == 0).all()]  # fmt: skip
 
 
 def run_link(path: Path, out: Path) -> str:
@@ -338,6 +272,16 @@ def write_report(out: Path, exp, results: pd.DataFrame, stats=None) -> tuple[Pat
                         th, paired.HEADLINE, figdir / f"forest-{_heading_id(other)}.png"
                     )
                 )
+        acc = getattr(suite, "acceptance", None)
+        if acc is not None:  # the suite's targets, judged (mpcasv/experiments/acceptance.py)
+            head, rule, parts = acceptance.report_parts(results, acc, names, no_fix)
+            both(f"\n## {head}\n", f"<h2>{html.escape(head)}</h2>")
+            bullet(rule)
+            for sub, d, says in parts:
+                both(f"\n### {sub}\n\n{_md_table(d)}\n", f"<h3>{html.escape(sub)}</h3>"
+                     f"{d.to_html()}")  # fmt: skip
+                bullet(says)
+            md.append("")
         wl = paired.significant_win_loss(table)
         note = (
             "Per metric with a direction: the number of cases in which each variant is "

@@ -28,6 +28,7 @@ from typing import Annotated, Any, Literal
 from pydantic import Field, Strict, model_validator
 
 from mpcasv.config import ConfigError, FinitePos, Float, frozen, load_toml, parse
+from mpcasv.experiments.acceptance import Acceptance
 
 #: the repository's ``experiments`` folder (scenarios and suites by name)
 EXPERIMENTS_DIR = Path(__file__).resolve().parents[2] / "experiments"
@@ -154,6 +155,7 @@ class Suite:
     estimator: tuple[str, ...] = ("scenario",)  # "scenario" or an estimator name
     duration: FinitePos | None = None  # s; replaces every scenario's duration when given
     plots: Literal["all", "representative", "none"] = "all"  # run figures (first seed only)
+    acceptance: Acceptance | None = None  # targets the report judges (acceptance.py)
 
     @model_validator(mode="after")
     def _check(self) -> Suite:

@@ -1,0 +1,168 @@
+"""Acceptance targets of a suite: the relative changes a compared variant must show against
+the reference, judged on the paired runs with their confidence intervals.
+
+A suite may name them (issue 16's acceptance in ``experiments/suites/paper.toml``)::
+
+    [acceptance]
+    source = "issue 16"
+    explained_in = "docs/mpc.md, 'What stands in the way of the acceptance'"
+    targets = { reliable_fix_age_p95_s = -0.30, nav_error_rms_m = -0.20,
+                propeller_on_s = 0.0, collision_domain_s = 0.0 }
+
+A target ``c`` of a metric where lower is better asks for ``(other - ref) / ref <= c``
+(-0.30: at least 30 % lower; 0: no more); where higher is better, ``>= c``. Per pair (the
+report's pairing, :func:`mpcasv.experiments.stats.pairs`) the relative change is
+``(other - ref) / |ref|`` (both zero: 0; the reference zero and the other not: +-inf, the
+other's sign), pooled over every case of the suite except, for a metric that needs fixes
+(:data:`NEEDS_FIXES`), the cases where no USBL fix arrived in any run (there the fix ages are
+the run's clock and the AUVs navigate without fixes whatever the controller). Its median and
+95 % bootstrap CI come from :func:`mpcasv.experiments.stats.paired_stat`. Verdict: **met**
+when the whole CI is on the target's side of it, **not met** when the whole CI is on the
+other side, else **undecided** (the CI contains the target).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pandas as pd
+
+from mpcasv.config import Float, frozen
+from mpcasv.experiments import stats as paired
+from mpcasv.experiments.metric_info import METRIC_INFO
+
+#: metrics that compare nothing in a case without any USBL fix (name prefixes)
+NEEDS_FIXES = ("reliable_fix_age", "fix_age", "nav_error", "fixes", "reliable_fixes")
+
+
+@frozen
+class Acceptance:
+    """A suite's ``[acceptance]`` table.
+
+    Attributes
+    ----------
+    targets : dict
+        Metric name -> required relative change of every compared variant against the
+        reference (dimensionless: -0.30 = at least 30 % lower where lower is better; 0 = no
+        more). Metrics of :data:`~mpcasv.experiments.metric_info.METRIC_INFO` with a
+        direction only.
+    source : str
+        Where the targets come from (e.g. "issue 16"); shown in the report's heading.
+    explained_in : str
+        Where a reader finds what stands in the way when a target is not met.
+    """
+
+    targets: dict[str, Float]
+    source: str = ""
+    explained_in: str = ""
+
+    def __post_init__(self) -> None:
+        if not self.targets:
+            raise ValueError("'targets' is empty: name at least one metric")
+        for m, c in self.targets.items():
+            info = METRIC_INFO.get(m)
+            if info is None or info.better not in ("lower", "higher"):
+                usable = sorted(k for k, v in METRIC_INFO.items() if v.better)
+                raise ValueError(f"target {m!r}: not a metric with a direction; known: {usable}")
+            if info.better == "lower" and c <= -1.0:
+                raise ValueError(f"target {m} = {c}: a relative change of a metric >= 0 "
+                                 "cannot reach -100 % or below")  # fmt: skip
+
+
+def relative_changes(ref: np.ndarray, other: np.ndarray) -> np.ndarray:
+    """Per pair ``(other - ref) / |ref|`` (shape (n,), dimensionless); both zero: 0; the
+    reference zero and the other not: +-inf with the other's sign."""
+    ref, other = np.asarray(ref, float), np.asarray(other, float)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        rel = (other - ref) / np.abs(ref)
+    return np.where(ref == 0, np.where(other == 0, 0.0, np.copysign(math.inf, other)), rel)
+
+
+def verdict(better: str, target: float, s: paired.PairedStat) -> str:
+    """"met", "not met", "undecided" or "n/a: ..." for the relative-change statistics ``s``
+    against ``target`` on a metric where ``better`` ("lower" | "higher") is better."""
+    if math.isnan(s.ci_low) or math.isnan(s.ci_high):  # too few pairs, or none
+        return s.note or "n/a"
+    lo, hi = (s.ci_low, s.ci_high) if better == "lower" else (-s.ci_high, -s.ci_low)
+    c = target if better == "lower" else -target
+    if hi <= c:
+        return "met"
+    if lo > c:
+        return "not met"
+    return "undecided"
+
+
+def acceptance_table(results: pd.DataFrame, acc: Acceptance, reference: str, other: str,
+                     no_fix_cases: list[str]) -> pd.DataFrame:  # fmt: skip
+    """One row per target: ``metric``, ``better``, ``target``, ``pairs``, ``cases`` (pooled),
+    ``median``, ``ci_low``, ``ci_high`` (relative change, dimensionless), ``sums`` (relative
+    change of the sums over the finite pairs) and ``verdict``. ``no_fix_cases``: the cases
+    left out for :data:`NEEDS_FIXES` metrics. A metric without a column gives a row with
+    0 pairs and verdict "n/a: no column"."""
+    rows = []
+    for m, c in acc.targets.items():
+        better = METRIC_INFO[m].better
+        row = {"metric": m, "better": better, "target": float(c)}
+        if m not in results:
+            rows.append(row | {"pairs": 0, "cases": "", "median": math.nan, "ci_low": math.nan,
+                               "ci_high": math.nan, "sums": math.nan,
+                               "verdict": "n/a: no column"})  # fmt: skip
+            continue
+        p, _ = paired.pairs(results, m, reference, other)
+        if m.startswith(NEEDS_FIXES):
+            p = p[~p[paired.CASE].isin(no_fix_cases)]
+        ref, oth = p["ref"].to_numpy(float), p["other"].to_numpy(float)
+        s = paired.paired_stat(np.zeros(len(p)), relative_changes(ref, oth))
+        fin = np.isfinite(ref) & np.isfinite(oth)
+        sums = oth[fin].sum() / ref[fin].sum() - 1.0 if ref[fin].sum() else math.nan
+        rows.append(row | {"pairs": len(p), "cases": ", ".join(dict.fromkeys(p[paired.CASE])),
+                           "median": s.median, "ci_low": s.ci_low, "ci_high": s.ci_high,
+                           "sums": sums, "verdict": verdict(better, c, s)})  # fmt: skip
+    return pd.DataFrame(rows)
+
+
+def _pct(v: float) -> str:
+    return "n/a" if math.isnan(v) else f"{100 * v:+.1f} %"
+
+
+def display_table(t: pd.DataFrame) -> pd.DataFrame:
+    """:func:`acceptance_table` as the report shows it (percentages)."""
+    return pd.DataFrame({
+        "required (other vs reference)": [("<= " if b == "lower" else ">= ") + _pct(c)
+                                          for b, c in zip(t["better"], t["target"],
+                                                          strict=True)],
+        "pairs": t["pairs"].to_list(),
+        "relative change per pair: median [95 % CI]": [
+            f"{_pct(m)} [{_pct(lo)}, {_pct(hi)}]"
+            for m, lo, hi in zip(t["median"], t["ci_low"], t["ci_high"], strict=True)],
+        "change of the sums": [_pct(v) for v in t["sums"]],
+        "verdict": t["verdict"].to_list(),
+    }, index=pd.Index(t["metric"], name="metric"))  # fmt: skip
+
+
+
+def report_parts(results: pd.DataFrame, acc: Acceptance, names: list[str],
+                 no_fix_cases: list[str]) -> tuple[str, str, list[tuple[str, pd.DataFrame, str]]]:
+    """What the report's "Acceptance" section says: its heading, the rule, and for each
+    variant after the reference ``names[0]`` (sub-heading, :func:`display_table`, the
+    conclusion: how many targets are met and, unless all, where
+    :attr:`Acceptance.explained_in` says what stands in the way)."""
+    head = f"Acceptance ({acc.source})" if acc.source else "Acceptance"
+    left_out = (f" (for the fix-age and navigation metrics without {', '.join(no_fix_cases)}: "
+                "no USBL fix arrived there)") if no_fix_cases else ""  # fmt: skip
+    rule = (f"Per pair the relative change (other − reference) / |reference|, pooled over the "
+            f"cases{left_out}; median with its {paired.CONFIDENCE:.0%} bootstrap CI. *met*: "
+            "the whole CI meets the requirement; *not met*: the whole CI misses it; "
+            "*undecided*: the CI contains it.")  # fmt: skip
+    parts = []
+    for other in names[1:]:
+        t = acceptance_table(results, acc, names[0], other, no_fix_cases)
+        met = int((t["verdict"] == "met").sum())
+        if met == len(t):
+            says = f"**All {len(t)} targets met.**"
+        else:
+            says = f"**{met} of {len(t)} targets met.**" + (
+                f" What stands in the way: {acc.explained_in}." if acc.explained_in else "")
+        parts.append((f"{other} vs {names[0]}", display_table(t), says))
+    return head, rule, parts

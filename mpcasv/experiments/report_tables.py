@@ -1,0 +1,85 @@
+"""The report's tables of per-run metrics: which column is which metric (per AUV
+expanded), the summary over seeds, per-run summaries of per-AUV lists, and the cases without
+any USBL fix. Used by :mod:`mpcasv.experiments.report`."""
+
+from __future__ import annotations
+
+import math
+
+import pandas as pd
+
+from mpcasv.experiments.metrics import METRIC_NAMES, auv_column
+from mpcasv.experiments.report_figures import CONDITION
+
+#: how a per-AUV list metric is summarised per run for wins and losses
+LIST_SUMMARY = {"fixes_auv": "sum", "reliable_fixes_auv": "sum",
+                "reliable_fix_age_max_s_auv": "max", "auv_distance_m_auv": "sum"}  # fmt: skip
+
+
+def metric_columns(df: pd.DataFrame) -> list[tuple[str, str, int | None]]:
+    """(column, metric, AUV index or None) for every metric column present, in
+    :data:`METRIC_NAMES` order, each column once: a per-AUV column goes with its scalar
+    (``fixes_auv0`` is listed as ``fixes`` AUV 0, not again as ``fixes_auv`` AUV 0); a list
+    with no scalar (``target_domain_s_auv``) keeps its own name."""
+    out, seen = [], set()
+    for m in METRIC_NAMES:
+        if m in df:
+            out.append((m, m, None))
+            seen.add(m)
+        for k, col in enumerate(_auv_columns(df, m)):
+            if col not in seen:
+                out.append((col, m, k))
+                seen.add(col)
+    return out
+
+
+def _auv_columns(df: pd.DataFrame, m: str) -> list[str]:
+    """The columns of AUVs 0, 1, ... of metric ``m`` present in ``df``, up to the first
+    missing one."""
+    cols: list[str] = []
+    while auv_column(m, len(cols)) in df:
+        cols.append(auv_column(m, len(cols)))
+    return cols
+
+
+def with_list_summaries(df: pd.DataFrame) -> pd.DataFrame:
+    """``df`` plus one column per per-AUV list metric of :data:`LIST_SUMMARY` (summed or
+    maxed over the per-AUV columns of each run) where it has no scalar column."""
+    out = df.copy()
+    for m, how in LIST_SUMMARY.items():
+        cols = _auv_columns(df, m)
+        if m not in df and cols:
+            out[m] = getattr(df[cols].astype(float), how)(axis=1, skipna=True)
+    return out
+
+
+def summary_table(df: pd.DataFrame) -> pd.DataFrame:
+    """Long table: scenario, condition, variant, column, metric, auv, mean, sd, n (seeds)."""
+    rows = []
+    ok = df[df["status"] == "ok"]
+    keys = ["scenario", *CONDITION, "variant"]
+    for key, g in ok.groupby(keys, sort=False):
+        for col, m, k in metric_columns(g):
+            v = g[col].astype(float).dropna()
+            if not len(v):  # e.g. a per-AUV column of another scenario: left out; a scalar
+                if k is None:  # metric not defined for these runs (null): a row saying so
+                    rows.append(dict(zip(keys, key, strict=True)) | {
+                        "column": col, "metric": m, "auv": k, "mean": math.nan,
+                        "sd": math.nan, "n": 0})  # fmt: skip
+                continue
+            rows.append(dict(zip(keys, key, strict=True)) | {
+                "column": col, "metric": m, "auv": k, "mean": float(v.mean()),
+                "sd": float(v.std(ddof=1)) if len(v) > 1 else math.nan, "n": len(v),
+            })  # fmt: skip
+    return pd.DataFrame(rows)
+
+
+def cases_without_fixes(ok: pd.DataFrame) -> list[str]:
+    """Scenarios in which no USBL fix arrived in any ok run (``fixes`` 0 everywhere): there
+    the fix ages are the run's clock and the AUVs' navigation does not depend on the
+    controller, so their liveness and navigation comparisons say nothing about it."""
+    if "fixes" not in ok or not len(ok):
+        return []
+    n = pd.to_numeric(ok["fixes"], errors="coerce")
+    return [c for c, g in n.groupby(ok["scenario"], sort=False) if g.notna().all() and
+            (g == 0).all()]  # fmt: skip
