@@ -181,6 +181,26 @@ def test_a_carry_the_check_refuses_leaves_the_run_as_without_a_budget(scenarios_
 def test_step_iter_is_refused_where_it_means_nothing():
     with pytest.raises(ValueError, match="step_iter"):
         dataclasses.replace(SolverParams(), solver="qp", step_iter=CAP)
+    with pytest.raises(ValueError, match="step_iter"):
+        SolverParams(step_iter=-1)
+
+
+@pytest.mark.parametrize(("controller", "preset", "expected"), [
+    ("mpc-multi", "mpc-multi", 20), ("mpc-multi", "mpc-multi-order", 20),
+    ("mpc-multi", "mpc-multi-variance", 20), ("mpc-single", "mpc-single", None),
+    ("mpc-single", "mpc-single-sim", None),
+])  # fmt: skip
+def test_the_presets_budget_the_step_with_several_auvs_and_0_turns_it_off(controller, preset,
+                                                                          expected):
+    """Session 16: the several-AUV presets set ``step_iter = 20`` (item 8's whole-step p99;
+    docs/mpc.md "Closed loop ... session 16"), the one-AUV presets none. A suite or preset
+    says "off" with 0 (TOML has no null), read as None: the same controller, the same job."""
+    from mpcasv.controllers.registry import load_preset
+
+    assert load_preset(controller, preset).solver.step_iter == expected
+    off = load_preset(controller, preset, {"solver.step_iter": 0})
+    assert off.solver.step_iter is None
+    assert off == load_preset(controller, preset, {"solver.step_iter": None})
 
 
 def test_no_carry_at_a_target_change_or_from_a_plan_that_is_not_a_converged_one(scenarios_dir):

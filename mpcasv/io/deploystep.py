@@ -43,7 +43,7 @@ def check_budget(cfg: DeployConfig, controller, log=log.warning) -> bool:
     sp = getattr(getattr(controller, "params", None), "solver", None)
     budget = getattr(sp, "budget_ms", None)
     Tc = cfg.controller.control_period
-    n = 3 if getattr(sp, "step_iter", None) is not None else 2
+    n = 3 if getattr(sp, "step_iter", None) else 2
     if budget is not None and n * budget / 1e3 > 0.9 * Tc:
         what = ("a step, a carried step's work and the exploration solve" if n == 3 else
                 "a step and its exploration solve")  # fmt: skip

@@ -83,7 +83,8 @@ class SolverParams:
         longer solves: the default stays ``max_iter``.
     step_iter : int or None
         Iterations the step's warm-started solve may take before the step follows the
-        previous plan instead (None: off, every solve finishes in the step; docs/mpc.md
+        previous plan instead (None or 0, read as None: off, every solve finishes in the
+        step; the several-AUV presets set 20, the one-AUV ones none; docs/mpc.md
         "Controller step" 3b; issue 16 item 8). A work budget, not a wall-time one, below
         ``max_iter``. When that solve stops at ``step_iter`` iterations, the step is no
         target change, and the last converged plan moved one period on passes the safety
@@ -123,13 +124,15 @@ class SolverParams:
     hang_s: NonNeg = 30.0
     rescue_iter: Annotated[int, Strict(), Field(ge=0)] = 200
     explore_iter: Annotated[int, Strict(), Field(ge=0)] | None = None
-    step_iter: Annotated[int, Strict(), Field(ge=1)] | None = None
+    step_iter: Annotated[int, Strict(), Field(ge=0)] | None = None
     check_stages: PosInt = 2
     check_margin: NonNeg = 2.0
     max_violation: Pos = 60.0
     funnel_speed: Pos = 1.25
 
     def __post_init__(self) -> None:
+        if self.step_iter == 0:  # TOML has no null: 0 is how a preset or override says "off"
+            object.__setattr__(self, "step_iter", None)
         if self.threads > 1 and not (self.compiled and self.solver in ("fatrop", "ipopt")):
             raise ValueError("threads > 1 needs compiled = true and solver 'fatrop' or 'ipopt' "
                              "(the stages run in parallel in the compiled library only)")
