@@ -20,13 +20,14 @@ from mpcasv.experiments.acceptance import (
 from mpcasv.experiments.report import write_report
 
 TARGETS = {"reliable_fix_age_p95_s": -0.30, "nav_error_rms_m": -0.20, "propeller_on_s": 0.0,
-           "collision_domain_s": 0.0}  # fmt: skip
+           "collision_domain_s": 0.0, "reliable_fixes": 0.5, "fix_age_p95_s": 0.0}  # fmt: skip
 
 
-def test_relative_change_per_pair_and_its_zero_references():
-    got = relative_changes(np.array([100.0, 0.0, 0.0, 50.0, 20.0]),
-                           np.array([70.0, 0.0, 5.0, 50.0, 0.0]))  # fmt: skip
-    assert got.tolist() == [pytest.approx(-0.3), 0.0, math.inf, 0.0, -1.0]
+def test_relative_change_per_pair_and_its_limits():
+    inf = math.inf
+    got = relative_changes(np.array([100.0, 0.0, 0.0, 50.0, 20.0, inf, inf, 30.0]),
+                           np.array([70.0, 0.0, 5.0, 50.0, 0.0, inf, 40.0, inf]))  # fmt: skip
+    assert got.tolist() == [pytest.approx(-0.3), 0.0, inf, 0.0, -1.0, 0.0, -1.0, inf]
 
 
 @pytest.mark.parametrize(("better", "target", "ci", "expected"), [
@@ -37,6 +38,11 @@ def test_relative_change_per_pair_and_its_zero_references():
     ("higher", 0.1, (0.15, 0.3), "met"),
     ("higher", 0.1, (-0.2, 0.05), "not met"),
     ("lower", 0.0, (-1.0, math.inf), "undecided"),
+    ("higher", 0.1, (0.05, 0.2), "undecided"),
+    ("lower", -0.3, (-0.3, 0.1), "undecided"),  # the CI's better end on the target
+    ("lower", 0.0, (-0.5, 0.0), "met"),  # its worse end on the target
+    ("higher", 0.0, (0.0, 0.5), "met"),
+    ("lower", 0.0, (math.inf, math.inf), "not met"),
 ])  # fmt: skip
 def test_the_verdict_reads_the_whole_interval(better, target, ci, expected):
     s = stats.PairedStat(20, float(np.mean(ci)) if np.isfinite(ci).all() else ci[0], *ci,
@@ -61,12 +67,16 @@ def _results(seeds=range(10)) -> pd.DataFrame:
             base = {m: 50.0 + 100.0 * rng.random() for m in TARGETS}
             base["collision_domain_s"] = 0.0 if seed == 0 else base["collision_domain_s"]
             mpc = {"reliable_fix_age_p95_s": 0.5 * base["reliable_fix_age_p95_s"],
+                   "reliable_fixes": 2.0 * base["reliable_fixes"],
+                   "fix_age_p95_s": 0.8 * base["fix_age_p95_s"],
                    "nav_error_rms_m": (0.9 + 0.01 * rng.standard_normal())
                    * base["nav_error_rms_m"],
                    "propeller_on_s": (1.0 + 0.08 * rng.uniform(-1, 1)) * base["propeller_on_s"],
                    "collision_domain_s": 0.0}  # fmt: skip
-            if case == "c0":
-                mpc["reliable_fix_age_p95_s"] = base["reliable_fix_age_p95_s"]
+            if case == "c0":  # no fix: the ages are the clock, 0 fixes; as bad for both
+                base["reliable_fixes"] = mpc["reliable_fixes"] = 0.0
+                for m in ("reliable_fix_age_p95_s", "fix_age_p95_s"):
+                    base[m] = mpc[m] = 3600.0
             for v, vals in (("hybrid", base), ("mpc", mpc)):
                 rows.append({"index": len(rows), "suite": "t", "scenario": case, "variant": v,
                              "current": "off", "estimator": "perfect", "seed": seed,
@@ -81,9 +91,13 @@ def test_each_target_gets_the_verdict_its_pairs_give():
     t = acceptance_table(df, Acceptance(TARGETS), "hybrid", "mpc", ["c0"]).set_index("metric")
     assert t["verdict"].to_dict() == {"reliable_fix_age_p95_s": "met", "nav_error_rms_m":
                                       "not met", "propeller_on_s": "undecided",
-                                      "collision_domain_s": "met"}  # fmt: skip
-    # the fix-dependent metrics leave c0 out; the others pool every case
-    assert t.loc["reliable_fix_age_p95_s", "pairs"] == 20
+                                      "collision_domain_s": "met", "reliable_fixes": "met",
+                                      "fix_age_p95_s": "met"}  # fmt: skip
+    # the fix-dependent metrics leave c0 out (with it, the fix ages' median would be 0 or
+    # -0.2 and the fixes' a 0/0); the others pool every case
+    for m in ("reliable_fix_age_p95_s", "fix_age_p95_s", "reliable_fixes", "nav_error_rms_m"):
+        assert t.loc[m, "pairs"] == 20 and t.loc[m, "cases"] == "c1, c2", m
+    assert t.loc["fix_age_p95_s", "median"] == pytest.approx(-0.2)
     assert t.loc["reliable_fix_age_p95_s", "median"] == pytest.approx(-0.5)
     assert t.loc["propeller_on_s", "pairs"] == 30 and t.loc["propeller_on_s", "cases"] == (
         "c0, c1, c2")
@@ -93,9 +107,40 @@ def test_each_target_gets_the_verdict_its_pairs_give():
     assert t.loc["nav_error_rms_m", "median"] == pytest.approx(float(np.median(rel)))
     assert t.loc["nav_error_rms_m", "ci_low"] < t.loc["nav_error_rms_m", "median"] < t.loc[
         "nav_error_rms_m", "ci_high"] < -0.05
-    # hybrid 0 and mpc 0 in seed 0 of every case: a relative change of 0, not dropped
-    assert t.loc["collision_domain_s", "pairs"] == 30
+    # hybrid 0 and mpc 0 in seed 0 of every case: no more, no less; left out and counted
+    assert t.loc["collision_domain_s", "pairs"] == 27
+    assert t.loc["collision_domain_s", "both_zero"] == 3
     assert t.loc["collision_domain_s", "sums"] == pytest.approx(-1.0)
+
+
+def test_no_more_is_not_met_by_the_runs_where_neither_spent_anything():
+    """21 pairs where both spent 0 s in the collision domain, 9 where only the other spent
+    30 s: its median relative change over all 30 would be 0 ("met"); over the 9 that say
+    something, +inf."""
+    df = _results(range(10))
+    for i, (case, seed) in enumerate((c, s) for c in ("c0", "c1", "c2") for s in range(10)):
+        for v in ("hybrid", "mpc"):
+            row = (df.scenario == case) & (df.seed == seed) & (df.variant == v)
+            df.loc[row, "collision_domain_s"] = 30.0 if v == "mpc" and i % 10 < 3 else 0.0
+    t = acceptance_table(df, Acceptance({"collision_domain_s": 0.0}), "hybrid", "mpc", [])
+    assert t["verdict"].tolist() == ["not met"] and t["pairs"].tolist() == [9]
+    assert t["both_zero"].tolist() == [21] and t["sums"].tolist() == [math.inf]
+
+
+def test_a_target_with_unpaired_runs_is_said_and_not_counted_as_met(tmp_path):
+    df = _results()
+    df.loc[(df.variant == "mpc") & (df.seed >= 5), "status"] = "error"  # half its runs fail
+    t = acceptance_table(df, Acceptance(TARGETS), "hybrid", "mpc", ["c0"]).set_index("metric")
+    assert t.loc["reliable_fix_age_p95_s", "verdict"] == "met, 10 runs unpaired"
+    assert t.loc["propeller_on_s", "unpaired"] == 15
+    acc = Acceptance({"reliable_fix_age_p95_s": -0.3})
+    from mpcasv.experiments.acceptance import report_parts
+
+    (_, _, [(_, d, says)]) = report_parts(df, acc, ["hybrid", "mpc"], ["c0"])
+    assert says == "**0 of 1 targets met.**"
+    assert d["pairs"].tolist() == ["10 (+10 unpaired)"]
+    (_, _, [(_, _, says)]) = report_parts(_results(), acc, ["hybrid", "mpc"], ["c0"])
+    assert says == "**All 1 targets met.**"
 
 
 def test_the_report_says_which_targets_are_not_met_and_where_to_read_why(tmp_path):
@@ -106,11 +151,17 @@ def test_the_report_says_which_targets_are_not_met_and_where_to_read_why(tmp_pat
     exp = SimpleNamespace(suite=suite, jobs=list(range(len(df))), skipped=[])
     md = write_report(tmp_path, exp, df)[0].read_text()
     section = md.split("## Acceptance (issue 16)")[1].split("\n## ")[0]
-    assert "without c0: no USBL fix arrived there" in section
+    assert ("reliable_fix_age_p95_s, nav_error_rms_m, reliable_fixes, fix_age_p95_s without "
+            "c0: no USBL fix arrived there") in section
     row = next(ln for ln in section.splitlines() if ln.startswith("| nav_error_rms_m "))
     assert "<= -20.0 %" in row and "| 20 |" in row and row.endswith("| not met |")
-    assert "**2 of 4 targets met.** What stands in the way: docs/mpc.md, 'Why'." in section
+    assert "**4 of 6 targets met.** What stands in the way: docs/mpc.md, 'Why'." in section
     assert md.index("## Acceptance") < md.index("## Significant wins")
+    one = df[df.variant == "hybrid"]  # no compared variant: said, not silently left out
+    (tmp_path / "one").mkdir()
+    md1 = write_report(tmp_path / "one", SimpleNamespace(suite=suite, jobs=list(range(len(one))),
+                                                         skipped=[]), one)[0].read_text()
+    assert "**The suite's acceptance targets are not judged**: no paired comparison." in md1
     del suite.acceptance  # a suite without targets: no section
     (tmp_path / "b").mkdir()
     assert "## Acceptance" not in write_report(tmp_path / "b", exp, df)[0].read_text()

@@ -83,14 +83,18 @@ BAD = {
         ["controllers", "['at'] without 'front'"]),
     "acceptance target of an unknown metric": (
         GOOD + "[acceptance]\ntargets = { reliable_fix_age_p96_s = -0.3 }\n",
-        ["reliable_fix_age_p96_s", "not a metric with a direction"]),
+        ["reliable_fix_age_p96_s", "not a per-run metric with a direction"]),
     "acceptance target of a metric without a direction": (
         GOOD + "[acceptance]\ntargets = { fix_possible_s = -0.3 }\n",
-        ["fix_possible_s", "not a metric with a direction"]),
+        ["fix_possible_s", "not a per-run metric with a direction"]),
     "acceptance target at -100 %": (
         GOOD + "[acceptance]\ntargets = { propeller_on_s = -1.0 }\n",
         ["propeller_on_s", "-100 %"]),
     "acceptance without targets": (GOOD + "[acceptance]\nsource = \"x\"\n", ["targets"]),
+    "acceptance target on a per-AUV list": (
+        GOOD + "[acceptance]\ntargets = { fixes_auv = 0.0 }\n", ["fixes_auv", "its scalar"]),
+    "acceptance target at -100 % where higher is better": (
+        GOOD + "[acceptance]\ntargets = { min_range_m = -5.0 }\n", ["min_range_m", "-100 %"]),
 }  # fmt: skip
 
 

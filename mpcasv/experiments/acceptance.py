@@ -12,13 +12,15 @@ A suite may name them (issue 16's acceptance in ``experiments/suites/paper.toml`
 A target ``c`` of a metric where lower is better asks for ``(other - ref) / ref <= c``
 (-0.30: at least 30 % lower; 0: no more); where higher is better, ``>= c``. Per pair (the
 report's pairing, :func:`mpcasv.experiments.stats.pairs`) the relative change is
-``(other - ref) / |ref|`` (both zero: 0; the reference zero and the other not: +-inf, the
-other's sign), pooled over every case of the suite except, for a metric that needs fixes
-(:data:`NEEDS_FIXES`), the cases where no USBL fix arrived in any run (there the fix ages are
-the run's clock and the AUVs navigate without fixes whatever the controller). Its median and
-95 % bootstrap CI come from :func:`mpcasv.experiments.stats.paired_stat`. Verdict: **met**
-when the whole CI is on the target's side of it, **not met** when the whole CI is on the
-other side, else **undecided** (the CI contains the target).
+``(other - ref) / |ref|`` (its limits where undefined: :func:`relative_changes`), pooled over
+every case of the suite except, for a metric that needs fixes (:data:`NEEDS_FIXES`), the
+cases where no USBL fix arrived in any run (there the fix ages are the run's clock and the
+AUVs navigate without fixes whatever the controller). Pairs where both are 0 are left out
+(they say nothing about more or less) and counted, as are runs without a partner. The
+median and 95 % bootstrap CI come from :func:`mpcasv.experiments.stats.paired_stat`.
+Verdict: **met** when the whole CI is at or on the better side of the target, **not met**
+when it is all on the worse side, else **undecided**; a target with unpaired runs is not
+counted as met.
 """
 
 from __future__ import annotations
@@ -62,28 +64,36 @@ class Acceptance:
             raise ValueError("'targets' is empty: name at least one metric")
         for m, c in self.targets.items():
             info = METRIC_INFO.get(m)
-            if info is None or info.better not in ("lower", "higher"):
-                usable = sorted(k for k, v in METRIC_INFO.items() if v.better)
-                raise ValueError(f"target {m!r}: not a metric with a direction; known: {usable}")
-            if info.better == "lower" and c <= -1.0:
-                raise ValueError(f"target {m} = {c}: a relative change of a metric >= 0 "
-                                 "cannot reach -100 % or below")  # fmt: skip
+            if m.endswith("_auv") or info is None or info.better not in ("lower", "higher"):
+                usable = sorted(k for k, v in METRIC_INFO.items()
+                                if v.better and not k.endswith("_auv"))  # fmt: skip
+                raise ValueError(f"target {m!r}: not a per-run metric with a direction (a "
+                                 f"per-AUV list is judged by its scalar); known: {usable}")
+            if c <= -1.0:
+                raise ValueError(f"target {m} = {c}: a relative change of a metric >= 0 is "
+                                 "above -100 % (-1)")  # fmt: skip
 
 
 def relative_changes(ref: np.ndarray, other: np.ndarray) -> np.ndarray:
-    """Per pair ``(other - ref) / |ref|`` (shape (n,), dimensionless); both zero: 0; the
-    reference zero and the other not: +-inf with the other's sign."""
+    """Per pair ``(other - ref) / |ref|`` (shape (n,), dimensionless), its limits where that
+    is undefined: equal values (both zero, both infinite) 0; the reference zero and the
+    other not: +-inf with the other's sign; the reference infinite and the other finite: -1
+    (e.g. an AUV never revisited against one revisited)."""
     ref, other = np.asarray(ref, float), np.asarray(other, float)
     with np.errstate(divide="ignore", invalid="ignore"):
         rel = (other - ref) / np.abs(ref)
-    return np.where(ref == 0, np.where(other == 0, 0.0, np.copysign(math.inf, other)), rel)
+    rel = np.where(ref == 0, np.copysign(math.inf, other), rel)
+    rel = np.where(np.isinf(ref) & np.isfinite(other), -1.0, rel)
+    return np.where(ref == other, 0.0, rel)
 
 
 def verdict(better: str, target: float, s: paired.PairedStat) -> str:
     """"met", "not met", "undecided" or "n/a: ..." for the relative-change statistics ``s``
-    against ``target`` on a metric where ``better`` ("lower" | "higher") is better."""
+    against ``target`` on a metric where ``better`` ("lower" | "higher") is better: met when
+    the whole CI is at or on the better side of the target, not met when the whole CI is on
+    the worse side, else undecided."""
     if math.isnan(s.ci_low) or math.isnan(s.ci_high):  # too few pairs, or none
-        return s.note or "n/a"
+        return s.note or "n/a: no interval"
     lo, hi = (s.ci_low, s.ci_high) if better == "lower" else (-s.ci_high, -s.ci_low)
     c = target if better == "lower" else -target
     if hi <= c:
@@ -95,35 +105,46 @@ def verdict(better: str, target: float, s: paired.PairedStat) -> str:
 
 def acceptance_table(results: pd.DataFrame, acc: Acceptance, reference: str, other: str,
                      no_fix_cases: list[str]) -> pd.DataFrame:  # fmt: skip
-    """One row per target: ``metric``, ``better``, ``target``, ``pairs``, ``cases`` (pooled),
-    ``median``, ``ci_low``, ``ci_high`` (relative change, dimensionless), ``sums`` (relative
-    change of the sums over the finite pairs) and ``verdict``. ``no_fix_cases``: the cases
-    left out for :data:`NEEDS_FIXES` metrics. A metric without a column gives a row with
-    0 pairs and verdict "n/a: no column"."""
+    """One row per target: ``metric``, ``better``, ``target``, ``pairs`` (used), ``unpaired``
+    (runs of either variant without a partner: a failed job, a missing value), ``both_zero``
+    (pairs left out: both 0, which says nothing about more or less), ``cases`` (pooled),
+    ``median``, ``ci_low``, ``ci_high`` (relative change per pair, dimensionless), ``sums``
+    (relative change of the sums over the used pairs; +inf from a zero sum) and
+    ``verdict`` (with ", N runs unpaired" when some are). ``no_fix_cases``: the cases left
+    out for :data:`NEEDS_FIXES` metrics. A metric without a column: 0 pairs, "n/a: no
+    column"."""
     rows = []
     for m, c in acc.targets.items():
         better = METRIC_INFO[m].better
         row = {"metric": m, "better": better, "target": float(c)}
         if m not in results:
-            rows.append(row | {"pairs": 0, "cases": "", "median": math.nan, "ci_low": math.nan,
-                               "ci_high": math.nan, "sums": math.nan,
-                               "verdict": "n/a: no column"})  # fmt: skip
+            rows.append(row | {"pairs": 0, "unpaired": 0, "both_zero": 0, "cases": "",
+                               "median": math.nan, "ci_low": math.nan, "ci_high": math.nan,
+                               "sums": math.nan, "verdict": "n/a: no column"})  # fmt: skip
             continue
-        p, _ = paired.pairs(results, m, reference, other)
+        p, unpaired = paired.pairs(results, m, reference, other)
         if m.startswith(NEEDS_FIXES):
             p = p[~p[paired.CASE].isin(no_fix_cases)]
+            unpaired = unpaired.drop(no_fix_cases, errors="ignore")
+        zero = (p["ref"] == 0) & (p["other"] == 0)
+        p = p[~zero]
         ref, oth = p["ref"].to_numpy(float), p["other"].to_numpy(float)
         s = paired.paired_stat(np.zeros(len(p)), relative_changes(ref, oth))
-        fin = np.isfinite(ref) & np.isfinite(oth)
-        sums = oth[fin].sum() / ref[fin].sum() - 1.0 if ref[fin].sum() else math.nan
-        rows.append(row | {"pairs": len(p), "cases": ", ".join(dict.fromkeys(p[paired.CASE])),
+        n_unpaired = int(unpaired.sum())
+        v = verdict(better, c, s) + (f", {n_unpaired} runs unpaired" if n_unpaired else "")
+        rows.append(row | {"pairs": len(p), "unpaired": n_unpaired, "both_zero": int(zero.sum()),
+                           "cases": ", ".join(dict.fromkeys(p[paired.CASE])),
                            "median": s.median, "ci_low": s.ci_low, "ci_high": s.ci_high,
-                           "sums": sums, "verdict": verdict(better, c, s)})  # fmt: skip
+                           "sums": float(relative_changes(np.array([ref.sum()]),
+                                                          np.array([oth.sum()]))[0]),
+                           "verdict": v})  # fmt: skip
     return pd.DataFrame(rows)
 
 
 def _pct(v: float) -> str:
-    return "n/a" if math.isnan(v) else f"{100 * v:+.1f} %"
+    if math.isnan(v):
+        return "n/a"
+    return f"{100 * v:+.1f} %" if math.isfinite(v) else ("+inf" if v > 0 else "-inf")
 
 
 def display_table(t: pd.DataFrame) -> pd.DataFrame:
@@ -132,8 +153,11 @@ def display_table(t: pd.DataFrame) -> pd.DataFrame:
         "required (other vs reference)": [("<= " if b == "lower" else ">= ") + _pct(c)
                                           for b, c in zip(t["better"], t["target"],
                                                           strict=True)],
-        "pairs": t["pairs"].to_list(),
-        "relative change per pair: median [95 % CI]": [
+        "pairs": [f"{n}" + "".join(f" (+{k} {what})" for k, what in ((u, "unpaired"),
+                                                                     (z, "both 0 left out"))
+                                   if k)
+                  for n, u, z in zip(t["pairs"], t["unpaired"], t["both_zero"], strict=True)],
+        f"relative change per pair: median [{paired.CONFIDENCE:.0%} CI]": [
             f"{_pct(m)} [{_pct(lo)}, {_pct(hi)}]"
             for m, lo, hi in zip(t["median"], t["ci_low"], t["ci_high"], strict=True)],
         "change of the sums": [_pct(v) for v in t["sums"]],
@@ -149,12 +173,15 @@ def report_parts(results: pd.DataFrame, acc: Acceptance, names: list[str],
     conclusion: how many targets are met and, unless all, where
     :attr:`Acceptance.explained_in` says what stands in the way)."""
     head = f"Acceptance ({acc.source})" if acc.source else "Acceptance"
-    left_out = (f" (for the fix-age and navigation metrics without {', '.join(no_fix_cases)}: "
-                "no USBL fix arrived there)") if no_fix_cases else ""  # fmt: skip
+    needs = [m for m in acc.targets if m.startswith(NEEDS_FIXES)]
+    left_out = (f" ({', '.join(needs)} without {', '.join(no_fix_cases)}: no USBL fix arrived "
+                "there)") if no_fix_cases and needs else ""  # fmt: skip
     rule = (f"Per pair the relative change (other − reference) / |reference|, pooled over the "
-            f"cases{left_out}; median with its {paired.CONFIDENCE:.0%} bootstrap CI. *met*: "
-            "the whole CI meets the requirement; *not met*: the whole CI misses it; "
-            "*undecided*: the CI contains it.")  # fmt: skip
+            f"cases{left_out}; pairs where both are 0 say nothing about more or less and are "
+            f"left out; median with its {paired.CONFIDENCE:.0%} bootstrap CI. *met*: the whole "
+            "CI is at or on the better side of the requirement; *not met*: the whole CI is on "
+            "the worse side; *undecided*: the CI straddles it. A target with unpaired runs (a "
+            "failed job, a missing value) is not counted as met.")  # fmt: skip
     parts = []
     for other in names[1:]:
         t = acceptance_table(results, acc, names[0], other, no_fix_cases)

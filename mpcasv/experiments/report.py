@@ -217,6 +217,8 @@ def write_report(out: Path, exp, results: pd.DataFrame, stats=None) -> tuple[Pat
     both("\n## Headline: paired differences\n", "<h2>Headline: paired differences</h2>")
     if not len(table):
         bullet(f"**No paired comparison**: {why}.")
+        if getattr(suite, "acceptance", None) is not None:
+            bullet("**The suite's acceptance targets are not judged**: no paired comparison.")
     else:
         key = paired.pair_key(results)
         ref = names[0]
