@@ -47,8 +47,13 @@ class Acceptance:
     targets : dict
         Metric name -> required relative change of every compared variant against the
         reference (dimensionless: -0.30 = at least 30 % lower where lower is better; 0 = no
-        more). Metrics of :data:`~mpcasv.experiments.metric_info.METRIC_INFO` with a
-        direction only.
+        more). Per-run metrics of :data:`~mpcasv.experiments.metric_info.METRIC_INFO` with a
+        direction only (not the per-AUV lists ``*_auv``).
+
+    Raises
+    ------
+    ValueError
+        No target; a name that is not such a metric; a target at or below -1 (-100 %).
     source : str
         Where the targets come from (e.g. "issue 16"); shown in the report's heading.
     explained_in : str
@@ -163,7 +168,6 @@ def display_table(t: pd.DataFrame) -> pd.DataFrame:
         "change of the sums": [_pct(v) for v in t["sums"]],
         "verdict": t["verdict"].to_list(),
     }, index=pd.Index(t["metric"], name="metric"))  # fmt: skip
-
 
 
 def report_parts(results: pd.DataFrame, acc: Acceptance, names: list[str],
