@@ -139,6 +139,20 @@ def test_commitment_keeps_the_target_unless_clearly_cheaper():
     assert committed_target(plan, 0, 0.02) == 1  # far cheaper: switches
 
 
+def test_a_served_target_is_left_for_the_cheapest_order_that_starts_elsewhere():
+    """Session 16: the re-plan after the target was served does not stay with it (which
+    would commit to it anew, for another whole visit), whatever the band; with one AUV
+    there is nowhere else to go."""
+    fc = [still(250.0, 0.0), still(-250.0, 0.0), still(0.0, 300.0)]
+    plan = best_order(np.zeros(2), fc, np.zeros(3), np.array([0.0, 100.0, 101.0]),
+                      np.full(3, 70.0), MODEL)  # fmt: skip
+    elsewhere = min((o for o in plan.costs if o[0] != 0), key=plan.costs.__getitem__)
+    assert committed_target(plan, 0, 10.0) == 0  # not served: a wide band keeps it
+    assert committed_target(plan, 0, 10.0, served=True) == elsewhere[0] != 0
+    one = best_order(np.zeros(2), fc[:1], np.zeros(1), np.zeros(1), np.full(1, 70.0), MODEL)
+    assert committed_target(one, 0, 0.02, served=True) == 0
+
+
 def test_more_than_four_auvs_refused():
     fc = [still(100.0 * k, 0.0) for k in range(5)]
     with pytest.raises(ValueError, match="at most 4"):

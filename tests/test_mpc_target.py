@@ -111,6 +111,26 @@ def _first_choice(rule: str) -> int:
     return c.target
 
 
+def test_the_order_rule_leaves_a_served_target_and_stays_when_no_other_auv_needs_a_visit():
+    """Session 16: target 2 beside the ASV, committed and served (a fix since the choice).
+    Even with a band of 1000 % that would keep it, the order rule leaves it for the first
+    AUV of the cheapest order that starts elsewhere (before, it committed to the served AUV
+    anew: a second whole visit). With the other AUVs served too, it stays, as the age rule
+    does."""
+    c = make_controller("mpc-multi", 3, "mpc-multi-order", overrides={
+        "solver.compiled": False, "order.hysteresis": 10.0})  # fmt: skip
+    far = (AUVEstimate(600.0, 0.0, 60.0), AUVEstimate(300.0, 0.0, 60.0),
+           AUVEstimate(15.0, 0.0, 60.0))  # fmt: skip
+    near = (AUVEstimate(0.0, 20.0, 60.0), AUVEstimate(0.0, -20.0, 60.0), far[2])
+    for auvs, tau, expected in ((far, [200.0, 150.0, 0.0], 1), (near, [10.0, 5.0, 0.0], 2)):
+        obs = Observation(0.0, ASVState(0.0, 0.0, 0.0), False, auvs)  # projected ages <= 25 s
+        c.reset(3)
+        c.target, c.tau, c.t_commit = 2, np.array(tau), -10.0
+        c.fixes_since[2] = 1.0
+        c._choose_target(obs, 1.0)
+        assert c.target == expected, tau
+
+
 def test_the_order_rule_visits_the_auv_on_the_way_where_the_age_rule_goes_past_it():
     """The age rule heads for the largest projected fix age (AUV 0: 200 s + 530 m / 2.5 m/s);
     the order rule visits AUV 1 on the way (tests/test_mpc_order.py has the order alone)."""

@@ -210,10 +210,18 @@ def transit_cost(weights, T_go: float, T_max: float, u_max: float) -> float:
             + weights.running)  # fmt: skip
 
 
-def committed_target(plan: OrderPlan, current: int, hysteresis: float) -> int:
+def committed_target(plan: OrderPlan, current: int, hysteresis: float,
+                     served: bool = False) -> int:  # fmt: skip
     """The target after a re-plan with commitment (issue 16 item 6): the first AUV of the
     cheapest order, unless the cheapest order that starts with the ``current`` target is
-    within ``hysteresis`` (a fraction) of it, in which case the target stays."""
+    within ``hysteresis`` (a fraction) of it, in which case the target stays. A ``served``
+    target (committed, then served: the re-plan comes because it was) is left: the first AUV
+    of the cheapest order that starts elsewhere (with one AUV: it stays). Staying would
+    commit to it anew, for another whole visit: the order model values a stay at the served
+    AUV as holding its variance at ``P+`` for ``T_stay``, so with a 2 % band the ASV stood
+    by a served AUV a second time (session 16)."""
+    if served and len(plan.order) > 1:
+        return min((o for o in plan.costs if o[0] != current), key=plan.costs.__getitem__)[0]
     keep = min(c for o, c in plan.costs.items() if o[0] == current)
     if plan.order[0] != current and keep <= (1.0 + hysteresis) * plan.cost:
         return current

@@ -166,8 +166,10 @@ class OrderParams:
     stay : float
         Standby the top level expects at each AUV it visits (s).
     hysteresis : float
-        A served target gives way only to an order at least this fraction cheaper than the
-        best order that starts by staying with it (issue 16 item 6).
+        The run's first target (not committed) gives way only to an order at least this
+        fraction cheaper than the best order that starts by staying with it (issue 16 item
+        6). A committed target, once served, is left (session 16; docs/mpc.md "Visiting
+        order").
     nav : float
         Cost per second of one ``V_ref = eps_a^2 / 8 tau_ref^4`` of an AUV's navigation
         variance (per axis; ``tau_ref`` of the weights), against the OCP's energy terms at

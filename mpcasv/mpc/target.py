@@ -18,9 +18,12 @@ such an AUV kept the target for good, its age growing). Then
 - ``age`` (default, the shipped presets): the AUV with the largest projected fix age
   ``tau_i + t_go,i`` (Paper 2's eq. 8 on projected ages) among those whose projected age
   exceeds ``tau_served``; none such: the target stays;
-- ``order`` (opt-in, preset ``mpc-multi-order``): the first AUV of the cheapest visiting order
-  over ``order.window`` (:mod:`mpcasv.mpc.order`, eq. O1), kept unless that order is
-  ``order.hysteresis`` cheaper than the best one that stays.
+- ``order`` (opt-in, preset ``mpc-multi-order``): a served committed target is left, as with
+  the age rule only when another AUV's projected fix age exceeds ``tau_served``, for the
+  first AUV of the cheapest visiting order over ``order.window`` that starts elsewhere
+  (:mod:`mpcasv.mpc.order`, eq. O1; since session 16); the run's first target (not
+  committed) gives way only to an order ``order.hysteresis`` cheaper than the best one that
+  stays.
 """
 
 from __future__ import annotations
@@ -73,11 +76,13 @@ class Targeting:
                 return
             if not self._reachable(obs, r_t, [i for i in range(K) if i != j]).any():
                 return
-        if order:
-            self._choose_by_order(obs, r_t)
-            return
         t_go = np.maximum(dist - r_t, 0.0) / self.U_go  # U_go, at most the speed cap
         proj = self.tau + t_go
+        if order:
+            others = np.arange(K) != j
+            if not self.committed or np.any(proj[others] > self.params.tau_served):
+                self._choose_by_order(obs, r_t)  # else (every other AUV served) it stays
+            return
         # commitment (issue 16 item 6): leave the target only for an AUV that needs a visit
         # itself (projected fix age above tau_served); with every other AUV served the target
         # stays (before, two served AUVs swapped the target every step for a whole run)
@@ -123,8 +128,8 @@ class Targeting:
                           np.array([a.depth for a in obs.auvs]), self.tau, r_t,
                           self.order_model)  # fmt: skip
         self.order_plan = plan
-        self._switch_to(committed_target(plan, self.target, self.params.order.hysteresis),
-                        obs.t)  # fmt: skip
+        self._switch_to(committed_target(plan, self.target, self.params.order.hysteresis,
+                                         served=self.committed), obs.t)  # fmt: skip
 
     @property
     def committed(self) -> bool:
