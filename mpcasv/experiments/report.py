@@ -215,9 +215,10 @@ def write_report(out: Path, exp, results: pd.DataFrame, stats=None) -> tuple[Pat
              f"<h2>Matched operating points</h2><p>{html.escape(MATCHED_NOTE)}</p>"
              f"{mt.to_html()}")  # fmt: skip
     both("\n## Headline: paired differences\n", "<h2>Headline: paired differences</h2>")
+    acc = getattr(suite, "acceptance", None)  # the suite's targets (acceptance.py), if any
     if not len(table):
         bullet(f"**No paired comparison**: {why}.")
-        if getattr(suite, "acceptance", None) is not None:
+        if acc is not None:
             bullet("**The suite's acceptance targets are not judged**: no paired comparison.")
     else:
         key = paired.pair_key(results)
@@ -274,8 +275,7 @@ def write_report(out: Path, exp, results: pd.DataFrame, stats=None) -> tuple[Pat
                         th, paired.HEADLINE, figdir / f"forest-{_heading_id(other)}.png"
                     )
                 )
-        acc = getattr(suite, "acceptance", None)
-        if acc is not None:  # the suite's targets, judged (mpcasv/experiments/acceptance.py)
+        if acc is not None:  # the suite's targets, judged
             head, rule, parts = acceptance.report_parts(results, acc, names, no_fix)
             both(f"\n## {head}\n", f"<h2>{html.escape(head)}</h2>")
             bullet(rule)

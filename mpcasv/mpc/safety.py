@@ -144,8 +144,7 @@ class Safety:
         # (each plan put its start off, priced only over the horizon; docs/mpc.md), unless
         # it leaves the range bounds (a way through an AUV's domain is never kept dearer)
         kept = late and alt.ok and self._slack(self.ocp.split(alt.w)[1]) <= STUCK_SLACK
-        cheaper = alt.f < res.f or kept
-        adopt = cheaper and (alt.ok or bool(np.all(np.isfinite(alt.w))))
+        adopt = kept or (alt.f < res.f and (alt.ok or bool(np.all(np.isfinite(alt.w)))))
         if adopt:
             self.w_prev, self.w_ok = alt.w, alt.ok
             self.lam_prev = (alt.lam_x, alt.lam_g) if alt.ok else None
