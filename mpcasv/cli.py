@@ -31,8 +31,17 @@ COMMAND_MODULES = (
 )
 
 
+class OneLineParser(argparse.ArgumentParser):
+    """An argument parser whose usage errors are one line (``mpcasv CMD: error: ...``, exit
+    2), as every other bad input: argparse's default printed the whole usage block first (3-11
+    lines). Sub-command parsers are of this class too (``add_subparsers`` uses the parent's)."""
+
+    def error(self, message: str):
+        self.exit(2, f"{self.prog}: error: {message} (see '{self.prog} --help')\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = OneLineParser(
         prog="mpcasv",
         description="ASV support of AUVs: hybrid and MPC controllers, experiments, tuning, "
         "IMC deployment. Run 'mpcasv COMMAND --help' for each command.",

@@ -9,12 +9,13 @@ runs. Numbers are strict: ``"1.5"`` (a string) is not a number.
 from __future__ import annotations
 
 import dataclasses
+import re
 import tomllib
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Annotated, Any, TypeVar
 
-from pydantic import ConfigDict, Field, Strict, TypeAdapter, ValidationError
+from pydantic import AfterValidator, ConfigDict, Field, Strict, TypeAdapter, ValidationError
 from pydantic.dataclasses import dataclass as _pydantic_dataclass
 
 T = TypeVar("T")
@@ -33,6 +34,25 @@ NonNeg = Annotated[float, Strict(), Field(ge=0)]
 Prob = Annotated[float, Strict(), Field(ge=0, le=1)]
 #: A strictly positive integer.
 PosInt = Annotated[int, Strict(), Field(gt=0)]
+#: The largest seed: every seed is an integer in ``[0, SEED_MAX]`` (Optuna's samplers and the
+#: results table's int64 column take no more; numpy would take any size)
+SEED_MAX = 2**32 - 1
+#: A seed (suites, scenarios' families): an integer in ``[0, SEED_MAX]``.
+Seed = Annotated[int, Strict(), Field(ge=0, le=SEED_MAX)]
+#: What a name that becomes part of an output path may hold (a scenario's, a suite's)
+NAME_PATTERN = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.+-]*")
+
+
+def _path_name(name: str) -> str:
+    if not NAME_PATTERN.fullmatch(name):
+        raise ValueError(f"{name!r} is used in output paths: letters, digits and _ . + - only, "
+                         "not empty, not starting with . or -")  # fmt: skip
+    return name
+
+
+#: A name used in output paths (``"../x"`` wrote outside the output folder, ``""`` named
+#: nothing): see :data:`NAME_PATTERN`.
+PathName = Annotated[str, Strict(), AfterValidator(_path_name)]
 
 STRICT = ConfigDict(extra="forbid", arbitrary_types_allowed=False)
 
@@ -44,6 +64,19 @@ def frozen(cls: type[T]) -> type[T]:
 
 class ConfigError(ValueError):
     """A configuration file (or mapping) is invalid; the message names the source and field."""
+
+
+def check_seed(seed: int, what: str = "--seed") -> int:
+    """``seed`` if it is an integer in ``[0, SEED_MAX]``.
+
+    Raises
+    ------
+    ConfigError
+        Outside that range (``what`` names the option or field in the message).
+    """
+    if not 0 <= seed <= SEED_MAX:
+        raise ConfigError(f"{what} {seed}: a seed is an integer in [0, 2**32 - 1]")
+    return seed
 
 
 def _format_loc(loc: tuple[Any, ...]) -> str:

@@ -175,7 +175,7 @@ def _log_path(out: Path | None, name: str) -> Path:
 
 def run_cli(args) -> int:
     """``mpcasv simulate --manoeuvre NAME``: write one identification log."""
-    from mpcasv.config import ConfigError
+    from mpcasv.config import ConfigError, check_seed
     from mpcasv.models.params import load_vessel
 
     if args.duration is not None and not (math.isfinite(args.duration) and args.duration > 0):
@@ -186,8 +186,7 @@ def run_cli(args) -> int:
         bad = [v for v in values if v is not None and not math.isfinite(v)]
         if bad:
             raise ConfigError(f"{opt} {bad[0]:g}: must be a finite number")
-    if args.seed < 0:
-        raise ConfigError(f"--seed {args.seed}: a seed is an integer >= 0")
+    check_seed(args.seed)
     out = _log_path(args.out, f"{args.manoeuvre}-{args.seed}.csv")  # before the work
     model = VesselModel(load_vessel(args.vessel or "gretha"))
     noise = Noise() if args.noise else None

@@ -45,7 +45,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from mpcasv.config import ConfigError
+    from mpcasv.config import ConfigError, check_seed
     from mpcasv.controllers import load_preset
     from mpcasv.experiments.falsify import (
         SearchSetup,
@@ -61,8 +61,7 @@ def run(args: argparse.Namespace) -> int:
             raise ConfigError(f"--{flag} must be >= 1, got {getattr(args, flag)}")
     # nan here was a search that never ended (--separation: every margin nan, Optuna refuses
     # the value), a check that always passed (--require-margin) or a traceback (--seed -1)
-    if args.seed < 0:
-        raise ConfigError(f"--seed {args.seed}: a seed is an integer >= 0")
+    check_seed(args.seed)
     if args.separation is not None and not (math.isfinite(args.separation)
                                             and args.separation >= 0):  # fmt: skip
         raise ConfigError(f"--separation {args.separation:g}: a finite distance >= 0 (m)")

@@ -23,11 +23,20 @@ import math
 import re
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Annotated, Any, Literal
+from typing import Any, Literal
 
-from pydantic import Field, Strict, model_validator
+from pydantic import model_validator
 
-from mpcasv.config import ConfigError, FinitePos, Float, frozen, load_toml, parse
+from mpcasv.config import (
+    ConfigError,
+    FinitePos,
+    Float,
+    PathName,
+    Seed,
+    frozen,
+    load_toml,
+    parse,
+)
 from mpcasv.experiments.acceptance import Acceptance
 
 #: the repository's ``experiments`` folder (scenarios and suites by name)
@@ -35,7 +44,6 @@ EXPERIMENTS_DIR = Path(__file__).resolve().parents[2] / "experiments"
 SCENARIOS_DIR = EXPERIMENTS_DIR / "scenarios"
 SUITES_DIR = EXPERIMENTS_DIR / "suites"
 
-Seed = Annotated[int, Strict(), Field(ge=0)]
 #: rough run time per simulated second relative to the hybrid controllers (for scheduling
 #: the longest jobs first, so that a sweep does not end with one worker on one long job)
 RELATIVE_COST = {"mpc-single": 10.0, "mpc-multi": 20.0}
@@ -146,7 +154,7 @@ class Suite:
     """A suite file. Lists are cartesian products: every scenario x current x estimator x
     controller (x its grid) x seed is one job."""
 
-    name: str
+    name: PathName
     scenarios: tuple[str, ...]
     controllers: tuple[ControllerEntry, ...]
     seeds: tuple[Seed, ...]

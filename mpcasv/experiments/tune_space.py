@@ -30,7 +30,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from mpcasv.config import ConfigError, load_toml
+from mpcasv.config import SEED_MAX, ConfigError, load_toml
 
 #: default objectives (metrics.json keys, all "lower is better"; issue 17 item 1)
 DEFAULT_OBJECTIVES = ("reliable_fix_age_p95_s", "nav_error_rms_m", "energy_J")
@@ -116,8 +116,8 @@ def _int_list(path: Path, key: str, v: Any) -> tuple[int, ...]:
     if not isinstance(v, list) or not v:
         _fail(path, f"{key}: expected a non-empty list of seeds, got {v!r}")
     for s in v:
-        if not isinstance(s, int) or isinstance(s, bool) or s < 0:
-            _fail(path, f"{key}: a seed is an integer >= 0, got {s!r}")
+        if not isinstance(s, int) or isinstance(s, bool) or not 0 <= s <= SEED_MAX:
+            _fail(path, f"{key}: a seed is an integer in [0, 2**32 - 1], got {s!r}")
     if len(set(v)) != len(v):
         _fail(path, f"{key}: duplicate seeds {v}")
     return tuple(v)

@@ -7,7 +7,7 @@ import dataclasses
 import math
 from pathlib import Path
 
-from mpcasv.config import ConfigError
+from mpcasv.config import ConfigError, check_seed
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -72,8 +72,7 @@ def run(args: argparse.Namespace) -> int:
                               f"({scenario.sim.control_period:g} s) and the scenario's "
                               f"{scenario.duration:g} s")  # fmt: skip
         scenario = dataclasses.replace(scenario, duration=args.duration)
-    if args.seed < 0:
-        raise ConfigError(f"--seed {args.seed}: a seed is an integer >= 0")
+    check_seed(args.seed)
     scenario, real = nominal(scenario) if args.nominal else realise(scenario, args.seed)
     name = args.controller or scenario.controller
     preset = args.params or (scenario.preset if name == scenario.controller else None)

@@ -17,6 +17,7 @@ from mpcasv.config import (
     ConfigError,
     FinitePos,
     Float,
+    PathName,
     Pos,
     anchor,
     frozen,
@@ -71,7 +72,7 @@ class SimSpec:
 class Scenario:
     """A complete simulation scenario."""
 
-    name: str
+    name: PathName  # part of default output paths (runs/<name>-<controller>-<seed>)
     duration: FinitePos  # s
     auv: tuple[AUVSpec, ...]
     description: str = ""

@@ -1,0 +1,107 @@
+"""Session 17's bad-input walk (a helper attacked every command): the rules shared by the
+commands. Usage errors that argparse catches are one line too; a seed is an integer in
+``[0, 2**32 - 1]`` wherever one is taken (a huge suite seed ran its job, then failed writing
+the results table with a traceback and left an empty table behind); a scenario's or a suite's
+name, which becomes part of output paths, cannot climb out of the output folder.
+"""
+
+from __future__ import annotations
+
+import re
+import shutil
+from pathlib import Path
+
+import pytest
+
+from mpcasv.cli import main
+from mpcasv.config import SEED_MAX, ConfigError, check_seed, parse
+from mpcasv.experiments.suite import load_suite
+from mpcasv.sim.scenario import load_scenario
+
+ROOT = Path(__file__).resolve().parents[1]
+DEMO = ROOT / "experiments" / "scenarios" / "demo.toml"
+QUICK = ROOT / "experiments" / "suites" / "quick.toml"
+
+
+def _one_line_exit_2(argv: list[str], capsys) -> str:
+    with pytest.raises(SystemExit) as exc:
+        main(argv)
+    err = capsys.readouterr().err
+    assert exc.value.code == 2, err
+    assert len(err.strip().splitlines()) == 1, err
+    assert "usage:" not in err
+    return err
+
+
+@pytest.mark.parametrize("argv", [
+    ["simulate", "--seed", "abc"],
+    ["compare", "--workers", "x"],
+    ["bench"],
+    ["nope"],
+    [],
+])  # fmt: skip
+def test_usage_errors_are_one_line(argv, capsys):
+    err = _one_line_exit_2(argv, capsys)
+    assert "error:" in err and "--help" in err
+
+
+@pytest.mark.parametrize("seed", [-1, SEED_MAX + 1, 10**23])
+def test_check_seed_refuses_outside_the_range(seed):
+    with pytest.raises(ConfigError, match=r"\[0, 2\*\*32 - 1\]"):
+        check_seed(seed)
+
+
+@pytest.mark.parametrize("seed", [0, SEED_MAX])
+def test_check_seed_keeps_the_ends(seed):
+    assert check_seed(seed) == seed
+
+
+@pytest.mark.parametrize("command", ["simulate", "falsify"])
+def test_a_huge_seed_is_bad_input(command, tmp_path, capsys):
+    argv = {"simulate": ["simulate", str(DEMO), "--out", str(tmp_path / "o")],
+            "falsify": ["falsify", str(ROOT / "experiments/falsify/pursuer-single.toml"),
+                        "--controller", "hybrid-single", "--out", str(tmp_path / "f")]}[command]
+    assert main([*argv, "--seed", str(10**23)]) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and "2**32 - 1" in err, err
+    assert not (tmp_path / "o").exists()
+
+
+def test_a_huge_suite_seed_is_refused_before_any_job(tmp_path):
+    text = QUICK.read_text()
+    suite = tmp_path / "s.toml"
+    suite.write_text(re.sub(r"(?m)^seeds = .*$", f"seeds = [0, {10**23}]", text))
+    with pytest.raises(ConfigError, match="seeds"):
+        load_suite(suite)
+
+
+@pytest.mark.parametrize("name", ["../../escaped", "", ".hidden", "a/b", "-x"])
+def test_a_scenario_name_cannot_leave_the_output_folder(name, tmp_path):
+    text = DEMO.read_text().replace('name = "demo"', f"name = {name!r}".replace("'", '"'))
+    path = tmp_path / "s.toml"
+    path.write_text(text)
+    with pytest.raises(ConfigError, match="used in output paths"):
+        load_scenario(path)
+
+
+def test_shipped_names_are_path_names():
+    for path in sorted((ROOT / "experiments" / "scenarios").rglob("*.toml")):
+        load_scenario(path)
+    for path in sorted((ROOT / "experiments" / "suites").glob("*.toml")):
+        load_suite(path)
+
+
+def test_a_suite_name_cannot_leave_the_results_folder(tmp_path):
+    suite = tmp_path / "s.toml"
+    shutil.copy(QUICK, suite)
+    text = suite.read_text()
+    suite.write_text(re.sub(r'(?m)^name = ".*"$', 'name = "../../../escsuite"', text, count=1))
+    with pytest.raises(ConfigError, match="used in output paths"):
+        load_suite(suite)
+
+
+def test_parse_names_the_field():
+    from mpcasv.sim.scenario import Scenario
+
+    with pytest.raises(ConfigError, match="name"):
+        parse(Scenario, {"name": "a/b", "duration": 1.0, "auv": []})
