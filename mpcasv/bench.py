@@ -13,6 +13,14 @@ BENCHES = {
     "mpc": "mpcasv.mpc.bench:bench_mpc",
     "compare": "mpcasv.experiments.bench:bench_compare",
 }
+#: the options each benchmark reads (another's option is refused, not ignored: ``bench mpc
+#: --suite quick`` ran the whole MPC benchmark as if the suite had been read)
+OPTIONS = {
+    "sim": ("repeat",),
+    "mpc": ("steps", "quick", "threads", "step_iter"),
+    "compare": ("suite", "repeat"),
+}
+DEFAULTS = {"repeat": 3, "steps": 300}
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -20,9 +28,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                        description="Run a benchmark and print its figures.")  # fmt: skip
     p.add_argument("which", choices=sorted(BENCHES), help="what to benchmark")
     p.add_argument("--json", type=Path, help="also write the figures to this JSON file")
-    p.add_argument("--repeat", type=int, default=3, help="repetitions (best/median reported)")
-    p.add_argument("--suite", help="suite for 'compare' benchmarks")
-    p.add_argument("--steps", type=int, default=300,
+    p.add_argument("--repeat", type=int, default=None,
+                   help="'sim', 'compare': repetitions (best/median reported; default 3)")
+    p.add_argument("--suite", help="'compare': the suite to time (default bench)")
+    p.add_argument("--steps", type=int, default=None,
                    help="'mpc': receding-horizon problems per recorded sequence (default 300)")
     p.add_argument("--quick", action="store_true",
                    help="'mpc': only Opti + IPOPT and the default solver (no QP variant, no "
@@ -40,6 +49,16 @@ def run(args: argparse.Namespace) -> int:
     from mpcasv.config import ConfigError
     from mpcasv.outputs import check_output_file
 
+    given = [k for k in ("repeat", "suite", "steps", "quick", "threads", "step_iter")
+             if getattr(args, k) not in (None, False)]  # fmt: skip
+    foreign = [k for k in given if k not in OPTIONS[args.which]]
+    if foreign:
+        opts = ", ".join("--" + k.replace("_", "-") for k in foreign)
+        raise ConfigError(f"{opts}: not read by 'bench {args.which}' (it reads "
+                          f"{', '.join('--' + k.replace('_', '-') for k in OPTIONS[args.which])})")
+    for k, v in DEFAULTS.items():
+        if getattr(args, k) is None:
+            setattr(args, k, v)
     # --repeat 0 / -1 ran once and said "over 1 runs"; --steps -1 blamed "case3 (modified):
     # duration"; an unwritable --json was found only after the whole benchmark
     for flag in ("repeat", "steps", "threads"):

@@ -28,6 +28,10 @@ Pos = Annotated[float, Strict(), Field(gt=0, allow_inf_nan=False)]
 PosOrInf = Annotated[float, Strict(), Field(gt=0)]
 #: A duration (s): finite and > 0 (inf would run for ever); the same as :data:`Pos`.
 FinitePos = Pos
+#: The longest simulated run (s): a week (``duration = 1e300`` was accepted and ran for ever)
+DURATION_MAX = 7 * 86400.0
+#: A run's duration (s): in ``(0, DURATION_MAX]``.
+Duration = Annotated[float, Strict(), Field(gt=0, le=DURATION_MAX, allow_inf_nan=False)]
 #: A number >= 0.
 NonNeg = Annotated[float, Strict(), Field(ge=0)]
 #: A probability in [0, 1].
@@ -49,6 +53,16 @@ def _path_name(name: str) -> str:
                          "not empty, not starting with . or -")  # fmt: skip
     return name
 
+
+def _label(name: str) -> str:
+    if not name.strip() or name != name.strip() or not name.isprintable():
+        raise ValueError(f"{name!r}: a name is printable, not empty, without leading or "
+                         "trailing spaces")  # fmt: skip
+    return name
+
+
+#: A name shown in tables and messages (an AUV's): printable, not empty, not padded.
+Label = Annotated[str, Strict(), AfterValidator(_label)]
 
 #: A name used in output paths (``"../x"`` wrote outside the output folder, ``""`` named
 #: nothing): see :data:`NAME_PATTERN`.

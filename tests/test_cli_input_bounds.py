@@ -105,3 +105,80 @@ def test_parse_names_the_field():
 
     with pytest.raises(ConfigError, match="name"):
         parse(Scenario, {"name": "a/b", "duration": 1.0, "auv": []})
+
+
+@pytest.mark.parametrize("argv,names", [
+    (["bench", "sim", "--steps", "5"], "--steps"),
+    (["bench", "sim", "--quick"], "--quick"),
+    (["bench", "mpc", "--suite", "quick"], "--suite"),
+    (["bench", "mpc", "--repeat", "2"], "--repeat"),
+    (["bench", "compare", "--threads", "4", "--step-iter", "3"], "--threads, --step-iter"),
+])  # fmt: skip
+def test_bench_refuses_another_benchmarks_options(argv, names, capsys):
+    """``bench mpc --suite quick`` ran the whole MPC benchmark as if the suite had been read."""
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and names in err and "not read by" in err, err
+
+
+@pytest.mark.parametrize("extra,names", [
+    ([str(DEMO)], "SCENARIO"),
+    (["--controller", "goto", "--nominal"], "--controller, --nominal"),
+    (["--estimator", "kalman"], "--estimator"),
+    (["--no-plots"], "--no-plots"),
+    (["--duration", "1e12"], "--duration"),
+    (["--duration", "0.1"], "--duration"),
+    (["--current", "5", "0"], "--current"),
+])  # fmt: skip
+def test_a_manoeuvre_refuses_what_it_would_ignore_or_cannot_do(extra, names, tmp_path, capsys):
+    """A SCENARIO or scenario options beside --manoeuvre were ignored; --duration 1e12 tried to
+    allocate 582 TiB; --duration 0.1 wrote a 2-sample log; --current 5 0 was taken (a scenario
+    refuses currents above 2 m/s)."""
+    out = tmp_path / "m.csv"
+    assert main(["simulate", "--manoeuvre", "zigzag", "--out", str(out), *extra]) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and names in err, err
+    assert not out.exists()
+
+
+def _scenario(tmp_path, old: str, new: str) -> Path:
+    text = DEMO.read_text()
+    assert old in text
+    path = tmp_path / "s.toml"
+    path.write_text(text.replace(old, new, 1))
+    return path
+
+
+@pytest.mark.parametrize("old,new,field", [
+    ("duration = 900.0", "duration = 1e300", "duration"),
+    ("psi_deg = 45.0", "psi_deg = 1e20", "psi_deg"),
+    ('name = "auv"', 'name = ""', "name"),
+    ('name = "auv"', 'name = " auv"', "name"),
+])  # fmt: skip
+def test_impossible_scenario_values_are_refused(old, new, field, tmp_path):
+    """``duration = 1e300`` ran for ever; a heading of 1e20 deg left the boat unable to turn
+    (a yaw step is lost in a float that large); an empty AUV name was taken."""
+    with pytest.raises(ConfigError, match=field):
+        load_scenario(_scenario(tmp_path, old, new))
+
+
+def test_the_longest_run_is_still_taken(tmp_path):
+    from mpcasv.config import DURATION_MAX
+
+    sc = load_scenario(_scenario(tmp_path, "duration = 900.0", f"duration = {DURATION_MAX}"))
+    assert sc.duration == DURATION_MAX
+
+
+def test_paper_table_refuses_a_negative_seed(tmp_path, capsys):
+    assert main(["paper-table", "--seed", "-1", "--out", str(tmp_path / "pt")]) == 2
+    assert "--seed -1" in capsys.readouterr().err
+    assert not (tmp_path / "pt").exists()
+
+
+def test_simulate_without_plots_does_not_say_it_wrote_plots(tmp_path, capsys):
+    out = tmp_path / "run"
+    assert main(["simulate", str(DEMO), "--duration", "5", "--out", str(out), "--no-plots",
+                 "--quiet"]) == 0  # fmt: skip
+    said = capsys.readouterr().out
+    assert "(timeseries.parquet, metrics.json)" in said, said
+    assert not list(out.glob("*.png"))

@@ -155,7 +155,7 @@ def test_an_output_folder_under_a_file_is_refused_saying_so(tmp_path, capsys, co
 )
 def test_bad_manoeuvre_options_are_refused_in_one_line(tmp_path, capsys, extra, word):
     out = tmp_path / "log.csv"
-    argv = ["simulate", "--manoeuvre", "zigzag", "--duration", "5", "--out", str(out), *extra]
+    argv = ["simulate", "--manoeuvre", "zigzag", "--duration", "15", "--out", str(out), *extra]
     assert main(argv) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "Traceback" not in err[0], err

@@ -64,9 +64,9 @@ def _ident_log(tmp_path: Path) -> Path:
 # "/proc/.x.s2nzvf0o: No such file or directory" (a temporary name, not the option)
 COMMANDS_WITH_OUTPUT = {
     "simulate": ["simulate", CASE1, "--duration", "20", "--quiet", "--out", "{bad}"],
-    "manoeuvre folder": ["simulate", "--manoeuvre", "zigzag", "--duration", "5", "--out",
+    "manoeuvre folder": ["simulate", "--manoeuvre", "zigzag", "--duration", "15", "--out",
                          "{bad}"],
-    "manoeuvre file": ["simulate", "--manoeuvre", "zigzag", "--duration", "5", "--out",
+    "manoeuvre file": ["simulate", "--manoeuvre", "zigzag", "--duration", "15", "--out",
                        "{bad}/m.csv"],
     "paper-table": ["paper-table", "--out", "{bad}"],
     "compare": ["compare", "quick", "--workers", "1", "--quiet", "--out", "{bad}"],
@@ -171,7 +171,7 @@ def test_a_folder_output_named_or_being_a_file_is_refused(name, kind, tmp_path, 
 def test_a_manoeuvre_log_named_as_another_kind_of_file_is_refused(out, tmp_path, capsys,
                                                                   no_work):  # fmt: skip
     path = tmp_path / out
-    _refused(["simulate", "--manoeuvre", "zigzag", "--duration", "5", "--out", path], capsys,
+    _refused(["simulate", "--manoeuvre", "zigzag", "--duration", "15", "--out", path], capsys,
              "--out", str(path), "FILE.csv or FILE.parquet")  # fmt: skip
     assert not path.exists()
 
@@ -179,7 +179,7 @@ def test_a_manoeuvre_log_named_as_another_kind_of_file_is_refused(out, tmp_path,
 @pytest.mark.parametrize(("out", "written"), [("m.csv", "m.csv"), ("logs", "logs/zigzag-0.csv"),
                                               ("m.parquet", "m.parquet")])  # fmt: skip
 def test_a_manoeuvre_log_goes_to_a_csv_parquet_or_folder(out, written, tmp_path, capsys):
-    assert main(["simulate", "--manoeuvre", "zigzag", "--duration", "5", "--out",
+    assert main(["simulate", "--manoeuvre", "zigzag", "--duration", "15", "--out",
                  str(tmp_path / out)]) == 0  # fmt: skip
     assert (tmp_path / written).is_file()
 
@@ -200,7 +200,7 @@ def test_identify_writes_a_toml_file_only(out, tmp_path, capsys, no_work):
 # `simulate --manoeuvre zigzag --vessel case2.toml` printed one line of ~40 problems ("L: Field
 # required; ...; auv: Unexpected keyword argument"), and `simulate gretha.toml` the reverse
 VESSEL_OPTIONS = {
-    "manoeuvre": ["simulate", "--manoeuvre", "zigzag", "--duration", "5", "--out",
+    "manoeuvre": ["simulate", "--manoeuvre", "zigzag", "--duration", "15", "--out",
                   "{tmp}/z.csv", "--vessel", CASE2],
     "tune yaw": ["tune", "yaw", "--quiet", "--out", "{tmp}/y", "--vessel", CASE2],
     "tune speed": ["tune", "speed", "--quiet", "--out", "{tmp}/s", "--vessel", CASE2],

@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from mpcasv.models.current import V_MAX
 from mpcasv.models.vessel import IX, VesselModel
 
 MANOEUVRES = ("zigzag", "turning-circle", "speed-steps")
@@ -78,7 +79,7 @@ def simulate_manoeuvre(model: VesselModel, name: str, u0: float = 1.5, delta_deg
     n = int(round(duration / dt))
     X, U = np.zeros((n + 1, len(x))), np.zeros((n + 1, 2))
     X[0] = x
-    side, t_approach = 1.0, 10.0
+    side, t_approach = 1.0, T_APPROACH
     for k in range(n):
         t = k * dt
         if name == "zigzag":
@@ -152,6 +153,11 @@ def add_arguments(p) -> None:
     )
 
 
+#: straight approach at the trim before each manoeuvre's inputs start (s)
+T_APPROACH = 10.0
+#: the longest manoeuvre log (s): an hour at dt = 0.1 s is 36 000 rows
+DURATION_MAX = 3600.0
+
 #: options that only a manoeuvre reads (a SCENARIO run refuses them rather than ignore them)
 MANOEUVRE_ONLY = ("vessel", "speed", "delta", "current", "noise")
 
@@ -178,8 +184,14 @@ def run_cli(args) -> int:
     from mpcasv.config import ConfigError, check_seed
     from mpcasv.models.params import load_vessel
 
-    if args.duration is not None and not (math.isfinite(args.duration) and args.duration > 0):
-        raise ConfigError(f"--duration {args.duration:g}: a duration is a number of seconds > 0")
+    if args.duration is not None and not (
+            math.isfinite(args.duration) and T_APPROACH < args.duration <= DURATION_MAX):
+        # 0.1 s wrote a "2 samples, 0 s" log; 1e12 s tried to allocate 582 TiB
+        raise ConfigError(f"--duration {args.duration:g}: a manoeuvre lasts more than its "
+                          f"{T_APPROACH:g}-s approach and at most {DURATION_MAX:g} s")
+    if args.current is not None and math.hypot(*args.current) > V_MAX:  # as scenarios refuse
+        raise ConfigError(f"--current {args.current[0]:g} {args.current[1]:g}: speed "
+                          f"{math.hypot(*args.current):.3g} m/s above {V_MAX:g} m/s")
     # nan in --delta or --current wrote a log of nan states with exit 0; --seed -1 with
     # --noise was a numpy traceback
     for opt, values in (("--delta", [args.delta]), ("--current", list(args.current or []))):

@@ -29,7 +29,7 @@ from pydantic import model_validator
 
 from mpcasv.config import (
     ConfigError,
-    FinitePos,
+    Duration,
     Float,
     PathName,
     Seed,
@@ -161,7 +161,7 @@ class Suite:
     description: str = ""
     current: tuple[Current, ...] = ("scenario",)  # "scenario", "off" or [V_N, V_E] (m/s)
     estimator: tuple[str, ...] = ("scenario",)  # "scenario" or an estimator name
-    duration: FinitePos | None = None  # s; replaces every scenario's duration when given
+    duration: Duration | None = None  # s; replaces every scenario's duration when given
     plots: Literal["all", "representative", "none"] = "all"  # run figures (first seed only)
     acceptance: Acceptance | None = None  # targets the report judges (acceptance.py)
 

@@ -17,7 +17,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--out", type=Path, default=Path("runs/paper-table"), help="output folder")
     p.add_argument("--scenarios", type=Path, default=Path("experiments/scenarios"),
                    help="folder with case1.toml ... case8.toml")  # fmt: skip
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=int, default=0,
+                   help="random seed of the world's acoustic draws (default 0)")
     p.set_defaults(func=run)
 
 
@@ -25,7 +26,7 @@ def run(args: argparse.Namespace) -> int:
     import pandas as pd
     from tqdm import tqdm
 
-    from mpcasv.config import ConfigError
+    from mpcasv.config import ConfigError, check_seed
     from mpcasv.controllers import Boat, make_controller
     from mpcasv.experiments.metrics import compute_metrics
     from mpcasv.hybrid.paper import metrics_of, write_table
@@ -34,6 +35,7 @@ def run(args: argparse.Namespace) -> int:
     from mpcasv.sim.scenario import load_scenario
     from mpcasv.sim.simulator import simulate
 
+    check_seed(args.seed)  # -1 was a numpy traceback
     paths = [args.scenarios / f"{c}.toml" for c in CASES]
     missing = [str(p) for p in paths if not p.exists()]
     if missing:

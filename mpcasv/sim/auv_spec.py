@@ -12,11 +12,11 @@ Behaviours: ``plan``, ``pursuer``, ``transit``, ``loiter`` (exactly one). Events
 from __future__ import annotations
 
 import math
-from typing import Literal
+from typing import Annotated, Literal
 
-from pydantic import model_validator
+from pydantic import Field, Strict, model_validator
 
-from mpcasv.config import Float, NonNeg, Pos, PosInt, frozen
+from mpcasv.config import Float, Label, NonNeg, Pos, PosInt, frozen
 from mpcasv.models.auv import AUVLimits
 from mpcasv.models.behaviours import (
     Abort,
@@ -35,7 +35,9 @@ from mpcasv.models.behaviours import (
 class Start:
     N: Float = 0.0  # m
     E: Float = 0.0  # m
-    psi_deg: Float = 0.0
+    #: heading (deg); ten turns either way at most (1e20 left the boat unable to turn: a yaw
+    #: step of 0.01 rad is lost in a float of that size)
+    psi_deg: Annotated[float, Strict(), Field(ge=-3600, le=3600, allow_inf_nan=False)] = 0.0
     depth: NonNeg = 0.0  # m
     speed: NonNeg = 0.0  # m/s
 
@@ -231,7 +233,7 @@ class Event:
 
 @frozen
 class AUVSpec:
-    name: str
+    name: Label
     behaviour: Behaviour
     start: Start = Start()
     limits: AUVLimits = AUVLimits()

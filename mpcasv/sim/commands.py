@@ -39,10 +39,19 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
+#: options that only a scenario run reads (a manoeuvre refuses them rather than ignore them)
+SCENARIO_ONLY = ("scenario", "controller", "params", "nominal", "estimator", "no_plots")
+
+
 def run(args: argparse.Namespace) -> int:
     if args.manoeuvre:  # open-loop identification manoeuvre instead of a scenario
         from mpcasv.control.manoeuvres import run_cli
 
+        given = [k for k in SCENARIO_ONLY if getattr(args, k) not in (None, False)]
+        if given:
+            names = ["SCENARIO" if k == "scenario" else "--" + k.replace("_", "-") for k in given]
+            raise ConfigError(f"{', '.join(names)}: not with --manoeuvre (an open-loop "
+                              "manoeuvre has no scenario, controller or estimator)")  # fmt: skip
         return run_cli(args)
     if args.scenario is None:
         raise ConfigError("give a SCENARIO (TOML file) or --manoeuvre")
@@ -101,7 +110,8 @@ def run(args: argparse.Namespace) -> int:
     keys = ("duration_s", "asv_distance_m", "min_range_m", "collision_domain_s",
             "reliable_fix_age_max_s", "reliable_fix_age_p95_s", "nav_error_rms_m",
             "nav_error_p95_m", "propeller_on_s", "energy_J", "fallbacks")  # fmt: skip
-    print(f"wrote {out}/ (timeseries.parquet, metrics.json, plots) in {result.wall_s:.2f} s")
+    files = "timeseries.parquet, metrics.json" + ("" if args.no_plots else ", plots")
+    print(f"wrote {out}/ ({files}) in {result.wall_s:.2f} s")
     print(f"  realisation {real.id}: {len(real.values)} drawn values (run.json)")
     for k in keys:
         v = metrics[k]

@@ -15,7 +15,7 @@ from pydantic import model_validator
 
 from mpcasv.config import (
     ConfigError,
-    FinitePos,
+    Duration,
     Float,
     PathName,
     Pos,
@@ -73,7 +73,7 @@ class Scenario:
     """A complete simulation scenario."""
 
     name: PathName  # part of default output paths (runs/<name>-<controller>-<seed>)
-    duration: FinitePos  # s
+    duration: Duration  # s (at most a week: DURATION_MAX)
     auv: tuple[AUVSpec, ...]
     description: str = ""
     controller: str = "goto"  # default controller for this scenario
