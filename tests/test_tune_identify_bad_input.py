@@ -14,6 +14,10 @@ import pytest
 
 from mpcasv.cli import main
 from mpcasv.config import DATA_DIR
+from mpcasv.control.manoeuvres import simulate_manoeuvre
+from mpcasv.errors import LogError
+from mpcasv.models.params import load_vessel
+from mpcasv.models.vessel import VesselModel
 
 
 def _refused(capsys, argv, *words):
@@ -101,3 +105,89 @@ def test_a_diverged_response_never_reads_as_settled():
     t = np.arange(0.0, 10.0, 1.0)
     err = np.full(len(t), np.nan)  # a response that overflowed: nan, not "within the band"
     assert settling_time(t, err, 0.1) == math.inf
+
+
+# --- identify ------------------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def zigzag():
+    return simulate_manoeuvre(VesselModel(load_vessel("gretha")), "zigzag", duration=60.0)
+
+
+def test_a_steering_that_never_varies_is_refused_naming_the_coefficient(tmp_path, capsys,
+                                                                         zigzag):  # fmt: skip
+    df = zigzag.copy()
+    df["delta_cmd"] = 0.0  # the steering column zeroed while the boat turns
+    log = tmp_path / "constant steering.csv"
+    df.to_csv(log, index=False)
+    out = tmp_path / "p.toml"
+    _refused(capsys, ["identify", str(log), "--out", str(out), "--quiet"],
+             "Y_uudelta cannot be identified", str(log), "delta_cmd never varies (always 0)",
+             "--coeffs")  # fmt: skip
+    assert not out.exists() and not (tmp_path / "p-report").exists()
+
+
+def test_collinear_and_singular_fits_are_named():
+    from mpcasv.models.ident_checks import check_covariance, unidentifiable
+
+    rng = np.random.default_rng(0)
+    J = rng.normal(size=(50, 3))
+    assert unidentifiable(J, ("a", "b", "c")) == ([], "")
+    J[:, 2] = 2.0 * J[:, 0]
+    assert unidentifiable(J, ("a", "b", "c")) == (["a", "c"], "collinear")
+    J[:, 1] = 0.0
+    assert unidentifiable(J, ("a", "b", "c")) == (["b"], "zero")
+    with pytest.raises(LogError, match=r"^X_u cannot be identified from x\.csv: .*not finite"):
+        check_covariance({"X_u": math.nan, "X_uu": 0.1}, ["x.csv"])
+
+
+@pytest.mark.parametrize(
+    ("args", "words"),
+    [
+        (["--vehicle", "nobody"], ["--vehicle nobody", "DUNE log"]),  # was ignored silently
+        (["--coeffs", "X_u,X_u"], ["--coeffs X_u,X_u", "X_u given more than once"]),
+    ],
+)
+def test_identify_options_that_would_be_misread(tmp_path, capsys, zigzag, args, words):
+    log = tmp_path / "z.csv"
+    zigzag.to_csv(log, index=False)
+    out = tmp_path / "p.toml"
+    _refused(capsys, ["identify", str(log), *args, "--out", str(out), "--quiet"], *words)
+    assert not out.exists()
+
+
+def test_identify_on_a_folder_says_it_is_a_folder(tmp_path, capsys):
+    out = tmp_path / "p.toml"
+    _refused(capsys, ["identify", str(tmp_path), "--out", str(out), "--quiet"],
+             f"{tmp_path}: a folder, not a log file")  # fmt: skip
+    assert not out.exists()
+
+
+def test_a_negative_validation_fit_exits_1_and_marks_the_toml(tmp_path, capsys, zigzag,
+                                                              monkeypatch):  # fmt: skip
+    """The identification itself is replaced (a full fit takes half a minute): what is
+    checked is the verdict on its held-out fits."""
+    import mpcasv.io.identlog as identlog
+    from mpcasv.models.identify import OUTPUTS, Identification
+
+    def fake(logs, prior, coeffs, **kw):
+        fits = {"train": {c: {"rmse": 0.1, "fit_pct": 50.0} for c in OUTPUTS},
+                "validation": {c: {"rmse": 0.1, "fit_pct": -20.0 if c == "u" else 60.0}
+                               for c in OUTPUTS}}  # fmt: skip
+        Y = np.zeros((4, 10))
+        return Identification(params=prior, coeffs=("X_u",), theta=np.ones(3),
+                              rel_std={"X_u": 0.05}, current=(0.0, 0.0),
+                              metrics={s: fits for s in ("prior", "equation_error",
+                                                         "simulation_error")},
+                              replay={"train": (Y, Y), "validation": (Y, Y)})  # fmt: skip
+
+    monkeypatch.setattr(identlog, "identify", fake)
+    log = tmp_path / "z.csv"
+    zigzag.to_csv(log, index=False)
+    out = tmp_path / "p.toml"
+    assert main(["identify", str(log), "--coeffs", "X_u", "--out", str(out), "--quiet"]) == 1
+    text = capsys.readouterr().out
+    assert "validation FAIL: held-out fit below 0 % for u -20.0 %" in text, text
+    assert "Validation (held-out fit >= 0 % on every channel): FAIL: u -20.0 %" in text
+    assert "# VALIDATION FAILED: held-out fit below 0 % for u" in out.read_text()

@@ -131,7 +131,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         dest="vehicle_pick",
         metavar="NAME|ID",
         help="DUNE logs with several vehicles: the one to identify (Announce name or IMC id, "
-        "e.g. 0x2801); default: the one that carries the actuator set-points",
+        "e.g. 0x2801); default: the one that carries the actuator set-points (refused "
+        "without a DUNE log)",
     )
     i.add_argument(
         "--coeffs", help="comma-separated coefficients to identify (default: the documented subset)"
@@ -402,6 +403,6 @@ def _design_dict(d) -> dict:
 
 
 def run_identify(args: argparse.Namespace) -> int:
-    from mpcasv.io.identlog import run_cli
+    from mpcasv.control.identify_cli import run_identify as run
 
-    return run_cli(args)
+    return run(args)
