@@ -303,7 +303,8 @@ def tune_yaw(model: VesselModel, ep: ExecutionParams, speeds, wn, zeta: float = 
     zeta, integral_ratio, T_f : float
         Damping ratio, integral pole / ``wn``, yaw-rate filter time constant (s).
     dt : float
-        Simulator step (s) for the sampled-loop check and the nonlinear runs.
+        Step (s) of the sampled-loop check (the nonlinear runs use the simulator's default
+        step :data:`mpcasv.control.tuning.DT`).
 
     Returns
     -------
