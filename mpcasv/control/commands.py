@@ -18,14 +18,18 @@ from mpcasv.config import ConfigError
 
 DEFAULT_SPEEDS = "0.5,1,1.5,2,2.5"  # Gretha's: 0.2 ... 1.0 u_max (the default for any vessel)
 SPEED_FRACTIONS = (0.2, 0.4, 0.6, 0.8, 1.0)
+DESIGN_FRACTION = 0.4  # default --design-speed / top speed: Gretha's 1 m/s
 
 
 def _floats(text: str) -> list[float]:
     try:
-        return [float(v) for v in text.split(",") if v.strip()]
+        values = [float(v) for v in text.split(",") if v.strip()]
     except ValueError:
         msg = f"not a comma-separated list of numbers: {text!r}"
         raise argparse.ArgumentTypeError(msg) from None
+    if not values:  # ",," was a pydantic traceback (an empty schedule)
+        raise argparse.ArgumentTypeError(f"no numbers in {text!r}")
+    return values
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -74,7 +78,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     s = tsub.add_parser("speed", help="speed loop PI and surge-speed reference model (eq. 3.1)")
     s.add_argument("--w", type=float, default=0.3, help="speed loop natural frequency, rad/s")
     s.add_argument("--zeta", type=float, default=1.0, help="speed loop damping ratio")
-    s.add_argument("--design-speed", type=float, default=1.0, help="design speed, m/s")
+    s.add_argument(
+        "--design-speed",
+        type=float,
+        help="design speed, m/s (default 0.4 times the vessel's top speed: 1 for Gretha)",
+    )
     s.add_argument(
         "--speeds",
         type=_floats,
@@ -123,7 +131,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         dest="vehicle_pick",
         metavar="NAME|ID",
         help="DUNE logs with several vehicles: the one to identify (Announce name or IMC id, "
-        "e.g. 0x2801); default: the one that carries the actuator set-points",
+        "e.g. 0x2801); default: the one that carries the actuator set-points (refused "
+        "without a DUNE log)",
     )
     i.add_argument(
         "--coeffs", help="comma-separated coefficients to identify (default: the documented subset)"
@@ -176,50 +185,57 @@ def _provenance(old: str, key: str, text: str) -> str:
     return " | ".join(sorted([*parts, f"{key}: {text}"]))
 
 
-#: options of `tune yaw` / `tune speed` that are numbers > 0 (finite); lists: every value
-POSITIVE = ("wn", "wn_per_speed", "zeta", "integral_ratio", "T_f", "dt", "w", "design_speed",
-            "u_ff", "k_u", "distance")  # fmt: skip
-
-
-def _check_positive(args: argparse.Namespace) -> None:
-    """Refuse a number option that is not finite and > 0 in one line (before any work: nan,
-    a negative step or time constant were tracebacks, a negative zeta a wrong cause)."""
-    for key in POSITIVE:
-        v = getattr(args, key, None)
-        for x in v if isinstance(v, list) else ([] if v is None else [v]):
-            if not (math.isfinite(x) and x > 0):
-                opt = "--T-f" if key == "T_f" else "--" + key.replace("_", "-")
-                raise ConfigError(f"{opt} {x:g}: must be a finite number > 0")
-
-
-def _setup(args):
+def _setup(args, what: str):
+    """Load and check everything before any work (one line, exit 2, for bad input)."""
+    from mpcasv.control import tuning_checks as tc
     from mpcasv.control.params import load_execution
     from mpcasv.control.tuning_yaw import check_speeds
     from mpcasv.models.params import load_vessel
     from mpcasv.models.vessel import VesselModel
     from mpcasv.outputs import check_output_file, check_output_folder
 
-    _check_positive(args)
+    tc.check_positive(args)
+    tc.check_lists(args, increasing=("speeds",) if what == "yaw" else ())
     model = VesselModel(load_vessel(args.vessel))
-    ep = load_execution(args.base)
+    try:
+        ep = load_execution(args.base)
+    except ConfigError as exc:
+        raise ConfigError(f"--base {args.base}: {exc}") from None
+    top = min(model.top_speed, model.params.u_max)
     if args.speeds is None:
-        top = min(model.top_speed, model.params.u_max)
         args.speeds = [round(f * top, 4) for f in SPEED_FRACTIONS]
-    check_speeds(model, args.speeds)
+    check_speeds(model, args.speeds, "--speeds")
+    if what == "speed":
+        if args.design_speed is None:
+            args.design_speed = round(DESIGN_FRACTION * top, 4)
+        tc.check_speed_limits(model, args)
     check_output_folder(args.out)
     toml = check_output_file(args.toml or args.out / "execution.toml", "--toml", (".toml",),
                              parents=True)  # fmt: skip
-    args.out.mkdir(parents=True, exist_ok=True)
     return model, ep, toml
+
+
+def _write_if_pass(ok: bool, toml: Path, ep, what: str) -> str:
+    """Write the execution TOML only when the acceptance passed; the words for the summary.
+
+    A design that fails its acceptance (exit 1) leaves ``--toml`` as it was: the file is what
+    the simulator and ``--base`` load, and a failing design written there would be used as if
+    good (it was, until session 17). Its gains are in the report (yaw.json, speed.md)."""
+    from mpcasv.control.tuning import write_execution_toml
+
+    if not ok:
+        return f"{toml} NOT written (acceptance FAIL; the {what} design is in the report)"
+    write_execution_toml(toml, ep, _header(ep))
+    return f"wrote {toml}"
 
 
 def run_tune_yaw(args: argparse.Namespace) -> int:
     from mpcasv.config import replace
-    from mpcasv.control.tuning import write_execution_toml
+    from mpcasv.control.tuning_checks import check_yaw_limits
     from mpcasv.control.tuning_report import plot_yaw, yaw_table
     from mpcasv.control.tuning_yaw import CourseUnstable, tune_yaw
 
-    model, ep, toml = _setup(args)
+    model, ep, toml = _setup(args, "yaw")
     speeds = args.speeds
     if args.wn is None:
         wn = [args.wn_per_speed * u for u in speeds]
@@ -227,6 +243,8 @@ def run_tune_yaw(args: argparse.Namespace) -> int:
         wn = args.wn * len(speeds) if len(args.wn) == 1 else args.wn
     else:
         raise ConfigError(f"--wn: {len(args.wn)} values for {len(speeds)} speeds")
+    check_yaw_limits(model, args, wn)
+    args.out.mkdir(parents=True, exist_ok=True)
     try:
         ep_new, designs, runs = tune_yaw(model, ep, speeds, wn, args.zeta, args.integral_ratio,
                                          args.T_f, args.dt, progress=not args.quiet)  # fmt: skip
@@ -248,12 +266,12 @@ def run_tune_yaw(args: argparse.Namespace) -> int:
             f"{min(d.sampled['gain_margin_db'] for d in designs):.1f} dB (sampled, steering lag "
             f"incl.); nonlinear 45 deg step settles to 2 deg within {ts_max:.1f} s")  # fmt: skip
     ep_new = replace(ep_new, provenance=_provenance(ep.provenance, "yaw", text))
-    write_execution_toml(toml, ep_new, _header(ep_new))
+    wrote = _write_if_pass(ok, toml, ep_new, "yaw")
     (args.out / "yaw.md").write_text(table + "\n")
     (args.out / "yaw.json").write_text(json.dumps([_design_dict(d) for d in designs], indent=1))
     print(table)
     print(
-        f"wrote {toml}, {args.out}/yaw.md, yaw.json and plots; acceptance "
+        f"{wrote}; wrote {args.out}/yaw.md, yaw.json and plots; acceptance "
         f"(PM >= 45 deg, GM >= 6 dB, nonlinear step settles): {'PASS' if ok else 'FAIL'}"
     )
     return 0 if ok else 1
@@ -262,7 +280,6 @@ def run_tune_yaw(args: argparse.Namespace) -> int:
 def run_tune_speed(args: argparse.Namespace) -> int:
     from mpcasv.config import replace
     from mpcasv.control.params import SpeedReference
-    from mpcasv.control.tuning import write_execution_toml
     from mpcasv.control.tuning_report import plot_speed, speed_tables
     from mpcasv.control.tuning_speed import (
         place_speed_pi,
@@ -272,7 +289,8 @@ def run_tune_speed(args: argparse.Namespace) -> int:
         turn_grid,
     )  # fmt: skip
 
-    model, ep, toml = _setup(args)
+    model, ep, toml = _setup(args, "speed")
+    args.out.mkdir(parents=True, exist_ok=True)
     g = place_speed_pi(model, args.design_speed, args.w, args.zeta)
     ep_new = replace(ep, speed=g)
     loop = {
@@ -339,7 +357,7 @@ def run_tune_speed(args: argparse.Namespace) -> int:
                else "of mpcasv tune speed found no pirouette-free pair)"),
         )
     ep_new = replace(ep_new, provenance=prov)
-    write_execution_toml(toml, ep_new, _header(ep_new))
+    wrote = _write_if_pass(ok_loop, toml, ep_new, "speed")
     plot_speed(model, g, grids, field, best, args.out)
     from mpcasv.control.tuning_report import plot_pirouette
     from mpcasv.control.tuning_speed import PIROUETTE_CASE, pirouette_check
@@ -355,7 +373,7 @@ def run_tune_speed(args: argparse.Namespace) -> int:
     print(
         (f"recommended (u_ff, k_u) = ({best.u_ff}, {best.k_u})" if best else
          "no recommended (u_ff, k_u): every pair of the grid pirouetted")
-        + f"; wrote {toml}, "
+        + f"; {wrote}; wrote "
         f"{args.out}/speed.md and plots; loop margins {'PASS' if ok_loop else 'FAIL'}"
     )
     return 0 if ok_loop else 1
@@ -385,6 +403,6 @@ def _design_dict(d) -> dict:
 
 
 def run_identify(args: argparse.Namespace) -> int:
-    from mpcasv.io.identlog import run_cli
+    from mpcasv.control.identify_cli import run_identify as run
 
-    return run_cli(args)
+    return run(args)

@@ -123,24 +123,34 @@ def sweep_margins(L, omega) -> dict:
 FRD_FALLBACK = "stability_margins: Falling back to 'frd' method"
 
 
+#: what ``margin_method`` says after scipy's BadCoefficients warning inside python-control
+ILL = " (badly conditioned coefficients)"
+
+
 def _stability_margins(L) -> tuple[float, float, float, float, str]:
     """``control.stability_margins(L)`` as (gm, pm, w_phase_crossover, w_gain_crossover,
-    method): its fallback warning (:data:`FRD_FALLBACK`) becomes ``method = "frd"``; any
-    other warning is passed on unchanged."""
+    method): its fallback warning (:data:`FRD_FALLBACK`) becomes ``method = "frd"``, scipy's
+    ``BadCoefficients`` (near-zero leading coefficients of the loop's transfer function: a
+    speed PI with ``Kp = 0``, four lines of stderr per loop) appends :data:`ILL` to it (the
+    frequency sweep of :func:`loop_margins` checks those margins); any other warning is
+    passed on unchanged."""
     import warnings
 
     import control as ct
+    from scipy.signal import BadCoefficients
 
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         gm, pm, _, wg, wp, _ = ct.stability_margins(L)
-    method = "poly"
+    method, ill = "poly", ""
     for w in caught:
         if issubclass(w.category, UserWarning) and str(w.message).startswith(FRD_FALLBACK):
             method = "frd"
+        elif issubclass(w.category, BadCoefficients):
+            ill = ILL
         else:
             warnings.warn_explicit(w.message, w.category, w.filename, w.lineno, source=w.source)
-    return gm, pm, wg, wp, method
+    return gm, pm, wg, wp, method + ill
 
 
 def loop_margins(L) -> dict:
@@ -153,8 +163,9 @@ def loop_margins(L) -> dict:
     ``margin_check`` says so; a margin neither can compute is ``nan``, which fails every
     ``>=`` acceptance test. ``margin_method`` is the method python-control used: ``"poly"``,
     or ``"frd"`` where it judged its polynomial method numerically unreliable for the sampled
-    loop (its "Falling back to 'frd'" warning, caught here and said in the report); its
-    other warnings are not silenced.
+    loop (its "Falling back to 'frd'" warning, caught here and said in the report), followed
+    by :data:`ILL` after scipy's ``BadCoefficients`` warning (caught, said in the report);
+    its other warnings are not silenced.
     ``disk_*`` are the skew-0 disk margins of ``control.disk_margins`` (gain margin in dB, as
     python-control returns it); frequencies in rad/s.
     """
@@ -213,8 +224,9 @@ def step_figures(y, t, yfinal: float, **kw) -> dict:
 
 
 def settling_time(t: np.ndarray, err: np.ndarray, band: float) -> float:
-    """First time after which ``|err| <= band`` until the end (``inf`` if never)."""
-    outside = np.nonzero(np.abs(err) > band)[0]
+    """First time after which ``|err| <= band`` until the end (``inf`` if never; a non-finite
+    error, a response that diverged, is outside the band)."""
+    outside = np.nonzero(~(np.abs(err) <= band))[0]
     if len(outside) == 0:
         return 0.0
     if outside[-1] == len(err) - 1:

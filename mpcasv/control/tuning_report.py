@@ -12,6 +12,7 @@ import control as ct
 import matplotlib.pyplot as plt
 import numpy as np
 
+from mpcasv.control.tuning import ILL
 from mpcasv.control.tuning_yaw import SETTLE_BAND, yaw_loop, yaw_plant
 
 
@@ -62,10 +63,13 @@ def _margin_notes(items) -> list[str]:
     """Lines for every loop whose margins python-control and the frequency sweep disagree on,
     for closed loops that are unstable, and one for the loops whose margins python-control
     computed from the frequency response (``margin_method`` "frd")."""
-    lines, frd = [], []
+    lines, frd, ill = [], [], []
     for u, kind, f in items:
-        if f.get("margin_method") == "frd":
+        method = f.get("margin_method", "poly")
+        if method.startswith("frd"):
             frd.append(f"{u:g} m/s ({kind})")
+        if method.endswith(ILL):
+            ill.append(f"{u:g} m/s ({kind})")
         if f.get("margin_check", "python-control = sweep") != "python-control = sweep":
             lines.append(f"- u0 = {u:g} m/s, {kind}: {f['margin_check']}")
         if not f.get("stable", True):
@@ -76,6 +80,10 @@ def _margin_notes(items) -> list[str]:
         out.append(f"python-control computed the margins at u0 = {', '.join(frd)} from the "
                    "frequency response: it judged its polynomial method numerically unreliable "
                    "for these sampled loops; the frequency sweep checks them.")  # fmt: skip
+    if ill:
+        out.append(f"Loop transfer functions at u0 = {', '.join(ill)} have badly conditioned "
+                   "coefficients (scipy's BadCoefficients, e.g. Kp = 0); the frequency sweep "
+                   "checks their margins.")  # fmt: skip
     return out
 
 
@@ -100,7 +108,8 @@ def plot_yaw(model, designs, runs, T_f: float, out: Path) -> list[Path]:
     for d in designs:
         lp = yaw_loop(yaw_plant(model, d.u0), d.gains, T_f)
         t = np.arange(0, 120, 0.05)
-        y = ct.step_response(lp.T_ref, t).outputs * 45.0
+        with np.errstate(over="ignore", invalid="ignore"):  # unstable: off the axes
+            y = ct.step_response(lp.T_ref, t).outputs * 45.0
         axes[0].plot(t, y, label=f"u0 = {d.u0:g} m/s")
         r = runs[d.u0]
         axes[1].plot(r.t, np.degrees(np.unwrap(r.X[:, 2])), label=f"u0 = {d.u0:g} m/s "
@@ -169,10 +178,10 @@ def speed_tables(g, loop, grids, best) -> str:
 
 def plot_speed(model, g, grids, field, best, out: Path) -> list[Path]:
     """Speed loop Bode (design speeds) and turn paths of the field and recommended pairs."""
-    from mpcasv.control.tuning_speed import surge_plant
+    from mpcasv.control.tuning_speed import pi_tf, surge_plant
 
     fig = plt.figure(figsize=(7, 6))
-    Ls = [ct.ss(ct.tf([g.Kp, g.Ki], [1.0, 0.0])) * surge_plant(model, u) for u in (0.5, 1.5, 2.5)]
+    Ls = [ct.ss(pi_tf(g)) * surge_plant(model, u) for u in (0.5, 1.5, 2.5)]
     ct.bode_plot(
         Ls,
         omega_limits=(1e-3, 1e1),

@@ -47,6 +47,16 @@ def place_speed_pi(model: VesselModel, u0: float, w: float, zeta: float) -> Spee
     return SpeedLoop(Kp=max((2 * zeta * w - a) / b, 0.0), Ki=w * w / b)
 
 
+def pi_tf(g: SpeedLoop, dt: float | None = None) -> ct.TransferFunction:
+    """The speed PI as a transfer function: ``Kp + Ki/s``, or with ``dt`` the forward-Euler
+    integrator of :func:`mpcasv.control.execution.execution_law`. With ``Kp = 0``
+    (:func:`place_speed_pi` clips it) the numerator has no leading zero, which scipy calls
+    "badly conditioned" (a BadCoefficients warning per use)."""
+    if dt is None:
+        return ct.tf(np.trim_zeros([g.Kp, g.Ki], "f"), [1.0, 0.0])
+    return ct.tf(np.trim_zeros([g.Kp, g.Ki * dt - g.Kp], "f"), [1.0, -1.0], dt)
+
+
 def speed_figures(P: ct.StateSpace, g: SpeedLoop, dt: float | None = None,
                   step: float = 0.5) -> dict[str, float]:  # fmt: skip
     """Margins (``stability_margins``, balanced ``disk_margins``) and ``step`` m/s step figures.
@@ -54,17 +64,16 @@ def speed_figures(P: ct.StateSpace, g: SpeedLoop, dt: float | None = None,
     With ``dt`` the plant is sampled (ZOH) and the integrator is forward Euler, as in
     :func:`mpcasv.control.execution.execution_law`.
     """
-    if dt is None:
-        C = ct.tf([g.Kp, g.Ki], [1.0, 0.0])
-    else:
-        C = ct.tf([g.Kp, g.Ki * dt - g.Kp], [1.0, -1.0], dt)
+    C = pi_tf(g, dt)
+    if dt is not None:
         P = ct.c2d(P, dt, "zoh")
     from mpcasv.control.tuning import loop_margins, step_figures
 
     L = ct.ss(C) * P
     t = np.arange(0.0, 120.0, dt or 0.05)
     cl = ct.feedback(L, 1)
-    y = ct.step_response(cl, t).outputs * step
+    with np.errstate(over="ignore", invalid="ignore"):  # an unstable loop diverges: "inf"
+        y = ct.step_response(cl, t).outputs * step
     poles = ct.poles(cl)
     stable = bool(np.all(np.abs(poles) < 1) if dt else np.all(poles.real < 0))
     return loop_margins(L) | step_figures(y, t, step) | {"stable": stable}

@@ -225,11 +225,13 @@ def loop_figures(loop: YawLoop, step: float = math.radians(45.0)) -> dict[str, f
     T_ref = loop.T_ref
     poles = ct.poles(loop.T_dist)  # all the closed loop's states
     t = np.arange(0.0, 200.0, dt or 0.05)
-    resp = ct.step_response(T_ref, t)
+    with np.errstate(over="ignore", invalid="ignore"):  # an unstable loop diverges: "inf"
+        resp = ct.step_response(T_ref, t)
+        dist = ct.step_response(loop.T_dist, t).outputs * math.radians(5.0)
     steps = step_figures(resp.outputs * step, t, step, SettlingTimeThreshold=SETTLE_BAND / step)
-    dist = ct.step_response(loop.T_dist, t).outputs * math.radians(5.0)
     return loop_margins(L) | steps | {
-        "dist_peak_deg": float(np.degrees(np.abs(dist).max())),
+        "dist_peak_deg": float(np.degrees(np.abs(dist).max())) if np.isfinite(dist).all()
+        else math.inf,
         "dist_recover_s": settling_time(t, dist, math.radians(0.5)),
         "stable": bool(np.all(np.abs(poles) < 1) if dt else np.all(poles.real < 0)),
     }  # fmt: skip
@@ -301,7 +303,8 @@ def tune_yaw(model: VesselModel, ep: ExecutionParams, speeds, wn, zeta: float = 
     zeta, integral_ratio, T_f : float
         Damping ratio, integral pole / ``wn``, yaw-rate filter time constant (s).
     dt : float
-        Simulator step (s) for the sampled-loop check and the nonlinear runs.
+        Step (s) of the sampled-loop check (the nonlinear runs use the simulator's default
+        step :data:`mpcasv.control.tuning.DT`).
 
     Returns
     -------
@@ -334,18 +337,18 @@ def tune_yaw(model: VesselModel, ep: ExecutionParams, speeds, wn, zeta: float = 
     return ep_new, designs, runs
 
 
-def check_speeds(model: VesselModel, speeds) -> None:
+def check_speeds(model: VesselModel, speeds, what: str = "speeds") -> None:
     """Refuse design speeds the vessel cannot hold (above its top speed at ``T_max``, or <= 0).
 
     Raises
     ------
     mpcasv.config.ConfigError
-        One line naming the speed, the top speed and the vessel.
+        One line naming ``what`` (the option), the speeds, the top speed and the vessel.
     """
     from mpcasv.config import ConfigError
 
     top = min(model.top_speed, model.params.u_max)
     bad = [u for u in speeds if not 0 < u <= top * (1 + 1e-6)]
     if bad:
-        raise ConfigError(f"speeds {bad} m/s outside (0, {top:.3g}] m/s: {model.params.name} "
+        raise ConfigError(f"{what} {bad} m/s outside (0, {top:.3g}] m/s: {model.params.name} "
                           f"cannot hold them at T_max = {model.params.T_max:g} N")  # fmt: skip

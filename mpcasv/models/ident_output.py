@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
+from mpcasv.models.ident_checks import validation_failures
 from mpcasv.models.identify import OUTPUTS, Identification, mass_terms
 from mpcasv.models.params import VesselParams
 
@@ -18,11 +19,17 @@ def write_params(path: Path, res: Identification, prior: VesselParams, sources: 
 
     Every number keeps a provenance entry: identified ones name the logs, the method, the
     1-sigma uncertainty and the validation fit; the others are the prior's, marked as held.
+    A model that failed its validation (a held-out fit below 0 %,
+    :func:`mpcasv.models.ident_checks.validation_failures`; ``mpcasv identify`` exits 1) says
+    so in the header and in every identified coefficient's provenance.
     """
     import tomli_w
 
     val = res.metrics["simulation_error"]["validation"]
     fit = ", ".join(f"{c} {v['fit_pct']:.1f} %" for c, v in val.items())
+    failed = validation_failures(res.metrics)
+    if failed:
+        fit += " (VALIDATION FAILED: fit < 0 %)"
     from mpcasv.models.vessel import top_speed
 
     data = {f.name: getattr(res.params, f.name) for f in dataclasses.fields(res.params)}
@@ -49,6 +56,10 @@ def write_params(path: Path, res: Identification, prior: VesselParams, sources: 
     header = (f"# Identified by `mpcasv identify` from {', '.join(sources)}.\n"
               f"# Estimated constant current V_N = {res.current[0]:.3f} m/s, "
               f"V_E = {res.current[1]:.3f} m/s (not a vessel parameter).\n")  # fmt: skip
+    if failed:
+        header += (f"# VALIDATION FAILED: held-out fit below 0 % for {', '.join(failed)}: this "
+                   "model predicts the validation data worse than their mean; do not use it as "
+                   "is.\n")  # fmt: skip
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(header + tomli_w.dumps({**data, "provenance": prov}))
 
@@ -94,7 +105,7 @@ def report_table(res: Identification, prior: VesselParams, truth: VesselParams |
     mt = mass_terms(truth) if truth else {}
     rows += [(k, mp[k], mi[k], math.nan, mt.get(k)) for k in mp]
     for c, p0, pi, sd, pt in rows:
-        line = f"| {c} | {p0:.4g} | {pi:.4g} | {sd:.1f} |"
+        line = f"| {c} | {p0:.4g} | {pi:.4g} | {'derived' if math.isnan(sd) else f'{sd:.1f}'} |"
         if truth:
             line += f" {pt:.4g} | {100 * (pi / pt - 1):+.1f} |"
         lines.append(line)
@@ -110,6 +121,10 @@ def report_table(res: Identification, prior: VesselParams, truth: VesselParams |
             )
     lines.append("RMSE in rad, m/s, m/s, rad/s; fits over replay windows re-initialised every "
                  "window from the smoothed measurement.")  # fmt: skip
+    failed = validation_failures(res.metrics)
+    lines.append("Validation (held-out fit >= 0 % on every channel): " + (
+        "FAIL: " + ", ".join(f"{c} {v:.1f} %" for c, v in failed.items()) +
+        " (the model predicts the held-out data worse than their mean)" if failed else "PASS"))
     return "\n".join(lines)
 
 

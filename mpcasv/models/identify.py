@@ -109,6 +109,7 @@ def identification_table(df: pd.DataFrame, path) -> pd.DataFrame:
         src = psi if c == "psi" else df[c].to_numpy(float)
         kind = "previous" if c in ("T_cmd", "delta_cmd") else "linear"
         out[c] = _resample(t, src, grid, kind)
+    out.attrs["source"] = str(path)  # named in identify()'s refusals
     return out
 
 
@@ -325,7 +326,17 @@ class Identification:
 def identify(logs: list[pd.DataFrame], prior: VesselParams, coeffs=IDENTIFIED,
              current: bool = True, validation: float = 0.25, window_s: float = 30.0,
              progress: bool = False) -> Identification:  # fmt: skip
-    """Identify ``coeffs`` (and the current) from identification tables (see module docstring)."""
+    """Identify ``coeffs`` (and the current) from identification tables (see module docstring).
+
+    Raises
+    ------
+    LogError
+        Coefficients the logs cannot identify (:mod:`mpcasv.models.ident_checks`: their
+        regression columns are zero or collinear, e.g. a steering set-point that never varies,
+        or their 1-sigma is not finite), logs with different time steps, logs too short.
+    """
+    from mpcasv.models.ident_checks import check_covariance, check_identifiable, source
+
     if not 0.0 < validation < 0.9:
         raise ValueError(f"validation fraction {validation} not in (0, 0.9)")
     t_start = time.perf_counter()
@@ -342,6 +353,9 @@ def identify(logs: list[pd.DataFrame], prior: VesselParams, coeffs=IDENTIFIED,
     prob = Problem(prior, coeffs, current)
     bounds = prob.bounds()
     th0 = prob.theta0()
+    names = [source(df, i) for i, df in enumerate(logs)]
+    J0 = np.array(prob.equation_error(list(train))(th0)[1])[:, : prob.n]
+    check_identifiable(J0, prob.coeffs, logs, names)  # before minutes of fitting
     sim_tr, info_tr = prob.replay(list(train), window_s, "the logs' training parts")
     held = f"the logs' validation parts (the last {validation:g} of each log, --validation)"
     sim_va, info_va = prob.replay(list(val), window_s, held)
@@ -376,10 +390,15 @@ def identify(logs: list[pd.DataFrame], prior: VesselParams, coeffs=IDENTIFIED,
         std = np.sqrt(np.clip(np.diag(cov)[: prob.n], 0, None)) / np.abs(theta[: prob.n])
     except np.linalg.LinAlgError:
         std = np.full(prob.n, math.inf)
+    # pinv gives a coefficient without effect a 1-sigma of 0 %: it is unknown (inf)
+    norms = np.linalg.norm(se.jac[:, : prob.n], axis=0)
+    std = np.where(norms <= 1e-12 * max(norms.max(), 1e-300), math.inf, std)
+    rel_std = {c: float(s) for c, s in zip(prob.coeffs, std, strict=True)}
+    check_covariance(rel_std, names)
     final = {"train": ext(theta, info_tr), "validation": ext(theta, info_va)}
     return Identification(
         params=prob.params(theta), coeffs=prob.coeffs, theta=theta,
-        rel_std={c: float(s) for c, s in zip(prob.coeffs, std, strict=True)},
+        rel_std=rel_std,
         current=(float(theta[prob.n]), float(theta[prob.n + 1])) if current else (0.0, 0.0),
         metrics=metrics,
         replay={"train": (info_tr["Y"], np.array(info_tr["replay"](final["train"]))),

@@ -1,0 +1,119 @@
+"""Bad input of ``mpcasv tune yaw|speed``, refused before any work in one line (exit 2).
+
+Besides numbers that must be finite and > 0 and lists that must not repeat a value, the
+designs have physical limits that the pole placement itself cannot see, because it is done on
+models that neglect them (docs/tuning.md, "Usable ranges"):
+
+* **actuator lag**: the yaw PID is placed on the first-order Nomoto model, without the
+  steering lag ``T_delta`` and the yaw-rate filter ``T_f``; the speed PI on the first-order
+  surge model, without the thrust lag ``T_thrust``. A closed loop asked to be faster than the
+  lag it neglects (``wn >= 1/T_delta`` or ``1/T_f``, ``w >= 1/T_thrust``) cannot be obtained:
+  the loop is then unstable (Gretha loses her yaw margins already from about half of that).
+* **sampling**: the execution level runs at the simulator step ``dt``; a step longer than the
+  loop's fastest time constant (``T_f``, ``T_delta`` for yaw; ``T_thrust`` for speed) cannot
+  represent it. The yaw-rate filter is forward Euler (``r_f += dt/T_f (r - r_f)``,
+  :func:`mpcasv.control.execution.execution_law`): it rings for ``dt > T_f`` and diverges for
+  ``dt > 2 T_f``. With ``dt`` within these limits the Nyquist frequency ``pi/dt`` is above
+  every admitted design frequency.
+* **speeds**: every speed option (``--speeds``, ``--design-speed``, ``--u-ff``) must be one the
+  vessel can hold, in ``(0, top speed]`` (:func:`mpcasv.control.tuning_yaw.check_speeds`).
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+
+from mpcasv.config import ConfigError
+
+#: options of `tune yaw` / `tune speed` that are numbers > 0 (finite); lists: every value
+POSITIVE = ("wn", "wn_per_speed", "zeta", "integral_ratio", "T_f", "dt", "w", "design_speed",
+            "u_ff", "k_u", "distance")  # fmt: skip
+
+
+def option(key: str) -> str:
+    """The command-line spelling of an ``argparse`` destination."""
+    return "--T-f" if key == "T_f" else "--" + key.replace("_", "-")
+
+
+def _text(values) -> str:
+    return ",".join(f"{x:g}" for x in values)
+
+
+def check_positive(args: argparse.Namespace) -> None:
+    """Refuse a number option that is not finite and > 0 in one line (before any work: nan,
+    a negative step or time constant were tracebacks, a negative zeta a wrong cause)."""
+    for key in POSITIVE:
+        v = getattr(args, key, None)
+        for x in v if isinstance(v, list) else ([] if v is None else [v]):
+            if not (math.isfinite(x) and x > 0):
+                raise ConfigError(f"{option(key)} {x:g}: must be a finite number > 0")
+
+
+def check_lists(args: argparse.Namespace, increasing: tuple[str, ...] = ()) -> None:
+    """Refuse a list option that repeats a value (a repeated ``--u-ff`` was a traceback in the
+    turn grid) and, for the options in ``increasing``, one that is not strictly increasing
+    (the yaw schedule's ``--speeds``: a pydantic traceback)."""
+    for key in ("speeds", "wn", "u_ff", "k_u", "distance"):
+        v = getattr(args, key, None)
+        if not isinstance(v, list) or (key == "wn" and len(v) <= 1):
+            continue
+        twice = sorted({x for x in v if v.count(x) > 1})
+        if twice and key != "wn":
+            raise ConfigError(f"{option(key)} {_text(v)}: {_text(twice)} given more than once")
+        if key in increasing and any(b <= a for a, b in zip(v, v[1:], strict=False)):
+            raise ConfigError(f"{option(key)} {_text(v)}: must be strictly increasing (the "
+                              "speeds of a gain schedule)")  # fmt: skip
+
+
+def check_speed(model, opt: str, value: float) -> None:
+    """Refuse a speed option the vessel cannot hold: outside ``(0, top speed]``."""
+    top = min(model.top_speed, model.params.u_max)
+    if not 0 < value <= top * (1 + 1e-6):
+        raise ConfigError(f"{opt} {value:g} m/s: outside (0, {top:.3g}] m/s: "
+                          f"{model.params.name} cannot hold it at T_max = "
+                          f"{model.params.T_max:g} N")  # fmt: skip
+
+
+def _sampling(dt: float, limits: dict[str, float], loop: str, why: str) -> None:
+    tau = min(limits.values())
+    if dt > tau * (1 + 1e-9):
+        what = ", ".join(f"{k} = {v:g} s" for k, v in limits.items())
+        raise ConfigError(f"--dt {dt:g} s: longer than the {loop} loop's fastest time constant "
+                          f"({what}): use --dt <= {tau:g} s ({why})")
+
+
+def check_yaw_limits(model, args: argparse.Namespace, wn: list[float]) -> None:
+    """Refuse a yaw design outside the usable range (module docstring): ``--dt`` above ``T_f``
+    or ``T_delta``; ``wn`` at or above ``1/T_delta`` or ``1/T_f``."""
+    P = model.params
+    _sampling(args.dt, {"T_f (--T-f)": args.T_f, f"T_delta ({P.name})": P.T_delta}, "yaw",
+              "a sampled loop cannot follow a faster lag; the forward-Euler yaw-rate filter rings "
+              "for dt > T_f and diverges for dt > 2 T_f")
+    corners = {"1/T_delta": 1.0 / P.T_delta, "1/T_f": 1.0 / args.T_f}
+    w_max = min(corners.values())
+    for u, w in zip(args.speeds, wn, strict=True):
+        if w >= w_max:
+            given = (f"--wn {w:g}" if args.wn is not None else
+                     f"--wn-per-speed {args.wn_per_speed:g} (wn = {w:g} rad/s at {u:g} m/s)")
+            what = ", ".join(f"{k} = {v:.3g} rad/s" for k, v in corners.items())
+            raise ConfigError(f"{given}: the yaw loop's natural frequency must be below the "
+                              f"steering lag's and the yaw-rate filter's corners ({what}): the "
+                              "PID is placed on a Nomoto model without them, a faster loop is "
+                              "unstable")  # fmt: skip
+
+
+def check_speed_limits(model, args: argparse.Namespace) -> None:
+    """Refuse a speed-loop design outside the usable range (module docstring): a speed the
+    vessel cannot hold; ``--dt`` above ``T_thrust``; ``--w`` at or above ``1/T_thrust``."""
+    P = model.params
+    check_speed(model, "--design-speed", args.design_speed)
+    for u in args.u_ff:
+        check_speed(model, "--u-ff", u)
+    _sampling(args.dt, {f"T_thrust ({P.name})": P.T_thrust}, "speed",
+              "a sampled loop cannot follow a faster lag")
+    if args.w >= 1.0 / P.T_thrust:
+        raise ConfigError(f"--w {args.w:g} rad/s: the speed loop's natural frequency must be "
+                          f"below the thrust lag's corner 1/T_thrust = {1 / P.T_thrust:.3g} "
+                          f"rad/s ({P.name}): the PI is placed on a surge model without it, a "
+                          "faster loop is unstable")  # fmt: skip
