@@ -229,9 +229,10 @@ def resolve(kind: str, name_or_path: str | Path, base: str | Path | None = None)
     if not is_path(name_or_path) and shipped.exists():
         return shipped
     known = sorted(f.stem for f in (DATA_DIR / kind).glob("*.toml"))
+    what = kind.removesuffix("s")  # the folder's name less a plural s ("execution" keeps its n)
     if is_path(name_or_path):
-        raise ConfigError(f"unknown {kind[:-1]} {str(name_or_path)!r}: no such file (looked at "
+        raise ConfigError(f"unknown {what} {str(name_or_path)!r}: no such file (looked at "
                           f"{p.resolve()}; shipped names: {known})")  # fmt: skip
     raise ConfigError(
-        f"unknown {kind[:-1]} {str(name_or_path)!r}: not a file, and not one of {known}"
+        f"unknown {what} {str(name_or_path)!r}: not a file, and not one of {known}"
     )

@@ -8,7 +8,7 @@ from typing import Annotated, Literal
 
 from pydantic import Field, Strict, model_validator
 
-from mpcasv.config import ConfigError, Float, NonNeg, Pos, frozen, load, resolve
+from mpcasv.config import Float, NonNeg, Pos, frozen, load, resolve
 
 
 @frozen
@@ -90,10 +90,5 @@ def load_execution(name_or_path: str | Path = "gretha") -> ExecutionParams:
     mpcasv.config.ConfigError
         Unknown name or missing file (the shipped names listed), or an invalid file.
     """
-    try:
-        path = resolve("execution", name_or_path)
-    except ConfigError as exc:
-        # resolve() names the kind by its folder less a plural "s": "execution" lost its "n"
-        # ("unknown executio 'nope'"); a no-op once config.resolve drops only a final "s"
-        raise ConfigError(str(exc).replace("unknown executio ", "unknown execution ", 1)) from None
+    path = resolve("execution", name_or_path)
     return load(ExecutionParams, path, "execution")
