@@ -255,7 +255,7 @@ def compute_metrics(result) -> dict:
         "solver_hangs": int(steps["mpc_hung"].sum()) if "mpc_hung" in steps else 0,
         "over_budget_steps": int(steps["mpc_over_budget"].sum())
         if "mpc_over_budget" in steps else 0,
-        **plan_following(ts),
+        **plan_following(steps),  # one row per step (with log_every_step: 10x the plans)
         # per-AUV lists
         "auv_distance_m_auv": auv_d,
         "collision_domain_s_auv": coll_auv,
