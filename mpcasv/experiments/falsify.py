@@ -162,6 +162,7 @@ def search(setup: SearchSetup, storage_path: Path, budget: int, workers: int = 1
 
     ``timeout`` (s of wall clock per run, None: no limit): a run that takes longer is
     recorded as failed with a ``timeout`` error (see :mod:`mpcasv.experiments.falsify_pool`).
+    ``workers``: at most ``min(BATCH, budget)`` processes start (no more runs go at once).
 
     The study lives in the SQLite file ``storage_path`` (Optuna RDB storage). Trials left
     running by a killed search are marked failed (``interrupted``) and not counted; finished
@@ -170,6 +171,7 @@ def search(setup: SearchSetup, storage_path: Path, budget: int, workers: int = 1
     import optuna
 
     from mpcasv.experiments.falsify_pool import WorkerPool, run_batch
+    from mpcasv.experiments.workers import pool_size
 
     optuna.logging.set_verbosity(optuna.logging.WARNING)
     storage = optuna.storages.RDBStorage(f"sqlite:///{storage_path}")
@@ -194,7 +196,7 @@ def search(setup: SearchSetup, storage_path: Path, budget: int, workers: int = 1
         if progress is not None:
             progress(trial.number, measures if error is None else {"error": error})
 
-    with WorkerPool(workers, timeout) as pool:
+    with WorkerPool(pool_size(workers, min(BATCH, budget)), timeout) as pool:
         while (done := n_finished(study)) < budget:
             trials = [study.ask(dists) for _ in range(min(BATCH, budget - done))]
             items = [(t, (lambda t=t: setup.trial_args(t.params, t.number))) for t in trials]

@@ -8,19 +8,26 @@ expresses (pursuer speed, aim and timing; crossing AUV paths; depths and rises; 
 acoustic dropouts ...). A ``[[polar]]`` entry writes a pair of fields from a bearing (deg)
 and a radius: ``origin + radius [cos b, sin b]`` (an approach direction, a current vector).
 
-A family is checked whole before any run (:func:`load_family`).
+A family is checked whole before any run (:func:`load_family`): its ``name`` is a path name
+(:data:`mpcasv.config.NAME_PATTERN`: it names the default output folder and the worst cases'
+files ``falsified-<family>-<controller>-<rank>``), and the template with the parameters at
+both ends of every range (the others at their midpoints), and at the box's corners, must be a
+valid scenario (:func:`check_range_ends`): a range reaching past what the scenario accepts
+(``p_good`` up to 1.5) was found only at its midpoint, and the trials beyond were recorded as
+"invalid scenario" while the search reported success.
 """
 
 from __future__ import annotations
 
 import copy
 import fnmatch
+import itertools
 import math
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from mpcasv.config import ConfigError, FinitePos, Float, frozen, load_toml, parse
+from mpcasv.config import ConfigError, FinitePos, Float, PathName, frozen, load_toml, parse
 
 #: scenario fields that are instants of the run (s from its start; fnmatch patterns): a
 #: searched value past the run's duration changes nothing
@@ -57,9 +64,10 @@ class PolarSpec:
 @frozen
 class Family:
     """A family of scenarios: a template (inline ``[scenario]`` or a ``template`` path,
-    relative to the family file) and the parameters searched."""
+    relative to the family file) and the parameters searched. ``name`` is part of output
+    paths (:data:`~mpcasv.config.PathName`)."""
 
-    name: str
+    name: PathName
     param: tuple[ParamSpec, ...]
     description: str = ""
     template: str | None = None
@@ -82,13 +90,16 @@ class LoadedFamily:
 
 
 def load_family(path: str | Path) -> LoadedFamily:
-    """Load a family TOML file; check every parameter once with its midpoint.
+    """Load a family TOML file; check the template with every parameter at both ends of its
+    range and at the corners of the box (:func:`check_range_ends`).
 
     Raises
     ------
     ConfigError
-        Unreadable file, unknown keys, bad ranges, unknown fields or parameters, or a
-        template that the scenario loader refuses (the message names the file).
+        Unreadable file, unknown keys, a name that cannot be part of a path, bad ranges,
+        unknown fields or parameters, a template that the scenario loader refuses, or a
+        range end (or corner) giving an invalid scenario (the message names the file and the
+        parameter).
     """
     path = Path(path)
     fam = parse(Family, load_toml(path, "falsification family"), path)
@@ -115,6 +126,7 @@ def load_family(path: str | Path) -> LoadedFamily:
     loaded = LoadedFamily(fam, path, template)
     mid = {p.name: 0.5 * (p.low + p.high) for p in fam.param}
     candidate(loaded, mid, "midpoint")  # validates every field path and the template
+    check_range_ends(loaded)
     for r in time_ranges(loaded):
         if r.low >= r.duration:
             raise ConfigError(f"{path}: parameter {r.name!r} (field {r.field}): its times "
@@ -122,6 +134,60 @@ def load_family(path: str | Path) -> LoadedFamily:
                               f"{r.duration:g} s: nothing searched there happens; lower its "
                               "range or raise 'duration'")  # fmt: skip
     return loaded
+
+
+#: the most corners of the parameter box :func:`check_range_ends` tries (2**12: ~0.5 s)
+MAX_CORNERS = 2**12
+
+
+def _ends(p: ParamSpec) -> tuple[float, float]:
+    """The ends of a parameter's range as the search draws them (integers: Optuna's)."""
+    return (int(p.low), int(p.high)) if p.integer else (p.low, p.high)
+
+
+def _cause(exc: ConfigError) -> str:
+    """A scenario loader's refusal in one line, without its 'invalid configuration' head."""
+    lines = [ln.strip() for ln in str(exc).splitlines() if ln.strip()]
+    return "; ".join(ln for ln in lines if ln != "invalid configuration")
+
+
+def check_range_ends(family: LoadedFamily) -> None:
+    """Refuse a family whose template is not a valid scenario at an end of some range.
+
+    Each parameter is tried at its low and its high end with the others at their midpoints;
+    then every corner of the box (all parameters at an end, up to :data:`MAX_CORNERS`; for
+    more parameters the all-low and all-high corners), which finds ends that are bad only
+    together (e.g. ``t_attack + rise_after``, a polar radius with its bearing).
+
+    Raises
+    ------
+    ConfigError
+        One line naming the file, the parameter, the end and its value, and the scenario
+        loader's cause (for a corner: every parameter's end).
+    """
+    params = family.spec.param
+    mid = {p.name: 0.5 * (p.low + p.high) for p in params}
+    for p in params:
+        for end, value in zip(("low", "high"), _ends(p), strict=True):
+            try:
+                candidate(family, mid | {p.name: value}, f"{p.name} = {value:g}")
+            except ConfigError as exc:
+                raise ConfigError(f"{family.source}: parameter {p.name!r}: its {end} end "
+                                  f"{value:g} (the others at their midpoints) gives an "
+                                  f"invalid scenario: {_cause(exc)}; narrow its range") from None
+    if 2 ** len(params) <= MAX_CORNERS:
+        corners = itertools.product((0, 1), repeat=len(params))
+    else:
+        corners = ((0,) * len(params), (1,) * len(params))
+    for corner in corners:
+        values = {p.name: _ends(p)[i] for p, i in zip(params, corner, strict=True)}
+        try:
+            candidate(family, values, "a corner of the ranges")
+        except ConfigError as exc:
+            where = ", ".join(f"{p.name} = {values[p.name]:g} ({('low', 'high')[i]})"
+                              for p, i in zip(params, corner, strict=True))  # fmt: skip
+            raise ConfigError(f"{family.source}: the parameters' ends together ({where}) give "
+                              f"an invalid scenario: {_cause(exc)}; narrow the ranges") from None
 
 
 @dataclass(frozen=True)
