@@ -87,6 +87,18 @@ def training_jobs(spec: TuneSpec) -> list[Job]:
     return jobs
 
 
+def check_presets(spec: TuneSpec) -> list[Job]:
+    """The training jobs (:func:`training_jobs`), after refusing range ends that their presets
+    refuse whatever the other searched fields
+    (:func:`~mpcasv.experiments.tune_space.check_range_ends`; such trials failed one by one
+    and the search ended with exit 0)."""
+    from mpcasv.experiments.tune_space import check_range_ends
+
+    train = training_jobs(spec)
+    check_range_ends(spec, [(j.preset, j.overrides) for j in train])
+    return train
+
+
 def heldout_jobs(spec: TuneSpec, train: list[Job]) -> list[Job]:
     """Base jobs of the held-out set: each training condition (scenario, current, estimator)
     realised for every held-out seed (drawn as the suite draws them)."""
@@ -293,8 +305,8 @@ def search(spec: TuneSpec, out: str | Path, workers: int = 1, dask: str | None =
     from optuna.trial import TrialState
 
     out = Path(out).resolve()
+    train = check_presets(spec)
     out.mkdir(parents=True, exist_ok=True)
-    train = training_jobs(spec)
     study = open_study(spec, out, train)
     t0 = time.perf_counter()
     wall0 = float(study.user_attrs.get("wall_s", 0.0))
