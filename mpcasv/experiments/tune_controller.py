@@ -10,7 +10,8 @@ over them, stored with Optuna's ``Trial.set_constraint`` (Optuna 5's replacement
 samplers' ``constraints_func``; NSGA-II's constrained domination and TPE's feasibility
 weighting read it): a trial is feasible when the value is <= 0, i.e. no run entered a
 collision domain. No penalty is added to the objectives. A trial whose values the preset
-refuses (e.g. ``eps_minus > delta_r``) fails without a run; it counts in the budget. The
+refuses (e.g. ``eps_minus > delta_r``) fails without a run; it counts in the budget (a range
+end refused whatever the other fields is refused before the search: :func:`check_presets`). The
 trials on the training front are then run on **held-out** realisations: the same scenarios
 and conditions, other seeds.
 

@@ -20,7 +20,10 @@ seed = 0                              # the sampler's seed
 "horizon.N" = { low = 8, high = 20, int = true }
 ```
 
-Every problem is refused with one line naming the file and the field (:class:`ConfigError`).
+Every problem is refused with one line naming the file and the field (:class:`ConfigError`),
+among them a range end the preset field does not accept (``speed`` from -1: its type says
+> 0) or that the suite's presets refuse whatever the other searched fields are
+(:func:`check_range_ends`): such trials failed one by one and the search exited 0.
 """
 
 from __future__ import annotations
