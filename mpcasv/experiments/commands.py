@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 import os
 from pathlib import Path
 
@@ -13,7 +14,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         description="Expand SUITE into jobs, run them on a local process pool (or a Dask "
         "cluster), write each finished job at once (run folder + results row) and finally "
         "DIR/results.parquet, DIR/report.md and DIR/report.html. Rerunning the same command "
-        "resumes an interrupted sweep.",
+        "resumes an interrupted sweep; a DIR holding another suite's results is refused.",
     )  # fmt: skip
     p.add_argument(
         "suite",
@@ -25,7 +26,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="output folder DIR (default: results/<suite name>)")  # fmt: skip
     p.add_argument("--workers", type=int, default=os.cpu_count() or 1,
                    help="local worker processes (default: the number of cores; 1 runs in this "
-                   "process)")  # fmt: skip
+                   "process; at most 4 per core; never more than the jobs to run)")  # fmt: skip
     p.add_argument("--dask", metavar="ADDRESS",
                    help="run on an existing Dask scheduler (e.g. tcp://host:8786); the workers "
                    "need no file system shared with this machine: each job's row comes back "
@@ -52,12 +53,14 @@ def run(args: argparse.Namespace) -> int:
     from mpcasv.experiments.report import READ_LINE
     from mpcasv.experiments.runner import JOB_TIMEOUT_S, is_url, run_suite
     from mpcasv.experiments.suite import load_suite
+    from mpcasv.experiments.workers import check_workers
     from mpcasv.outputs import check_not_other_output, check_output_folder
 
-    if args.workers < 1:
-        raise ConfigError(f"--workers must be >= 1, got {args.workers}")
-    if args.job_timeout is not None and args.job_timeout < 0:
-        raise ConfigError(f"--job-timeout must be >= 0, got {args.job_timeout}")
+    check_workers(args.workers, args.dask)  # at most 4 per CPU locally (1000 hung the machine)
+    if args.job_timeout is not None and not (math.isfinite(args.job_timeout)
+                                             and args.job_timeout >= 0):  # fmt: skip
+        raise ConfigError(f"--job-timeout {args.job_timeout}: a finite number of seconds >= 0 "
+                          "(0: no limit)")  # fmt: skip
     limit = JOB_TIMEOUT_S if args.job_timeout is None else (args.job_timeout or None)
     suite = load_suite(args.suite)[0]  # a bad suite (or another kind of file): refused now
     out = check_output_folder(args.out or Path("results") / suite.name)

@@ -17,7 +17,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         "parameter ranges, e.g. experiments/falsify/pursuer-single.toml) for the smallest "
         "margin min_t (slant range - required separation) (or the longest stay inside a "
         "collision domain) of CONTROLLER, with Optuna's CMA-ES sampler. Writes DIR/study.db "
-        "(resumable: rerun the same command), DIR/trials.csv, DIR/trials.md, and the worst "
+        "(resumable: rerun the same command; DIR/falsify.json records the search, and a DIR "
+        "holding another search is refused), DIR/trials.csv, DIR/trials.md, and the worst "
         "cases as DIR/worst/<name>.toml with their run folders (paths.png, range.png). A "
         "search finds counterexamples; it does not prove safety.",
     )  # fmt: skip
@@ -25,7 +26,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--controller", required=True, help="controller name")
     p.add_argument("--params", help="controller preset: shipped name or TOML path")
     p.add_argument("--budget", type=int, default=32, help="runs in all (default 32)")
-    p.add_argument("--workers", type=int, default=1, help="worker processes (default 1)")
+    p.add_argument("--workers", type=int, default=1,
+                   help="worker processes (default 1; at most 4 per core; no more start than "
+                   "runs go at once, 4)")  # fmt: skip
     p.add_argument("--timeout", type=float, metavar="S",
                    help="wall-clock limit per run (s): a run still going is recorded as an "
                    "error (a solver that never returns); default: none")  # fmt: skip
@@ -45,39 +48,19 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from mpcasv.config import ConfigError, check_seed
-    from mpcasv.controllers import load_preset
-    from mpcasv.experiments.falsify import (
-        SearchSetup,
-        load_family,
-        search,
-        time_ranges,
-        trials_table,
-    )  # fmt: skip
-    from mpcasv.outputs import check_output_folder
+    from mpcasv.experiments.falsify import BATCH, search, time_ranges, trials_table
+    from mpcasv.experiments.falsify_folder import record_study
+    from mpcasv.experiments.workers import pool_size, reduced_note
 
-    for flag in ("budget", "worst"):
-        if getattr(args, flag) < 1:
-            raise ConfigError(f"--{flag} must be >= 1, got {getattr(args, flag)}")
-    # nan here was a search that never ended (--separation: every margin nan, Optuna refuses
-    # the value), a check that always passed (--require-margin) or a traceback (--seed -1)
-    check_seed(args.seed)
-    if args.separation is not None and not (math.isfinite(args.separation)
-                                            and args.separation >= 0):  # fmt: skip
-        raise ConfigError(f"--separation {args.separation:g}: a finite distance >= 0 (m)")
-    if args.require_margin is not None and not math.isfinite(args.require_margin):
-        raise ConfigError(f"--require-margin {args.require_margin:g}: a finite margin (m)")
-    if args.timeout is not None and not (math.isfinite(args.timeout) and args.timeout > 0):
-        raise ConfigError(f"--timeout must be > 0, got {args.timeout}")
-    family = load_family(args.family)  # a time range wholly past the duration: refused
-    for r in time_ranges(family):  # partly past it: said, the search goes on
-        if r.past:
+    setup, out, identity = check_inputs(args)  # every refusal: before any trial or file
+    for r in time_ranges(setup.family):  # partly past the duration: said, the search goes on
+        if r.past:  # (after the refusals: a refused command prints its one line only)
             print(r.warning(args.family), file=sys.stderr)
-    load_preset(args.controller, args.params)  # unknown controller / bad preset: refused now
-    out = args.out or Path("results") / "falsify" / f"{family.name}-{args.controller}"
-    check_output_folder(out).mkdir(parents=True, exist_ok=True)
-    setup = SearchSetup(family, args.controller, args.params, args.seed, args.separation,
-                        args.objective)  # fmt: skip
+    record_study(out, identity)
+    used = pool_size(args.workers, min(BATCH, args.budget))  # runs going at once
+    if used < args.workers and not args.quiet:
+        print(f"{used} worker processes" + reduced_note(args.workers, used, "the most runs that "
+                                                         "go at once"))  # fmt: skip
 
     def progress(number: int, m: dict) -> None:
         if args.quiet:
@@ -103,7 +86,7 @@ def run(args: argparse.Namespace) -> int:
                   for rank, (_, row) in enumerate(top, 1))  # fmt: skip
     written = list(reruns)
     worst = float(ok["margin_m"].min())
-    summary = {"family": family.name, "controller": args.controller, "preset": args.params,
+    summary = {"family": setup.family.name, "controller": args.controller, "preset": args.params,
                "budget": args.budget, "seed": args.seed, "objective": args.objective,
                "finished": int(len(table)), "errors": int((table["state"] != "complete").sum()),
                "worst_margin_m": worst, "longest_stay_s": float(ok["longest_stay_s"].max()),
@@ -117,6 +100,62 @@ def run(args: argparse.Namespace) -> int:
         print(f"margin check FAIL: {worst:.2f} m < {args.require_margin:g} m")
         return 1
     return 0
+
+
+def check_inputs(args: argparse.Namespace):
+    """Check every option, the family, the controller and the output folder before any trial
+    or file: (SearchSetup, output folder, the search's identity for ``DIR/falsify.json``).
+
+    Raises
+    ------
+    ConfigError
+        One line naming the option or file and the cause: a bad number; a family refused by
+        :func:`~mpcasv.experiments.falsify_family.load_family` (e.g. a range end giving an
+        invalid scenario); an unknown controller or bad preset; a controller without a safety
+        domain and no ``--separation``; worst-case names that cannot be file names; an output
+        folder of another command or holding another search
+        (:func:`~mpcasv.experiments.falsify_folder.check_study_folder`).
+    """
+    from mpcasv.config import NAME_PATTERN, ConfigError, check_seed
+    from mpcasv.controllers import load_preset
+    from mpcasv.experiments.falsify import SearchSetup, load_family
+    from mpcasv.experiments.falsify_folder import check_study_folder, study_identity
+    from mpcasv.experiments.workers import check_workers
+    from mpcasv.outputs import check_not_other_output, check_output_folder
+
+    for flag in ("budget", "worst"):
+        if getattr(args, flag) < 1:
+            raise ConfigError(f"--{flag} must be >= 1, got {getattr(args, flag)}")
+    check_workers(args.workers)  # at most 4 per CPU (each a process)
+    # nan here was a search that never ended (--separation: every margin nan, Optuna refuses
+    # the value), a check that always passed (--require-margin) or a traceback (--seed -1)
+    check_seed(args.seed)
+    if args.separation is not None and not (math.isfinite(args.separation)
+                                            and args.separation >= 0):  # fmt: skip
+        raise ConfigError(f"--separation {args.separation:g}: a finite distance >= 0 (m)")
+    if args.require_margin is not None and not math.isfinite(args.require_margin):
+        raise ConfigError(f"--require-margin {args.require_margin:g}: a finite margin (m)")
+    if args.timeout is not None and not (math.isfinite(args.timeout) and args.timeout > 0):
+        raise ConfigError(f"--timeout must be > 0, got {args.timeout}")
+    family = load_family(args.family)  # ranges checked at their ends and corners
+    params = load_preset(args.controller, args.params)  # unknown controller / bad preset
+    if args.separation is None and getattr(params, "domain", None) is None:
+        # every trial failed on it ("has no safety domain"), the search exited 1 with a study
+        raise ConfigError(f"--controller {args.controller}: has no safety domain (no collision "
+                          "sphere r_in to measure the margin against): give --separation M")
+    worst = f"falsified-{family.name}-{args.controller}-{args.worst}"
+    if not NAME_PATTERN.fullmatch(worst):  # the worst cases' file and folder names
+        raise ConfigError(f"--controller {args.controller}: worst cases would be named "
+                          f"{worst!r}, not a file name (letters, digits and _ . + - only)")
+    out = args.out or Path("results") / "falsify" / f"{family.name}-{args.controller}"
+    check_output_folder(out)
+    check_not_other_output(out, "mpcasv falsify")  # a compare or tune folder: refused
+    setup = SearchSetup(family, args.controller, args.params, args.seed, args.separation,
+                        args.objective)  # fmt: skip
+    identity = study_identity(family, args.controller, args.params, params, args.seed,
+                              args.objective, args.separation)  # fmt: skip
+    check_study_folder(out, identity)  # another search there: refused, not mixed
+    return setup, out, identity
 
 
 def _markdown(table, setup, budget: int) -> str:

@@ -5,10 +5,11 @@ A worker runs a job, writes its run folder under the runs location and returns t
 (description, outcome, metrics); this process (the client) writes the row as the job's part
 in ``DIR/parts`` and, at the end, ``DIR/results.parquet``. So the workers need no file system
 shared with the client: the results table is complete and resumable from the client alone.
-The runs location (:func:`runs_location`) is ``DIR/runs`` for local workers; on Dask it is
-the ``--runs-dir`` the user names (a path the workers can write, or an fsspec URL such as
-``s3://bucket/runs``), else ``mpcasv-runs/<suite>`` in each worker's working directory (the
-run folders stay where the worker is; the row's ``run_dir`` and ``worker`` say where).
+The runs location (:func:`~mpcasv.experiments.sweep_folder.runs_location`) is ``DIR/runs``
+for local workers; on Dask it is the ``--runs-dir`` the user names (a path the workers can
+write, or an fsspec URL such as ``s3://bucket/runs``), else ``mpcasv-runs/<suite>`` in each
+worker's working directory (the run folders stay where the worker is; the row's ``run_dir``
+and ``worker`` say where).
 
 Local pool workers are started with ``spawn`` (fresh interpreters: each builds its own CasADi
 functions, which are cached per process, and nothing half-initialised is inherited) and exit
@@ -20,7 +21,9 @@ row, so resuming reruns that job. On a local pool a job running longer than ``jo
 (default :data:`JOB_TIMEOUT_S`) is ended (its worker process killed and replaced, by Pebble's
 process pool) and recorded with ``status = "timeout"``; the sweep goes on (issue 16 item 5:
 a hung solve must not stall a sweep). ``--workers 1`` (this process) and Dask do not enforce
-it.
+it. A local pool starts no more processes than there are jobs to run
+(:mod:`mpcasv.experiments.workers`), and a sweep refuses an output folder holding another
+suite's results (:func:`~mpcasv.experiments.sweep_folder.check_suite_folder`).
 """
 
 from __future__ import annotations
@@ -41,6 +44,13 @@ from mpcasv.config import ConfigError
 from mpcasv.experiments.metrics import auv_column
 from mpcasv.experiments.store import done_ids, write_part, write_results
 from mpcasv.experiments.suite import Expansion, Job, expand
+from mpcasv.experiments.sweep_folder import (
+    check_runs_location,
+    check_suite_folder,
+    is_url,
+    runs_location,
+)
+from mpcasv.experiments.workers import pool_size, reduced_note
 
 #: default time limit of one job on a local pool (s): generous (a 1500 s MPC run with three
 #: AUVs takes a few minutes on a busy 2-core machine)
@@ -92,11 +102,6 @@ def simulate_job(job: Job, run_dir: Path) -> dict:
              "estimator": job.estimator, "current": job.current,
              "realisation": realisation.as_dict(), "boat": boat.describe()}  # fmt: skip
     return write_run(result, run_dir, compute_metrics(result), plots=job.plots, extra=extra)
-
-
-def is_url(location: str) -> bool:
-    """Whether a runs location is an fsspec URL (``s3://...``, ``file://...``), not a path."""
-    return "://" in str(location)
 
 
 def _run_into(job: Job, runs: str) -> tuple[dict, str]:
@@ -163,39 +168,6 @@ def finish_job(out: Path, row: dict) -> dict:
         row = row | {"run_dir": str(Path(run_dir).relative_to(out))}
     write_part(out, row)
     return row
-
-
-def runs_location(out: Path, suite: str, runs_dir: str | None, dask: str | None) -> str:
-    """Where the run folders go: ``runs_dir`` as given (a local path made absolute here, or a
-    URL), else ``DIR/runs`` for local workers and ``mpcasv-runs/<suite>`` relative to each Dask
-    worker's working directory."""
-    if runs_dir:
-        return str(runs_dir) if is_url(runs_dir) else str(Path(runs_dir).expanduser().resolve())
-    return f"mpcasv-runs/{suite}" if dask else str(out / "runs")
-
-
-def check_runs_location(runs: str, dask: str | None) -> None:
-    """Refuse, before any job starts, a runs location this process cannot write: a local
-    path (unless Dask workers write it on their own machines) or an fsspec URL. Raises
-    :class:`ConfigError` in one line naming it and the cause (every job would fail on it)."""
-    if dask and not is_url(runs):
-        return  # a path on the workers' machines: only they can tell
-    if not is_url(runs):
-        from mpcasv.outputs import check_output_folder
-
-        check_output_folder(runs, "--runs-dir")  # the one check of a local output folder
-        return
-    probe = ".mpcasv-write-probe"
-    try:
-        import fsspec
-
-        fs, root = fsspec.core.url_to_fs(runs)
-        fs.makedirs(root, exist_ok=True)
-        fs.pipe(f"{root.rstrip('/')}/{probe}", b"")
-        fs.rm(f"{root.rstrip('/')}/{probe}")
-    except (OSError, ValueError, ImportError) as exc:
-        cause = getattr(exc, "strerror", None) or str(exc).splitlines()[0]
-        raise ConfigError(f"--runs-dir {runs}: cannot write run folders there ({cause})") from None
 
 
 def prepare_controllers(jobs: list[Job], quiet: bool = False, dask: str | None = None) -> list:
@@ -290,7 +262,8 @@ def run_jobs(jobs: list[Job], out: Path, stats: SweepStats, workers: int = 1,
     """Run ``jobs`` (serially, on a process pool, or on Dask), updating ``stats``; run folders
     under ``runs`` (default: :func:`runs_location`), rows written into ``out`` here.
     ``job_timeout`` (s, local pool only; None: no limit): a longer job is ended and recorded
-    as ``timeout``."""
+    as ``timeout``. A local pool (``workers > 1``) starts at most one process per job
+    (:func:`~mpcasv.experiments.workers.pool_size`), so a single job still gets its timeout."""
     out = out.resolve()
     runs = runs or runs_location(out, stats.suite, None, dask)
     stats.runs = stats.runs or runs
@@ -307,8 +280,9 @@ def run_jobs(jobs: list[Job], out: Path, stats: SweepStats, workers: int = 1,
                 bar.set_postfix(errors=stats.errors, refresh=False)
                 bar.update(1)
         else:
-            stats.backend, stats.workers = f"local process pool ({workers} workers)", workers
-            _run_pool(jobs, out, runs, stats, workers, bar, job_timeout)
+            n = pool_size(workers, len(jobs))
+            stats.backend, stats.workers = f"local process pool ({n} workers)", n
+            _run_pool(jobs, out, runs, stats, n, bar, job_timeout)
     except KeyboardInterrupt:
         stats.interrupted = True
         raise
@@ -391,6 +365,7 @@ def run_suite(suite: str | Path, out: str | Path, workers: int = 1, dask: str | 
     """
     exp = expand(suite)  # refuses a bad suite before anything starts
     out = Path(out).resolve()
+    check_suite_folder(out, exp.suite.name)  # another suite's results: refused, not mixed
     runs = runs_location(out, exp.suite.name, runs_dir, dask)
     if runs_dir:
         check_runs_location(runs, dask)  # before anything is written
@@ -405,8 +380,10 @@ def run_suite(suite: str | Path, out: str | Path, workers: int = 1, dask: str | 
         where = (
             f"Dask at {dask}"
             if dask
-            else ("this process" if workers <= 1 else f"{workers} local worker processes")
-        )
+            else ("this process" if workers <= 1 or not todo else
+                  f"{pool_size(workers, len(todo))} local worker processes"
+                  + reduced_note(workers, pool_size(workers, len(todo))))
+        )  # fmt: skip
         print(f"suite {exp.suite.name}: {len(exp.jobs)} jobs, {stats.already_done} already done, "
               f"{len(todo)} to run on {where}; output {out}; runs: {stats.runs}")  # fmt: skip
     try:

@@ -48,7 +48,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--workers",
         type=int,
         default=os.cpu_count() or 1,
-        help="local worker processes (default: one per core; 1: this process)",
+        help="local worker processes (default: one per core; 1: this process; at most 4 per "
+        "core; never more than the runs of a batch)",
     )
     p.add_argument("--dask", metavar="ADDRESS", help="run on a Dask scheduler instead")
     p.add_argument("--no-heldout", action="store_true", help="skip the held-out runs")
@@ -57,15 +58,15 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run_tune_controller(args: argparse.Namespace) -> int:
-    from mpcasv.config import ConfigError
-    from mpcasv.experiments.tune_controller import evaluate_heldout, search
+    from mpcasv.experiments.tune_controller import check_presets, evaluate_heldout, search
     from mpcasv.experiments.tune_outputs import write_outputs
     from mpcasv.experiments.tune_space import load_spec
+    from mpcasv.experiments.workers import check_workers
     from mpcasv.outputs import check_not_other_output, check_output_folder, folder_lock
 
-    if args.workers < 1:
-        raise ConfigError(f"--workers {args.workers}: must be >= 1")
+    check_workers(args.workers, args.dask)  # at most 4 per CPU locally
     spec = load_spec(args.ranges, args.trials)
+    check_presets(spec)  # the suite's entry, and range ends no trial could run: before any file
     out = check_output_folder((args.out or Path("results") / f"tune-{spec.path.stem}").resolve())
     check_not_other_output(out, "mpcasv tune controller", own=("study.db", "tune.lock"))
     # two commands on one folder ran the same trials; the second died on a traceback

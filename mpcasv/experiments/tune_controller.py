@@ -10,7 +10,8 @@ over them, stored with Optuna's ``Trial.set_constraint`` (Optuna 5's replacement
 samplers' ``constraints_func``; NSGA-II's constrained domination and TPE's feasibility
 weighting read it): a trial is feasible when the value is <= 0, i.e. no run entered a
 collision domain. No penalty is added to the objectives. A trial whose values the preset
-refuses (e.g. ``eps_minus > delta_r``) fails without a run; it counts in the budget. The
+refuses (e.g. ``eps_minus > delta_r``) fails without a run; it counts in the budget (a range
+end refused whatever the other fields is refused before the search: :func:`check_presets`). The
 trials on the training front are then run on **held-out** realisations: the same scenarios
 and conditions, other seeds.
 
@@ -85,6 +86,18 @@ def training_jobs(spec: TuneSpec) -> list[Job]:
         raise ConfigError(f"{spec.path}: heldout_seeds {clash} are also training seeds of "
                           f"{exp.path}")  # fmt: skip
     return jobs
+
+
+def check_presets(spec: TuneSpec) -> list[Job]:
+    """The training jobs (:func:`training_jobs`), after refusing range ends that their presets
+    refuse whatever the other searched fields
+    (:func:`~mpcasv.experiments.tune_space.check_range_ends`; such trials failed one by one
+    and the search ended with exit 0)."""
+    from mpcasv.experiments.tune_space import check_range_ends
+
+    train = training_jobs(spec)
+    check_range_ends(spec, [(j.preset, j.overrides) for j in train])
+    return train
 
 
 def heldout_jobs(spec: TuneSpec, train: list[Job]) -> list[Job]:
@@ -293,8 +306,8 @@ def search(spec: TuneSpec, out: str | Path, workers: int = 1, dask: str | None =
     from optuna.trial import TrialState
 
     out = Path(out).resolve()
+    train = check_presets(spec)
     out.mkdir(parents=True, exist_ok=True)
-    train = training_jobs(spec)
     study = open_study(spec, out, train)
     t0 = time.perf_counter()
     wall0 = float(study.user_attrs.get("wall_s", 0.0))

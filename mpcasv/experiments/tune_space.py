@@ -20,7 +20,10 @@ seed = 0                              # the sampler's seed
 "horizon.N" = { low = 8, high = 20, int = true }
 ```
 
-Every problem is refused with one line naming the file and the field (:class:`ConfigError`).
+Every problem is refused with one line naming the file and the field (:class:`ConfigError`),
+among them a range end the preset field does not accept (``speed`` from -1: its type says
+> 0) or that the suite's presets refuse whatever the other searched fields are
+(:func:`check_range_ends`): such trials failed one by one and the search exited 0.
 """
 
 from __future__ import annotations
@@ -160,25 +163,88 @@ def _check_fields(path: Path, spec: TuneSpec) -> None:
                 kind, f"not a number ({getattr(kind, '__name__', kind)})"
             )
             _fail(path, f"params.{p.name!r}: the preset field is {what}")
-    # value combinations the preset refuses (e.g. eps_minus > delta_r) are found per trial:
-    # such a trial fails without a run (mpcasv.experiments.tune_controller)
+        _check_bounds(path, spec.controller, p, _field_type(params_cls, p.name, extras=True))
+    # ends refused with every setting of the other fields: check_range_ends (needs the
+    # suite's presets); other combinations the preset refuses (e.g. eps_minus > delta_r)
+    # are found per trial: such a trial fails without a run (mpcasv.experiments.tune_controller)
 
 
-def _field_type(cls: type, dotted: str):
-    """The (unwrapped) type of the dotted field of parameter dataclass ``cls``; None: none."""
+def _check_bounds(path: Path, controller: str, p: ParamRange, annotation) -> None:
+    """Both bounds of ``p`` are values the preset field (its annotated type) accepts."""
+    from pydantic import TypeAdapter, ValidationError
+
+    for end, value in (("low", p.low), ("high", p.high)):
+        try:
+            TypeAdapter(annotation).validate_python(value)
+        except ValidationError as exc:
+            cause = "; ".join(e["msg"] for e in exc.errors())
+            _fail(path, f"params.{p.name!r}: {end} = {value!r} is outside what {controller} "
+                        f"presets accept for {p.name} ({cause})")  # fmt: skip
+
+
+def check_range_ends(spec: TuneSpec, presets) -> None:
+    """Refuse a range end that the preset refuses whatever the other searched fields are.
+
+    ``presets``: the training jobs' ``(preset, overrides)`` pairs. Each end of each range is
+    loaded with the other searched fields at the preset's own values, at their lows, their
+    midpoints and their highs; an end refused in all four (a trial there could never run) is
+    refused before the search, naming the file, the field, the end and the preset's cause.
+
+    Raises
+    ------
+    ConfigError
+        One line: ``FILE: params.'speed': low = -1.0 is refused by ...: <cause>``.
+    """
+    from mpcasv.controllers import load_preset
+
+    def mid(q: ParamRange):
+        return (q.low + q.high) // 2 if q.int else 0.5 * (q.low + q.high)
+
+    others = {"lows": lambda q: q.low, "midpoints": mid, "highs": lambda q: q.high}
+    for preset, overrides in sorted(set(presets), key=str):
+        for p in spec.params:
+            for end, value in (("low", p.low), ("high", p.high)):
+                contexts = [{}] + [{q.name: f(q) for q in spec.params if q is not p}
+                                   for f in others.values()]  # fmt: skip
+                causes = []
+                for ctx in contexts:
+                    try:
+                        load_preset(spec.controller, preset,
+                                    dict(overrides) | ctx | {p.name: value})  # fmt: skip
+                        break
+                    except ConfigError as exc:
+                        causes.append(" ".join(str(exc).split()).removeprefix(
+                            "invalid configuration "))  # fmt: skip
+                else:
+                    _fail(spec.path, f"params.{p.name!r}: {end} = {value!r} is refused by the "
+                                     f"{spec.controller} preset {preset or 'default'} whatever "
+                                     "the other searched fields (at the preset's values, their "
+                                     f"lows, midpoints or highs): {causes[0]}")  # fmt: skip
+
+
+def _field_type(cls: type, dotted: str, extras: bool = False):
+    """The (unwrapped) type of the dotted field of parameter dataclass ``cls``; None: none.
+    ``extras``: the field's annotation as declared (constraints kept, Optional kept)."""
     import dataclasses
     import typing
 
     for part in dotted.split("."):
         if not dataclasses.is_dataclass(cls):
             return None
-        hints = typing.get_type_hints(cls)
+        hints = typing.get_type_hints(cls, include_extras=True)
         if part not in hints:
             return None
         cls = hints[part]
+    if extras:
+        return cls
+
+    def bare(t):  # Annotated[float, Gt(0)] -> float
+        return typing.get_args(t)[0] if typing.get_origin(t) is typing.Annotated else t
+
+    cls = bare(cls)
     args = typing.get_args(cls)  # Optional[float] (None: off): a number when searched
     if type(None) in args and len(args) == 2:
-        cls = next(a for a in args if a is not type(None))
+        cls = bare(next(a for a in args if a is not type(None)))
     return cls
 
 
