@@ -182,3 +182,19 @@ def test_simulate_without_plots_does_not_say_it_wrote_plots(tmp_path, capsys):
     said = capsys.readouterr().out
     assert "(timeseries.parquet, metrics.json)" in said, said
     assert not list(out.glob("*.png"))
+
+
+def test_a_one_auv_controller_on_several_auvs_is_refused_before_compiling(monkeypatch,
+                                                                          tmp_path):
+    """``simulate`` of a two-AUV scenario with ``mpc-single`` compiled a two-AUV library
+    (10-34 s, left in the cache) and then refused the count."""
+    from mpcasv.controllers import prepare as prep
+
+    compiled = []
+    monkeypatch.setattr(prep, "prepare", lambda libs, *a, **k: compiled.append(libs))
+    with pytest.raises(ConfigError, match="handles one AUV"):
+        prep.needed_libraries([("mpc-single", 2, None, None, None)])
+    assert main(["simulate", str(ROOT / "experiments/scenarios/case6.toml"),
+                 "--controller", "mpc-single", "--params", "mpc-single", "--quiet",
+                 "--out", str(tmp_path / "o")]) == 2
+    assert not compiled

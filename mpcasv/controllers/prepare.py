@@ -16,7 +16,7 @@ from collections.abc import Iterable
 from typing import Any
 
 from mpcasv.config import resolve
-from mpcasv.controllers.registry import Boat, check_boat, controller_kind, load_preset
+from mpcasv.controllers.registry import Boat, check_auv_count, check_boat, load_preset
 
 
 def needed_libraries(builds: Iterable[tuple[str, int, Any, Any, Boat | None]]) -> list:
@@ -24,7 +24,7 @@ def needed_libraries(builds: Iterable[tuple[str, int, Any, Any, Boat | None]]) -
     ``(name, n_auv, preset, overrides, boat)``, one per cache path, in first-seen order."""
     seen: dict = {}
     for name, n_auv, preset, overrides, boat in builds:
-        kind = controller_kind(name)
+        kind = check_auv_count(name, n_auv)  # before compiling a library it cannot use
         if kind.libraries is None:
             continue
         params = load_preset(name, preset, overrides)

@@ -290,6 +290,20 @@ def check_boat(params: Any, boat: Boat, source: str) -> None:
             )
 
 
+def check_auv_count(name: str, n_auv: int) -> ControllerKind:
+    """The kind of controller ``name`` if it handles ``n_auv`` AUVs.
+
+    Raises
+    ------
+    ConfigError
+        Unknown controller, or several AUVs for a one-AUV controller.
+    """
+    kind = controller_kind(name)
+    if n_auv > 1 and not kind.multi:
+        raise ConfigError(f"controller {name!r} handles one AUV, the scenario has {n_auv}")
+    return kind
+
+
 def make_controller(
     name: str, n_auv: int, preset: str | Path | None = None,
     overrides: Mapping[str, Any] | None = None, *, boat: Boat | None = None,
@@ -305,9 +319,7 @@ def make_controller(
         Unknown controller or preset, invalid preset, too many AUVs for the kind, or a preset
         that names another vessel than ``boat``'s.
     """
-    kind = controller_kind(name)
-    if n_auv > 1 and not kind.multi:
-        raise ConfigError(f"controller {name!r} handles one AUV, the scenario has {n_auv}")
+    kind = check_auv_count(name, n_auv)
     params = load_preset(name, preset, overrides)
     if boat is not None:
         check_boat(params, boat, str(resolve("presets", preset or kind.default_preset)))
