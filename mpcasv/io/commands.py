@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import math
 import sys
 from pathlib import Path
 
@@ -26,10 +27,41 @@ def _pair(text: str) -> tuple[float, float]:
     return a, b
 
 
+def _number(text: str) -> float:
+    try:
+        return float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+
+
 def _positive(text: str) -> float:
-    v = float(text)
-    if not v > 0:
-        raise argparse.ArgumentTypeError(f"must be > 0, got {text}")
+    v = _number(text)
+    if not 0 < v < math.inf:  # nan fails too
+        raise argparse.ArgumentTypeError(f"must be a finite number > 0, got {text}")
+    return v
+
+
+def _nonneg(text: str) -> float:
+    v = _number(text)
+    if not 0 <= v < math.inf:
+        raise argparse.ArgumentTypeError(f"must be a finite number >= 0, got {text}")
+    return v
+
+
+def _count(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+    if v < 0:
+        raise argparse.ArgumentTypeError(f"must be an integer >= 0, got {text}")
+    return v
+
+
+def _port(text: str) -> int:
+    v = _count(text)
+    if v > 65535:
+        raise argparse.ArgumentTypeError(f"a port is an integer in [0, 65535], got {text}")
     return v
 
 
@@ -57,13 +89,13 @@ def register(sub: argparse._SubParsersAction) -> None:
         "FollowRefState). SIGUSR1 kills the ASV's IMC system, SIGUSR2 restarts it.",
     )  # fmt: skip
     s.add_argument("scenario", type=Path, help="scenario TOML")
-    s.add_argument("--seed", type=int, default=0)
+    s.add_argument("--seed", type=int, default=0, help="world seed, in [0, 2**32 - 1] (0)")
     s.add_argument("--speedup", type=_positive, default=1.0,
                    help="clock factor (deploy's clock.speedup must match)")  # fmt: skip
     s.add_argument("--bind", default="127.0.0.1", help="local address (default 127.0.0.1)")
-    s.add_argument("--discovery-port", type=int, default=30100,
+    s.add_argument("--discovery-port", type=_port, default=30100,
                    help="port of the discovery socket (0: any free)")  # fmt: skip
-    s.add_argument("--base-port", type=int, default=6002,
+    s.add_argument("--base-port", type=_port, default=6002,
                    help="vehicle k binds base+k (ASV first); 0: any free ports")  # fmt: skip
     s.add_argument("--origin", type=_pair, default=(63.4406, 10.3530),
                    help="local frame origin 'lat,lon' in degrees")  # fmt: skip
@@ -103,8 +135,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     r.add_argument("log", type=Path)
     r.add_argument("--controller", help="controller name (default: the logged one)")
     r.add_argument("--preset", help="preset name or TOML (default: the logged one)")
-    r.add_argument("--tol", type=float, default=0.5, help="waypoint tolerance in m (0.5)")
-    r.add_argument("--show", type=int, default=20, help="differing steps to list (20)")
+    r.add_argument("--tol", type=_nonneg, default=0.5, help="waypoint tolerance in m (0.5)")
+    r.add_argument("--show", type=_count, default=20, help="differing steps to list (20)")
     r.add_argument("--json", type=Path, help="write the comparison table here (JSON lines)")
     r.set_defaults(func=run_replay_cli)
 
@@ -132,9 +164,6 @@ def run_sitl_cli(args: argparse.Namespace) -> int:
     if not 0 <= args.reaction < 1:
         raise ConfigError(f"--reaction must be in [0, 1) periods, got {args.reaction}")
     sc = load_scenario(args.scenario)
-    check_output_folder(args.out)
-    if args.ready_file is not None:
-        check_output_file(args.ready_file, "--ready-file")
     opt = SitlOptions(
         seed=args.seed, speedup=args.speedup, bind=args.bind,
         discovery_port=args.discovery_port, base_port=args.base_port, origin=args.origin,
@@ -143,7 +172,11 @@ def run_sitl_cli(args: argparse.Namespace) -> int:
         auv_id_base=args.auv_id_base, tcp=args.tcp, asv_outage=args.asv_outage,
         out=args.out, plots=args.plots, controller=args.controller, preset=args.preset,
         ready_file=args.ready_file,
-    )  # fmt: skip
+    ).check([a.name for a in sc.auv])  # fmt: skip
+    check_output_folder(args.out)
+    if args.ready_file is not None:
+        check_output_file(args.ready_file, "--ready-file")
+    opt.check_binds(len(sc.auv))  # before --out is written
     info = run_sitl(sc, opt)
     print(json.dumps({"finished": {k: v for k, v in info.items() if k != "metrics"}}),
           flush=True)  # fmt: skip
