@@ -70,7 +70,10 @@ def register(sub: argparse._SubParsersAction) -> None:
         "deploy", help="run a controller on live IMC vehicles (DUNE) or against mpcasv sitl",
         description="Run the configured controller on the vehicles of CONFIG over IMC: "
         "FollowReference on the ASV, one Reference per control period, watchdogs, logs "
-        "(imc.lsf + deploy.jsonl in log.dir). Ctrl-C / SIGTERM: standby + MANDONE, exit.",
+        "(imc.lsf + deploy.jsonl in log.dir). Ctrl-C / SIGTERM: standby + MANDONE, exit. "
+        "Exit 0: ran and decided; 1: ran without a single decision (no vehicle heard, or "
+        "never a state: one line says which); 2: bad input (CONFIG, the log folder, the bind "
+        "address), one line.",
     )  # fmt: skip
     p.add_argument("config", type=Path, help="deploy TOML (experiments/deploy/sitl-case3.toml)")
     p.add_argument("--dry-run", action="store_true", help="compute and log, send no commands")
@@ -152,6 +155,9 @@ def run_deploy_cli(args: argparse.Namespace) -> int:
     _logging(args.quiet)
     summary = run_deploy(args.config, args.dry_run, args.log_dir, args.duration, args.prepare)
     print(json.dumps({"prepared" if args.prepare else "summary": summary}), flush=True)
+    if "no_decision" in summary:  # ran, and never decided: exit 1 (the CLI's "check failed")
+        print(f"mpcasv deploy: failed: {summary['no_decision']}", file=sys.stderr)
+        return 1
     return 0
 
 

@@ -37,6 +37,8 @@ __all__ = [  # the controller's part is mpcasv.io.deploycontroller's, re-exporte
 #: An IMC system id (0xFFFF is broadcast, never a vehicle).
 ImcId = Annotated[int, Strict(), Field(ge=0, le=0xFFFE)]
 Port = Annotated[int, Strict(), Field(ge=0, le=65535)]
+#: The longest control period accepted (s): a supervisory period is seconds, not hours
+CONTROL_PERIOD_MAX = 60.0
 
 
 def parse_address(text: str) -> tuple[str, int]:
@@ -53,6 +55,13 @@ def parse_address(text: str) -> tuple[str, int]:
     return host, int(port)
 
 
+def _system_name(v: str | None) -> str | None:
+    if v is not None and not v.strip():
+        raise ValueError(f"{v!r}: an IMC system name cannot be empty (omit the field to use "
+                         "the default or, for a vehicle, its id alone)")  # fmt: skip
+    return v
+
+
 def _check_address(v: str | None) -> str | None:
     if v is not None:
         parse_address(v)
@@ -65,6 +74,8 @@ class Identity:
 
     name: str = "mpcasv-deploy"
     id: ImcId = 0x4001
+
+    _name = field_validator("name")(_system_name)
 
 
 @frozen
@@ -89,6 +100,8 @@ class Vehicle:
     name: str | None = None
     address: str | None = None
     tcp: str | None = None
+
+    _name = field_validator("name")(_system_name)
 
     @field_validator("address", "tcp")
     @classmethod
@@ -176,6 +189,14 @@ class ControllerSpec:
     # feed the learned achievable speed back into the controller's 'speed' (see SpeedSpec)
     speed_feedback: bool = False
 
+    @field_validator("control_period")
+    @classmethod
+    def _period(cls, v: float) -> float:
+        if v > CONTROL_PERIOD_MAX:
+            raise ValueError(f"{v:g} s: a control period is at most {CONTROL_PERIOD_MAX:g} s "
+                             "(the papers' is 1 s)")  # fmt: skip
+        return v
+
 
 @frozen
 class WatchdogSpec:
@@ -231,6 +252,16 @@ class ClockSpec:
     """``speedup`` > 1 only against a SITL started with the same ``--speedup``."""
 
     speedup: Pos = 1.0
+
+    @field_validator("speedup")
+    @classmethod
+    def _speedup(cls, v: float) -> float:
+        from mpcasv.io.sitloptions import SPEEDUP_MAX, SPEEDUP_MIN
+
+        if not SPEEDUP_MIN <= v <= SPEEDUP_MAX:
+            raise ValueError(f"{v:g}: a clock factor is in [{SPEEDUP_MIN:g}, {SPEEDUP_MAX:g}] "
+                             "(1: real time)")  # fmt: skip
+        return v
 
 
 @frozen
