@@ -61,6 +61,7 @@ def check_bindable(host: str, port: int, what: str, kind: int = socket.SOCK_DGRA
             errno.EADDRINUSE: f"port {port} is in use on {host} (another mpcasv or DUNE?)",
             errno.EACCES: f"port {port} needs privileges (use a port above 1023)",
         }.get(exc.errno, exc.strerror or str(exc))  # fmt: skip
-        raise ConfigError(f"{what} {host}:{port}: cannot bind: {cause}") from None
+        shown = host if port == 0 else f"{host}:{port}"  # port 0: the address alone
+        raise ConfigError(f"{what} {shown}: cannot bind: {cause}") from None
     finally:
         sock.close()
