@@ -102,7 +102,7 @@ def check_local(cfg: DeployConfig, config, log_dir=None, port: bool = False) -> 
 
     check_output_folder(log_dir or cfg.log.dir, "--log-dir" if log_dir else f"{config}: log.dir")
     lk = cfg.link
-    if port and lk.transport == "udp":
+    if port and lk.transport == "udp" and lk.port:
         check_bindable(lk.bind, lk.port, f"{config}: link.bind, link.port")
     else:
         check_bindable(lk.bind, 0, f"{config}: link.bind")
