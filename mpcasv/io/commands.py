@@ -94,14 +94,16 @@ def register(sub: argparse._SubParsersAction) -> None:
     s.add_argument("scenario", type=Path, help="scenario TOML")
     s.add_argument("--seed", type=int, default=0, help="world seed, in [0, 2**32 - 1] (0)")
     s.add_argument("--speedup", type=_positive, default=1.0,
-                   help="clock factor (deploy's clock.speedup must match)")  # fmt: skip
+                   help="clock factor in [0.01, 1000] (deploy's clock.speedup must "
+                   "match)")  # fmt: skip
     s.add_argument("--bind", default="127.0.0.1", help="local address (default 127.0.0.1)")
     s.add_argument("--discovery-port", type=_port, default=30100,
                    help="port of the discovery socket (0: any free)")  # fmt: skip
     s.add_argument("--base-port", type=_port, default=6002,
                    help="vehicle k binds base+k (ASV first); 0: any free ports")  # fmt: skip
     s.add_argument("--origin", type=_pair, default=(63.4406, 10.3530),
-                   help="local frame origin 'lat,lon' in degrees")  # fmt: skip
+                   help="local frame origin 'lat,lon' in degrees (lat in [-90, 90], lon "
+                   "in [-180, 180])")  # fmt: skip
     s.add_argument("--duration", type=_positive, help="world seconds (default: the scenario's)")
     s.add_argument("--hold", action="store_true",
                    help="keep the world at t=0 until the first Reference")  # fmt: skip
@@ -121,7 +123,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--asv-id", type=_imc_id, default=0x2801)
     s.add_argument("--auv-id-base", type=_imc_id, default=0x2811)
     s.add_argument("--tcp", action="store_true", help="also serve DUNE-like TCP backseat ports")
-    s.add_argument("--asv-outage", type=_pair, help="kill the ASV at world time T0, restart at T1")
+    s.add_argument("--asv-outage", type=_pair,
+                   help="'T0,T1': kill the ASV at world time T0, restart at T1 > T0")
     s.add_argument("--controller", help="controller whose domain the world uses (metrics)")
     s.add_argument("--preset", help="its preset")
     s.add_argument("--out", type=Path, default=Path("runs/sitl"))
