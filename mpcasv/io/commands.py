@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import math
 import sys
 from pathlib import Path
 
@@ -26,10 +27,41 @@ def _pair(text: str) -> tuple[float, float]:
     return a, b
 
 
+def _number(text: str) -> float:
+    try:
+        return float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+
+
 def _positive(text: str) -> float:
-    v = float(text)
-    if not v > 0:
-        raise argparse.ArgumentTypeError(f"must be > 0, got {text}")
+    v = _number(text)
+    if not 0 < v < math.inf:  # nan fails too
+        raise argparse.ArgumentTypeError(f"must be a finite number > 0, got {text}")
+    return v
+
+
+def _nonneg(text: str) -> float:
+    v = _number(text)
+    if not 0 <= v < math.inf:
+        raise argparse.ArgumentTypeError(f"must be a finite number >= 0, got {text}")
+    return v
+
+
+def _count(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+    if v < 0:
+        raise argparse.ArgumentTypeError(f"must be an integer >= 0, got {text}")
+    return v
+
+
+def _port(text: str) -> int:
+    v = _count(text)
+    if v > 65535:
+        raise argparse.ArgumentTypeError(f"a port is an integer in [0, 65535], got {text}")
     return v
 
 
@@ -38,7 +70,10 @@ def register(sub: argparse._SubParsersAction) -> None:
         "deploy", help="run a controller on live IMC vehicles (DUNE) or against mpcasv sitl",
         description="Run the configured controller on the vehicles of CONFIG over IMC: "
         "FollowReference on the ASV, one Reference per control period, watchdogs, logs "
-        "(imc.lsf + deploy.jsonl in log.dir). Ctrl-C / SIGTERM: standby + MANDONE, exit.",
+        "(imc.lsf + deploy.jsonl in log.dir). Ctrl-C / SIGTERM: standby + MANDONE, exit. "
+        "Exit 0: ran and decided; 1: ran without a single decision (no vehicle heard, or "
+        "never a state: one line says which); 2: bad input (CONFIG, the log folder, the bind "
+        "address), one line.",
     )  # fmt: skip
     p.add_argument("config", type=Path, help="deploy TOML (experiments/deploy/sitl-case3.toml)")
     p.add_argument("--dry-run", action="store_true", help="compute and log, send no commands")
@@ -57,16 +92,18 @@ def register(sub: argparse._SubParsersAction) -> None:
         "FollowRefState). SIGUSR1 kills the ASV's IMC system, SIGUSR2 restarts it.",
     )  # fmt: skip
     s.add_argument("scenario", type=Path, help="scenario TOML")
-    s.add_argument("--seed", type=int, default=0)
+    s.add_argument("--seed", type=int, default=0, help="world seed, in [0, 2**32 - 1] (0)")
     s.add_argument("--speedup", type=_positive, default=1.0,
-                   help="clock factor (deploy's clock.speedup must match)")  # fmt: skip
+                   help="clock factor in [0.01, 1000] (deploy's clock.speedup must "
+                   "match)")  # fmt: skip
     s.add_argument("--bind", default="127.0.0.1", help="local address (default 127.0.0.1)")
-    s.add_argument("--discovery-port", type=int, default=30100,
+    s.add_argument("--discovery-port", type=_port, default=30100,
                    help="port of the discovery socket (0: any free)")  # fmt: skip
-    s.add_argument("--base-port", type=int, default=6002,
+    s.add_argument("--base-port", type=_port, default=6002,
                    help="vehicle k binds base+k (ASV first); 0: any free ports")  # fmt: skip
     s.add_argument("--origin", type=_pair, default=(63.4406, 10.3530),
-                   help="local frame origin 'lat,lon' in degrees")  # fmt: skip
+                   help="local frame origin 'lat,lon' in degrees (lat in [-90, 90], lon "
+                   "in [-180, 180])")  # fmt: skip
     s.add_argument("--duration", type=_positive, help="world seconds (default: the scenario's)")
     s.add_argument("--hold", action="store_true",
                    help="keep the world at t=0 until the first Reference")  # fmt: skip
@@ -86,7 +123,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--asv-id", type=_imc_id, default=0x2801)
     s.add_argument("--auv-id-base", type=_imc_id, default=0x2811)
     s.add_argument("--tcp", action="store_true", help="also serve DUNE-like TCP backseat ports")
-    s.add_argument("--asv-outage", type=_pair, help="kill the ASV at world time T0, restart at T1")
+    s.add_argument("--asv-outage", type=_pair,
+                   help="'T0,T1': kill the ASV at world time T0, restart at T1 > T0")
     s.add_argument("--controller", help="controller whose domain the world uses (metrics)")
     s.add_argument("--preset", help="its preset")
     s.add_argument("--out", type=Path, default=Path("runs/sitl"))
@@ -103,8 +141,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     r.add_argument("log", type=Path)
     r.add_argument("--controller", help="controller name (default: the logged one)")
     r.add_argument("--preset", help="preset name or TOML (default: the logged one)")
-    r.add_argument("--tol", type=float, default=0.5, help="waypoint tolerance in m (0.5)")
-    r.add_argument("--show", type=int, default=20, help="differing steps to list (20)")
+    r.add_argument("--tol", type=_nonneg, default=0.5, help="waypoint tolerance in m (0.5)")
+    r.add_argument("--show", type=_count, default=20, help="differing steps to list (20)")
     r.add_argument("--json", type=Path, help="write the comparison table here (JSON lines)")
     r.set_defaults(func=run_replay_cli)
 
@@ -120,6 +158,9 @@ def run_deploy_cli(args: argparse.Namespace) -> int:
     _logging(args.quiet)
     summary = run_deploy(args.config, args.dry_run, args.log_dir, args.duration, args.prepare)
     print(json.dumps({"prepared" if args.prepare else "summary": summary}), flush=True)
+    if "no_decision" in summary:  # ran, and never decided: exit 1 (the CLI's "check failed")
+        print(f"mpcasv deploy: failed: {summary['no_decision']}", file=sys.stderr)
+        return 1
     return 0
 
 
@@ -132,9 +173,6 @@ def run_sitl_cli(args: argparse.Namespace) -> int:
     if not 0 <= args.reaction < 1:
         raise ConfigError(f"--reaction must be in [0, 1) periods, got {args.reaction}")
     sc = load_scenario(args.scenario)
-    check_output_folder(args.out)
-    if args.ready_file is not None:
-        check_output_file(args.ready_file, "--ready-file")
     opt = SitlOptions(
         seed=args.seed, speedup=args.speedup, bind=args.bind,
         discovery_port=args.discovery_port, base_port=args.base_port, origin=args.origin,
@@ -143,7 +181,11 @@ def run_sitl_cli(args: argparse.Namespace) -> int:
         auv_id_base=args.auv_id_base, tcp=args.tcp, asv_outage=args.asv_outage,
         out=args.out, plots=args.plots, controller=args.controller, preset=args.preset,
         ready_file=args.ready_file,
-    )  # fmt: skip
+    ).check([a.name for a in sc.auv])  # fmt: skip
+    check_output_folder(args.out)
+    if args.ready_file is not None:
+        check_output_file(args.ready_file, "--ready-file")
+    opt.check_binds(len(sc.auv))  # before --out is written
     info = run_sitl(sc, opt)
     print(json.dumps({"finished": {k: v for k, v in info.items() if k != "metrics"}}),
           flush=True)  # fmt: skip

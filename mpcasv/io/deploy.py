@@ -20,7 +20,8 @@ Shutdown (Ctrl-C / SIGTERM, or ``duration``): stop deciding (states are no longe
 stop announcing, heart-beating and listening for discovery; a standby Reference (speed 0)
 then MANDONE; wait (at most ``link.plan_done_timeout``) for DUNE's answer to MANDONE
 (PlanControl SUCCESS "plan completed" with our request id); close the socket; ``summary``
-(counters, CPU use) is the last record written.
+(counters, CPU use, the vehicles ``heard``) is the last record written; a run that never made
+a decision says why in its ``no_decision`` (``mpcasv deploy`` then exits 1).
 
 The controller is built (an MPC's library compiled if it is not cached) before any socket is
 opened: ``mpcasv deploy CONFIG --prepare`` does only that, at the quay.
@@ -53,7 +54,13 @@ from mpcasv.io.asvwatch import SpeedWatch, Thrusters
 from mpcasv.io.config import DeployConfig, build_controller, load_deploy_config
 from mpcasv.io.deployfeedback import BoatFeedback
 from mpcasv.io.deployphases import ASV_STALE, RUNNING, STARTING, WAITING, Phases
-from mpcasv.io.deploystep import FieldMode, guard_params, known_plans, prepare_controller
+from mpcasv.io.deploystep import (
+    FieldMode,
+    check_local,
+    guard_params,
+    known_plans,
+    prepare_controller,
+)
 from mpcasv.io.imc import RF, reference
 from mpcasv.io.link import ImcLink, Peer
 from mpcasv.io.logs import JsonlWriter, LsfWriter
@@ -266,6 +273,7 @@ class Deploy(Phases, BoatFeedback, FieldMode):
         """Run until ``stop`` is set (or ``duration`` s of the deploy clock); return the
         final counters."""
         await self.link.start()
+        self.t_started = self.clock.now()
         self.event(
             "started",
             controller=self.cfg.controller.name,
@@ -330,7 +338,11 @@ class Deploy(Phases, BoatFeedback, FieldMode):
                    "between_ms_max": round(self.between_ms_max, 3),
                    "asv_stale_events": self.stale_events,
                    "plan_completed": self.plan_done.is_set(), "load": self.load(),
+                   "heard": [p.label for p in self.link.peers if math.isfinite(p.last_heard)],
                    **self.link.counters()}  # fmt: skip
+        why = self.no_decision(self.clock.now() - getattr(self, "t_started", self.clock.now()))
+        if why is not None:
+            summary["no_decision"] = why
         self.jsonl.write({"kind": "summary", "t": self.clock.now(), **summary})
         self.jsonl.close()
         self.lsf.close()
@@ -352,13 +364,13 @@ def run_deploy(config: str | Path, dry_run: bool = False, log_dir: Path | None =
                duration: float | None = None, prepare: bool = False) -> dict:  # fmt: skip
     """Load ``config``, build the controller (compiling what it needs), and run the deploy
     loop until Ctrl-C / SIGTERM (or ``duration``). ``prepare``: stop after building, before
-    any socket is opened."""
-    from mpcasv.outputs import check_output_folder
-
+    any socket is opened. Both first try what the run needs of this host
+    (:func:`~mpcasv.io.deploystep.check_local`: the log folder, the bind address; the run also
+    ``link.port``)."""
     cfg = load_deploy_config(config)
+    check_local(cfg, config, log_dir, port=not prepare)
     if prepare:
         return prepare_controller(cfg)
-    check_output_folder(log_dir or cfg.log.dir, "--log-dir" if log_dir else f"log.dir of {config}")
     deploy = Deploy(cfg, dry_run, log_dir)
 
     async def main() -> dict:

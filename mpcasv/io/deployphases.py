@@ -5,7 +5,9 @@ START FollowReference sent; waits for the answer with the same request id; retri
 ``plan_start_timeout``) -> ``running``; the ASV's state older than ``asv_stale_s`` ->
 ``asv_stale`` (no more References), and back to ``waiting`` when states come back. The
 watchdogs (every 0.25 s of the deploy clock) classify the ASV and every AUV
-(:func:`mpcasv.io.watchdog.auv_status`) and move the phases.
+(:func:`mpcasv.io.watchdog.auv_status`) and move the phases. A run that ends without a
+single decision says why in one line (:meth:`Phases.no_decision`: no vehicle heard, or which
+one never sent a state): ``mpcasv deploy`` then exits 1.
 """
 
 from __future__ import annotations
@@ -121,3 +123,28 @@ class Phases:
                 self.cfg.log.load_report_s):  # fmt: skip
             self.event("load", **self.load(since=self._load_mark))
             self._load_mark = (time.process_time(), time.monotonic(), self.link.datagrams)
+
+    def no_decision(self, seconds: float) -> str | None:
+        """None if the run made a decision; else why not, in one line (the vehicles never
+        heard, or never in state, and where we announce and listen), for a run of ``seconds``
+        of the deploy clock."""
+        if self.steps:
+            return None
+        lk, peers = self.cfg.link, self.link.peers
+        took = f"{round(seconds, 1):g} s"
+        heard = [p.label for p in peers if math.isfinite(p.last_heard)]
+        if not heard:
+            ep = getattr(self.link, "endpoint", None)
+            where = (f"we listen on {ep.address[0]}:{ep.address[1]}" if ep is not None else
+                     "over TCP to " + ", ".join(f"{p.label} {p.spec.tcp}" for p in peers))
+            to = ", ".join(lk.announce_to) or "nowhere (link.announce_to = [])"
+            return (f"no vehicle heard in {took} (of {', '.join(p.label for p in peers)}): is "
+                    "DUNE (or mpcasv sitl) running, and does it hear our Announces "
+                    f"(link.announce_to: {to}; {where})?")  # fmt: skip
+        silent = [p.label for p in peers if p.nav is None]
+        if silent:
+            return (f"no decision in {took}: no state (EstimatedState) accepted from "
+                    f"{', '.join(silent)} (heard: {', '.join(heard)}); see the 'reject' events "
+                    "and counters in deploy.jsonl")  # fmt: skip
+        return (f"no decision in {took}: every vehicle was heard, the deploy stayed in phase "
+                f"{self.phase!r} (see its events in deploy.jsonl)")  # fmt: skip

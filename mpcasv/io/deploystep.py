@@ -85,10 +85,36 @@ def known_plans(cfg: DeployConfig) -> list:
     return [known_plan(a.build_behaviour()) for a in sc.auv]
 
 
+def check_local(cfg: DeployConfig, config, log_dir=None, port: bool = False) -> None:
+    """What the run needs of this host, tried before the controller is built or anything is
+    written or bound for good (``--prepare`` and the run): the log folder (``--log-dir`` or
+    ``log.dir``) can be made and written; ``link.bind`` (and ``link.discovery_bind``) is an
+    address of this host (a UDP socket bound to it and closed at once); with ``port`` (the
+    run) also ``link.port`` on it (a port in use).
+
+    Raises
+    ------
+    ConfigError
+        One line naming ``config``'s field (or ``--log-dir``), the value and the cause.
+    """
+    from mpcasv.io.netcheck import check_bindable
+    from mpcasv.outputs import check_output_folder
+
+    check_output_folder(log_dir or cfg.log.dir, "--log-dir" if log_dir else f"{config}: log.dir")
+    lk = cfg.link
+    if port and lk.transport == "udp" and lk.port:
+        check_bindable(lk.bind, lk.port, f"{config}: link.bind, link.port")
+    else:
+        check_bindable(lk.bind, 0, f"{config}: link.bind")
+    if lk.discovery_bind is not None:
+        check_bindable(lk.discovery_bind, 0, f"{config}: link.discovery_bind")
+
+
 def prepare_controller(cfg: DeployConfig) -> dict:
     """``mpcasv deploy CONFIG --prepare``: build the controller (an MPC's library compiled if
     it is not cached) and, for an MPC, start its solver worker once (it loads the library in a
-    fresh process) and stop it; nothing is bound, nobody contacted."""
+    fresh process) and stop it; nothing is bound, nobody contacted (:func:`check_local` has
+    tried the log folder and the address first)."""
     t0 = time.perf_counter()
     ctl = build_controller(cfg, log=log.warning)
     field = hasattr(ctl, "use_deadline")

@@ -41,6 +41,8 @@ side must use the same factor). SIGUSR1 kills the ASV's IMC system (its DUNE is 
 closed, loops off, the boat drifts) and SIGUSR2 restarts it (a fresh DUNE: no maneuver, no
 known systems); ``--asv-outage T0:T1`` does the same at world times T0 and T1.
 
+The options are checked before anything is written or bound for good
+(:mod:`mpcasv.io.sitloptions`: ranges, distinct ids and names, the address and ports tried).
 Output folder ``--out``: ``sitl.lsf`` (every packet in and out), ``sitl.jsonl`` (events)
 and, on exit (duration reached, SIGINT or SIGTERM), ``run/`` written as ``mpcasv simulate``
 writes a run (``timeseries.parquet``, ``metrics.json``, ``run.json``...; the mode comes
@@ -58,7 +60,6 @@ import math
 import os
 import signal
 import time
-from dataclasses import dataclass
 from pathlib import Path
 
 import imcpy
@@ -71,6 +72,7 @@ from mpcasv.io.imc import BadInput, NavState, decode, estimated_state, udp_servi
 from mpcasv.io.logs import JsonlWriter, LsfWriter
 from mpcasv.io.simvehicle import SimVehicle
 from mpcasv.io.sitlasv import AsvDune
+from mpcasv.io.sitloptions import SitlOptions
 from mpcasv.io.transport import Clock, UdpEndpoint
 from mpcasv.sim.scenario import Scenario
 
@@ -81,33 +83,6 @@ Addr = tuple[str, int]
 ANNOUNCE_S = 10.0
 
 
-@dataclass(frozen=True)
-class SitlOptions:
-    """Everything ``mpcasv sitl`` takes besides the scenario (see its ``--help``)."""
-
-    seed: int = 0
-    speedup: float = 1.0
-    bind: str = "127.0.0.1"
-    discovery_port: int = 30100
-    base_port: int = 0  # vehicle k binds base_port + k (0: any free port)
-    origin: tuple[float, float] = (63.4406, 10.3530)  # deg
-    duration: float | None = None  # world seconds (default: the scenario's)
-    hold: bool = False
-    reaction: float = 0.9  # longest wait for a Reference, in periods
-    lockstep: bool = False  # wait for the answering Reference however long it takes
-    reanchor_m: float = 1000.0
-    asv_name: str = "sitl-asv"
-    asv_id: int = 0x2801
-    auv_id_base: int = 0x2811
-    tcp: bool = False
-    asv_outage: tuple[float, float] | None = None
-    out: Path = Path("runs/sitl")
-    plots: bool = False
-    controller: str | None = None  # for the world's domain (reliable-fix rule, metrics)
-    preset: str | None = None
-    ready_file: Path | None = None
-
-
 class Sitl(AsvDune):
     """The SITL runner (see the module docstring)."""
 
@@ -115,6 +90,7 @@ class Sitl(AsvDune):
         from mpcasv.controllers import make_controller
         from mpcasv.sim.world import World
 
+        opt.check([a.name for a in scenario.auv])  # commands.py checked it already
         self.sc, self.opt = scenario, opt
         self.clock = Clock(opt.speedup)
         self.origin = Origin.from_degrees(*opt.origin)
@@ -129,7 +105,7 @@ class Sitl(AsvDune):
         self.lsf = LsfWriter(opt.out / "sitl.lsf")
         self.jsonl = JsonlWriter(opt.out / "sitl.jsonl")
         self.asv = SimVehicle(self, opt.asv_name, opt.asv_id, "asv", -1)
-        self.auvs = [SimVehicle(self, f"sitl-{a.name}", opt.auv_id_base + k, "auv", k)
+        self.auvs = [SimVehicle(self, opt.auv_name(a.name), opt.auv_id_base + k, "auv", k)
                      for k, a in enumerate(scenario.auv)]  # fmt: skip
         self.vehicles = [self.asv, *self.auvs]
         self.directory: dict[int, list[Addr]] = {}  # who announced to the discovery socket

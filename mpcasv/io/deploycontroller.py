@@ -1,0 +1,139 @@
+"""How the deploy builds and checks its controller from a :class:`~mpcasv.io.config.DeployConfig`:
+the preset overrides, the boat (vessel and acoustic channel), the build (an MPC's library
+compiled now if it is not cached), and the checks made when the configuration is loaded
+(controller, preset, estimator, vessel, an MPC's field budget, the AUV count).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from mpcasv.config import ConfigError
+
+if TYPE_CHECKING:
+    from mpcasv.io.config import DeployConfig
+
+__all__ = ["MIN_SOLVE_MS", "build_controller", "check_controller", "check_field_budget",
+           "controller_overrides", "deploy_boat"]
+
+
+def controller_overrides(cfg: DeployConfig, speed: float | None = None) -> dict[str, Any]:
+    """The preset overrides the deploy builds its controller with: ``controller.overrides``,
+    plus ``speed`` when the learned achievable speed caps it (``controller.speed_feedback``).
+    The vessel is not an override: it is the run's :class:`~mpcasv.controllers.Boat`
+    (:func:`deploy_boat`)."""
+    out = dict(cfg.controller.overrides)
+    if speed is not None:
+        out["speed"] = float(speed)
+    return out
+
+
+def deploy_boat(cfg: DeployConfig):
+    """The boat the deploy drives (``controller.vessel``, default Gretha) with the
+    configuration's acoustic channel (``[acoustics]``): the one vessel the controller plans
+    with; a preset that names another vessel is refused in one line."""
+    import dataclasses
+
+    from mpcasv.controllers import Boat
+
+    return dataclasses.replace(Boat.load(cfg.controller.vessel or "gretha"),
+                               acoustics=cfg.acoustics)  # fmt: skip
+
+
+def build_controller(cfg: DeployConfig, speed: float | None = None, log=print):
+    """The deploy's controller (compiles an MPC's library now if it is not cached: progress
+    on ``log``; the other controllers have nothing to compile, and ``log`` says so)."""
+    import threading
+    import time
+
+    from mpcasv.controllers import controller_kind, make_controller
+
+    c = cfg.controller
+    t0 = time.perf_counter()
+    what = ("nothing to compile (only an MPC has a compiled library)"
+            if controller_kind(c.name).libraries is None else
+            "an MPC compiles its library now if it is not cached (about a minute the first "
+            "time)")  # fmt: skip
+    log(f"preparing controller {c.name} (preset {c.preset or 'default'}"
+        f"{', vessel ' + c.vessel if c.vessel else ''}): {what}")  # fmt: skip
+    done = threading.Event()
+
+    def progress() -> None:  # a line every 10 s while building (compiling)
+        while not done.wait(10.0):
+            log(f"still preparing {c.name}: {time.perf_counter() - t0:.0f} s")
+
+    threading.Thread(target=progress, daemon=True).start()
+    try:
+        ctl = make_controller(c.name, len(cfg.auvs), c.preset, controller_overrides(cfg, speed),
+                              boat=deploy_boat(cfg))  # fmt: skip
+    finally:
+        done.set()
+    if getattr(ctl, "needs_current_oracle", False):  # only a simulator knows the true current
+        raise ConfigError(f"controller {c.name}: current = 'oracle' needs the simulator's true "
+                          "current; in a deployment use 'estimated' or 'zero'")  # fmt: skip
+    log(f"controller {c.name} ready in {time.perf_counter() - t0:.1f} s")
+    return ctl
+
+
+#: the least time (ms) a step's solves can work with in the field: a warm-started solve's
+#: median is 2-7 ms (docs/deploy.md, ``solver.threads``)
+MIN_SOLVE_MS = 1.0
+
+
+def check_field_budget(params) -> None:
+    """Refuse a ``solver.budget_ms`` that can never work in the field: the deadline keeps
+    :data:`~mpcasv.mpc.controller.STEP_RESERVE_S` of every step's budget for the fallback and
+    its command, and the solves need :data:`MIN_SOLVE_MS` of the rest; with less, each solve
+    would be abandoned at once (its worker killed and replaced) and every step would take the
+    fallback. Parameters without ``solver`` (the hybrid controllers) pass.
+
+    Raises
+    ------
+    ConfigError
+        One line with the budget, the reserve and the least budget accepted.
+    """
+    budget = getattr(getattr(params, "solver", None), "budget_ms", None)
+    if budget is None:
+        return
+    from mpcasv.mpc.controller import STEP_RESERVE_S
+
+    reserve = STEP_RESERVE_S * 1e3
+    if budget < reserve + MIN_SOLVE_MS:
+        raise ConfigError(f"solver.budget_ms = {budget:g} ms can never work in the field: a "
+                          f"step keeps {reserve:g} ms of its budget for the fallback, which "
+                          f"leaves the solves {max(budget - reserve, 0.0):g} ms (every step "
+                          f"would take the fallback); give at least {reserve + MIN_SOLVE_MS:g} "
+                          "ms (the presets: 200)")  # fmt: skip
+
+
+def check_controller(cfg: DeployConfig, source: str | Path) -> None:
+    """Validate the controller's name, preset, overrides, vessel, an MPC's field budget
+    (:func:`check_field_budget`) and the AUV count (the controller itself is built by
+    :func:`build_controller`, before any vehicle is contacted)."""
+    from mpcasv.config import ConfigError, resolve
+    from mpcasv.controllers import check_boat, controller_kind, load_preset
+    from mpcasv.estimation import ESTIMATORS
+
+    c = cfg.controller
+    if c.estimator not in ESTIMATORS:
+        raise ConfigError(
+            f"{source}: controller.estimator: unknown {c.estimator!r}; known {sorted(ESTIMATORS)}"
+        )
+    try:
+        kind = controller_kind(c.name)
+        if len(cfg.auvs) > 1 and not kind.multi:
+            raise ConfigError(f"controller {c.name!r} handles one AUV, the config has "
+                              f"{len(cfg.auvs)}")  # fmt: skip
+        if c.vessel is not None:
+            resolve("vessels", c.vessel)
+        params = load_preset(c.name, c.preset, controller_overrides(cfg))
+        check_boat(params, deploy_boat(cfg), str(c.preset or c.name))
+        check_field_budget(params)
+    except ConfigError as exc:
+        raise ConfigError(f"{source}: controller: {exc}") from None
+    if c.speed_feedback and not hasattr(params, "speed"):
+        raise ConfigError(f"{source}: controller.speed_feedback: {c.name!r} has no 'speed' "
+                          "to cap")  # fmt: skip
+    if c.scenario is not None and not Path(c.scenario).is_file():
+        raise ConfigError(f"{source}: controller.scenario: no such file {c.scenario!r}")

@@ -1,0 +1,67 @@
+"""Up-front checks of the local addresses and ports ``mpcasv deploy`` and ``mpcasv sitl`` bind.
+
+A bind that fails only once the run is under way ended in a bare ``Cannot assign requested
+address`` or ``Name or service not known`` (naming neither the option nor the address), an
+``OverflowError`` traceback for a port above 65535, and a half-written output folder. These
+helpers try the bind first (a socket bound and closed at once: nothing stays open) and refuse
+in one line naming the option or field, the value and the cause
+(:class:`mpcasv.config.ConfigError`).
+"""
+
+from __future__ import annotations
+
+import errno
+import ipaddress
+import socket
+
+from mpcasv.config import ConfigError
+
+__all__ = ["PORT_MAX", "check_bindable", "check_ipv4", "check_port"]
+
+PORT_MAX = 65535
+
+
+def check_ipv4(host: str, what: str) -> str:
+    """``host`` if it is an IPv4 literal (``127.0.0.1``, ``0.0.0.0``, ...); else ConfigError
+    naming ``what`` (the option or field) and the value."""
+    try:
+        ipaddress.IPv4Address(host)
+    except ValueError:
+        raise ConfigError(f"{what} {host!r}: not an IPv4 address (e.g. 127.0.0.1, or this "
+                          "host's address on the vehicles' network)") from None  # fmt: skip
+    return host
+
+
+def check_port(port: int, what: str, top: int = PORT_MAX, why: str = "") -> int:
+    """``port`` if it is an integer in ``[0, top]`` (``top`` below 65535 when ports above it
+    are used too, ``why`` says so); else ConfigError naming ``what`` and the value."""
+    if isinstance(port, bool) or not isinstance(port, int) or not 0 <= port <= top:
+        raise ConfigError(f"{what} {port}: a port is an integer in [0, {top}]"
+                          + (f" ({why})" if why else ""))  # fmt: skip
+    return port
+
+
+def check_bindable(host: str, port: int, what: str, kind: int = socket.SOCK_DGRAM) -> None:
+    """Bind a socket (UDP by default) to ``host:port`` and close it at once.
+
+    Raises
+    ------
+    ConfigError
+        One line naming ``what``, the address and the cause: not an IPv4 address, not an
+        address of this host, the port in use, or a privileged port.
+    """
+    check_ipv4(host, what)
+    sock = socket.socket(socket.AF_INET, kind)
+    try:
+        sock.bind((host, port))
+    except OSError as exc:
+        cause = {
+            errno.EADDRNOTAVAIL: f"{host} is not an address of this host (give one of its "
+                                 "own addresses, 127.0.0.1 or 0.0.0.0)",
+            errno.EADDRINUSE: f"port {port} is in use on {host} (another mpcasv or DUNE?)",
+            errno.EACCES: f"port {port} needs privileges (use a port above 1023)",
+        }.get(exc.errno, exc.strerror or str(exc))  # fmt: skip
+        shown = host if port == 0 else f"{host}:{port}"  # port 0: the address alone
+        raise ConfigError(f"{what} {shown}: cannot bind: {cause}") from None
+    finally:
+        sock.close()
