@@ -111,8 +111,20 @@ def parse(cls: type[T], data: Mapping[str, Any], source: str | Path = "<mapping>
     try:
         return TypeAdapter(cls).validate_python(dict(data))
     except ValidationError as exc:
-        lines = [f"{source}: {_format_loc(e['loc'])}: {e['msg']}" for e in exc.errors()]
+        lines = [f"{source}: {_format_loc(e['loc'])}: {_message(e)}" for e in exc.errors()]
+        if len(lines) > MAX_PROBLEMS:  # an empty vessel file listed ~40 missing fields
+            lines = [*lines[:MAX_PROBLEMS], f"... and {len(lines) - MAX_PROBLEMS} more"]
         raise ConfigError("invalid configuration\n  " + "\n  ".join(lines)) from None
+
+
+#: the problems of one file listed at most (the rest counted)
+MAX_PROBLEMS = 6
+
+
+def _message(error: dict) -> str:
+    """Pydantic's message without its "Value error, " prefix (our validators' own words)."""
+    msg = str(error["msg"])
+    return msg.removeprefix("Value error, ") if error.get("type") == "value_error" else msg
 
 
 #: The kinds of mpcasv TOML file: the top-level keys every file of the kind has (and no other

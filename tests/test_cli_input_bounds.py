@@ -198,3 +198,20 @@ def test_a_one_auv_controller_on_several_auvs_is_refused_before_compiling(monkey
                  "--controller", "mpc-single", "--params", "mpc-single", "--quiet",
                  "--out", str(tmp_path / "o")]) == 2
     assert not compiled
+
+
+def test_a_file_of_many_problems_lists_a_few_and_counts_the_rest():
+    """An empty vessel file listed its ~40 missing fields on one line."""
+    from mpcasv.config import MAX_PROBLEMS
+    from mpcasv.models.params import VesselParams
+
+    with pytest.raises(ConfigError) as exc:
+        parse(VesselParams, {"name": "x"}, "v.toml")
+    listed = str(exc.value).count("v.toml:")
+    assert listed == MAX_PROBLEMS and "more" in str(exc.value)
+
+
+def test_our_validators_words_come_without_pydantics_prefix(tmp_path):
+    with pytest.raises(ConfigError) as exc:
+        load_scenario(_scenario(tmp_path, 'name = "demo"', 'name = "a/b"'))
+    assert "Value error" not in str(exc.value) and "used in output paths" in str(exc.value)
