@@ -8,6 +8,7 @@ import time
 
 import pandas as pd
 
+from mpcasv.config import DURATION_MAX
 from mpcasv.experiments.runner import SweepStats, pending_jobs, run_jobs
 from mpcasv.experiments.store import write_results
 from mpcasv.experiments.suite import expand
@@ -16,8 +17,9 @@ from mpcasv.experiments.suite import expand
 def test_a_job_past_its_time_limit_is_ended_and_the_sweep_goes_on(tmp_path):
     quick = expand("quick")
     jobs = sorted(pending_jobs(quick, tmp_path), key=lambda j: j.index)[:3]
-    # one job that would run for days (a 10^7 s scenario): it stands for a hung solve
-    endless = dataclasses.replace(jobs[1], duration=1.0e7, realisation="")  # "": no check
+    # one job that would run for hours (a week of simulated time, the longest a scenario may
+    # last): it stands for a hung solve
+    endless = dataclasses.replace(jobs[1], duration=DURATION_MAX, realisation="")  # "": no check
     # against the expansion's realisation (the duration is part of the realised scenario)
     jobs = [jobs[0], endless, jobs[2]]
     stats = SweepStats("quick", len(jobs), 0)
