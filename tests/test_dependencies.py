@@ -34,6 +34,7 @@ FORBIDDEN = {
 APPLICATIONS = {
     "mpcasv.hybrid.commands": "mpcasv paper-table: runs the simulator",
     "mpcasv.control.commands": "mpcasv tune / identify: command line",
+    "mpcasv.control.identify_cli": "mpcasv identify: command line (its checks and exit codes)",
     "mpcasv.mpc.bench": "mpcasv bench mpc: records closed-loop runs",
     "mpcasv.sim.bench": "mpcasv bench sim",
     "mpcasv.sim.commands": "mpcasv simulate: computes the metrics it writes",
