@@ -9,7 +9,6 @@ runs. Numbers are strict: ``"1.5"`` (a string) is not a number.
 from __future__ import annotations
 
 import dataclasses
-import re
 import tomllib
 from collections.abc import Mapping
 from pathlib import Path
@@ -43,15 +42,6 @@ PosInt = Annotated[int, Strict(), Field(gt=0)]
 SEED_MAX = 2**32 - 1
 #: A seed (suites, scenarios' families): an integer in ``[0, SEED_MAX]``.
 Seed = Annotated[int, Strict(), Field(ge=0, le=SEED_MAX)]
-#: What a name that becomes part of an output path may hold (a scenario's, a suite's)
-NAME_PATTERN = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.+-]*")
-
-
-def _path_name(name: str) -> str:
-    if not NAME_PATTERN.fullmatch(name):
-        raise ValueError(f"{name!r} is used in output paths: letters, digits and _ . + - only, "
-                         "not empty, not starting with . or -")  # fmt: skip
-    return name
 
 
 def _label(name: str) -> str:
@@ -64,9 +54,24 @@ def _label(name: str) -> str:
 #: A name shown in tables and messages (an AUV's): printable, not empty, not padded.
 Label = Annotated[str, Strict(), AfterValidator(_label)]
 
+
+def check_path_name(name: str) -> str:
+    """``name`` if it may be part of an output path (a :data:`PathName`).
+
+    Raises
+    ------
+    ValueError
+        Empty, padded, not printable, holding ``/`` or ``\\``, or starting with ``.``.
+    """
+    _label(name)
+    if "/" in name or "\\" in name or name.startswith("."):
+        raise ValueError(f"{name!r} is used in output paths: no / or \\, not starting with .")
+    return name
+
+
 #: A name used in output paths (``"../x"`` wrote outside the output folder, ``""`` named
-#: nothing): see :data:`NAME_PATTERN`.
-PathName = Annotated[str, Strict(), AfterValidator(_path_name)]
+#: nothing): a :data:`Label` without ``/`` or ``\\``, not starting with ``.``.
+PathName = Annotated[str, Strict(), AfterValidator(check_path_name)]
 
 STRICT = ConfigDict(extra="forbid", arbitrary_types_allowed=False)
 

@@ -75,12 +75,12 @@ def test_a_huge_suite_seed_is_refused_before_any_job(tmp_path):
         load_suite(suite)
 
 
-@pytest.mark.parametrize("name", ["../../escaped", "", ".hidden", "a/b", "-x"])
+@pytest.mark.parametrize("name", ["../../escaped", "", ".hidden", "a/b", "a\\\\b", " x"])
 def test_a_scenario_name_cannot_leave_the_output_folder(name, tmp_path):
     text = DEMO.read_text().replace('name = "demo"', f"name = {name!r}".replace("'", '"'))
     path = tmp_path / "s.toml"
     path.write_text(text)
-    with pytest.raises(ConfigError, match="used in output paths"):
+    with pytest.raises(ConfigError, match="name"):
         load_scenario(path)
 
 

@@ -116,7 +116,7 @@ def check_inputs(args: argparse.Namespace):
         folder of another command or holding another search
         (:func:`~mpcasv.experiments.falsify_folder.check_study_folder`).
     """
-    from mpcasv.config import NAME_PATTERN, ConfigError, check_seed
+    from mpcasv.config import ConfigError, check_path_name, check_seed
     from mpcasv.controllers import load_preset
     from mpcasv.experiments.falsify import SearchSetup, load_family
     from mpcasv.experiments.falsify_folder import check_study_folder, study_identity
@@ -144,9 +144,11 @@ def check_inputs(args: argparse.Namespace):
         raise ConfigError(f"--controller {args.controller}: has no safety domain (no collision "
                           "sphere r_in to measure the margin against): give --separation M")
     worst = f"falsified-{family.name}-{args.controller}-{args.worst}"
-    if not NAME_PATTERN.fullmatch(worst):  # the worst cases' file and folder names
+    try:  # the worst cases' file and folder names
+        check_path_name(worst)
+    except ValueError as exc:
         raise ConfigError(f"--controller {args.controller}: worst cases would be named "
-                          f"{worst!r}, not a file name (letters, digits and _ . + - only)")
+                          f"{worst!r}, not a file name: {exc}") from None
     out = args.out or Path("results") / "falsify" / f"{family.name}-{args.controller}"
     check_output_folder(out)
     check_not_other_output(out, "mpcasv falsify")  # a compare or tune folder: refused

@@ -9,7 +9,7 @@ acoustic dropouts ...). A ``[[polar]]`` entry writes a pair of fields from a bea
 and a radius: ``origin + radius [cos b, sin b]`` (an approach direction, a current vector).
 
 A family is checked whole before any run (:func:`load_family`): its ``name`` is a path name
-(:data:`mpcasv.config.NAME_PATTERN`: it names the default output folder and the worst cases'
+(:data:`mpcasv.config.PathName`: it names the default output folder and the worst cases'
 files ``falsified-<family>-<controller>-<rank>``), and the template with the parameters at
 both ends of every range (the others at their midpoints), and at the box's corners, must be a
 valid scenario (:func:`check_range_ends`): a range reaching past what the scenario accepts
