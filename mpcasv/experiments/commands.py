@@ -4,8 +4,9 @@ from __future__ import annotations
 
 import argparse
 import math
-import os
 from pathlib import Path
+
+from mpcasv.experiments.workers import cpu_count
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -24,9 +25,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--out", type=Path, metavar="DIR",
                    help="output folder DIR (default: results/<suite name>)")  # fmt: skip
-    p.add_argument("--workers", type=int, default=os.cpu_count() or 1,
-                   help="local worker processes (default: the number of cores; 1 runs in this "
-                   "process; at most 4 per core; never more than the jobs to run)")  # fmt: skip
+    p.add_argument("--workers", type=int, default=cpu_count(),
+                   help="local worker processes (default: the cores this process may use; 1 "
+                   "runs in this process; at most 4 per core; never more than the jobs to "
+                   "run)")  # fmt: skip
     p.add_argument("--dask", metavar="ADDRESS",
                    help="run on an existing Dask scheduler (e.g. tcp://host:8786); the workers "
                    "need no file system shared with this machine: each job's row comes back "

@@ -9,8 +9,9 @@
 from __future__ import annotations
 
 import argparse
-import os
 from pathlib import Path
+
+from mpcasv.experiments.workers import cpu_count
 
 
 def _tune_subparsers(sub: argparse._SubParsersAction) -> argparse._SubParsersAction:
@@ -47,7 +48,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--workers",
         type=int,
-        default=os.cpu_count() or 1,
+        default=cpu_count(),
         help="local worker processes (default: one per core; 1: this process; at most 4 per "
         "core; never more than the runs of a batch)",
     )

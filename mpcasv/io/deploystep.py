@@ -87,10 +87,11 @@ def known_plans(cfg: DeployConfig) -> list:
 
 def check_local(cfg: DeployConfig, config, log_dir=None, port: bool = False) -> None:
     """What the run needs of this host, tried before the controller is built or anything is
-    written or bound for good (``--prepare`` and the run): the log folder (``--log-dir`` or
-    ``log.dir``) can be made and written; ``link.bind`` (and ``link.discovery_bind``) is an
-    address of this host (a UDP socket bound to it and closed at once); with ``port`` (the
-    run) also ``link.port`` on it (a port in use).
+    written or bound for good: the log folder (``--log-dir`` or ``log.dir``) can be made and
+    written (``--prepare`` and the run); with ``port`` (the run, not ``--prepare``, which runs
+    at the quay with the boat's network still down: docs/deploy.md) ``link.bind`` (and
+    ``link.discovery_bind``) is an address of this host (a UDP socket bound to it and closed
+    at once) and ``link.port`` on it is free.
 
     Raises
     ------
@@ -101,8 +102,10 @@ def check_local(cfg: DeployConfig, config, log_dir=None, port: bool = False) -> 
     from mpcasv.outputs import check_output_folder
 
     check_output_folder(log_dir or cfg.log.dir, "--log-dir" if log_dir else f"{config}: log.dir")
+    if not port:
+        return
     lk = cfg.link
-    if port and lk.transport == "udp" and lk.port:
+    if lk.transport == "udp" and lk.port:
         check_bindable(lk.bind, lk.port, f"{config}: link.bind, link.port")
     else:
         check_bindable(lk.bind, 0, f"{config}: link.bind")
