@@ -181,9 +181,10 @@ def test_a_range_end_giving_an_invalid_scenario_is_refused(tmp_path, capsys):
     assert not out.exists()
 
 
-def test_ends_valid_alone_but_invalid_together_are_refused(tmp_path, capsys):
+def test_ends_valid_alone_but_invalid_together_are_warned_of(tmp_path, capsys):
     """p_good = extra + base: each at its high end with the other at its midpoint is <= 1,
-    both at their high ends is not."""
+    both at their high ends is not. Said, with the share of such corners, and searched (a
+    review: refusing the whole box refused families valid in 97 % of it)."""
     text = FAMILY.read_text()
     start = text.index('name = "p_good"')
     old = text[start:text.index("\n[", start)]
@@ -191,9 +192,10 @@ def test_ends_valid_alone_but_invalid_together_are_refused(tmp_path, capsys):
            '[[param]]\nname = "extra"\nlow = 0.0\nhigh = 0.5')  # fmt: skip
     family = _family(tmp_path, old, new)
     out = tmp_path / "out"
-    assert _falsify(family, out) == 2
-    _one_error_line(capsys, str(family), "p_good = 0.6 (high)", "extra = 0.5 (high)")
-    assert not out.exists()
+    assert _falsify(family, out) == 0
+    err = capsys.readouterr().err
+    # a quarter of the 2**11 corners: those with p_good and extra both high
+    assert "512 of 2048 corners" in err and "p_good = 0.6 (high), extra = 0.5 (high)" in err, err
 
 
 @pytest.mark.parametrize("bad", ["../escape", "", ".hidden", "a/b"])

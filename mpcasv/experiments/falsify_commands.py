@@ -49,10 +49,14 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from mpcasv.experiments.falsify import BATCH, search, time_ranges, trials_table
+    from mpcasv.experiments.falsify_family import corner_warning
     from mpcasv.experiments.falsify_folder import record_study
     from mpcasv.experiments.workers import pool_size, reduced_note
 
     setup, out, identity = check_inputs(args)  # every refusal: before any trial or file
+    corners = corner_warning(setup.family)
+    if corners:
+        print(corners, file=sys.stderr)
     for r in time_ranges(setup.family):  # partly past the duration: said, the search goes on
         if r.past:  # (after the refusals: a refused command prints its one line only)
             print(r.warning(args.family), file=sys.stderr)

@@ -12,7 +12,8 @@ A family is checked whole before any run (:func:`load_family`): its ``name`` is 
 (:data:`mpcasv.config.PathName`: it names the default output folder and the worst cases'
 files ``falsified-<family>-<controller>-<rank>``), and the template with the parameters at
 both ends of every range (the others at their midpoints), and at the box's corners, must be a
-valid scenario (:func:`check_range_ends`): a range reaching past what the scenario accepts
+valid scenario (:func:`check_range_ends`; invalid corners of the box are warned of,
+:func:`corner_warning`): a range reaching past what the scenario accepts
 (``p_good`` up to 1.5) was found only at its midpoint, and the trials beyond were recorded as
 "invalid scenario" while the search reported success.
 """
@@ -152,18 +153,15 @@ def _cause(exc: ConfigError) -> str:
 
 
 def check_range_ends(family: LoadedFamily) -> None:
-    """Refuse a family whose template is not a valid scenario at an end of some range.
-
-    Each parameter is tried at its low and its high end with the others at their midpoints;
-    then every corner of the box (all parameters at an end, up to :data:`MAX_CORNERS`; for
-    more parameters the all-low and all-high corners), which finds ends that are bad only
-    together (e.g. ``t_attack + rise_after``, a polar radius with its bearing).
+    """Refuse a family whose template is not a valid scenario at an end of some range, each
+    parameter tried at its low and its high end with the others at their midpoints (the
+    corners of the box are only warned of: :func:`corner_warning`).
 
     Raises
     ------
     ConfigError
         One line naming the file, the parameter, the end and its value, and the scenario
-        loader's cause (for a corner: every parameter's end).
+        loader's cause.
     """
     params = family.spec.param
     mid = {p.name: 0.5 * (p.low + p.high) for p in params}
@@ -175,19 +173,36 @@ def check_range_ends(family: LoadedFamily) -> None:
                 raise ConfigError(f"{family.source}: parameter {p.name!r}: its {end} end "
                                   f"{value:g} (the others at their midpoints) gives an "
                                   f"invalid scenario: {_cause(exc)}; narrow its range") from None
+
+
+def corner_warning(family: LoadedFamily) -> str | None:
+    """One line if some corners of the parameter box (all parameters at an end, up to
+    :data:`MAX_CORNERS`; for more parameters the all-low and all-high corners) give an
+    invalid scenario: ends bad only together (e.g. ``t_attack + rise_after``, a polar
+    radius with its bearing, ``d1 <= d2``). Said, not refused: a box cannot describe a
+    search space that is not one (a review: ``d1`` in [300, 700] with ``d2`` in [600, 1000]
+    is invalid in 3 % of the box, and was refused whole); such trials are recorded as
+    invalid scenarios. None when every corner is valid."""
+    params = family.spec.param
     if 2 ** len(params) <= MAX_CORNERS:
-        corners = itertools.product((0, 1), repeat=len(params))
+        corners = list(itertools.product((0, 1), repeat=len(params)))
     else:
-        corners = ((0,) * len(params), (1,) * len(params))
+        corners = [(0,) * len(params), (1,) * len(params)]
+    bad, first = 0, None
     for corner in corners:
         values = {p.name: _ends(p)[i] for p, i in zip(params, corner, strict=True)}
         try:
             candidate(family, values, "a corner of the ranges")
         except ConfigError as exc:
-            where = ", ".join(f"{p.name} = {values[p.name]:g} ({('low', 'high')[i]})"
-                              for p, i in zip(params, corner, strict=True))  # fmt: skip
-            raise ConfigError(f"{family.source}: the parameters' ends together ({where}) give "
-                              f"an invalid scenario: {_cause(exc)}; narrow the ranges") from None
+            bad += 1
+            if first is None:
+                where = ", ".join(f"{p.name} = {values[p.name]:g} ({('low', 'high')[i]})"
+                                  for p, i in zip(params, corner, strict=True))  # fmt: skip
+                first = f"{where}: {_cause(exc)}"
+    if not bad:
+        return None
+    return (f"warning: {family.source}: {bad} of {len(corners)} corners of the parameter box "
+            f"give an invalid scenario (e.g. {first}); trials there are recorded as invalid")
 
 
 @dataclass(frozen=True)
