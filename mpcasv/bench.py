@@ -50,7 +50,7 @@ def run(args: argparse.Namespace) -> int:
     from mpcasv.outputs import check_output_file
 
     given = [k for k in ("repeat", "suite", "steps", "quick", "threads", "step_iter")
-             if getattr(args, k) not in (None, False)]  # fmt: skip
+             if getattr(args, k) is not None and getattr(args, k) is not False]  # 0 is given
     foreign = [k for k in given if k not in OPTIONS[args.which]]
     if foreign:
         opts = ", ".join("--" + k.replace("_", "-") for k in foreign)

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 import tomllib
+import unicodedata
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Annotated, Any, TypeVar
@@ -45,13 +46,17 @@ Seed = Annotated[int, Strict(), Field(ge=0, le=SEED_MAX)]
 
 
 def _label(name: str) -> str:
-    if not name.strip() or name != name.strip() or not name.isprintable():
-        raise ValueError(f"{name!r}: a name is printable, not empty, without leading or "
+    # control characters and line or paragraph separators only (isprintable() also refused a
+    # no-break space and emoji joined with a zero-width joiner)
+    control = any(unicodedata.category(c) in ("Cc", "Zl", "Zp") for c in name)
+    if not name.strip() or name != name.strip() or control:
+        raise ValueError(f"{name!r}: a name is one line, not empty, without leading or "
                          "trailing spaces")  # fmt: skip
     return name
 
 
-#: A name shown in tables and messages (an AUV's): printable, not empty, not padded.
+#: A name shown in tables and messages (an AUV's): one line (no control character), not
+#: empty, not padded.
 Label = Annotated[str, Strict(), AfterValidator(_label)]
 
 
@@ -61,7 +66,7 @@ def check_path_name(name: str) -> str:
     Raises
     ------
     ValueError
-        Empty, padded, not printable, holding ``/`` or ``\\``, or starting with ``.``.
+        Empty, padded, holding a control character, ``/`` or ``\\``, or starting with ``.``.
     """
     _label(name)
     if "/" in name or "\\" in name or name.startswith("."):

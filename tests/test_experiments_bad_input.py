@@ -287,3 +287,24 @@ def test_range_ends_valid_with_some_setting_of_the_others_are_kept(tmp_path):
     ranges = _ranges(tmp_path, '"domain.delta_r" = { low = 5.0, high = 50.0 }\n'
                                '"domain.eps_minus" = { low = 2.0, high = 10.0 }')  # fmt: skip
     assert len(check_presets(load_spec(ranges))) == 1
+
+
+def test_a_family_edited_only_in_its_description_is_the_same_study(tmp_path):
+    """A review: the identity hashed the family's description, so rewording it refused the
+    resumption of the same search."""
+    from mpcasv.controllers.registry import load_preset
+    from mpcasv.experiments.falsify_family import load_family
+    from mpcasv.experiments.falsify_folder import study_identity
+
+    params = load_preset("hybrid-single", None)
+    ids = []
+    for i, text in enumerate(("", 'description = "reworded"\n')):
+        path = _family(tmp_path, "", "", name=f"f{i}.toml")
+        path.write_text(text + path.read_text().replace("\ndescription = ", "\n# ", 1))
+        ids.append(study_identity(load_family(path), "hybrid-single", None, params, 0,
+                                  "margin", None))  # fmt: skip
+    assert ids[0] == ids[1]
+    changed = _family(tmp_path, "duration = 20.0", "duration = 21.0", name="f2.toml")
+    other = study_identity(load_family(changed), "hybrid-single", None, params, 0, "margin",
+                           None)  # fmt: skip
+    assert other["family_sha256"] != ids[0]["family_sha256"]

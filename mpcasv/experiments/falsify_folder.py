@@ -41,7 +41,10 @@ def study_identity(family, controller: str, preset: str | None, params, seed: in
     """
     return {
         "family": family.name,
-        "family_sha256": _sha([dataclasses.asdict(family.spec), family.template]),
+        # its description and the template's name and description say nothing of the search:
+        # editing them keeps the study (a review)
+        "family_sha256": _sha([_without(dataclasses.asdict(family.spec)),
+                               _without(family.template, "name")]),
         "controller": controller,
         "preset": preset or "default",
         "preset_sha256": _sha(dataclasses.asdict(params)),
@@ -49,6 +52,11 @@ def study_identity(family, controller: str, preset: str | None, params, seed: in
         "objective": objective,
         "separation_m": separation,
     }
+
+
+def _without(d: dict, *keys: str) -> dict:
+    """``d`` less its ``description`` (and ``keys``)."""
+    return {k: v for k, v in d.items() if k not in ("description", *keys)}
 
 
 def check_study_folder(out: Path, identity: dict, option: str = "--out") -> None:

@@ -96,7 +96,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--speedup", type=_positive, default=1.0,
                    help="clock factor in [0.01, 1000] (deploy's clock.speedup must "
                    "match)")  # fmt: skip
-    s.add_argument("--bind", default="127.0.0.1", help="local address (default 127.0.0.1)")
+    s.add_argument("--bind", default="127.0.0.1",
+                   help="local IPv4 address (default 127.0.0.1; not a host name)")
     s.add_argument("--discovery-port", type=_port, default=30100,
                    help="port of the discovery socket (0: any free)")  # fmt: skip
     s.add_argument("--base-port", type=_port, default=6002,
