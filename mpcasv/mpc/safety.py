@@ -65,7 +65,8 @@ class Safety:
         self.explored += 1
         limit = P.solver.explore_iter  # None: the warm solve's max_iter
         res = self._solve(p, ocp.guided_rollout(p, j, self._capped(P.speed)), max_iter=limit)
-        if np.all(still >= par["r_lo"]):
+        if np.all(still >= par["r_lo"]) or (res.ok and self._slack(ocp.split(res.w)[1])
+                                             <= STUCK_SLACK):  # fmt: skip
             return res
         # held still, the ASV is (or comes) inside an anti-collision radius: also from the
         # escape guess (full thrust away from the AUVs that threaten it). Heading for the
