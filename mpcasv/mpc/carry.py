@@ -110,3 +110,6 @@ class Carry:
         else:
             self.w_prev, self.lam_prev = None, None  # next step starts from a rollout
         self.w_ok = bool(res.ok) and source in ("plan", "rescue", "as-escape")
+        start, self._alt_start = self._alt_start, None
+        if start is not None and source == "plan":  # an in-step exploration's cheaper
+            self.w_prev, self.lam_prev, self.w_ok = start, None, False  # iterate (safety.py)

@@ -246,6 +246,8 @@ class MPCController(WorldView, Safety, PlanOutput, Targeting, SpeedCap, Carry):
         #: (observation, solved parameters, result) of a step whose exploration is due
         #: (between_steps)
         self._pending: tuple | None = None
+        #: an in-step exploration's unconverged, cheaper iterate: the next step's start
+        self._alt_start: np.ndarray | None = None
         self.rescues = 0  # steps that needed rescue solves (docs/mpc.md, "Fallbacks")
         self.target = 0  # the AUV the terminal cost visits next
         #: when the target was chosen by the rule (s; -inf: not yet, ``committed``)

@@ -51,13 +51,29 @@ class Safety:
         j = self.target
         still = ranges(obs.asv.position, par["pa"])[:, j]  # the ASV held where it is
         # already there; but inside the anti-collision radius (plus margin) at some stage, as
-        # when an AUV rises under the ASV, the guess heading out to the target circle is needed
-        if np.all(still >= par["r_lo"][:, j]) and self.domain.in_reliable_range(still[0],
-                                                                             par["r_t"][j]):
+        # when an AUV rises under the ASV, the guess heading out to the target circle is
+        # needed; and a plan stuck at rest outside the bounds is explored wherever it is (the
+        # target's radius held still says nothing of a current carrying a standby into
+        # another AUV's domain: session 17, 104 s inside, the plan's cost growing)
+        stuck = res.ok and self._stuck(Z, V)
+        if not stuck and np.all(still >= par["r_lo"][:, j]) and self.domain.in_reliable_range(
+                still[0], par["r_t"][j]):
             return None
         self.explored += 1
         limit = P.solver.explore_iter  # None: the warm solve's max_iter
-        return self._solve(p, ocp.guided_rollout(p, j, self._capped(P.speed)), max_iter=limit)
+        guided = self._solve(p, ocp.guided_rollout(p, j, self._capped(P.speed)), max_iter=limit)
+        if not stuck or (guided.ok and self._slack(ocp.split(guided.w)[1]) <= STUCK_SLACK):
+            return guided
+        # stuck, and heading for the target found no plan within the bounds: also from the
+        # escape guess (full thrust away from the AUVs that threaten it). Session 17: at its
+        # target's circle, a current carrying it into another AUV's domain, the warm start
+        # stayed at rest (a local minimum: the rudder has no authority there)
+        esc = escape_guess(ocp, p, P.margin, self.T_cap)
+        if esc is None:
+            return guided
+        alt = self._solve(p, esc, max_iter=limit)
+        best = alt if alt.ok and (not guided.ok or alt.f < guided.f) else guided
+        return dataclasses.replace(best, ms=guided.ms + alt.ms, iters=guided.iters + alt.iters)
 
     def _stuck(self, Z: np.ndarray, V: np.ndarray) -> bool:
         """Whether the plan (``Z``, ``V``: :meth:`OCP.split`) stands by now (the STANDBY rule)
@@ -175,7 +191,16 @@ class Safety:
         here = obs.asv.position
         if (reason is not None or self.t_explore is None
                 or self._transit_reason(here, self.ocp.unpack_par(p)) is Reason.AVOIDANCE):
-            res = self._cheaper(res, self._explore(obs, p_s, res))
+            alt = self._explore(obs, p_s, res)
+            if (alt is not None and not alt.ok and res.ok and alt.f < res.f
+                    and np.all(np.isfinite(alt.w)) and self._stuck(*self.ocp.split(res.w))):
+                # a plan stuck at rest, and an exploration cheaper but at its iteration limit:
+                # not this step's plan, but the next step's start, as after the command
+                # (between_steps). Without it an ASV at rest inside an AUV's domain stayed
+                # there: each exploration stopped at its limit far cheaper, each warm solve
+                # converged back to rest (session 17)
+                self._alt_start = alt.w
+            res = self._cheaper(res, alt)
             reason = self._check(res, p)
         else:
             self._pending = (obs, p_s, res)
