@@ -241,7 +241,11 @@ def test_several_auvs_no_standby_far_from_the_target_for_minutes(tmp_path, case,
     1373 s were dearer over the horizon than the plans that put their start off again, and
     until session 15 only a cheaper one was kept. A late standby's converged exploration is
     now kept (48 s). That run had no step budget (before session 16's presets): without one
-    it still needs the rule; with the presets' budget this seed takes another course."""
+    it needed the rule; with the presets' budget this seed takes another course. Since
+    session 17 (a plan stuck at rest is explored wherever its target is) it takes another
+    course without a budget too: no late standby's dearer exploration is taken any more and
+    its longest standby away from the target is 28 s (scratch /work/s17/f1/c6.py); the rule
+    itself is checked by ``test_a_late_standby_keeps_its_exploration_even_if_dearer``."""
     from mpcasv.controllers import Boat
     from mpcasv.experiments.suite import expand
 
@@ -271,9 +275,6 @@ def test_several_auvs_no_standby_far_from_the_target_for_minutes(tmp_path, case,
     assert longest < 120, f"stood by {longest} s away from the target's reliable range"
     if hooks:
         _same_decisions(ctrl, d, *run(False))
-    else:  # the promise kept: a dearer exploration was taken (before session 15: never)
-        assert ((d["mpc_explore_adopted"] == 1)
-                & (d["mpc_explore_cost"] > d["mpc_cost"])).any()  # fmt: skip
 
 
 @pytest.mark.parametrize(("ok", "finite", "cheaper", "adopted"), [
