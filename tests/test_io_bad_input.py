@@ -247,10 +247,12 @@ def _deploy_stub(steps: int, heard: list[bool], state: list[bool]) -> SimpleName
     peers = [SimpleNamespace(label=f"v{k}", last_heard=0.0 if h else float("-inf"),
                              nav=object() if s else None, spec=SimpleNamespace(tcp=None))
              for k, (h, s) in enumerate(zip(heard, state, strict=True))]  # fmt: skip
-    return SimpleNamespace(
+    stub = SimpleNamespace(
         steps=steps, phase="waiting", cfg=SimpleNamespace(link=SimpleNamespace(announce_to=())),
         link=SimpleNamespace(peers=peers, endpoint=SimpleNamespace(address=("127.0.0.1", 1))),
     )
+    stub.heard = lambda: Phases.heard(stub)
+    return stub
 
 
 def test_no_decision_names_what_was_missing():

@@ -58,13 +58,6 @@ def _count(text: str) -> int:
     return v
 
 
-def _port(text: str) -> int:
-    v = _count(text)
-    if v > 65535:
-        raise argparse.ArgumentTypeError(f"a port is an integer in [0, 65535], got {text}")
-    return v
-
-
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "deploy", help="run a controller on live IMC vehicles (DUNE) or against mpcasv sitl",
@@ -98,9 +91,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                    "match)")  # fmt: skip
     s.add_argument("--bind", default="127.0.0.1",
                    help="local IPv4 address (default 127.0.0.1; not a host name)")
-    s.add_argument("--discovery-port", type=_port, default=30100,
+    s.add_argument("--discovery-port", type=int, default=30100,
                    help="port of the discovery socket (0: any free)")  # fmt: skip
-    s.add_argument("--base-port", type=_port, default=6002,
+    s.add_argument("--base-port", type=int, default=6002,
                    help="vehicle k binds base+k (ASV first); 0: any free ports")  # fmt: skip
     s.add_argument("--origin", type=_pair, default=(63.4406, 10.3530),
                    help="local frame origin 'lat,lon' in degrees (lat in [-90, 90], lon "

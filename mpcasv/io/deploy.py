@@ -94,6 +94,7 @@ class Deploy(Phases, BoatFeedback, FieldMode):
                  solver_factory=None):  # fmt: skip
         self.cfg, self.dry_run = cfg, dry_run
         self.clock = Clock(cfg.clock.speedup)
+        self.t_started = self.clock.now()  # the deploy clock when the link started (run())
         c = cfg.controller
         self.n_auv = len(cfg.auvs)
         self.controller = build_controller(cfg, log=log.info)
@@ -338,9 +339,9 @@ class Deploy(Phases, BoatFeedback, FieldMode):
                    "between_ms_max": round(self.between_ms_max, 3),
                    "asv_stale_events": self.stale_events,
                    "plan_completed": self.plan_done.is_set(), "load": self.load(),
-                   "heard": [p.label for p in self.link.peers if math.isfinite(p.last_heard)],
+                   "heard": self.heard(),
                    **self.link.counters()}  # fmt: skip
-        why = self.no_decision(self.clock.now() - getattr(self, "t_started", self.clock.now()))
+        why = self.no_decision(self.clock.now() - self.t_started)
         if why is not None:
             summary["no_decision"] = why
         self.jsonl.write({"kind": "summary", "t": self.clock.now(), **summary})

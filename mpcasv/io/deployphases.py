@@ -124,6 +124,10 @@ class Phases:
             self.event("load", **self.load(since=self._load_mark))
             self._load_mark = (time.process_time(), time.monotonic(), self.link.datagrams)
 
+    def heard(self) -> list[str]:
+        """The vehicles heard at least once (their labels)."""
+        return [p.label for p in self.link.peers if math.isfinite(p.last_heard)]
+
     def no_decision(self, seconds: float) -> str | None:
         """None if the run made a decision; else why not, in one line (the vehicles never
         heard, or never in state, and where we announce and listen), for a run of ``seconds``
@@ -132,7 +136,7 @@ class Phases:
             return None
         lk, peers = self.cfg.link, self.link.peers
         took = f"{round(seconds, 1):g} s"
-        heard = [p.label for p in peers if math.isfinite(p.last_heard)]
+        heard = self.heard()
         if not heard:
             ep = getattr(self.link, "endpoint", None)
             where = (f"we listen on {ep.address[0]}:{ep.address[1]}" if ep is not None else
