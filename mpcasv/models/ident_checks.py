@@ -35,16 +35,21 @@ def source(df, i: int) -> str:
     return str(df.attrs.get("source", f"log {i + 1}"))
 
 
+def zero_columns(J: np.ndarray) -> np.ndarray:
+    """Which columns of ``J`` have no effect (norm at most ``ZERO_COLUMN`` of the largest; all
+    of them when every column is zero or one is not finite), shape ``(J.shape[1],)``."""
+    norms = np.linalg.norm(J, axis=0)
+    top = norms.max() if norms.size and np.isfinite(norms).all() else 0.0
+    return norms <= ZERO_COLUMN * top if top > 0 else np.ones(norms.shape, bool)
+
+
 def unidentifiable(J: np.ndarray, coeffs) -> tuple[list[str], str]:
     """Coefficients whose columns of ``J`` are zero, else those spanning its (numerical) null
     space; and which of the two (``"zero"``, ``"collinear"``; ``""`` if none)."""
-    norms = np.linalg.norm(J, axis=0)
-    top = norms.max() if norms.size and np.isfinite(norms).all() else 0.0
-    if top <= 0:
-        return list(coeffs), "zero"
-    zero = [c for c, n in zip(coeffs, norms, strict=True) if n <= ZERO_COLUMN * top]
+    zero = [c for c, z in zip(coeffs, zero_columns(J), strict=True) if z]
     if zero:
         return zero, "zero"
+    norms = np.linalg.norm(J, axis=0)
     _, s, Vt = np.linalg.svd(J / norms, full_matrices=False)
     null = Vt[s <= COLLINEAR * s[0]]
     if not len(null):

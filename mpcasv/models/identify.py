@@ -335,7 +335,12 @@ def identify(logs: list[pd.DataFrame], prior: VesselParams, coeffs=IDENTIFIED,
         regression columns are zero or collinear, e.g. a steering set-point that never varies,
         or their 1-sigma is not finite), logs with different time steps, logs too short.
     """
-    from mpcasv.models.ident_checks import check_covariance, check_identifiable, source
+    from mpcasv.models.ident_checks import (
+        check_covariance,
+        check_identifiable,
+        source,
+        zero_columns,
+    )
 
     if not 0.0 < validation < 0.9:
         raise ValueError(f"validation fraction {validation} not in (0, 0.9)")
@@ -391,8 +396,7 @@ def identify(logs: list[pd.DataFrame], prior: VesselParams, coeffs=IDENTIFIED,
     except np.linalg.LinAlgError:
         std = np.full(prob.n, math.inf)
     # pinv gives a coefficient without effect a 1-sigma of 0 %: it is unknown (inf)
-    norms = np.linalg.norm(se.jac[:, : prob.n], axis=0)
-    std = np.where(norms <= 1e-12 * max(norms.max(), 1e-300), math.inf, std)
+    std = np.where(zero_columns(se.jac[:, : prob.n]), math.inf, std)
     rel_std = {c: float(s) for c, s in zip(prob.coeffs, std, strict=True)}
     check_covariance(rel_std, names)
     final = {"train": ext(theta, info_tr), "validation": ext(theta, info_va)}
