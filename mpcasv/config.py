@@ -38,6 +38,8 @@ NonNeg = Annotated[float, Strict(), Field(ge=0)]
 Prob = Annotated[float, Strict(), Field(ge=0, le=1)]
 #: A strictly positive integer.
 PosInt = Annotated[int, Strict(), Field(gt=0)]
+#: An integer >= 0.
+NonNegInt = Annotated[int, Strict(), Field(ge=0)]
 #: The largest seed: every seed is an integer in ``[0, SEED_MAX]`` (Optuna's samplers and the
 #: results table's int64 column take no more; numpy would take any size)
 SEED_MAX = 2**32 - 1

@@ -9,7 +9,8 @@ import pytest
 
 from mpcasv.controllers import Boat, make_controller
 from mpcasv.interface import ASVState, AUVEstimate, Observation
-from mpcasv.mpc.problem import channel_vector, sigmoid
+from mpcasv.mpc.problem import channel_vector
+from mpcasv.mpc.smooth import sigmoid
 from mpcasv.sim.scenario import load_scenario, scenario_with
 from mpcasv.sim.simulator import simulate
 

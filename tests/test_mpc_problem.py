@@ -14,7 +14,8 @@ from mpcasv.controllers import load_preset
 from mpcasv.models.acoustics import AcousticParams
 from mpcasv.mpc.codegen import library_key
 from mpcasv.mpc.derivatives import nlp_functions
-from mpcasv.mpc.problem import NXV, OCP, channel_vector, sigmoid
+from mpcasv.mpc.problem import NXV, OCP, channel_vector
+from mpcasv.mpc.smooth import sigmoid
 
 
 @pytest.fixture(scope="module")
@@ -150,8 +151,13 @@ def test_expected_fix_age_relaxes_when_quiet_in_range_and_grows_otherwise(single
 @pytest.mark.parametrize("solver", ["fatrop", "ipopt", "qp"])
 def test_stagewise_derivatives_equal_casadis_differentiation_of_the_nlp(request, which, solver):
     ocp: OCP = request.getfixturevalue(which)
+    check_stagewise_derivatives(ocp, params_for(ocp, seed=2), solver)
+
+
+def check_stagewise_derivatives(ocp: OCP, p: np.ndarray, solver: str) -> None:
+    """The compiled library's functions for ``solver`` (evaluated by CasADi's virtual machine)
+    against CasADi's differentiation of the whole NLP, at a perturbed rollout for ``p``."""
     rng = np.random.default_rng(1)
-    p = params_for(ocp, seed=2)
     w = ocp.scaled(ocp.rollout(p, rates=rng.normal(0, 0.2, (ocp.dims.N, 2))))
     w += rng.normal(0, 0.01, w.size)
     lam = rng.normal(0, 1, ocp.dims.ng)

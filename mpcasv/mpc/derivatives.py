@@ -18,14 +18,16 @@ import casadi as ca
 from mpcasv.mpc.problem import OCP
 
 
-def _stage_functions(ocp: OCP) -> dict[str, ca.Function]:
+def _stage_functions(ocp: OCP, stage: ca.Function, tag: str = "") -> dict[str, ca.Function]:
+    """One stage's derivative functions (``stage``: :attr:`OCP.stage` or, tagged ``"t"``, the
+    coarse tail's :attr:`OCP.stage_tail`) and the terminal cost's."""
     d = ocp.dims
     nx = d.nx
     z, v, z1 = ca.SX.sym("z", nx), ca.SX.sym("v", d.nu), ca.SX.sym("z1", nx)
     sp, sp1 = ca.SX.sym("sp", d.n_stage_par), ca.SX.sym("sp1", d.n_stage_par)
     gp = ca.SX.sym("gp", d.n_global_par)
     lf, lg = ca.SX.sym("lf"), ca.SX.sym("lg", nx + d.nh)
-    L, g = ocp.stage(z, v, z1, sp, sp1, gp)
+    L, g = stage(z, v, z1, sp, sp1, gp)
     zv = ca.vertcat(z, v)
     H, grad_lag = ca.hessian(lf * L + ca.dot(lg, g), zv)
     sp0 = ca.SX.sym("sp0", d.n_stage_par)
@@ -33,11 +35,11 @@ def _stage_functions(ocp: OCP) -> dict[str, ca.Function]:
     HN, dLN = ca.hessian(LN, z)
     a = [z, v, z1, sp, sp1, gp]
     return {
-        "grad": ca.Function("st_grad", a, [L, ca.gradient(L, zv)]),
-        "jac": ca.Function("st_jac", a, [g, ca.jacobian(g, zv)]),
-        "hess": ca.Function("st_hess", [*a, lf, lg], [grad_lag, H]),
+        "grad": ca.Function(f"st{tag}_grad", a, [L, ca.gradient(L, zv)]),
+        "jac": ca.Function(f"st{tag}_jac", a, [g, ca.jacobian(g, zv)]),
+        "hess": ca.Function(f"st{tag}_hess", [*a, lf, lg], [grad_lag, H]),
         "all": ca.Function(
-            "st_all",
+            f"st{tag}_all",
             [*a, lg],
             [L, ca.gradient(L, zv), g, ca.jacobian(g, zv), ca.substitute(H, lf, 1.0)],
         ),  # fmt: skip
@@ -69,11 +71,20 @@ def nlp_functions(ocp: OCP, solver: str, threads: int = 1) -> dict[str, ca.Funct
     d = ocp.dims
     N, nx, nb, nw = d.N, d.nx, d.nb, d.nw
     ngk = nx + d.nh
-    S = _stage_functions(ocp)
+    S = _stage_functions(ocp, ocp.stage)
+    # the coarse tail's stages (M1t): their own functions, else the fine ones (not used)
+    St = _stage_functions(ocp, ocp.stage_tail, "t") if d.n_tail else S
     x, p = ca.MX.sym("x", nw), ca.MX.sym("p", d.npar)
     lam_f, lam_g = ca.MX.sym("lam_f"), ca.MX.sym("lam_g", d.ng)
     args, zN, targs = ocp.horizon_args(x, p)
-    Ls, Gs = _over_horizon(ocp.stage, N, threads)(*args)
+
+    def over(key, extra=(), mapper=lambda f, n: _over_horizon(f, n, threads)):
+        """Stage function ``key`` over the horizon (fine and coarse stages)."""
+        if key == "stage":
+            return ocp.over_stages(ocp.stage, ocp.stage_tail, args, mapper)
+        return ocp.over_stages(S[key], St[key], [*args, *extra], mapper)
+
+    Ls, Gs = over("stage")
     f = ca.sum2(Ls) + ocp.term(zN, *targs)
     g = ca.vec(Gs)
     # +I on z_{k+1} in the gap-closing rows: a constant block
@@ -93,11 +104,11 @@ def nlp_functions(ocp: OCP, solver: str, threads: int = 1) -> dict[str, ca.Funct
     out: dict[str, ca.Function] = {}
     xp, xpl = ["x", "p"], ["x", "p", "lam_f", "lam_g"]
     if solver in ("fatrop", "ipopt"):
-        _, dLs = _over_horizon(S["grad"], N, threads)(*args)
+        _, dLs = over("grad")
         LN, dLN = S["term_grad"](zN, *targs)
         grad_f = ca.vertcat(ca.vec(dLs), dLN)
-        g2, Js = _over_horizon(S["jac"], N, threads)(*args)
-        gls, Hs = _over_horizon(S["hess"], N, threads)(*args, ca.repmat(lam_f, 1, N), LG)
+        g2, Js = over("jac")
+        gls, Hs = over("hess", (ca.repmat(lam_f, 1, N), LG))
         grad_lag = ca.vertcat(ca.vec(gls), lam_f * dLN) + ca.mtimes(E.T, lam_g)
         H = hess_of(Hs, lam_f * S["term_hess"](zN, *targs))
         out["nlp"] = ca.Function("nlp", [x, p], [f, g], xp, ["f", "g"])
@@ -120,7 +131,7 @@ def nlp_functions(ocp: OCP, solver: str, threads: int = 1) -> dict[str, ca.Funct
             out["nlp_hess_l"] = ca.Function("nlp_hess_l", [x, p, lam_f, lam_g], [ca.triu(H)],
                                             xpl, ["triu_hess_gamma_x_x"])  # fmt: skip
     elif solver == "qp":
-        Ls2, dLs, g2, Js, Hs = S["all"].map(N)(*args, LG)
+        Ls2, dLs, g2, Js, Hs = over("all", (LG,), lambda f, n: f.map(n))
         LN, dLN = S["term_grad"](zN, *targs)
         out["qp_eval"] = ca.Function(
             "qp_eval", [x, p, lam_g],

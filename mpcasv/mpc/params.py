@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from typing import Literal
 
-from mpcasv.config import NonNeg, Pos, PosInt, frozen
+from mpcasv.config import NonNeg, NonNegInt, Pos, PosInt, frozen
 from mpcasv.estimation.current import CurrentObserverParams
 from mpcasv.hybrid.avoidance import AvoidanceParams
 from mpcasv.hybrid.domains import DomainParams
@@ -36,12 +36,21 @@ class HorizonParams:
     for a course-unstable hull (:func:`~mpcasv.models.envelope.course_instability`: Fossen's
     Otter, whose yaw an open-loop plan cannot hold over 4-s stages), else ``"rudder"``
     (Gretha, dune-otter: the plan as before).
+
+    ``tail_N`` coarse stages of ``tail_m * dt`` s each follow the ``N`` fine ones (issue 16
+    item 2, docs/mpc.md "Long horizon", eq. M1t): a horizon of ``(N + tail_N tail_m) dt`` s
+    that reaches the next AUV. A coarse stage holds its command rates (move blocking) and is
+    integrated as ``tail_m`` fine stages, so the model and its accuracy are the same; its
+    cost is the sum of theirs, its range constraints are at its start only. ``tail_N = 0``
+    (the presets): the uniform horizon, unchanged.
     """
 
     N: PosInt = 15
     dt: Pos = 4.0
     n_sub: PosInt = 4
     steering: Literal["auto", "rudder", "heading"] = "auto"
+    tail_N: NonNegInt = 0
+    tail_m: PosInt = 5
 
 
 @frozen

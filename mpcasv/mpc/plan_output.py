@@ -22,7 +22,7 @@ class PlanOutput:
     def _store_plan(self, t: float, w: np.ndarray) -> None:
         ocp = self.ocp
         Z, V = ocp.split(w)
-        ts = t + ocp.dt * np.arange(Z.shape[0])
+        ts = t + ocp.t_stage
         K = ocp.dims.n_auv
         delta = (np.asarray(ocp.plan_steering(Z[:, :NXV].T)).ravel() if ocp.heading
                  else Z[:, 7].copy())  # fmt: skip
@@ -36,7 +36,7 @@ class PlanOutput:
         """STANDBY or TRANSIT from the plan (see the module docstring)."""
         P, ocp = self.params, self.ocp
         Z, _ = ocp.split(w)
-        ts = ocp.dt * np.arange(Z.shape[0])
+        ts = ocp.t_stage
         par = ocp.unpack_par(p)
         dist = ranges(Z[:, 0:2], par["pa"])
         served = int(np.argmin(dist[-1] - par["r_t"]))

@@ -50,13 +50,10 @@ from mpcasv.mpc.layout import (  # the parameter vector's layout (re-exported na
     channel_vector,  # noqa: F401
 )
 from mpcasv.mpc.params import MPCParams
-from mpcasv.mpc.smooth import D_EPS, SOFT_T, SOFTPLUS_M, W_T_OF_T_ON, sigmoid, softplus
+from mpcasv.mpc.smooth import D_EPS, SOFT_T, W_T_OF_T_ON, softplus
+from mpcasv.mpc.stage_terms import StageTerms
 from mpcasv.mpc.variance import N_NAV, VarianceObjective, n_ext
 from mpcasv.mpc.warmstart import WarmStart
-
-#: eq. M7s's smoothing: of the square root (m^2/s), of the room inside the bound (m^2), of
-#: the sign of the approach d.v (m^2/s) and of the AUV's squared speed (m^2/s^2)
-STAND_EPS, STAND_ROOM, STAND_DV, STAND_V2 = 1.0, 100.0, 10.0, 1e-4
 
 
 @dataclass(frozen=True)
@@ -68,6 +65,7 @@ class Dims:
     outer: bool  # single AUV: the donut's outer bound is a (soft) constraint
     epi: bool  # worst-age epigraph variable present
     n_ext: int = 0  # objective "variance": its parameter block (mpcasv.mpc.variance.n_ext)
+    n_tail: int = 0  # of the N stages, the last n_tail are coarse (M1t; horizon.tail_N)
 
     @property
     def nx(self) -> int:
@@ -107,7 +105,7 @@ class Dims:
         return 2 + 3 * self.n_auv + NCH + NW + self.n_ext
 
 
-class OCP(PlanDynamics, WarmStart, VarianceObjective, ParamLayout):
+class OCP(StageTerms, PlanDynamics, WarmStart, VarianceObjective, ParamLayout):
     """The problem for ``n_auv`` AUVs (built once; every per-step quantity is a parameter).
 
     Parameters
@@ -160,9 +158,15 @@ class OCP(PlanDynamics, WarmStart, VarianceObjective, ParamLayout):
         self.heading = steering == "heading"
         self.dd_max = R_REF_MAX if self.heading else vp.delta_rate_max
         self.variance = params.objective == "variance"
-        self.dims = Dims(hz.N, n_auv, outer, wt.worst > 0,
-                         n_ext(n_auv) if self.variance else 0)  # fmt: skip
+        self.dims = Dims(hz.N + hz.tail_N, n_auv, outer, wt.worst > 0,
+                         n_ext(n_auv) if self.variance else 0, hz.tail_N)  # fmt: skip
+        #: the fine stages' length (s); the coarse tail's are ``horizon.tail_m`` times it
         self.dt = hz.dt
+        self.tail_m = hz.tail_m
+        #: each stage's length (s, shape (N,)) and the stages' times from now (s, (N + 1,))
+        self.dts = np.r_[np.full(hz.N, hz.dt), np.full(hz.tail_N, hz.tail_m * hz.dt)]
+        self.t_stage = (hz.dt * np.arange(hz.N + 1) if not hz.tail_N
+                        else np.r_[0.0, np.cumsum(self.dts)])  # fmt: skip
         self._build()
 
     def _build(self) -> None:
@@ -187,32 +191,35 @@ class OCP(PlanDynamics, WarmStart, VarianceObjective, ParamLayout):
             W = dict(zip(WEIGHT_NAMES, ca.vertsplit(gp[o_w:]), strict=True))
         target = gp[2 + 2 * K : 2 + 3 * K]  # one-hot: the AUV the tail visits next
         ch = gp[2 + 3 * K : 2 + 3 * K + NCH]
-        dep, dep1 = sp[4 * K : 5 * K], sp1[4 * K : 5 * K]
-        qk = ca.vertcat(c, sp[0 : 2 * K], (sp1[0 : 2 * K] - sp[0 : 2 * K]) / dt, dep,
-                        (dep1 - dep) / dt, d_fix, ch)  # fmt: skip
-        if self.variance:
-            qk = ca.vertcat(qk, ext[0:N_NAV])
+        def q_of(spa, spb):  # F's parameters over a stage of dt s from spa to spb
+            dep, dep1 = spa[4 * K : 5 * K], spb[4 * K : 5 * K]
+            q = ca.vertcat(c, spa[0 : 2 * K], (spb[0 : 2 * K] - spa[0 : 2 * K]) / dt, dep,
+                           (dep1 - dep) / dt, d_fix, ch)  # fmt: skip
+            return ca.vertcat(q, ext[0:N_NAV]) if self.variance else q
+
         h, lbh, ubh = self._path(z, v[2 : 2 + K], v[2 + K] if d.epi else None, sp)
-        T, u = z[6], z[3]
-        L = W["age"] * ca.sum1(z[NXV : NXV + K])  # (M4)
-        if d.epi:
-            L += W["worst"] * v[2 + K]
-        L += W["thrust"] * T + W["power"] * T * u
-        L += W["dT"] * v[0] ** 2 + W["ddelta"] * v[1] ** 2
-        L += W["slack"] * ca.sum1(v[2 : 2 + K])
-        # (M4b) thrusts the execution level cannot hold (between the propeller-on threshold and
-        # its transit thrust floor): without this the plan "creeps" quietly at a few newtons
-        w_T = self.w_T
-        running = sigmoid((T - self.T_on) / w_T)  # ~1 while the propeller runs
-        L += W["deadband"] * running * sigmoid((self.T_floor - T) / w_T)
-        L += W["running"] * running  # (M4c) propeller time (noise, wear), whatever the thrust
-        if self.variance:
-            L += self._variance_stage(z, sp, ext)  # (M4n, M4d)
+        L = self._stage_cost(z, v, sp, W, ext if self.variance else None)
         #: stage k: (z_k, v_k, z_{k+1}, stage params k and k+1, global params) -> (dt L_k, g_k)
         self.stage_phys = ca.Function(
-            "stage", [z, v, z1, sp, sp1, gp], [dt * L, ca.vertcat(z1 - self.F(z, v[0:2], qk), h)],
+            "stage", [z, v, z1, sp, sp1, gp],
+            [dt * L, ca.vertcat(z1 - self.F(z, v[0:2], q_of(sp, sp1)), h)],
             ["z", "v", "z1", "sp", "sp1", "gp"], ["L", "g"],
         )  # fmt: skip
+        if d.n_tail:  # (M1t) a coarse stage: tail_m fine stages, the rates held
+            m_t = hz.tail_m
+            # F as a call, not inlined: its code and derivatives once, not tail_m times (an
+            # inlined tail took 5 times as long to compile)
+            F_call = ca.Function("F_tail", [z, wv, qs], [zn],
+                                 {"never_inline": True})  # fmt: skip
+            zj, Lt, spj = z, 0, sp
+            for j in range(m_t):
+                spn = sp + (j + 1) / m_t * (sp1 - sp)  # stage parameters interpolated
+                Lt += dt * self._stage_cost(zj, v, spj, W, ext if self.variance else None)
+                zj, spj = F_call(zj, v[0:2], q_of(spj, spn)), spn
+            self.stage_tail_phys = ca.Function(
+                "stage_tail", [z, v, z1, sp, sp1, gp], [Lt, ca.vertcat(z1 - zj, h)],
+                ["z", "v", "z1", "sp", "sp1", "gp"], ["L", "g"],
+            )  # fmt: skip
         tau, t_go, T_tail = z[NXV : NXV + K], self._t_go(z, sp, gp), W["tail"]
         if self.variance:  # (M7c) wait or go, the AUVs' variance over the tail
             LN = self._tail_cost(z, gp[2 + K : 2 + 2 * K], d_fix, target, ch, W, ext)
@@ -224,7 +231,7 @@ class OCP(PlanDynamics, WarmStart, VarianceObjective, ParamLayout):
             LN = W["age"] * (T_tail * ca.sum1(tau) - ca.dot(target, saved))
         sp0 = ca.SX.sym("sp0", d.n_stage_par)  # stage N - 1's parameters: the AUV's velocity
         if d.outer:  # (M7s) one AUV: the standing time the plan's end leaves, short of a horizon
-            short = N * dt - self._standing_time(z, sp0, sp, dt)
+            short = float(self.t_stage[-1]) - self._standing_time(z, sp0, sp, float(self.dts[-1]))
             LN += W["stand"] * W["age"] * SOFT_T * softplus(short / SOFT_T)
         #: terminal stage: (z_N, stage params N - 1 and N, global params) -> L_N
         self.term_phys = ca.Function("term", [z, sp0, sp, gp], [LN], ["z", "sp0", "sp", "gp"],
@@ -238,6 +245,14 @@ class OCP(PlanDynamics, WarmStart, VarianceObjective, ParamLayout):
         #: stage k in scaled variables: (z_k, v_k, z_{k+1}, sp_k, sp_{k+1}, gp) -> (dt L_k, g_k)
         self.stage = ca.Function("stage_s", [zs, vs, z1s, sp, sp1, gp], [Ls, gs / s_g],
                                  ["z", "v", "z1", "sp", "sp1", "gp"], ["L", "g"])  # fmt: skip
+        #: a coarse stage (M1t) in scaled variables; None without a tail
+        self.stage_tail = None
+        if d.n_tail:
+            Lt, gt = self.stage_tail_phys(self.s_z * zs, self.s_v * vs, self.s_z * z1s, sp, sp1,
+                                          gp)  # fmt: skip
+            self.stage_tail = ca.Function("stage_tail_s", [zs, vs, z1s, sp, sp1, gp],
+                                          [Lt, gt / s_g], ["z", "v", "z1", "sp", "sp1", "gp"],
+                                          ["L", "g"])  # fmt: skip
         #: terminal cost in scaled variables
         self.term = ca.Function("term_s", [zs, sp0, sp, gp],
                                 [self.term_phys(self.s_z * zs, sp0, sp, gp)],
@@ -248,7 +263,7 @@ class OCP(PlanDynamics, WarmStart, VarianceObjective, ParamLayout):
         p = ca.MX.sym("p", d.npar)
         wx = ca.MX.sym("w", d.nw)
         args, zN, targs = self.horizon_args(wx, p)
-        Ls, Gs = self.stage.map(N)(*args)
+        Ls, Gs = self.over_stages(self.stage, self.stage_tail, args)
         self.nlp = {"x": wx, "p": p, "f": ca.sum2(Ls) + self.term(zN, *targs), "g": ca.vec(Gs)}
         self.lbg = np.tile(np.r_[np.zeros(nx), lbh], N)
         self.ubg = np.tile(np.r_[np.zeros(nx), ubh], N)
@@ -311,78 +326,18 @@ class OCP(PlanDynamics, WarmStart, VarianceObjective, ParamLayout):
         args = [Zs, Vs, ca.horzcat(Zs[:, 1:], zN), SP[:, :N], SP[:, 1:], ca.repmat(gpx, 1, N)]
         return args, zN, [SP[:, N - 1], SP[:, N], gpx]
 
-    def _dist(self, z, sp):
-        """Smooth horizontal ranges from the ASV to each AUV at one stage (m)."""
-        K = self.dims.n_auv
-        return [ca.sqrt((z[0] - sp[2 * i]) ** 2 + (z[1] - sp[2 * i + 1]) ** 2 + D_EPS**2)
-                for i in range(K)]  # fmt: skip
-
-    def _standing_time(self, z, sp0, sp, dt):
-        """How long (s) the ASV could stand still at ``z``'s position before the AUV, moving on
-        at its velocity over the last stage (``sp0`` -> ``sp``, ``dt`` s), leaves the donut
-        (eq. M7s; one AUV): it reaches the outer bound ``r_hi`` (the root ``t >= 0`` of
-        ``|d - v t| = r_hi``, ``d`` the ASV's offset from the AUV, in the form
-        ``room / (sqrt((d.v)^2 + |v|^2 room) - d.v)`` with ``room = r_hi^2 - |d|^2``: no
-        ``1 / |v|^2``, so a still AUV gives a very long time) or, first, if its path passes
-        within the inner bound ``r_lo``, it enters the collision domain (the first root of
-        ``|d - v t| = r_lo``, :meth:`_entry_time`). ``room`` enters as a softplus
-        (``STAND_ROOM`` m^2), so the time is positive and smooth everywhere and about 0 outside
-        the bound (where the donut's slack acts)."""
-        d = z[0:2] - sp[0:2]
-        v = (sp[0:2] - sp0[0:2]) / dt
-        r_lo, r_hi = sp[2], sp[3]  # the single AUV's bounds (layout: pa (2), r_lo, r_hi, depth)
-        room = STAND_ROOM * softplus((r_hi**2 - ca.sumsqr(d)) / STAND_ROOM)
-        dv = ca.dot(d, v)
-        t_out = room / (ca.sqrt(dv**2 + ca.sumsqr(v) * room + STAND_EPS**2) - dv)  # (M7s)
-        t_in, enters = self._entry_time(d, v, r_lo)
-        return t_out - enters * SOFT_T * softplus((t_out - t_in) / SOFT_T)  # ~min(t_out, t_in)
-
-    @staticmethod
-    def _entry_time(d, v, r_lo):
-        """When (s) an AUV at offset ``-d`` (m) from the ASV, moving at ``v`` (m/s), enters the
-        inner bound ``r_lo`` (m) around a still ASV, and a smooth indicator (0..1) that its
-        path does (approaching, ``d.v > 0``, with a miss distance below ``r_lo``; eq. M7s):
-        ``t_in = (|d|^2 - r_lo^2) / (d.v + sqrt(disc))``, ``disc = (d.v)^2 - |v|^2 (|d|^2 -
-        r_lo^2)``. The squares are softplus-smoothed (``STAND_ROOM`` m^2), the sign of ``d.v``
-        over ``STAND_DV`` m^2/s."""
-        dv, vv, dd = ca.dot(d, v), ca.sumsqr(v), ca.sumsqr(d)
-        outside = dd - r_lo**2
-        disc = dv**2 - vv * outside
-        miss = dv**2 / (vv + STAND_V2) - outside  # r_lo^2 - miss distance^2, m^2
-        enters = sigmoid(miss / STAND_ROOM) * sigmoid(dv / STAND_DV)
-        dv_pos = STAND_DV * softplus(dv / STAND_DV)
-        root = ca.sqrt(STAND_ROOM * softplus(disc / STAND_ROOM) + STAND_EPS**2)
-        t_in = STAND_ROOM * softplus(outside / STAND_ROOM) / (dv_pos + root)
-        return t_in, enters
-
-    def _t_go(self, z, sp, gp):
-        """Time to reach each AUV's target circle from the stage's position (s, smooth)."""
-        K = self.dims.n_auv
-        r_t = gp[2 + K : 2 + 2 * K]
-        inv_U = gp[2 + 3 * K + NCH + WEIGHT_NAMES.index("inv_U_go")]
-        return ca.vertcat(*[SOFTPLUS_M * softplus((d - r_t[i]) / SOFTPLUS_M) * inv_U
-                            for i, d in enumerate(self._dist(z, sp))])  # fmt: skip
-
-    def _path(self, z, slack, m, sp):
-        """Path constraints ``h`` of one stage and their bounds (M5, M6)."""
-        K, d = self.dims.n_auv, self.dims
-        r_lo, r_hi = sp[2 * K : 3 * K], sp[3 * K : 4 * K]
-        dist = self._dist(z, sp)
-        h, lb, ub = [], [], []
-        for i in range(K):
-            h.append(dist[i] + slack[i] - r_lo[i])
-            lb.append(0.0)
-            ub.append(math.inf)
-            if d.outer:
-                h.append(dist[i] - slack[i] - r_hi[i])
-                lb.append(-math.inf)
-                ub.append(0.0)
-        if d.epi:
-            for i in range(K):
-                h.append(m - z[NXV + i])
-                lb.append(0.0)
-                ub.append(math.inf)
-        return ca.vertcat(*h), np.array(lb), np.array(ub)
+    def over_stages(self, fine: ca.Function, tail: ca.Function | None, args: list,
+                    mapper=None) -> list:
+        """``fine`` evaluated on the fine stages' columns of ``args`` (each with ``N``
+        columns) and ``tail`` on the coarse tail's (M1t), the outputs side by side (``N``
+        columns). ``mapper(f, n)`` maps a function over ``n`` stages (default ``f.map(n)``)."""
+        mapper = mapper or (lambda f, n: f.map(n))
+        N, nt = self.dims.N, self.dims.n_tail
+        if not nt:
+            return mapper(fine, N)(*args)
+        out_f = mapper(fine, N - nt)(*[a[:, : N - nt] for a in args])
+        out_t = mapper(tail, nt)(*[a[:, N - nt :] for a in args])
+        return [ca.horzcat(a, b) for a, b in zip(out_f, out_t, strict=True)]
 
     def bounds(self, p: np.ndarray, T_cap: float | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Scaled ``lbx, ubx`` with stage 0 fixed to the initial state in ``p``; with a thrust
@@ -403,7 +358,7 @@ class OCP(PlanDynamics, WarmStart, VarianceObjective, ParamLayout):
         from now, within ``[T_min, T_max]``. A thrust ``T_0`` above the cap comes down at the
         plan's rate limit ``dT_max`` (an immediate cap would be infeasible); plus 1e-6 N so
         that the ramp at exactly the rate limit stays inside after rounding."""
-        t = self.dt * np.arange(1, self.dims.N + 1)  # stage k's time (uniform stages)
+        t = self.t_stage[1:]  # stage k's time from now
         ub = np.maximum(T_cap, T_0 - self.dT_max * t + 1e-6)
         return np.clip(ub, self.vessel.T_min, self.vessel.T_max)
 

@@ -38,7 +38,8 @@ class OptiReference:
         J = 0
         opti.subject_to(Z[0] == P[:nx] / ocp.s_z)
         for k in range(N):
-            L, g = ocp.stage(Z[k], V[k], Z[k + 1], SP[:, k], SP[:, k + 1], gp)
+            stage = ocp.stage if k < N - d.n_tail else ocp.stage_tail  # (M1t) coarse tail
+            L, g = stage(Z[k], V[k], Z[k + 1], SP[:, k], SP[:, k + 1], gp)
             J += L
             opti.subject_to(g[:nx] == 0)
             h, lo, hi = g[nx:], ocp.lbg[nx : nx + d.nh], ocp.ubg[nx : nx + d.nh]

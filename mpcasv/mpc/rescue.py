@@ -92,7 +92,7 @@ def funnel(ocp: OCP, p: np.ndarray, max_gap: float, speed: float) -> np.ndarray:
     p = np.array(p, float)
     par = ocp.unpack_par(p)  # views into p
     d0 = np.hypot(*(par["pa"][0] - par["z0"][0:2]).T)
-    t = ocp.dt * np.arange(ocp.dims.N + 1)[:, None]
+    t = ocp.t_stage[:, None]
     out = d0 - par["r_hi"][0]
     inn = par["r_lo"][0] - d0
     if np.any(out > max_gap):

@@ -82,10 +82,21 @@ class WarmStart:
         Z = np.zeros((d.N + 1, d.nx))
         Z[0] = par["z0"]
         for k in range(d.N):
-            Z[k + 1] = np.array(self.F(Z[k], rates[k], self._q(par, k))).ravel()
+            Z[k + 1] = self._advance(Z[k], rates[k], par, k)
         V = np.zeros((d.N, d.nu))
         V[:, 0:2] = rates
         return self.fill_slacks(Z, V, p)
+
+    def _advance(self, z: np.ndarray, rate: np.ndarray, par: dict, k: int) -> np.ndarray:
+        """The plan model's state after stage ``k`` from ``z`` under the rates ``rate`` (2,): a
+        coarse stage (M1t) is ``tail_m`` fine steps, the rates held, on interpolated
+        parameters (as :meth:`OCP._build`'s ``stage_tail``)."""
+        if k < self.dims.N - self.dims.n_tail:
+            return np.array(self.F(z, rate, self._q(par, k))).ravel()
+        m = self.tail_m
+        for j in range(m):
+            z = np.array(self.F(z, rate, self._q(par, k, (j / m, (j + 1) / m)))).ravel()
+        return z
 
     def guided_rollout(self, p: np.ndarray, auv: int, speed: float) -> np.ndarray:
         """A primal guess that heads for AUV ``auv``'s target circle at ``speed`` and stops
@@ -123,7 +134,7 @@ class WarmStart:
         (rad; None: straight on; with ``steering = "heading"`` the heading reference to it,
         None: to the present heading) and the thrust towards ``thrust(k, z)`` (N, clipped to the
         vessel's range), within the rate limits (the plan model, as :meth:`rollout`)."""
-        d, vp, dt = self.dims, self.vessel, self.dt
+        d, vp = self.dims, self.vessel
         par = self.unpack_par(p)
         Z = np.zeros((d.N + 1, d.nx))
         Z[0] = par["z0"]
@@ -141,9 +152,10 @@ class WarmStart:
                 e = math.atan2(math.sin(e), math.cos(e))
                 steer_des = float(np.clip(e, -vp.delta_max, vp.delta_max))
             T_des = float(np.clip(thrust(k, z), vp.T_min, vp.T_max))
+            dt = self.dts[k]
             rates[k, 0] = np.clip((T_des - z[6]) / dt, -self.dT_max, self.dT_max)
             rates[k, 1] = np.clip((steer_des - z[7]) / dt, -self.dd_max, self.dd_max)
-            Z[k + 1] = np.array(self.F(z, rates[k], self._q(par, k))).ravel()
+            Z[k + 1] = self._advance(z, rates[k], par, k)
         V = np.zeros((d.N, d.nu))
         V[:, 0:2] = rates
         return self.fill_slacks(Z, V, p)
@@ -164,33 +176,51 @@ class WarmStart:
             V[:, 2 + K] = Z[:-1, NXV : NXV + K].max(axis=1) + 1e-3
         return self.join(Z, V)
 
-    def _q(self, par: dict, k: int) -> np.ndarray:
+    def _q(self, par: dict, k: int, part: tuple[float, float] | None = None) -> np.ndarray:
+        """The plan model's parameters over stage ``k``; ``part = (a, b)``: over the part of a
+        coarse stage from ``a`` to ``b`` of it (its parameters interpolated; one fine step)."""
         pa, pa1 = par["pa"][k].ravel(), par["pa"][k + 1].ravel()
         dep, dep1 = par["depth"][k], par["depth"][k + 1]
+        if part is not None:
+            (a, b), dpa, ddep = part, pa1 - pa, dep1 - dep
+            pa, pa1, dep, dep1 = pa + a * dpa, pa + b * dpa, dep + a * ddep, dep + b * ddep
         # ext: the variance objective's nav constants (M2'); empty for the default objective
         return np.concatenate([par["current"], pa, (pa1 - pa) / self.dt, dep,
                                (dep1 - dep) / self.dt, par["d_fix"], par["channel"],
                                par["ext"][:N_NAV]])  # fmt: skip
 
+    def _positions(self, n: int, frac: float) -> np.ndarray:
+        """Where the first ``n`` stage times lie ``frac`` fine stages (``frac dt`` s) later,
+        in stage indices (fractional; on the coarse tail (M1t) by its times)."""
+        if not self.dims.n_tail:
+            return np.arange(n) + frac
+        t = self.t_stage
+        return np.interp(t[:n] + frac * self.dt, t, np.arange(len(t)))
+
     def shift(self, w: np.ndarray, frac: float) -> np.ndarray:
-        """Primal warm start moved ``frac`` stages ahead (linear interpolation, end held)."""
+        """Primal warm start moved ``frac`` fine stages (``frac dt`` s) ahead (linear
+        interpolation in time, end held)."""
         Z, V = self.split(w)
-        return self.join(interp_rows(Z, frac), interp_rows(V, frac))
+        return self.join(interp_rows(Z, self._positions(len(Z), frac)),
+                         interp_rows(V, self._positions(len(V), frac)))  # fmt: skip
 
     def shift_lam_g(self, lam: np.ndarray, frac: float) -> np.ndarray:
-        """Constraint multipliers moved ``frac`` stages ahead (same rule as :meth:`shift`)."""
+        """Constraint multipliers moved ``frac`` fine stages ahead (same rule as
+        :meth:`shift`)."""
         d = self.dims
-        return interp_rows(np.asarray(lam).reshape(d.N, d.nx + d.nh), frac).ravel()
+        return interp_rows(np.asarray(lam).reshape(d.N, d.nx + d.nh),
+                           self._positions(d.N, frac)).ravel()  # fmt: skip
 
     def shift_lam_x(self, lam: np.ndarray, frac: float) -> np.ndarray:
-        """Bound multipliers moved ``frac`` stages ahead."""
+        """Bound multipliers moved ``frac`` fine stages ahead."""
         return self.shift(lam, frac)
 
 
-def interp_rows(A: np.ndarray, frac: float) -> np.ndarray:
-    """Rows of ``A`` evaluated at ``k + frac`` by linear interpolation, the last row held."""
+def interp_rows(A: np.ndarray, s: np.ndarray) -> np.ndarray:
+    """Rows of ``A`` (n, m) evaluated at the fractional row indices ``s`` (n,) by linear
+    interpolation, the last row held."""
     n = A.shape[0]
-    s = np.minimum(np.arange(n) + frac, n - 1)
+    s = np.minimum(s, n - 1)
     i0 = np.floor(s).astype(int)
     i1 = np.minimum(i0 + 1, n - 1)
     a = (s - i0)[:, None]

@@ -177,9 +177,9 @@ class WorldView:
 
     def parameters(self, obs: Observation) -> np.ndarray:
         """The parameter vector of the OCP for this observation (after fix-age bookkeeping)."""
-        d, dt = self.ocp.dims, self.ocp.dt
+        d = self.ocp.dims
         K, N = d.n_auv, d.N
-        ts = dt * np.arange(N + 1)
+        ts = self.ocp.t_stage  # the stages' times from now (s)
         # the estimator's forecast (along the known plan) or constant velocity
         pa = np.stack([a.predict(ts) for a in obs.auvs], axis=1)  # (N+1, K, 2)
         # bearing of each stage from the previous plan (or the current position)
