@@ -279,7 +279,7 @@ def test_a_run_that_does_not_return_is_recorded_as_a_timeout(tmp_path, monkeypat
     from mpcasv.experiments.falsify_pool import WorkerPool, run_batch
 
     told = []
-    with WorkerPool(1, timeout=3.0) as workers:
+    with WorkerPool(1, timeout=10.0) as workers:  # the hang sleeps 60 s
         items = [("hang", lambda: ("sleep", 60.0)), ("quick", lambda: ("sleep", 0.0))]
         monkeypatch.setattr(pool_mod, "_guarded", _sleeper)
         t0 = time.monotonic()

@@ -44,8 +44,13 @@ class WorkerPool:
             self.pool.shutdown(wait=True, cancel_futures=True)
 
     def _new(self) -> Executor:
-        return ProcessPoolExecutor(self.workers, mp_context=get_context("spawn"),
+        """A fresh pool whose processes have started (untimed): a run's deadline counts the
+        run, not the spawn and imports of a process (seconds on a loaded machine; after a
+        restart they made a quick run miss a 3-s deadline in a test under load)."""
+        pool = ProcessPoolExecutor(self.workers, mp_context=get_context("spawn"),
                                    initializer=_watch_parent, initargs=(os.getpid(),))  # fmt: skip
+        wait([pool.submit(_ready) for _ in range(self.workers)])
+        return pool
 
     def restart(self) -> None:
         """End every worker process (a run that does not return) and start a fresh pool."""
@@ -54,6 +59,10 @@ class WorkerPool:
             child.kill()
             child.join()
         self.pool = self._new()
+
+
+def _ready() -> None:
+    """A worker's first job: nothing (the process is up)."""
 
 
 def _guarded(args: tuple) -> tuple[dict | None, str | None]:
