@@ -78,13 +78,14 @@ def nlp_functions(ocp: OCP, solver: str, threads: int = 1) -> dict[str, ca.Funct
     lam_f, lam_g = ca.MX.sym("lam_f"), ca.MX.sym("lam_g", d.ng)
     args, zN, targs = ocp.horizon_args(x, p)
 
-    def over(key, extra=(), mapper=lambda f, n: _over_horizon(f, n, threads)):
-        """Stage function ``key`` over the horizon (fine and coarse stages)."""
-        if key == "stage":
-            return ocp.over_stages(ocp.stage, ocp.stage_tail, args, mapper)
+    def mapped(f, n):
+        return _over_horizon(f, n, threads)
+
+    def over(key, extra=(), mapper=mapped):
+        """Stage derivative function ``key`` over the horizon (fine and coarse stages)."""
         return ocp.over_stages(S[key], St[key], [*args, *extra], mapper)
 
-    Ls, Gs = over("stage")
+    Ls, Gs = ocp.over_stages(ocp.stage, ocp.stage_tail, args, mapped)
     f = ca.sum2(Ls) + ocp.term(zN, *targs)
     g = ca.vec(Gs)
     # +I on z_{k+1} in the gap-closing rows: a constant block

@@ -163,7 +163,8 @@ class OCP(StageTerms, PlanDynamics, WarmStart, VarianceObjective, ParamLayout):
         #: the fine stages' length (s); the coarse tail's are ``horizon.tail_m`` times it
         self.dt = hz.dt
         self.tail_m = hz.tail_m
-        #: each stage's length (s, shape (N,)) and the stages' times from now (s, (N + 1,))
+        #: each stage's length (s, shape (N,)) and the stages' times from now (s, (N + 1,));
+        #: uniform: ``dt k`` as before (a cumulative sum rounds differently)
         self.dts = np.r_[np.full(hz.N, hz.dt), np.full(hz.tail_N, hz.tail_m * hz.dt)]
         self.t_stage = (hz.dt * np.arange(hz.N + 1) if not hz.tail_N
                         else np.r_[0.0, np.cumsum(self.dts)])  # fmt: skip
