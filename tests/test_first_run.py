@@ -5,12 +5,13 @@ line each; the paths listed are the ones the controller then loads."""
 from __future__ import annotations
 
 import io
+import time
 from pathlib import Path
 
 import pytest
 
 from mpcasv.controllers import Boat, make_controller
-from mpcasv.controllers.prepare import needed_libraries, prepare
+from mpcasv.controllers.prepare import about, needed_libraries, prepare
 from mpcasv.experiments.runner import prepare_controllers
 from mpcasv.experiments.suite import SCENARIOS_DIR, expand
 from mpcasv.mpc import codegen
@@ -36,9 +37,12 @@ grid = {{ "weights.dT" = [0.02, 0.05] }}
 """
 
 
-def test_compile_estimate_is_the_measured_cold_compile():
-    assert compile_estimate(1) == 28.0 and compile_estimate(3) == 40.0
-    assert compile_estimate(2) == pytest.approx(34.0)
+def test_compile_estimate_grows_with_the_auvs_and_the_sub_steps():
+    one, two, three = (compile_estimate(k) for k in (1, 2, 3))
+    assert one < two < three and two == pytest.approx((one + three) / 2)
+    assert compile_estimate(4) > three  # extrapolated beyond the measured points
+    assert compile_estimate(1, n_sub=8) == pytest.approx(2 * one)  # the stage's code doubles
+    assert compile_estimate(1, n_sub=2) == one  # fewer sub-steps are not measured: no less
 
 
 def test_listed_library_is_the_one_the_controller_loads():
@@ -98,7 +102,7 @@ def test_a_sweep_names_and_compiles_each_missing_library_once(fake_compile, tmp_
     assert all(Path(p).parent == tmp_path / "cache" / "mpc" for p in fake_compile)
     err = capsys.readouterr().err
     assert "first run: 2 MPC libraries to compile" in err and "once per problem" in err
-    assert "about 68 s" in err  # 28 s + 40 s
+    assert f"about {about(compile_estimate(1) + compile_estimate(3))} on" in err
     assert "mpc-single, 1 AUV, fatrop, vessel gretha" in err
     assert "mpc-multi, 3 AUVs, fatrop, vessel gretha" in err
     assert err.count("  compiled ") == 2
@@ -113,7 +117,28 @@ def test_the_progress_line_counts_against_the_estimate(fake_compile):
     prepare([lib], quiet=False, file=out)
     text = out.getvalue()
     assert "compiling 1/1 mpc-single, 1 AUV" in text
-    assert "00:00 (about 28 s on an idle machine)" in text
+    assert f"00:00 (about {about(compile_estimate(1))} on an idle machine)" in text
+
+
+def test_a_log_file_is_not_flooded_with_progress_frames(fake_compile, monkeypatch):
+    """Written to a file that is not a terminal, a compile of 1.5 s gives the bar's first and
+    last frames only (on a terminal the bar moves every half second)."""
+    fast = Library.compile
+
+    def slow(self, log=print):
+        time.sleep(1.5)
+        return fast(self, log)
+
+    monkeypatch.setattr(Library, "compile", slow)
+    (lib,) = needed_libraries([("mpc-single", 1, "mpc-single", None, Boat.load())])
+    out = io.StringIO()
+    prepare([lib], quiet=False, file=out)
+    assert out.getvalue().count("compiling 1/1") == 2
+
+
+def test_an_estimate_reads_in_seconds_or_minutes():
+    assert about(40.0) == "40 s" and about(119.4) == "119 s"
+    assert about(230.0) == "4 min" and about(500.0) == "8 min"
 
 
 def test_dask_sweeps_only_say_it(fake_compile, tmp_path, capsys):

@@ -1,10 +1,11 @@
 """Compile what controllers need once, before a sweep or a simulation starts (issue 12 item 8).
 
 An MPC loads a compiled library from the cache (``~/.cache/mpcasv/mpc``, or ``$MPCASV_CACHE``);
-a missing one is compiled on first use, which takes tens of seconds per library. Before any
-worker starts, :func:`prepare` lists the libraries the jobs need that are not in the cache,
-says so once with an estimate, and compiles them here with a progress line each, so the
-workers load them and the sweep's progress bar does not sit at 0 % without a word.
+a missing one is compiled on first use, which takes from half a minute to several minutes per
+library by machine (docs/mpc.md, "Known problems"). Before any worker starts, :func:`prepare`
+lists the libraries the jobs need that are not in the cache, says so once with an estimate,
+and compiles them here with a progress line each, so the workers load them and the sweep's
+progress bar does not sit at 0 % without a word.
 """
 
 from __future__ import annotations
@@ -35,11 +36,17 @@ def needed_libraries(builds: Iterable[tuple[str, int, Any, Any, Boat | None]]) -
     return list(seen.values())
 
 
-def _ticker(bar, stop: threading.Event) -> None:
-    """Fill the bar with the elapsed time (up to 99 % of the estimate; tqdm shows the
-    elapsed time itself beside it)."""
+def about(seconds: float) -> str:
+    """``seconds`` as a person reads an estimate: ``"40 s"`` below two minutes, else
+    ``"4 min"``."""
+    return f"{seconds:.0f} s" if seconds < 120 else f"{seconds / 60:.0f} min"
+
+
+def _ticker(bar, stop: threading.Event, every: float) -> None:
+    """Fill the bar with the elapsed time every ``every`` s (up to 99 % of the estimate;
+    tqdm shows the elapsed time itself beside it)."""
     t0 = time.perf_counter()
-    while not stop.wait(0.5):
+    while not stop.wait(every):
         bar.n = min(time.perf_counter() - t0, bar.total * 0.99)
         bar.refresh()
 
@@ -62,17 +69,19 @@ def prepare(libraries: list, quiet: bool = False, file=None) -> list:
     total = sum(lib.estimate_s for lib in missing)
     folder = missing[0].path.parent
     print(f"first run: {len(missing)} MPC librar{'y' if len(missing) == 1 else 'ies'} to compile "
-          f"(not in the cache {folder}); this happens once per problem, about {total:.0f} s on "
-          "an idle machine (longer on a busy one):", file=file, flush=True)  # fmt: skip
+          f"(not in the cache {folder}); this happens once per problem, about {about(total)} "
+          "on an idle machine (longer on a busy one):", file=file, flush=True)  # fmt: skip
     for lib in missing:
-        print(f"  {lib.label}: {lib.path.name} (about {lib.estimate_s:.0f} s)", file=file)
+        print(f"  {lib.label}: {lib.path.name} (about {about(lib.estimate_s)})", file=file)
+    # a log file gets a line every 30 s, not a frame every half second
+    every = 0.5 if getattr(file, "isatty", lambda: False)() else 30.0
     for i, lib in enumerate(missing, 1):
         bar = tqdm(total=lib.estimate_s, desc=f"compiling {i}/{len(missing)} {lib.label}",
-                   unit="s", disable=quiet, file=file, dynamic_ncols=True,
-                   bar_format="{desc}: {bar} {elapsed} (about {total:.0f} s on an idle "
-                   "machine)")  # fmt: skip
+                   unit="s", disable=quiet, file=file, dynamic_ncols=True, mininterval=every,
+                   bar_format="{desc}: {bar} {elapsed} (about " + about(lib.estimate_s)
+                   + " on an idle machine)")  # fmt: skip
         stop = threading.Event()
-        ticker = threading.Thread(target=_ticker, args=(bar, stop), daemon=True)
+        ticker = threading.Thread(target=_ticker, args=(bar, stop, every), daemon=True)
         ticker.start()
         t0 = time.perf_counter()
         try:
