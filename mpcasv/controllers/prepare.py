@@ -1,11 +1,11 @@
 """Compile what controllers need once, before a sweep or a simulation starts (issue 12 item 8).
 
 An MPC loads a compiled library from the cache (``~/.cache/mpcasv/mpc``, or ``$MPCASV_CACHE``);
-a missing one is compiled on first use, which takes from half a minute to several minutes per
-library by machine (docs/mpc.md, "Known problems"). Before any worker starts, :func:`prepare`
-lists the libraries the jobs need that are not in the cache, says so once with an estimate,
-and compiles them here with a progress line each, so the workers load them and the sweep's
-progress bar does not sit at 0 % without a word.
+a missing one is compiled on first use, which takes tens of seconds per library (more for a
+stiff hull's many plan sub-steps; docs/mpc.md, "Known problems"). Before any worker starts,
+:func:`prepare` lists the libraries the jobs need that are not in the cache, says so once
+with an estimate, and compiles them here with a progress line each, so the workers load them
+and the sweep's progress bar does not sit at 0 % without a word.
 """
 
 from __future__ import annotations

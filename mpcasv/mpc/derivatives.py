@@ -14,7 +14,9 @@ import contextlib
 import io
 
 import casadi as ca
+import numpy as np
 
+from mpcasv.mpc.adjoint import dynamics_derivatives
 from mpcasv.mpc.problem import OCP
 
 
@@ -29,14 +31,18 @@ def _stage_functions(ocp: OCP, stage: ca.Function, tag: str = "") -> dict[str, c
     lf, lg = ca.SX.sym("lf"), ca.SX.sym("lg", nx + d.nh)
     L, g = stage(z, v, z1, sp, sp1, gp)
     zv = ca.vertcat(z, v)
-    H, grad_lag = ca.hessian(lf * L + ca.dot(lg, g), zv)
+    if tag or ocp.params.solver.stage_derivatives == "inline":
+        H, grad_lag = ca.hessian(lf * L + ca.dot(lg, g), zv)
+        g_J, J = g, ca.jacobian(g, zv)
+    else:  # the dynamics' rows composed from the sub-steps (mpcasv.mpc.adjoint, D1-D3)
+        g_J, J, H, grad_lag = _composed(ocp, L, g, z, v, z1, sp, sp1, gp, lf, lg)
     sp0 = ca.SX.sym("sp0", d.n_stage_par)
     LN = ocp.term(z, sp0, sp, gp)
     HN, dLN = ca.hessian(LN, z)
     a = [z, v, z1, sp, sp1, gp]
     return {
         "grad": ca.Function(f"st{tag}_grad", a, [L, ca.gradient(L, zv)]),
-        "jac": ca.Function(f"st{tag}_jac", a, [g, ca.jacobian(g, zv)]),
+        "jac": ca.Function(f"st{tag}_jac", a, [g_J, J]),
         "hess": ca.Function(f"st{tag}_hess", [*a, lf, lg], [grad_lag, H]),
         "all": ca.Function(
             f"st{tag}_all",
@@ -46,6 +52,32 @@ def _stage_functions(ocp: OCP, stage: ca.Function, tag: str = "") -> dict[str, c
         "term_grad": ca.Function("te_grad", [z, sp0, sp, gp], [LN, dLN]),
         "term_hess": ca.Function("te_hess", [z, sp0, sp, gp], [HN]),
     }
+
+
+def _composed(ocp: OCP, L, g, z, v, z1, sp, sp1, gp, lf, lg):
+    """A fine stage's constraints, their Jacobian, the Lagrangian's Hessian and gradient in
+    the scaled variables (M8): the dynamics' rows ``(s_z z1 - F(s_z z, s_w w, q)) / s_z`` from
+    :func:`mpcasv.mpc.adjoint.dynamics_derivatives` (``F`` too: one forward pass), the rest
+    (cost, path constraints, no dynamics) differentiated as it is."""
+    nx, nv = ocp.dims.nx, ocp.dims.nu
+    zv = ca.vertcat(z, v)
+    dyn = dynamics_derivatives(ocp)
+    s_u = np.r_[ocp.s_z, ocp.s_v[0:2]]
+    D, D_g = ca.DM(ca.diag(s_u)), ca.DM(ca.diag(1 / np.asarray(ocp.s_z)))
+    u = ca.mtimes(D, ca.vertcat(z, v[0:2]))  # physical [z, w]
+    q = ocp.q_fun(sp, sp1, gp)
+    pad = ca.SX(nx, nv - 2)  # the slacks (and the epigraph variable) are not in F
+    lam = ca.mtimes(D_g, lg[0:nx])  # the Lagrangian's weight on F (with a minus sign)
+    F, J_F, H_F = dyn(u[0:nx], u[nx:], q, lam)
+    g_dyn = ca.mtimes(D_g, ca.DM(ocp.s_z) * z1 - F)
+    J_dyn = ca.horzcat(-ca.mtimes([D_g, J_F, D]), pad)
+    H_u = -ca.mtimes([D, H_F, D])
+    H_dyn = ca.diagcat(H_u, ca.SX(nv - 2, nv - 2))
+    rest = lf * L + ca.dot(lg[nx:], g[nx:])
+    H_rest, grad_rest = ca.hessian(rest, zv)
+    J = ca.vertcat(J_dyn, ca.jacobian(g[nx:], zv))
+    return (ca.vertcat(g_dyn, g[nx:]), J, H_rest + H_dyn,
+            grad_rest + ca.mtimes(J_dyn.T, lg[0:nx]))  # fmt: skip
 
 
 def _over_horizon(f: ca.Function, N: int, threads: int) -> ca.Function:

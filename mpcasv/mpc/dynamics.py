@@ -76,22 +76,37 @@ class PlanDynamics:
         rates ``w = [Tdot, deltadot]`` held: RK4 for the vessel, the fix ages exactly for a
         rate interpolated by Simpson's rule (module docstring). SX or MX, shape ``(nx,)``."""
         K, h = self.dims.n_auv, dt / n_sub
-        x, tau = z[0:NXV], [z[NXV + i] for i in range(K)]
-        r0 = self._rates(x, tau, 0.0, q)
+        x, tau = z[0:NXV], z[NXV : NXV + K]
+        r = self.start_rates(z, q)
         for j in range(n_sub):
-            x1, xm = rk4_step(self._vessel_rhs, x, w, q, h)
-            rm = self._rates(xm, tau, (j + 0.5) * h, q)
-            r1 = self._rates(x1, tau, (j + 1) * h, q)
-            for i in range(K):
-                A = h / 6 * (r0[i] + 4 * rm[i] + r1[i])  # int_0^h rho
-                A_m = h / 4 * (r0[i] + rm[i])  # int_0^{h/2} rho
-                e = ca.exp(-A)
-                tau[i] = tau[i] * e + h / 6 * (e + 4 * ca.exp(A_m - A) + 1)  # (M2)
-            x = x1
-            # the rate at the sub-step's end starts the next one (with "variance" it depends
-            # on tau, so it is taken again at the new tau)
-            r0 = self._rates(x, tau, (j + 1) * h, q) if self.variance else r1
-        return ca.vertcat(x, *tau)
+            x, tau, r = self.sub_step(x, tau, r, w, q, (j + 0.5) * h, (j + 1) * h, h)
+        return ca.vertcat(x, tau)
+
+    def start_rates(self, z, q):
+        """The fix rates (1/s, shape ``(K,)``) at the stage's start, where its first sub-step
+        begins (eq. M3)."""
+        K = self.dims.n_auv
+        return ca.vertcat(*self._rates(z[0:NXV], [z[NXV + i] for i in range(K)], 0.0, q))
+
+    def sub_step(self, x, tau, r0, w, q, s_m, s_1, h):
+        """One sub-step of :meth:`discrete`: ``(x, tau, r0) -> (x1, tau1, r1)`` over ``h`` s,
+        ``r0`` the fix rates at its start, ``s_m`` and ``s_1`` its middle and end in the stage
+        (s; numbers or symbols). RK4 for the vessel (M1), the fix ages by Simpson's rule (M2);
+        ``r1`` the rates at its end, where the next sub-step starts."""
+        K = self.dims.n_auv
+        tau = [tau[i] for i in range(K)]
+        x1, xm = rk4_step(self._vessel_rhs, x, w, q, h)
+        rm = self._rates(xm, tau, s_m, q)
+        r1 = self._rates(x1, tau, s_1, q)
+        for i in range(K):
+            A = h / 6 * (r0[i] + 4 * rm[i] + r1[i])  # int_0^h rho
+            A_m = h / 4 * (r0[i] + rm[i])  # int_0^{h/2} rho
+            e = ca.exp(-A)
+            tau[i] = tau[i] * e + h / 6 * (e + 4 * ca.exp(A_m - A) + 1)  # (M2)
+        # the rate at the sub-step's end starts the next one (with "variance" it depends on
+        # tau, so it is taken again at the new tau)
+        r1 = self._rates(x1, tau, s_1, q) if self.variance else r1
+        return x1, ca.vertcat(*tau), ca.vertcat(*r1)
 
     def _vessel_rhs(self, x, w, q):
         """The vessel part of M1: the shared model's rigid body (actuators at their set-points)

@@ -18,11 +18,11 @@ from mpcasv.mpc.params import MPCParams
 from mpcasv.mpc.problem import OCP
 
 #: measured cold compile time (s) of one library on an idle machine by number of AUVs
-#: (fatrop, -O3 -march=native, gcc 12 on the project's 2-core machine, session 20: 232 s and
-#: 267 s; issue 12 had measured 28 s and 40 s on a faster machine for about the same C):
-#: interpolated between. gcc's register allocation of the stage Hessian, one straight-line
-#: function of 1.5-1.9 MB of C, is 80 % of it (docs/mpc.md, "Known problems")
-COLD_COMPILE_S = {1: 230.0, 3: 270.0}
+#: (fatrop, -O3 -march=native, gcc 12 on the project's 2-core machine, session 20, the two
+#: compiled side by side: 17.5 s and 27.5 s with the composed stage derivatives; 232 s and
+#: 267 s differentiated inline, where gcc's register allocation of one 1.5-1.9 MB function
+#: took 80 % of it; docs/mpc.md, "Known problems"): interpolated between
+COLD_COMPILE_S = {1: 18.0, 3: 28.0}
 
 #: weights that enter the problem as parameters (mpcasv.mpc.layout.WEIGHT_NAMES), not compiled
 #: in: presets differing only in these share a library (tests/test_first_run.py checks it)

@@ -198,6 +198,8 @@ class OCP(StageTerms, PlanDynamics, WarmStart, VarianceObjective, ParamLayout):
                            (dep1 - dep) / dt, d_fix, ch)  # fmt: skip
             return ca.vertcat(q, ext[0:N_NAV]) if self.variance else q
 
+        #: F's parameters q over a fine stage: (sp_k, sp_{k+1}, gp) -> q
+        self.q_fun = ca.Function("q", [sp, sp1, gp], [q_of(sp, sp1)])
         h, lbh, ubh = self._path(z, v[2 : 2 + K], v[2 + K] if d.epi else None, sp)
         L = self._stage_cost(z, v, sp, W, ext if self.variance else None)
         #: stage k: (z_k, v_k, z_{k+1}, stage params k and k+1, global params) -> (dt L_k, g_k)

@@ -109,6 +109,11 @@ class SolverParams:
         acts beyond r_outer only.
     funnel_speed : float
         Speed (m/s) at which the relaxed bounds of ``max_violation`` close in over the horizon.
+    stage_derivatives : {"composed", "inline"}
+        How a fine stage's dynamics are differentiated: ``composed`` (default since session
+        20) from each RK4 sub-step's Jacobian and Hessian (:mod:`mpcasv.mpc.adjoint`, eqs.
+        D1-D3: a library compiles about ten times faster); ``inline``: the stage as one
+        expression (before; the same values to rounding, another compiled library).
     """
 
     solver: SolverName = "fatrop"
@@ -129,6 +134,7 @@ class SolverParams:
     check_margin: NonNeg = 2.0
     max_violation: Pos = 60.0
     funnel_speed: Pos = 1.25
+    stage_derivatives: Literal["composed", "inline"] = "composed"
 
     def __post_init__(self) -> None:
         if self.step_iter == 0:  # TOML has no null: 0 is how a preset or override says "off"
