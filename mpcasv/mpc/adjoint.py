@@ -64,7 +64,9 @@ def dynamics_derivatives(ocp) -> ca.Function:
     for j in range(n_sub):  # (D1)
         yj, A, B = sub_jac(yj, w, q, j * h)
         S = ca.mtimes(A, S) + ca.mtimes(B, E_w)
-        ys.append(yj), Ss.append(S), As.append(A)
+        ys.append(yj)
+        Ss.append(S)
+        As.append(A)
 
     mu = ca.vertcat(lam, ca.SX(K, 1))  # the rates at the stage's end are not in F
     H = ca.SX(nz + 2, nz + 2)  # its upper triangle; the lower one is never computed

@@ -3,7 +3,8 @@ and its discretisation over one stage. A mixin of :class:`~mpcasv.mpc.problem.OC
 vessel, parameters and dimensions live there).
 
 The continuous model, :meth:`PlanDynamics.rhs`, is the definition; :meth:`PlanDynamics.
-discrete` is what the solvers differentiate:
+discrete` is what the solvers differentiate (through its sub-steps, :meth:`PlanDynamics.
+sub_step`, one at a time: :mod:`mpcasv.mpc.adjoint`):
 
 - the vessel (M1: the shared model's rigid body with the actuators at their set-points, the
   set-points driven by their rates) by classic RK4 in ``n_sub`` sub-steps of ``h``;

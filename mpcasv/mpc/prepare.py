@@ -44,7 +44,8 @@ def compile_estimate(n_auv: int, n_sub: int = 4) -> float:
     """Seconds a cold compile takes on an idle machine (linear in the AUVs through the two
     points measured with 4 RK4 sub-steps per stage, and proportional to the sub-steps: a stiff
     hull's plan takes more, :attr:`~mpcasv.mpc.problem.OCP.n_sub`; a busy or slower machine
-    takes longer, a faster one less; the coarse tail of M1t is not counted)."""
+    takes longer, a faster one less; the coarse tail of M1t is not counted, nor
+    ``solver.stage_derivatives = "inline"``, which takes about ten times as long)."""
     (n0, t0), (n1, t1) = sorted(COLD_COMPILE_S.items())
     return max(t0, t0 + (t1 - t0) * (n_auv - n0) / (n1 - n0)) * max(n_sub, 4) / 4
 
