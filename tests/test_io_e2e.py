@@ -207,9 +207,7 @@ def test_asv_killed_and_restarted(tmp_path):
         assert delay <= limit + 1.0
         n_at_stale = len(_records(log, "step"))
         time.sleep(10 / SPEEDUP)  # 10 s of outage: no decision is made or sent
-        # counted by the deploy clock, not by the records written since: on a busy machine a
-        # decision made before the outage was noticed can reach the log after it
-        assert sum(s["clock"] > stale["t"] for s in _records(log, "step")) <= 1
+        assert len(_records(log, "step")) <= n_at_stale + 1
         sitl.send_signal(signal.SIGUSR2)
         _wait(lambda: _events(log, "asv_resumed"), 30, "asv_resumed", procs)
         _wait(lambda: len(_events(log, "plan_started")) >= 2, 30, "FollowReference again", procs)
