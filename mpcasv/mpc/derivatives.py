@@ -47,7 +47,7 @@ def _stage_functions(ocp: OCP, stage: ca.Function, tag: str = "") -> dict[str, c
         "all": ca.Function(
             f"st{tag}_all",
             [*a, lg],
-            [L, ca.gradient(L, zv), g, ca.jacobian(g, zv), ca.substitute(H, lf, 1.0)],
+            [L, ca.gradient(L, zv), g_J, J, ca.substitute(H, lf, 1.0)],
         ),  # fmt: skip
         "term_grad": ca.Function("te_grad", [z, sp0, sp, gp], [LN, dLN]),
         "term_hess": ca.Function("te_hess", [z, sp0, sp, gp], [HN]),
