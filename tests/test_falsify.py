@@ -249,8 +249,8 @@ def test_falsified_worst_cases_keep_todays_margin(name):
 
     sc = load_scenario(FALSIFIED / f"{name}.toml")
     # the mpc-multi case met 3 fatrop hangs until session 7, none in session 7, one since
-    # session 8 (docs/mpc.md "Known problems"): each holds the default hang guard's 30 s; its
-    # solves take < 0.3 s, so 5 s abandons a hung solve and nothing else
+    # session 8 (docs/mpc.md "Known problems"): each holds the default hang guard's 10 s of
+    # CPU time; its solves take < 0.3 s, so 5 s abandons a hung solve and nothing else
     overrides = {"solver.hang_s": 5.0} if sc.controller.startswith("mpc") else None
     ctrl = make_controller(sc.controller, len(sc.auv), sc.preset, overrides,
                            boat=Boat.of_scenario(sc))  # fmt: skip

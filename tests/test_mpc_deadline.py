@@ -2,6 +2,7 @@
 
 - In simulation no wall-clock measurement changes a decision: one MPC scenario run with a
   clock that says every solve took hours, and under CPU load, gives the same time series.
+- Simulation's hang guard abandons a solve on its worker's CPU time, not on the wall clock.
 - In the field (``use_deadline``) a solve that hangs is abandoned at the step's budget: the
   step returns the hybrid fallback's command in time, and the next step starts warm on the
   spare worker.
@@ -16,12 +17,15 @@ import subprocess
 import sys
 import time
 
+import numpy as np
 import pandas as pd
 import pytest
 
 from mpcasv.controllers import make_controller
 from mpcasv.interface import ASVState, AUVEstimate, Observation, Reason
 from mpcasv.mpc.controller import _worker_solver
+from mpcasv.mpc.deadline import DeadlineSolver
+from mpcasv.mpc.solvers import SolveResult
 from mpcasv.sim.scenario import load_scenario, scenario_with
 from mpcasv.sim.simulator import simulate
 
@@ -71,6 +75,13 @@ def test_a_run_under_cpu_load_is_the_same_run(case3):
     pd.testing.assert_frame_equal(_decisions(ref), _decisions(loaded))
 
 
+def _spin_for_ever() -> None:
+    """A hung solve: fatrop's unbounded inertia-correction loop spins on a core (docs/mpc.md
+    "Known problems"); here in Python."""
+    while True:
+        pass
+
+
 class _HangOnce:
     """The real solver, except that the first solve after ``flag`` appears never returns."""
 
@@ -80,7 +91,7 @@ class _HangOnce:
     def solve(self, *args):
         if os.path.exists(self.flag):
             os.remove(self.flag)
-            time.sleep(3600.0)  # a hung native solve, as fatrop on NaN
+            _spin_for_ever()
         return self.solver.solve(*args)
 
 
@@ -118,6 +129,65 @@ def test_field_deadline_abandons_a_hung_solve_and_the_next_step_starts_warm(tmp_
         assert took1 < budget + 0.25
     finally:
         ctrl.close()
+
+
+#: wall time of a solve starved by the machine's load (it sleeps: almost no CPU time)
+STARVED_S = 1.5
+
+
+class _Starved:
+    def solve(self, p, w0, *args):
+        time.sleep(STARVED_S)
+        return SolveResult(np.asarray(w0, float), None, None, 1.0, True, "Solve_Succeeded", 3, 0.0)
+
+
+class _Spins:
+    def solve(self, *args):
+        _spin_for_ever()
+
+
+class _Stops:  # a worker blocked without using CPU (never seen; the wall-clock backstop)
+    def solve(self, *args):
+        time.sleep(3600.0)
+
+
+def starved():
+    return _Starved()
+
+
+def spins():
+    return _Spins()
+
+
+def stops():
+    return _Stops()
+
+
+def _guarded(factory, timeout: float, cpu_timeout: float):
+    """One solve in a hang-guard worker (no spare): (result, wall s, solves abandoned)."""
+    ds = DeadlineSolver(factory, start_timeout=120.0, spare=False)
+    try:
+        t0 = time.perf_counter()
+        res = ds.solve(np.zeros(2), np.ones(3), timeout=timeout, cpu_timeout=cpu_timeout)
+        return res, time.perf_counter() - t0, ds.abandoned
+    finally:
+        ds.close()
+
+
+def test_the_hang_guard_judges_a_solve_by_its_cpu_time_not_by_the_load():
+    """Simulation's hang guard abandons a solve on the CPU time its worker spent on it: a solve
+    that takes 1.5 s of wall time while using almost no CPU (as one starved by a loaded
+    machine) is kept with a 0.3-s CPU limit, so the load never decides a run; one that spins
+    (as fatrop hung) is abandoned at the limit, long before the wall-clock backstop; a worker
+    that stops without using CPU is abandoned at the backstop."""
+    res, took, abandoned = _guarded(starved, timeout=60.0, cpu_timeout=0.3)
+    assert res.ok and abandoned == 0 and took >= STARVED_S  # a wall-time guard would drop it
+    res, took, abandoned = _guarded(spins, timeout=60.0, cpu_timeout=0.3)
+    assert not res.ok and res.status == "deadline" and abandoned == 1
+    assert took < 30.0, f"abandoned after {took:.1f} s of wall time"  # 0.3 s CPU, under load
+    assert np.array_equal(res.w, np.ones(3))  # the warm start comes back as the iterate
+    res, took, abandoned = _guarded(stops, timeout=2.0, cpu_timeout=0.3)
+    assert not res.ok and res.status == "deadline" and abandoned == 1 and took >= 2.0
 
 
 _ORPHAN_SCRIPT = '''

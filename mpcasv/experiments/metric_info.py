@@ -135,8 +135,8 @@ _BASE: dict[str, MetricInfo] = {
     "target_switches": _i("1", "lower", "changes of the AUV an MPC targets (0 for the other "
                           "controllers; chattering shows here)", "issue 16 item 6"),
     "solver_hangs": _i("1", "lower", "MPC solves abandoned as hung by the simulation's hang "
-                       "guard (no answer within solver.hang_s s of wall time; the step then "
-                       "rescued or fell back): where this is not 0 the run depends on wall time"),
+                       "guard (no answer within solver.hang_s s of the solver's CPU time; the "
+                       "step then rescued or fell back); each cost that CPU time"),
     "over_budget_steps": _i("1", "lower", "MPC steps whose solve took longer than the field "
                             "budget_ms (wall clock: measured only, it changes no decision in "
                             "simulation)"),

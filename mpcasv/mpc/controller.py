@@ -66,6 +66,10 @@ from mpcasv.mpc.worldview import WorldView
 #: field mode: part of the step's budget kept for the fallback and the command after a
 #: missed solve deadline (s)
 STEP_RESERVE_S = 0.03
+#: simulation's hang guard: a solve whose worker has not answered after this many times
+#: ``solver.hang_s`` of wall time is abandoned even without spending ``hang_s`` of CPU time
+#: (a worker stopped or blocked; a hung fatrop spins and is caught by its CPU time first)
+HANG_WALL_FACTOR = 20.0
 
 _OCP_CACHE: dict = {}
 
@@ -173,8 +177,10 @@ class MPCController(WorldView, Safety, PlanOutput, Targeting, SpeedCap, Carry):
         self._hang_guard = False
 
     def use_hang_guard(self) -> None:
-        """Simulation: the solves run in a worker process and only one that has not answered
-        after ``solver.hang_s`` s is abandoned (:class:`~mpcasv.mpc.solver_params.SolverParams`;
+        """Simulation: the solves run in a worker process and only one on which the worker
+        has spent ``solver.hang_s`` s of CPU time (or that has not answered after
+        ``HANG_WALL_FACTOR`` times as long on the wall clock: a worker that stopped without
+        using CPU) is abandoned (:class:`~mpcasv.mpc.solver_params.SolverParams`;
         ``hang_s = 0``: solves stay in this process, unguarded)."""
         if self.params.solver.hang_s <= 0:
             self.close()
@@ -278,9 +284,10 @@ class MPCController(WorldView, Safety, PlanOutput, Targeting, SpeedCap, Carry):
             if max_iter is None and not cap:
                 return self.solver.solve(p, w0, lam_x, lam_g)
             return self.solver.solve(p, w0, lam_x, lam_g, max_iter, **cap)
-        if self._hang_guard:  # simulation: abandon only a hung solve (SolverParams.hang_s)
-            res = self.deadline.solve(p, w0, lam_x, lam_g, max_iter,
-                                      timeout=self.params.solver.hang_s, **cap)  # fmt: skip
+        if self._hang_guard:  # simulation: abandon only a hung solve (SolverParams.hang_s),
+            hang_s = self.params.solver.hang_s  # judged by its worker's CPU time, not the load
+            res = self.deadline.solve(p, w0, lam_x, lam_g, max_iter, cpu_timeout=hang_s,
+                                      timeout=HANG_WALL_FACTOR * hang_s, **cap)  # fmt: skip
             self._hung += int(not res.ok and res.status == "deadline")  # counted, never hidden
             return res
         return self.deadline.solve(p, w0, lam_x, lam_g, max_iter, timeout=self._left(), **cap)

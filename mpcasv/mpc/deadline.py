@@ -16,9 +16,13 @@ A worker started from the main thread dies with the process that started it (Lin
 The warm start stays in the controller (the previous plan moved one period ahead), so the
 step after an overrun starts warm whatever happened to the worker.
 
-Used only in the field (:meth:`mpcasv.mpc.controller.MPCController.use_deadline`); in
-simulation the solver runs in the simulator's process and only iteration limits decide
-(wall-clock time never changes a simulated decision).
+In the field (:meth:`mpcasv.mpc.controller.MPCController.use_deadline`) the deadline is wall
+time. Simulation's hang guard (:meth:`~mpcasv.mpc.controller.MPCController.use_hang_guard`)
+judges a solve by the CPU time its worker has spent on it instead (``cpu_timeout``): a hung
+fatrop spins (docs/mpc.md "Known problems"), while a solve starved by the machine's load uses
+little CPU, so the load never decides which solve is abandoned (wall-clock time never changes
+a simulated decision); the wall clock is only a backstop for a worker that stops without
+using CPU.
 """
 
 from __future__ import annotations
@@ -33,6 +37,7 @@ import time
 from collections.abc import Callable
 
 import numpy as np
+import psutil
 
 from mpcasv.mpc.solvers import SolveResult
 
@@ -41,6 +46,17 @@ _READY = "ready"
 #: part of the control period: starting a process holds the interpreter for 4-45 ms (measured
 #: at load 8 on 2 cores), which would otherwise be spent on the step that missed its deadline
 SPARE_DELAY_S = 0.1
+#: how often a solve judged by its worker's CPU time (``cpu_timeout``) reads that time (s)
+CPU_POLL_S = 0.2
+
+
+def cpu_s(proc) -> float:
+    """CPU time (user + system, s) process ``proc`` has used; inf if it is gone."""
+    try:
+        t = psutil.Process(proc.pid).cpu_times()
+    except (psutil.Error, ValueError, TypeError):  # gone (or never started: pid None)
+        return math.inf
+    return t.user + t.system
 
 
 def _die_with(parent: int | None) -> None:  # pragma: no cover - runs in the worker
@@ -205,19 +221,21 @@ class DeadlineSolver:
         return self._active.wait_ready(timeout)
 
     def solve(self, p: np.ndarray, w0: np.ndarray, lam_x0=None, lam_g0=None,
-              max_iter: int | None = None, *, timeout: float,
-              T_cap: float | None = None) -> SolveResult:  # fmt: skip
+              max_iter: int | None = None, *, timeout: float, T_cap: float | None = None,
+              cpu_timeout: float | None = None) -> SolveResult:  # fmt: skip
         """Solve in the worker (``max_iter``: the solver's iteration limit for this solve,
         None: its own; ``T_cap``: the planned thrust's cap, N, None: none); after
-        ``timeout`` s without an answer the worker is killed, the spare takes over, and the
-        result is a failure with status ``"deadline"`` and the warm start ``w0`` as its
-        iterate (the next step starts warm from it)."""
+        ``timeout`` s of wall time without an answer, or (``cpu_timeout``, s) once the worker
+        has spent that much CPU time on this solve, the worker is killed, the spare takes
+        over, and the result is a failure with status ``"deadline"`` and the warm start
+        ``w0`` as its iterate (the next step starts warm from it)."""
         t0 = time.perf_counter()
         for dead in self._dead:  # killed at an earlier deadline: gone by now
             dead.reap()
         self._dead.clear()
         w = self._active
         answer = None
+        cpu0 = None if cpu_timeout is None else cpu_s(w.proc)  # the idle worker's CPU time
         try:
             msg = (p, w0, lam_x0, lam_g0) + (() if max_iter is None else (max_iter,))
             if T_cap is not None:  # (sent only when set: the solver's call is as before)
@@ -225,7 +243,10 @@ class DeadlineSolver:
             w.conn.send(msg)
             while answer is None:
                 left = timeout - (time.perf_counter() - t0)
-                if not w.conn.poll(max(left, 0.0)):
+                wait = left if cpu0 is None else min(left, CPU_POLL_S)
+                if not w.conn.poll(max(wait, 0.0)):
+                    if wait < left and cpu_s(w.proc) - cpu0 <= cpu_timeout:
+                        continue  # still within its CPU time: wait on
                     break
                 msg = w.conn.recv()
                 if msg == _READY:  # a promoted spare that was still loading

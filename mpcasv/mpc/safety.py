@@ -225,7 +225,7 @@ class Safety:
         """Why this step's plan may not be used (None: it may)."""
         sp = self.params.solver
         if not res.ok and res.status == "deadline" and self._hang_guard:
-            return f"solver hung: no answer within {sp.hang_s:g} s (hang guard)"
+            return f"solver hung: no answer within {sp.hang_s:g} s of CPU time (hang guard)"
         if not res.ok and res.status == "deadline":
             return f"deadline: no plan within the step's {sp.budget_ms:g} ms (field mode)"
         if not res.ok:

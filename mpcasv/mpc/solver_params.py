@@ -60,13 +60,16 @@ class SolverParams:
         reproduced exactly under any load): a step over it is only counted
         (``mpc_over_budget``); ``max_iter`` bounds the work.
     hang_s : float
-        Hang guard in simulation (s; 0 = none): the solves run in a worker process and one
-        that has not answered after ``hang_s`` s of wall time is abandoned as hung (the step
-        takes the fallback, status ``deadline``). fatrop has looped forever inside its linear
-        solver on finite, well-posed parameters (Case 4 with the issue-13 plant, step 1097:
-        docs/mpc.md "Known problems"). Normal solves take milliseconds, so no run that does
-        not hang depends on wall time; a run that meets a hang is reproducible only as far
-        as the hang is.
+        Hang guard in simulation (s of CPU time; 0 = none): the solves run in a worker
+        process and one on which the worker has spent ``hang_s`` s of CPU time is abandoned
+        as hung (status ``deadline``; the step is then rescued or falls back, docs/mpc.md
+        "Fallbacks"). fatrop loops forever in its inertia correction on rare ill-conditioned
+        iterates (docs/mpc.md "Known problems"), spinning on a core. CPU time, not wall time:
+        a solve slowed by the machine's load is not abandoned, so a run that meets a hang is
+        reproduced exactly under any load too (the hang itself is deterministic). Normal
+        solves take milliseconds to under a second with 200 rescue iterations. A worker that
+        has not answered after ``HANG_WALL_FACTOR`` (20) times ``hang_s`` of wall time is
+        abandoned as well (one stopped without using CPU).
     rescue_iter : int
         Iteration limit of the rescue solves (docs/mpc.md, "Fallbacks"): when the plan of the
         warm-started solve cannot be used (iteration limit, or it goes deeper into an
@@ -126,7 +129,7 @@ class SolverParams:
     bound_push: Pos = 1e-6
     qp_iters: PosInt = 10
     budget_ms: Pos = 200.0
-    hang_s: NonNeg = 30.0
+    hang_s: NonNeg = 10.0
     rescue_iter: Annotated[int, Strict(), Field(ge=0)] = 200
     explore_iter: Annotated[int, Strict(), Field(ge=0)] | None = None
     step_iter: Annotated[int, Strict(), Field(ge=0)] | None = None

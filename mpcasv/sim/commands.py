@@ -116,7 +116,7 @@ def run(args: argparse.Namespace) -> int:
     for k in keys:
         v = metrics[k]
         print(f"  {k:24s} {v:.3f}" if isinstance(v, float) else f"  {k:24s} {v}")
-    if metrics.get("solver_hangs"):  # a run that met a hang depends on wall time: say so
+    if metrics.get("solver_hangs"):  # solves abandoned by the hang guard: say so
         print(f"  {'solver_hangs':24s} {metrics['solver_hangs']} (solves abandoned after "
-              "solver.hang_s s of wall time: this run depends on wall time)")
+              "solver.hang_s s of the solver's CPU time: docs/mpc.md 'Known problems')")
     return 0
