@@ -255,6 +255,35 @@ def test_parallel_processes_compile_a_library_once(tmp_path):
     assert len(list((tmp_path / "mpc").glob("mpc_locktest_*.so"))) == 1
 
 
+def test_a_compile_killed_by_a_signal_leaves_no_folder_behind(tmp_path):
+    """A compile ended by SIGKILL/SIGTERM runs no cleanup: its temporary folder (the C, some
+    MB) stayed in the cache for ever. The next compile of the library removes it."""
+    import os
+    import subprocess
+    import sys
+    import time
+
+    env = os.environ | {"MPCASV_CACHE": str(tmp_path)}
+    slow = _COMPILE_ONE.replace('"-O0"', '"-O0 -DSLEEP"').replace(
+        "compiled_library(", "import mpcasv.mpc.codegen as cg, time\n"
+        "cg.subprocess.run = lambda *a, **k: time.sleep(3600)\ncompiled_library(")
+    p = subprocess.Popen([sys.executable, "-c", slow], env=env)
+    folder = tmp_path / "mpc"
+    deadline = time.monotonic() + 60
+    while not list(folder.glob("mpc_locktest_*.tmp*")) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    p.kill()  # inside the (stand-in) compiler call
+    p.wait()
+    left = list(folder.glob("mpc_locktest_*.tmp*"))
+    assert len(left) == 1 and left[0].is_dir()  # what a killed compile leaves
+    stem = left[0].name.split(".tmp")[0]
+    out = subprocess.run([sys.executable, "-c", _COMPILE_ONE.replace('"-O0"', '"-O0 -DSLEEP"')],
+                         env=env, capture_output=True, text=True, timeout=120)  # fmt: skip
+    assert out.returncode == 0, out.stderr
+    assert (folder / f"{stem}.so").exists()  # the same library, compiled now
+    assert not list(folder.glob("mpc_locktest_*.tmp*"))
+
+
 def _rk4_gain(z: complex) -> float:
     """|R(z)| of classical RK4 on y' = lambda y with z = lambda h."""
     return abs(1 + z + z**2 / 2 + z**3 / 6 + z**4 / 24)

@@ -136,13 +136,18 @@ def write_source(functions: dict[str, ca.Function], src: Path, cflags: str) -> P
 
 def _compile(functions: dict[str, ca.Function], target: Path, compiler: str, cflags: str,
              solver: str, log) -> None:
-    """Generate C for ``functions`` and compile it into ``target`` (atomic rename)."""
+    """Generate C for ``functions`` and compile it into ``target`` (atomic rename), in a
+    temporary folder ``<target stem>.tmp*`` beside it; called under the library's lock."""
     folder, stem = target.parent, target.stem
     if shutil.which(compiler) is None:
         raise RuntimeError(f"C compiler {compiler!r} not found: install it or set "
                            "solver.compiled = false in the MPC preset")  # fmt: skip
     t0 = time.perf_counter()
-    with tempfile.TemporaryDirectory(dir=folder) as tmp:
+    # a compile of this library killed by a signal (no cleanup ran) left its folder: under
+    # the library's lock nobody else is compiling it, so the folder is ours to remove
+    for left in folder.glob(f"{stem}.tmp*"):
+        shutil.rmtree(left, ignore_errors=True)
+    with tempfile.TemporaryDirectory(dir=folder, prefix=f"{stem}.tmp") as tmp:
         src = write_source(functions, Path(tmp) / f"{stem}.c", cflags)
         out = Path(tmp) / target.name
         cmd = [compiler, *shlex.split(cflags), "-fPIC", "-shared", str(src), "-o", str(out),
