@@ -75,6 +75,9 @@ WALK: list[tuple[str, str]] = [
     ("sitl unknown.toml --duration 1", "unknown.toml"),
     ("replay missing.jsonl", "missing.jsonl"),
     ("replay garbage.jsonl", "garbage.jsonl"),
+    ("replay-solve missing.pkl", "missing.pkl"),
+    ("replay-solve garbage.toml", "garbage.toml"),
+    ("replay-solve adir", "adir"),
     ("bench compare --suite missing.toml", "missing.toml"),
     ("bench compare --suite garbage.toml", "garbage.toml"),
 ]

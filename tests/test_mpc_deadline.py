@@ -23,7 +23,7 @@ import pytest
 
 from mpcasv.controllers import make_controller
 from mpcasv.interface import ASVState, AUVEstimate, Observation, Reason
-from mpcasv.mpc.controller import _worker_solver
+from mpcasv.mpc.controller import worker_solver
 from mpcasv.mpc.deadline import DeadlineSolver
 from mpcasv.mpc.solvers import SolveResult
 from mpcasv.sim.scenario import load_scenario, scenario_with
@@ -96,7 +96,7 @@ class _HangOnce:
 
 
 def hang_once_solver(flag: str, params, n_auv: int, multi: bool):
-    return _HangOnce(_worker_solver(params, n_auv, multi, None), flag)
+    return _HangOnce(worker_solver(params, n_auv, multi, None), flag)
 
 
 def test_field_deadline_abandons_a_hung_solve_and_the_next_step_starts_warm(tmp_path):

@@ -136,7 +136,8 @@ _BASE: dict[str, MetricInfo] = {
                           "controllers; chattering shows here)", "issue 16 item 6"),
     "solver_hangs": _i("1", "lower", "MPC solves abandoned as hung by the simulation's hang "
                        "guard (no answer within solver.hang_s s of the solver's CPU time; the "
-                       "step then rescued or fell back); each cost that CPU time"),
+                       "step then rescued or fell back); each cost that CPU time and is kept "
+                       "in the run folder's hung_solves.pkl (mpcasv replay-solve)"),
     "over_budget_steps": _i("1", "lower", "MPC steps whose solve took longer than the field "
                             "budget_ms (wall clock: measured only, it changes no decision in "
                             "simulation)"),

@@ -52,6 +52,7 @@ from mpcasv.models.acoustics import AcousticParams
 from mpcasv.mpc.carry import Carry, Deferred
 from mpcasv.mpc.deadline import DeadlineSolver
 from mpcasv.mpc.dynamics import warn_course_unstable
+from mpcasv.mpc.hung import HANG_WALL_FACTOR, HungSolve
 from mpcasv.mpc.params import MPCParams
 from mpcasv.mpc.plan_check import PLAN_CHECK_S, plan_energy
 from mpcasv.mpc.plan_output import PlanOutput
@@ -66,10 +67,6 @@ from mpcasv.mpc.worldview import WorldView
 #: field mode: part of the step's budget kept for the fallback and the command after a
 #: missed solve deadline (s)
 STEP_RESERVE_S = 0.03
-#: simulation's hang guard: a solve whose worker has not answered after this many times
-#: ``solver.hang_s`` of wall time is abandoned even without spending ``hang_s`` of CPU time
-#: (a worker stopped or blocked; a hung fatrop spins and is caught by its CPU time first)
-HANG_WALL_FACTOR = 20.0
 
 _OCP_CACHE: dict = {}
 
@@ -95,9 +92,10 @@ def build_ocp(params: MPCParams, n_auv: int, multi: bool, log=print, boat: Boat 
     return _OCP_CACHE[key]
 
 
-def _worker_solver(params: MPCParams, n_auv: int, multi: bool, boat):
-    """The solver of a field-mode worker process (:class:`~mpcasv.mpc.deadline.DeadlineSolver`):
-    the same problem as the controller's, its library loaded from the cache."""
+def worker_solver(params: MPCParams, n_auv: int, multi: bool, boat):
+    """The solver of a worker process (:class:`~mpcasv.mpc.deadline.DeadlineSolver`: the field
+    mode, the hang guard, :func:`mpcasv.mpc.hung.replay`): the same problem as the
+    controller's, its library loaded from the cache."""
     return build_ocp(params, n_auv, multi, log=lambda *a: None, boat=boat)[1]
 
 
@@ -170,7 +168,7 @@ class MPCController(WorldView, Safety, PlanOutput, Targeting, SpeedCap, Carry):
         """
         if self.deadline is not None:
             self.deadline.close()
-        factory = factory or functools.partial(_worker_solver, self.params, self.ocp.dims.n_auv,
+        factory = factory or functools.partial(worker_solver, self.params, self.ocp.dims.n_auv,
                                                self.multi, self.boat)  # fmt: skip
         self.deadline = DeadlineSolver(factory, start_timeout, spare)
         self._deadline_n = self.ocp.dims.n_auv
@@ -242,6 +240,8 @@ class MPCController(WorldView, Safety, PlanOutput, Targeting, SpeedCap, Carry):
         self.over_budget = 0
         self._t_step = 0.0
         self._hung = 0
+        #: solves abandoned as hung this run, kept for a replay (:mod:`mpcasv.mpc.hung`)
+        self.hung_solves: list[HungSolve] = []
         self.t_explore: float | None = None
         #: when the first plan of the present standby streak meant to move off (s; None: the
         #: plan commanded was no standby); a later plan still standing by past it is late
@@ -288,7 +288,12 @@ class MPCController(WorldView, Safety, PlanOutput, Targeting, SpeedCap, Carry):
             hang_s = self.params.solver.hang_s  # judged by its worker's CPU time, not the load
             res = self.deadline.solve(p, w0, lam_x, lam_g, max_iter, cpu_timeout=hang_s,
                                       timeout=HANG_WALL_FACTOR * hang_s, **cap)  # fmt: skip
-            self._hung += int(not res.ok and res.status == "deadline")  # counted, never hidden
+            if not res.ok and res.status == "deadline":  # counted, never hidden, and kept
+                self._hung += 1  # for a replay (mpcasv replay-solve)
+                self.hung_solves.append(HungSolve(
+                    self.t_prev, self.params, self.ocp.dims.n_auv, self.multi, self.boat,
+                    *(None if a is None else np.array(a, float) for a in (p, w0, lam_x, lam_g)),
+                    max_iter, self.T_cap, hang_s))  # fmt: skip
             return res
         return self.deadline.solve(p, w0, lam_x, lam_g, max_iter, timeout=self._left(), **cap)
 

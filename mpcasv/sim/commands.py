@@ -118,5 +118,6 @@ def run(args: argparse.Namespace) -> int:
         print(f"  {k:24s} {v:.3f}" if isinstance(v, float) else f"  {k:24s} {v}")
     if metrics.get("solver_hangs"):  # solves abandoned by the hang guard: say so
         print(f"  {'solver_hangs':24s} {metrics['solver_hangs']} (solves abandoned after "
-              "solver.hang_s s of the solver's CPU time: docs/mpc.md 'Known problems')")
+              "solver.hang_s s of the solver's CPU time: docs/mpc.md 'Known problems'; solve "
+              f"them again: mpcasv replay-solve {out / 'hung_solves.pkl'})")
     return 0

@@ -1,5 +1,6 @@
 """Writing a run to its folder: ``timeseries.parquet``, ``metrics.json``, ``run.json``,
-``jumps.csv`` (hybrid controllers) and the figures. Written into a temporary folder and
+``jumps.csv`` (hybrid controllers), ``hung_solves.pkl`` (an MPC's solves abandoned as hung,
+:mod:`mpcasv.mpc.hung`) and the figures. Written into a temporary folder and
 renamed at the end, so a failed run leaves no partial output.
 
 The metrics are computed by the caller (:func:`mpcasv.experiments.metrics.compute_metrics`)
@@ -9,6 +10,7 @@ from __future__ import annotations
 
 import json
 import math
+import pickle
 import shutil
 import tempfile
 from pathlib import Path
@@ -66,6 +68,9 @@ def write_run(result, out_dir: str | Path, metrics: dict, plots: bool = True,
         (tmp / "run.json").write_text(json.dumps(info, indent=1, default=str) + "\n")
         if result.jumps is not None:
             result.jumps.to_csv(tmp / "jumps.csv", index=False)
+        if getattr(result, "hung_solves", None):  # an MPC's solves abandoned as hung, for
+            with open(tmp / "hung_solves.pkl", "wb") as f:  # mpcasv replay-solve (mpc/hung.py)
+                pickle.dump(result.hung_solves, f, protocol=pickle.HIGHEST_PROTOCOL)
         if plots:
             from mpcasv.sim.plots import plot_run  # matplotlib only when drawing
 

@@ -44,6 +44,8 @@ class RunResult:
     min_slant_range_m: float = math.inf
     wall_s: float = 0.0
     domain: object = None  # the scenario's evaluation DomainParams (None: it has none)
+    #: an MPC's solves abandoned as hung (mpcasv.mpc.hung.HungSolve; written to the run folder)
+    hung_solves: list = field(default_factory=list)
 
 
 def simulate(
@@ -107,6 +109,7 @@ def simulate(
         world.fix_times, world.reliable_times, int(getattr(controller, "fallbacks", 0)),
         jumps() if callable(jumps) else None, plans, world.energy_J, world.min_range,
         world.min_slant, time.perf_counter() - wall0, world.domain,
+        list(getattr(controller, "hung_solves", ())),
     )  # fmt: skip
 
 
