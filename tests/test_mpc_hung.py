@@ -31,19 +31,26 @@ ROOT = Path(__file__).resolve().parents[1]
 HANG_S = 1.0  # s of CPU time: the injected hang is abandoned after it
 
 
+#: the injected hang: this solve of the worker's (1-based), when the flag file exists
+HANG_CALL = 3
+
+
 class _HangOnceRecording:
-    """The real solver, except that the first solve after ``flag`` appears saves what it was
-    sent (``flag``.npz) and never returns."""
+    """The real solver, except that its ``HANG_CALL``-th solve, if ``flag`` exists, pickles
+    what it was sent (``flag``.sent) and never returns; the successor worker (the flag gone)
+    solves normally."""
 
     def __init__(self, solver, flag: str):
-        self.solver, self.flag = solver, flag
+        self.solver, self.flag, self.calls = solver, flag, 0
 
-    def solve(self, p, w0, *args):
-        if os.path.exists(self.flag):
+    def solve(self, *args):
+        self.calls += 1
+        if self.calls == HANG_CALL and os.path.exists(self.flag):
             os.remove(self.flag)
-            np.savez(self.flag + ".npz", p=p, w0=w0)
+            with open(self.flag + ".sent", "wb") as f:
+                pickle.dump(args, f)
             spins().solve()
-        return self.solver.solve(p, w0, *args)
+        return self.solver.solve(*args)
 
 
 def hang_once_recording(flag: str, params, n_auv: int, multi: bool):
@@ -68,16 +75,23 @@ def hung_run(tmp_path_factory):
     flag.touch()
     res = simulate(sc, c, seed=0)
     assert not flag.exists()  # the worker did start the hanging solve
-    return c, res, dict(np.load(str(flag) + ".npz"))
+    with open(str(flag) + ".sent", "rb") as f:
+        return c, res, pickle.load(f)
 
 
 def test_a_hung_solve_is_kept_with_what_the_worker_was_sent(hung_run):
     c, res, sent = hung_run
     assert res.timeseries["mpc_hung"].sum() == 1 and len(res.hung_solves) == 1
     s = res.hung_solves[0]
-    assert s.t == 0.0 and s.n_auv == 1 and not s.multi and s.cpu_s == HANG_S
+    assert s.n_auv == 1 and not s.multi and s.cpu_s == HANG_S
+    ts = res.timeseries  # a row's t is the end of its 1-s period: the step began 1 s before
+    assert s.t == ts.loc[ts["mpc_hung"] == 1, "t"].iloc[0] - 1.0 > 0.0
     assert s.params == c.params and s.boat is c.boat
-    assert np.array_equal(s.p, sent["p"]) and np.array_equal(s.w0, sent["w0"])
+    p, w0, lam_x, lam_g, *rest = sent
+    assert lam_x is not None and lam_g is not None  # warm multipliers: all fields are tested
+    assert all(np.array_equal(a, b) for a, b in ((s.p, p), (s.w0, w0), (s.lam_x, lam_x),
+                                                 (s.lam_g, lam_g)))  # fmt: skip
+    assert (s.max_iter, s.T_cap) == ((rest + [None, None])[0], (rest + [None, None])[1])
     assert s.p.shape == (c.ocp.nlp["p"].numel(),) and s.w0.shape == (c.ocp.nlp["x"].numel(),)
 
 
@@ -117,16 +131,42 @@ def test_the_run_folder_keeps_the_hung_solves_and_the_command_replays_them(
 def test_replay_solve_refuses_bad_input_in_one_line(hung_run, tmp_path, capsys):
     solves = hung_run[1].hung_solves
     good = tmp_path / "good.pkl"
-    hung.save(solves, good)
-    garbage = tmp_path / "garbage.pkl"
-    garbage.write_bytes(b"not a pickle at all")
-    other = tmp_path / "other.pkl"
-    other.write_bytes(pickle.dumps({"a": 1}))
-    _refused(["replay-solve", garbage], capsys, str(garbage), "not a file of hung solves")
-    _refused(["replay-solve", other], capsys, str(other), "not a file of hung solves")
+    good.write_bytes(pickle.dumps(solves))
+
+    def pkl(name: str, obj=None, raw: bytes | None = None) -> Path:
+        f = tmp_path / name
+        f.write_bytes(pickle.dumps(obj) if raw is None else raw)
+        return f
+
+    for f in (pkl("garbage.pkl", raw=b"not a pickle at all"), pkl("other.pkl", {"a": 1}),
+              pkl("huge.pkl", raw=b"\x80\x05\x8e" + b"\xff" * 8),  # a vast byte string
+              pkl("cut.pkl", raw=good.read_bytes()[:100])):  # fmt: skip
+        _refused(["replay-solve", f], capsys, str(f), "not a file of hung solves")
+    f = pkl("bad_params.pkl", [dataclasses.replace(solves[0], params="notparams")])
+    _refused(["replay-solve", f], capsys, str(f), "malformed", "MPCParams")
+    f = pkl("bad_p.pkl", [dataclasses.replace(solves[0], p=[1.0, 2.0])])
+    _refused(["replay-solve", f], capsys, str(f), "malformed", "p is not")
+    _refused(["replay-solve", pkl("empty.pkl", [])], capsys, "holds no hung solves")
     _refused(["replay-solve", tmp_path / "none.pkl"], capsys, "none.pkl")
-    _refused(["replay-solve", good, "--index", "1"], capsys, "--index 1", "holds 1 solves")
+    _refused(["replay-solve", good, "--index", "1"], capsys, "--index 1", "holds 1 hung solve")
     _refused(["replay-solve", good, "--set", "solver.nope=1"], capsys, "solver.nope")
-    _refused(["replay-solve", good, "--set", "solver.max_iter=-3"], capsys, "--set")
+    _refused(["replay-solve", good, "--set", "solver.tol=-3"], capsys, "--set", "tol")
+    _refused(["replay-solve", good, "--set", "solver.max_iter=30"], capsys, "--max-iter")
+    _refused(["replay-solve", good, "--set", "solver.hang_s=1"], capsys, "--cpu-s")
+    _refused(["replay-solve", good, "--set", "solver.budget_ms=5"], capsys, "budget_ms",
+             "reach the solver")  # fmt: skip
     _refused(["replay-solve", good, "--set", "max_iter=3"], capsys, "solver.KEY=VALUE")
-    _refused(["replay-solve", good, "--cpu-s", "0"], capsys, "--cpu-s")
+    for v in ("0", "-1", "inf", "nan"):
+        _refused(["replay-solve", good, "--cpu-s", v], capsys, "--cpu-s")
+    _refused(["replay-solve", good, "--max-iter", str(2**31)], capsys, "--max-iter")
+
+
+def test_a_solve_that_fails_in_the_worker_is_an_error_not_a_result(hung_run, tmp_path,
+                                                                   capsys):  # fmt: skip
+    """Parameters of another size than the problem's (a record of another version): the
+    worker's exception is one line and exit 2, not a "returned, not converged" result."""
+    s = hung_run[1].hung_solves[0]
+    f = tmp_path / "short.pkl"
+    f.write_bytes(pickle.dumps([dataclasses.replace(s, p=s.p[:-3])]))
+    line = _refused(["replay-solve", f, "--cpu-s", "5"], capsys, "[0]", "failed in the worker")
+    assert "p" in line

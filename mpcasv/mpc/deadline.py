@@ -201,6 +201,9 @@ class DeadlineSolver:
     ----------
     abandoned : int
         Solves abandoned at their deadline (their worker killed).
+    last_error : str or None
+        Why the last solve failed in its worker (the exception, or "solver worker died");
+        None if it returned or was abandoned. Its result's ``status`` says the same.
     """
 
     def __init__(self, factory: Callable, start_timeout: float = 600.0, spare: bool = True):
@@ -208,6 +211,7 @@ class DeadlineSolver:
         self.factory = factory
         self.start_timeout = start_timeout
         self.abandoned = 0
+        self.last_error: str | None = None
         self._dead: list[_Worker] = []  # killed workers not yet reaped
         self._active = self._started()
         self._spare = _Worker(factory, self._ctx, background=True) if spare else None
@@ -230,6 +234,7 @@ class DeadlineSolver:
         over, and the result is a failure with status ``"deadline"`` and the warm start
         ``w0`` as its iterate (the next step starts warm from it)."""
         t0 = time.perf_counter()
+        self.last_error = None
         for dead in self._dead:  # killed at an earlier deadline: gone by now
             dead.reap()
         self._dead.clear()
@@ -260,6 +265,7 @@ class DeadlineSolver:
             return SolveResult(answer.w, answer.lam_x, answer.lam_g, answer.f, answer.ok,
                                answer.status, answer.iters, ms)  # fmt: skip
         status = answer[1] if answer is not None else "deadline"
+        self.last_error = None if answer is None else status  # the worker's exception
         self._replace()
         if answer is None:
             self.abandoned += 1

@@ -10,7 +10,11 @@ process, under the same CPU-time guard, with the same or other solver settings: 
 reproduction a report to fatrop's authors needs, and a way to try settings on the very
 problems that hung.
 
-The file is a Python pickle: open only files you trust (a pickle can run code when loaded).
+The file is a Python pickle: open only files you trust (a pickle can run code when loaded),
+and it loads with the mpcasv code that wrote it (its classes; the problem is rebuilt from the
+recorded parameters, so a version whose problem differs refuses the record's sizes).
+Solves abandoned in a ``falsify`` search's trials are not kept (only its reruns write run
+folders), nor those of the field mode (a deadline there is not a hang).
 """
 
 from __future__ import annotations
@@ -18,15 +22,13 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import functools
+import math
 import pickle
-import time
 import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-
-from mpcasv import __version__
 
 #: the file a run folder keeps its hung solves in
 FILE_NAME = "hung_solves.pkl"
@@ -40,8 +42,10 @@ HANG_WALL_FACTOR = 20.0
 class HungSolve:
     """One solve abandoned by the hang guard: what the worker was sent, and its problem.
 
-    ``p`` (shape (n_p,)) the problem's parameters, ``w0`` (shape (n_w,)) the initial guess
-    (physical units), ``lam_x``/``lam_g`` the warm-start multipliers (None: none); ``max_iter``
+    Any solve of the step (the warm-started one, an exploration, a rescue: the controller
+    solves with the same call). ``p`` (shape (n_p,)) the problem's parameters, ``w0`` (shape
+    (n_w,)) the initial guess (physical units), ``lam_x``/``lam_g`` the warm-start multipliers
+    of the scaled problem (None: none); ``max_iter``
     the solve's iteration limit (None: ``solver.max_iter``); ``T_cap`` the planned thrust's
     cap (N; None: none); ``cpu_s`` the CPU time it was given (s); ``t`` the step's time (s).
     ``params``, ``n_auv``, ``multi`` and ``boat`` rebuild the same problem
@@ -60,23 +64,17 @@ class HungSolve:
     max_iter: int | None
     T_cap: float | None
     cpu_s: float
-    version: str = __version__  # mpcasv's version that recorded it
-
-
-def save(solves: list[HungSolve], path: str | Path) -> None:
-    """Write ``solves`` to ``path`` (a pickle of the list)."""
-    with open(path, "wb") as f:
-        pickle.dump(list(solves), f, protocol=pickle.HIGHEST_PROTOCOL)
 
 
 def load(path: str | Path) -> list[HungSolve]:
-    """The hung solves in ``path`` (written by :func:`save`).
+    """The hung solves in ``path`` (a pickled list of :class:`HungSolve`, written by
+    :func:`mpcasv.sim.record.write_run`), each record checked.
 
     Raises
     ------
     ConfigError
-        One line: not such a file (not a pickle, or not a list of :class:`HungSolve`), or
-        written by a version of mpcasv whose classes no longer load.
+        One line: not such a file (not a pickle, or not a list of well-formed
+        :class:`HungSolve`), or one that names mpcasv classes this version does not have.
     OSError
         The file cannot be read.
     """
@@ -85,50 +83,91 @@ def load(path: str | Path) -> list[HungSolve]:
     with open(path, "rb") as f:
         try:
             solves = pickle.load(f)
-        except (pickle.UnpicklingError, EOFError, ValueError) as exc:
-            raise ConfigError(f"{path}: not a file of hung solves ({exc}); it is the "
-                              f"{FILE_NAME} of a run folder") from None  # fmt: skip
-        except (AttributeError, ImportError, TypeError) as exc:
-            raise ConfigError(f"{path}: written by another version of mpcasv, whose classes "
-                              f"do not load here ({exc})") from None  # fmt: skip
+        except (AttributeError, ImportError) as exc:
+            if "mpcasv" in str(exc) or "HungSolve" in str(exc):
+                raise ConfigError(f"{path}: written by another version of mpcasv, whose "
+                                  f"classes do not load here ({exc})") from None  # fmt: skip
+            raise ConfigError(f"{path}: not a file of hung solves ({exc})") from None
+        except Exception as exc:  # a pickle of garbage fails in many ways
+            raise ConfigError(f"{path}: not a file of hung solves ({type(exc).__name__}: "
+                              f"{exc}); it is the {FILE_NAME} of a run folder") from None
     if not isinstance(solves, list) or not all(isinstance(s, HungSolve) for s in solves):
         raise ConfigError(f"{path}: not a file of hung solves (a pickle of something else); "
                           f"it is the {FILE_NAME} of a run folder")  # fmt: skip
+    for i, s in enumerate(solves):
+        problem = _malformed(s)
+        if problem:
+            raise ConfigError(f"{path}: hung solve {i} is malformed ({problem}): written by "
+                              "another version of mpcasv, or not by mpcasv")  # fmt: skip
     return solves
+
+
+def _malformed(s: HungSolve) -> str | None:
+    """What is wrong with record ``s`` (None: nothing)."""
+    from mpcasv.mpc.params import MPCParams
+
+    try:
+        if not isinstance(s.params, MPCParams):
+            return "params is not an MPCParams"
+        if not (isinstance(s.n_auv, int) and s.n_auv >= 1 and isinstance(s.multi, bool)):
+            return "n_auv or multi"
+        for name in ("p", "w0", "lam_x", "lam_g"):
+            a = getattr(s, name)
+            if (a is not None or name in ("p", "w0")) and not (
+                    isinstance(a, np.ndarray) and a.ndim == 1 and a.dtype == float):
+                return f"{name} is not a 1-D float array"  # fmt: skip
+        if s.max_iter is not None and not isinstance(s.max_iter, int):
+            return "max_iter"
+        if not (isinstance(s.cpu_s, float | int) and s.cpu_s > 0):
+            return "cpu_s"
+    except AttributeError as exc:  # a record of another layout
+        return str(exc)
+    return None
+
+
+#: the solver settings a replay may change (``--set solver.K=V``): those that reach the
+#: solver's call; the others act in the controller (iteration budgets of other solves, the
+#: plan check) or are options of the command (``max_iter``: ``--max-iter``; ``hang_s``:
+#: ``--cpu-s``)
+REPLAY_SETTINGS = ("solver", "compiled", "cflags", "threads", "tol", "mu_init", "bound_push",
+                   "qp_iters", "stage_derivatives")  # fmt: skip
 
 
 def with_solver(solve: HungSolve, settings: dict) -> HungSolve:
     """``solve`` with ``settings`` (field of ``solver`` -> value, e.g. ``{"stage_derivatives":
-    "inline"}``) replacing its preset's solver settings.
+    "inline"}``; the fields :data:`REPLAY_SETTINGS`) replacing its preset's solver settings.
 
     Raises
     ------
     ConfigError
-        A field that ``SolverParams`` does not have, or an invalid value.
+        Another field (one line saying which option sets it, if any), or an invalid value.
     """
-    from mpcasv.config import ConfigError
+    from mpcasv.config import ConfigError, replace
 
-    sp = solve.params.solver
-    names = {f.name for f in dataclasses.fields(sp)}
-    unknown = sorted(set(settings) - names)
-    if unknown:
-        raise ConfigError(f"--set solver.{unknown[0]}: no such solver setting (SolverParams: "
-                          f"{', '.join(sorted(names))})")  # fmt: skip
+    for key in settings:
+        if key in ("max_iter", "hang_s"):
+            opt = "--max-iter" if key == "max_iter" else "--cpu-s"
+            raise ConfigError(f"--set solver.{key}: use {opt} to replay with another limit")
+        if key not in REPLAY_SETTINGS:
+            raise ConfigError(f"--set solver.{key}: not a setting a replay can change "
+                              f"(these reach the solver: {', '.join(REPLAY_SETTINGS)})")
     try:
-        new = dataclasses.replace(sp, **settings)
-    except (TypeError, ValueError) as exc:
-        msg = " ".join(str(exc).split())
-        raise ConfigError(f"--set: invalid solver setting: {msg}") from None
+        new = replace(solve.params.solver, **settings)
+    except ConfigError as exc:
+        msg = "; ".join(x.strip() for x in str(exc).splitlines()[1:] if x.strip())
+        raise ConfigError(f"--set: {msg}") from None
     return dataclasses.replace(solve, params=dataclasses.replace(solve.params, solver=new))
 
 
 @dataclass(frozen=True)
 class Replayed:
-    """The outcome of :func:`replay`: ``hung`` (abandoned again after ``cpu_s`` s of CPU
-    time), else the solver's ``status``, ``iters``, cost ``f`` and ``ok``; ``wall_s`` the wall
-    time of the solve (s)."""
+    """The outcome of :func:`replay`: ``hung`` (abandoned again; ``by_cpu``: after its CPU-time
+    limit, else at the wall-clock backstop), else the solver's ``status`` (as the solver
+    names it: fatrop's return code, IPOPT's or the QP variant's word), ``iters``, cost ``f``
+    and ``ok`` (converged); ``wall_s`` the wall time of the solve alone (s)."""
 
     hung: bool
+    by_cpu: bool
     status: str
     iters: int
     f: float
@@ -139,15 +178,17 @@ class Replayed:
 def replay(solve: HungSolve, cpu_s: float | None = None, max_iter: int | None = None,
            factory=None) -> Replayed:  # fmt: skip
     """Solve ``solve`` again in a fresh worker process (its compiled library loaded from the
-    cache, compiled first if missing) and abandon it, as the hang guard did, after ``cpu_s``
-    s of the worker's CPU time (None: the time it was given, ``solve.cpu_s``).
-    ``max_iter``: another iteration limit (None: the recorded one). ``factory`` (tests): builds
-    the worker's solver (default: the recorded problem's).
+    cache, compiled first if missing) and abandon it, as the hang guard does, after ``cpu_s``
+    s of the worker's CPU time (None: the time it was given, ``solve.cpu_s``), or after
+    :data:`HANG_WALL_FACTOR` times as long on the wall clock. ``max_iter``: another iteration
+    limit (None: the recorded one). ``factory`` (tests): builds the worker's solver (default:
+    the recorded problem's).
 
     Raises
     ------
     RuntimeError
-        The worker could not build the solver.
+        The worker could not build the solver, or the solve failed in it (an exception, e.g.
+        parameters of another size than the problem's; or the worker died).
     """
     from mpcasv.mpc.controller import worker_solver
     from mpcasv.mpc.deadline import DeadlineSolver
@@ -158,15 +199,18 @@ def replay(solve: HungSolve, cpu_s: float | None = None, max_iter: int | None = 
     ds = DeadlineSolver(factory, start_timeout=1800.0, spare=False)
     try:
         cap = {} if solve.T_cap is None else {"T_cap": solve.T_cap}
-        t0 = time.perf_counter()
         res = ds.solve(solve.p, solve.w0, solve.lam_x, solve.lam_g,
                        solve.max_iter if max_iter is None else max_iter,
                        cpu_timeout=cpu_s, timeout=HANG_WALL_FACTOR * cpu_s, **cap)  # fmt: skip
-        wall = time.perf_counter() - t0
+        error = ds.last_error
     finally:
         ds.close()
+    if error is not None:
+        raise RuntimeError(f"the solve failed in the worker: {error.splitlines()[0]}")
+    wall = res.ms / 1e3  # the solve alone (not the successor worker started after a hang)
     hung = not res.ok and res.status == "deadline"
-    return Replayed(hung, res.status, res.iters, float(res.f), bool(res.ok), wall)
+    by_cpu = hung and wall < HANG_WALL_FACTOR * cpu_s
+    return Replayed(hung, by_cpu, res.status, res.iters, float(res.f), bool(res.ok), wall)
 
 
 # ---------------------------------------------------------------------- command line
@@ -182,59 +226,97 @@ def _setting(text: str) -> tuple[str, object]:
     return key.removeprefix("solver."), v
 
 
+#: fatrop's and IPOPT's iteration limit is a C int
+MAX_ITER_LIMIT = 2**31 - 1
+
+
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "replay-solve", help="solve again the MPC solves a run abandoned as hung",
         description="Solve again, each in a fresh worker process under the hang guard's CPU "
         "time limit, the MPC solves a simulated run abandoned as hung (RUN/hung_solves.pkl, "
         "written when the metric solver_hangs is not 0): whether each hangs again, with the "
-        "recorded or other solver settings (docs/mpc.md 'Known problems').",
+        "recorded or other solver settings (docs/mpc.md 'Known problems'). The file is a "
+        "Python pickle: open only files you trust.",
     )  # fmt: skip
     p.add_argument("file", type=Path, help=f"a run folder's {FILE_NAME}")
     p.add_argument("--index", type=int, action="append",
                    help="replay only this solve (0-based; repeatable; default: all)")
     p.add_argument("--cpu-s", type=float, default=None,
-                   help="abandon a solve after this many s of CPU time (default: the "
-                        "solver.hang_s it was given)")  # fmt: skip
+                   help="abandon a solve after this many s of its worker's CPU time (or 20 "
+                        "times as long on the wall clock; default: the solver.hang_s it was "
+                        "given)")  # fmt: skip
     p.add_argument("--max-iter", type=int, default=None,
-                   help="the solve's iteration limit (default: the recorded one)")
+                   help="the solve's iteration limit (default: the recorded one, else the "
+                        "preset's solver.max_iter)")  # fmt: skip
     p.add_argument("--set", type=_setting, action="append", default=[], metavar="solver.K=V",
-                   help="replace a solver setting, e.g. solver.stage_derivatives=\"inline\" "
-                        "(repeatable; settings that change the problem's size are refused)")
+                   help="replace a solver setting that reaches the solver, e.g. "
+                        f"solver.stage_derivatives=inline ({', '.join(REPLAY_SETTINGS)}; "
+                        "repeatable)")  # fmt: skip
     p.set_defaults(func=run)
+
+
+def _check_options(args: argparse.Namespace) -> None:
+    from mpcasv.config import ConfigError
+
+    if args.cpu_s is not None and not (math.isfinite(args.cpu_s) and args.cpu_s > 0):
+        raise ConfigError(f"--cpu-s {args.cpu_s}: must be a finite number > 0 (s)")
+    if args.max_iter is not None and not 1 <= args.max_iter <= MAX_ITER_LIMIT:
+        raise ConfigError(f"--max-iter {args.max_iter}: must be 1..{MAX_ITER_LIMIT}")
+
+
+def _library_ready(s: HungSolve) -> None:
+    """Compile the solve's library first if it is not in the cache, saying so (the worker
+    would compile it silently)."""
+    from mpcasv.mpc.prepare import libraries
+
+    for lib in libraries(s.params, s.n_auv, s.multi, s.boat):
+        if not lib.cached:
+            inline = s.params.solver.stage_derivatives == "inline"
+            print(f"compiling {lib.label} (about {lib.estimate_s * (10 if inline else 1):.0f} "
+                  "s on an idle machine; cached for the next time) ...", flush=True)
+            lib.compile(log=lambda *a: None)
 
 
 def run(args: argparse.Namespace) -> int:
     from mpcasv.config import ConfigError
 
-    if args.cpu_s is not None and not args.cpu_s > 0:
-        raise ConfigError(f"--cpu-s {args.cpu_s}: must be > 0 s")
-    if args.max_iter is not None and args.max_iter < 1:
-        raise ConfigError(f"--max-iter {args.max_iter}: must be >= 1")
+    _check_options(args)
     solves = load(args.file)
-    picked = range(len(solves)) if args.index is None else args.index
+    if not solves:
+        raise ConfigError(f"{args.file}: holds no hung solves")
+    picked = list(dict.fromkeys(range(len(solves)) if args.index is None else args.index))
     for i in picked:
         if not 0 <= i < len(solves):
-            raise ConfigError(f"--index {i}: {args.file} holds {len(solves)} solves "
-                              f"(0..{len(solves) - 1})")  # fmt: skip
-    print(f"{args.file}: {len(solves)} hung solves (recorded by mpcasv "
-          f"{solves[0].version if solves else '?'})")  # fmt: skip
-    again = 0
-    for i in picked:
-        s = with_solver(solves[i], dict(args.set))
+            raise ConfigError(f"--index {i}: {args.file} holds {len(solves)} hung solve"
+                              f"{'s' if len(solves) > 1 else ''} (0..{len(solves) - 1})")
+    runs = {i: with_solver(solves[i], dict(args.set)) for i in picked}  # all checked first
+    print(f"{args.file}: {len(solves)} hung solve{'s' if len(solves) > 1 else ''}")
+    again = undecided = 0
+    for i, s in runs.items():
         sp = s.params.solver
-        print(f"[{i}] t = {s.t:g} s, {s.n_auv} AUV(s), {sp.solver} "
-              f"({sp.stage_derivatives} derivatives), max_iter "
-              f"{s.max_iter if args.max_iter is None else args.max_iter}: ", end="", flush=True)
-        try:
-            r = replay(s, args.cpu_s, args.max_iter)
-        except RuntimeError as exc:
-            raise ConfigError(f"[{i}]: {exc}") from None
-        again += r.hung
+        limit = s.max_iter if args.max_iter is None else args.max_iter  # None: the preset's
         cpu = s.cpu_s if args.cpu_s is None else args.cpu_s
-        print(f"hung again (abandoned after {cpu:g} s of CPU time, {r.wall_s:.1f} s wall)"
-              if r.hung else f"returned in {r.wall_s:.2f} s: "
-              f"{'converged' if r.ok else 'not converged'} (status {r.status}), {r.iters} "
-              f"iterations, cost {r.f:.6g}")  # fmt: skip
-    print(f"{again} of {len(picked)} hung again")
+        how = f"{sp.solver}" + (f" ({sp.stage_derivatives} derivatives)"
+                                if sp.solver != "qp" else "")  # fmt: skip
+        _library_ready(s)
+        print(f"[{i}] t = {s.t:g} s, {s.n_auv} AUV{'s' if s.n_auv > 1 else ''}, {how}, "
+              f"max_iter {sp.max_iter if limit is None else limit}: ", end="", flush=True)
+        try:
+            r = replay(s, cpu, limit)
+        except RuntimeError as exc:
+            print("failed")
+            raise ConfigError(f"[{i}]: {exc}") from None
+        if r.hung and r.by_cpu:
+            again += 1
+            print(f"hung again (abandoned after {cpu:g} s of CPU time; {r.wall_s:.1f} s wall)")
+        elif r.hung:  # a worker starved or stopped: it did not spend its CPU time
+            undecided += 1
+            print(f"no verdict: not answered within the wall-clock backstop "
+                  f"({HANG_WALL_FACTOR:g} x {cpu:g} s) before spending {cpu:g} s of CPU time")
+        else:
+            print(f"returned in {r.wall_s:.2f} s: {'converged' if r.ok else 'not converged'} "
+                  f"(status {r.status}), {r.iters} iterations, cost {r.f:.6g}")
+    print(f"{again} of {len(runs)} hung again"
+          + (f"; {undecided} without a verdict (raise --cpu-s)" if undecided else ""))
     return 0
