@@ -206,7 +206,7 @@ def replay(solve: HungSolve, cpu_s: float | None = None, max_iter: int | None = 
     finally:
         ds.close()
     if error is not None:
-        raise RuntimeError(f"the solve failed in the worker: {error.splitlines()[0]}")
+        raise RuntimeError(f"the solve failed in the worker: {(error.splitlines() or ['?'])[0]}")
     wall = res.ms / 1e3  # the solve alone (not the successor worker started after a hang)
     hung = not res.ok and res.status == "deadline"
     by_cpu = hung and wall < HANG_WALL_FACTOR * cpu_s
