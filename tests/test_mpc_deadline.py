@@ -12,7 +12,9 @@ from __future__ import annotations
 
 import functools
 import itertools
+import math
 import os
+import signal
 import subprocess
 import sys
 import time
@@ -241,3 +243,63 @@ def test_a_solver_worker_dies_with_the_process_that_started_it(tmp_path):
         parent.kill()
         if worker is not None and _alive(worker):  # (the test failed: do not leave it)
             os.kill(worker, 9)
+
+
+_PAUSED_SCRIPT = '''
+import sys, time
+import numpy as np
+from mpcasv.mpc.deadline import DeadlineSolver
+from mpcasv.mpc.solvers import SolveResult
+
+class Busy:  # a healthy solve: 1.5 s of CPU, then an answer
+    def solve(self, p, w0, *args):
+        t0 = time.process_time()
+        while time.process_time() - t0 < 1.5:
+            pass
+        return SolveResult(np.asarray(w0, float), None, None, 1.0, True, "ok", 3, 0.0)
+
+def busy():
+    return Busy()
+
+if __name__ == "__main__":
+    ds = DeadlineSolver(busy, start_timeout=120.0, spare=False)
+    print("solving", flush=True)
+    res = ds.solve(np.zeros(2), np.ones(3), timeout=2.0, cpu_timeout=10.0)
+    print(res.ok, res.status, ds.abandoned, getattr(ds, "last_abandon", None), flush=True)
+    ds.close()
+'''
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="process-group signals")
+def test_a_run_suspended_during_a_solve_does_not_abandon_it(tmp_path):
+    """The hang guard's wall-clock backstop (a worker that uses no CPU for ``timeout`` s)
+    must not count a time in which the whole run was stopped (Ctrl-Z, a paused container):
+    the healthy solve in flight is kept. Before, a 4-s stop past a 2-s backstop abandoned it
+    as hung, and the run went another way."""
+    script = tmp_path / "paused.py"
+    script.write_text(_PAUSED_SCRIPT)
+    proc = subprocess.Popen([sys.executable, str(script)], stdout=subprocess.PIPE, text=True,
+                            start_new_session=True)  # its own group: the worker's too
+    try:
+        assert proc.stdout.readline().strip() == "solving"
+        time.sleep(0.3)  # inside the solve
+        os.killpg(proc.pid, signal.SIGSTOP)
+        time.sleep(4.0)
+        os.killpg(proc.pid, signal.SIGCONT)
+        out, _ = proc.communicate(timeout=120)
+        assert out.split() == ["True", "ok", "0", "None"], out
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+
+
+def test_a_worker_cpu_time_that_cannot_be_read_is_unknown_not_this_process():
+    """psutil.Process(None) is the calling process: a worker not started yet (pid None) must
+    read as unknown (NaN), not as the controller's own CPU time."""
+    from types import SimpleNamespace
+
+    from mpcasv.mpc.deadline import cpu_s
+
+    assert math.isnan(cpu_s(SimpleNamespace(pid=None)))
+    assert math.isnan(cpu_s(SimpleNamespace(pid=2**22 + 12345)))  # no such process
+    assert cpu_s(SimpleNamespace(pid=os.getpid())) > 0.0

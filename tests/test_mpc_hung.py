@@ -111,7 +111,7 @@ def test_a_replay_solves_the_very_problem_that_hung(hung_run):
 def test_a_replay_that_hangs_again_is_abandoned_on_its_cpu_time(hung_run):
     (s,) = hung_run[1].hung_solves
     r = hung.replay(s, cpu_s=0.5, factory=spins)
-    assert r.hung and r.status == "deadline" and r.wall_s < 20 * 0.5
+    assert r.hung and r.by_cpu and r.status == "deadline" and r.wall_s < 30.0
 
 
 def test_the_run_folder_keeps_the_hung_solves_and_the_command_replays_them(

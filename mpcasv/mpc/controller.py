@@ -52,7 +52,7 @@ from mpcasv.models.acoustics import AcousticParams
 from mpcasv.mpc.carry import Carry, Deferred
 from mpcasv.mpc.deadline import DeadlineSolver
 from mpcasv.mpc.dynamics import warn_course_unstable
-from mpcasv.mpc.hung import HANG_WALL_FACTOR, HungSolve
+from mpcasv.mpc.hung import HungSolve, idle_limit
 from mpcasv.mpc.params import MPCParams
 from mpcasv.mpc.plan_check import PLAN_CHECK_S, plan_energy
 from mpcasv.mpc.plan_output import PlanOutput
@@ -176,10 +176,10 @@ class MPCController(WorldView, Safety, PlanOutput, Targeting, SpeedCap, Carry):
 
     def use_hang_guard(self) -> None:
         """Simulation: the solves run in a worker process and only one on which the worker
-        has spent ``solver.hang_s`` s of CPU time (or that has not answered after
-        ``HANG_WALL_FACTOR`` times as long on the wall clock: a worker that stopped without
-        using CPU) is abandoned (:class:`~mpcasv.mpc.solver_params.SolverParams`;
-        ``hang_s = 0``: solves stay in this process, unguarded)."""
+        has spent ``solver.hang_s`` s of CPU time (or that has used no CPU for
+        :func:`~mpcasv.mpc.hung.idle_limit` s: a worker stopped or blocked) is abandoned
+        (:class:`~mpcasv.mpc.solver_params.SolverParams`; ``hang_s = 0``: solves stay in this
+        process, unguarded)."""
         if self.params.solver.hang_s <= 0:
             self.close()
             return
@@ -287,7 +287,7 @@ class MPCController(WorldView, Safety, PlanOutput, Targeting, SpeedCap, Carry):
         if self._hang_guard:  # simulation: abandon only a hung solve (SolverParams.hang_s),
             hang_s = self.params.solver.hang_s  # judged by its worker's CPU time, not the load
             res = self.deadline.solve(p, w0, lam_x, lam_g, max_iter, cpu_timeout=hang_s,
-                                      timeout=HANG_WALL_FACTOR * hang_s, **cap)  # fmt: skip
+                                      timeout=idle_limit(hang_s), **cap)  # fmt: skip
             if not res.ok and res.status == "deadline":  # counted, never hidden, and kept
                 self._hung += 1  # for a replay (mpcasv replay-solve)
                 self.hung_solves.append(HungSolve(

@@ -20,9 +20,14 @@ In the field (:meth:`mpcasv.mpc.controller.MPCController.use_deadline`) the dead
 time. Simulation's hang guard (:meth:`~mpcasv.mpc.controller.MPCController.use_hang_guard`)
 judges a solve by the CPU time its worker has spent on it instead (``cpu_timeout``): a hung
 fatrop spins (docs/mpc.md "Known problems"), while a solve starved by the machine's load uses
-little CPU, so the load never decides which solve is abandoned (wall-clock time never changes
-a simulated decision); the wall clock is only a backstop for a worker that stops without
-using CPU.
+little CPU, so the load does not decide which solve is abandoned (wall-clock time does not
+change a simulated decision); the wall clock only ends a worker that has used no CPU at all
+for a long time (stopped or blocked), not counting time in which this process was stopped
+itself. What is left to chance: the CPU time is read every ``CPU_POLL_S`` s, so a solve that
+would end within a poll of the limit may or may not be abandoned, and the CPU a unit of work
+takes varies a little with load (caches, shared cores); with ``hang_s`` = 10 s of CPU
+against solves of at most about a second, neither has been seen to matter. The limit counts
+all the worker's threads (``solver.threads``).
 """
 
 from __future__ import annotations
@@ -51,11 +56,15 @@ CPU_POLL_S = 0.2
 
 
 def cpu_s(proc) -> float:
-    """CPU time (user + system, s) process ``proc`` has used; inf if it is gone."""
+    """CPU time (user + system, all threads, s) process ``proc`` has used; NaN if it cannot
+    be read (not started yet, gone, or psutil refused): unknown, never taken for progress nor
+    for a limit reached."""
+    if getattr(proc, "pid", None) is None:  # psutil.Process(None) would be this process
+        return math.nan
     try:
         t = psutil.Process(proc.pid).cpu_times()
-    except (psutil.Error, ValueError, TypeError):  # gone (or never started: pid None)
-        return math.inf
+    except (psutil.Error, ValueError, TypeError):
+        return math.nan
     return t.user + t.system
 
 
@@ -204,6 +213,8 @@ class DeadlineSolver:
     last_error : str or None
         Why the last solve failed in its worker (the exception, or "solver worker died");
         None if it returned or was abandoned. Its result's ``status`` says the same.
+    last_abandon : {"wall", "cpu", "idle"} or None
+        Which limit abandoned the last solve (:meth:`solve`); None if it was not abandoned.
     """
 
     def __init__(self, factory: Callable, start_timeout: float = 600.0, spare: bool = True):
@@ -212,6 +223,7 @@ class DeadlineSolver:
         self.start_timeout = start_timeout
         self.abandoned = 0
         self.last_error: str | None = None
+        self.last_abandon: str | None = None
         self._dead: list[_Worker] = []  # killed workers not yet reaped
         self._active = self._started()
         self._spare = _Worker(factory, self._ctx, background=True) if spare else None
@@ -228,36 +240,34 @@ class DeadlineSolver:
               max_iter: int | None = None, *, timeout: float, T_cap: float | None = None,
               cpu_timeout: float | None = None) -> SolveResult:  # fmt: skip
         """Solve in the worker (``max_iter``: the solver's iteration limit for this solve,
-        None: its own; ``T_cap``: the planned thrust's cap, N, None: none); after
-        ``timeout`` s of wall time without an answer, or (``cpu_timeout``, s) once the worker
-        has spent that much CPU time on this solve, the worker is killed, the spare takes
-        over, and the result is a failure with status ``"deadline"`` and the warm start
-        ``w0`` as its iterate (the next step starts warm from it)."""
+        None: its own; ``T_cap``: the planned thrust's cap, N, None: none) and abandon it:
+
+        - field (``cpu_timeout`` None): after ``timeout`` s of wall time without an answer;
+        - simulation's hang guard: once the worker has spent ``cpu_timeout`` s of CPU time
+          (all its threads) on this solve, or has used no CPU for ``timeout`` s of this
+          process's wall time (a stopped or blocked worker; a gap in which this process was
+          stopped itself, e.g. the run suspended, counts as one poll, not as its length).
+          A starved solve that still gets CPU is never abandoned.
+
+        An abandoned worker is killed, the spare (or a new worker) takes over, and the result
+        is a failure with status ``"deadline"`` and the warm start ``w0`` as its iterate (the
+        next step starts warm from it); :attr:`last_abandon` says which limit it was."""
         t0 = time.perf_counter()
-        self.last_error = None
+        self.last_error = self.last_abandon = None
         for dead in self._dead:  # killed at an earlier deadline: gone by now
             dead.reap()
         self._dead.clear()
         w = self._active
-        answer = None
-        cpu0 = None if cpu_timeout is None else cpu_s(w.proc)  # the idle worker's CPU time
         try:
             msg = (p, w0, lam_x0, lam_g0) + (() if max_iter is None else (max_iter,))
             if T_cap is not None:  # (sent only when set: the solver's call is as before)
                 msg = (p, w0, lam_x0, lam_g0, max_iter, T_cap)
+            cpu0 = cpu_s(w.proc) if w.ready else math.nan  # the idle worker's CPU time
             w.conn.send(msg)
-            while answer is None:
-                left = timeout - (time.perf_counter() - t0)
-                wait = left if cpu0 is None else min(left, CPU_POLL_S)
-                if not w.conn.poll(max(wait, 0.0)):
-                    if wait < left and cpu_s(w.proc) - cpu0 <= cpu_timeout:
-                        continue  # still within its CPU time: wait on
-                    break
-                msg = w.conn.recv()
-                if msg == _READY:  # a promoted spare that was still loading
-                    w.ready = True
-                    continue
-                answer = msg
+            if cpu_timeout is None:
+                answer = self._wait_wall(w, timeout - (time.perf_counter() - t0))
+            else:
+                answer = self._wait_cpu(w, cpu0, cpu_timeout, timeout)
         except (EOFError, OSError):  # the worker died
             answer = ("error", "solver worker died")
         ms = (time.perf_counter() - t0) * 1e3
@@ -270,6 +280,54 @@ class DeadlineSolver:
         if answer is None:
             self.abandoned += 1
         return SolveResult(np.asarray(w0, float), None, None, math.nan, False, status, 0, ms)
+
+    @staticmethod
+    def _answer(w: _Worker):
+        """The worker's next message, or None for the ready message of a promoted spare."""
+        msg = w.conn.recv()
+        if msg == _READY:  # a promoted spare that was still loading
+            w.ready = True
+            return None
+        return msg
+
+    def _wait_wall(self, w: _Worker, timeout: float):
+        """The answer within ``timeout`` s of wall time, or None (``last_abandon`` "wall")."""
+        t0 = time.perf_counter()
+        while True:
+            if not w.conn.poll(max(timeout - (time.perf_counter() - t0), 0.0)):
+                self.last_abandon = "wall"
+                return None
+            answer = self._answer(w)
+            if answer is not None:
+                return answer
+
+    def _wait_cpu(self, w: _Worker, cpu0: float, cpu_timeout: float, idle_timeout: float):
+        """The answer before the worker spends ``cpu_timeout`` s of CPU on it (from ``cpu0``,
+        NaN: not known yet) or uses none for ``idle_timeout`` s; else None
+        (``last_abandon`` "cpu" or "idle")."""
+        last, idle, t_prev = cpu0, 0.0, time.perf_counter()
+        while True:
+            if w.conn.poll(CPU_POLL_S):
+                answer = self._answer(w)
+                if answer is not None:
+                    return answer
+                cpu0 = last = cpu_s(w.proc)  # a spare ready only now: its loading not counted
+                continue
+            now = time.perf_counter()
+            dt, t_prev = now - t_prev, now
+            c = cpu_s(w.proc)
+            if c - cpu0 > cpu_timeout:  # (NaN, unknown, never exceeds)
+                if w.conn.poll(0):  # answered meanwhile: take it
+                    continue
+                self.last_abandon = "cpu"
+                return None
+            if math.isfinite(c) and not c <= last:  # progress (or the first known reading)
+                last, idle = c, 0.0
+            else:  # no CPU used: a longer gap than a poll means this process was stopped
+                idle += min(dt, 2 * CPU_POLL_S)
+            if idle > idle_timeout:
+                self.last_abandon = "idle"
+                return None
 
     def _started(self) -> _Worker:
         """A new worker, waited for until ready (RuntimeError, the worker killed, if it is

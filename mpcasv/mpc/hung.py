@@ -32,10 +32,18 @@ import numpy as np
 
 #: the file a run folder keeps its hung solves in
 FILE_NAME = "hung_solves.pkl"
-#: the hang guard (and a replay): a solve whose worker has not answered after this many times
-#: its CPU-time limit (``solver.hang_s``) of wall time is abandoned even without spending that
-#: CPU time (a worker stopped or blocked; a hung fatrop spins and is caught by its CPU time)
+#: the hang guard (and a replay): a solve's worker that has used no CPU at all for this many
+#: times its CPU-time limit (``solver.hang_s``), and at least ``HANG_IDLE_MIN_S``, of wall
+#: time is abandoned too (a worker stopped or blocked; a hung fatrop spins and is caught by
+#: its CPU time; a starved one still gets some CPU)
 HANG_WALL_FACTOR = 20.0
+HANG_IDLE_MIN_S = 30.0
+
+
+def idle_limit(cpu_s: float) -> float:
+    """Seconds of wall time without any CPU used after which a solve given ``cpu_s`` s of CPU
+    time is abandoned (:meth:`mpcasv.mpc.deadline.DeadlineSolver.solve`)."""
+    return max(HANG_WALL_FACTOR * cpu_s, HANG_IDLE_MIN_S)
 
 
 @dataclass(frozen=True)
@@ -162,9 +170,10 @@ def with_solver(solve: HungSolve, settings: dict) -> HungSolve:
 @dataclass(frozen=True)
 class Replayed:
     """The outcome of :func:`replay`: ``hung`` (abandoned again; ``by_cpu``: after its CPU-time
-    limit, else at the wall-clock backstop), else the solver's ``status`` (as the solver
-    names it: fatrop's return code, IPOPT's or the QP variant's word), ``iters``, cost ``f``
-    and ``ok`` (converged); ``wall_s`` the wall time of the solve alone (s)."""
+    limit, else because it used no CPU for :func:`idle_limit` s), else the solver's
+    ``status`` (as the solver names it: fatrop's return code, IPOPT's or the QP variant's
+    word), ``iters``, cost ``f`` and ``ok`` (converged); ``wall_s`` the wall time of the
+    solve alone (s)."""
 
     hung: bool
     by_cpu: bool
@@ -179,8 +188,8 @@ def replay(solve: HungSolve, cpu_s: float | None = None, max_iter: int | None = 
            factory=None) -> Replayed:  # fmt: skip
     """Solve ``solve`` again in a fresh worker process (its compiled library loaded from the
     cache, compiled first if missing) and abandon it, as the hang guard does, after ``cpu_s``
-    s of the worker's CPU time (None: the time it was given, ``solve.cpu_s``), or after
-    :data:`HANG_WALL_FACTOR` times as long on the wall clock. ``max_iter``: another iteration
+    s of the worker's CPU time (None: the time it was given, ``solve.cpu_s``), or once it has
+    used no CPU for :func:`idle_limit` s. ``max_iter``: another iteration
     limit (None: the recorded one). ``factory`` (tests): builds the worker's solver (default:
     the recorded problem's).
 
@@ -201,15 +210,15 @@ def replay(solve: HungSolve, cpu_s: float | None = None, max_iter: int | None = 
         cap = {} if solve.T_cap is None else {"T_cap": solve.T_cap}
         res = ds.solve(solve.p, solve.w0, solve.lam_x, solve.lam_g,
                        solve.max_iter if max_iter is None else max_iter,
-                       cpu_timeout=cpu_s, timeout=HANG_WALL_FACTOR * cpu_s, **cap)  # fmt: skip
-        error = ds.last_error
+                       cpu_timeout=cpu_s, timeout=idle_limit(cpu_s), **cap)  # fmt: skip
+        error, abandon = ds.last_error, ds.last_abandon
     finally:
         ds.close()
     if error is not None:
         raise RuntimeError(f"the solve failed in the worker: {(error.splitlines() or ['?'])[0]}")
     wall = res.ms / 1e3  # the solve alone (not the successor worker started after a hang)
     hung = not res.ok and res.status == "deadline"
-    by_cpu = hung and wall < HANG_WALL_FACTOR * cpu_s
+    by_cpu = hung and abandon == "cpu"
     return Replayed(hung, by_cpu, res.status, res.iters, float(res.f), bool(res.ok), wall)
 
 
@@ -243,9 +252,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--index", type=int, action="append",
                    help="replay only this solve (0-based; repeatable; default: all)")
     p.add_argument("--cpu-s", type=float, default=None,
-                   help="abandon a solve after this many s of its worker's CPU time (or 20 "
-                        "times as long on the wall clock; default: the solver.hang_s it was "
-                        "given)")  # fmt: skip
+                   help="abandon a solve after this many s of its worker's CPU time "
+                        "(default: the solver.hang_s it was given)")
     p.add_argument("--max-iter", type=int, default=None,
                    help="the solve's iteration limit (default: the recorded one, else the "
                         "preset's solver.max_iter)")  # fmt: skip
@@ -310,10 +318,10 @@ def run(args: argparse.Namespace) -> int:
         if r.hung and r.by_cpu:
             again += 1
             print(f"hung again (abandoned after {cpu:g} s of CPU time; {r.wall_s:.1f} s wall)")
-        elif r.hung:  # a worker starved or stopped: it did not spend its CPU time
+        elif r.hung:  # a worker stopped or blocked: it used no CPU for that long
             undecided += 1
-            print(f"no verdict: not answered within the wall-clock backstop "
-                  f"({HANG_WALL_FACTOR:g} x {cpu:g} s) before spending {cpu:g} s of CPU time")
+            print(f"no verdict: the worker used no CPU for {idle_limit(cpu):g} s before "
+                  f"spending {cpu:g} s of CPU time (stopped or blocked)")
         else:
             print(f"returned in {r.wall_s:.2f} s: {'converged' if r.ok else 'not converged'} "
                   f"(status {r.status}), {r.iters} iterations, cost {r.f:.6g}")

@@ -66,10 +66,11 @@ class SolverParams:
         "Fallbacks"). fatrop loops forever in its inertia correction on rare ill-conditioned
         iterates (docs/mpc.md "Known problems"), spinning on a core. CPU time, not wall time:
         a solve slowed by the machine's load is not abandoned, so a run that meets a hang is
-        reproduced exactly under any load too (the hang itself is deterministic). Normal
-        solves take milliseconds to under a second with 200 rescue iterations. A worker that
-        has not answered after ``HANG_WALL_FACTOR`` (20) times ``hang_s`` of wall time is
-        abandoned as well (one stopped without using CPU).
+        reproduced under load too (the hang itself is deterministic; the limits of this claim:
+        :mod:`mpcasv.mpc.deadline`). Normal solves take milliseconds to under a second with
+        200 rescue iterations. The limit counts all the worker's threads (``threads``). A
+        worker that uses no CPU at all for 20 times ``hang_s`` (at least 30 s) of wall time
+        is abandoned as well (one stopped or blocked: :func:`mpcasv.mpc.hung.idle_limit`).
     rescue_iter : int
         Iteration limit of the rescue solves (docs/mpc.md, "Fallbacks"): when the plan of the
         warm-started solve cannot be used (iteration limit, or it goes deeper into an
