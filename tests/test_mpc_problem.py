@@ -257,7 +257,8 @@ def test_parallel_processes_compile_a_library_once(tmp_path):
 
 def test_a_compile_killed_by_a_signal_leaves_no_folder_behind(tmp_path):
     """A compile ended by SIGKILL/SIGTERM runs no cleanup: its temporary folder (the C, some
-    MB) stayed in the cache for ever. The next compile of the library removes it."""
+    MB) stayed in the cache for ever. The next compile removes it, and any other library's
+    whose lock is free, but not the folder of a compile in progress."""
     import os
     import subprocess
     import sys
@@ -277,11 +278,21 @@ def test_a_compile_killed_by_a_signal_leaves_no_folder_behind(tmp_path):
     left = list(folder.glob("mpc_locktest_*.tmp*"))
     assert len(left) == 1 and left[0].is_dir()  # what a killed compile leaves
     stem = left[0].name.split(".tmp")[0]
-    out = subprocess.run([sys.executable, "-c", _COMPILE_ONE.replace('"-O0"', '"-O0 -DSLEEP"')],
-                         env=env, capture_output=True, text=True, timeout=120)  # fmt: skip
+    # another library's killed compile (its lock free) and one being compiled now (held)
+    (folder / "mpc_fatrop_killed.tmpab12").mkdir()
+    (folder / "mpc_fatrop_busy.tmpcd34").mkdir()
+    import fcntl
+
+    with open(folder / "mpc_fatrop_busy.so.lock", "w") as held:
+        fcntl.flock(held, fcntl.LOCK_EX)
+        out = subprocess.run([sys.executable, "-c",
+                              _COMPILE_ONE.replace('"-O0"', '"-O0 -DSLEEP"')],
+                             env=env, capture_output=True, text=True, timeout=120)  # fmt: skip
     assert out.returncode == 0, out.stderr
     assert (folder / f"{stem}.so").exists()  # the same library, compiled now
     assert not list(folder.glob("mpc_locktest_*.tmp*"))
+    assert not (folder / "mpc_fatrop_killed.tmpab12").exists()  # removed: nobody compiles it
+    assert (folder / "mpc_fatrop_busy.tmpcd34").is_dir()  # kept: its compile is running
 
 
 def _rk4_gain(z: complex) -> float:

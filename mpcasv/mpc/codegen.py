@@ -134,6 +134,25 @@ def write_source(functions: dict[str, ca.Function], src: Path, cflags: str) -> P
     return src
 
 
+def _remove_abandoned(folder: Path, stem: str) -> None:
+    """Remove the temporary folders (``<stem>.tmp*``) that compiles killed by a signal left in
+    the cache (no cleanup ran): this library's (its lock is held by the caller, so nobody
+    else is compiling it), and any other library's whose lock is free (a compile in progress
+    holds it; a killed one's lock was released by the kernel). Folders of the naming before
+    session 21 (``tmp*``, no library named) are left alone."""
+    for left in folder.glob("mpc_*.tmp*"):
+        other = left.name.split(".tmp")[0]
+        if other == stem:
+            shutil.rmtree(left, ignore_errors=True)
+            continue
+        try:
+            with open(folder / f"{other}.so.lock", "a") as lock:
+                fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)  # released at close
+                shutil.rmtree(left, ignore_errors=True)
+        except OSError:  # being compiled now (lock held), or not ours to touch
+            continue
+
+
 def _compile(functions: dict[str, ca.Function], target: Path, compiler: str, cflags: str,
              solver: str, log) -> None:
     """Generate C for ``functions`` and compile it into ``target`` (atomic rename), in a
@@ -143,10 +162,7 @@ def _compile(functions: dict[str, ca.Function], target: Path, compiler: str, cfl
         raise RuntimeError(f"C compiler {compiler!r} not found: install it or set "
                            "solver.compiled = false in the MPC preset")  # fmt: skip
     t0 = time.perf_counter()
-    # a compile of this library killed by a signal (no cleanup ran) left its folder: under
-    # the library's lock nobody else is compiling it, so the folder is ours to remove
-    for left in folder.glob(f"{stem}.tmp*"):
-        shutil.rmtree(left, ignore_errors=True)
+    _remove_abandoned(folder, stem)
     with tempfile.TemporaryDirectory(dir=folder, prefix=f"{stem}.tmp") as tmp:
         src = write_source(functions, Path(tmp) / f"{stem}.c", cflags)
         out = Path(tmp) / target.name

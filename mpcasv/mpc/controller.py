@@ -139,7 +139,8 @@ class MPCController(WorldView, Safety, PlanOutput, Targeting, SpeedCap, Carry):
         # vessel comes: with the Boat (default channel outside a run)
         self.acoustics = getattr(boat, "acoustics", None) or AcousticParams()
         self.channel = channel_vector(self.acoustics, params.fix.noisy_fixes)
-        #: field mode (:meth:`use_deadline`): solves in a worker process with a deadline
+        #: solves in a worker process: the field mode's deadline (:meth:`use_deadline`) or
+        #: simulation's hang guard (:meth:`use_hang_guard`); None: in this process
         self.deadline: DeadlineSolver | None = None
         self._hang_guard = False
         #: ``current = "oracle"``: the simulator puts the true current into the observations
@@ -153,8 +154,9 @@ class MPCController(WorldView, Safety, PlanOutput, Targeting, SpeedCap, Carry):
         """Field mode: every step's solves run in a worker process and are abandoned at the
         step's budget ``solver.budget_ms`` (the step then takes the hybrid fallback's command,
         reason ``deadline``; the next step starts warm from the previous plan, on a spare
-        worker). Set by the deploy loop; never in simulation, where only iteration limits
-        decide and wall time is measured (``mpc_over_budget``), so runs are reproducible.
+        worker). Set by the deploy loop; in simulation only through :meth:`use_hang_guard`
+        (no spare, a CPU-time limit instead of the budget: iteration limits decide and wall
+        time is only measured, ``mpc_over_budget``, so runs are reproducible).
 
         ``factory`` (tests): builds the worker's solver (default: this controller's problem,
         its compiled library loaded from the cache). Blocks until the first worker is ready.
@@ -187,7 +189,7 @@ class MPCController(WorldView, Safety, PlanOutput, Targeting, SpeedCap, Carry):
         self._hang_guard = True
 
     def close(self) -> None:
-        """Stop the field mode's solver workers (no-op in simulation)."""
+        """Stop the solver workers (the field mode's or the hang guard's; none: no-op)."""
         if self.deadline is not None:
             self.deadline.close()
             self.deadline = None
@@ -276,8 +278,10 @@ class MPCController(WorldView, Safety, PlanOutput, Targeting, SpeedCap, Carry):
     def _solve(self, p: np.ndarray, w0: np.ndarray, lam_x=None, lam_g=None,
                max_iter: int | None = None) -> SolveResult:  # fmt: skip
         """One solve (``max_iter``: this solve's iteration limit, None: ``solver.max_iter``):
-        in this process (simulation: only the iteration limit decides), or in the field
-        mode's worker with what is left of this step's budget."""
+        in this process (``hang_s = 0``: only the iteration limit decides), in the hang
+        guard's worker (simulation: abandoned only after ``solver.hang_s`` s of its CPU time,
+        then kept in :attr:`hung_solves`), or in the field mode's worker with what is left of
+        this step's budget."""
         # the speed cap's thrust bound (passed only when set: no cap, the calls as before)
         cap = {} if self.T_cap is None else {"T_cap": self.T_cap}
         if self.deadline is None:
