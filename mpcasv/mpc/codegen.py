@@ -99,6 +99,11 @@ def _library_file(solver: str, key: str) -> Path:
     return cache_dir() / f"mpc_{solver}_{key}.so"
 
 
+def _lock_file(folder: Path, stem: str) -> Path:
+    """The lock a compile of library ``<stem>.so`` holds (``fcntl.flock``)."""
+    return folder / f"{stem}.so.lock"
+
+
 def compiled_library(functions: dict[str, ca.Function], solver: str, cflags: str,
                      compiler: str = "gcc", log=print) -> Path:  # fmt: skip
     """Path of the shared library with ``functions``: from the cache, or compiled now.
@@ -115,7 +120,7 @@ def compiled_library(functions: dict[str, ca.Function], solver: str, cflags: str
     target = _library_file(solver, key)
     folder = target.parent
     if not target.exists():
-        with open(folder / f"{target.name}.lock", "w") as lock:
+        with open(_lock_file(folder, target.stem), "w") as lock:
             fcntl.flock(lock, fcntl.LOCK_EX)  # one compile per library across processes
             if not target.exists():  # another process may have compiled it meanwhile
                 _compile(functions, target, compiler, cflags, solver, log)
@@ -146,7 +151,7 @@ def _remove_abandoned(folder: Path, stem: str) -> None:
             shutil.rmtree(left, ignore_errors=True)
             continue
         try:
-            with open(folder / f"{other}.so.lock", "a") as lock:
+            with open(_lock_file(folder, other), "a") as lock:
                 fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)  # released at close
                 shutil.rmtree(left, ignore_errors=True)
         except OSError:  # being compiled now (lock held), or not ours to touch

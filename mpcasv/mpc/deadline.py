@@ -262,7 +262,8 @@ class DeadlineSolver:
             msg = (p, w0, lam_x0, lam_g0) + (() if max_iter is None else (max_iter,))
             if T_cap is not None:  # (sent only when set: the solver's call is as before)
                 msg = (p, w0, lam_x0, lam_g0, max_iter, T_cap)
-            cpu0 = cpu_s(w.proc) if w.ready else math.nan  # the idle worker's CPU time
+            # the idle worker's CPU time (read only for the hang guard: not on the field's path)
+            cpu0 = cpu_s(w.proc) if cpu_timeout is not None and w.ready else math.nan
             w.conn.send(msg)
             if cpu_timeout is None:
                 answer = self._wait_wall(w, timeout - (time.perf_counter() - t0))
