@@ -12,6 +12,9 @@ import dataclasses
 import functools
 import os
 import pickle
+import re
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -170,3 +173,53 @@ def test_a_solve_that_fails_in_the_worker_is_an_error_not_a_result(hung_run, tmp
     f.write_bytes(pickle.dumps([dataclasses.replace(s, p=s.p[:-3])]))
     line = _refused(["replay-solve", f, "--cpu-s", "5"], capsys, "[0]", "failed in the worker")
     assert "p" in line
+
+
+def test_an_exported_solve_runs_without_mpcasv_and_solves_as_the_uncompiled_solver(
+        hung_run, tmp_path, capsys):  # fmt: skip
+    """``replay-solve --export``: the folder's reproduce.py, run where ``import mpcasv`` fails,
+    returns the iterations and cost of this process's uncompiled solver (CasADi's own
+    derivatives, the problem the export holds) on the recorded solve, so the export is the very
+    problem, its start and options."""
+    res = hung_run[1]
+    (s,) = res.hung_solves
+    f = tmp_path / hung.FILE_NAME
+    f.write_bytes(pickle.dumps(res.hung_solves))
+    assert _exit_code(["replay-solve", f, "--export", tmp_path / "exp"]) == 0
+    folder = tmp_path / "exp" / "solve-0"
+    assert str(folder) in capsys.readouterr().out
+    assert {p.name for p in folder.iterdir()} == {"nlp.casadi", "problem.npz", "options.json",
+                                                  "reproduce.py", "README.md"}  # fmt: skip
+    poison = tmp_path / "poison" / "mpcasv"
+    poison.mkdir(parents=True)
+    (poison / "__init__.py").write_text("raise ImportError('mpcasv imported')\n")
+    env = os.environ | {"PYTHONPATH": str(poison.parent)}
+    u = hung.with_solver(s, {"compiled": False})
+    here_solver = worker_solver(u.params, u.n_auv, u.multi, u.boat)
+    for limit in (2, None):  # a stop at the limit (it converges in 3), the recorded limit
+        out = subprocess.run([sys.executable, "reproduce.py"]
+                             + ([] if limit is None else ["--max-iter", str(limit)]),
+                             cwd=folder, env=env, capture_output=True, text=True, timeout=300,
+                             check=True).stdout  # fmt: skip
+        m = re.search(r"iterations (\d+), cost (\S+)", out)
+        assert m, out
+        cap = {} if s.T_cap is None else {"T_cap": s.T_cap}
+        here = here_solver.solve(s.p, s.w0, s.lam_x, s.lam_g,
+                                 s.max_iter if limit is None else limit, **cap)  # fmt: skip
+        assert int(m[1]) == here.iters and float(m[2]) == here.f  # the same problem, bit for bit
+
+
+def test_export_refuses_what_it_cannot_write_in_one_line(hung_run, tmp_path, capsys):
+    solves = hung_run[1].hung_solves
+    good = tmp_path / "good.pkl"
+    good.write_bytes(pickle.dumps(solves))
+    a_file = tmp_path / "a_file"
+    a_file.write_text("x")
+    _refused(["replay-solve", good, "--export", a_file], capsys, "--export", "not a folder")
+    _refused(["replay-solve", good, "--export", tmp_path / "e", "--max-iter", "3"], capsys,
+             "--export", "reproduce.py")  # fmt: skip
+    _refused(["replay-solve", good, "--export", tmp_path / "e", "--set", "solver.solver='qp'"],
+             capsys, "[0]", "qp", "NLP")  # fmt: skip
+    short = tmp_path / "short.pkl"
+    short.write_bytes(pickle.dumps([dataclasses.replace(solves[0], p=solves[0].p[:-3])]))
+    _refused(["replay-solve", short, "--export", tmp_path / "e"], capsys, "[0]", "another version")

@@ -261,6 +261,11 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="replace a solver setting that reaches the solver, e.g. "
                         f"solver.stage_derivatives=inline ({', '.join(REPLAY_SETTINGS)}; "
                         "repeatable)")  # fmt: skip
+    p.add_argument("--export", type=Path, default=None, metavar="DIR",
+                   help="instead of solving, write each solve to DIR/solve-I as a standalone "
+                        "reproduction that needs casadi and numpy only (nlp.casadi, "
+                        "problem.npz, options.json, reproduce.py, README.md: a report to "
+                        "fatrop's authors)")  # fmt: skip
     p.set_defaults(func=run)
 
 
@@ -300,6 +305,8 @@ def run(args: argparse.Namespace) -> int:
                               f"{'s' if len(solves) > 1 else ''} (0..{len(solves) - 1})")
     runs = {i: with_solver(solves[i], dict(args.set)) for i in picked}  # all checked first
     print(f"{args.file}: {len(solves)} hung solve{'s' if len(solves) > 1 else ''}")
+    if args.export is not None:
+        return _export_all(runs, args)
     again = undecided = 0
     for i, s in runs.items():
         sp = s.params.solver
@@ -327,4 +334,25 @@ def run(args: argparse.Namespace) -> int:
                   f"(status {r.status}), {r.iters} iterations, cost {r.f:.6g}")
     print(f"{again} of {len(runs)} hung again"
           + (f"; {undecided} without a verdict (raise --cpu-s)" if undecided else ""))
+    return 0
+
+
+def _export_all(runs: dict[int, HungSolve], args: argparse.Namespace) -> int:
+    """``--export DIR``: each picked solve to ``DIR/solve-I`` (:func:`mpcasv.mpc.export.
+    export`); none is solved."""
+    from mpcasv.config import ConfigError
+    from mpcasv.mpc.export import export
+
+    if args.max_iter is not None or args.cpu_s is not None:
+        raise ConfigError("--export writes the problem without solving it: --max-iter and "
+                          "--cpu-s are options of reproduce.py and of a replay")  # fmt: skip
+    if args.export.exists() and not args.export.is_dir():
+        raise ConfigError(f"--export {args.export}: exists and is not a folder")
+    for i, s in runs.items():
+        try:
+            out = export(s, args.export / f"solve-{i}", source=f"{args.file} [{i}]")
+        except ValueError as exc:
+            raise ConfigError(f"[{i}]: {exc}") from None
+        print(f"[{i}] t = {s.t:g} s: written to {out} (run: cd {out} && timeout 60 python "
+              "reproduce.py)")
     return 0

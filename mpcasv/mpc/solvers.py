@@ -37,6 +37,10 @@ class SolveResult:
     ms: float
 
 
+#: the options an uncompiled solver adds to :func:`solver_options`
+UNCOMPILED = {"expand": True}
+
+
 def solver_options(ocp: OCP, sp: SolverParams) -> dict:
     """CasADi ``nlpsol`` options of the configured solver."""
     base = {"print_time": False, "error_on_fail": False, "calc_lam_p": False}
@@ -56,6 +60,21 @@ def solver_options(ocp: OCP, sp: SolverParams) -> dict:
             "ipopt.bound_frac": sp.bound_push,
         }  # fmt: skip
     raise ValueError(f"not an NLP solver: {sp.solver!r}")
+
+
+def nlpsol_args(ocp: OCP, p: np.ndarray, w0: np.ndarray, lam_x0: np.ndarray | None = None,
+                lam_g0: np.ndarray | None = None, T_cap: float | None = None) -> dict:
+    """The arguments of the CasADi ``nlpsol`` call for parameters ``p`` (shape (n_p,)) from
+    the primal start ``w0`` (shape (n_w,), physical units; clipped into the bounds, scaled)
+    and, when both given, the dual start (scaled multipliers); ``T_cap`` as
+    :meth:`~mpcasv.mpc.problem.OCP.bounds`. One definition for :class:`NLPSolver` and the
+    standalone export of a hung solve (:mod:`mpcasv.mpc.export`)."""
+    lbx, ubx = ocp.bounds(p, T_cap)
+    args = {"x0": np.clip(ocp.scaled(w0), lbx, ubx), "p": np.asarray(p, float), "lbx": lbx,
+            "ubx": ubx, "lbg": ocp.lbg, "ubg": ocp.ubg}  # fmt: skip
+    if lam_x0 is not None and lam_g0 is not None:
+        args |= {"lam_x0": lam_x0, "lam_g0": lam_g0}
+    return args
 
 
 class NLPSolver:
@@ -92,8 +111,8 @@ class NLPSolver:
             opts = solver_options(self.ocp, sp)
             if self._lib is not None:
                 s = ca.nlpsol("mpc", sp.solver, str(self._lib), opts)
-            else:
-                s = ca.nlpsol("mpc", sp.solver, self.ocp.nlp, opts | {"expand": True})
+            else:  # CasADi's own derivatives of the expanded problem
+                s = ca.nlpsol("mpc", sp.solver, self.ocp.nlp, opts | UNCOMPILED)
             self._solvers[max_iter] = s
         return self._solvers[max_iter]
 
@@ -105,11 +124,8 @@ class NLPSolver:
         iterations (None: ``SolverParams.max_iter``; a work budget, never a wall-time one),
         with the planned thrust capped at ``T_cap`` (N, :meth:`~mpcasv.mpc.problem.OCP.bounds`;
         None: no cap)."""
-        lbx, ubx = self.ocp.bounds(p, T_cap)
-        args = {"x0": np.clip(self.ocp.scaled(w0), lbx, ubx), "p": p, "lbx": lbx, "ubx": ubx,
-                "lbg": self.ocp.lbg, "ubg": self.ocp.ubg}  # fmt: skip
-        if self.duals and lam_x0 is not None and lam_g0 is not None:
-            args |= {"lam_x0": lam_x0, "lam_g0": lam_g0}
+        args = nlpsol_args(self.ocp, p, w0, lam_x0 if self.duals else None,
+                           lam_g0 if self.duals else None, T_cap)  # fmt: skip
         solver = self.solver if max_iter is None else self._nlpsol(max_iter)
         t0 = time.perf_counter()
         r = solver(**args)
