@@ -21,6 +21,7 @@ import time
 
 import numpy as np
 import pandas as pd
+import psutil
 import pytest
 
 from mpcasv.controllers import make_controller
@@ -190,6 +191,22 @@ def test_the_hang_guard_judges_a_solve_by_its_cpu_time_not_by_the_load():
     assert np.array_equal(res.w, np.ones(3))  # the warm start comes back as the iterate
     res, took, abandoned = _guarded(stops, timeout=2.0, cpu_timeout=0.3)
     assert not res.ok and res.status == "deadline" and abandoned == 1 and took >= 2.0
+
+
+def test_without_a_spare_the_successor_of_an_abandoned_worker_starts_at_the_next_solve():
+    """The hang guard (no spare): an abandoned worker's successor is started by the next
+    solve, not at the abandon (a replay, closed right after, starts none); that solve is
+    answered by it."""
+    ds = DeadlineSolver(spins, start_timeout=120.0, spare=False)
+    try:
+        before = {c.pid for c in psutil.Process().children()}
+        res = ds.solve(np.zeros(2), np.ones(3), timeout=60.0, cpu_timeout=0.3)
+        assert res.status == "deadline" and ds.abandoned == 1
+        assert not {c.pid for c in psutil.Process().children()} - before  # none started
+        ds.factory = starved  # the successor answers
+        assert ds.solve(np.zeros(2), np.ones(3), timeout=60.0, cpu_timeout=5.0).ok
+    finally:
+        ds.close()
 
 
 _ORPHAN_SCRIPT = '''

@@ -152,7 +152,7 @@ def test_after_a_hung_solve_in_simulation_the_step_is_still_planned(tmp_path):
     recorded Case 4 problem that hangs fatrop, docs/mpc.md "Known problems"); the step is then
     planned by the exploration or rescue solves on a new worker (that Case 4 problem
     converges from the escape guess and from a rollout), not handed to the hybrid. As
-    use_hang_guard: no spare worker, the successor is started when the hung one is killed."""
+    use_hang_guard: no spare worker, the successor is started by the next solve."""
     from test_mpc_deadline import hang_once_solver
 
     c = make_controller("mpc-single", 1, "mpc-single", overrides={"solver.hang_s": 5.0})

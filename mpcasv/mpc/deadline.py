@@ -197,7 +197,7 @@ class DeadlineSolver:
     spare : bool
         Keep a spare worker ready (the field: a killed worker's successor is ready at once).
         False (simulation's hang guard, where wall time decides nothing): no spare process;
-        a killed worker's successor is started when needed and waited for (the spare
+        a killed worker's successor is started at the next solve and waited for (the spare
         imported and built the problem for nothing in every run: ~10 % of an MPC run's CPU
         in a profile of Case 3).
 
@@ -233,7 +233,10 @@ class DeadlineSolver:
         return self._spare is not None and self._spare.wait_ready(timeout)
 
     def wait_active(self, timeout: float) -> bool:
-        """Wait until the active worker is ready (after a replacement)."""
+        """Wait until the active worker is ready (after a replacement; without a spare, the
+        successor is started here if no solve has started it yet)."""
+        if self._active is None:
+            self._active = _Worker(self.factory, self._ctx)
         return self._active.wait_ready(timeout)
 
     def solve(self, p: np.ndarray, w0: np.ndarray, lam_x0=None, lam_g0=None,
@@ -257,6 +260,8 @@ class DeadlineSolver:
         for dead in self._dead:  # killed at an earlier deadline: gone by now
             dead.reap()
         self._dead.clear()
+        if self._active is None:  # the successor of a worker killed without a spare
+            self._active = self._started()
         w = self._active
         try:
             msg = (p, w0, lam_x0, lam_g0) + (() if max_iter is None else (max_iter,))
@@ -341,18 +346,13 @@ class DeadlineSolver:
 
     def _replace(self) -> None:
         """Kill the active worker (reaped at the next call); the spare takes over; a new spare
-        starts in the background (the step's time is not spent on it). Without a spare: a new
-        worker is started and waited for here.
-
-        Raises
-        ------
-        RuntimeError
-            Without a spare: the new worker was not ready within ``start_timeout``.
-        """
+        starts in the background (the step's time is not spent on it). Without a spare: the
+        successor is started by the next :meth:`solve` (none for a solver closed after it,
+        e.g. a replay's)."""
         self._active.kill(wait=False)
         self._dead.append(self._active)
         if self._spare is None:
-            self._active = self._started()
+            self._active = None
             return
         self._active = self._spare
         self._spare = _Worker(self.factory, self._ctx, background=True, delay=SPARE_DELAY_S)
