@@ -255,13 +255,13 @@ class DeadlineSolver:
         An abandoned worker is killed, the spare (or a new worker) takes over, and the result
         is a failure with status ``"deadline"`` and the warm start ``w0`` as its iterate (the
         next step starts warm from it); :attr:`last_abandon` says which limit it was."""
+        if self._active is None:  # the successor of a worker killed without a spare (its
+            self._active = self._started()  # start-up is not this solve's time)
         t0 = time.perf_counter()
         self.last_error = self.last_abandon = None
         for dead in self._dead:  # killed at an earlier deadline: gone by now
             dead.reap()
         self._dead.clear()
-        if self._active is None:  # the successor of a worker killed without a spare
-            self._active = self._started()
         w = self._active
         try:
             msg = (p, w0, lam_x0, lam_g0) + (() if max_iter is None else (max_iter,))
