@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import json
 import os
 import pickle
 import re
@@ -178,35 +179,50 @@ def test_a_solve_that_fails_in_the_worker_is_an_error_not_a_result(hung_run, tmp
 def test_an_exported_solve_runs_without_mpcasv_and_solves_as_the_uncompiled_solver(
         hung_run, tmp_path, capsys):  # fmt: skip
     """``replay-solve --export``: the folder's reproduce.py, run where ``import mpcasv`` fails,
-    returns the iterations and cost of this process's uncompiled solver (CasADi's own
-    derivatives, the problem the export holds) on the recorded solve, so the export is the very
-    problem, its start and options."""
-    res = hung_run[1]
+    returns the iterations and cost, bit for bit, of this process's uncompiled solver (CasADi's
+    own derivatives, the problem the export holds) on the recorded solve: as recorded (no
+    thrust cap, the preset's iteration limit; at a lower limit too), and with a binding thrust
+    cap and an iteration limit of its own, with fatrop and with IPOPT (the dual start), so the
+    export is the very problem, its bounds, start and options."""
+    c, res, _ = hung_run
     (s,) = res.hung_solves
+    capped = dataclasses.replace(s, T_cap=0.2 * c.ocp.vessel.T_max, max_iter=2)  # converges in 3
     f = tmp_path / hung.FILE_NAME
-    f.write_bytes(pickle.dumps(res.hung_solves))
+    f.write_bytes(pickle.dumps([s, capped]))
     assert _exit_code(["replay-solve", f, "--export", tmp_path / "exp"]) == 0
-    folder = tmp_path / "exp" / "solve-0"
-    assert str(folder) in capsys.readouterr().out
-    assert {p.name for p in folder.iterdir()} == {"nlp.casadi", "problem.npz", "options.json",
-                                                  "reproduce.py", "README.md"}  # fmt: skip
+    assert str(tmp_path / "exp" / "solve-1") in capsys.readouterr().out
+    assert {p.name for p in (tmp_path / "exp" / "solve-0").iterdir()} == {
+        "nlp.casadi", "problem.npz", "options.json", "reproduce.py", "README.md"}
     poison = tmp_path / "poison" / "mpcasv"
     poison.mkdir(parents=True)
     (poison / "__init__.py").write_text("raise ImportError('mpcasv imported')\n")
     env = os.environ | {"PYTHONPATH": str(poison.parent)}
-    u = hung.with_solver(s, {"compiled": False})
-    here_solver = worker_solver(u.params, u.n_auv, u.multi, u.boat)
-    for limit in (2, None):  # a stop at the limit (it converges in 3), the recorded limit
-        out = subprocess.run([sys.executable, "reproduce.py"]
+    here_solvers, results = {}, {}
+    for k, rec, solver, limit in ((0, s, "fatrop", 2), (0, s, "fatrop", None),  # fmt: skip
+                                  (1, capped, "fatrop", None), (1, capped, "ipopt", None)):
+        out = subprocess.run([sys.executable, "reproduce.py", "--solver", solver]
                              + ([] if limit is None else ["--max-iter", str(limit)]),
-                             cwd=folder, env=env, capture_output=True, text=True, timeout=300,
-                             check=True).stdout  # fmt: skip
+                             cwd=tmp_path / "exp" / f"solve-{k}", env=env, capture_output=True,
+                             text=True, timeout=300, check=True).stdout  # fmt: skip
         m = re.search(r"iterations (\d+), cost (\S+)", out)
         assert m, out
-        cap = {} if s.T_cap is None else {"T_cap": s.T_cap}
-        here = here_solver.solve(s.p, s.w0, s.lam_x, s.lam_g,
-                                 s.max_iter if limit is None else limit, **cap)  # fmt: skip
-        assert int(m[1]) == here.iters and float(m[2]) == here.f  # the same problem, bit for bit
+        if solver not in here_solvers:
+            u = hung.with_solver(s, {"compiled": False, "solver": solver})
+            here_solvers[solver] = worker_solver(u.params, u.n_auv, u.multi, u.boat)
+        cap = {} if rec.T_cap is None else {"T_cap": rec.T_cap}
+        here = here_solvers[solver].solve(rec.p, rec.w0, rec.lam_x, rec.lam_g,
+                                          rec.max_iter if limit is None else limit, **cap)
+        assert (int(m[1]), float(m[2])) == (here.iters, here.f), (k, solver, limit)
+        results[k, solver, limit] = here.f
+    assert results[1, "fatrop", None] != results[0, "fatrop", 2]  # the cap binds
+    # other settings than the record's: in the options, and named in the README
+    assert _exit_code(["replay-solve", f, "--index", "0", "--export", tmp_path / "tol",
+                       "--set", "solver.tol=0.5"]) == 0  # fmt: skip
+    opts = json.loads((tmp_path / "tol" / "solve-0" / "options.json").read_text())
+    assert opts["fatrop"]["fatrop.tol"] == 0.5 and opts["ipopt"]["ipopt.tol"] == 0.5
+    readme = (tmp_path / "tol" / "solve-0" / "README.md").read_text()
+    assert f"`tol` = 0.5 (recorded: {s.params.solver.tol!r})" in readme
+    assert f"hung with fatrop (max_iter\n{s.params.solver.max_iter}" in readme
 
 
 def test_export_refuses_what_it_cannot_write_in_one_line(hung_run, tmp_path, capsys):
@@ -220,6 +236,12 @@ def test_export_refuses_what_it_cannot_write_in_one_line(hung_run, tmp_path, cap
              "--export", "reproduce.py")  # fmt: skip
     _refused(["replay-solve", good, "--export", tmp_path / "e", "--set", "solver.solver='qp'"],
              capsys, "[0]", "qp", "NLP")  # fmt: skip
+    _refused(["replay-solve", good, "--export", tmp_path / "e", "--set",
+              "solver.compiled=false"], capsys, "solver.compiled", "does not apply")  # fmt: skip
+    _refused(["replay-solve", good, "--export", ""], capsys, "--export", "empty folder")
+    (tmp_path / "d" / "solve-0" / "nlp.casadi").mkdir(parents=True)  # cannot be a file
+    _refused(["replay-solve", good, "--export", tmp_path / "d"], capsys, "nlp.casadi",
+             "cannot be written")  # fmt: skip
     short = tmp_path / "short.pkl"
     short.write_bytes(pickle.dumps([dataclasses.replace(solves[0], p=solves[0].p[:-3])]))
     _refused(["replay-solve", short, "--export", tmp_path / "e"], capsys, "[0]", "another version")

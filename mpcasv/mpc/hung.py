@@ -235,6 +235,13 @@ def _setting(text: str) -> tuple[str, object]:
     return key.removeprefix("solver."), v
 
 
+def _folder(text: str) -> Path:
+    """A folder name (not empty: ``Path("")`` would be the current folder)."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError("an empty folder name")
+    return Path(text)
+
+
 #: fatrop's and IPOPT's iteration limit is a C int
 MAX_ITER_LIMIT = 2**31 - 1
 
@@ -261,7 +268,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="replace a solver setting that reaches the solver, e.g. "
                         f"solver.stage_derivatives=inline ({', '.join(REPLAY_SETTINGS)}; "
                         "repeatable)")  # fmt: skip
-    p.add_argument("--export", type=Path, default=None, metavar="DIR",
+    p.add_argument("--export", type=_folder, default=None, metavar="DIR",
                    help="instead of solving, write each solve to DIR/solve-I as a standalone "
                         "reproduction that needs casadi and numpy only (nlp.casadi, "
                         "problem.npz, options.json, reproduce.py, README.md: a report to "
@@ -303,10 +310,11 @@ def run(args: argparse.Namespace) -> int:
         if not 0 <= i < len(solves):
             raise ConfigError(f"--index {i}: {args.file} holds {len(solves)} hung solve"
                               f"{'s' if len(solves) > 1 else ''} (0..{len(solves) - 1})")
-    runs = {i: with_solver(solves[i], dict(args.set)) for i in picked}  # all checked first
+    if args.export is None:  # all checked first (an export checks its own settings)
+        runs = {i: with_solver(solves[i], dict(args.set)) for i in picked}
     print(f"{args.file}: {len(solves)} hung solve{'s' if len(solves) > 1 else ''}")
     if args.export is not None:
-        return _export_all(runs, args)
+        return _export_all({i: solves[i] for i in picked}, args)
     again = undecided = 0
     for i, s in runs.items():
         sp = s.params.solver
@@ -337,9 +345,9 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _export_all(runs: dict[int, HungSolve], args: argparse.Namespace) -> int:
-    """``--export DIR``: each picked solve to ``DIR/solve-I`` (:func:`mpcasv.mpc.export.
-    export`); none is solved."""
+def _export_all(records: dict[int, HungSolve], args: argparse.Namespace) -> int:
+    """``--export DIR``: each picked solve (``records``, as recorded; ``--set`` applied by the
+    export) to ``DIR/solve-I`` (:func:`mpcasv.mpc.export.export`); none is solved."""
     from mpcasv.config import ConfigError
     from mpcasv.mpc.export import export
 
@@ -348,9 +356,10 @@ def _export_all(runs: dict[int, HungSolve], args: argparse.Namespace) -> int:
                           "--cpu-s are options of reproduce.py and of a replay")  # fmt: skip
     if args.export.exists() and not args.export.is_dir():
         raise ConfigError(f"--export {args.export}: exists and is not a folder")
-    for i, s in runs.items():
+    settings = dict(args.set)
+    for i, s in records.items():
         try:
-            out = export(s, args.export / f"solve-{i}", source=f"{args.file} [{i}]")
+            out = export(s, args.export / f"solve-{i}", f"{args.file} [{i}]", settings)
         except ValueError as exc:
             raise ConfigError(f"[{i}]: {exc}") from None
         print(f"[{i}] t = {s.t:g} s: written to {out} (run: cd {out} && timeout 60 python "
