@@ -267,7 +267,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--set", type=_setting, action="append", default=[], metavar="solver.K=V",
                    help="replace a solver setting that reaches the solver, e.g. "
                         f"solver.stage_derivatives=inline ({', '.join(REPLAY_SETTINGS)}; "
-                        "repeatable)")  # fmt: skip
+                        "with --export: solver, tol, mu_init, bound_push; repeatable)")
     p.add_argument("--export", type=_folder, default=None, metavar="DIR",
                    help="instead of solving, write each solve to DIR/solve-I as a standalone "
                         "reproduction that needs casadi and numpy only (nlp.casadi, "
