@@ -247,6 +247,8 @@ MAX_ITER_LIMIT = 2**31 - 1
 
 
 def register(sub: argparse._SubParsersAction) -> None:
+    from mpcasv.mpc.export import EXPORT_SETTINGS
+
     p = sub.add_parser(
         "replay-solve", help="solve again the MPC solves a run abandoned as hung",
         description="Solve again, each in a fresh worker process under the hang guard's CPU "
@@ -267,7 +269,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--set", type=_setting, action="append", default=[], metavar="solver.K=V",
                    help="replace a solver setting that reaches the solver, e.g. "
                         f"solver.stage_derivatives=inline ({', '.join(REPLAY_SETTINGS)}; "
-                        "with --export: solver, tol, mu_init, bound_push; repeatable)")
+                        f"with --export: {', '.join(EXPORT_SETTINGS)}; repeatable)")
     p.add_argument("--export", type=_folder, default=None, metavar="DIR",
                    help="instead of solving, write each solve to DIR/solve-I as a standalone "
                         "reproduction that needs casadi and numpy only (nlp.casadi, "
