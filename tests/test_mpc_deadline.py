@@ -17,6 +17,7 @@ import os
 import signal
 import subprocess
 import sys
+import threading
 import time
 
 import numpy as np
@@ -212,6 +213,20 @@ def test_without_a_spare_the_successor_of_an_abandoned_worker_starts_at_the_next
         t0 = time.perf_counter()
         res = ds.solve(np.zeros(2), np.ones(3), timeout=60.0, cpu_timeout=5.0)
         assert res.ok and (time.perf_counter() - t0) * 1e3 - res.ms >= 1000.0
+    finally:
+        ds.close()
+
+
+def test_a_ctrl_c_at_the_terminal_does_not_end_a_worker_s_solve():
+    """A Ctrl-C reaches the whole process group; the worker ignores it (the parent handles it
+    and stops its workers), so no worker traceback is printed and a solve under way is still
+    answered: SIGINT sent to the worker during a 1.5-s solve."""
+    ds = DeadlineSolver(starved, start_timeout=120.0, spare=False)
+    try:
+        pid = ds._active.proc.pid
+        threading.Timer(0.5, os.kill, (pid, signal.SIGINT)).start()
+        res = ds.solve(np.zeros(2), np.ones(3), timeout=60.0, cpu_timeout=5.0)
+        assert res.ok and ds._active.proc.is_alive()
     finally:
         ds.close()
 

@@ -89,7 +89,11 @@ def _die_with(parent: int | None) -> None:  # pragma: no cover - runs in the wor
 
 def _serve(factory: Callable, conn, parent: int | None = None) -> None:  # pragma: no cover
     """Worker process: build the solver, say so, then answer solve requests until None
-    (``parent``: :func:`_die_with`)."""
+    (``parent``: :func:`_die_with`). It ignores SIGINT: a Ctrl-C at the terminal reaches the
+    whole process group, and the parent, which handles it, stops its workers (``close``,
+    or as daemons at its exit); a worker's own ``KeyboardInterrupt`` only printed its
+    traceback over the parent's one-line message."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     _die_with(parent)
     try:
         solver = factory()
