@@ -258,7 +258,13 @@ class DeadlineSolver:
 
         An abandoned worker is killed, the spare (or a new worker) takes over, and the result
         is a failure with status ``"deadline"`` and the warm start ``w0`` as its iterate (the
-        next step starts warm from it); :attr:`last_abandon` says which limit it was."""
+        next step starts warm from it); :attr:`last_abandon` says which limit it was.
+
+        Raises
+        ------
+        RuntimeError
+            Without a spare: the successor of a killed worker, started here, was not ready
+            within ``start_timeout``."""
         if self._active is None:  # the successor of a worker killed without a spare (its
             self._active = self._started()  # start-up is not this solve's time)
         t0 = time.perf_counter()
