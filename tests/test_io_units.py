@@ -373,3 +373,19 @@ def test_deploy_feeds_the_simulators_estimators(tmp_path, estimator):
     assert dep.steps == 20 and status == ["ok"]
     assert obs.auvs[0].N == pytest.approx(-200.0 + 1.35 * 19, abs=0.5)
     assert obs.auvs[0].t_last_fix == pytest.approx(now)
+
+
+@pytest.mark.parametrize("scenario, says", [
+    (None, "needs controller.scenario"),
+    ("case4.toml", "gives no AUV a plan"),  # a transit: no waypoints
+])  # fmt: skip
+def test_deploy_plan_estimator_without_plans_is_refused(tmp_path, scenario, says):
+    """``estimator = "plan"`` with no plan for any AUV would silently run the Kalman filter
+    (a new user's walk-through, session 23): refused at load, in one line."""
+    ctl = {"name": "hybrid-single", "preset": "paper1-field", "estimator": "plan"}
+    if scenario is not None:
+        ctl["scenario"] = str(Path(__file__).resolve().parents[1] / "experiments" / "scenarios"
+                              / scenario)  # fmt: skip
+    with pytest.raises(ConfigError, match=says) as info:
+        deploy_config_from_dict(BASE | {"controller": ctl, "log": {"dir": str(tmp_path)}})
+    assert "\n" not in str(info.value) and "'kalman'" in str(info.value)

@@ -52,13 +52,13 @@ from mpcasv.estimation import make_estimator
 from mpcasv.interface import ASVState, Command, Mode, Observation
 from mpcasv.io.asvwatch import SpeedWatch, Thrusters
 from mpcasv.io.config import DeployConfig, build_controller, load_deploy_config
+from mpcasv.io.deploycontroller import known_plans
 from mpcasv.io.deployfeedback import BoatFeedback
 from mpcasv.io.deployphases import ASV_STALE, RUNNING, STARTING, WAITING, Phases
 from mpcasv.io.deploystep import (
     FieldMode,
     check_local,
     guard_params,
-    known_plans,
     prepare_controller,
 )
 from mpcasv.io.imc import RF, reference

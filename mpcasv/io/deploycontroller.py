@@ -15,7 +15,7 @@ if TYPE_CHECKING:
     from mpcasv.io.config import DeployConfig
 
 __all__ = ["MIN_SOLVE_MS", "build_controller", "check_controller", "check_field_budget",
-           "controller_overrides", "deploy_boat"]
+           "controller_overrides", "deploy_boat", "known_plans"]
 
 
 def controller_overrides(cfg: DeployConfig, speed: float | None = None) -> dict[str, Any]:
@@ -137,3 +137,41 @@ def check_controller(cfg: DeployConfig, source: str | Path) -> None:
                           "to cap")  # fmt: skip
     if c.scenario is not None and not Path(c.scenario).is_file():
         raise ConfigError(f"{source}: controller.scenario: no such file {c.scenario!r}")
+    if c.estimator == "plan" and c.scenario is None:
+        raise ConfigError(f"{source}: controller.estimator = 'plan' needs controller.scenario "
+                          "(the scenario holding the AUVs' plans); without it every AUV "
+                          "would run the Kalman filter: give scenario, or estimator = "
+                          "'kalman'")  # fmt: skip
+    try:
+        plans = known_plans(cfg)
+    except ConfigError as exc:
+        raise ConfigError(f"{source}: {exc}") from None
+    if c.estimator == "plan" and all(p is None for p in plans):
+        raise ConfigError(f"{source}: controller.estimator = 'plan': controller.scenario "
+                          f"{c.scenario!r} gives no AUV a plan (waypoints), so every AUV "
+                          "would run the Kalman filter: give the scenario of the AUVs' "
+                          "plans, or estimator = 'kalman'")  # fmt: skip
+
+
+def known_plans(cfg: DeployConfig) -> list:
+    """The AUVs' plans as the ASV knows them (:func:`mpcasv.estimation.known_plan`, one per
+    AUV of the configuration, in order) from ``controller.scenario``; ``[None] * n`` without a
+    scenario. An AUV without a plan (a pursuer, a transit) has None: its ``plan`` estimator is
+    its Kalman filter, as in the simulator.
+
+    Raises
+    ------
+    ConfigError
+        The scenario cannot be loaded, or holds another number of AUVs than the configuration.
+    """
+    n = len(cfg.auvs)
+    if cfg.controller.scenario is None:
+        return [None] * n
+    from mpcasv.estimation import known_plan
+    from mpcasv.sim.scenario import load_scenario
+
+    sc = load_scenario(cfg.controller.scenario)
+    if len(sc.auv) != n:
+        raise ConfigError(f"controller.scenario {cfg.controller.scenario} has {len(sc.auv)} "
+                          f"AUVs, the config {n}")  # fmt: skip
+    return [known_plan(a.build_behaviour()) for a in sc.auv]

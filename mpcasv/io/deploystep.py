@@ -17,7 +17,6 @@ import functools
 import logging
 import time
 
-from mpcasv.config import ConfigError
 from mpcasv.interface import Command
 from mpcasv.io.config import DeployConfig, build_controller
 from mpcasv.io.watchdog import GuardParams
@@ -69,20 +68,6 @@ def guard_params(cfg: DeployConfig, controller) -> GuardParams:
     speed = float(getattr(params, "speed", wd.guard_speed))
     return GuardParams(wd.auv_stale_s, wd.auv_lost_s, wd.auv_speed_max, wd.auv_rise_rate,
                        float(r_keep), wd.guard_margin_m, speed)  # fmt: skip
-
-
-def known_plans(cfg: DeployConfig) -> list:
-    n = len(cfg.auvs)
-    if cfg.controller.scenario is None:
-        return [None] * n
-    from mpcasv.estimation import known_plan
-    from mpcasv.sim.scenario import load_scenario
-
-    sc = load_scenario(cfg.controller.scenario)
-    if len(sc.auv) != n:
-        raise ConfigError(f"controller.scenario {cfg.controller.scenario} has {len(sc.auv)} "
-                          f"AUVs, the config {n}")  # fmt: skip
-    return [known_plan(a.build_behaviour()) for a in sc.auv]
 
 
 def check_local(cfg: DeployConfig, config, log_dir=None, port: bool = False) -> None:
