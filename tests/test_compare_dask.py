@@ -123,3 +123,49 @@ def test_run_folders_go_to_the_named_fsspec_url(tmp_path):
         assert {p.name for p in (remote / job.run_name).iterdir()} >= {
             "metrics.json", "run.json", "timeseries.parquet"}  # fmt: skip
     assert not (out / "runs").exists()
+
+
+MPC_SUITE = f"""
+name = "tiny-mpc"
+scenarios = ["{CASE3}"]
+duration = 5.0
+seeds = [0]
+current = ["off"]
+estimator = ["scenario"]
+plots = "none"
+
+[[controllers]]
+label = "mpc"
+name = "mpc-single"
+overrides = {{ "solver.compiled" = false }}
+"""
+
+
+def test_mpc_jobs_on_daemon_workers_are_refused_before_any_is_submitted(cluster, tmp_path):
+    """``dask worker``'s workers are daemons under their nanny and may not start the MPC's
+    solver process: every MPC job failed with multiprocessing's "daemonic processes are not
+    allowed to have children". Refused up front, in one line saying how to start them."""
+    from mpcasv.config import ConfigError
+
+    c, _ = cluster
+    path = tmp_path / "mpc.toml"
+    path.write_text(MPC_SUITE)
+    out = tmp_path / "out"
+    with pytest.raises(ConfigError, match="DASK_DISTRIBUTED__WORKER__DAEMON=False") as info:
+        run_suite(path, out, dask=c.scheduler_address, quiet=True, report=False)
+    assert "\n" not in str(info.value) and "mpc-single" in str(info.value)
+    assert not list((out / "parts").glob("*.parquet"))
+
+
+def test_mpc_jobs_run_on_workers_started_as_the_refusal_says(tmp_path):
+    import dask
+
+    path = tmp_path / "mpc.toml"
+    path.write_text(MPC_SUITE)
+    with dask.config.set({"distributed.worker.daemon": False}), distributed.LocalCluster(
+            processes=True, n_workers=1, threads_per_worker=1,
+            dashboard_address=None) as c:  # fmt: skip
+        stats, exp, df = run_suite(path, tmp_path / "out", dask=c.scheduler_address,
+                                   quiet=True, report=False,
+                                   runs_dir=str(tmp_path / "runs"))  # fmt: skip
+    assert stats.ok == 1 and (df["status"] == "ok").all(), df.get("error")

@@ -89,8 +89,30 @@ def test_workers_above_four_per_cpu_are_refused_naming_the_cpu_count(command, tw
     assert not out.exists()
 
 
-def test_workers_limit_is_not_this_machines_with_dask(two_cpus):
-    assert workers_mod.check_workers(64, dask="tcp://scheduler:8786") == 64
+def test_workers_default_is_the_cpu_count_and_none_with_dask_is_fine(two_cpus):
+    assert workers_mod.check_workers(None) == 2
+    assert workers_mod.check_workers(None, dask="tcp://scheduler:8786") == 2
+
+
+@pytest.mark.parametrize("command, extra", [
+    ("compare", ["--workers", "2"]),
+    ("compare", ["--job-timeout", "60"]),
+    ("tune", ["--workers", "2"]),
+])  # fmt: skip
+def test_options_dask_would_ignore_are_refused_with_it(command, extra, tmp_path, capsys):
+    """``--workers`` and ``--job-timeout`` were silently ignored with ``--dask`` (a Dask sweep
+    then had no per-job limit; a new user's walk-through, session 23): refused before anything
+    is contacted or written (no scheduler listens at the address)."""
+    out = tmp_path / "out"
+    dask = "tcp://127.0.0.1:9"
+    argv = {
+        "compare": ["compare", str(_suite(tmp_path)), "--out", str(out)],
+        "tune": ["tune", "controller", str(ROOT / "experiments/tuning/hybrid-single.toml"),
+                 "--out", str(out)],
+    }[command] + ["--dask", dask, *extra]  # fmt: skip
+    assert main(argv) == 2
+    _one_error_line(capsys, f"{extra[0]} {extra[1]} with --dask {dask}", "leave it out")
+    assert not out.exists()
 
 
 def test_a_pool_starts_no_more_processes_than_jobs_and_says_so(two_cpus, tmp_path, capsys):

@@ -342,3 +342,27 @@ def test_a_worker_cpu_time_that_cannot_be_read_is_unknown_not_this_process():
     assert math.isnan(cpu_s(SimpleNamespace(pid=None)))
     assert math.isnan(cpu_s(SimpleNamespace(pid=2**22 + 12345)))  # no such process
     assert cpu_s(SimpleNamespace(pid=os.getpid())) > 0.0
+
+
+def _deadline_solver_in_this_process(queue) -> None:  # runs in a daemon process
+    try:
+        DeadlineSolver(None)
+    except RuntimeError as exc:
+        queue.put(str(exc))
+    else:  # pragma: no cover - the failure this test looks for
+        queue.put("started")
+
+
+def test_a_daemon_process_is_told_why_it_cannot_start_the_solver_worker():
+    """A Dask worker under its nanny is a daemon: multiprocessing only asserted "daemonic
+    processes are not allowed to have children"; the error now says how to start the workers
+    (a worker joining a cluster after ``compare``'s up-front check meets this)."""
+    import multiprocessing
+
+    ctx = multiprocessing.get_context("spawn")
+    queue = ctx.Queue()
+    proc = ctx.Process(target=_deadline_solver_in_this_process, args=(queue,), daemon=True)
+    proc.start()
+    said = queue.get(timeout=60)
+    proc.join(10)
+    assert "DASK_DISTRIBUTED__WORKER__DAEMON=False" in said and "\n" not in said

@@ -25,10 +25,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--out", type=Path, metavar="DIR",
                    help="output folder DIR (default: results/<suite name>)")  # fmt: skip
-    p.add_argument("--workers", type=int, default=cpu_count(),
-                   help="local worker processes (default: the cores this process may use; 1 "
-                   "runs in this process; at most 4 per core; never more than the jobs to "
-                   "run)")  # fmt: skip
+    p.add_argument("--workers", type=int, default=None,
+                   help=f"local worker processes (default: the cores this process may use, "
+                   f"{cpu_count()}; 1 runs in this process; at most 4 per core; never more "
+                   "than the jobs to run; not with --dask)")  # fmt: skip
     p.add_argument("--dask", metavar="ADDRESS",
                    help="run on an existing Dask scheduler (e.g. tcp://host:8786); the workers "
                    "need no file system shared with this machine: each job's row comes back "
@@ -44,7 +44,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--job-timeout", type=float, metavar="S", default=None,
                    help="end a job running longer than S seconds and record it as 'timeout' "
-                   "(local worker pools; default 1200; 0: no limit)")  # fmt: skip
+                   "(local worker pools; default 1200; 0: no limit; not with --dask: a "
+                   "Dask task cannot be ended from outside)")  # fmt: skip
     p.add_argument("--no-report", action="store_true", help="skip report.md / report.html")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
@@ -58,7 +59,13 @@ def run(args: argparse.Namespace) -> int:
     from mpcasv.experiments.workers import check_workers
     from mpcasv.outputs import check_not_other_output, check_output_folder
 
-    check_workers(args.workers, args.dask)  # at most 4 per CPU locally (1000 hung the machine)
+    # at most 4 per CPU locally (1000 hung the machine); not with --dask (was ignored)
+    args.workers = check_workers(args.workers, args.dask)
+    if args.dask and args.job_timeout is not None:  # was silently ignored
+        raise ConfigError(f"--job-timeout {args.job_timeout:g} with --dask {args.dask}: a Dask "
+                          "task cannot be ended from outside, so a cluster has no per-job time "
+                          "limit (an MPC's hang guard still abandons a hung solve): leave it "
+                          "out, or run on local workers")  # fmt: skip
     if args.job_timeout is not None and not (math.isfinite(args.job_timeout)
                                              and args.job_timeout >= 0):  # fmt: skip
         raise ConfigError(f"--job-timeout {args.job_timeout}: a finite number of seconds >= 0 "

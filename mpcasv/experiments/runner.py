@@ -40,7 +40,6 @@ from concurrent.futures import as_completed
 from multiprocessing import get_context
 from pathlib import Path
 
-from mpcasv.config import ConfigError
 from mpcasv.experiments.metrics import auv_column
 from mpcasv.experiments.store import done_ids, write_part, write_results
 from mpcasv.experiments.suite import Expansion, Job, expand
@@ -232,7 +231,8 @@ class SweepStats:
     error_jobs: list = dataclasses.field(default_factory=list)  # (run name, last error line)
 
 
-def _record(stats: SweepStats, job: Job, row: dict) -> None:
+def record_row(stats: SweepStats, job: Job, row: dict) -> None:
+    """Count a finished job's row (written by :func:`finish_job`) in ``stats``."""
     stats.ran += 1
     if row["status"] == "ok":
         stats.ok += 1
@@ -271,12 +271,14 @@ def run_jobs(jobs: list[Job], out: Path, stats: SweepStats, workers: int = 1,
     t0 = time.perf_counter()
     try:
         if dask:
+            from mpcasv.experiments.dask_runner import run_dask
+
             stats.backend = f"dask {dask}"
-            _run_dask(jobs, out, runs, stats, dask, bar)
+            run_dask(jobs, out, runs, stats, dask, bar)
         elif workers <= 1:
             stats.backend, stats.workers = "serial (this process)", 1
             for job in jobs:
-                _record(stats, job, finish_job(out, run_job(job, runs)))
+                record_row(stats, job, finish_job(out, run_job(job, runs)))
                 bar.set_postfix(errors=stats.errors, refresh=False)
                 bar.update(1)
         else:
@@ -311,7 +313,7 @@ def _run_pool(jobs, out: Path, runs: str, stats: SweepStats, workers: int, bar,
                           "command to resume")  # fmt: skip
                 bar.update(1)
                 continue
-            _record(stats, job, finish_job(out, row))
+            record_row(stats, job, finish_job(out, row))
             bar.set_postfix(errors=stats.errors, refresh=False)
             bar.update(1)
     except BaseException:  # Ctrl-C or a failure: stop now, not after the queued jobs
@@ -320,33 +322,6 @@ def _run_pool(jobs, out: Path, runs: str, stats: SweepStats, workers: int, bar,
     finally:
         pool.close()
         pool.join()
-
-
-def _run_dask(jobs, out: Path, runs: str, stats: SweepStats, address: str, bar) -> None:
-    from dask.distributed import Client
-    from dask.distributed import as_completed as dask_completed
-
-    try:
-        client = Client(address, timeout="20s")
-    except (OSError, TimeoutError, ValueError) as exc:
-        raise ConfigError(f"--dask {address}: cannot connect to a Dask scheduler: {exc}") from None
-    try:
-        stats.workers = len(client.nthreads())
-        futures = {client.submit(run_job, job, runs, pure=False, retries=0): job
-                   for job in jobs}  # fmt: skip
-        for fut in dask_completed(list(futures)):
-            job = futures[fut]
-            try:
-                row = fut.result()  # the row comes back through Dask: written here
-            except Exception as exc:  # the machinery failed (e.g. KilledWorker): no row
-                stats.lost += 1
-                bar.write(f"lost {job.run_name}: {type(exc).__name__}: {exc} (rerun to resume)")
-            else:
-                _record(stats, job, finish_job(out, row))
-            bar.set_postfix(errors=stats.errors, refresh=False)
-            bar.update(1)
-    finally:
-        client.close()
 
 
 def run_suite(suite: str | Path, out: str | Path, workers: int = 1, dask: str | None = None,

@@ -48,9 +48,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--workers",
         type=int,
-        default=cpu_count(),
-        help="local worker processes (default: one per core; 1: this process; at most 4 per "
-        "core; never more than the runs of a batch)",
+        default=None,
+        help=f"local worker processes (default: one per core, {cpu_count()}; 1: this process; "
+        "at most 4 per core; never more than the runs of a batch; not with --dask)",
     )
     p.add_argument("--dask", metavar="ADDRESS", help="run on a Dask scheduler instead")
     p.add_argument("--no-heldout", action="store_true", help="skip the held-out runs")
@@ -65,7 +65,7 @@ def run_tune_controller(args: argparse.Namespace) -> int:
     from mpcasv.experiments.workers import check_workers
     from mpcasv.outputs import check_not_other_output, check_output_folder, folder_lock
 
-    check_workers(args.workers, args.dask)  # at most 4 per CPU locally
+    args.workers = check_workers(args.workers, args.dask)  # <= 4 per CPU; not with --dask
     spec = load_spec(args.ranges, args.trials)
     check_presets(spec)  # the suite's entry, and range ends no trial could run: before any file
     out = check_output_folder((args.out or Path("results") / f"tune-{spec.path.stem}").resolve())

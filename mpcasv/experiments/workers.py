@@ -6,7 +6,7 @@ command says so when it starts fewer than asked), and ``--workers`` above
 :data:`MAX_PER_CPU` times the machine's CPU count is refused before anything runs
 (:func:`check_workers`): ``compare --workers 1000`` on a one-job suite started 1000 Python
 interpreters (the machine stalled, semaphores leaked). With ``--dask`` the cluster's workers
-run the jobs and ``--workers`` is not used, so it is not checked against this machine.
+run the jobs: ``--workers`` given with it is refused (it was silently ignored).
 """
 
 from __future__ import annotations
@@ -28,19 +28,28 @@ def cpu_count() -> int:
         return os.cpu_count() or 1
 
 
-def check_workers(workers: int, dask: str | None = None, option: str = "--workers") -> int:
-    """``workers`` if it is a usable number of local worker processes.
+def check_workers(workers: int | None, dask: str | None = None, option: str = "--workers") -> int:
+    """The number of local worker processes to use: ``workers``, or by default (None) the
+    CPUs this process may use (:func:`cpu_count`).
 
     Raises
     ------
     ConfigError
-        ``workers < 1``; or, without ``dask``, more than ``MAX_PER_CPU * cpu_count()`` (the
-        message names the option, the value and the CPU count).
+        ``workers`` given with ``dask`` (the cluster's workers run the jobs: it would be
+        ignored); ``workers < 1``; more than ``MAX_PER_CPU * cpu_count()`` (the message
+        names the option, the value and the CPU count).
     """
+    if workers is None:
+        return cpu_count()
+    if dask is not None:
+        raise ConfigError(f"{option} {workers} with --dask {dask}: the Dask cluster's workers "
+                          f"run the jobs (their number is the cluster's: 'dask worker "
+                          f"--nworkers N' on each machine); {option} is for local processes "
+                          "only: leave it out")  # fmt: skip
     if workers < 1:
         raise ConfigError(f"{option} {workers}: must be >= 1")
     limit = MAX_PER_CPU * cpu_count()
-    if dask is None and workers > limit:
+    if workers > limit:
         raise ConfigError(f"{option} {workers}: more than {MAX_PER_CPU} x the {cpu_count()} "
                           f"CPUs of this machine ({limit}); each worker is a process running "
                           f"CPU-bound jobs: use at most {limit}")  # fmt: skip

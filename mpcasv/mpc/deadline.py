@@ -53,6 +53,13 @@ _READY = "ready"
 SPARE_DELAY_S = 0.1
 #: how often a solve judged by its worker's CPU time (``cpu_timeout``) reads that time (s)
 CPU_POLL_S = 0.2
+#: why a daemon process (a Dask worker under its nanny) cannot run an MPC: it may not start
+#: the solver's worker process
+DAEMON_REFUSED = (
+    "this process is a daemon, which may not start the MPC's solver process (the hang "
+    "guard); a Dask worker under its nanny is one: start the workers with "
+    "DASK_DISTRIBUTED__WORKER__DAEMON=False (or 'dask worker --no-nanny')"
+)
 
 
 def cpu_s(proc) -> float:
@@ -208,7 +215,9 @@ class DeadlineSolver:
     Raises
     ------
     RuntimeError
-        The first worker did not start within ``start_timeout`` or could not build its solver.
+        The first worker did not start within ``start_timeout`` or could not build its solver;
+        or this process is a daemon, which may not start one (a Dask worker under its nanny:
+        start the workers with ``DASK_DISTRIBUTED__WORKER__DAEMON=False``, docs/experiments.md).
 
     Attributes
     ----------
@@ -222,6 +231,8 @@ class DeadlineSolver:
     """
 
     def __init__(self, factory: Callable, start_timeout: float = 600.0, spare: bool = True):
+        if multiprocessing.current_process().daemon:  # multiprocessing's own assertion said
+            raise RuntimeError(DAEMON_REFUSED)  # only "daemonic processes are not allowed ..."
         self._ctx = multiprocessing.get_context("spawn")
         self.factory = factory
         self.start_timeout = start_timeout
