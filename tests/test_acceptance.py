@@ -127,6 +127,25 @@ def test_no_more_is_not_met_by_the_runs_where_neither_spent_anything():
     assert t["both_zero"].tolist() == [21] and t["sums"].tolist() == [math.inf]
 
 
+@pytest.mark.parametrize("target, better_side", [(0.0, True), (-0.3, False)])
+def test_every_pair_both_zero_is_a_change_of_zero_not_no_pairs(target, better_side):
+    """Neither controller spent any time in the collision domain in any run: the change is 0
+    in every pair. "No more" (0) is met; "at least 30 % less" is not. Before, every pair was
+    left out and the target was "n/a: no pairs", counted as not met (a new user's
+    walk-through, session 23)."""
+    df = _results(range(10))
+    df["collision_domain_s"] = 0.0
+    t = acceptance_table(df, Acceptance({"collision_domain_s": target}), "hybrid", "mpc", [])
+    assert t["pairs"].tolist() == [30] and t["both_zero"].tolist() == [0]
+    assert t[["median", "ci_low", "ci_high", "sums"]].values.tolist() == [[0.0] * 4]
+    assert t["verdict"].tolist() == ["met" if better_side else "not met"]
+    from mpcasv.experiments.acceptance import report_parts
+
+    (_, _, [(_, _, says)]) = report_parts(df, Acceptance({"collision_domain_s": target}),
+                                         ["hybrid", "mpc"], [])  # fmt: skip
+    assert says.startswith("**All 1 targets met" if better_side else "**0 of 1 targets met")
+
+
 def test_a_target_with_unpaired_runs_is_said_and_not_counted_as_met(tmp_path):
     df = _results()
     df.loc[(df.variant == "mpc") & (df.seed >= 5), "status"] = "error"  # half its runs fail

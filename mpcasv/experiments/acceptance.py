@@ -16,7 +16,10 @@ report's pairing, :func:`mpcasv.experiments.stats.pairs`) the relative change is
 every case of the suite except, for a metric that needs fixes (:data:`NEEDS_FIXES`), the
 cases where no USBL fix arrived in any run (there the fix ages are the run's clock and the
 AUVs navigate without fixes whatever the controller). Pairs where both are 0 are left out
-(they say nothing about more or less) and counted, as are runs without a partner. The
+(they say nothing about more or less) and counted, as are runs without a partner; unless
+every pair is 0 against 0: then the change is 0 in each pair, and a target of "no more" (0)
+is met (before, no pair was left to judge and the target, e.g. no time in a collision domain
+for either controller, counted as not met). The
 median and 95 % bootstrap CI come from :func:`mpcasv.experiments.stats.paired_stat`.
 Verdict: **met** when the whole CI is at or on the better side of the target, **not met**
 when it is all on the worse side, else **undecided**; a target with unpaired runs is not
@@ -132,6 +135,8 @@ def acceptance_table(results: pd.DataFrame, acc: Acceptance, reference: str, oth
             p = p[~p[paired.CASE].isin(no_fix_cases)]
             unpaired = unpaired.drop(no_fix_cases, errors="ignore")
         zero = (p["ref"] == 0) & (p["other"] == 0)
+        if zero.all():  # both 0 in every pair: the change is 0 in each (not "no pairs")
+            zero = zero & False
         p = p[~zero]
         ref, oth = p["ref"].to_numpy(float), p["other"].to_numpy(float)
         s = paired.paired_stat(np.zeros(len(p)), relative_changes(ref, oth))
@@ -182,7 +187,8 @@ def report_parts(results: pd.DataFrame, acc: Acceptance, names: list[str],
                 "there)") if no_fix_cases and needs else ""  # fmt: skip
     rule = (f"Per pair the relative change (other − reference) / |reference|, pooled over the "
             f"cases{left_out}; pairs where both are 0 say nothing about more or less and are "
-            f"left out; median with its {paired.CONFIDENCE:.0%} bootstrap CI. *met*: the whole "
+            f"left out, unless all are (then the change is 0 in every pair); median with its "
+            f"{paired.CONFIDENCE:.0%} bootstrap CI. *met*: the whole "
             "CI is at or on the better side of the requirement; *not met*: the whole CI is on "
             "the worse side; *undecided*: the CI straddles it. A target with unpaired runs (a "
             "failed job, a missing value) is not counted as met.")  # fmt: skip
