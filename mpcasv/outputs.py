@@ -29,6 +29,10 @@ FILE_SUFFIXES = frozenset({
     ".npz", ".npy", ".pkl", ".py", ".xlsx",
 })  # fmt: skip
 
+#: Suffixes of a figure file (``--plot``): the formats matplotlib picks by the suffix that the
+#: project writes; others (``--plot out.txt``) are refused before the work that draws it.
+PLOT_SUFFIXES = (".png", ".pdf", ".svg")
+
 
 def check_output_folder(path: str | os.PathLike, option: str = "--out") -> Path:
     """Refuse an output folder that cannot be made or written, before the work that fills it.

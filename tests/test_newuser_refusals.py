@@ -260,3 +260,41 @@ def test_the_estimation_harness_refuses_bad_input_in_one_line(tmp_path, capsys, 
     assert evaluate([str(scenario), *extra]) == 2
     err = [ln for ln in capsys.readouterr().err.strip().splitlines() if "error" in ln]
     assert len(err) == 1 and "Traceback" not in err[0] and word in err[0], err
+
+
+@pytest.mark.parametrize(
+    ("name", "words"),
+    [
+        # was a ValueError traceback from savefig ("Format 'txt' is not supported") after
+        # every run had been simulated
+        ("out.txt", ["--plot", "out.txt", ".png or .pdf or .svg", "ends in .txt"]),
+        ("out", ["--plot", "ends in no suffix"]),
+        ("afile/out.png", ["--plot", "afile", "a file is there"]),  # a file where a folder is
+    ],
+)
+def test_the_estimation_harness_refuses_a_bad_plot_path_before_the_runs(tmp_path, capsys,
+                                                                         name, words):  # fmt: skip
+    from mpcasv.estimation.evaluate import main as evaluate
+
+    scenario = tmp_path / "short.toml"  # (the old code ran it before failing: keep it short)
+    scenario.write_text(CASE1.read_text().replace("duration = 3250.0", "duration = 5.0", 1))
+    (tmp_path / "afile").write_text("keep me\n")
+    plot = tmp_path / name
+    assert evaluate([str(scenario), "--plot", str(plot)]) == 2
+    captured = capsys.readouterr()
+    err = captured.err.strip().splitlines()
+    assert len(err) == 1 and "Traceback" not in err[0], err  # no progress bar: before the runs
+    assert err[0].startswith("mpcasv.estimation.evaluate: error: --plot "), err
+    for word in words:
+        assert word in err[0], (word, err[0])
+    assert captured.out == "" and not plot.exists()
+
+
+def test_the_estimation_harness_makes_the_folder_of_its_plot(tmp_path, capsys):
+    from mpcasv.estimation.evaluate import main as evaluate
+
+    scenario = tmp_path / "short.toml"
+    scenario.write_text(CASE1.read_text().replace("duration = 3250.0", "duration = 5.0", 1))
+    plot = tmp_path / "new" / "est.svg"
+    assert evaluate([str(scenario), "--estimators", "acoustic", "--plot", str(plot)]) == 0
+    assert plot.read_text().lstrip().startswith("<?xml")

@@ -242,7 +242,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("--seeds", nargs="+", type=int, default=[0])
     ap.add_argument("--controller")
     ap.add_argument("--preset")
-    ap.add_argument("--plot", type=Path, help="PNG of the first seed's runs")
+    ap.add_argument("--plot", type=Path,
+                    help="figure of the first seed's runs (.png, .pdf or .svg; missing folders "
+                    "are made)")  # fmt: skip
     args = ap.parse_args(argv)
     try:
         return _run(args, load_scenario)
@@ -257,8 +259,12 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 def _run(args: argparse.Namespace, load_scenario) -> int:
+    from mpcasv.outputs import PLOT_SUFFIXES, check_output_file
+
     if any(s < 0 for s in args.seeds):
         raise ConfigError(f"--seeds {args.seeds}: seeds are integers >= 0")
+    if args.plot is not None:  # before the runs: `--plot out.txt` failed in savefig after them
+        check_output_file(args.plot, "--plot", PLOT_SUFFIXES, parents=True)
     sc = load_scenario(args.scenario)
     table = compare_estimators(sc, args.estimators, args.seeds, args.controller, args.preset,
                                progress=True)  # fmt: skip

@@ -232,12 +232,12 @@ def register_compare(tsub) -> None:
 def _run(args) -> int:
     if not args.tolerance > 0:
         raise ConfigError(f"--tolerance {args.tolerance}: must be > 0")
-    from mpcasv.outputs import check_output_file
+    from mpcasv.outputs import PLOT_SUFFIXES, check_output_file
 
     if args.out is not None:
         check_output_file(args.out, "--out")
     if args.plot is not None:  # matplotlib picks the format by the suffix
-        check_output_file(args.plot, "--plot", (".png", ".pdf", ".svg"))
+        check_output_file(args.plot, "--plot", PLOT_SUFFIXES)
     if args.baseline is not None:  # checked before the work; drawn only on the figure
         if args.plot is None:
             raise ConfigError(f"--baseline {args.baseline}: is drawn on the figure only; give "
