@@ -109,6 +109,41 @@ def test_sitl_refuses_auv_ids_past_0xfffe(tmp_path, capsys):
     assert not out.exists()
 
 
+# (arguments, words the one line must hold): an outage the world would never apply was run
+# without it, exit 0 (the old code; with --hold it waited for ever for the first Reference)
+SITL_OUTAGE_NEVER = [
+    (["--duration", "1", "--asv-outage", "2,3"], ["--asv-outage 2,3", "--duration 1",
+                                                  "never be killed", "T0 <= 0"]),
+    (["--duration", "1", "--asv-outage", "1,2"], ["--asv-outage 1,2", "--duration 1"]),
+    (["--duration", "10.5", "--asv-outage", "10.2,11"], ["--asv-outage 10.2,11",
+                                                          "--duration 10.5", "T0 <= 10"]),
+    (["--duration", "1", "--hold", "--asv-outage", "5,6"], ["--asv-outage 5,6", "--duration 1"]),
+    (["--speedup", "1000", "--asv-outage", "1500,1600"],  # no --duration: case3's 1500 s
+     ["--asv-outage 1500,1600", "1500 s", "the duration of scenario case3", "T0 <= 1499"]),
+    (["--duration", "5", "--asv-outage", "1.2,1.8"], ["--asv-outage 1.2,1.8", "2 s",
+                                                      "never be killed"]),
+]  # fmt: skip
+
+
+@pytest.mark.parametrize("extra,words", SITL_OUTAGE_NEVER,
+                         ids=[" ".join(a) for a, _ in SITL_OUTAGE_NEVER])  # fmt: skip
+def test_sitl_refuses_an_outage_that_would_never_happen(extra, words, tmp_path, capsys):
+    out = tmp_path / "sitl"
+    _refused(["sitl", CASE3, "--discovery-port", "0", "--base-port", "0", "--quiet", "--out",
+              out, *extra], capsys, *words)  # fmt: skip
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("duration,outage", [(1.0, (0.0, 1.0)), (2.0, (0.5, 1.5)),
+                                             (1.5, (1.0, 9.0)), (None, (1499.0, 1500.0))])
+def test_sitl_takes_an_outage_that_holds_a_period_start(duration, outage):
+    from mpcasv.io.sitloptions import SitlOptions
+    from mpcasv.sim.scenario import load_scenario
+
+    opt = SitlOptions(duration=duration, asv_outage=outage)
+    assert opt.check(load_scenario(CASE3)) is opt
+
+
 @pytest.mark.parametrize("option", ["--discovery-port", "--base-port"])
 def test_sitl_refuses_a_port_in_use_before_writing(option, busy_port, tmp_path, capsys):
     out = tmp_path / "sitl"

@@ -118,7 +118,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--auv-id-base", type=_imc_id, default=0x2811)
     s.add_argument("--tcp", action="store_true", help="also serve DUNE-like TCP backseat ports")
     s.add_argument("--asv-outage", type=_pair,
-                   help="'T0,T1': kill the ASV at world time T0, restart at T1 > T0")
+                   help="'T0,T1': kill the ASV at world time T0, restart at T1 > T0 (each "
+                   "at the first period start at or after it; T0 within the run)")  # fmt: skip
     s.add_argument("--controller", help="controller whose domain the world uses (metrics)")
     s.add_argument("--preset", help="its preset")
     s.add_argument("--out", type=Path, default=Path("runs/sitl"))
@@ -175,7 +176,7 @@ def run_sitl_cli(args: argparse.Namespace) -> int:
         auv_id_base=args.auv_id_base, tcp=args.tcp, asv_outage=args.asv_outage,
         out=args.out, plots=args.plots, controller=args.controller, preset=args.preset,
         ready_file=args.ready_file,
-    ).check([a.name for a in sc.auv])  # fmt: skip
+    ).check(sc)  # fmt: skip
     check_output_folder(args.out)
     if args.ready_file is not None:
         check_output_file(args.ready_file, "--ready-file")

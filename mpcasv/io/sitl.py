@@ -39,7 +39,9 @@ Timestamps are ``epoch + n h`` (integer epoch, h = half a period), so difference
 timestamps are exact. ``--speedup`` runs the clock faster than the wall clock (the deploy
 side must use the same factor). SIGUSR1 kills the ASV's IMC system (its DUNE is gone: socket
 closed, loops off, the boat drifts) and SIGUSR2 restarts it (a fresh DUNE: no maneuver, no
-known systems); ``--asv-outage T0:T1`` does the same at world times T0 and T1.
+known systems); ``--asv-outage T0,T1`` does the same at the first period starts at or after
+world times T0 and T1 (one that would never kill the ASV is refused:
+:mod:`mpcasv.io.sitloptions`).
 
 The options are checked before anything is written or bound for good
 (:mod:`mpcasv.io.sitloptions`: ranges, distinct ids and names, the address and ports tried).
@@ -90,7 +92,7 @@ class Sitl(AsvDune):
         from mpcasv.controllers import make_controller
         from mpcasv.sim.world import World
 
-        opt.check([a.name for a in scenario.auv])  # commands.py checked it already
+        opt.check(scenario)  # commands.py checked it already
         self.sc, self.opt = scenario, opt
         self.clock = Clock(opt.speedup)
         self.origin = Origin.from_degrees(*opt.origin)
@@ -240,7 +242,7 @@ class Sitl(AsvDune):
     async def run(self, stop: asyncio.Event) -> dict:
         self._stop = stop
         await self.start()
-        n_steps = int(math.ceil((self.opt.duration or self.sc.duration) / self.Tc - 1e-9))
+        n_steps = self.opt.periods(self.sc)
         per = round(self.Tc / self.h)
         flusher = asyncio.create_task(self._flush_loop())
         boundary = 0  # tick index of the next period boundary

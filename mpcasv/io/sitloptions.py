@@ -7,7 +7,10 @@ factor outside ``[SPEEDUP_MIN, SPEEDUP_MAX]`` (a tiny one slept for ever, deaf t
 inf was a traceback); an origin that is not a latitude in [-90, 90] and a longitude in
 [-180, 180] degrees; a port above 65535 (the base port plus one port per vehicle above it);
 an ASV IMC id equal to an AUV's, or AUV ids past 0xFFFE; an empty ASV name or one equal to
-an AUV's; an ``--asv-outage`` whose restart is not after its kill. :meth:`SitlOptions.check_binds`
+an AUV's; an ``--asv-outage`` whose restart is not after its kill, or whose kill would never
+happen: the world checks the outage at the start of each supervisory period, so T0 after the
+last period's start (T0 at or past the run's duration, ``--duration`` or the scenario's) or
+an outage that holds no period start was silently never applied. :meth:`SitlOptions.check_binds`
 then binds (and closes at once) the address and every fixed port the SITL will bind, so that a
 foreign address, a host name or a port in use is refused with the option named, before
 ``--out`` is written.
@@ -18,9 +21,13 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from mpcasv.config import ConfigError, check_seed
 from mpcasv.io.netcheck import PORT_MAX, check_bindable, check_ipv4, check_port
+
+if TYPE_CHECKING:
+    from mpcasv.sim.scenario import Scenario
 
 __all__ = ["SPEEDUP_MAX", "SPEEDUP_MIN", "SitlOptions", "check_speedup"]
 
@@ -68,9 +75,17 @@ class SitlOptions:
         """The IMC system name of the scenario's AUV ``name``."""
         return f"sitl-{name}"
 
-    def check(self, auv_names: list[str]) -> SitlOptions:
-        """Refuse impossible values (see the module docstring) for a scenario whose AUVs are
-        ``auv_names``; nothing is bound or written. Returns ``self``."""
+    def periods(self, scenario: Scenario) -> int:
+        """The supervisory periods the world runs: ``duration`` (default the scenario's) in
+        periods of ``scenario.sim.control_period``, a partial last one counted whole. With
+        ``hold`` the world waits at t = 0 for the first Reference and then runs as many."""
+        duration = self.duration or scenario.duration
+        return int(math.ceil(duration / scenario.sim.control_period - 1e-9))
+
+    def check(self, scenario: Scenario) -> SitlOptions:
+        """Refuse impossible values (see the module docstring) for ``scenario`` (its AUVs, its
+        duration and control period); nothing is bound or written. Returns ``self``."""
+        auv_names = [a.name for a in scenario.auv]
         check_seed(self.seed, "--seed")
         check_speedup(self.speedup)
         lat, lon = self.origin
@@ -100,7 +115,32 @@ class SitlOptions:
             if not (0 <= t0 < t1 < math.inf):  # nan fails too
                 raise ConfigError(f"--asv-outage {t0:g},{t1:g}: 'T0,T1' kills the ASV at world "
                                   "time T0 and restarts it at T1: 0 <= T0 < T1, finite")
+            self._check_outage_happens(scenario)
         return self
+
+    def _check_outage_happens(self, scenario: Scenario) -> None:
+        """ConfigError if no period start (k Tc, k < :meth:`periods`) lies in [T0, T1): the
+        SITL kills the ASV at the first one at or after T0 (:meth:`Sitl.run`), so without one
+        the outage was silently never applied. ``--hold`` changes nothing: the world's time
+        stays at 0 while held and then runs the same periods."""
+        t0, t1 = self.asv_outage
+        tc = scenario.sim.control_period
+        n = self.periods(scenario)
+        k = math.ceil(t0 / tc - 1e-9)  # the period start at which the ASV is killed
+        given = f"--asv-outage {t0:g},{t1:g}"
+        if k >= n:
+            dur = (f"--duration {self.duration:g}" if self.duration
+                   else f"the duration of scenario {scenario.name}")  # fmt: skip
+            raise ConfigError(f"{given}: the run lasts {self.duration or scenario.duration:g} s "
+                              f"of world time ({dur}) and the ASV is killed at the first period "
+                              f"start (every {tc:g} s) at or after T0, the last being "
+                              f"{(n - 1) * tc:g} s: it would never be killed; give T0 <= "
+                              f"{(n - 1) * tc:g}")  # fmt: skip
+        if k * tc >= t1 - 1e-9:
+            raise ConfigError(f"{given}: the ASV is killed at the first period start (every "
+                              f"{tc:g} s) at or after T0, {k * tc:g} s, which is not before T1:"
+                              " it would never be killed; give an outage that holds a period "
+                              "start")  # fmt: skip
 
     def check_binds(self, n_auv: int) -> None:
         """Bind (and close) ``--bind`` with ``--discovery-port`` and each vehicle's UDP port
