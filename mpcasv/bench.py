@@ -27,7 +27,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("bench", help="benchmarks that print timing figures",
                        description="Run a benchmark and print its figures.")  # fmt: skip
     p.add_argument("which", choices=sorted(BENCHES), help="what to benchmark")
-    p.add_argument("--json", type=Path, help="also write the figures to this JSON file")
+    p.add_argument("--json", type=Path, help="also write the figures to this .json file")
     p.add_argument("--repeat", type=int, default=None,
                    help="'sim', 'compare': repetitions (best/median reported; default 3)")
     p.add_argument("--suite", help="'compare': the suite to time (default bench)")
@@ -70,7 +70,7 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError(f"--steps {args.steps}: 'mpc' needs >= 2 (the first, cold step is "
                           "left out of the figures)")
     if args.json is not None:
-        check_output_file(args.json, "--json")
+        check_output_file(args.json, "--json", (".json",))
     module, func = BENCHES[args.which].split(":")
     figures = getattr(importlib.import_module(module), func)(args)
     if args.json:

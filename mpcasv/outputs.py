@@ -1,12 +1,14 @@
 """Output locations of the command line, checked before any long work starts.
 
 Every command that writes a folder (``--out`` of simulate, paper-table, compare, falsify,
-tune ..., sitl; ``--log-dir`` of deploy) or a file (``identify --out``, ``bench --json``,
-``tune compare --out/--plot``, ``replay --json``, ``tune yaw|speed --toml``, ...) calls
-:func:`check_output_folder` or :func:`check_output_file` on it first: an unwritable place
-(``/proc/x``, a read-only file system, a folder without write permission), a file where a
-folder is to be made, or a folder named like a file (``--out m.txt``) were found only after
-the whole run, or silently wrote a folder called ``m.txt``.
+tune ..., sitl; ``--log-dir`` of deploy; ``replay-solve --export``) or a file (``identify
+--out``, ``bench --json``, ``tune compare --out/--plot``, ``replay --json``, ``sitl
+--ready-file``, ``tune yaw|speed --toml``, ``python -m mpcasv.estimation.evaluate --plot``)
+calls :func:`check_output_folder` or :func:`check_output_file` on it first, a file with the
+suffixes it writes: an unwritable place (``/proc/x``, a read-only file system, a folder
+without write permission), a file where a folder is to be made, a folder named like a file
+(``--out m.txt``) or a file named as another kind (``replay --json x.csv``) were found only
+after the whole run, or silently wrote a folder called ``m.txt`` or JSON into ``x.csv``.
 
 Nothing is created: writability is probed by making and removing a temporary folder in the
 nearest existing folder on the way to the output.

@@ -231,7 +231,8 @@ def test_export_refuses_what_it_cannot_write_in_one_line(hung_run, tmp_path, cap
     good.write_bytes(pickle.dumps(solves))
     a_file = tmp_path / "a_file"
     a_file.write_text("x")
-    _refused(["replay-solve", good, "--export", a_file], capsys, "--export", "not a folder")
+    _refused(["replay-solve", good, "--export", a_file], capsys, "--export", str(a_file),
+             "a file is there")  # fmt: skip
     _refused(["replay-solve", good, "--export", tmp_path / "e", "--max-iter", "3"], capsys,
              "--export", "reproduce.py")  # fmt: skip
     _refused(["replay-solve", good, "--export", tmp_path / "e", "--set", "solver.solver='qp'"],

@@ -86,6 +86,10 @@ COMMANDS_WITH_OUTPUT = {
     "sitl": ["sitl", CASE1, "--quiet", "--out", "{bad}"],
     "deploy --log-dir": ["deploy", DEPLOY, "--dry-run", "--duration", "1", "--log-dir", "{bad}"],
     "replay --json": ["replay", "{tmp}", "--json", "{bad}/r.jsonl"],
+    "sitl --ready-file": ["sitl", CASE1, "--quiet", "--out", "{tmp}/s", "--ready-file",
+                          "{bad}/ready.json"],
+    # checked before the file of hung solves is read: none is needed here
+    "replay-solve --export": ["replay-solve", "{tmp}/hung.pkl", "--export", "{bad}"],
 }  # fmt: skip
 
 
@@ -148,6 +152,7 @@ FOLDER_COMMANDS = {
     "sitl": ["sitl", CASE1, "--quiet", "--out", "{out}"],
     "deploy --log-dir": ["deploy", DEPLOY, "--dry-run", "--duration", "1", "--log-dir",
                          "{out}"],
+    "replay-solve --export": ["replay-solve", "{out}.pkl", "--export", "{out}"],
 }  # fmt: skip
 
 
@@ -165,6 +170,36 @@ def test_a_folder_output_named_or_being_a_file_is_refused(name, kind, tmp_path, 
     _refused(argv, capsys, option, str(out), *words)
     assert out.exists() == (kind == "existing file")  # neither made nor replaced
     assert kind == "file-like name" or out.read_text() == "keep me\n"
+
+
+# (argv with the output {out}, the suffix given, the suffix(es) the option writes): each took a
+# file of any name before (`replay --json x.csv` wrote JSON lines into x.csv), but the last
+# three, which refused it already (the one check: mpcasv.outputs.check_output_file)
+FILE_COMMANDS = {
+    "replay --json": (["replay", "{tmp}", "--json", "{out}"], ".csv", ".jsonl"),
+    "tune compare --out": (["tune", "compare", "{tmp}/a", "{tmp}/b", "--out", "{out}"], ".txt",
+                           ".csv"),
+    "bench --json": (["bench", "sim", "--json", "{out}"], ".txt", ".json"),
+    "sitl --ready-file": (["sitl", CASE1, "--quiet", "--out", "{tmp}/s", "--ready-file",
+                           "{out}"], ".txt", ".json"),
+    "tune compare --plot": (["tune", "compare", "{tmp}/a", "{tmp}/b", "--plot", "{out}"],
+                            ".txt", ".png or .pdf or .svg"),
+    "tune yaw --toml": (["tune", "yaw", "--quiet", "--out", "{tmp}/y", "--toml", "{out}"],
+                        ".json", ".toml"),
+    "identify --out": (["identify", "{log}", "--quiet", "--out", "{out}"], ".csv", ".toml"),
+}  # fmt: skip
+
+
+@pytest.mark.parametrize("name", sorted(FILE_COMMANDS))
+def test_a_file_output_with_another_suffix_is_refused(name, tmp_path, capsys, no_work):
+    template, suffix, wanted = FILE_COMMANDS[name]
+    out = tmp_path / f"x{suffix}"
+    argv = [str(a).format(out=out, tmp=tmp_path, log=_ident_log(tmp_path)) for a in template]
+    option = argv[argv.index(str(out)) - 1]
+    line = _refused(argv, capsys, f"{option} {out}: this command writes a {wanted} file",
+                    f"the name ends in {suffix}")  # fmt: skip
+    assert line.split(": error: ", 1)[1].startswith(option), line
+    assert not out.exists() and not (tmp_path / "s").exists()
 
 
 @pytest.mark.parametrize("out", ["m.txt", "m.toml", "m.json"])

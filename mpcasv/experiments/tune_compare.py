@@ -221,7 +221,7 @@ def register_compare(tsub) -> None:
     p.add_argument("--at", default="energy_J", help="metric to match (default energy_J)")
     p.add_argument("--tolerance", type=float, default=0.1,
                    help="largest relative mismatch of --at (default 0.1)")  # fmt: skip
-    p.add_argument("--out", type=Path, help="write the table as CSV here")
+    p.add_argument("--out", type=Path, help="write the table here (a .csv file)")
     p.add_argument("--plot", type=Path, help="draw both held-out fronts into this PNG")
     p.add_argument("--baseline", type=Path,
                    help="results.parquet of 'mpcasv compare' on the same held-out "
@@ -235,7 +235,7 @@ def _run(args) -> int:
     from mpcasv.outputs import PLOT_SUFFIXES, check_output_file
 
     if args.out is not None:
-        check_output_file(args.out, "--out")
+        check_output_file(args.out, "--out", (".csv",))
     if args.plot is not None:  # matplotlib picks the format by the suffix
         check_output_file(args.plot, "--plot", PLOT_SUFFIXES)
     if args.baseline is not None:  # checked before the work; drawn only on the figure

@@ -124,7 +124,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--preset", help="its preset")
     s.add_argument("--out", type=Path, default=Path("runs/sitl"))
     s.add_argument("--plots", action="store_true", help="also write the PNG figures")
-    s.add_argument("--ready-file", type=Path, help="write the bound ports here (JSON)")
+    s.add_argument("--ready-file", type=Path, help="write the bound ports here (a .json file)")
     s.add_argument("--quiet", action="store_true")
     s.set_defaults(func=run_sitl_cli)
 
@@ -138,7 +138,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     r.add_argument("--preset", help="preset name or TOML (default: the logged one)")
     r.add_argument("--tol", type=_nonneg, default=0.5, help="waypoint tolerance in m (0.5)")
     r.add_argument("--show", type=_count, default=20, help="differing steps to list (20)")
-    r.add_argument("--json", type=Path, help="write the comparison table here (JSON lines)")
+    r.add_argument("--json", type=Path,
+                   help="write the comparison table here (JSON lines: a .jsonl file)")
     r.set_defaults(func=run_replay_cli)
 
 
@@ -179,7 +180,7 @@ def run_sitl_cli(args: argparse.Namespace) -> int:
     ).check(sc)  # fmt: skip
     check_output_folder(args.out)
     if args.ready_file is not None:
-        check_output_file(args.ready_file, "--ready-file")
+        check_output_file(args.ready_file, "--ready-file", (".json",))
     opt.check_binds(len(sc.auv))  # before --out is written
     info = run_sitl(sc, opt)
     print(json.dumps({"finished": {k: v for k, v in info.items() if k != "metrics"}}),
@@ -192,7 +193,7 @@ def run_replay_cli(args: argparse.Namespace) -> int:
     from mpcasv.outputs import check_output_file
 
     if args.json is not None:
-        check_output_file(args.json, "--json")
+        check_output_file(args.json, "--json", (".jsonl",))  # JSON lines, not one JSON
     rep = replay(args.log, args.controller, args.preset, args.tol)
     print_replay(rep, args.show)
     if args.json:

@@ -285,6 +285,10 @@ def _check_options(args: argparse.Namespace) -> None:
         raise ConfigError(f"--cpu-s {args.cpu_s}: must be a finite number > 0 (s)")
     if args.max_iter is not None and not 1 <= args.max_iter <= MAX_ITER_LIMIT:
         raise ConfigError(f"--max-iter {args.max_iter}: must be 1..{MAX_ITER_LIMIT}")
+    if args.export is not None:  # a file there, a file-like name (--export e.txt), unwritable
+        from mpcasv.outputs import check_output_folder
+
+        check_output_folder(args.export, "--export")
 
 
 def _library_ready(s: HungSolve) -> None:
@@ -356,8 +360,6 @@ def _export_all(records: dict[int, HungSolve], args: argparse.Namespace) -> int:
     if args.max_iter is not None or args.cpu_s is not None:
         raise ConfigError("--export writes the problem without solving it: --max-iter and "
                           "--cpu-s are options of reproduce.py and of a replay")  # fmt: skip
-    if args.export.exists() and not args.export.is_dir():
-        raise ConfigError(f"--export {args.export}: exists and is not a folder")
     settings = dict(args.set)
     for i, s in records.items():
         try:
