@@ -132,6 +132,21 @@ def test_the_run_folder_keeps_the_hung_solves_and_the_command_replays_them(
     assert not (tmp_path / "run2" / hung.FILE_NAME).exists()
 
 
+def test_a_qp_replay_says_feasible_not_converged(hung_run, tmp_path, capsys):
+    """The QP variant's ``ok`` is a feasible plan, not convergence, and its work is bounded by
+    ``qp_iters`` (no iteration limit): the replay's line says so (it said "converged (status
+    max_iter)" under "max_iter 50")."""
+    f = tmp_path / hung.FILE_NAME
+    f.write_bytes(pickle.dumps(hung_run[1].hung_solves))
+    assert _exit_code(["replay-solve", f, "--set", "solver.solver='qp'",
+                       "--set", "solver.qp_iters=1"]) == 0  # fmt: skip
+    (line,) = [x for x in capsys.readouterr().out.splitlines() if x.startswith("[0]")]
+    assert ", qp, qp_iters 1: returned" in line and "max_iter 50" not in line
+    assert "feasible, not converged (status max_iter: its qp_iters steps made), 1 step," in line
+    _refused(["replay-solve", f, "--set", "solver.solver='qp'", "--max-iter", "3"], capsys,
+             "--max-iter", "qp_iters")  # fmt: skip
+
+
 def test_replay_solve_refuses_bad_input_in_one_line(hung_run, tmp_path, capsys):
     solves = hung_run[1].hung_solves
     good = tmp_path / "good.pkl"

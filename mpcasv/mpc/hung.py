@@ -172,8 +172,9 @@ class Replayed:
     """The outcome of :func:`replay`: ``hung`` (abandoned again; ``by_cpu``: after its CPU-time
     limit, else because it used no CPU for :func:`idle_limit` s), else the solver's
     ``status`` (as the solver names it: fatrop's return code, IPOPT's or the QP variant's
-    word), ``iters``, cost ``f`` and ``ok`` (converged); ``wall_s`` the wall time of the
-    solve alone (s)."""
+    word), ``iters``, cost ``f`` and ``ok`` (the solver's: an NLP solver's convergence, the QP
+    variant's feasible plan, :func:`verdict`); ``wall_s`` the wall time of the solve alone
+    (s)."""
 
     hung: bool
     by_cpu: bool
@@ -220,6 +221,24 @@ def replay(solve: HungSolve, cpu_s: float | None = None, max_iter: int | None = 
     hung = not res.ok and res.status == "deadline"
     by_cpu = hung and abandon == "cpu"
     return Replayed(hung, by_cpu, res.status, res.iters, float(res.f), bool(res.ok), wall)
+
+
+def verdict(solver: str, r: Replayed) -> str:
+    """What a returned replay ``r`` of a solve by ``solver`` (``solver.solver``) says, in its
+    variant's terms: an NLP solver's (fatrop's, IPOPT's) ``ok`` is convergence; the QP
+    variant's (:meth:`mpcasv.mpc.qp.QPSolver.solve`) is a feasible plan (its gaps closed to
+    ``FEAS_TOL``), converged only if its last step was below ``STEP_TOL`` (status
+    "converged"), else its ``qp_iters`` steps were all made (status "max_iter", "inaccurate
+    qp": the last QP solved inaccurately)."""
+    if solver != "qp":
+        return f"{'converged' if r.ok else 'not converged'} (status {r.status})"
+    if not r.ok:
+        return f"no feasible plan (status {r.status})"
+    if r.status == "converged":
+        return "feasible, converged (status converged: its last step below tolerance)"
+    why = {"max_iter": ": its qp_iters steps made",
+           "inaccurate qp": ": its qp_iters steps made, the last QP solved inaccurately"}
+    return f"feasible, not converged (status {r.status}{why.get(r.status, '')})"
 
 
 # ---------------------------------------------------------------------- command line
@@ -318,6 +337,10 @@ def run(args: argparse.Namespace) -> int:
                               f"{'s' if len(solves) > 1 else ''} (0..{len(solves) - 1})")
     if args.export is None:  # all checked first (an export checks its own settings)
         runs = {i: with_solver(solves[i], dict(args.set)) for i in picked}
+        if args.max_iter is not None and any(s.params.solver.solver == "qp"
+                                             for s in runs.values()):  # fmt: skip
+            raise ConfigError("--max-iter: the qp variant has no iteration limit; its work is "
+                              "bounded by solver.qp_iters (--set solver.qp_iters=N)")
     print(f"{args.file}: {len(solves)} hung solve{'s' if len(solves) > 1 else ''}")
     if args.export is not None:
         return _export_all({i: solves[i] for i in picked}, args)
@@ -326,11 +349,14 @@ def run(args: argparse.Namespace) -> int:
         sp = s.params.solver
         limit = s.max_iter if args.max_iter is None else args.max_iter  # None: the preset's
         cpu = s.cpu_s if args.cpu_s is None else args.cpu_s
-        how = f"{sp.solver}" + (f" ({sp.stage_derivatives} derivatives)"
-                                if sp.solver != "qp" else "")  # fmt: skip
+        if sp.solver == "qp":  # its work is bounded by qp_iters, not by an iteration limit
+            how = f"qp, qp_iters {sp.qp_iters}"
+        else:
+            how = (f"{sp.solver} ({sp.stage_derivatives} derivatives), "
+                   f"max_iter {sp.max_iter if limit is None else limit}")  # fmt: skip
         _library_ready(s)
-        print(f"[{i}] t = {s.t:g} s, {s.n_auv} AUV{'s' if s.n_auv > 1 else ''}, {how}, "
-              f"max_iter {sp.max_iter if limit is None else limit}: ", end="", flush=True)
+        print(f"[{i}] t = {s.t:g} s, {s.n_auv} AUV{'s' if s.n_auv > 1 else ''}, {how}: ",
+              end="", flush=True)
         try:
             r = replay(s, cpu, limit)
         except RuntimeError as exc:
@@ -344,8 +370,9 @@ def run(args: argparse.Namespace) -> int:
             print(f"no verdict: the worker used no CPU for {idle_limit(cpu):g} s before "
                   f"spending {cpu:g} s of CPU time (stopped or blocked)")
         else:
-            print(f"returned in {r.wall_s:.2f} s: {'converged' if r.ok else 'not converged'} "
-                  f"(status {r.status}), {r.iters} iterations, cost {r.f:.6g}")
+            unit = "step" if sp.solver == "qp" else "iteration"
+            print(f"returned in {r.wall_s:.2f} s: {verdict(sp.solver, r)}, {r.iters} {unit}"
+                  f"{'s' if r.iters != 1 else ''}, cost {r.f:.6g}")
     print(f"{again} of {len(runs)} hung again"
           + (f"; {undecided} without a verdict (raise --cpu-s)" if undecided else ""))
     return 0
