@@ -444,7 +444,7 @@ def test_simulating_a_tuned_preset_of_another_controller_says_how(searched, tmp_
     case3 = Path(__file__).resolve().parents[1] / "experiments" / "scenarios" / "case3.toml"
     code = main(["simulate", str(case3), "--controller", "mpc-single", "--params", str(preset),
                  "--duration", "5", "--out", str(tmp_path / "s"), "--no-plots", "--quiet"])
-    _refused(capsys, code, "not for 'mpc-single'", "simulate: --controller hybrid-single")
+    _refused(capsys, code, "not for 'mpc-single'", "its controller ('hybrid-single')")
 
 
 def test_tune_compare_finds_the_runs_a_repeated_trial_shares(searched, tmp_path):

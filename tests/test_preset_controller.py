@@ -9,6 +9,7 @@ key keep the validation-only check (see :mod:`mpcasv.controllers.registry`).
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import pytest
@@ -16,6 +17,9 @@ import pytest
 from mpcasv.cli import main
 from mpcasv.config import DATA_DIR, ConfigError, load_toml
 from mpcasv.controllers import CONTROLLERS, load_preset, make_controller
+from mpcasv.interface import ASVState, AUVEstimate, Observation
+from mpcasv.io.records import cmd_to_dict, obs_to_dict
+from mpcasv.io.replay import replay
 
 ROOT = Path(__file__).resolve().parents[1]
 CASE1 = ROOT / "experiments" / "scenarios" / "case1.toml"
@@ -160,3 +164,55 @@ def test_deploy_refuses_a_solver_override_of_a_hybrid_controller(tmp_path, capsy
     assert code == 2 and "Traceback" not in err and len(err.strip().splitlines()) == 1, err
     assert (f"{bad}: controller: override 'solver.threads': controller 'hybrid-single' has no "
             "parameter 'solver'") in err, err  # fmt: skip
+
+
+def test_the_refusal_names_no_command_it_may_not_have_come_from():
+    """The refusal is raised for simulate, compare, deploy, replay, sitl, falsify and tune
+    alike: it said "(simulate: --controller X)" whatever the command (a new user came
+    through another one); it now names the preset's controller only."""
+    with pytest.raises(ConfigError) as err:
+        load_preset("mpc-single", "paper1-field")
+    line = str(err.value)
+    assert "simulate" not in line and "--controller" not in line, line
+    assert "choose a preset of 'mpc-single' (its default: 'mpc-single'), or use this preset " \
+           "with its controller ('hybrid-single')" in line, line
+
+
+def test_simulate_records_the_preset_it_ran_with(tmp_path, capsys):
+    """`simulate --controller X` without --params runs X's default preset: run.json said
+    "preset": null; it names the default."""
+    out = tmp_path / "run"
+    assert main(["simulate", str(CASE1), "--controller", "goto", "--duration", "2", "--out",
+                 str(out), "--quiet", "--no-plots"]) == 0  # fmt: skip
+    assert json.loads((out / "run.json").read_text())["preset"] == "goto"
+
+
+def _deploy_log(folder: Path, name: str, preset) -> Path:
+    """A deploy log of one decision by controller ``name`` with ``preset`` (None: its
+    default, as the deploy configuration's ``controller.preset`` may be)."""
+    obs = Observation(0.0, ASVState(0.0, 0.0, 0.0), True,
+                      (AUVEstimate(200.0, 50.0, 10.0, t_last_fix=0.0),))  # fmt: skip
+    ctl = make_controller(name, 1, preset)
+    ctl.reset(1)
+    cmd = ctl.step(obs)
+    guard = {"stale_s": 5.0, "lost_s": 60.0, "v_max": 1.5, "w_max": 0.5, "r_keep": 10.0,
+             "margin_m": 5.0, "speed": 1.5}  # fmt: skip
+    started = {"kind": "event", "event": "started", "guard": guard,
+               "config": {"controller": {"name": name, "preset": preset, "overrides": {}}}}
+    step = {"kind": "step", "t": 0.0, "obs": obs_to_dict(obs), "cmd": cmd_to_dict(cmd),
+            "override": None, "status": ["ok"], "ages": [0.0]}  # fmt: skip
+    log = folder / "deploy.jsonl"
+    log.write_text("".join(json.dumps(r) + "\n" for r in (started, step)))
+    return log
+
+
+def test_replay_records_the_preset_it_replayed_with(tmp_path, capsys):
+    """`replay` of a log whose controller ran its default preset, or with another
+    --controller, said "(preset None)"; it names the preset the replay built."""
+    log = _deploy_log(tmp_path, "hybrid-single", None)
+    rep = replay(log)
+    assert (rep.controller, rep.preset, rep.n_steps, rep.n_differ) == (
+        "hybrid-single", "paper1-sim", 1, 0)  # fmt: skip
+    assert replay(log, controller="goto").preset == "goto"
+    assert main(["replay", str(log), "--controller", "goto"]) == 0
+    assert "with goto (preset goto)" in capsys.readouterr().out

@@ -11,9 +11,10 @@ from mpcasv.controllers.registry import (
     load_preset,
     make_controller,
     parameter_hash,
+    preset_used,
 )
 
 __all__ = [
     "CONTROLLERS", "Boat", "ControllerKind", "check_boat", "controller_kind", "load_preset",
-    "make_controller", "parameter_hash",
+    "make_controller", "parameter_hash", "preset_used",
 ]  # fmt: skip

@@ -17,7 +17,13 @@ from collections.abc import Iterable
 from typing import Any
 
 from mpcasv.config import resolve
-from mpcasv.controllers.registry import Boat, check_auv_count, check_boat, load_preset
+from mpcasv.controllers.registry import (
+    Boat,
+    check_auv_count,
+    check_boat,
+    load_preset,
+    preset_used,
+)
 
 
 def needed_libraries(builds: Iterable[tuple[str, int, Any, Any, Boat | None]]) -> list:
@@ -30,7 +36,7 @@ def needed_libraries(builds: Iterable[tuple[str, int, Any, Any, Boat | None]]) -
             continue
         params = load_preset(name, preset, overrides)
         if boat is not None:
-            check_boat(params, boat, str(resolve("presets", preset or kind.default_preset)))
+            check_boat(params, boat, str(resolve("presets", preset_used(name, preset))))
         for lib in kind.libraries(params, n_auv, boat):
             seen.setdefault(lib.path, lib)
     return list(seen.values())

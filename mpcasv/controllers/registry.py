@@ -135,9 +135,21 @@ def controller_kind(name: str) -> ControllerKind:
         raise ConfigError(f"controller {name!r} is not available: {exc}") from None
 
 
+def preset_used(name: str, preset: str | Path | None) -> str:
+    """The preset controller ``name`` is built with when given ``preset``: ``preset`` itself
+    (a shipped preset's name or a TOML path, as given), else (None) its kind's default preset
+    (:attr:`ControllerKind.default_preset`), by name: what a run or a replay records.
+
+    Raises
+    ------
+    ConfigError
+        Unknown controller (:func:`controller_kind`).
+    """
+    return str(preset) if preset else controller_kind(name).default_preset
+
+
 def _preset_data(name: str, preset: str | Path | None) -> tuple[Path, dict]:
-    kind = controller_kind(name)
-    path = resolve("presets", preset or kind.default_preset)
+    path = resolve("presets", preset_used(name, preset))
     data = load_toml(path, "preset")
     for key in PATH_FIELDS:  # a path inside the preset is relative to the preset's folder
         value = data.get(key)
@@ -182,8 +194,8 @@ def check_preset_controller(name: str, data: Mapping[str, Any], path: str | Path
     if declared is not None and name not in declared:
         raise ConfigError(f"{path}: a preset for {' / '.join(declared)} (its '{CONTROLLER_KEY}' "
                           f"key), not for {name!r}: choose a preset of {name!r} (its default: "
-                          f"{controller_kind(name).default_preset!r}), or run the preset's "
-                          f"controller (simulate: --controller {declared[0]})")  # fmt: skip
+                          f"{controller_kind(name).default_preset!r}), or use this preset with "
+                          f"its controller ({declared[0]!r})")  # fmt: skip
 
 
 def load_preset(
@@ -322,5 +334,5 @@ def make_controller(
     kind = check_auv_count(name, n_auv)
     params = load_preset(name, preset, overrides)
     if boat is not None:
-        check_boat(params, boat, str(resolve("presets", preset or kind.default_preset)))
+        check_boat(params, boat, str(resolve("presets", preset_used(name, preset))))
     return kind.build(params, n_auv, boat)

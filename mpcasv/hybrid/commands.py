@@ -27,7 +27,7 @@ def run(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
     from mpcasv.config import ConfigError, check_seed
-    from mpcasv.controllers import Boat, make_controller
+    from mpcasv.controllers import Boat, make_controller, preset_used
     from mpcasv.experiments.metrics import compute_metrics
     from mpcasv.hybrid.paper import metrics_of, write_table
     from mpcasv.outputs import check_output_folder
@@ -48,12 +48,13 @@ def run(args: argparse.Namespace) -> int:
         boat = Boat.of_scenario(sc)
         ctrl = make_controller(sc.controller, len(sc.auv), sc.preset, boat=boat)
         res = simulate(sc, ctrl, args.seed)
+        preset = preset_used(sc.controller, sc.preset)
         out = args.out / sc.name
         write_run(
-            res, out, compute_metrics(res), extra={"preset": sc.preset, "boat": boat.describe()}
+            res, out, compute_metrics(res), extra={"preset": preset, "boat": boat.describe()}
         )
         results[sc.name] = (metrics_of(out), pd.read_parquet(out / "timeseries.parquet"),
-                            f"{sc.controller} / {sc.preset}")  # fmt: skip
+                            f"{sc.controller} / {preset}")  # fmt: skip
     path = write_table(results, args.out / "paper_table.md")
     print(f"wrote {path} and the run folders in {args.out}/")
     return 0

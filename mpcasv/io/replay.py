@@ -17,7 +17,7 @@ from pathlib import Path
 import pandas as pd
 
 from mpcasv.config import ConfigError
-from mpcasv.controllers import make_controller
+from mpcasv.controllers import make_controller, preset_used
 from mpcasv.io.logs import read_jsonl
 from mpcasv.io.records import cmd_from_dict, obs_from_dict, same_command
 from mpcasv.io.watchdog import GuardParams, guard
@@ -31,7 +31,7 @@ class ReplayReport:
 
     log: Path
     controller: str
-    preset: str | None
+    preset: str  # the preset replayed with (given, logged, else the controller's default)
     table: pd.DataFrame  # t, logged/replayed mode, reason, auv, waypoint distance, same
 
     @property
@@ -100,7 +100,7 @@ def replay(log: str | Path, controller: str | None = None, preset: str | None = 
             "logged_override": s["override"], "replay_override": override,
             "same": same_command(cmd, logged, tol_m),
         })  # fmt: skip
-    return ReplayReport(path, name, preset, pd.DataFrame(rows))
+    return ReplayReport(path, name, preset_used(name, preset), pd.DataFrame(rows))
 
 
 def print_replay(rep: ReplayReport, show: int = 20) -> None:

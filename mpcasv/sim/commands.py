@@ -64,7 +64,7 @@ def run(args: argparse.Namespace) -> int:
                           "vessel, current and noise)")  # fmt: skip
     if args.duration is not None and not (math.isfinite(args.duration) and args.duration > 0):
         raise ConfigError(f"--duration {args.duration:g}: a duration is a number of seconds > 0")
-    from mpcasv.controllers import Boat, make_controller
+    from mpcasv.controllers import Boat, make_controller, preset_used
     from mpcasv.controllers.prepare import needed_libraries, prepare
     from mpcasv.estimation import ESTIMATORS
     from mpcasv.experiments.metrics import compute_metrics
@@ -103,7 +103,7 @@ def run(args: argparse.Namespace) -> int:
     if args.estimator and args.estimator not in ESTIMATORS:
         raise ConfigError(f"unknown estimator {args.estimator!r}; known: {sorted(ESTIMATORS)}")
     result = simulate(scenario, controller, args.seed, args.estimator, progress=not args.quiet)
-    extra = {"preset": preset, "estimator": args.estimator or scenario.estimator,
+    extra = {"preset": preset_used(name, preset), "estimator": args.estimator or scenario.estimator,
              "realisation": real.as_dict(), "boat": boat.describe()}  # fmt: skip
     metrics = write_run(result, out, compute_metrics(result), plots=not args.no_plots,
                         extra=extra)  # fmt: skip
