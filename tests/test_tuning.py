@@ -276,3 +276,31 @@ def test_tune_speed_runs_on_third_party_hulls(tmp_path, capsys, vessel):
     out = capsys.readouterr().out
     assert rc in (0, 1) and "loop margins" in out
     assert not re.search(r"\| -?\d+ / inf \|", out)  # no 'inf' sampled phase margin
+
+
+def test_the_yaw_bode_plot_names_its_loop_and_gives_the_gain_margin_in_db(model):
+    """`tune yaw`'s Bode plot read "sys[372]: Gm = 25.76 (at ...)": python-control's name of
+    an unnamed system and the gain margin as a ratio. It names the loop (a speed with a
+    ".", which a python-control system's name may not hold) and gives GM in dB, PM in deg."""
+    import matplotlib.pyplot as plt
+
+    from mpcasv.control.tuning import loop_margins
+    from mpcasv.control.tuning_report import bode_yaw_figure
+
+    d = dataclasses.make_dataclass("Design", ["u0", "gains"])(2.5, PIDGains(2.4, 0.45, 2.5))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        fig = bode_yaw_figure(model, d, 0.2)
+        want = loop_margins(yaw_loop(yaw_plant(model, 2.5), d.gains, 0.2).L)
+    try:
+        assert fig._suptitle.get_text() == "yaw loop at u0 = 2.5 m/s (broken at steering command)"
+        line = fig.axes[0].get_title()
+        assert "sys[" not in line, line
+        m = re.fullmatch(r"L \(u0 = 2\.5 m/s\): Gm = (\S+) dB \(at \S+ rad/s\), "
+                         r"Pm = (\S+) deg \(at \S+ rad/s\)", line)  # fmt: skip
+        assert m, line
+        assert float(m[1]) == pytest.approx(want["gain_margin_db"], abs=0.1), line
+        assert float(m[2]) == pytest.approx(want["phase_margin_deg"], abs=0.5), line
+        assert fig.axes[0].get_ylabel() == "Magnitude [dB]"
+    finally:
+        plt.close(fig)

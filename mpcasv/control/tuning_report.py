@@ -87,19 +87,42 @@ def _margin_notes(items) -> list[str]:
     return out
 
 
+def bode_figure(loops: dict, title: str, omega_limits: tuple[float, float]):
+    """A Bode plot (magnitude in dB, phase in deg) of the loops ``loops`` (name -> SISO
+    loop transfer function) with their classical margins marked, and one line per loop above
+    the axes: its name, gain margin (dB) and phase margin (deg), each at its frequency
+    (python-control's margins); ``title`` is the figure's title. Returns the figure (drawn
+    on a new one; the caller saves and closes it)."""
+    fig = plt.figure(figsize=(7, 6))
+    # python-control labels a trace and its margins with the response's system name (an
+    # unnamed system's is "sys[372]"); a system's own name may hold no "." ("2.5 m/s"), the
+    # response's sysname may. bode_plot computes the same response from a system.
+    responses = ct.frequency_response(list(loops.values()), omega_limits=omega_limits)
+    for name, r in zip(loops, responses, strict=True):
+        r.sysname = name
+    # dB: the gain margin in dB (python-control's default states it as a ratio)
+    ct.bode_plot(responses, omega_limits=omega_limits, display_margins=True, dB=True, deg=True,
+                 title=title)  # fmt: skip
+    ax = fig.axes[0]  # a margin without its crossover: python-control says "inf (at nan)"
+    ax.title.set_text(ax.get_title().replace("inf dB (at nan rad/s)", "inf (no phase crossover)")
+                      .replace("inf deg (at nan rad/s)", "inf (no gain crossover)"))  # fmt: skip
+    return fig
+
+
+def bode_yaw_figure(model, d, T_f: float):
+    """The Bode plot of design ``d``'s yaw loop (:func:`bode_figure`): broken at the steering
+    command, continuous time (the sampled loop's margins are in yaw.md)."""
+    return bode_figure({f"L (u0 = {d.u0:g} m/s)": yaw_loop(yaw_plant(model, d.u0), d.gains,
+                                                            T_f).L},
+                       f"yaw loop at u0 = {d.u0:g} m/s (broken at steering command)",
+                       (1e-3, 1e2))  # fmt: skip
+
+
 def plot_yaw(model, designs, runs, T_f: float, out: Path) -> list[Path]:
     """Bode plots with margins (one per speed), linear and nonlinear 45 deg steps."""
     paths = []
     for d in designs:
-        L = yaw_loop(yaw_plant(model, d.u0), d.gains, T_f).L
-        fig = plt.figure(figsize=(7, 6))
-        ct.bode_plot(
-            L,
-            omega_limits=(1e-3, 1e2),
-            display_margins=True,
-            label="L",
-            title=f"yaw loop at u0 = {d.u0:g} m/s (broken at steering command)",
-        )
+        fig = bode_yaw_figure(model, d, T_f)
         p = out / f"bode_yaw_u{d.u0:g}.png"
         fig.savefig(p, dpi=100)
         plt.close(fig)
@@ -180,14 +203,9 @@ def plot_speed(model, g, grids, field, best, out: Path) -> list[Path]:
     """Speed loop Bode (design speeds) and turn paths of the field and recommended pairs."""
     from mpcasv.control.tuning_speed import pi_tf, surge_plant
 
-    fig = plt.figure(figsize=(7, 6))
-    Ls = [ct.ss(pi_tf(g)) * surge_plant(model, u) for u in (0.5, 1.5, 2.5)]
-    ct.bode_plot(
-        Ls,
-        omega_limits=(1e-3, 1e1),
-        display_margins=True,
-        title="speed loop at 0.5, 1.5, 2.5 m/s (thrust lag incl.)",
-    )
+    loops = {f"L (u = {u:g} m/s)": ct.ss(pi_tf(g)) * surge_plant(model, u)
+             for u in (0.5, 1.5, 2.5)}  # fmt: skip
+    fig = bode_figure(loops, "speed loop at 0.5, 1.5, 2.5 m/s (thrust lag incl.)", (1e-3, 1e1))
     paths = [out / "bode_speed.png"]
     fig.savefig(paths[0], dpi=100)
     plt.close(fig)
