@@ -206,3 +206,21 @@ def test_a_preset_of_another_controller_is_named_as_such(tmp_path, capsys):
     bad.write_text("speed = -3\n")
     assert main(["simulate", scenario, "--params", str(bad), "--out", out, "--quiet"]) == 2
     assert "greater than 0" in capsys.readouterr().err
+
+
+def test_every_run_figure_is_titled_with_its_scenario_controller_and_seed():
+    """fix_age.png was titled "Fix ages per AUV (...)" alone: a suite's many run folders'
+    figures could not be told apart; it is titled like paths.png and range.png now."""
+    import matplotlib.pyplot as plt
+
+    from mpcasv.sim.plots import fix_age_figure, run_title
+
+    res = simulate(scenario_from_dict(BASE | {"name": "titled", "duration": 20.0}),
+                   make_controller("goto", 1, None), seed=7)  # fmt: skip
+    assert run_title(res, "x") == "titled: x (goto, seed 7)"
+    fig = fix_age_figure(res)
+    try:
+        assert fig.axes[0].get_title() == ("titled: fix ages per AUV (goto, seed 7); ticks: "
+                                           "reliable fixes (Paper 2 eq. 9)")  # fmt: skip
+    finally:
+        plt.close(fig)

@@ -18,6 +18,12 @@ def _n_auv(ts) -> int:
     return sum(1 for c in ts.columns if c.startswith("auv") and c.endswith("_N"))
 
 
+def run_title(result, what: str) -> str:
+    """The title of figure ``what`` (e.g. ``"paths"``) of one run: its scenario, controller
+    and seed, which tell apart the figures of a suite's many run folders."""
+    return f"{result.scenario.name}: {what} ({result.controller}, seed {result.seed})"
+
+
 def plot_paths(result, path: str | Path) -> Path:
     """North-East paths of the ASV (standby positions marked) and the AUVs, plus any MPC
     plans recorded during the run (dashed)."""
@@ -41,7 +47,7 @@ def plot_paths(result, path: str | Path) -> Path:
     ax.set_aspect("equal", adjustable="datalim")
     ax.grid(alpha=0.3)
     ax.legend(loc="best", fontsize=8)
-    ax.set_title(f"{result.scenario.name}: paths ({result.controller}, seed {result.seed})")
+    ax.set_title(run_title(result, "paths"))
     return _save(fig, path)
 
 
@@ -79,14 +85,20 @@ def plot_ranges(result, path: str | Path) -> Path:
     handles, labels = axes[0, 0].get_legend_handles_labels()
     fig.legend(handles, labels, loc="lower center", ncol=4, fontsize=8, frameon=False)
     axes[-1, 0].set_xlabel("time (s)")
-    fig.suptitle(f"{result.scenario.name}: ASV-AUV range ({result.controller}, seed {result.seed})")
+    fig.suptitle(run_title(result, "ASV-AUV range"))
     fig.tight_layout(rect=(0, 0.06 if n > 1 else 0.1, 1, 1))
     return _save(fig, path, tight=False)
 
 
 def plot_fix_age(result, path: str | Path) -> Path:
+    """:func:`fix_age_figure` saved to ``path``."""
+    return _save(fix_age_figure(result), path)
+
+
+def fix_age_figure(result):
     """Per AUV: Paper 2's reliable-fix age tau_k (eq. 9, solid; reliable fixes ticked) and
-    the age of the last fix that arrived at all (thin), from the simulator's ground truth."""
+    the age of the last fix that arrived at all (thin), from the simulator's ground truth.
+    Returns the figure (the caller saves and closes it)."""
     ts = result.timeseries
     fig, ax = plt.subplots(figsize=(11, 3.4))
     for k in range(_n_auv(ts)):
@@ -103,8 +115,8 @@ def plot_fix_age(result, path: str | Path) -> Path:
     ax.set_ylabel("age (s)")
     ax.grid(alpha=0.3)
     ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0))
-    ax.set_title("Fix ages per AUV (ticks: reliable fixes, Paper 2 eq. 9)")
-    return _save(fig, path)
+    ax.set_title(run_title(result, "fix ages per AUV") + "; ticks: reliable fixes (Paper 2 eq. 9)")
+    return fig
 
 
 def _save(fig, path, tight: bool = True) -> Path:
