@@ -131,7 +131,7 @@ def test_no_more_is_not_met_by_the_runs_where_neither_spent_anything():
 def test_every_pair_both_zero_is_a_change_of_zero_not_no_pairs(target, better_side):
     """Neither controller spent any time in the collision domain in any run: the change is 0
     in every pair. "No more" (0) is met; "at least 30 % less" is not. Before, every pair was
-    left out and the target was "n/a: no pairs", counted as not met (a new user's
+    left out and the target was "no pairs", counted as not met (a new user's
     walk-through, session 23)."""
     df = _results(range(10))
     df["collision_domain_s"] = 0.0
@@ -144,6 +144,15 @@ def test_every_pair_both_zero_is_a_change_of_zero_not_no_pairs(target, better_si
     (_, _, [(_, _, says)]) = report_parts(df, Acceptance({"collision_domain_s": target}),
                                          ["hybrid", "mpc"], [])  # fmt: skip
     assert says.startswith("**All 1 targets met" if better_side else "**0 of 1 targets met")
+
+
+def test_a_target_without_pairs_is_not_applicable_and_has_no_sums():
+    """Every case without a USBL fix: the fix ages compare nothing. The verdict says n/a (it
+    said only "no pairs") and the change of the sums is n/a, not +0.0 % of two empty sums."""
+    t = acceptance_table(_results(), Acceptance({"reliable_fix_age_p95_s": -0.3}), "hybrid",
+                         "mpc", ["c0", "c1", "c2"])  # fmt: skip
+    assert t["pairs"].tolist() == [0] and t["verdict"].tolist() == ["n/a: no pairs"]
+    assert math.isnan(t["sums"].iloc[0])
 
 
 def test_a_target_with_unpaired_runs_is_said_and_not_counted_as_met(tmp_path):

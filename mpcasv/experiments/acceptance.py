@@ -19,7 +19,11 @@ AUVs navigate without fixes whatever the controller). Pairs where both are 0 are
 (they say nothing about more or less) and counted, as are runs without a partner; unless
 every pair is 0 against 0: then the change is 0 in each pair, and a target of "no more" (0)
 is met (before, no pair was left to judge and the target, e.g. no time in a collision domain
-for either controller, counted as not met). The
+for either controller, counted as not met). The rule has a step: 29 pairs at 0 against 0 and
+one where the variant did better leave one pair that says something, too few for an
+interval (``n/a: 1 pairs < 5``, not counted as met), while 30 pairs at 0 meet "no more".
+Judging on all 30 with the zeros as 0 would remove the step but also meet "no more" with one
+pair worse (a median of 0); too few pairs that say anything is reported as such instead. The
 median and 95 % bootstrap CI come from :func:`mpcasv.experiments.stats.paired_stat`.
 Verdict: **met** when the whole CI is at or on the better side of the target, **not met**
 when it is all on the worse side, else **undecided**; a target with unpaired runs is not
@@ -101,7 +105,8 @@ def verdict(better: str, target: float, s: paired.PairedStat) -> str:
     the whole CI is at or on the better side of the target, not met when the whole CI is on
     the worse side, else undecided."""
     if math.isnan(s.ci_low) or math.isnan(s.ci_high):  # too few pairs, or none
-        return s.note or "n/a: no interval"
+        note = s.note or "no interval"
+        return note if note.startswith("n/a") else f"n/a: {note}"
     lo, hi = (s.ci_low, s.ci_high) if better == "lower" else (-s.ci_high, -s.ci_low)
     c = target if better == "lower" else -target
     if hi <= c:
@@ -146,7 +151,8 @@ def acceptance_table(results: pd.DataFrame, acc: Acceptance, reference: str, oth
                            "cases": ", ".join(dict.fromkeys(p[paired.CASE])),
                            "median": s.median, "ci_low": s.ci_low, "ci_high": s.ci_high,
                            "sums": float(relative_changes(np.array([ref.sum()]),
-                                                          np.array([oth.sum()]))[0]),
+                                                          np.array([oth.sum()]))[0])
+                           if len(p) else math.nan,  # no pair: no sums to compare
                            "verdict": v})  # fmt: skip
     return pd.DataFrame(rows)
 
