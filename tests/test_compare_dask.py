@@ -153,8 +153,22 @@ def test_mpc_jobs_on_daemon_workers_are_refused_before_any_is_submitted(cluster,
     out = tmp_path / "out"
     with pytest.raises(ConfigError, match="DASK_DISTRIBUTED__WORKER__DAEMON=False") as info:
         run_suite(path, out, dask=c.scheduler_address, quiet=True, report=False)
-    assert "\n" not in str(info.value) and "mpc-single" in str(info.value)
-    assert not list((out / "parts").glob("*.parquet"))
+    said = str(info.value)
+    assert "\n" not in said and "mpc-single" in said
+    assert "1 of the cluster's 1 workers are daemon processes" in said
+    assert not out.exists()  # refused before anything was written
+
+
+def test_an_mpc_without_its_hang_guard_runs_on_daemon_workers(cluster, tmp_path):
+    """``solver.hang_s = 0``: the solves stay in the worker's process, which a daemon may
+    run; such a suite is not refused."""
+    c, _ = cluster
+    path = tmp_path / "mpc.toml"
+    path.write_text(MPC_SUITE.replace('"solver.compiled" = false',
+                                      '"solver.compiled" = false, "solver.hang_s" = 0'))
+    stats, _, df = run_suite(path, tmp_path / "out", dask=c.scheduler_address, quiet=True,
+                             report=False, runs_dir=str(tmp_path / "runs"))  # fmt: skip
+    assert stats.ok == 1 and (df["status"] == "ok").all(), df.get("error")
 
 
 def test_mpc_jobs_run_on_workers_started_as_the_refusal_says(tmp_path):

@@ -115,6 +115,25 @@ def test_options_dask_would_ignore_are_refused_with_it(command, extra, tmp_path,
     assert not out.exists()
 
 
+def test_no_job_limit_with_dask_is_what_dask_has(tmp_path, capsys, monkeypatch):
+    """``--job-timeout 0`` (no limit) with ``--dask`` is not refused: the command goes on to
+    the scheduler, which is asked before anything is written (here a stand-in refuses at
+    once; a real connection to a closed port takes Dask's 20 s timeout)."""
+    from mpcasv.config import ConfigError
+    from mpcasv.experiments import dask_runner
+
+    def no_scheduler(address):
+        raise ConfigError(f"--dask {address}: no scheduler (test stand-in)")
+
+    monkeypatch.setattr(dask_runner, "connect", no_scheduler)
+    out = tmp_path / "out"
+    dask = "tcp://127.0.0.1:9"
+    assert main(["compare", str(_suite(tmp_path)), "--out", str(out), "--dask", dask,
+                 "--job-timeout", "0"]) == 2  # fmt: skip
+    _one_error_line(capsys, f"--dask {dask}: no scheduler (test stand-in)")
+    assert not out.exists()
+
+
 def test_a_pool_starts_no_more_processes_than_jobs_and_says_so(two_cpus, tmp_path, capsys):
     out = tmp_path / "out"
     assert main(["compare", str(_suite(tmp_path)), "--workers", "3", "--out", str(out),

@@ -32,7 +32,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--dask", metavar="ADDRESS",
                    help="run on an existing Dask scheduler (e.g. tcp://host:8786); the workers "
                    "need no file system shared with this machine: each job's row comes back "
-                   "here and DIR is written here")  # fmt: skip
+                   "here and DIR is written here; MPC jobs need workers that are not daemons "
+                   "(DASK_DISTRIBUTED__WORKER__DAEMON=False dask worker ...)")  # fmt: skip
     p.add_argument("--runs-dir", metavar="PATH|URL",
                    help="where the run folders go: a path the workers can write or an fsspec "
                    "URL (e.g. s3://bucket/runs); default DIR/runs, and with --dask "
@@ -44,7 +45,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--job-timeout", type=float, metavar="S", default=None,
                    help="end a job running longer than S seconds and record it as 'timeout' "
-                   "(local worker pools; default 1200; 0: no limit; not with --dask: a "
+                   "(local worker pools; default 1200; 0: no limit; only 0 with --dask: a "
                    "Dask task cannot be ended from outside)")  # fmt: skip
     p.add_argument("--no-report", action="store_true", help="skip report.md / report.html")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -61,7 +62,7 @@ def run(args: argparse.Namespace) -> int:
 
     # at most 4 per CPU locally (1000 hung the machine); not with --dask (was ignored)
     args.workers = check_workers(args.workers, args.dask)
-    if args.dask and args.job_timeout is not None:  # was silently ignored
+    if args.dask and args.job_timeout:  # was silently ignored (0, no limit, is what Dask has)
         raise ConfigError(f"--job-timeout {args.job_timeout:g} with --dask {args.dask}: a Dask "
                           "task cannot be ended from outside, so a cluster has no per-job time "
                           "limit (an MPC's hang guard still abandons a hung solve): leave it "

@@ -14,7 +14,7 @@ from mpcasv.config import ConfigError
 from mpcasv.experiments.runner import SweepStats, finish_job, record_row, run_job
 from mpcasv.experiments.suite import Job
 
-__all__ = ["check_dask_workers", "run_dask"]
+__all__ = ["check_dask_cluster", "check_dask_workers", "connect", "hang_guarded", "run_dask"]
 
 
 def _is_daemon() -> bool:  # runs in each Dask worker
@@ -23,30 +23,83 @@ def _is_daemon() -> bool:  # runs in each Dask worker
     return multiprocessing.current_process().daemon
 
 
+def hang_guarded(jobs: list[Job]) -> list[str]:
+    """The controllers (sorted names) of ``jobs`` whose solves run in a solver process of
+    their own in simulation: an MPC with its hang guard
+    (:attr:`mpcasv.mpc.solver_params.SolverParams.hang_guard`, ``solver.hang_s > 0``)."""
+    from mpcasv.controllers import load_preset
+
+    names, seen = set(), set()
+    for j in jobs:
+        key = (j.controller, j.preset, j.overrides)
+        if key in seen or j.controller in names:
+            continue
+        seen.add(key)
+        solver = getattr(load_preset(j.controller, j.preset, dict(j.overrides)), "solver", None)
+        if getattr(solver, "hang_guard", False):
+            names.add(j.controller)
+    return sorted(names)
+
+
 def check_dask_workers(client, jobs: list[Job], address: str) -> None:
-    """Refuse, before any job is submitted, a cluster whose workers cannot run the jobs: MPC
-    jobs (the kinds with compiled libraries) on workers that are daemon processes (``dask
-    worker``'s default, under its nanny), which may not start the MPC's solver process (every
-    such job failed with multiprocessing's "daemonic processes are not allowed to have
-    children"). Workers that join later are not seen here: their MPC jobs fail with the same
-    explanation (:data:`mpcasv.mpc.deadline.DAEMON_REFUSED`).
+    """Refuse a cluster whose workers cannot run ``jobs``: an MPC with its hang guard
+    (:func:`hang_guarded`) on workers that are daemon processes (``dask worker``'s default,
+    under its nanny), which may not start the MPC's solver process; every such job failed with
+    multiprocessing's "daemonic processes are not allowed to have children". Only the workers
+    connected now are asked: one that joins later fails its MPC jobs with the explanation
+    (:data:`mpcasv.mpc.deadline.DAEMON_REFUSED`).
 
     Raises
     ------
     ConfigError
-        One line naming the address, how many workers are daemons and how to start them
-        instead.
+        One line naming the address, how many workers are daemons, the controllers and how
+        to start the workers instead.
     """
-    from mpcasv.controllers import controller_kind
-    from mpcasv.mpc.deadline import DAEMON_REFUSED
+    from mpcasv.mpc.deadline import DAEMON_FIX
 
-    mpc = sorted({j.controller for j in jobs if controller_kind(j.controller).libraries})
-    if not mpc:
+    guarded = hang_guarded(jobs)
+    if not guarded:
         return
-    daemons = [w for w, daemon in client.run(_is_daemon).items() if daemon]
+    answers = client.run(_is_daemon)
+    daemons = [w for w, daemon in answers.items() if daemon]
     if daemons:
-        raise ConfigError(f"--dask {address}: {len(daemons)} of the cluster's workers cannot "
-                          f"run the {', '.join(mpc)} jobs: {DAEMON_REFUSED}")  # fmt: skip
+        raise ConfigError(f"--dask {address}: {len(daemons)} of the cluster's {len(answers)} "
+                          "workers are daemon processes (dask worker's default, under its "
+                          "nanny), which may not start the MPC's solver process (its hang "
+                          f"guard) that the {', '.join(guarded)} jobs need: "
+                          f"{DAEMON_FIX}")  # fmt: skip
+
+
+def connect(address: str):
+    """A ``dask.distributed.Client`` of the scheduler at ``address``.
+
+    Raises
+    ------
+    ConfigError
+        No scheduler answers within 20 s (one line naming the address).
+    """
+    from dask.distributed import Client
+
+    try:
+        return Client(address, timeout="20s")
+    except (OSError, TimeoutError, ValueError) as exc:
+        raise ConfigError(f"--dask {address}: cannot connect to a Dask scheduler: {exc}") from None
+
+
+def check_dask_cluster(address: str, jobs: list[Job]) -> None:
+    """Before a sweep writes anything: the scheduler at ``address`` answers and its workers
+    can run ``jobs`` (:func:`check_dask_workers`).
+
+    Raises
+    ------
+    ConfigError
+        As :func:`connect` and :func:`check_dask_workers`.
+    """
+    client = connect(address)
+    try:
+        check_dask_workers(client, jobs, address)
+    finally:
+        client.close()
 
 
 def run_dask(jobs: list[Job], out: Path, runs: str, stats: SweepStats, address: str,
@@ -62,13 +115,9 @@ def run_dask(jobs: list[Job], out: Path, runs: str, stats: SweepStats, address: 
         No scheduler answers at ``address``; or its workers cannot run the jobs
         (:func:`check_dask_workers`).
     """
-    from dask.distributed import Client
     from dask.distributed import as_completed as dask_completed
 
-    try:
-        client = Client(address, timeout="20s")
-    except (OSError, TimeoutError, ValueError) as exc:
-        raise ConfigError(f"--dask {address}: cannot connect to a Dask scheduler: {exc}") from None
+    client = connect(address)
     try:
         stats.workers = len(client.nthreads())
         check_dask_workers(client, jobs, address)

@@ -344,9 +344,13 @@ def run_suite(suite: str | Path, out: str | Path, workers: int = 1, dask: str | 
     runs = runs_location(out, exp.suite.name, runs_dir, dask)
     if runs_dir:
         check_runs_location(runs, dask)  # before anything is written
+    todo = pending_jobs(exp, out, retry_errors)
+    if dask:  # the scheduler answers and its workers can run the jobs: before any file
+        from mpcasv.experiments.dask_runner import check_dask_cluster
+
+        check_dask_cluster(dask, todo)
     out.mkdir(parents=True, exist_ok=True)
     (out / "suite.toml").write_bytes(exp.path.read_bytes())
-    todo = pending_jobs(exp, out, retry_errors)
     stats = SweepStats(exp.suite.name, len(exp.jobs), len(exp.jobs) - len(todo), workers=workers)
     stats.runs = runs if (runs_dir or not dask) else f"{runs} in each Dask worker's directory"
     if not quiet:

@@ -52,7 +52,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         help=f"local worker processes (default: one per core, {cpu_count()}; 1: this process; "
         "at most 4 per core; never more than the runs of a batch; not with --dask)",
     )
-    p.add_argument("--dask", metavar="ADDRESS", help="run on a Dask scheduler instead")
+    p.add_argument("--dask", metavar="ADDRESS",
+                   help="run on a Dask scheduler instead (MPC runs need workers that are not "
+                   "daemons: DASK_DISTRIBUTED__WORKER__DAEMON=False dask worker ...)")  # fmt: skip
     p.add_argument("--no-heldout", action="store_true", help="skip the held-out runs")
     p.add_argument("--quiet", action="store_true", help="no progress output")
     p.set_defaults(func=run_tune_controller)

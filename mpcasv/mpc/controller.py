@@ -182,7 +182,7 @@ class MPCController(WorldView, Safety, PlanOutput, Targeting, SpeedCap, Carry):
         :func:`~mpcasv.mpc.hung.idle_limit` s: a worker stopped or blocked) is abandoned
         (:class:`~mpcasv.mpc.solver_params.SolverParams`; ``hang_s = 0``: solves stay in this
         process, unguarded)."""
-        if self.params.solver.hang_s <= 0:
+        if not self.params.solver.hang_guard:
             self.close()
             return
         self.use_deadline(spare=False)  # no spare: a hang is rare, and wall time decides nothing

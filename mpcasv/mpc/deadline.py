@@ -53,12 +53,16 @@ _READY = "ready"
 SPARE_DELAY_S = 0.1
 #: how often a solve judged by its worker's CPU time (``cpu_timeout``) reads that time (s)
 CPU_POLL_S = 0.2
-#: why a daemon process (a Dask worker under its nanny) cannot run an MPC: it may not start
-#: the solver's worker process
+#: how to start Dask workers that may run an MPC (not daemons), or do without its hang guard
+DAEMON_FIX = (
+    "start the workers with DASK_DISTRIBUTED__WORKER__DAEMON=False (or 'dask worker "
+    "--no-nanny', one worker per command), or set solver.hang_s = 0 (no hang guard)"
+)
+#: why a daemon process (a Dask worker under its nanny) cannot run an MPC with its hang
+#: guard: it may not start the solver's worker process
 DAEMON_REFUSED = (
     "this process is a daemon, which may not start the MPC's solver process (the hang "
-    "guard); a Dask worker under its nanny is one: start the workers with "
-    "DASK_DISTRIBUTED__WORKER__DAEMON=False (or 'dask worker --no-nanny')"
+    f"guard, solver.hang_s > 0); a Dask worker under its nanny is one: {DAEMON_FIX}"
 )
 
 

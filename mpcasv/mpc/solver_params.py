@@ -140,6 +140,13 @@ class SolverParams:
     funnel_speed: Pos = 1.25
     stage_derivatives: Literal["composed", "inline"] = "composed"
 
+    @property
+    def hang_guard(self) -> bool:
+        """Whether simulation's solves run in a worker process of their own (``hang_s > 0``):
+        a process that may not start one, a daemon such as a Dask worker under its nanny,
+        cannot run this MPC (:data:`mpcasv.mpc.deadline.DAEMON_REFUSED`)."""
+        return self.hang_s > 0
+
     def __post_init__(self) -> None:
         if self.step_iter == 0:  # TOML has no null: 0 is how a preset or override says "off"
             object.__setattr__(self, "step_iter", None)
