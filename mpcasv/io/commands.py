@@ -85,7 +85,12 @@ def register(sub: argparse._SubParsersAction) -> None:
         "FollowRefState). SIGUSR1 kills the ASV's IMC system, SIGUSR2 restarts it.",
     )  # fmt: skip
     s.add_argument("scenario", type=Path, help="scenario TOML")
-    s.add_argument("--seed", type=int, default=0, help="world seed, in [0, 2**32 - 1] (0)")
+    s.add_argument("--seed", type=int, default=0,
+                   help="world seed, in [0, 2**32 - 1] (0): the world's acoustic draws and the "
+                   "realisation of the scenario's [uncertain] table, as in mpcasv "
+                   "simulate")  # fmt: skip
+    s.add_argument("--nominal", action="store_true",
+                   help="simulate the scenario's nominal values (no draw from [uncertain])")
     s.add_argument("--speedup", type=_positive, default=1.0,
                    help="clock factor in [0.01, 1000] (deploy's clock.speedup must "
                    "match)")  # fmt: skip
@@ -170,7 +175,7 @@ def run_sitl_cli(args: argparse.Namespace) -> int:
         raise ConfigError(f"--reaction must be in [0, 1) periods, got {args.reaction}")
     sc = load_scenario(args.scenario)
     opt = SitlOptions(
-        seed=args.seed, speedup=args.speedup, bind=args.bind,
+        seed=args.seed, nominal=args.nominal, speedup=args.speedup, bind=args.bind,
         discovery_port=args.discovery_port, base_port=args.base_port, origin=args.origin,
         duration=args.duration, hold=args.hold, reaction=args.reaction, lockstep=args.lockstep,
         reanchor_m=args.reanchor, asv_name=args.asv_name, asv_id=args.asv_id,

@@ -90,9 +90,12 @@ class Sitl(AsvDune):
 
     def __init__(self, scenario: Scenario, opt: SitlOptions) -> None:
         from mpcasv.controllers import make_controller
+        from mpcasv.sim.uncertainty import run_scenario
         from mpcasv.sim.world import World
 
         opt.check(scenario)  # commands.py checked it already
+        # the world mpcasv simulate runs for the same seed and duration (realised)
+        scenario, self.realisation = run_scenario(scenario, opt.seed, opt.nominal, opt.duration)
         self.sc, self.opt = scenario, opt
         self.clock = Clock(opt.speedup)
         self.origin = Origin.from_degrees(*opt.origin)
@@ -356,7 +359,9 @@ class Sitl(AsvDune):
                             np.zeros(len(self.rows)), w.fix_times, w.reliable_times, 0, None, [],
                             w.energy_J, w.min_range, w.min_slant, wall_s, self.domain)  # fmt: skip
             info["metrics"] = write_run(res, self.opt.out / "run", compute_metrics(res),
-                                        plots=self.opt.plots, extra={"sitl": info})  # fmt: skip
+                                        plots=self.opt.plots, extra={
+                                            "sitl": info,
+                                            "realisation": self.realisation.as_dict()})  # fmt: skip
         return info
 
 

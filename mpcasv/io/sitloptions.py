@@ -48,7 +48,8 @@ def check_speedup(speedup: float, what: str = "--speedup") -> float:
 class SitlOptions:
     """Everything ``mpcasv sitl`` takes besides the scenario (see its ``--help``)."""
 
-    seed: int = 0
+    seed: int = 0  # the world's draws and the scenario's realisation, as in mpcasv simulate
+    nominal: bool = False  # simulate the scenario's nominal values (no draw from [uncertain])
     speedup: float = 1.0
     bind: str = "127.0.0.1"
     discovery_port: int = 30100

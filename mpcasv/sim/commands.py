@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import math
 from pathlib import Path
 
@@ -72,7 +71,7 @@ def run(args: argparse.Namespace) -> int:
     from mpcasv.sim.record import check_run_dir, write_run
     from mpcasv.sim.scenario import load_scenario
     from mpcasv.sim.simulator import simulate
-    from mpcasv.sim.uncertainty import nominal, realise
+    from mpcasv.sim.uncertainty import run_scenario
 
     scenario = load_scenario(args.scenario)
     if args.duration is not None:  # the first DURATION s: part of the realised scenario
@@ -80,9 +79,8 @@ def run(args: argparse.Namespace) -> int:
             raise ConfigError(f"--duration {args.duration:g}: between one control period "
                               f"({scenario.sim.control_period:g} s) and the scenario's "
                               f"{scenario.duration:g} s")  # fmt: skip
-        scenario = dataclasses.replace(scenario, duration=args.duration)
     check_seed(args.seed)
-    scenario, real = nominal(scenario) if args.nominal else realise(scenario, args.seed)
+    scenario, real = run_scenario(scenario, args.seed, args.nominal, args.duration)
     name = args.controller or scenario.controller
     preset = args.params or (scenario.preset if name == scenario.controller else None)
     boat = Boat.of_scenario(scenario)  # one vessel per run: the simulator's and the MPC's

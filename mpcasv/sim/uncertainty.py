@@ -303,6 +303,18 @@ def nominal(sc):
     return done, Realisation(sc.name, None, {}, world_digest(done))
 
 
+def run_scenario(sc, seed: int, nominal_values: bool = False, duration: float | None = None):
+    """``(scenario, Realisation)`` that a run of ``sc`` with ``seed`` simulates: its first
+    ``duration`` s (None: the whole), realised for ``seed`` (:func:`realise`), or its nominal
+    values (:func:`nominal`). The one definition for ``mpcasv simulate`` and ``mpcasv sitl``,
+    so that a rehearsal and a simulation of the same scenario, seed and duration run the same
+    world (the SITL ran the nominal values before session 24). ``duration`` is put in before
+    the draw, as it is part of the realised scenario (its id)."""
+    if duration is not None:
+        sc = dataclasses.replace(sc, duration=float(duration))
+    return nominal(sc) if nominal_values else realise(sc, seed)
+
+
 def without_current(sc):
     """``sc`` with its current no longer uncertain nor varying (a suite that fixes the current
     to its ``current``): the ``[uncertain.current]`` table and the ``[current_field]``'s knots
@@ -406,5 +418,5 @@ def _apply_auv(a: dict, v: dict[str, float]) -> None:
 
 
 __all__ = ["Uncertain", "Realisation", "Uniform", "Normal", "Choice", "draw", "realise",
-           "apply", "nominal", "without_current", "distributions", "stream",
+           "apply", "nominal", "run_scenario", "without_current", "distributions", "stream",
            "check_uncertain"]  # fmt: skip
