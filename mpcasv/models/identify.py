@@ -108,15 +108,23 @@ def identification_table(df: pd.DataFrame, path) -> pd.DataFrame:
     for c in REQUIRED[1:]:
         src = psi if c == "psi" else df[c].to_numpy(float)
         kind = "previous" if c in ("T_cmd", "delta_cmd") else "linear"
-        out[c] = _resample(t, src, grid, kind)
+        out[c] = _resample(t, src, grid, kind, tol=RESAMPLE_TOL * dt)
     out.attrs["source"] = str(path)  # named in identify()'s refusals
     return out
 
 
-def _resample(t, y, grid, kind):
+#: a set-point logged within this fraction of a step after a grid instant holds from that
+#: instant (the grid is ``t0 + k dt`` with ``dt`` the median of differences of times that were
+#: rounded when written: without the tolerance, ``k dt`` fell a few 1e-16 s short of the
+#: logged ``t_k`` and the hold took the previous row, delaying every steering switch of a
+#: simulator log by one step)
+RESAMPLE_TOL = 1e-3
+
+
+def _resample(t, y, grid, kind, tol=0.0):
     if kind == "linear":
         return np.interp(grid, t, y)
-    idx = np.clip(np.searchsorted(t, grid, side="right") - 1, 0, len(t) - 1)
+    idx = np.clip(np.searchsorted(t, grid + tol, side="right") - 1, 0, len(t) - 1)
     return y[idx]  # zero-order hold of set-points
 
 
