@@ -25,6 +25,7 @@ from mpcasv.models.identify import (
     identify,
     mass_terms,
     prepare,
+    sigma_inflation,
 )  # fmt: skip
 from mpcasv.models.params import load_vessel
 from mpcasv.models.vessel import VesselModel
@@ -110,6 +111,18 @@ def test_noise_free_log_replays_exactly_and_identifies_the_truth(tmp_path, prior
     for c in IDENTIFIED:
         assert getattr(res.params, c) == pytest.approx(getattr(prior, c), rel=0.01), c
     assert res.current == pytest.approx((0.0, 0.0), abs=1e-3)
+
+
+def test_sigma_inflation_for_correlated_residuals():
+    """White residuals keep the plain 1-sigma; smooth ones (a model that misses the data)
+    widen it: W correlated samples carry about one sample's information."""
+    rng = np.random.default_rng(0)
+    W, nwin = 300, 3
+    white = rng.normal(size=(nwin * W, 4)).ravel()
+    assert sigma_inflation(white, W, nwin) == pytest.approx(1.0, abs=0.2)
+    t = np.arange(nwin * W) * 0.1
+    smooth = np.column_stack([np.sin(0.2 * t + k) for k in range(4)]).ravel()
+    assert sigma_inflation(smooth, W, nwin) > 100
 
 
 def test_manoeuvre_cli_writes_seeded_logs(tmp_path, prior):

@@ -95,6 +95,13 @@ def plot_replay(res: Identification, out: Path) -> Path:
     return p
 
 
+#: a coefficient whose 1-sigma is above this (relative) is named as poorly determined
+LOOSE = 0.25
+#: residual variance factor (:func:`mpcasv.models.identify.sigma_inflation`) above which the
+#: report says the model does not explain the logs to their noise level
+INFLATION_WARN = 4.0
+
+
 def report_table(res: Identification, prior: VesselParams, truth: VesselParams | None = None):
     """Markdown: coefficients (prior, identified, 1-sigma, truth error if known), fits."""
     lines = ["| coefficient | prior | identified | 1-sigma % |" + (" true | error % |" if truth
@@ -109,6 +116,15 @@ def report_table(res: Identification, prior: VesselParams, truth: VesselParams |
         if truth:
             line += f" {pt:.4g} | {100 * (pi / pt - 1):+.1f} |"
         lines.append(line)
+    loose = [c for c in res.coeffs if res.rel_std[c] > LOOSE]
+    if loose:
+        lines += ["", f"Poorly determined by these logs (1-sigma above {100 * LOOSE:.0f} %): "
+                  f"{', '.join(loose)}; hold them at the prior (--coeffs without them) or add a "
+                  "log that excites them (speed-steps for the surge terms)."]  # fmt: skip
+    if res.inflation > INFLATION_WARN:
+        lines += ["", f"The replay residuals are serially correlated (variance factor "
+                  f"{res.inflation:.0f}, 1 for white noise; the 1-sigma includes it): the model "
+                  "does not explain these logs to their noise level."]  # fmt: skip
     lines += ["", f"Current: V_N = {res.current[0]:.3f} m/s, V_E = {res.current[1]:.3f} m/s", "",
               "| stage | split | " + " | ".join(f"{c} fit % (RMSE)" for c in OUTPUTS) + " |",
               "|---|---|" + "---|" * len(OUTPUTS)]  # fmt: skip
