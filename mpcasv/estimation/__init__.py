@@ -8,7 +8,15 @@ from mpcasv.estimation.base import (
     make_estimator,
 )
 from mpcasv.estimation.kalman import KalmanEstimator, KalmanParams
-from mpcasv.estimation.plan import KnownPlan, PlanEstimator, PlanParams, known_plan
+from mpcasv.estimation.plan import (
+    KnownPlan,
+    PlanEstimator,
+    PlanParams,
+    check_plan_estimator,
+    has_plan,
+    known_plan,
+    scenario_plans,
+)
 
 __all__ = [
     "ESTIMATORS",
@@ -20,6 +28,9 @@ __all__ = [
     "PlanParams",
     "PerfectEstimator",
     "StationaryEstimator",
+    "check_plan_estimator",
+    "has_plan",
     "known_plan",
     "make_estimator",
+    "scenario_plans",
 ]

@@ -44,7 +44,8 @@ from mpcasv.estimation.kalman import KalmanEstimator, KalmanParams, report_veloc
 from mpcasv.interface import AUVEstimate
 from mpcasv.models.acoustics import Fix, Report
 
-__all__ = ["KnownPlan", "PlanEstimator", "PlanParams", "Polyline", "known_plan"]
+__all__ = ["KnownPlan", "PlanEstimator", "PlanParams", "Polyline", "check_plan_estimator",
+           "has_plan", "known_plan", "scenario_plans"]
 
 
 @functools.lru_cache(maxsize=32)
@@ -104,6 +105,45 @@ def known_plan(behaviour) -> KnownPlan | None:
         copy.deepcopy(behaviour.waypoints), float(behaviour.speed), float(behaviour.acceptance),
         tuple(tuple(map(float, iv)) for iv in behaviour.surface), float(behaviour.surface_speed),
     )  # fmt: skip
+
+
+def scenario_plans(scenario) -> list[KnownPlan | None]:
+    """The plans of a scenario's AUVs as the ASV knows them (:func:`known_plan` of each
+    ``[[auv]]``'s behaviour, in order): the one definition of "which AUVs have a plan", used
+    by the simulator, the suites and deploy (``controller.scenario``)."""
+    return [known_plan(a.build_behaviour()) for a in scenario.auv]
+
+
+def has_plan(scenario) -> bool:
+    """Whether at least one AUV of ``scenario`` has a plan (the ``plan`` estimator is more
+    than its Kalman filter)."""
+    return any(p is not None for p in scenario_plans(scenario))
+
+
+def check_plan_estimator(scenario, estimator: str | None, what: str,
+                         fix: str = "estimator 'kalman'") -> None:
+    """Refuse the ``plan`` estimator on a scenario in which NO AUV has a plan (waypoints):
+    every AUV would run the Kalman filter under the name "plan". ``estimator`` None means the
+    scenario's own; ``what`` names where the choice came from (e.g. "--estimator plan") and
+    ``fix`` the way out in the caller's terms.
+    Some AUVs without a plan beside planned ones stay allowed (those run the Kalman filter).
+
+    Raises
+    ------
+    ConfigError
+        One line naming ``what`` and the way out.
+    """
+    from mpcasv.config import ConfigError
+
+    if (estimator or scenario.estimator) != "plan":
+        return
+    if has_plan(scenario):
+        return
+    behaviours = [a.build_behaviour() for a in scenario.auv]
+    kinds = sorted({type(getattr(b, "initial", b)).__name__.lower() for b in behaviours})
+    raise ConfigError(f"{what}: no AUV of scenario {scenario.name!r} has a plan (waypoints; its "
+                      f"AUVs: {', '.join(kinds)}), so every AUV would run the Kalman filter: "
+                      f"use {fix}")  # fmt: skip
 
 
 class Polyline:

@@ -307,7 +307,7 @@ def write_report(out: Path, exp, results: pd.DataFrame, stats=None) -> tuple[Pat
         "tables give means ± sd over seeds.",
         f"Whole results table: `{READ_LINE.format(out=out)}` (one row per job).",
     ]
-    facts += [f"Skipped (optional controller not available): {s}" for s in exp.skipped]
+    facts += [f"Skipped: {s}" for s in exp.skipped]
     for f in filter(None, facts):
         bullet(f)
     md.append("")

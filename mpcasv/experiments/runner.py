@@ -355,7 +355,7 @@ def run_suite(suite: str | Path, out: str | Path, workers: int = 1, dask: str | 
     stats.runs = runs if (runs_dir or not dask) else f"{runs} in each Dask worker's directory"
     if not quiet:
         for s in exp.skipped:
-            print(f"skipped (optional controller not available): {s}")
+            print(f"skipped: {s}")
         where = (
             f"Dask at {dask}"
             if dask

@@ -243,7 +243,9 @@ class Job:
 
 @dataclasses.dataclass(frozen=True)
 class Expansion:
-    """A suite's jobs, plus the controller entries skipped because they are unavailable."""
+    """A suite's jobs, plus what the expansion left out, one line each with why: optional
+    controller entries that are unavailable, and estimator 'plan' on a scenario whose AUVs
+    have no plan (it would run the Kalman filter under the name "plan")."""
 
     suite: Suite
     path: Path
@@ -350,6 +352,7 @@ def expand(name_or_path: str | Path) -> Expansion:
         controller, bad preset or override key, empty list or grid, unknown estimator.
     """
     from mpcasv.controllers import load_preset
+    from mpcasv.estimation import has_plan
     from mpcasv.experiments.conditions import conditions, realisations
     from mpcasv.experiments.suite_entries import (
         _controller_and_preset,
@@ -367,6 +370,12 @@ def expand(name_or_path: str | Path) -> Expansion:
     seen: dict[str, int] = {}
     for sc0, file in scenarios:
         for sc, current, axis, estimator in conditions(suite, sc0, path, file):
+            if estimator == "plan" and not has_plan(sc0):  # it would be the Kalman filter
+                note = (f"estimator 'plan' on scenario {sc.name!r}: no AUV of it has a plan "
+                        "(waypoints), the plan estimator would be the Kalman filter")
+                if note not in skipped:
+                    skipped.append(note)
+                continue
             sc_digest = _digest(_plain(sc))
             reals = realisations(sc, suite.seeds, f"{path}: scenario {file}")
             for i, entry in usable:

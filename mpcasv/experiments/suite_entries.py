@@ -33,7 +33,7 @@ def _usable_controllers(suite: Suite, path: Path, names: list[str]):
                 controller_kind(cname)
             except ConfigError as exc:
                 if entry.optional and "not available" in str(exc):
-                    skipped.append(f"{entry.label} ({cname}): {exc}")
+                    skipped.append(f"optional controller {entry.label} ({cname}): {exc}")
                     break
                 raise ConfigError(f"{where}: {key}: {exc}") from None
         else:

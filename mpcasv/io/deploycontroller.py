@@ -154,7 +154,7 @@ def check_controller(cfg: DeployConfig, source: str | Path) -> None:
 
 
 def known_plans(cfg: DeployConfig) -> list:
-    """The AUVs' plans as the ASV knows them (:func:`mpcasv.estimation.known_plan`, one per
+    """The AUVs' plans as the ASV knows them (:func:`mpcasv.estimation.scenario_plans`, one per
     AUV of the configuration, in order) from ``controller.scenario``; ``[None] * n`` without a
     scenario. An AUV without a plan (a pursuer, a transit) has None: its ``plan`` estimator is
     its Kalman filter, as in the simulator.
@@ -167,11 +167,11 @@ def known_plans(cfg: DeployConfig) -> list:
     n = len(cfg.auvs)
     if cfg.controller.scenario is None:
         return [None] * n
-    from mpcasv.estimation import known_plan
+    from mpcasv.estimation import scenario_plans
     from mpcasv.sim.scenario import load_scenario
 
     sc = load_scenario(cfg.controller.scenario)
     if len(sc.auv) != n:
         raise ConfigError(f"controller.scenario {cfg.controller.scenario} has {len(sc.auv)} "
                           f"AUVs, the config {n}")  # fmt: skip
-    return [known_plan(a.build_behaviour()) for a in sc.auv]
+    return scenario_plans(sc)

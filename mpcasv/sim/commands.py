@@ -65,7 +65,7 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError(f"--duration {args.duration:g}: a duration is a number of seconds > 0")
     from mpcasv.controllers import Boat, make_controller, preset_used
     from mpcasv.controllers.prepare import needed_libraries, prepare
-    from mpcasv.estimation import ESTIMATORS
+    from mpcasv.estimation import ESTIMATORS, check_plan_estimator
     from mpcasv.experiments.metrics import compute_metrics
     from mpcasv.outputs import check_output_folder
     from mpcasv.sim.record import check_run_dir, write_run
@@ -73,7 +73,15 @@ def run(args: argparse.Namespace) -> int:
     from mpcasv.sim.simulator import simulate
     from mpcasv.sim.uncertainty import run_scenario
 
+    if args.estimator and args.estimator not in ESTIMATORS:
+        raise ConfigError(f"unknown estimator {args.estimator!r}; known: {sorted(ESTIMATORS)}")
     scenario = load_scenario(args.scenario)
+    if args.estimator:
+        check_plan_estimator(scenario, args.estimator, f"--estimator {args.estimator}",
+                             "--estimator kalman")  # fmt: skip
+    else:
+        check_plan_estimator(scenario, None, f"{args.scenario}: estimator = 'plan'",
+                             "estimator = 'kalman' or --estimator kalman")  # fmt: skip
     if args.duration is not None:  # the first DURATION s: part of the realised scenario
         if not scenario.sim.control_period <= args.duration <= scenario.duration:
             raise ConfigError(f"--duration {args.duration:g}: between one control period "
@@ -98,8 +106,6 @@ def run(args: argparse.Namespace) -> int:
             raise
         raise ConfigError(f"{args.scenario} ({' / '.join(keys)} from this scenario): "
                           f"{exc}") from None  # fmt: skip
-    if args.estimator and args.estimator not in ESTIMATORS:
-        raise ConfigError(f"unknown estimator {args.estimator!r}; known: {sorted(ESTIMATORS)}")
     result = simulate(scenario, controller, args.seed, args.estimator, progress=not args.quiet)
     extra = {"preset": preset_used(name, preset), "estimator": args.estimator or scenario.estimator,
              "realisation": real.as_dict(), "boat": boat.describe()}  # fmt: skip

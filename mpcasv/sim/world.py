@@ -26,7 +26,7 @@ import numpy as np
 
 from mpcasv.control.execution import NZ, closed_loop
 from mpcasv.control.params import ExecutionParams, load_execution
-from mpcasv.estimation import known_plan, make_estimator
+from mpcasv.estimation import check_plan_estimator, known_plan, make_estimator
 from mpcasv.hybrid.domains import r_inner, r_outer, r_target
 from mpcasv.interface import ASVState, AUVEstimate, Observation
 from mpcasv.models.acoustics import Report, success_probability, usbl_fix
@@ -143,6 +143,8 @@ class World:
         self._auv_step = _packed(auv_step_function(self.dt, self.n_sub, self.n_auv,
                                                    drift=self._carry))  # fmt: skip
         name = estimator or scenario.estimator
+        # not the Kalman filter under the name "plan" (the callers refuse it up front)
+        check_plan_estimator(scenario, name, f"estimator {name!r}")
         self.estimators = [
             make_estimator(
                 name,

@@ -1,0 +1,66 @@
+"""Options and configuration fields that were accepted but silently had no effect (an audit,
+session 24): each now works or is refused up front in one line (exit 2) naming the option."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from mpcasv.cli import main
+from mpcasv.config import ConfigError
+
+ROOT = Path(__file__).resolve().parents[1]
+SCENARIOS = ROOT / "experiments" / "scenarios"
+
+
+def refused(argv: list[str], capsys, *words: str) -> str:
+    """``mpcasv ARGV`` exits 2 with one error line holding every word; return that line."""
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    lines = [ln for ln in err.splitlines() if ln.strip()]
+    assert len(lines) == 1 and "Traceback" not in err, err
+    for w in words:
+        assert w in lines[0], (w, lines[0])
+    return lines[0]
+
+
+# -- 1. the plan estimator on a scenario in which no AUV has a plan --------------------------
+
+
+def test_simulate_refuses_the_plan_estimator_when_no_auv_has_a_plan(tmp_path, capsys):
+    """Case 4's AUV is a transit: 'plan' was the Kalman filter under another name."""
+    out = tmp_path / "run"
+    refused(["simulate", str(SCENARIOS / "case4.toml"), "--estimator", "plan", "--out", str(out),
+             "--quiet", "--no-plots"], capsys, "--estimator plan", "no AUV", "--estimator kalman")
+    assert not out.exists()
+    sc = tmp_path / "case4.toml"  # the same from the scenario's own field
+    sc.write_text((SCENARIOS / "case4.toml").read_text().replace(
+        'estimator = "perfect"', 'estimator = "plan"'))  # fmt: skip
+    refused(["simulate", str(sc), "--out", str(out), "--quiet", "--no-plots"], capsys,
+            str(sc), "estimator = 'plan'", "no AUV")
+    assert not out.exists()
+
+
+def test_the_world_refuses_it_too_and_a_subset_without_plans_stays_allowed():
+    from mpcasv.estimation import check_plan_estimator, scenario_plans
+    from mpcasv.sim.scenario import load_scenario
+    from mpcasv.sim.world import World
+
+    with pytest.raises(ConfigError, match="estimator 'plan'"):
+        World(load_scenario(SCENARIOS / "case4.toml"), 0, "plan")
+    case8 = load_scenario(SCENARIOS / "case8.toml")  # a pursuer beside planned AUVs
+    plans = scenario_plans(case8)
+    assert None in plans and any(p is not None for p in plans)
+    check_plan_estimator(case8, "plan", "--estimator plan")  # no error
+
+
+def test_a_suite_leaves_out_plan_on_a_scenario_without_plans_and_says_so():
+    from mpcasv.experiments.suite import expand
+
+    exp = expand("estimators")
+    assert ("case4", "plan") not in {(j.scenario, j.estimator) for j in exp.jobs}
+    assert ("case8", "plan") in {(j.scenario, j.estimator) for j in exp.jobs}
+    assert ("case4", "kalman") in {(j.scenario, j.estimator) for j in exp.jobs}
+    assert len(exp.jobs) == 93
+    assert any("'plan'" in s and "'case4'" in s for s in exp.skipped), exp.skipped
