@@ -64,3 +64,34 @@ def test_a_suite_leaves_out_plan_on_a_scenario_without_plans_and_says_so():
     assert ("case4", "kalman") in {(j.scenario, j.estimator) for j in exp.jobs}
     assert len(exp.jobs) == 93
     assert any("'plan'" in s and "'case4'" in s for s in exp.skipped), exp.skipped
+
+
+# -- 2. compare --workers 1 --job-timeout S --------------------------------------------------
+
+SUITE = """
+name = "one"
+scenarios = ["case1"]
+seeds = [0]
+current = ["off"]
+duration = 5.0
+
+[[controllers]]
+label = "hybrid"
+single = "hybrid-single"
+multi = "hybrid-multi"
+preset = "scenario"
+"""
+
+
+def test_compare_with_one_worker_enforces_the_job_timeout(tmp_path, capsys):
+    """The serial branch never read the limit: the job ran to its end, recorded 'ok'."""
+    import pandas as pd
+
+    suite = tmp_path / "one.toml"
+    suite.write_text(SUITE)
+    out = tmp_path / "out"
+    assert main(["compare", str(suite), "--out", str(out), "--workers", "1", "--job-timeout",
+                 "0.01", "--no-report", "--quiet"]) == 1  # fmt: skip
+    table = pd.read_parquet(out / "results.parquet")
+    assert list(table["status"]) == ["timeout"], table[["status", "error"]]
+    assert "time limit of 0.01 s" in table["error"].iloc[0]

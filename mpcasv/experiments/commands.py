@@ -27,8 +27,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="output folder DIR (default: results/<suite name>)")  # fmt: skip
     p.add_argument("--workers", type=int, default=None,
                    help=f"local worker processes (default: the cores this process may use, "
-                   f"{cpu_count()}; 1 runs in this process; at most 4 per core; never more "
-                   "than the jobs to run; not with --dask)")  # fmt: skip
+                   f"{cpu_count()}; 1 runs them one at a time, in one worker process while "
+                   "--job-timeout holds, in this process with --job-timeout 0; at most 4 per "
+                   "core; never more than the jobs to run; not with --dask)")  # fmt: skip
     p.add_argument("--dask", metavar="ADDRESS",
                    help="run on an existing Dask scheduler (e.g. tcp://host:8786); the workers "
                    "need no file system shared with this machine: each job's row comes back "
@@ -45,8 +46,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--job-timeout", type=float, metavar="S", default=None,
                    help="end a job running longer than S seconds and record it as 'timeout' "
-                   "(local worker pools; default 1200; 0: no limit; only 0 with --dask: a "
-                   "Dask task cannot be ended from outside)")  # fmt: skip
+                   "(default 1200; 0: no limit; with --workers 1 too: the job then runs in "
+                   "a worker process; only 0 with --dask: a Dask task cannot be ended from "
+                   "outside)")  # fmt: skip
     p.add_argument("--no-report", action="store_true", help="skip report.md / report.html")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=run)

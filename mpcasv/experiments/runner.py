@@ -1,5 +1,6 @@
-"""Running a suite's jobs: in this process (1 worker), on a local process pool, or on a Dask
-distributed cluster; each finished job is written at once (run folder, then its results part).
+"""Running a suite's jobs: in this process (1 worker, no time limit), on a local process pool,
+or on a Dask distributed cluster; each finished job is written at once (run folder, then its
+results part).
 
 A worker runs a job, writes its run folder under the runs location and returns the job's row
 (description, outcome, metrics); this process (the client) writes the row as the job's part
@@ -20,10 +21,12 @@ go on; a failure of the machinery itself (a worker process killed, the cluster l
 row, so resuming reruns that job. On a local pool a job running longer than ``job_timeout``
 (default :data:`JOB_TIMEOUT_S`) is ended (its worker process killed and replaced, by Pebble's
 process pool) and recorded with ``status = "timeout"``; the sweep goes on (issue 16 item 5:
-a hung solve must not stall a sweep). ``--workers 1`` (this process) and Dask do not enforce
-it. A local pool starts no more processes than there are jobs to run
-(:mod:`mpcasv.experiments.workers`), and a sweep refuses an output folder holding another
-suite's results (:func:`~mpcasv.experiments.sweep_folder.check_suite_folder`).
+a hung solve must not stall a sweep). ``--workers 1`` with a limit runs on a pool of one
+process for that reason; ``--workers 1 --job-timeout 0`` (no limit) runs in this process. Dask
+does not enforce it (the command refuses a limit with ``--dask``). A local pool starts no more
+processes than there are jobs to run (:mod:`mpcasv.experiments.workers`), and a sweep refuses
+an output folder holding another suite's results
+(:func:`~mpcasv.experiments.sweep_folder.check_suite_folder`).
 """
 
 from __future__ import annotations
@@ -261,9 +264,11 @@ def run_jobs(jobs: list[Job], out: Path, stats: SweepStats, workers: int = 1,
              job_timeout: float | None = JOB_TIMEOUT_S) -> None:  # fmt: skip
     """Run ``jobs`` (serially, on a process pool, or on Dask), updating ``stats``; run folders
     under ``runs`` (default: :func:`runs_location`), rows written into ``out`` here.
-    ``job_timeout`` (s, local pool only; None: no limit): a longer job is ended and recorded
-    as ``timeout``. A local pool (``workers > 1``) starts at most one process per job
-    (:func:`~mpcasv.experiments.workers.pool_size`), so a single job still gets its timeout."""
+    ``job_timeout`` (s; None: no limit): a longer job is ended and recorded as ``timeout``.
+    ``workers = 1`` runs the jobs in this process only without a limit; with one it runs them
+    on a Pebble pool of one process (a job in this process cannot be ended). A local pool
+    starts at most one process per job (:func:`~mpcasv.experiments.workers.pool_size`), so a
+    single job still gets its timeout. Dask has no limit (the command refuses one)."""
     out = out.resolve()
     runs = runs or runs_location(out, stats.suite, None, dask)
     stats.runs = stats.runs or runs
@@ -275,14 +280,14 @@ def run_jobs(jobs: list[Job], out: Path, stats: SweepStats, workers: int = 1,
 
             stats.backend = f"dask {dask}"
             run_dask(jobs, out, runs, stats, dask, bar)
-        elif workers <= 1:
+        elif workers <= 1 and not job_timeout:  # no limit: nothing to end it from outside
             stats.backend, stats.workers = "serial (this process)", 1
             for job in jobs:
                 record_row(stats, job, finish_job(out, run_job(job, runs)))
                 bar.set_postfix(errors=stats.errors, refresh=False)
                 bar.update(1)
         else:
-            n = pool_size(workers, len(jobs))
+            n = pool_size(max(workers, 1), len(jobs))
             stats.backend, stats.workers = f"local process pool ({n} workers)", n
             _run_pool(jobs, out, runs, stats, n, bar, job_timeout)
     except KeyboardInterrupt:
@@ -359,7 +364,7 @@ def run_suite(suite: str | Path, out: str | Path, workers: int = 1, dask: str | 
         where = (
             f"Dask at {dask}"
             if dask
-            else ("this process" if workers <= 1 or not todo else
+            else ("this process" if (workers <= 1 and not job_timeout) or not todo else
                   f"{pool_size(workers, len(todo))} local worker processes"
                   + reduced_note(workers, pool_size(workers, len(todo))))
         )  # fmt: skip
