@@ -95,3 +95,14 @@ def test_compare_with_one_worker_enforces_the_job_timeout(tmp_path, capsys):
     table = pd.read_parquet(out / "results.parquet")
     assert list(table["status"]) == ["timeout"], table[["status", "error"]]
     assert "time limit of 0.01 s" in table["error"].iloc[0]
+
+
+# -- 3. tune yaw --wn with --wn-per-speed -----------------------------------------------------
+
+
+def test_tune_yaw_refuses_wn_per_speed_beside_wn(tmp_path, capsys):
+    """--wn-per-speed was ignored beside --wn (yet written into the provenance)."""
+    out = tmp_path / "yaw"
+    refused(["tune", "yaw", "--wn", "0.5", "--wn-per-speed", "0.2", "--out", str(out), "--quiet"],
+            capsys, "--wn-per-speed 0.2", "--wn 0.5", "give one of them")
+    assert not out.exists()

@@ -19,6 +19,7 @@ from mpcasv.config import ConfigError
 DEFAULT_SPEEDS = "0.5,1,1.5,2,2.5"  # Gretha's: 0.2 ... 1.0 u_max (the default for any vessel)
 SPEED_FRACTIONS = (0.2, 0.4, 0.6, 0.8, 1.0)
 DESIGN_FRACTION = 0.4  # default --design-speed / top speed: Gretha's 1 m/s
+WN_PER_SPEED = 0.3  # default --wn-per-speed, rad/m
 
 
 def _floats(text: str) -> list[float]:
@@ -54,9 +55,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     y.add_argument(
         "--wn-per-speed",
         type=float,
-        default=0.3,
-        help="wn = this * u0 when --wn is not given, rad/m (default 0.3: about the "
-        "same Kp at every speed and the same turn length scale)",
+        default=None,
+        help=f"wn = this * u0, rad/m, instead of --wn (not with it; default {WN_PER_SPEED}: "
+        "about the same Kp at every speed and the same turn length scale)",
     )
     y.add_argument("--zeta", type=float, default=1.0, help="damping ratio (default 1.0)")
     y.add_argument(
@@ -235,6 +236,13 @@ def run_tune_yaw(args: argparse.Namespace) -> int:
     from mpcasv.control.tuning_report import plot_yaw, yaw_table
     from mpcasv.control.tuning_yaw import CourseUnstable, tune_yaw
 
+    if args.wn is not None and args.wn_per_speed is not None:  # was silently ignored
+        raise ConfigError(f"--wn-per-speed {args.wn_per_speed:g} with --wn "
+                          f"{','.join(f'{w:g}' for w in args.wn)}"
+                          ": --wn sets the natural frequencies itself, so --wn-per-speed would "
+                          "be unused: give one of them")  # fmt: skip
+    if args.wn is None and args.wn_per_speed is None:
+        args.wn_per_speed = WN_PER_SPEED  # (in the provenance's command line, as given)
     model, ep, toml = _setup(args, "yaw")
     speeds = args.speeds
     if args.wn is None:
