@@ -106,3 +106,17 @@ def test_tune_yaw_refuses_wn_per_speed_beside_wn(tmp_path, capsys):
     refused(["tune", "yaw", "--wn", "0.5", "--wn-per-speed", "0.2", "--out", str(out), "--quiet"],
             capsys, "--wn-per-speed 0.2", "--wn 0.5", "give one of them")
     assert not out.exists()
+
+
+# -- 4. a suite entry's preset for a scenario the entry leaves out ----------------------------
+
+
+def test_a_suite_refuses_a_preset_for_a_scenario_its_entry_leaves_out(tmp_path, capsys):
+    """The suite runs case8, the entry only case3: its case8 preset was silently unused."""
+    suite = tmp_path / "s.toml"
+    suite.write_text(SUITE.replace('["case1"]', '["case3", "case8"]') + (
+        'scenarios = ["case3"]\npresets = { case8 = "paper2-field" }\n'))  # fmt: skip
+    out = tmp_path / "out"
+    refused(["compare", str(suite), "--out", str(out), "--workers", "1", "--quiet"], capsys,
+            str(suite), "controllers[0]", "presets: 'case8'", "scenarios ['case3']")
+    assert not out.exists()

@@ -42,6 +42,13 @@ def _usable_controllers(suite: Suite, path: Path, names: list[str]):
                     if s not in names:
                         raise ConfigError(f"{where}: {field}: {s!r} is not among the suite's "
                                           f"scenarios {names}")  # fmt: skip
+            if entry.scenarios is not None:  # a preset for a scenario it does not run: unused
+                unused = [s for s in entry.presets if s not in entry.scenarios]
+                if unused:
+                    raise ConfigError(f"{where}: presets: {unused[0]!r} is not among this "
+                                      f"entry's scenarios {list(entry.scenarios)}, so its "
+                                      "preset would be unused: add it to 'scenarios' or "
+                                      "drop it from 'presets'")  # fmt: skip
             usable.append((i, entry))
     return usable, skipped
 
