@@ -120,3 +120,16 @@ def test_a_suite_refuses_a_preset_for_a_scenario_its_entry_leaves_out(tmp_path, 
     refused(["compare", str(suite), "--out", str(out), "--workers", "1", "--quiet"], capsys,
             str(suite), "controllers[0]", "presets: 'case8'", "scenarios ['case3']")
     assert not out.exists()
+
+
+# -- 5. simulate --manoeuvre --seed without --noise -------------------------------------------
+
+
+def test_a_manoeuvre_refuses_a_seed_without_noise(tmp_path, capsys):
+    """Without --noise nothing is random: --seed 7 wrote the same file as --seed 0."""
+    out = tmp_path / "logs"
+    refused(["simulate", "--manoeuvre", "zigzag", "--seed", "7", "--duration", "20", "--out",
+             str(out)], capsys, "--seed 7", "--noise")  # fmt: skip
+    assert not out.exists()
+    assert main(["simulate", "--manoeuvre", "zigzag", "--duration", "20", "--out", str(out)]) == 0
+    assert (out / "zigzag-0.csv").is_file()  # the default seed still names the file

@@ -198,6 +198,12 @@ def run_cli(args) -> int:
         bad = [v for v in values if v is not None and not math.isfinite(v)]
         if bad:
             raise ConfigError(f"{opt} {bad[0]:g}: must be a finite number")
+    if args.seed is not None and not args.noise:  # the seed draws the noise alone
+        raise ConfigError(f"--seed {args.seed}: a manoeuvre without --noise has nothing "
+                          "random (the seed would change nothing): add --noise, or leave "
+                          "--seed out")  # fmt: skip
+    if args.seed is None:
+        args.seed = 0
     check_seed(args.seed)
     out = _log_path(args.out, f"{args.manoeuvre}-{args.seed}.csv")  # before the work
     model = VesselModel(load_vessel(args.vessel or "gretha"))
@@ -210,5 +216,5 @@ def run_cli(args) -> int:
                             seed=args.seed)  # fmt: skip
     write_log(df, out)
     print(f"wrote {out} ({len(df)} samples, {df['t'].iloc[-1]:.0f} s, noise "
-          f"{'on' if noise else 'off'}, seed {args.seed})")  # fmt: skip
+          f"{f'on, seed {args.seed}' if noise else 'off'})")  # fmt: skip
     return 0

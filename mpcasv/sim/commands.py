@@ -21,9 +21,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     )  # fmt: skip
     p.add_argument("--controller", help="controller name (default: the scenario's)")
     p.add_argument("--params", help="controller preset: shipped name or TOML path")
-    p.add_argument("--seed", type=int, default=0,
+    p.add_argument("--seed", type=int, default=None,
                    help="random seed (default 0): the world's acoustic draws and the realisation "
-                   "of the scenario's [uncertain] table")  # fmt: skip
+                   "of the scenario's [uncertain] table; with --manoeuvre the measurement "
+                   "noise, so only with --noise")  # fmt: skip
     p.add_argument("--nominal", action="store_true",
                    help="simulate the scenario's nominal values (no draw from [uncertain])")
     p.add_argument("--estimator", help="AUV estimator (default: the scenario's)")
@@ -54,6 +55,8 @@ def run(args: argparse.Namespace) -> int:
         return run_cli(args)
     if args.scenario is None:
         raise ConfigError("give a SCENARIO (TOML file) or --manoeuvre")
+    if args.seed is None:
+        args.seed = 0
     from mpcasv.control.manoeuvres import MANOEUVRE_ONLY
 
     given = [f"--{k}" for k in MANOEUVRE_ONLY
