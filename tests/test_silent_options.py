@@ -133,3 +133,33 @@ def test_a_manoeuvre_refuses_a_seed_without_noise(tmp_path, capsys):
     assert not out.exists()
     assert main(["simulate", "--manoeuvre", "zigzag", "--duration", "20", "--out", str(out)]) == 0
     assert (out / "zigzag-0.csv").is_file()  # the default seed still names the file
+
+
+# -- 7. tune controller's budget hint offers only budgets the study allows --------------------
+
+
+def test_the_budget_hint_offers_no_budget_below_the_study_s_trials(tmp_path, capsys):
+    """A study of 6 trials, --trials 5 in batches of 2: the hint said 'use 4 or 6', and 4 was
+    then refused ('holds 6 trials already ... give at least 6')."""
+    import optuna
+
+    from mpcasv.experiments.tune_controller import STUDY_NAME
+
+    (tmp_path / "train.toml").write_text(
+        'name = "tiny-train"\nscenarios = ["case3"]\nduration = 20.0\nseeds = [0]\n'
+        'plots = "none"\n[[controllers]]\nlabel = "hybrid"\nsingle = "hybrid-single"\n'
+        'preset = "scenario"\n')  # fmt: skip
+    ranges = tmp_path / "ranges.toml"
+    ranges.write_text('controller = "hybrid-single"\nsuite = "train.toml"\nheldout_seeds = [7]\n'
+                      'trials = 6\nbatch = 2\n[params]\n"speed" = { low = 1.0, high = 2.5 }\n')
+    out = tmp_path / "out"
+    out.mkdir()
+    optuna.logging.set_verbosity(optuna.logging.WARNING)
+    study = optuna.create_study(study_name=STUDY_NAME, storage=f"sqlite:///{out / 'study.db'}")
+    for _ in range(6):
+        study.add_trial(optuna.trial.create_trial(value=0.0))
+    line = refused(["tune", "controller", str(ranges), "--trials", "5", "--out", str(out),
+                    "--quiet"], capsys, "--trials = 5", "use 6", "holds 6 trials")  # fmt: skip
+    assert "4" not in line.split("use ")[1], line
+    refused(["tune", "controller", str(ranges), "--trials", "7", "--out", str(out), "--quiet"],
+            capsys, "--trials = 7", "use 6 or 8")  # fmt: skip

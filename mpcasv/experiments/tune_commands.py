@@ -61,14 +61,21 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run_tune_controller(args: argparse.Namespace) -> int:
-    from mpcasv.experiments.tune_controller import check_presets, evaluate_heldout, search
+    from mpcasv.experiments.tune_controller import (
+        check_presets,
+        evaluate_heldout,
+        search,
+        study_size,
+    )
     from mpcasv.experiments.tune_outputs import write_outputs
     from mpcasv.experiments.tune_space import load_spec
     from mpcasv.experiments.workers import check_workers
     from mpcasv.outputs import check_not_other_output, check_output_folder, folder_lock
 
     args.workers = check_workers(args.workers, args.dask)  # <= 4 per CPU; not with --dask
-    spec = load_spec(args.ranges, args.trials)
+    # the trials already in the study (a budget hint never offers fewer: it was refused next)
+    done = study_size(args.out or Path("results") / f"tune-{Path(args.ranges).resolve().stem}")
+    spec = load_spec(args.ranges, args.trials, done)
     check_presets(spec)  # the suite's entry, and range ends no trial could run: before any file
     out = check_output_folder((args.out or Path("results") / f"tune-{spec.path.stem}").resolve())
     check_not_other_output(out, "mpcasv tune controller", own=("study.db", "tune.lock"))

@@ -179,6 +179,22 @@ def directions(spec: TuneSpec) -> list[str]:
             for m in spec.objectives]  # fmt: skip
 
 
+def study_size(out: Path) -> int:
+    """The trials of the search study in ``out/study.db`` (0 without one, or if it cannot be
+    read: :func:`open_study` says why later)."""
+    db = Path(out).resolve() / "study.db"
+    if not db.is_file():
+        return 0
+    import optuna
+
+    optuna.logging.set_verbosity(optuna.logging.WARNING)
+    try:
+        study = optuna.load_study(study_name=STUDY_NAME, storage=f"sqlite:///{db}")
+        return len(study.get_trials(deepcopy=False))
+    except Exception:  # another study, or not a study at all: refused by open_study
+        return 0
+
+
 def open_study(spec: TuneSpec, out: Path, train: list[Job]):
     """Create or load the study in ``out/study.db``; refuse one made for another search."""
     import optuna

@@ -248,8 +248,10 @@ def _field_type(cls: type, dotted: str, extras: bool = False):
     return cls
 
 
-def load_spec(path: str | Path, trials: int | None = None) -> TuneSpec:
-    """Load and validate a range file; ``trials`` replaces its budget when given.
+def load_spec(path: str | Path, trials: int | None = None, done: int = 0) -> TuneSpec:
+    """Load and validate a range file; ``trials`` replaces its budget when given. ``done``:
+    the trials the output folder's study holds already (a budget below it is refused later,
+    so a hint never offers one).
 
     Raises
     ------
@@ -299,10 +301,13 @@ def load_spec(path: str | Path, trials: int | None = None) -> TuneSpec:
     if n_trials % batch:  # a partial last batch: extending it later would ask its trials
         # after the earlier ones are told, not as an uninterrupted search does (measured)
         lo, hi = (n_trials // batch) * batch, (n_trials // batch + 1) * batch
+        least = -(-done // batch) * batch  # the smallest multiple not below the study's trials
+        offer = sorted({v for v in (lo, hi) if v >= max(least, 1)} or {least})
         where = "--trials" if trials is not None else f"{path}: trials"
+        held = f" (the study holds {done} trials already)" if done > lo else ""
         raise ConfigError(f"{where} = {n_trials} is not a multiple of batch = {batch}: a "
                           "partial last batch makes a later extension ask other trials than an "
-                          f"uninterrupted search; use {' or '.join(str(v) for v in (lo, hi) if v)}")
+                          f"uninterrupted search; use {' or '.join(map(str, offer))}{held}")
     suite = data["suite"]
     if suite.endswith(".toml") and not Path(suite).is_absolute():
         suite = str((path.parent / suite).resolve())
