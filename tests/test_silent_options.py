@@ -163,3 +163,26 @@ def test_the_budget_hint_offers_no_budget_below_the_study_s_trials(tmp_path, cap
     assert "4" not in line.split("use ")[1], line
     refused(["tune", "controller", str(ranges), "--trials", "7", "--out", str(out), "--quiet"],
             capsys, "--trials = 7", "use 6 or 8")  # fmt: skip
+
+
+# -- 6. tune controller and its suite's plots / [acceptance] -----------------------------------
+
+
+@pytest.mark.parametrize(("add", "words"), [
+    ('plots = "all"\n', ("plots = 'all'", "tune controller draws no run figures")),
+    ('[acceptance]\nsource = "x"\ntargets = { energy_J = -0.1 }\n', ("[acceptance]",)),
+])  # fmt: skip
+def test_tune_controller_refuses_suite_plots_and_acceptance_it_would_not_use(
+        tmp_path, capsys, add, words):  # fmt: skip
+    suite = ('name = "tiny-train"\nscenarios = ["case3"]\nduration = 20.0\nseeds = [0]\n'
+             f'{add if add.startswith("plots") else ""}[[controllers]]\nlabel = "hybrid"\n'
+             'single = "hybrid-single"\npreset = "scenario"\n'
+             f'{"" if add.startswith("plots") else add}')  # fmt: skip
+    (tmp_path / "train.toml").write_text(suite)
+    ranges = tmp_path / "ranges.toml"
+    ranges.write_text('controller = "hybrid-single"\nsuite = "train.toml"\nheldout_seeds = [7]\n'
+                      'trials = 2\nbatch = 2\n[params]\n"speed" = { low = 1.0, high = 2.5 }\n')
+    out = tmp_path / "out"
+    refused(["tune", "controller", str(ranges), "--out", str(out), "--quiet"], capsys,
+            str(tmp_path / "train.toml"), *words)
+    assert not out.exists()

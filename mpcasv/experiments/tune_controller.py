@@ -64,6 +64,18 @@ def training_jobs(spec: TuneSpec) -> list[Job]:
         ``spec.controller``, has a grid, or a held-out seed is also a training seed.
     """
     exp = expand(spec.suite)
+    from mpcasv.config import load_toml
+
+    raw = load_toml(exp.path, "suite")  # what the file sets itself (not the defaults)
+    if raw.get("plots", "none") != "none":  # trial and held-out runs draw no figures
+        raise ConfigError(f"{spec.path}: suite {exp.path}: plots = {raw['plots']!r}: tune "
+                          "controller draws no run figures, so it would be unused: set plots "
+                          "= 'none' or leave it out")  # fmt: skip
+    if "acceptance" in raw:  # no suite report here to judge it
+        raise ConfigError(f"{spec.path}: suite {exp.path}: [acceptance]: tune controller "
+                          "writes no suite report to judge it (its objectives and constraint "
+                          "are the range file's), so it would be unused: remove it (judge the "
+                          "chosen preset with mpcasv compare)")  # fmt: skip
     labels = sorted({j.label for j in exp.jobs})
     label = spec.label
     if label is None:
