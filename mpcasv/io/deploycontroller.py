@@ -15,7 +15,7 @@ if TYPE_CHECKING:
     from mpcasv.io.config import DeployConfig
 
 __all__ = ["MIN_SOLVE_MS", "build_controller", "check_controller", "check_field_budget",
-           "controller_overrides", "deploy_boat", "known_plans"]
+           "controller_overrides", "deploy_boat", "field_boat", "known_plans"]
 
 
 def controller_overrides(cfg: DeployConfig, speed: float | None = None) -> dict[str, Any]:
@@ -33,12 +33,19 @@ def deploy_boat(cfg: DeployConfig):
     """The boat the deploy drives (``controller.vessel``, default Gretha) with the
     configuration's acoustic channel (``[acoustics]``): the one vessel the controller plans
     with; a preset that names another vessel is refused in one line."""
+    return field_boat(cfg.controller.vessel, cfg.acoustics)
+
+
+def field_boat(vessel: str | None, acoustics):
+    """The :class:`~mpcasv.controllers.Boat` of a deploy: ``vessel`` (shipped name or TOML
+    path; None: Gretha) with the acoustic channel ``acoustics``
+    (:class:`~mpcasv.models.acoustics.AcousticParams`). One definition for the deploy
+    (:func:`deploy_boat`) and its replay (:func:`mpcasv.io.replay.replay`)."""
     import dataclasses
 
     from mpcasv.controllers import Boat
 
-    return dataclasses.replace(Boat.load(cfg.controller.vessel or "gretha"),
-                               acoustics=cfg.acoustics)  # fmt: skip
+    return dataclasses.replace(Boat.load(vessel or "gretha"), acoustics=acoustics)
 
 
 def build_controller(cfg: DeployConfig, speed: float | None = None, log=print):

@@ -3,10 +3,12 @@
 The deploy log (``deploy.jsonl``) holds, for every decision, the exact Observation the
 controller was given (estimates already inflated by the watchdogs), the watchdogs' verdicts
 and the command sent. Replay builds the controller named in the log (or another one / another
-preset), feeds it the same Observations in order, applies the same guard with the logged
-verdicts, and compares command by command (:func:`mpcasv.io.records.same_command`).
-Replaying with the logged controller must reproduce every decision; anything else points at
-non-determinism or a changed controller.
+preset) for the boat the deploy drove (the logged ``controller.vessel`` and ``[acoustics]``:
+:func:`mpcasv.io.deploycontroller.field_boat`, as the deploy built it), feeds it the same
+Observations in order, applies the same guard with the logged verdicts, and compares command
+by command (:func:`mpcasv.io.records.same_command`). Replaying with the logged controller
+must reproduce every decision; anything else points at non-determinism or a changed
+controller.
 """
 
 from __future__ import annotations
@@ -16,13 +18,15 @@ from pathlib import Path
 
 import pandas as pd
 
-from mpcasv.config import ConfigError
+from mpcasv.config import ConfigError, parse
 from mpcasv.controllers import make_controller, preset_used
+from mpcasv.io.deploycontroller import field_boat
 from mpcasv.io.logs import read_jsonl
 from mpcasv.io.records import cmd_from_dict, obs_from_dict, same_command
 from mpcasv.io.watchdog import GuardParams, guard
+from mpcasv.models.acoustics import AcousticParams
 
-__all__ = ["ReplayReport", "print_replay", "replay"]
+__all__ = ["ReplayReport", "logged_boat", "print_replay", "replay"]
 
 
 @dataclass
@@ -62,6 +66,20 @@ def _log_path(log: str | Path) -> Path:
     return p
 
 
+def logged_boat(cfg: dict, source: str | Path = "<deploy log>"):
+    """The boat a deploy drove, from the configuration its log records (``controller.vessel``,
+    ``acoustics``; absent: Gretha, the default channel) as the deploy built it
+    (:func:`~mpcasv.io.deploycontroller.field_boat`).
+
+    Raises
+    ------
+    ConfigError
+        The logged vessel cannot be loaded, or the logged acoustics are invalid.
+    """
+    acoustics = parse(AcousticParams, cfg.get("acoustics") or {}, f"{source}: acoustics")
+    return field_boat(cfg["controller"].get("vessel"), acoustics)
+
+
 def replay(log: str | Path, controller: str | None = None, preset: str | None = None,
            tol_m: float = 0.5) -> ReplayReport:  # fmt: skip
     """Replay the decisions of a deploy log (see the module docstring)."""
@@ -78,7 +96,8 @@ def replay(log: str | Path, controller: str | None = None, preset: str | None = 
     same_ctl = name == c["name"]
     preset = preset or (c["preset"] if same_ctl else None)
     n_auv = len(steps[0]["obs"]["auvs"])
-    ctl = make_controller(name, n_auv, preset, c["overrides"] if same_ctl else None)
+    ctl = make_controller(name, n_auv, preset, c["overrides"] if same_ctl else None,
+                          boat=logged_boat(cfg, path))  # fmt: skip
     ctl.reset(n_auv)
     g = started[0]["guard"]
     gp = GuardParams(**g) if same_ctl else GuardParams(**(g | {"speed": float(getattr(

@@ -1,0 +1,65 @@
+"""Options and configuration fields of the deploy, SITL and replay that were accepted and had
+no effect (session 24 audit): each now works or is refused up front in one line naming it.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from mpcasv.interface import ASVState, AUVEstimate, Observation
+from mpcasv.io import replay as replay_mod
+from mpcasv.io.records import cmd_to_dict, obs_to_dict
+from mpcasv.models.params import load_vessel
+
+
+def _deploy_log(folder: Path, controller: dict, acoustics: dict | None = None) -> Path:
+    """A deploy log of one decision whose configuration has ``controller`` (and
+    ``acoustics``)."""
+    from mpcasv.controllers import make_controller
+
+    obs = Observation(0.0, ASVState(0.0, 0.0, 0.0), True,
+                      (AUVEstimate(200.0, 50.0, 10.0, t_last_fix=0.0),))  # fmt: skip
+    ctl = make_controller(controller["name"], 1, controller.get("preset"))
+    ctl.reset(1)
+    guard = {"stale_s": 5.0, "lost_s": 60.0, "v_max": 1.5, "w_max": 0.5, "r_keep": 10.0,
+             "margin_m": 5.0, "speed": 1.5}  # fmt: skip
+    config = {"controller": {"preset": None, "overrides": {}, **controller}}
+    if acoustics is not None:
+        config["acoustics"] = acoustics
+    started = {"kind": "event", "event": "started", "guard": guard, "config": config}
+    step = {"kind": "step", "t": 0.0, "obs": obs_to_dict(obs), "cmd": cmd_to_dict(ctl.step(obs)),
+            "override": None, "status": ["ok"], "ages": [0.0]}  # fmt: skip
+    log = folder / "deploy.jsonl"
+    log.write_text("".join(json.dumps(r) + "\n" for r in (started, step)))
+    return log
+
+
+# --- 1. replay builds the controller for the boat the deploy drove -------------------------
+
+def test_replay_builds_the_controller_for_the_logged_vessel_and_acoustics(tmp_path, monkeypatch):
+    """`replay` built the controller for the default boat (Gretha, default acoustics) whatever
+    the logged `controller.vessel` and `[acoustics]`; the deploy built it for those
+    (deploy_boat). It now builds it for the logged boat, as the deploy did."""
+    boats = []
+    real = replay_mod.make_controller
+
+    def spy(*args, **kw):
+        boats.append(kw.get("boat"))
+        return real(*args, **kw)
+
+    monkeypatch.setattr(replay_mod, "make_controller", spy)
+    acoustics = {"T0": 7.0, "d1": 300.0, "d2": 600.0}
+    log = _deploy_log(tmp_path, {"name": "hybrid-single", "vessel": "otter"}, acoustics)
+    rep = replay_mod.replay(log)
+    assert (rep.n_steps, rep.n_differ) == (1, 0)
+    (boat,) = boats
+    assert boat is not None
+    assert boat.vessel == load_vessel("otter")
+    assert (boat.acoustics.T0, boat.acoustics.d1, boat.acoustics.d2) == (7.0, 300.0, 600.0)
+
+
+def test_replay_of_a_log_without_vessel_or_acoustics_uses_the_deploy_defaults(tmp_path):
+    log = _deploy_log(tmp_path, {"name": "hybrid-single"})
+    boat = replay_mod.logged_boat(json.loads(log.read_text().splitlines()[0])["config"])
+    assert boat.vessel == load_vessel("gretha") and boat.acoustics.T0 == 5.0
