@@ -7,10 +7,52 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import pytest
+import tomli_w
+
+from mpcasv.cli import main
+from mpcasv.config import ConfigError
 from mpcasv.interface import ASVState, AUVEstimate, Observation
 from mpcasv.io import replay as replay_mod
+from mpcasv.io.config import deploy_config_from_dict
 from mpcasv.io.records import cmd_to_dict, obs_to_dict
 from mpcasv.models.params import load_vessel
+
+BASE = {
+    "origin": {"lat_deg": 63.4406, "lon_deg": 10.3530},
+    "controller": {"name": "hybrid-single", "preset": "paper1-field"},
+    "vehicle": [{"role": "asv", "id": 0x2801}, {"role": "auv", "id": 0x2802}],
+}
+
+
+def _config(**change) -> dict:
+    """BASE with top-level sections merged into (``controller``, ``link``, ...)."""
+    data = json.loads(json.dumps(BASE))
+    for key, value in change.items():
+        data[key] = data.get(key, {}) | value if isinstance(value, dict) else value
+    return data
+
+
+def _refused(argv: list, capsys, *words: str) -> str:
+    """`mpcasv ARGV` exits 2 with one error line containing every word; returns the line."""
+    assert main([str(a) for a in argv]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "Traceback" not in err, err
+    for w in words:
+        assert w in err, (w, err)
+    return err
+
+
+def _deploy_refused(data: dict, tmp_path: Path, capsys, *words: str) -> None:
+    """The configuration is refused at load (ConfigError naming every word) and `mpcasv
+    deploy CONFIG --prepare` exits 2 in one line naming them."""
+    with pytest.raises(ConfigError) as err:
+        deploy_config_from_dict(data, "deploy.toml")
+    for w in words:
+        assert w in str(err.value), (w, str(err.value))
+    path = tmp_path / "deploy.toml"
+    path.write_text(tomli_w.dumps(data | {"log": {"dir": str(tmp_path / "log")}}))
+    _refused(["deploy", path, "--prepare"], capsys, str(path), *words)
 
 
 def _deploy_log(folder: Path, controller: dict, acoustics: dict | None = None) -> Path:
@@ -63,3 +105,15 @@ def test_replay_of_a_log_without_vessel_or_acoustics_uses_the_deploy_defaults(tm
     log = _deploy_log(tmp_path, {"name": "hybrid-single"})
     boat = replay_mod.logged_boat(json.loads(log.read_text().splitlines()[0])["config"])
     assert boat.vessel == load_vessel("gretha") and boat.acoustics.T0 == 5.0
+
+
+# --- 2. a vehicle's tcp address with the UDP transport ------------------------------------
+
+def test_a_vehicle_tcp_address_with_the_udp_transport_is_refused(tmp_path, capsys):
+    """`[[vehicle]] tcp = ...` with link.transport = 'udp' (the default) was loaded and never
+    read (the link binds UDP); refused at load, naming the fields."""
+    veh = [{"role": "asv", "id": 0x2801, "tcp": "127.0.0.1:6001"}, {"role": "auv", "id": 0x2802}]
+    _deploy_refused(_config(vehicle=veh), tmp_path, capsys, "vehicle.tcp", "link.transport",
+                    "0x2801")  # fmt: skip
+    ok = _config(vehicle=[v | {"tcp": "127.0.0.1:6001"} for v in veh], link={"transport": "tcp"})
+    assert deploy_config_from_dict(ok).link.transport == "tcp"

@@ -92,7 +92,8 @@ class Vehicle:
     """One vehicle: its role and IMC id and/or system name (both given: both must match).
 
     ``address`` (``"IPv4:port"`` of its IMC UDP service) is optional: by default it is learnt
-    from the vehicle's Announce. ``tcp`` is its backseat server for ``link.transport = "tcp"``.
+    from the vehicle's Announce. ``tcp`` is its backseat server for ``link.transport = "tcp"``
+    (refused with ``"udp"``, which would not read it).
     """
 
     role: Literal["asv", "auv"]
@@ -308,6 +309,11 @@ class DeployConfig:
         if self.link.transport == "tcp" and any(v.tcp is None or v.id is None
                                                 for v in self.vehicle):  # fmt: skip
             raise ValueError("link.transport = 'tcp' needs 'tcp' and 'id' for every vehicle")
+        tcp = [v.label for v in self.vehicle if v.tcp is not None]
+        if self.link.transport == "udp" and tcp:
+            raise ValueError(f"vehicle.tcp (given for {', '.join(tcp)}) is read only with "
+                             "link.transport = 'tcp' (the transport is 'udp'): set "
+                             "link.transport = 'tcp' or remove 'tcp'")  # fmt: skip
         return self
 
     @property
