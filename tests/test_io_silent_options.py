@@ -117,3 +117,16 @@ def test_a_vehicle_tcp_address_with_the_udp_transport_is_refused(tmp_path, capsy
                     "0x2801")  # fmt: skip
     ok = _config(vehicle=[v | {"tcp": "127.0.0.1:6001"} for v in veh], link={"transport": "tcp"})
     assert deploy_config_from_dict(ok).link.transport == "tcp"
+
+
+# --- 3. deploy --prepare with the run's options ---------------------------------------------
+
+@pytest.mark.parametrize("option", [["--dry-run"], ["--duration", "5"]])
+def test_deploy_prepare_refuses_the_options_of_a_run(option, tmp_path, capsys):
+    """`deploy CONFIG --prepare` built the controller and exited, silently ignoring --dry-run
+    and --duration; the combination is refused in one line naming both options, before
+    anything is built."""
+    path = tmp_path / "deploy.toml"
+    path.write_text(tomli_w.dumps(_config(log={"dir": str(tmp_path / "log")})))
+    _refused(["deploy", path, "--prepare", *option], capsys, "--prepare", option[0])
+    assert not (tmp_path / "log").exists()

@@ -75,7 +75,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--quiet", action="store_true", help="no event lines on stderr")
     p.add_argument("--prepare", action="store_true",
                    help="validate CONFIG and build the controller (compiling an MPC's library "
-                   "if it is not cached), then exit without contacting any vehicle")  # fmt: skip
+                   "if it is not cached), then exit without contacting any vehicle (not with "
+                   "--dry-run or --duration, which only a run reads)")  # fmt: skip
     p.set_defaults(func=run_deploy_cli)
 
     s = sub.add_parser(

@@ -48,6 +48,7 @@ from pathlib import Path
 
 import imcpy
 
+from mpcasv.config import ConfigError
 from mpcasv.estimation import make_estimator
 from mpcasv.interface import ASVState, Command, Mode, Observation
 from mpcasv.io.asvwatch import SpeedWatch, Thrusters
@@ -367,7 +368,13 @@ def run_deploy(config: str | Path, dry_run: bool = False, log_dir: Path | None =
     loop until Ctrl-C / SIGTERM (or ``duration``). ``prepare``: stop after building, before
     any socket is opened. Both first try what the run needs of this host
     (:func:`~mpcasv.io.deploystep.check_local`: the log folder, the bind address; the run also
-    ``link.port``)."""
+    ``link.port``). ``prepare`` with ``dry_run`` or ``duration`` (run options: nothing runs)
+    is refused in one line (ConfigError)."""
+    if prepare and (dry_run or duration is not None):
+        given = "--dry-run" if dry_run else "--duration"
+        raise ConfigError(f"--prepare builds the controller and exits without running, so "
+                          f"{given} has no effect: prepare first, then run with {given} "
+                          "(without --prepare)")  # fmt: skip
     cfg = load_deploy_config(config)
     check_local(cfg, config, log_dir, port=not prepare)
     if prepare:
