@@ -130,3 +130,17 @@ def test_deploy_prepare_refuses_the_options_of_a_run(option, tmp_path, capsys):
     path.write_text(tomli_w.dumps(_config(log={"dir": str(tmp_path / "log")})))
     _refused(["deploy", path, "--prepare", *option], capsys, "--prepare", option[0])
     assert not (tmp_path / "log").exists()
+
+
+# --- 4. controller.scenario without the plan estimator -------------------------------------
+
+@pytest.mark.parametrize("estimator", ["perfect", "acoustic", "kalman"])
+def test_a_scenario_without_the_plan_estimator_is_refused(estimator, tmp_path, capsys):
+    """`controller.scenario` was loaded and checked (file, AUV count) and then read by no
+    estimator but 'plan'; refused at load naming the field and the estimator."""
+    case3 = str(Path(__file__).resolve().parents[1] / "experiments" / "scenarios" / "case3.toml")
+    ctl = {"name": "hybrid-single", "estimator": estimator, "scenario": case3}
+    _deploy_refused(_config(controller=ctl), tmp_path, capsys, "controller.scenario",
+                    "estimator = 'plan'", repr(estimator))  # fmt: skip
+    ok = deploy_config_from_dict(_config(controller=ctl | {"estimator": "plan"}))
+    assert ok.controller.scenario == case3

@@ -182,7 +182,7 @@ class ControllerSpec:
     preset: str | None = None  # shipped preset name or TOML path (default: the kind's)
     estimator: str = "perfect"
     control_period: Pos = 1.0  # s between decisions (the papers' timers count seconds)
-    scenario: str | None = None  # optional scenario TOML: the AUVs' plans for "plan"
+    scenario: str | None = None  # scenario TOML: the AUVs' plans, for "plan" only (refused else)
     overrides: dict[str, Any] = Field(default_factory=dict)
     # the boat in the water (shipped vessel name or TOML path): controllers that plan with a
     # vessel model (preset field 'vessel', the MPCs) get it as an override; None: the preset's

@@ -116,7 +116,8 @@ def check_field_budget(params) -> None:
 
 def check_controller(cfg: DeployConfig, source: str | Path) -> None:
     """Validate the controller's name, preset, overrides, vessel, an MPC's field budget
-    (:func:`check_field_budget`) and the AUV count (the controller itself is built by
+    (:func:`check_field_budget`), the estimator and its scenario (read only by ``plan``) and
+    the AUV count (the controller itself is built by
     :func:`build_controller`, before any vehicle is contacted)."""
     from mpcasv.config import ConfigError, resolve
     from mpcasv.controllers import check_boat, controller_kind, load_preset
@@ -142,6 +143,10 @@ def check_controller(cfg: DeployConfig, source: str | Path) -> None:
     if c.speed_feedback and not hasattr(params, "speed"):
         raise ConfigError(f"{source}: controller.speed_feedback: {c.name!r} has no 'speed' "
                           "to cap")  # fmt: skip
+    if c.scenario is not None and c.estimator != "plan":
+        raise ConfigError(f"{source}: controller.scenario: read only by estimator = 'plan' "
+                          f"(the AUVs' plans), the estimator is {c.estimator!r}: remove "
+                          "scenario, or set estimator = 'plan'")  # fmt: skip
     if c.scenario is not None and not Path(c.scenario).is_file():
         raise ConfigError(f"{source}: controller.scenario: no such file {c.scenario!r}")
     if c.estimator == "plan" and c.scenario is None:
