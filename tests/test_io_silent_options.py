@@ -144,3 +144,40 @@ def test_a_scenario_without_the_plan_estimator_is_refused(estimator, tmp_path, c
                     "estimator = 'plan'", repr(estimator))  # fmt: skip
     ok = deploy_config_from_dict(_config(controller=ctl | {"estimator": "plan"}))
     assert ok.controller.scenario == case3
+
+
+# --- 5. [watchdog] fields the controller or mode never reads -------------------------------
+
+@pytest.mark.parametrize("field, value, ctl, words", [
+    ("keep_out_m", 30.0, {"name": "hybrid-single"}, ["hybrid-single", "domain's r_in"]),
+    ("guard_speed", 1.0, {"name": "hybrid-single"}, ["hybrid-single", "'speed'"]),
+    ("guard_speed", 1.0, {"name": "goto", "preset": "goto"}, ["goto", "'speed'"]),
+])  # fmt: skip
+def test_a_guard_field_the_controller_replaces_is_refused(field, value, ctl, words, tmp_path,
+                                                          capsys):  # fmt: skip
+    """`watchdog.keep_out_m` is read only for a controller without avoid sphere or domain,
+    `guard_speed` only for one without a 'speed' (mpcasv.io.deploystep.guard_params); set
+    for one that has them it was silently unused. Refused at load when set explicitly."""
+    data = _config(controller=ctl, watchdog={field: value})
+    _deploy_refused(data, tmp_path, capsys, f"watchdog.{field}", *words)
+    deploy_config_from_dict(_config(controller=ctl))  # the default is not refused
+
+
+def test_keep_out_m_is_accepted_for_a_controller_without_a_domain():
+    """goto has no domain: the guard keeps out watchdog.keep_out_m, so it may be set."""
+    from mpcasv.controllers import make_controller
+    from mpcasv.io.deploystep import guard_params
+
+    cfg = deploy_config_from_dict(_config(controller={"name": "goto", "preset": "goto"},
+                                          watchdog={"keep_out_m": 30.0}))  # fmt: skip
+    assert guard_params(cfg, make_controller("goto", 1)).r_keep == 30.0
+
+
+def test_the_propeller_threshold_without_thrusters_is_refused(tmp_path, capsys):
+    """`propeller_on_threshold` is read only from thruster messages; with `propeller =
+    "command"` it was silently unused. Refused when set explicitly."""
+    wd = {"propeller": "command", "propeller_on_threshold": 0.1}
+    _deploy_refused(_config(watchdog=wd), tmp_path, capsys, "watchdog.propeller_on_threshold",
+                    "'command'")  # fmt: skip
+    deploy_config_from_dict(_config(watchdog={"propeller": "command"}))
+    deploy_config_from_dict(_config(watchdog=wd | {"propeller": "thruster"}))

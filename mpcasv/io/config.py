@@ -17,7 +17,7 @@ from typing import Annotated, Any, Literal
 
 from pydantic import Field, Strict, field_validator, model_validator
 
-from mpcasv.config import Float, NonNeg, Pos, frozen, load, parse
+from mpcasv.config import Float, NonNeg, Pos, frozen, load_toml, parse
 from mpcasv.io.deploycontroller import (
     MIN_SOLVE_MS,
     build_controller,
@@ -329,12 +329,13 @@ class DeployConfig:
 def load_deploy_config(path: str | Path) -> DeployConfig:
     """Load and validate a deploy TOML file; also checks controller, preset and estimator
     names now, so that nothing fails after the vehicles have been contacted."""
-    cfg = load(DeployConfig, path, "deploy")
-    check_controller(cfg, path)
-    return cfg
+    return deploy_config_from_dict(load_toml(path, "deploy"), path)
 
 
-def deploy_config_from_dict(data: dict, source: str = "<deploy config>") -> DeployConfig:
+def deploy_config_from_dict(data: dict, source: str | Path = "<deploy config>") -> DeployConfig:
+    """Validate a deploy configuration given as a mapping (a TOML file's tables), with the
+    checks of :func:`load_deploy_config`; ``source`` names it in the messages."""
     cfg = parse(DeployConfig, data, source)
-    check_controller(cfg, source)
+    watchdog = data.get("watchdog")
+    check_controller(cfg, source, frozenset(watchdog if isinstance(watchdog, dict) else ()))
     return cfg

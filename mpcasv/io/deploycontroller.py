@@ -15,7 +15,8 @@ if TYPE_CHECKING:
     from mpcasv.io.config import DeployConfig
 
 __all__ = ["MIN_SOLVE_MS", "build_controller", "check_controller", "check_field_budget",
-           "controller_overrides", "deploy_boat", "field_boat", "known_plans"]
+           "check_watchdog", "controller_overrides", "deploy_boat", "field_boat",
+           "known_plans"]
 
 
 def controller_overrides(cfg: DeployConfig, speed: float | None = None) -> dict[str, Any]:
@@ -114,11 +115,13 @@ def check_field_budget(params) -> None:
                           "ms (the presets: 200)")  # fmt: skip
 
 
-def check_controller(cfg: DeployConfig, source: str | Path) -> None:
+def check_controller(cfg: DeployConfig, source: str | Path,
+                     watchdog_set: frozenset[str] = frozenset()) -> None:  # fmt: skip
     """Validate the controller's name, preset, overrides, vessel, an MPC's field budget
-    (:func:`check_field_budget`), the estimator and its scenario (read only by ``plan``) and
-    the AUV count (the controller itself is built by
-    :func:`build_controller`, before any vehicle is contacted)."""
+    (:func:`check_field_budget`), the estimator and its scenario (read only by ``plan``),
+    the AUV count (the controller itself is built by :func:`build_controller`, before any
+    vehicle is contacted), and that no ``[watchdog]`` field set explicitly (the names in
+    ``watchdog_set``) goes unread with this controller and mode (:func:`check_watchdog`)."""
     from mpcasv.config import ConfigError, resolve
     from mpcasv.controllers import check_boat, controller_kind, load_preset
     from mpcasv.estimation import ESTIMATORS
@@ -140,6 +143,7 @@ def check_controller(cfg: DeployConfig, source: str | Path) -> None:
         check_field_budget(params)
     except ConfigError as exc:
         raise ConfigError(f"{source}: controller: {exc}") from None
+    check_watchdog(cfg, params, watchdog_set, source)
     if c.speed_feedback and not hasattr(params, "speed"):
         raise ConfigError(f"{source}: controller.speed_feedback: {c.name!r} has no 'speed' "
                           "to cap")  # fmt: skip
@@ -163,6 +167,39 @@ def check_controller(cfg: DeployConfig, source: str | Path) -> None:
                           f"{c.scenario!r} gives no AUV a plan (waypoints), so every AUV "
                           "would run the Kalman filter: give the scenario of the AUVs' "
                           "plans, or estimator = 'kalman'")  # fmt: skip
+
+
+def check_watchdog(cfg: DeployConfig, params, watchdog_set, source: str | Path) -> None:
+    """Refuse a ``[watchdog]`` field set explicitly (named in ``watchdog_set``) that the run
+    would never read: ``keep_out_m`` and ``guard_speed`` when the controller's ``avoid``
+    option or domain, and its ``speed``, take their place in the guard
+    (:func:`mpcasv.io.watchdog.guard_sources`); ``propeller_on_threshold`` with
+    ``propeller = "command"`` (no thruster is read). Defaults are never refused.
+
+    Raises
+    ------
+    ConfigError
+        One line naming ``source``, the field, the controller or mode, and what to do.
+    """
+    from mpcasv.io.watchdog import guard_sources
+
+    c, wd = cfg.controller, cfg.watchdog
+    keep, speed_from = guard_sources(params, getattr(params, "domain", None))
+    what = {"avoid": "its 'avoid' sphere", "domain": "its domain's r_in"}
+    if "keep_out_m" in watchdog_set and keep != "keep_out_m":
+        raise ConfigError(f"{source}: watchdog.keep_out_m: not read with controller "
+                          f"{c.name!r}, whose guard keeps out {what[keep]}: remove "
+                          "keep_out_m (it is for controllers without a domain)")  # fmt: skip
+    if "guard_speed" in watchdog_set and speed_from != "guard_speed":
+        raise ConfigError(f"{source}: watchdog.guard_speed: not read with controller "
+                          f"{c.name!r}, whose guard transits at its own 'speed' "
+                          f"({params.speed:g} m/s): remove guard_speed (set the speed in "
+                          "controller.overrides)")  # fmt: skip
+    if "propeller_on_threshold" in watchdog_set and wd.propeller != "thruster":
+        raise ConfigError(f"{source}: watchdog.propeller_on_threshold: read only with "
+                          f"watchdog.propeller = 'thruster' (it is {wd.propeller!r}: no "
+                          "thruster is read): remove it, or set propeller = "
+                          "'thruster'")  # fmt: skip
 
 
 def known_plans(cfg: DeployConfig) -> list:

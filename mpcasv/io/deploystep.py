@@ -19,7 +19,7 @@ import time
 
 from mpcasv.interface import Command
 from mpcasv.io.config import DeployConfig, build_controller
-from mpcasv.io.watchdog import GuardParams
+from mpcasv.io.watchdog import GuardParams, guard_sources
 
 log = logging.getLogger("mpcasv.deploy")
 
@@ -56,16 +56,17 @@ def check_budget(cfg: DeployConfig, controller, log=log.warning) -> bool:
 def guard_params(cfg: DeployConfig, controller) -> GuardParams:
     """Guard parameters: watchdog limits, and the keep-out sphere of the controller's
     ``avoid`` option (:class:`mpcasv.hybrid.avoidance.AvoidanceParams`), else its domain's
-    ``r_in``, else ``watchdog.keep_out_m``."""
+    ``r_in``, else ``watchdog.keep_out_m``; the controller's ``speed``, else
+    ``watchdog.guard_speed`` (:func:`~mpcasv.io.watchdog.guard_sources`)."""
     wd = cfg.watchdog
     params = getattr(controller, "params", None)
     domain = getattr(controller, "domain", None)
-    avoid = getattr(params, "avoid", None)
-    if avoid is not None:
-        r_keep = avoid.sphere(domain)
+    keep, speed_from = guard_sources(params, domain)
+    if keep == "avoid":
+        r_keep = params.avoid.sphere(domain)
     else:
-        r_keep = domain.r_in if domain is not None else wd.keep_out_m
-    speed = float(getattr(params, "speed", wd.guard_speed))
+        r_keep = domain.r_in if keep == "domain" else wd.keep_out_m
+    speed = float(params.speed if speed_from == "speed" else wd.guard_speed)
     return GuardParams(wd.auv_stale_s, wd.auv_lost_s, wd.auv_speed_max, wd.auv_rise_rate,
                        float(r_keep), wd.guard_margin_m, speed)  # fmt: skip
 

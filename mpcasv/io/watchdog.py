@@ -37,7 +37,8 @@ from dataclasses import dataclass, replace
 from mpcasv.hybrid.avoidance import r_avoid_uncertain
 from mpcasv.interface import AUVEstimate, Command, Mode, Observation, Reason
 
-__all__ = ["OK", "UNCERTAIN", "LOST", "GuardParams", "auv_status", "guard", "inflate"]
+__all__ = ["OK", "UNCERTAIN", "LOST", "GuardParams", "auv_status", "guard", "guard_sources",
+           "inflate"]
 
 OK, UNCERTAIN, LOST = "ok", "uncertain", "lost"
 
@@ -53,6 +54,21 @@ class GuardParams:
     r_keep: float  # keep-out sphere radius around the AUV (m)
     margin_m: float  # clearance beyond the grown radius when moving away
     speed: float  # m/s of a guard transit when the controller gave none
+
+
+def guard_sources(params, domain) -> tuple[str, str]:
+    """Where the guard takes its keep-out sphere and its transit speed from, for a controller
+    with parameters ``params`` and anti-collision domain ``domain`` (None: it has none):
+    (``"avoid"`` the controller's ``avoid`` option, else ``"domain"`` its domain's ``r_in``,
+    else ``"keep_out_m"`` the watchdog's; ``"speed"`` the controller's, else
+    ``"guard_speed"`` the watchdog's). One definition for the guard's parameters
+    (:func:`mpcasv.io.deploystep.guard_params`) and for the refusal, at load, of the
+    ``[watchdog]`` fields the controller never reads."""
+    if getattr(params, "avoid", None) is not None:
+        keep = "avoid"
+    else:
+        keep = "domain" if domain is not None else "keep_out_m"
+    return keep, "speed" if hasattr(params, "speed") else "guard_speed"
 
 
 def auv_status(age: float, p: GuardParams) -> str:
