@@ -126,8 +126,6 @@ def register(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--asv-outage", type=_pair,
                    help="'T0,T1': kill the ASV at world time T0, restart at T1 > T0 (each "
                    "at the first period start at or after it; T0 within the run)")  # fmt: skip
-    s.add_argument("--controller", help="controller whose domain the world uses (metrics)")
-    s.add_argument("--preset", help="its preset")
     s.add_argument("--out", type=Path, default=Path("runs/sitl"))
     s.add_argument("--plots", action="store_true", help="also write the PNG figures")
     s.add_argument("--ready-file", type=Path, help="write the bound ports here (a .json file)")
@@ -181,8 +179,7 @@ def run_sitl_cli(args: argparse.Namespace) -> int:
         duration=args.duration, hold=args.hold, reaction=args.reaction, lockstep=args.lockstep,
         reanchor_m=args.reanchor, asv_name=args.asv_name, asv_id=args.asv_id,
         auv_id_base=args.auv_id_base, tcp=args.tcp, asv_outage=args.asv_outage,
-        out=args.out, plots=args.plots, controller=args.controller, preset=args.preset,
-        ready_file=args.ready_file,
+        out=args.out, plots=args.plots, ready_file=args.ready_file,
     ).check(sc)  # fmt: skip
     check_output_folder(args.out)
     if args.ready_file is not None:

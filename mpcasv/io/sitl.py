@@ -99,9 +99,8 @@ class Sitl(AsvDune):
         self.sc, self.opt = scenario, opt
         self.clock = Clock(opt.speedup)
         self.origin = Origin.from_degrees(*opt.origin)
-        name = opt.controller or scenario.controller
-        preset = opt.preset or (scenario.preset if name == scenario.controller else None)
-        make_controller(name, len(scenario.auv), preset)  # validates --controller/--preset
+        # the scenario's controller and preset: the world judges by that preset's domain
+        make_controller(scenario.controller, len(scenario.auv), scenario.preset)  # validates
         self.world = World(scenario, opt.seed)  # judged by the scenario's domain (issue 12)
         self.domain = self.world.domain
         self.Tc = scenario.sim.control_period

@@ -67,8 +67,6 @@ class SitlOptions:
     asv_outage: tuple[float, float] | None = None
     out: Path = Path("runs/sitl")
     plots: bool = False
-    controller: str | None = None  # for the world's domain (reliable-fix rule, metrics)
-    preset: str | None = None
     ready_file: Path | None = None
 
     @staticmethod
