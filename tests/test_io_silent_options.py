@@ -198,3 +198,14 @@ def test_sitl_has_no_controller_or_preset_option(option, tmp_path, capsys):
     _refused(["sitl", case3, *option, "--out", tmp_path / "s"], capsys,
              f"unrecognized arguments: {' '.join(option)}")  # fmt: skip
     assert not (tmp_path / "s").exists()
+
+
+# --- 7. sitl --lockstep --reaction ---------------------------------------------------------
+
+def test_sitl_refuses_reaction_with_lockstep(tmp_path, capsys):
+    """`sitl --lockstep --reaction R` waited without limit whatever R; refused in one line
+    naming both options, before the world is built. --lockstep alone is unaffected."""
+    case3 = Path(__file__).resolve().parents[1] / "experiments" / "scenarios" / "case3.toml"
+    _refused(["sitl", case3, "--lockstep", "--reaction", "0.5", "--out", tmp_path / "s"],
+             capsys, "--reaction 0.5", "--lockstep")  # fmt: skip
+    assert not (tmp_path / "s").exists()

@@ -110,8 +110,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     s.add_argument(
         "--reaction",
         type=float,
-        default=0.9,
-        help="longest wait for the Reference answering a state, in periods (0.9)",
+        default=None,
+        help="longest wait for the Reference answering a state, in [0, 1) periods (0.9); "
+        "not with --lockstep, which waits however long it takes",
     )
     s.add_argument("--lockstep", action="store_true",
                    help="wait for the Reference answering each period's state however long it "
@@ -166,17 +167,23 @@ def run_deploy_cli(args: argparse.Namespace) -> int:
 
 def run_sitl_cli(args: argparse.Namespace) -> int:
     from mpcasv.io.sitl import SitlOptions, run_sitl
+    from mpcasv.io.sitloptions import REACTION
     from mpcasv.outputs import check_output_file, check_output_folder
     from mpcasv.sim.scenario import load_scenario
 
     _logging(args.quiet)
-    if not 0 <= args.reaction < 1:
-        raise ConfigError(f"--reaction must be in [0, 1) periods, got {args.reaction}")
+    if args.reaction is not None and args.lockstep:
+        raise ConfigError(f"--reaction {args.reaction:g} has no effect with --lockstep, which "
+                          "waits for every answering Reference however long it takes: give "
+                          "one of them")  # fmt: skip
+    reaction = REACTION if args.reaction is None else args.reaction
+    if not 0 <= reaction < 1:
+        raise ConfigError(f"--reaction must be in [0, 1) periods, got {reaction}")
     sc = load_scenario(args.scenario)
     opt = SitlOptions(
         seed=args.seed, nominal=args.nominal, speedup=args.speedup, bind=args.bind,
         discovery_port=args.discovery_port, base_port=args.base_port, origin=args.origin,
-        duration=args.duration, hold=args.hold, reaction=args.reaction, lockstep=args.lockstep,
+        duration=args.duration, hold=args.hold, reaction=reaction, lockstep=args.lockstep,
         reanchor_m=args.reanchor, asv_name=args.asv_name, asv_id=args.asv_id,
         auv_id_base=args.auv_id_base, tcp=args.tcp, asv_outage=args.asv_outage,
         out=args.out, plots=args.plots, ready_file=args.ready_file,

@@ -29,10 +29,12 @@ from mpcasv.io.netcheck import PORT_MAX, check_bindable, check_ipv4, check_port
 if TYPE_CHECKING:
     from mpcasv.sim.scenario import Scenario
 
-__all__ = ["SPEEDUP_MAX", "SPEEDUP_MIN", "SitlOptions", "check_speedup"]
+__all__ = ["REACTION", "SPEEDUP_MAX", "SPEEDUP_MIN", "SitlOptions", "check_speedup"]
 
 #: The clock factors accepted (``--speedup`` and the deploy's ``clock.speedup``)
 SPEEDUP_MIN, SPEEDUP_MAX = 0.01, 1000.0
+#: the default longest wait for the Reference answering a state (periods; ``--reaction``)
+REACTION = 0.9
 IMC_ID_MAX = 0xFFFE  # 0xFFFF is broadcast
 
 
@@ -57,7 +59,7 @@ class SitlOptions:
     origin: tuple[float, float] = (63.4406, 10.3530)  # deg
     duration: float | None = None  # world seconds (default: the scenario's)
     hold: bool = False
-    reaction: float = 0.9  # longest wait for a Reference, in periods
+    reaction: float = REACTION  # longest wait for a Reference, in periods (not lockstep)
     lockstep: bool = False  # wait for the answering Reference however long it takes
     reanchor_m: float = 1000.0
     asv_name: str = "sitl-asv"
