@@ -186,3 +186,43 @@ def test_tune_controller_refuses_suite_plots_and_acceptance_it_would_not_use(
     refused(["tune", "controller", str(ranges), "--out", str(out), "--quiet"], capsys,
             str(tmp_path / "train.toml"), *words)
     assert not out.exists()
+
+
+def test_the_estimator_harness_leaves_plan_out_where_no_auv_has_one(tmp_path, capsys):
+    """``python -m mpcasv.estimation.evaluate`` registers its estimators under recording names,
+    which the World's check of "plan" did not see: on Case 4 (a transit AUV) its "plan" row
+    was the Kalman filter's (a review, session 24). Asked for, it is refused; by default it is
+    left out and said."""
+    import re
+
+    from mpcasv.estimation.evaluate import main as evaluate
+    from mpcasv.estimation.evaluate import run_estimators
+    from mpcasv.sim.scenario import load_scenario
+
+    text = (SCENARIOS / "case4.toml").read_text()
+    short = tmp_path / "case4.toml"
+    short.write_text(re.sub(r"(?m)^duration = .*$", "duration = 5.0", text, count=1))
+    assert evaluate([str(short), "--estimators", "kalman", "plan"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--estimators plan" in err[0] and "no AUV" in err[0], err
+    with pytest.raises(ConfigError, match="no AUV"):
+        run_estimators(load_scenario(short), ["plan"], 0)
+    assert evaluate([str(short)]) == 0
+    out = capsys.readouterr().out
+    assert "plan left out" in out
+    rows = re.findall(r"(?m)^(\w+)\s+[-\d.]+\s", out)  # the table's rows: estimator, figures
+    assert rows == ["acoustic", "kalman"], out
+
+
+def test_a_falsify_family_with_plan_and_no_planned_auv_is_refused_up_front(tmp_path):
+    """A family whose AUV is a pursuer, with estimator "plan": every trial would have failed
+    in the World; refused when the family is checked, before any trial."""
+    from mpcasv.experiments.falsify_family import check_range_ends, load_family
+
+    text = (ROOT / "experiments" / "falsify" / "pursuer-single.toml").read_text()
+    changed = tmp_path / "pursuer-single.toml"
+    changed.write_text(text.replace('estimator = "kalman"', 'estimator = "plan"'))
+    assert changed.read_text() != text
+    check_range_ends(load_family(ROOT / "experiments" / "falsify" / "pursuer-single.toml"))
+    with pytest.raises(ConfigError, match="estimator 'plan'"):
+        check_range_ends(load_family(changed))

@@ -34,6 +34,7 @@ import pandas as pd
 
 from mpcasv.config import ConfigError
 from mpcasv.estimation.base import ESTIMATORS
+from mpcasv.estimation.plan import check_plan_estimator, has_plan
 from mpcasv.sim.scenario import Scenario
 
 __all__ = [
@@ -76,6 +77,8 @@ def run_estimators(
     unknown = [e for e in estimators if e not in ESTIMATORS]
     if unknown:
         raise ConfigError(f"unknown estimator(s) {unknown}; known: {sorted(ESTIMATORS)}")
+    for est in estimators:  # the World sees a recording name, not "plan": checked here
+        check_plan_estimator(scenario, est, f"--estimators {est}", "--estimators without plan")
     name = controller or scenario.controller
     preset = preset or (scenario.preset if name == scenario.controller else None)
     out = {}
@@ -238,7 +241,9 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("scenario", type=Path)
-    ap.add_argument("--estimators", nargs="+", default=list(DEFAULT_ESTIMATORS))
+    ap.add_argument("--estimators", nargs="+",
+                    help=f"default: {' '.join(DEFAULT_ESTIMATORS)} ('plan' left out, and said, "
+                    "where no AUV has a plan)")  # fmt: skip
     ap.add_argument("--seeds", nargs="+", type=int, default=[0])
     ap.add_argument("--controller")
     ap.add_argument("--preset")
@@ -266,6 +271,13 @@ def _run(args: argparse.Namespace, load_scenario) -> int:
     if args.plot is not None:  # before the runs: `--plot out.txt` failed in savefig after them
         check_output_file(args.plot, "--plot", PLOT_SUFFIXES, parents=True)
     sc = load_scenario(args.scenario)
+    if args.estimators is None:  # the default: 'plan' only where some AUV has one
+        args.estimators = [e for e in DEFAULT_ESTIMATORS if e != "plan" or has_plan(sc)]
+        if "plan" not in args.estimators:
+            print(f"plan left out: no AUV of scenario {sc.name!r} has a plan (waypoints), so "
+                  "it would be its Kalman filter")  # fmt: skip
+    for est in args.estimators:  # before any run (and its progress bar)
+        check_plan_estimator(sc, est, f"--estimators {est}", "--estimators without plan")
     table = compare_estimators(sc, args.estimators, args.seeds, args.controller, args.preset,
                                progress=True)  # fmt: skip
     with pd.option_context("display.width", 200, "display.max_columns", 20, "display.precision", 2):

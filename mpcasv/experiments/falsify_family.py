@@ -163,8 +163,13 @@ def check_range_ends(family: LoadedFamily) -> None:
         One line naming the file, the parameter, the end and its value, and the scenario
         loader's cause.
     """
+    from mpcasv.estimation import check_plan_estimator
+
     params = family.spec.param
     mid = {p.name: 0.5 * (p.low + p.high) for p in params}
+    # the estimator "plan" on AUVs none of which has a plan: every trial would fail late
+    check_plan_estimator(candidate(family, mid, "midpoints")[0], None,
+                         f"{family.source}: estimator 'plan'", "estimator = 'kalman'")  # fmt: skip
     for p in params:
         for end, value in zip(("low", "high"), _ends(p), strict=True):
             try:
