@@ -209,3 +209,29 @@ def test_sitl_refuses_reaction_with_lockstep(tmp_path, capsys):
     _refused(["sitl", case3, "--lockstep", "--reaction", "0.5", "--out", tmp_path / "s"],
              capsys, "--reaction 0.5", "--lockstep")  # fmt: skip
     assert not (tmp_path / "s").exists()
+
+
+def test_replay_says_a_logged_vessel_it_cannot_load_came_from_the_log(tmp_path):
+    """A relative vessel path in the log is the deploy's, not the replay's working folder's:
+    the refusal names the logged field (it read as if the user had given the name)."""
+    from mpcasv.io.replay import logged_boat
+
+    with pytest.raises(ConfigError, match=r"x\.jsonl: the logged controller\.vessel "
+                                          r"'vessels/mine\.toml': .*replay from its folder"):
+        logged_boat({"controller": {"vessel": "vessels/mine.toml"}}, "x.jsonl")
+
+
+def test_sitl_options_refuse_reaction_with_lockstep_from_python_too():
+    """The check is the options' own (it was only the command line's): a library caller
+    giving both was silently accepted."""
+    from mpcasv.io.sitloptions import REACTION, SitlOptions
+    from mpcasv.sim.scenario import load_scenario
+
+    sc = load_scenario(Path(__file__).resolve().parents[1] / "experiments" / "scenarios"
+                       / "case3.toml")  # fmt: skip
+    with pytest.raises(ConfigError, match="--reaction 0.5 has no effect with --lockstep"):
+        SitlOptions(lockstep=True, reaction=0.5).check(sc)
+    with pytest.raises(ConfigError, match=r"--reaction must be in \[0, 1\)"):
+        SitlOptions(reaction=1.5).check(sc)
+    assert SitlOptions(lockstep=True).check(sc).wait_periods == REACTION
+    assert SitlOptions(reaction=0.2).check(sc).wait_periods == 0.2

@@ -377,7 +377,7 @@ def test_deploy_feeds_the_simulators_estimators(tmp_path, estimator):
 
 @pytest.mark.parametrize("scenario, says", [
     (None, "needs controller.scenario"),
-    ("case4.toml", "gives no AUV a plan"),  # a transit: no waypoints
+    ("case4.toml", "no AUV of scenario 'case4' has a plan"),  # a transit: no waypoints
 ])  # fmt: skip
 def test_deploy_plan_estimator_without_plans_is_refused(tmp_path, scenario, says):
     """``estimator = "plan"`` with no plan for any AUV would silently run the Kalman filter

@@ -49,8 +49,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--workers",
         type=int,
         default=None,
-        help=f"local worker processes (default: one per core, {cpu_count()}; 1: this process; "
-        "at most 4 per core; never more than the runs of a batch; not with --dask)",
+        help=f"local worker processes (default: one per core, {cpu_count()}; 1: one worker "
+        "process with the runs' time limit; at most 4 per core; never more than the runs of a "
+        "batch; not with --dask)",
     )
     p.add_argument("--dask", metavar="ADDRESS",
                    help="run on a Dask scheduler instead (MPC runs need workers that are not "

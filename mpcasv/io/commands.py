@@ -9,8 +9,6 @@ import math
 import sys
 from pathlib import Path
 
-from mpcasv.config import ConfigError
-
 
 def _imc_id(text: str) -> int:
     v = int(text, 0)
@@ -167,23 +165,15 @@ def run_deploy_cli(args: argparse.Namespace) -> int:
 
 def run_sitl_cli(args: argparse.Namespace) -> int:
     from mpcasv.io.sitl import SitlOptions, run_sitl
-    from mpcasv.io.sitloptions import REACTION
     from mpcasv.outputs import check_output_file, check_output_folder
     from mpcasv.sim.scenario import load_scenario
 
     _logging(args.quiet)
-    if args.reaction is not None and args.lockstep:
-        raise ConfigError(f"--reaction {args.reaction:g} has no effect with --lockstep, which "
-                          "waits for every answering Reference however long it takes: give "
-                          "one of them")  # fmt: skip
-    reaction = REACTION if args.reaction is None else args.reaction
-    if not 0 <= reaction < 1:
-        raise ConfigError(f"--reaction must be in [0, 1) periods, got {reaction}")
     sc = load_scenario(args.scenario)
     opt = SitlOptions(
         seed=args.seed, nominal=args.nominal, speedup=args.speedup, bind=args.bind,
         discovery_port=args.discovery_port, base_port=args.base_port, origin=args.origin,
-        duration=args.duration, hold=args.hold, reaction=reaction, lockstep=args.lockstep,
+        duration=args.duration, hold=args.hold, reaction=args.reaction, lockstep=args.lockstep,
         reanchor_m=args.reanchor, asv_name=args.asv_name, asv_id=args.asv_id,
         auv_id_base=args.auv_id_base, tcp=args.tcp, asv_outage=args.asv_outage,
         out=args.out, plots=args.plots, ready_file=args.ready_file,

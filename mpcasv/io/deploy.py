@@ -371,10 +371,11 @@ def run_deploy(config: str | Path, dry_run: bool = False, log_dir: Path | None =
     ``link.port``). ``prepare`` with ``dry_run`` or ``duration`` (run options: nothing runs)
     is refused in one line (ConfigError)."""
     if prepare and (dry_run or duration is not None):
-        given = "--dry-run" if dry_run else "--duration"
+        given = " and ".join(o for o, on in (("--dry-run", dry_run),
+                                             ("--duration", duration is not None)) if on)
         raise ConfigError(f"--prepare builds the controller and exits without running, so "
-                          f"{given} has no effect: prepare first, then run with {given} "
-                          "(without --prepare)")  # fmt: skip
+                          f"{given} {'have' if ' and ' in given else 'has'} no effect: prepare "
+                          f"first, then run with {given} (without --prepare)")  # fmt: skip
     cfg = load_deploy_config(config)
     check_local(cfg, config, log_dir, port=not prepare)
     if prepare:

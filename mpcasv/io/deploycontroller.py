@@ -159,14 +159,17 @@ def check_controller(cfg: DeployConfig, source: str | Path,
                           "would run the Kalman filter: give scenario, or estimator = "
                           "'kalman'")  # fmt: skip
     try:
-        plans = known_plans(cfg)
+        known_plans(cfg)  # the scenario loads and has the configuration's AUVs
     except ConfigError as exc:
         raise ConfigError(f"{source}: {exc}") from None
-    if c.estimator == "plan" and all(p is None for p in plans):
-        raise ConfigError(f"{source}: controller.estimator = 'plan': controller.scenario "
-                          f"{c.scenario!r} gives no AUV a plan (waypoints), so every AUV "
-                          "would run the Kalman filter: give the scenario of the AUVs' "
-                          "plans, or estimator = 'kalman'")  # fmt: skip
+    if c.estimator == "plan" and c.scenario is not None:
+        from mpcasv.estimation import check_plan_estimator
+        from mpcasv.sim.scenario import load_scenario
+
+        check_plan_estimator(load_scenario(c.scenario), "plan",
+                             f"{source}: controller.estimator = 'plan' with controller."
+                             f"scenario {c.scenario!r}", "the scenario of the AUVs' plans, "
+                             "or estimator = 'kalman'")  # fmt: skip
 
 
 def check_watchdog(cfg: DeployConfig, params, watchdog_set, source: str | Path) -> None:

@@ -77,7 +77,12 @@ def logged_boat(cfg: dict, source: str | Path = "<deploy log>"):
         The logged vessel cannot be loaded, or the logged acoustics are invalid.
     """
     acoustics = parse(AcousticParams, cfg.get("acoustics") or {}, f"{source}: acoustics")
-    return field_boat(cfg["controller"].get("vessel"), acoustics)
+    vessel = cfg["controller"].get("vessel")
+    try:
+        return field_boat(vessel, acoustics)
+    except ConfigError as exc:  # say where the name came from (a path relative to the deploy's
+        raise ConfigError(f"{source}: the logged controller.vessel {vessel!r}: {exc} (a "
+                          "relative path is the deploy's: replay from its folder)") from None
 
 
 def replay(log: str | Path, controller: str | None = None, preset: str | None = None,

@@ -309,7 +309,7 @@ class Sitl(AsvDune):
                 return
             with contextlib.suppress(asyncio.TimeoutError):
                 await asyncio.wait_for(
-                    self.ref_event.wait(), self.clock.wall_seconds(self.opt.reaction * self.Tc)
+                    self.ref_event.wait(), self.clock.wall_seconds(self.opt.wait_periods * self.Tc)
                 )
         finally:
             self.in_window = False

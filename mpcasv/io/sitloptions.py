@@ -59,7 +59,7 @@ class SitlOptions:
     origin: tuple[float, float] = (63.4406, 10.3530)  # deg
     duration: float | None = None  # world seconds (default: the scenario's)
     hold: bool = False
-    reaction: float = REACTION  # longest wait for a Reference, in periods (not lockstep)
+    reaction: float | None = None  # longest wait for a Reference, periods (None: REACTION)
     lockstep: bool = False  # wait for the answering Reference however long it takes
     reanchor_m: float = 1000.0
     asv_name: str = "sitl-asv"
@@ -83,10 +83,22 @@ class SitlOptions:
         duration = self.duration or scenario.duration
         return int(math.ceil(duration / scenario.sim.control_period - 1e-9))
 
+    @property
+    def wait_periods(self) -> float:
+        """The longest wait for the Reference answering a state (periods): ``reaction``, by
+        default :data:`REACTION` (not read with ``lockstep``, which waits however long)."""
+        return REACTION if self.reaction is None else self.reaction
+
     def check(self, scenario: Scenario) -> SitlOptions:
         """Refuse impossible values (see the module docstring) for ``scenario`` (its AUVs, its
         duration and control period); nothing is bound or written. Returns ``self``."""
         auv_names = [a.name for a in scenario.auv]
+        if self.reaction is not None and self.lockstep:
+            raise ConfigError(f"--reaction {self.reaction:g} has no effect with --lockstep, "
+                              "which waits for every answering Reference however long it "
+                              "takes: give one of them")  # fmt: skip
+        if not 0 <= self.wait_periods < 1:  # nan fails too
+            raise ConfigError(f"--reaction must be in [0, 1) periods, got {self.reaction}")
         check_seed(self.seed, "--seed")
         check_speedup(self.speedup)
         lat, lon = self.origin
