@@ -43,8 +43,10 @@ def _runner(tmp_path, out):
     driver = tmp_path / "driver.py"
     driver.write_text(DRIVER)
     env = os.environ | {"FAIL_JOB": FAILING.job_id}
+    # --job-timeout 0: the jobs run in this process, where the driver's patch is (with a
+    # limit, --workers 1 is a pool of one spawned process, which would not see it)
     cmd = [sys.executable, str(driver), "compare", "quick", "--out", str(out), "--workers", "1",
-           "--quiet", "--no-report"]  # fmt: skip
+           "--job-timeout", "0", "--quiet", "--no-report"]  # fmt: skip
     return subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
 
 
