@@ -334,7 +334,9 @@ def run_cli(args) -> int:
     (folder / "identify.md").write_text(table + "\n")
     (folder / "identify.json").write_text(json.dumps({
         "coeffs": {c: getattr(res.params, c) for c in res.coeffs}, "rel_std": res.rel_std,
-        "current": res.current, "metrics": res.metrics}, indent=1))  # fmt: skip
+        "rel_std_plain": res.rel_std_plain, "var_ratio": res.var_ratio,
+        "sigma_method": res.sigma_method, "current": res.current,
+        "metrics": res.metrics}, indent=1))  # fmt: skip
     print(table)
     print(f"wrote {args.out} and {folder}/ (identify.md, identify.json, identify_replay.png)")
     return 0

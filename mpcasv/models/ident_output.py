@@ -10,8 +10,12 @@ from pathlib import Path
 import numpy as np
 
 from mpcasv.models.ident_checks import validation_failures
+from mpcasv.models.ident_cov import LOOSE, correlated_warning, ratio_line
 from mpcasv.models.identify import OUTPUTS, Identification, mass_terms
 from mpcasv.models.params import VesselParams
+
+#: the 1-sigma basis in one coefficient's provenance (the header gives the method in full)
+SIGMA_BASIS = "Newey-West HAC within replay windows"
 
 
 def write_params(path: Path, res: Identification, prior: VesselParams, sources: list[str]) -> None:
@@ -49,11 +53,14 @@ def write_params(path: Path, res: Identification, prior: VesselParams, sources: 
                          f"(prior declared {prior.u_max:g} m/s: {prior.provenance.get(key, '')})")
         elif key in res.coeffs:
             prov[key] = (f"identified by mpcasv identify from {', '.join(sources)}: simulation-"
-                         f"error least squares, 1-sigma {100 * res.rel_std[key]:.1f} %; "
+                         f"error least squares, 1-sigma {100 * res.rel_std[key]:.1f} % "
+                         f"({SIGMA_BASIS}; variance {res.var_ratio.get(key, math.nan):.3g} x "
+                         f"the independent-residual one); "
                          f"validation fit {fit}; prior {getattr(prior, key):.6g}")  # fmt: skip
         else:
             prov[key] = "held at the prior: " + prior.provenance.get(key, "(no provenance)")
     header = (f"# Identified by `mpcasv identify` from {', '.join(sources)}.\n"
+              f"# 1-sigma: {res.sigma_method}.\n"
               f"# Estimated constant current V_N = {res.current[0]:.3f} m/s, "
               f"V_E = {res.current[1]:.3f} m/s (not a vessel parameter).\n")  # fmt: skip
     if failed:
@@ -95,11 +102,6 @@ def plot_replay(res: Identification, out: Path) -> Path:
     return p
 
 
-#: a coefficient whose 1-sigma is above this (relative) is named as poorly determined
-LOOSE = 0.25
-#: residual variance factor (:func:`mpcasv.models.identify.sigma_inflation`) above which the
-#: report says the model does not explain the logs to their noise level
-INFLATION_WARN = 4.0
 
 
 def report_table(res: Identification, prior: VesselParams, truth: VesselParams | None = None):
@@ -116,15 +118,16 @@ def report_table(res: Identification, prior: VesselParams, truth: VesselParams |
         if truth:
             line += f" {pt:.4g} | {100 * (pi / pt - 1):+.1f} |"
         lines.append(line)
+    if res.var_ratio:
+        lines += ["", ratio_line(res.var_ratio)]
     loose = [c for c in res.coeffs if res.rel_std[c] > LOOSE]
     if loose:
         lines += ["", f"Poorly determined by these logs (1-sigma above {100 * LOOSE:.0f} %): "
                   f"{', '.join(loose)}; hold them at the prior (--coeffs without them) or add a "
                   "log that excites them (speed-steps for the surge terms)."]  # fmt: skip
-    if res.inflation > INFLATION_WARN:
-        lines += ["", f"The replay residuals are serially correlated (variance factor "
-                  f"{res.inflation:.0f}, 1 for white noise; the 1-sigma includes it): the model "
-                  "does not explain these logs to their noise level."]  # fmt: skip
+    warn = correlated_warning(res.var_ratio)
+    if warn:
+        lines += ["", warn]
     lines += ["", f"Current: V_N = {res.current[0]:.3f} m/s, V_E = {res.current[1]:.3f} m/s", "",
               "| stage | split | " + " | ".join(f"{c} fit % (RMSE)" for c in OUTPUTS) + " |",
               "|---|---|" + "---|" * len(OUTPUTS)]  # fmt: skip

@@ -61,6 +61,7 @@ from scipy.optimize import least_squares
 from scipy.signal import savgol_filter
 
 from mpcasv.errors import LogError
+from mpcasv.models.ident_cov import METHOD, window_covariance
 from mpcasv.models.params import MODEL_COEFFS, VesselParams
 from mpcasv.models.vessel import IX, NX, VesselModel, rk4_expr
 
@@ -304,27 +305,6 @@ def _solve(fun: ca.Function, theta0, bounds, max_nfev: int = 100):
                          ftol=1e-10)  # fmt: skip
 
 
-def sigma_inflation(res: np.ndarray, W: int, nwin: int) -> float:
-    """Variance factor of the 1-sigma for serially correlated replay residuals.
-
-    The covariance ``(J^T J)^-1 s^2`` assumes independent residuals. Measurement noise is, but
-    a model that does not match the data (a wrong structure, an input a step late) leaves
-    smooth residuals: ``W`` correlated samples carry about one sample's information, and the
-    plain figures were overconfident (a 1-sigma of 3.8 % on an ``N_rdot`` 28 % off). Factor
-    ``(1 + rho) / (1 - rho)`` (AR(1) effective sample size, Bartlett), ``rho`` the largest
-    lag-1 autocorrelation of a channel's residuals within the windows, bounded by ``W``.
-    """
-    E = np.asarray(res, float).reshape(nwin * W, -1)  # rows: samples; columns: channels
-    rho = 0.0
-    for j in range(E.shape[1]):
-        e = E[:, j].reshape(nwin, W)
-        e = e - e.mean(axis=1, keepdims=True)
-        den = float(np.sum(e * e))
-        if den > 0:
-            rho = max(rho, float(np.sum(e[:, 1:] * e[:, :-1])) / den)
-    return float(min(W, (1 + rho) / max(1 - rho, 1e-12)))
-
-
 def fit_metrics(Ysim: np.ndarray, Y: np.ndarray) -> dict[str, dict[str, float]]:
     """Per output channel: RMSE (SI units) and fit % = 100 (1 - |e| / |y - mean y|)."""
     out = {}
@@ -350,8 +330,11 @@ class Identification:
     current: tuple[float, float]  # (V_N, V_E) m/s
     metrics: dict  # stage ("prior", "equation_error", "simulation_error") -> split -> channel
     replay: dict  # split -> (measured Y, simulated Y) of the final model
-    #: variance factor for correlated replay residuals (:func:`sigma_inflation`; 1 = white)
-    inflation: float = 1.0
+    #: per coefficient: variance of the quoted (HAC) 1-sigma over the plain, independent-
+    #: residual one (:mod:`mpcasv.models.ident_cov`; 1 for white residuals)
+    var_ratio: dict = dataclasses.field(default_factory=dict)
+    rel_std_plain: dict = dataclasses.field(default_factory=dict)  # (J^T J)^-1 s^2, for reference
+    sigma_method: str = METHOD
 
 
 def identify(logs: list[pd.DataFrame], prior: VesselParams, coeffs=IDENTIFIED,
@@ -420,23 +403,26 @@ def identify(logs: list[pd.DataFrame], prior: VesselParams, coeffs=IDENTIFIED,
     say(f"  {se.nfev} evaluations, status {se.status}: {se.message}")
     theta = se.x[: len(th0)]
     evaluate("simulation_error", theta)
-    dof = max(1, len(se.fun) - len(se.x))
-    inflation = sigma_inflation(se.fun, info_tr["W"], info_tr["windows"])
     try:
-        cov = np.linalg.pinv(se.jac.T @ se.jac) * (2 * se.cost / dof) * inflation
-        std = np.sqrt(np.clip(np.diag(cov)[: prob.n], 0, None)) / np.abs(theta[: prob.n])
+        cov = window_covariance(se.jac, se.fun, info_tr["W"], info_tr["windows"],
+                                cols=np.arange(prob.n))  # fmt: skip
+        std = np.sqrt(np.clip(cov.hac, 0, None)) / np.abs(theta[: prob.n])
+        std_plain = np.sqrt(np.clip(cov.plain, 0, None)) / np.abs(theta[: prob.n])
+        ratio = cov.ratio
     except np.linalg.LinAlgError:
-        std = np.full(prob.n, math.inf)
+        std = std_plain = ratio = np.full(prob.n, math.inf)
     # pinv gives a coefficient without effect a 1-sigma of 0 %: it is unknown (inf)
     std = np.where(zero_columns(se.jac[:, : prob.n]), math.inf, std)
     rel_std = {c: float(s) for c, s in zip(prob.coeffs, std, strict=True)}
+    rel_std_plain = {c: float(s) for c, s in zip(prob.coeffs, std_plain, strict=True)}
+    var_ratio = {c: float(r) for c, r in zip(prob.coeffs, ratio, strict=True)}
     check_covariance(rel_std, names)
     final = {"train": ext(theta, info_tr), "validation": ext(theta, info_va)}
     return Identification(
         params=prob.params(theta), coeffs=prob.coeffs, theta=theta,
         rel_std=rel_std,
         current=(float(theta[prob.n]), float(theta[prob.n + 1])) if current else (0.0, 0.0),
-        metrics=metrics, inflation=inflation,
+        metrics=metrics, var_ratio=var_ratio, rel_std_plain=rel_std_plain,
         replay={"train": (info_tr["Y"], np.array(info_tr["replay"](final["train"]))),
                 "validation": (info_va["Y"], np.array(info_va["replay"](final["validation"])))},
     )  # fmt: skip

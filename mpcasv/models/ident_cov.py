@@ -1,0 +1,135 @@
+"""Covariance of coefficients identified by replay-window least squares, shared by
+:func:`mpcasv.models.identify.identify` and
+:func:`mpcasv.models.ident_thrust.identify_through_map`.
+
+The plain covariance ``(J^T J)^-1 s^2`` assumes independent residuals. Measurement noise is,
+but a model that does not match the data (a wrong structure, a set-point a step late) or a
+navigation filter (DUNE logs: the estimator's states are smooth) leaves serially correlated
+residuals, and the plain figures are overconfident. Here the variance of each coefficient is
+the heteroscedasticity-and-autocorrelation-consistent (HAC) sandwich of Newey & West (1987,
+"A simple, positive semi-definite, heteroskedasticity and autocorrelation consistent
+covariance matrix", Econometrica 55(3) 703-708)::
+
+    V = (J^T J)^-1  S  (J^T J)^-1,   S = sum over windows of
+        sum_t g_t g_t^T + sum_{l=1..L} (1 - l / (L + 1)) sum_t (g_t g_{t-l}^T + g_{t-l} g_t^T)
+
+with ``g_t = J_t^T e_t`` the score of sample ``t`` (its rows of the Jacobian, all output
+channels of that instant, times their residuals), Bartlett weights ``1 - l / (L + 1)``, and the
+lags taken **within** each replay window only (windows restart from the measurement and are
+independent by construction). A small-sample factor ``N / (N - p)`` matches the plain
+estimate's degrees of freedom.
+
+Lag ``L`` per coefficient: Andrews' (1991, "Heteroskedasticity and autocorrelation consistent
+covariance matrix estimation", Econometrica 59(3) 817-858, eq. 6.2/6.4) automatic bandwidth for
+the Bartlett kernel with an AR(1) plug-in, ``L = 1.1447 (alpha n)^(1/3)``,
+``alpha = 4 rho^2 / ((1 - rho)^2 (1 + rho)^2)``, ``rho`` the lag-1 autocorrelation (within
+windows) of that coefficient's projected score series ``a_j^T g_t`` and ``n`` the number of
+samples; never below Newey & West's (1994) fixed rule ``floor(4 (W / 100)^(2/9))``, at most
+``W - 1``. The correlation that matters for a coefficient is that of its score (sensitivity
+times residual), not of the residuals alone: a coefficient fixed by a channel whose residual is
+white keeps its plain figure even if another channel's residual is smooth.
+
+The ratio ``V_hac / V_plain`` per coefficient is reported (1 for white, homoscedastic
+residuals): above :data:`RATIO_WARN` the residuals are serially correlated (the model misses
+the data, or the logged states are filtered) and the plain figure would be overconfident.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+
+#: a coefficient whose 1-sigma is above this (relative) is named as poorly determined
+LOOSE = 0.25
+#: variance ratio HAC / plain above which the report says the residuals are correlated
+RATIO_WARN = 4.0
+#: what the outputs record as the 1-sigma basis
+METHOD = ("Newey-West HAC sandwich (Bartlett weights, within replay windows, lag per "
+          "coefficient by Andrews' AR(1) rule)")  # fmt: skip
+
+
+@dataclasses.dataclass(frozen=True)
+class Covariance:
+    """Variances of selected parameters: ``hac`` (quoted), ``plain`` (independent residuals),
+    their ``ratio`` and the Bartlett ``lag`` used (samples) per parameter."""
+
+    hac: np.ndarray
+    plain: np.ndarray
+    ratio: np.ndarray
+    lag: np.ndarray
+    method: str = METHOD
+
+
+def nw_lag(W: int) -> int:
+    """Newey & West's (1994) fixed rule ``floor(4 (W / 100)^(2/9))``, at least 1."""
+    return max(1, int(math.floor(4 * (W / 100.0) ** (2.0 / 9.0))))
+
+
+def andrews_lag(h: np.ndarray, W: int) -> int:
+    """Bartlett lag for one score series ``h`` of shape ``(windows, W)`` (see module doc)."""
+    den = float(np.sum(h[:, :-1] ** 2))
+    rho = float(np.sum(h[:, 1:] * h[:, :-1])) / den if den > 0 else 0.0
+    rho = min(max(rho, -0.99), 0.99)
+    alpha = 4 * rho**2 / ((1 - rho) ** 2 * (1 + rho) ** 2)
+    L = int(math.ceil(1.1447 * (alpha * h.size) ** (1.0 / 3.0)))
+    return int(min(W - 1, max(nw_lag(W), L)))
+
+
+def bartlett_lrv(h: np.ndarray, L: int) -> float:
+    """Sum over windows of the Bartlett-weighted long-run variance of ``h`` (windows, W)."""
+    s = float(np.sum(h * h))
+    for lag in range(1, L + 1):
+        s += 2 * (1 - lag / (L + 1)) * float(np.sum(h[:, lag:] * h[:, :-lag]))
+    return s
+
+
+def window_covariance(J: np.ndarray, res: np.ndarray, W: int, nwin: int,
+                      cols=None) -> Covariance:  # fmt: skip
+    """HAC and plain variances of the parameters ``cols`` (default all) of a least-squares fit
+    with Jacobian ``J`` and residuals ``res``, laid out as the replay functions build them:
+    ``nwin`` windows of ``W`` samples one after the other, each sample's ``k`` output channels
+    together (``ca.vec`` of a ``(k, W * nwin)`` matrix), ``len(res) = k * W * nwin``."""
+    J = np.asarray(J, float)
+    e = np.asarray(res, float).ravel()
+    N, p = J.shape
+    if N != len(e) or N % (W * nwin):
+        raise ValueError(f"{N} residual rows do not split into {nwin} windows of {W} samples")
+    k = N // (W * nwin)
+    cols = np.arange(p) if cols is None else np.asarray(cols)
+    Hinv = np.linalg.pinv(J.T @ J)
+    A = Hinv[:, cols]  # (p, m)
+    dof = max(1, N - p)
+    plain = np.diag(Hinv)[cols] * float(e @ e) / dof
+    # projected scores a_j^T g_t per sample (channels of one instant summed), per window
+    H = ((J @ A) * e[:, None]).reshape(nwin, W, k, len(cols)).sum(axis=2)
+    hac, lags = np.empty(len(cols)), np.empty(len(cols), int)
+    for j in range(len(cols)):
+        h = H[:, :, j]
+        lags[j] = andrews_lag(h, W)
+        hac[j] = bartlett_lrv(h, lags[j]) * N / dof
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio = np.where(plain > 0, hac / plain, 1.0)
+    return Covariance(hac=hac, plain=plain, ratio=ratio, lag=lags)
+
+
+def ratio_line(var_ratio: dict) -> str:
+    """One report line: the 1-sigma basis and each coefficient's HAC / plain variance."""
+    return (f"1-sigma: {METHOD}; its variance over the independent-residual one "
+            f"(J^T J)^-1 s^2: " + ", ".join(f"{c} {r:.2g}" for c, r in var_ratio.items()))  # fmt: skip
+
+
+def correlated_warning(var_ratio: dict) -> str | None:
+    """The report's warning when a coefficient's HAC variance is above :data:`RATIO_WARN`
+    times the plain one (``None`` otherwise)."""
+    high = {c: r for c, r in var_ratio.items() if r > RATIO_WARN}
+    if not high:
+        return None
+    worst = max(high, key=high.get)
+    return (f"The replay residuals are serially correlated: the HAC variance is up to "
+            f"{high[worst]:.0f} times the independent-residual one ({worst}; above "
+            f"{RATIO_WARN:g} for {', '.join(high)}; the 1-sigma includes it). Either the model "
+            "does not explain these logs to their noise level (a wrong structure, a set-point "
+            "logged a step late), or the logged states are filtered (DUNE logs: the "
+            "navigation estimator's states are smooth, not white measurements).")  # fmt: skip
