@@ -178,3 +178,22 @@ def test_the_otter_log_with_the_default_steerable_prior_hints_at_a_differential_
                  "--vessel otter", "--vessel dune-otter"):  # fmt: skip
         assert word in err, (word, err)
     assert not out.exists()
+
+
+@needs_log
+def test_map_sigma_is_on_the_same_basis_as_identify(identified):
+    """The thruster-map fit quotes the same HAC 1-sigma as ``identify()`` (one helper,
+    :mod:`mpcasv.models.ident_cov`) and records it: method, plain figures, variance ratio."""
+    import json
+
+    from mpcasv.models.ident_cov import METHOD
+
+    out = identified[0]
+    folder = out.with_name(out.stem + "-report")
+    rec = json.loads((folder / "identify.json").read_text())
+    assert rec["sigma_method"] == METHOD
+    assert set(rec["var_ratio"]) == set(rec["rel_std"]) == set(rec["rel_std_plain"])
+    assert f"# 1-sigma: {METHOD}." in out.read_text()
+    assert "Newey-West HAC" in load_vessel(out).provenance["X_u"]
+    md = (folder / "identify.md").read_text()
+    assert "1-sigma: Newey-West" in md

@@ -275,7 +275,8 @@ def run_map_identification(args, prior: VesselParams, tmap) -> int:
     header = (f"# {name}: identified by `mpcasv identify {log} --vessel {args.vessel} "
               f"--validation {args.validation:g}` through DUNE's thruster map "
               f"({tmap.source}).\n# Hull from the log; held values and the thrust limit: see "
-              "[provenance] and docs/deploy.md.\n")  # fmt: skip
+              "[provenance] and docs/deploy.md.\n"
+              f"# 1-sigma: {fit.sigma_method}.\n")  # fmt: skip
     write_vessel(args.out, data, header)
     cmd = nav["ref_speed"].to_numpy(float) if "ref_speed" in nav else None
     phases = None
@@ -293,7 +294,9 @@ def run_map_identification(args, prior: VesselParams, tmap) -> int:
     plot_map_replay(fit, folder)
     (folder / "identify.json").write_text(json.dumps({
         "coeffs": {c: getattr(P, c) for c in fit.coeffs}, "rel_std": fit.rel_std,
-        "metrics": fit.metrics, "split_s": fit.split_s, "T_max": P.T_max, "u_max": P.u_max,
+        "rel_std_plain": fit.rel_std_plain, "var_ratio": fit.var_ratio,
+        "sigma_method": fit.sigma_method, "metrics": fit.metrics, "split_s": fit.split_s,
+        "T_max": P.T_max, "u_max": P.u_max,
         "phases": phases}, indent=1))  # fmt: skip
     print(table_md)
     print(f"wrote {args.out} and {folder}/ (identify.md, identify.json, identify_replay.png)")

@@ -39,6 +39,7 @@ import pandas as pd
 from scipy.optimize import least_squares
 
 from mpcasv.errors import LogError
+from mpcasv.models.ident_cov import METHOD, window_covariance
 from mpcasv.models.params import MODEL_COEFFS, VesselParams
 from mpcasv.models.vessel import IX, NX, VesselModel, rk4_expr
 
@@ -124,11 +125,14 @@ class MapFit:
 
     params: VesselParams  # the prior with the identified hull coefficients
     coeffs: tuple[str, ...]
-    rel_std: dict  # coefficient -> 1-sigma relative standard deviation (from the Jacobian)
+    rel_std: dict  # coefficient -> 1-sigma relative (HAC, :mod:`mpcasv.models.ident_cov`)
+    rel_std_plain: dict  # the same from (J^T J)^-1 s^2 (independent residuals), for reference
+    var_ratio: dict  # coefficient -> HAC variance / plain variance (1 for white residuals)
     metrics: dict  # "prior" / "identified" -> "train" / "validation" -> channel -> RMS
     split_s: float  # log time (s from its start) where the held-out part begins
     replay: dict  # "train" / "validation" -> (measured, simulated) arrays (3, n)
     nfev: int
+    sigma_method: str = METHOD
 
 
 def check_table(df: pd.DataFrame, source) -> pd.DataFrame:
@@ -270,9 +274,9 @@ def identify_through_map(df: pd.DataFrame, prior: VesselParams, tmap: ThrusterMa
                         bounds=(lo, hi), x_scale="jac", max_nfev=200, xtol=1e-10,
                         ftol=1e-12)  # fmt: skip
     say(f"  {sol.nfev} evaluations, status {sol.status}: {sol.message}")
-    dof = max(1, len(sol.fun) - len(sol.x))
-    cov = np.linalg.pinv(sol.jac.T @ sol.jac) * (2 * sol.cost / dof)
-    std = np.sqrt(np.clip(np.diag(cov), 0, None)) / np.maximum(np.abs(sol.x), 1e-12)
+    cov = window_covariance(sol.jac, sol.fun, rp_tr.W, rp_tr.windows)  # as identify()'s
+    std = np.sqrt(np.clip(cov.hac, 0, None)) / np.maximum(np.abs(sol.x), 1e-12)
+    std_plain = np.sqrt(np.clip(cov.plain, 0, None)) / np.maximum(np.abs(sol.x), 1e-12)
     values = {c: float(scale[j] * sol.x[j]) for j, c in enumerate(coeffs)}
 
     def metrics(th):
@@ -283,6 +287,8 @@ def identify_through_map(df: pd.DataFrame, prior: VesselParams, tmap: ThrusterMa
     return MapFit(
         params=prior.with_coeffs(**values), coeffs=tuple(coeffs),
         rel_std={c: float(s) for c, s in zip(coeffs, std, strict=True)},
+        rel_std_plain={c: float(s) for c, s in zip(coeffs, std_plain, strict=True)},
+        var_ratio={c: float(r) for c, r in zip(coeffs, cov.ratio, strict=True)},
         metrics={"prior": metrics(th0), "identified": metrics(sol.x)},
         split_s=float(val["t"].iloc[0]),
         replay={"train": (rp_tr.Y, np.array(rp_tr.sim(sol.x))),
