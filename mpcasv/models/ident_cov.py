@@ -116,8 +116,9 @@ def window_covariance(J: np.ndarray, res: np.ndarray, W: int, nwin: int,
 
 def ratio_line(var_ratio: dict) -> str:
     """One report line: the 1-sigma basis and each coefficient's HAC / plain variance."""
+    ratios = ", ".join(f"{c} {r:.2g}" for c, r in var_ratio.items())
     return (f"1-sigma: {METHOD}; its variance over the independent-residual one "
-            f"(J^T J)^-1 s^2: " + ", ".join(f"{c} {r:.2g}" for c, r in var_ratio.items()))  # fmt: skip
+            f"(J^T J)^-1 s^2: {ratios}")
 
 
 def correlated_warning(var_ratio: dict) -> str | None:
