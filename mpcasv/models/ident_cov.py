@@ -134,3 +134,18 @@ def correlated_warning(var_ratio: dict) -> str | None:
             "does not explain these logs to their noise level (a wrong structure, a set-point "
             "logged a step late), or the logged states are filtered (DUNE logs: the "
             "navigation estimator's states are smooth, not white measurements).")  # fmt: skip
+
+
+def report_notes(coeffs, rel_std: dict, var_ratio: dict, source: str = "these logs") -> list[str]:
+    """The report's lines after the coefficient table, for both identification methods: the
+    1-sigma basis with each coefficient's HAC / plain ratio (:func:`ratio_line`), the
+    coefficients whose 1-sigma is above :data:`LOOSE`, and :func:`correlated_warning`; each
+    preceded by a blank line. ``source`` names the data in the text ("these logs")."""
+    lines = ["", ratio_line(var_ratio)] if var_ratio else []
+    loose = [c for c in coeffs if rel_std[c] > LOOSE]
+    if loose:
+        lines += ["", f"Poorly determined by {source} (1-sigma above {100 * LOOSE:.0f} %): "
+                  f"{', '.join(loose)}; hold them at the prior (--coeffs without them) or log "
+                  "a manoeuvre that excites them (speed steps for the surge terms)."]  # fmt: skip
+    warn = correlated_warning(var_ratio)
+    return lines + (["", warn] if warn else [])

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from mpcasv.models.ident_cov import LOOSE, correlated_warning, ratio_line
+from mpcasv.models.ident_cov import report_notes
 from mpcasv.models.ident_thrust import MapFit, ThrusterMap
 from mpcasv.models.params import VesselParams
 from mpcasv.models.vessel import resistance, top_speed
@@ -110,15 +110,7 @@ def report(fit: MapFit, P: VesselParams, tmap: ThrusterMap, prior: VesselParams,
         lines.append(f"| {c} | {getattr(prior, c):.4g} | {getattr(P, c):.4g} | "
                      f"{100 * sd:.1f} |" if sd < 10 else f"| {c} | {getattr(prior, c):.4g} | "
                      f"{getattr(P, c):.4g} | at bound |")  # fmt: skip
-    lines += ["", ratio_line(fit.var_ratio)]
-    loose = [c for c in fit.coeffs if LOOSE < fit.rel_std[c] < 10]
-    if loose:
-        lines += ["", f"Poorly determined by this log (1-sigma above {100 * LOOSE:.0f} %): "
-                  f"{', '.join(loose)}; hold them at the prior (--coeffs without them) or log "
-                  "a manoeuvre that excites them (speed steps for the surge terms)."]  # fmt: skip
-    warn = correlated_warning(fit.var_ratio)
-    if warn:
-        lines += ["", warn]
+    lines += report_notes(fit.coeffs, fit.rel_std, fit.var_ratio, "this log")
     lines += ["", "| model | part | u RMS (m/s) | r RMS (rad/s) | psi RMS (rad) |",
               "|---|---|---|---|---|"]  # fmt: skip
     for stage, d in fit.metrics.items():

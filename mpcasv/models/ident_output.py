@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from mpcasv.models.ident_checks import validation_failures
-from mpcasv.models.ident_cov import LOOSE, correlated_warning, ratio_line
+from mpcasv.models.ident_cov import report_notes
 from mpcasv.models.identify import OUTPUTS, Identification, mass_terms
 from mpcasv.models.params import VesselParams
 
@@ -118,16 +118,7 @@ def report_table(res: Identification, prior: VesselParams, truth: VesselParams |
         if truth:
             line += f" {pt:.4g} | {100 * (pi / pt - 1):+.1f} |"
         lines.append(line)
-    if res.var_ratio:
-        lines += ["", ratio_line(res.var_ratio)]
-    loose = [c for c in res.coeffs if res.rel_std[c] > LOOSE]
-    if loose:
-        lines += ["", f"Poorly determined by these logs (1-sigma above {100 * LOOSE:.0f} %): "
-                  f"{', '.join(loose)}; hold them at the prior (--coeffs without them) or add a "
-                  "log that excites them (speed-steps for the surge terms)."]  # fmt: skip
-    warn = correlated_warning(res.var_ratio)
-    if warn:
-        lines += ["", warn]
+    lines += report_notes(res.coeffs, res.rel_std, res.var_ratio)
     lines += ["", f"Current: V_N = {res.current[0]:.3f} m/s, V_E = {res.current[1]:.3f} m/s", "",
               "| stage | split | " + " | ".join(f"{c} fit % (RMSE)" for c in OUTPUTS) + " |",
               "|---|---|" + "---|" * len(OUTPUTS)]  # fmt: skip
