@@ -259,6 +259,12 @@ def pending_jobs(exp: Expansion, out: Path, retry_errors: bool = False) -> list[
     return sorted(todo, key=lambda j: (-j.cost, j.index))
 
 
+def in_this_process(workers: int, job_timeout: float | None) -> bool:
+    """Whether local jobs run in this process: one worker and no time limit (a job in this
+    process cannot be ended from outside, so a limit needs a pool, of one process if so)."""
+    return workers <= 1 and not job_timeout
+
+
 def run_jobs(jobs: list[Job], out: Path, stats: SweepStats, workers: int = 1,
              dask: str | None = None, quiet: bool = False, runs: str | None = None,
              job_timeout: float | None = JOB_TIMEOUT_S) -> None:  # fmt: skip
@@ -280,7 +286,7 @@ def run_jobs(jobs: list[Job], out: Path, stats: SweepStats, workers: int = 1,
 
             stats.backend = f"dask {dask}"
             run_dask(jobs, out, runs, stats, dask, bar)
-        elif workers <= 1 and not job_timeout:  # no limit: nothing to end it from outside
+        elif in_this_process(workers, job_timeout):
             stats.backend, stats.workers = "serial (this process)", 1
             for job in jobs:
                 record_row(stats, job, finish_job(out, run_job(job, runs)))
@@ -364,7 +370,7 @@ def run_suite(suite: str | Path, out: str | Path, workers: int = 1, dask: str | 
         where = (
             f"Dask at {dask}"
             if dask
-            else ("this process" if (workers <= 1 and not job_timeout) or not todo else
+            else ("this process" if in_this_process(workers, job_timeout) or not todo else
                   f"{pool_size(workers, len(todo))} local worker processes"
                   + reduced_note(workers, pool_size(workers, len(todo))))
         )  # fmt: skip
