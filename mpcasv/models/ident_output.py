@@ -102,8 +102,6 @@ def plot_replay(res: Identification, out: Path) -> Path:
     return p
 
 
-
-
 def report_table(res: Identification, prior: VesselParams, truth: VesselParams | None = None):
     """Markdown: coefficients (prior, identified, 1-sigma, truth error if known), fits."""
     lines = ["| coefficient | prior | identified | 1-sigma % |" + (" true | error % |" if truth
