@@ -142,7 +142,7 @@ def test_power_turn_scoped_to_avoidance_keeps_eq_3_1_in_tracking_turns(model):
     (cmd[0] = 2: the ASV inside a collision domain, from true ranges); a tracking transit's
     long hard turn stays at eq. 3.1's u_ff while an avoidance transit's runs well above it
     (docs/tuning.md)."""
-    from mpcasv.control.execution import command_vector
+    from mpcasv.control.execution import command_vector, escape_vector
     from mpcasv.control.tuning import run_closed_loop
     from mpcasv.interface import Command, Mode, Reason
 
@@ -161,7 +161,9 @@ def test_power_turn_scoped_to_avoidance_keeps_eq_3_1_in_tracking_turns(model):
     assert u_max[1.0] <= u_ff + 0.05
     assert u_max[2.0] > u_ff + 0.3
     wp = (10.0, 0.0)
-    # one rule for every controller: geometry (the caller's `escaping`), never the label
-    assert command_vector(Command(Mode.TRANSIT, wp, 1.0, 0, Reason.TRACKING), True)[0] == 2.0
+    # one rule for every controller: geometry (World.advance's `escaping`), never the label
+    tracking = command_vector(Command(Mode.TRANSIT, wp, 1.0, 0, Reason.TRACKING))
     assert command_vector(Command(Mode.TRANSIT, wp, 1.0, 0, Reason.AVOIDANCE))[0] == 1.0
-    assert command_vector(Command.standby(0), True)[0] == 0.0
+    assert list(escape_vector(tracking, True)) == [2.0, *wp, 1.0]
+    assert escape_vector(tracking, False)[0] == 1.0
+    assert escape_vector(command_vector(Command.standby(0)), True)[0] == 0.0

@@ -178,15 +178,14 @@ def test_case6_rehearsal_matches_simulation(tmp_path):
     # --lockstep: the world waits for each answering Reference; on a loaded host the default
     # window (0.9 period = 45 ms of wall time at SPEEDUP 20) let about a third of them act a
     # period late and the world drift from `mpcasv simulate`'s (newuser6)
-    # --nominal: in the seed's realisation (a current of up to 0.3 m/s) the two runs' paths
-    # agree within 2 cm for 250 s and then part (docs/deploy.md "Known limits"), beyond
-    # the tolerance of the comparison; Case 3 above runs the realisation
+    # the seed's realisation (a current of up to 0.3 m/s): at t = 250 s the ASV, inside
+    # auv1's collision domain, escapes with Gretha's power turn; until session 25 only
+    # `simulate` marked the escape (the SITL's maneuver did not) and the runs parted there
     sc, deploy_dir, sitl_dir, sockets = _rehearse(tmp_path, "case6", 300.0, base,
-                                                  "--reanchor", "100", "--lockstep",
-                                                  "--nominal")  # fmt: skip
+                                                  "--reanchor", "100", "--lockstep")  # fmt: skip
     _check_bind(sockets)
     _check_logs(deploy_dir, 3)
-    m_sim, m_dep = _compare(sc, deploy_dir, sitl_dir, nominal=True)
+    m_sim, m_dep = _compare(sc, deploy_dir, sitl_dir)
     table = compare_metrics(m_sim, m_dep)
     print(json.dumps(table, indent=1))
     info = json.loads((sitl_dir / "run" / "run.json").read_text())["sitl"]

@@ -389,3 +389,49 @@ def test_deploy_plan_estimator_without_plans_is_refused(tmp_path, scenario, says
     with pytest.raises(ConfigError, match=says) as info:
         deploy_config_from_dict(BASE | {"controller": ctl, "log": {"dir": str(tmp_path)}})
     assert "\n" not in str(info.value) and "'kalman'" in str(info.value)
+
+
+def test_sitl_maneuver_escapes_with_the_power_turn_as_simulate_does():
+    """A transit inside a collision domain is an escape (Gretha's power turn, turn_scope
+    "avoidance") whoever sends it: World.advance decides it from the true ranges, for the
+    simulator's Command and for the SITL's FollowReference maneuver alike (the SITL advances
+    the world with the maneuver's vector, ``transit`` = 1). Before, only ``simulate`` marked the
+    escape: Case 6 seed 3's rehearsal, after a standby inside auv1's domain at t = 250 s with a
+    169 degree heading error, commanded the 29 N steering floor where the simulation commanded
+    the 223 N power turn (docs/deploy.md, "Known limits", session 25)."""
+    from mpcasv.config import load_toml
+    from mpcasv.control.execution import NCMD, command_vector
+    from mpcasv.sim.scenario import scenario_from_dict
+    from mpcasv.sim.world import World
+
+    root = Path(__file__).resolve().parents[1]
+    data = load_toml(root / "experiments" / "scenarios" / "case6.toml")
+    data["preset"] = str(root / "mpcasv" / "data" / "presets" / "paper2-field.toml")
+    # 4 m south of auv1 (at the surface, going north), heading north at 0.95 m/s (above eq.
+    # 3.1's u_ff = 0.6 m/s of a hard turn: the speed loop asks for no thrust); the waypoint
+    # 200 m south
+    data["asv"]["start"] = {"N": 91.0, "E": -75.0, "psi_deg": 0.0, "speed": 0.95}
+    sc = scenario_from_dict(data)
+    wp = (-109.0, -74.0)
+    m = _followref()
+    assert m.on_reference(_ref(*wp, 2.5), 101.0, (91.0, -75.0))
+
+    def first_transit(cmd_of, standby_periods: int) -> tuple[float, float]:
+        w = World(sc, seed=0)
+        for _ in range(standby_periods):
+            w.advance(np.zeros(NCMD))
+        stay = w.stay
+        period = w.advance(cmd_of())
+        return stay, float(period.U[0].max())
+
+    sim = Command(Mode.TRANSIT, wp, 2.5, 0, Reason.AVOIDANCE)
+    stay, T_sim = first_transit(lambda: command_vector(sim), 2)
+    _, T_sitl = first_transit(m.command_vector, 2)
+    _, T_escape = first_transit(lambda: np.array([2.0, *wp, 2.5]), 2)
+    assert stay > 0  # inside the collision domain when the transit starts
+    assert T_sim == pytest.approx(T_escape) and T_sitl == pytest.approx(T_escape)
+    assert T_escape > 200.0  # the power turn (0.8 T_max at a heading error past 90 deg)
+    # outside a collision domain (the first period: no stay yet) the same transit is a
+    # tracking turn: no power turn, whoever sends it
+    stay0, T0 = first_transit(m.command_vector, 0)
+    assert stay0 == 0 and T0 < 60.0

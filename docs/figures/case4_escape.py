@@ -7,8 +7,8 @@ CASE --nominal --no-plots`` on a scenario copy whose ``[asv] execution`` names a
 * ``eq31``: ``turn_thrust = 0`` (eq. 3.1 true in every turn);
 * ``all``: the power turn in every transit (``turn_scope = "all"``, shipped before session 4);
 * ``shipped``: the file as shipped (``turn_scope = "avoidance"``: the power turn only while
-  the ASV is inside a collision domain, decided by the simulator from the true ranges,
-  ``command_vector(cmd, escaping=...)`` in ``mpcasv/sim/simulator.py``).
+  the ASV is inside a collision domain, decided by the world from the true ranges,
+  ``World.advance`` in ``mpcasv/sim/world.py``).
 
 Each run's window is aligned on its closest approach. Run from the repository's root::
 

@@ -166,14 +166,25 @@ def closed_loop(model: VesselModel, ep: ExecutionParams, dt: float, n_sub: int) 
     )  # fmt: skip
 
 
-def command_vector(command, escaping: bool = False) -> np.ndarray:
+def command_vector(command) -> np.ndarray:
     """Turn a :class:`mpcasv.interface.Command` into the ``cmd`` vector of :func:`closed_loop`:
-    ``transit`` = 2 for a transit while ``escaping`` (the ASV inside a collision domain now,
-    the one rule of the power turn's ``turn_scope = "avoidance"``, decided by the caller from
-    geometry, never from the controller's reason), 1 for any other transit, 0 standby."""
+    ``transit`` 1 for a transit, 0 for standby. Whether a transit is an escape (``transit`` =
+    2, the power turn's ``turn_scope = "avoidance"``) is decided from geometry by the world
+    that runs it (:func:`escape_vector`, called by :meth:`mpcasv.sim.world.World.advance`),
+    never from the controller's reason."""
     from mpcasv.interface import Mode
 
     if command.mode is Mode.STANDBY:
         return np.zeros(NCMD)
-    transit = 2.0 if escaping else 1.0
-    return np.array([transit, command.waypoint[0], command.waypoint[1], command.speed])
+    return np.array([1.0, command.waypoint[0], command.waypoint[1], command.speed])
+
+
+def escape_vector(cmd, escaping: bool) -> np.ndarray:
+    """``cmd`` with a transit marked as an escape (``cmd[0]`` = 2) while ``escaping``: the
+    ASV inside a collision domain now (true ranges). The one rule of the power turn's
+    ``turn_scope = "avoidance"``, for every controller and for every source of ``cmd`` (the
+    simulator's Command, the SITL's FollowReference maneuver): World.advance applies it."""
+    cmd = np.array(cmd, dtype=float).ravel()
+    if escaping and cmd[0] > 0.5:
+        cmd[0] = 2.0
+    return cmd

@@ -74,8 +74,8 @@ class ExecutionParams:
     # pursuer Cases 4 and 8 collide (docs/tuning.md, "Thrust floor and eq. 3.1").
     turn_thrust: Annotated[float, Strict(), Field(ge=0, le=1)] = 0.0
     # Where the power turn acts: "all" transits, or only "avoidance" transits: escapes, the
-    # ASV inside a collision domain now, decided by the simulator from the true ranges for
-    # every controller (command_vector(..., escaping=...); a command's reason never reaches
+    # ASV inside a collision domain now, decided by the world from the true ranges for
+    # every controller and the SITL alike (World.advance; a command's reason never reaches
     # the plant), which keeps eq. 3.1 true in every tracking turn (docs/tuning.md, "Why
     # Case 4 and Case 8 still collide").
     turn_scope: Literal["all", "avoidance"] = "all"

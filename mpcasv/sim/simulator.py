@@ -84,9 +84,9 @@ def simulate(
         if plan is not None and obs.t >= next_plan_t:
             plans.append((obs.t, plan))
             next_plan_t = obs.t + plan_every
-        # the power turn of an escape (turn_scope "avoidance") follows one rule for every
-        # controller: the ASV inside a collision domain now (true ranges), not its labels
-        period = world.advance(command_vector(cmd, escaping=world.stay > 0))
+        # the power turn of an escape (turn_scope "avoidance"): World.advance's one rule for
+        # every controller, the ASV inside a collision domain now (true ranges), not its labels
+        period = world.advance(command_vector(cmd))
         obs = world.observation()  # at the end of the period: logged, and used next step
         row = timeseries_row(world, obs, cmd, period, step_ms[-1])
         diag = getattr(controller, "diagnostics", None)

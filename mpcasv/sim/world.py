@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from mpcasv.control.execution import NZ, closed_loop
+from mpcasv.control.execution import NZ, closed_loop, escape_vector
 from mpcasv.control.params import ExecutionParams, load_execution
 from mpcasv.estimation import check_plan_estimator, known_plan, make_estimator
 from mpcasv.hybrid.domains import r_inner, r_outer, r_target
@@ -206,7 +206,11 @@ class World:
 
     def advance(self, cmd: np.ndarray) -> Period:
         """Move everything one supervisory period under execution-level command ``cmd``
-        (see :func:`mpcasv.control.execution.command_vector`)."""
+        (see :func:`mpcasv.control.execution.command_vector`). A transit while the ASV is
+        inside a collision domain (:attr:`stay` > 0) runs as an escape (``cmd[0]`` = 2, the
+        power turn of ``turn_scope = "avoidance"``), whoever sent it: the simulator and the
+        SITL's FollowReference maneuver alike (:func:`~mpcasv.control.execution.escape_vector`)."""
+        cmd = escape_vector(cmd, self.stay > 0)
         t0, x0 = self.t, self.x
         n, m = self.n_sub, self.n_auv
         if self.flow is not None:  # at the period's middle, at the positions at its start
