@@ -278,13 +278,18 @@ def test_a_deploy_that_hears_no_vehicle_exits_1_saying_so(tmp_path, capsys):
     assert json.loads(last)["no_decision"] == summary["no_decision"]  # the log says why too
 
 
-def _deploy_stub(steps: int, heard: list[bool], state: list[bool]) -> SimpleNamespace:
+def _deploy_stub(steps: int, heard: list[bool], state: list[bool],
+                 transport: str = "udp") -> SimpleNamespace:  # fmt: skip
+    tcp = transport == "tcp"
     peers = [SimpleNamespace(label=f"v{k}", last_heard=0.0 if h else float("-inf"),
-                             nav=object() if s else None, spec=SimpleNamespace(tcp=None))
+                             nav=object() if s else None,
+                             spec=SimpleNamespace(tcp=f"127.0.0.1:{6001 + k}" if tcp else None))
              for k, (h, s) in enumerate(zip(heard, state, strict=True))]  # fmt: skip
+    link = SimpleNamespace(announce_to=() if tcp else ("127.0.0.1:30100",), transport=transport)
     stub = SimpleNamespace(
-        steps=steps, phase="waiting", cfg=SimpleNamespace(link=SimpleNamespace(announce_to=())),
-        link=SimpleNamespace(peers=peers, endpoint=SimpleNamespace(address=("127.0.0.1", 1))),
+        steps=steps, phase="waiting", cfg=SimpleNamespace(link=link),
+        link=SimpleNamespace(peers=peers, endpoint=None if tcp else SimpleNamespace(
+            address=("127.0.0.1", 1))),  # fmt: skip
     )
     stub.heard = lambda: Phases.heard(stub)
     return stub
@@ -294,7 +299,11 @@ def test_no_decision_names_what_was_missing():
     assert Phases.no_decision(_deploy_stub(3, [True, True], [True, True]), 5.0) is None
     why = Phases.no_decision(_deploy_stub(0, [False, False], [False, False]), 5.0)
     assert why.startswith("no vehicle heard in 5 s") and "v0, v1" in why
-    assert "link.announce_to = []" in why
+    assert "link.announce_to: 127.0.0.1:30100" in why and "127.0.0.1:1" in why
+    # over TCP no Announce is sent (link.announce_to is not read): it names the tcp servers
+    why = Phases.no_decision(_deploy_stub(0, [False, False], [False, False], "tcp"), 5.0)
+    assert why.startswith("no vehicle heard in 5 s") and "announce" not in why.lower()
+    assert "v0 127.0.0.1:6001, v1 127.0.0.1:6002" in why and "sitl --tcp" in why
     why = Phases.no_decision(_deploy_stub(0, [True, True], [True, False]), 5.0)
     assert "no state" in why and "from v1 " in why and "heard: v0, v1" in why
     why = Phases.no_decision(_deploy_stub(0, [True, True], [True, True]), 5.0)

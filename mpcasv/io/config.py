@@ -17,7 +17,7 @@ from typing import Annotated, Any, Literal
 
 from pydantic import Field, Strict, field_validator, model_validator
 
-from mpcasv.config import Float, NonNeg, Pos, frozen, load_toml, parse
+from mpcasv.config import ConfigError, Float, NonNeg, Pos, frozen, load_toml, parse
 from mpcasv.io.deploycontroller import (
     MIN_SOLVE_MS,
     build_controller,
@@ -31,7 +31,7 @@ from mpcasv.models.acoustics import AcousticParams
 __all__ = [  # the controller's part is mpcasv.io.deploycontroller's, re-exported
     "MIN_SOLVE_MS", "DeployConfig", "build_controller", "check_controller",
     "check_field_budget", "controller_overrides", "deploy_boat", "deploy_config_from_dict",
-    "load_deploy_config", "parse_address",
+    "UDP_ONLY", "check_link", "load_deploy_config", "parse_address",
 ]  # fmt: skip
 
 #: An IMC system id (0xFFFF is broadcast, never a vehicle).
@@ -39,6 +39,10 @@ ImcId = Annotated[int, Strict(), Field(ge=0, le=0xFFFE)]
 Port = Annotated[int, Strict(), Field(ge=0, le=65535)]
 #: The longest control period accepted (s): a supervisory period is seconds, not hours
 CONTROL_PERIOD_MAX = 60.0
+#: ``[link]`` fields read only with ``transport = "udp"``: the TCP backseat link binds no
+#: data port, sends no Announce and opens no discovery socket (:meth:`ImcLink.start`)
+UDP_ONLY = ("port", "announce_to", "announce_period", "discovery_ports", "discovery_group",
+            "discovery_bind")  # fmt: skip
 
 
 def parse_address(text: str) -> tuple[str, int]:
@@ -93,7 +97,7 @@ class Vehicle:
 
     ``address`` (``"IPv4:port"`` of its IMC UDP service) is optional: by default it is learnt
     from the vehicle's Announce. ``tcp`` is its backseat server for ``link.transport = "tcp"``
-    (refused with ``"udp"``, which would not read it).
+    (refused with ``"udp"``, which would not read it; ``address`` is refused with ``"tcp"``).
     """
 
     role: Literal["asv", "auv"]
@@ -314,6 +318,12 @@ class DeployConfig:
             raise ValueError(f"vehicle.tcp (given for {', '.join(tcp)}) is read only with "
                              "link.transport = 'tcp' (the transport is 'udp'): set "
                              "link.transport = 'tcp' or remove 'tcp'")  # fmt: skip
+        udp = [v.label for v in self.vehicle if v.address is not None]
+        if self.link.transport == "tcp" and udp:
+            raise ValueError(f"vehicle.address (given for {', '.join(udp)}) is read only with "
+                             "link.transport = 'udp' (the transport is 'tcp': each vehicle is "
+                             "reached at its 'tcp' address): remove 'address' or set "
+                             "link.transport = 'udp'")  # fmt: skip
         return self
 
     @property
@@ -336,6 +346,27 @@ def deploy_config_from_dict(data: dict, source: str | Path = "<deploy config>") 
     """Validate a deploy configuration given as a mapping (a TOML file's tables), with the
     checks of :func:`load_deploy_config`; ``source`` names it in the messages."""
     cfg = parse(DeployConfig, data, source)
+    link = data.get("link")
+    check_link(cfg, frozenset(link if isinstance(link, dict) else ()), source)
     watchdog = data.get("watchdog")
     check_controller(cfg, source, frozenset(watchdog if isinstance(watchdog, dict) else ()))
     return cfg
+
+
+def check_link(cfg: DeployConfig, link_set, source: str | Path) -> None:
+    """Refuse a ``[link]`` field set explicitly (named in ``link_set``) that the run would
+    never read: the :data:`UDP_ONLY` ones with ``transport = "tcp"``. Defaults are never
+    refused.
+
+    Raises
+    ------
+    ConfigError
+        One line naming ``source``, the fields, the transport and what to do.
+    """
+    unread = [f"link.{f}" for f in UDP_ONLY if f in link_set]
+    if cfg.link.transport == "tcp" and unread:
+        raise ConfigError(f"{source}: {', '.join(unread)}: not read with link.transport = "
+                          "'tcp' (the link connects to each vehicle's 'tcp' backseat server: "
+                          "it binds no data port, sends no Announce and opens no discovery "
+                          f"port): remove {'it' if len(unread) == 1 else 'them'}, or set "
+                          "transport = 'udp'")  # fmt: skip

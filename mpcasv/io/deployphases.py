@@ -138,13 +138,16 @@ class Phases:
         took = f"{round(seconds, 1):g} s"
         heard = self.heard()
         if not heard:
-            ep = getattr(self.link, "endpoint", None)
-            where = (f"we listen on {ep.address[0]}:{ep.address[1]}" if ep is not None else
-                     "over TCP to " + ", ".join(f"{p.label} {p.spec.tcp}" for p in peers))
+            of = f"no vehicle heard in {took} (of {', '.join(p.label for p in peers)})"
+            if lk.transport == "tcp":  # no Announce over TCP: link.announce_to is not read
+                to = ", ".join(f"{p.label} {p.spec.tcp}" for p in peers)
+                return (f"{of}: is DUNE (or mpcasv sitl --tcp) running, with its TCP backseat "
+                        f"server where the 'tcp' addresses say ({to})?")  # fmt: skip
+            ep = self.link.endpoint  # None: the link never started
+            where = f"; we listen on {ep.address[0]}:{ep.address[1]}" if ep is not None else ""
             to = ", ".join(lk.announce_to) or "nowhere (link.announce_to = [])"
-            return (f"no vehicle heard in {took} (of {', '.join(p.label for p in peers)}): is "
-                    "DUNE (or mpcasv sitl) running, and does it hear our Announces "
-                    f"(link.announce_to: {to}; {where})?")  # fmt: skip
+            return (f"{of}: is DUNE (or mpcasv sitl) running, and does it hear our Announces "
+                    f"(link.announce_to: {to}{where})?")  # fmt: skip
         silent = [p.label for p in peers if p.nav is None]
         if silent:
             return (f"no decision in {took}: no state (EstimatedState) accepted from "

@@ -163,11 +163,18 @@ def deploy_config_for(ready: dict, base: dict, log_dir: str | Path, speedup: flo
     """A deploy configuration (as a dict) for the SITL described by ``ready``: ``base`` with
     the discovery address, a free port on 127.0.0.1, no discovery ports of our own (the SITL
     answers our Announce at our data port; parallel tests cannot share DUNE's), the clock
-    and the log folder set."""
+    and the log folder set. With ``link.transport = "tcp"`` in ``base`` only ``bind`` is
+    set and ``base``'s UDP-only link fields are removed (refused with TCP:
+    :data:`mpcasv.io.config.UDP_ONLY`)."""
+    from mpcasv.io.config import UDP_ONLY
+
     cfg = json.loads(json.dumps(base))
     link = cfg.setdefault("link", {})
-    link |= {"bind": "127.0.0.1", "port": 0, "announce_to": [ready["discovery"]],
-             "discovery_ports": []}  # fmt: skip
+    if link.get("transport") == "tcp":
+        cfg["link"] = {k: v for k, v in link.items() if k not in UDP_ONLY} | {"bind": "127.0.0.1"}
+    else:
+        link |= {"bind": "127.0.0.1", "port": 0, "announce_to": [ready["discovery"]],
+                 "discovery_ports": []}  # fmt: skip
     cfg.setdefault("clock", {})["speedup"] = float(speedup)
     cfg.setdefault("log", {})["dir"] = str(log_dir)
     return cfg
