@@ -138,7 +138,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     )  # fmt: skip
     r.add_argument("log", type=Path)
     r.add_argument("--controller", help="controller name (default: the logged one)")
-    r.add_argument("--preset", help="preset name or TOML (default: the logged one)")
+    r.add_argument("--preset", help="preset name or TOML (default: the logged one; another "
+                   "one, or another controller, is replayed without the logged "
+                   "controller.overrides, which were written for the logged preset)")
     r.add_argument("--tol", type=_nonneg, default=0.5, help="waypoint tolerance in m (0.5)")
     r.add_argument("--show", type=_count, default=20, help="differing steps to list (20)")
     r.add_argument("--json", type=Path,

@@ -54,7 +54,7 @@ from mpcasv.interface import ASVState, Command, Mode, Observation
 from mpcasv.io.asvwatch import SpeedWatch, Thrusters
 from mpcasv.io.config import DeployConfig, build_controller, load_deploy_config
 from mpcasv.io.deploycontroller import known_plans
-from mpcasv.io.deployfeedback import BoatFeedback
+from mpcasv.io.deployfeedback import BoatFeedback, cap_command
 from mpcasv.io.deployphases import ASV_STALE, RUNNING, STARTING, WAITING, Phases
 from mpcasv.io.deploystep import (
     FieldMode,
@@ -245,10 +245,7 @@ class Deploy(Phases, BoatFeedback, FieldMode):
     def _act(self, ts, now, obs, status, ages, raw: Command, step_ms: float) -> Command:
         """Guard, cap the speed (``speed_feedback``), send (unless dry run), log."""
         cmd, override = guard(raw, obs, status, ages, self.gp)
-        caps = [c for c in (self.speed_cap, self.cfg.speed.command_max) if c is not None]
-        capped = bool(caps) and cmd.mode is Mode.TRANSIT and cmd.speed > min(caps)
-        if capped:  # an MPC's speed comes from its plan, not from params.speed
-            cmd = dataclasses.replace(cmd, speed=min(caps))
+        cmd, capped = cap_command(cmd, self.speed_cap, self.cfg.speed.command_max)
         sent = False
         if not self.dry_run:
             lk = self.cfg.link

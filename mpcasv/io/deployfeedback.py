@@ -12,7 +12,38 @@ import time
 
 from mpcasv.interface import Mode
 
-__all__ = ["BoatFeedback"]
+__all__ = ["BoatFeedback", "cap_command", "cap_controller_speed"]
+
+
+def cap_controller_speed(controller, speed: float) -> tuple[float, float, float | None]:
+    """Lower ``speed`` in ``controller``'s parameters (and in those of its hybrid fallback,
+    for the MPCs) to ``speed`` (m/s), in place: never raised; an MPC's plan is capped at
+    ``speed`` too (:meth:`~mpcasv.mpc.controller.MPCController.set_speed_cap`). Returns
+    ``(old, new, plan)``: the speed before and after, and the plan's cap (None for a
+    controller without a plan). One definition for the deploy
+    (:meth:`BoatFeedback.set_controller_speed`) and its replay (:mod:`mpcasv.io.replay`)."""
+    old = float(controller.params.speed)
+    new = min(old, speed)  # never raised (a cap triggered by the plan's speed alone)
+    controller.params = dataclasses.replace(controller.params, speed=new)
+    fallback = getattr(controller, "hybrid", None)
+    if fallback is not None and hasattr(getattr(fallback, "params", None), "speed"):
+        fallback.params = dataclasses.replace(fallback.params, speed=new)
+    plan = None
+    if hasattr(controller, "set_speed_cap"):
+        controller.set_speed_cap(speed)
+        plan = speed
+    return old, new, plan
+
+
+def cap_command(cmd, speed_cap: float | None, command_max: float | None):
+    """``(cmd, capped)``: a transit's speed capped at the lower of ``speed_cap`` (the learned
+    achievable speed, ``controller.speed_feedback``) and ``command_max`` (``speed.command_max``,
+    the autopilot's limit), either None for none; an MPC's speed comes from its plan, not from
+    ``params.speed``, hence the cap on the command too. One definition for the deploy and its
+    replay."""
+    caps = [c for c in (speed_cap, command_max) if c is not None]
+    capped = bool(caps) and cmd.mode is Mode.TRANSIT and cmd.speed > min(caps)
+    return (dataclasses.replace(cmd, speed=min(caps)) if capped else cmd), capped
 
 
 class BoatFeedback:
@@ -73,16 +104,7 @@ class BoatFeedback:
         timers, warm start) is kept; an MPC's plan is capped at it too
         (:meth:`~mpcasv.mpc.controller.MPCController.set_speed_cap`: the planned thrust held
         to the steady thrust of that speed). Logged as ``controller_speed_cap`` (``plan``:
-        the plan's cap, None for a controller without a plan)."""
-        old = float(self.controller.params.speed)
-        new = min(old, speed)  # never raised (a cap triggered by the plan's speed alone)
-        self.controller.params = dataclasses.replace(self.controller.params, speed=new)
-        fallback = getattr(self.controller, "hybrid", None)
-        if fallback is not None and hasattr(getattr(fallback, "params", None), "speed"):
-            fallback.params = dataclasses.replace(fallback.params, speed=new)
-        plan = None
-        if hasattr(self.controller, "set_speed_cap"):
-            self.controller.set_speed_cap(speed)
-            plan = speed
+        the plan's cap, None for a controller without a plan; :func:`cap_controller_speed`)."""
+        old, new, plan = cap_controller_speed(self.controller, speed)
         self.speed_cap = speed
         self.event("controller_speed_cap", old=old, new=new, plan=plan)

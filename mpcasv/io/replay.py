@@ -6,9 +6,14 @@ and the command sent. Replay builds the controller named in the log (or another 
 preset) for the boat the deploy drove (the logged ``controller.vessel`` and ``[acoustics]``:
 :func:`mpcasv.io.deploycontroller.field_boat`, as the deploy built it), feeds it the same
 Observations in order, applies the same guard with the logged verdicts, and compares command
-by command (:func:`mpcasv.io.records.same_command`). Replaying with the logged controller
-must reproduce every decision; anything else points at non-determinism or a changed
-controller.
+by command (:func:`mpcasv.io.records.same_command`). The deploy's speed caps are replayed
+as logged: each ``controller_speed_cap`` event (``controller.speed_feedback``) caps the
+controller where it stands in the log, and every transit command is capped as the deploy
+capped it (that cap and ``speed.command_max``: :func:`mpcasv.io.deployfeedback.cap_command`).
+The logged ``controller.overrides`` were written for the logged controller and preset: they
+are applied only when replaying those, and the report says so when they are left out.
+Replaying with the logged controller must reproduce every decision; anything else points at
+non-determinism or a changed controller.
 """
 
 from __future__ import annotations
@@ -21,6 +26,7 @@ import pandas as pd
 from mpcasv.config import ConfigError, parse
 from mpcasv.controllers import make_controller, preset_used
 from mpcasv.io.deploycontroller import field_boat
+from mpcasv.io.deployfeedback import cap_command, cap_controller_speed
 from mpcasv.io.logs import read_jsonl
 from mpcasv.io.records import cmd_from_dict, obs_from_dict, same_command
 from mpcasv.io.watchdog import GuardParams, guard
@@ -37,6 +43,7 @@ class ReplayReport:
     controller: str
     preset: str  # the preset replayed with (given, logged, else the controller's default)
     table: pd.DataFrame  # t, logged/replayed mode, reason, auv, waypoint distance, same
+    notes: tuple[str, ...] = ()  # what the replay did differently from a plain re-run, said
 
     @property
     def n_steps(self) -> int:
@@ -89,8 +96,9 @@ def replay(log: str | Path, controller: str | None = None, preset: str | None = 
            tol_m: float = 0.5) -> ReplayReport:  # fmt: skip
     """Replay the decisions of a deploy log (see the module docstring)."""
     path = _log_path(log)
-    started = [r for r in read_jsonl(path, "event") if r.get("event") == "started"]
-    steps = read_jsonl(path, "step")
+    records = read_jsonl(path)
+    started = [r for r in records if r.get("kind") == "event" and r.get("event") == "started"]
+    steps = [r for r in records if r.get("kind") == "step"]
     if not started or "config" not in started[0]:
         raise ConfigError(f"{path}: no 'started' record with the configuration")
     if not steps:
@@ -98,20 +106,39 @@ def replay(log: str | Path, controller: str | None = None, preset: str | None = 
     cfg = started[0]["config"]
     c = cfg["controller"]
     name = controller or c["name"]
-    same_ctl = name == c["name"]
-    preset = preset or (c["preset"] if same_ctl else None)
+    preset = preset or (c["preset"] if name == c["name"] else None)
+    # the logged controller and preset: the deploy's overrides and guard speed are theirs
+    same = (name, preset_used(name, preset)) == (c["name"], preset_used(c["name"], c["preset"]))
+    notes = []
+    if not same and c["overrides"]:
+        notes.append(f"the logged controller.overrides {c['overrides']} are not applied: they "
+                     f"were written for {c['name']} with preset "
+                     f"{preset_used(c['name'], c['preset'])}")  # fmt: skip
     n_auv = len(steps[0]["obs"]["auvs"])
-    ctl = make_controller(name, n_auv, preset, c["overrides"] if same_ctl else None,
+    ctl = make_controller(name, n_auv, preset, c["overrides"] if same else None,
                           boat=logged_boat(cfg, path))  # fmt: skip
     ctl.reset(n_auv)
     g = started[0]["guard"]
-    gp = GuardParams(**g) if same_ctl else GuardParams(**(g | {"speed": float(getattr(
+    gp = GuardParams(**g) if same else GuardParams(**(g | {"speed": float(getattr(
         getattr(ctl, "params", None), "speed", g["speed"]))}))  # fmt: skip
+    command_max = (cfg.get("speed") or {}).get("command_max")
+    speed_cap, caps = None, []
     rows = []
-    for s in steps:
+    for s in records:  # in the order the deploy wrote them: a cap, then the steps after it
+        if s.get("kind") == "event" and s.get("event") == "controller_speed_cap":
+            # the cap the deploy applied: the plan's, else the new speed (a cap is applied
+            # only below the controller's speed, so new = the cap)
+            speed_cap = float(s["plan"] if s.get("plan") is not None else s["new"])
+            if hasattr(getattr(ctl, "params", None), "speed"):  # else: its commands only
+                cap_controller_speed(ctl, speed_cap)
+            caps.append(f"{speed_cap:g} m/s at t = {s['t']:.1f}")
+            continue
+        if s.get("kind") != "step":
+            continue
         obs = obs_from_dict(s["obs"])
         raw = ctl.step(obs)
         cmd, override = guard(raw, obs, s["status"], s["ages"], gp)
+        cmd = cap_command(cmd, speed_cap, command_max)[0]
         logged = cmd_from_dict(s["cmd"])
         dist = float("nan")
         if cmd.waypoint is not None and logged.waypoint is not None:
@@ -124,7 +151,13 @@ def replay(log: str | Path, controller: str | None = None, preset: str | None = 
             "logged_override": s["override"], "replay_override": override,
             "same": same_command(cmd, logged, tol_m),
         })  # fmt: skip
-    return ReplayReport(path, name, preset_used(name, preset), pd.DataFrame(rows))
+    if caps or command_max is not None:
+        notes.append("speed caps replayed as the deploy applied them: "
+                     + "; ".join([*(["controller_speed_cap (controller.speed_feedback) "
+                                     + ", ".join(caps)] if caps else []),
+                                  *([f"speed.command_max {command_max:g} m/s"]
+                                    if command_max is not None else [])]))  # fmt: skip
+    return ReplayReport(path, name, preset_used(name, preset), pd.DataFrame(rows), tuple(notes))
 
 
 def print_replay(rep: ReplayReport, show: int = 20) -> None:
@@ -132,6 +165,8 @@ def print_replay(rep: ReplayReport, show: int = 20) -> None:
     t = rep.table
     print(f"replayed {rep.n_steps} decisions of {rep.log} with {rep.controller} "
           f"(preset {rep.preset}): {rep.n_differ} differ")  # fmt: skip
+    for note in rep.notes:
+        print(f"note: {note}")
     if rep.n_differ == 0:
         return
     t0 = t["t"].iloc[0]
