@@ -101,5 +101,10 @@ def run(args: argparse.Namespace) -> int:
         print(f"  {stats.lost} jobs lost with their worker: rerun the same command to resume")
     if not args.no_report:
         print(f"report: {out / 'report.html'} (and report.md)")
+    elif suite.acceptance is not None:  # judged only in the report: say it was not
+        n = len(suite.acceptance.targets)
+        print(f"acceptance: the suite's {n} [acceptance] target{'s' * (n > 1)} not judged: "
+              "they are judged in the report, which --no-report skips (rerun the same command "
+              "without --no-report: finished jobs are not run again)")  # fmt: skip
     print(f"results table: import pandas as pd; df = {READ_LINE.format(out=out)}")
     return 0 if ok == len(exp.jobs) else 1

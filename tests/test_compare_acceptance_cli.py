@@ -1,0 +1,71 @@
+"""`mpcasv compare` and a suite's [acceptance] targets on the command line (session 25 audit):
+with --no-report nothing judged them and nothing said so; the exit status is the jobs', not
+the targets' verdict (docs/experiments.md, "Exit status")."""
+
+from __future__ import annotations
+
+import textwrap
+from pathlib import Path
+
+from mpcasv.cli import main
+
+SCENARIO = """
+name = "demo"
+duration = 20.0
+controller = "goto"
+preset = "goto"
+[asv.start]
+N = -50.0
+E = -50.0
+psi_deg = 45.0
+[[auv]]
+name = "auv"
+start = { N = 0.0, E = 0.0, depth = 20.0, psi_deg = 0.0 }
+behaviour = { transit = { heading_deg = 0.0, speed = 1.0, depth = 20.0 } }
+"""
+
+
+def _suite(tmp: Path) -> Path:
+    """Two go-to variants (one slower) on a 20-s scenario, one seed, with a target the
+    slower one cannot be shown to meet (one pair: too few for a verdict of 'met')."""
+    (tmp / "demo.toml").write_text(SCENARIO)
+    path = tmp / "acc.toml"
+    path.write_text(textwrap.dedent("""
+        name = "acc"
+        scenarios = ["demo.toml"]
+        seeds = [0]
+        plots = "none"
+        [[controllers]]
+        label = "goto"
+        name = "goto"
+        preset = "goto"
+        [[controllers]]
+        label = "slow"
+        name = "goto"
+        preset = "goto"
+        overrides = { speed = 0.5 }
+        [acceptance]
+        targets = { propeller_on_s = -0.5 }
+    """))  # fmt: skip
+    return path
+
+
+def test_no_report_says_the_acceptance_was_not_judged(tmp_path, capsys):
+    """The targets are judged in the report only; --no-report skipped it without a word."""
+    suite = _suite(tmp_path)
+    assert main(["compare", str(suite), "--out", str(tmp_path / "out"), "--workers", "1",
+                 "--quiet", "--no-report"]) == 0  # fmt: skip
+    out = capsys.readouterr().out
+    lines = [ln for ln in out.splitlines() if ln.startswith("acceptance:")]
+    assert len(lines) == 1, out
+    assert "1 [acceptance] target not judged" in lines[0] and "--no-report" in lines[0]
+    assert not (tmp_path / "out" / "report.md").exists()
+    # the same command with the report: judged there, the line not printed; a target not
+    # met is a research result, not an error: exit 0 (docs/experiments.md, "Exit status")
+    assert main(["compare", str(suite), "--out", str(tmp_path / "out"), "--workers", "1",
+                 "--quiet"]) == 0  # fmt: skip
+    out = capsys.readouterr().out
+    assert "acceptance:" not in out and "0 jobs run" in out
+    md = (tmp_path / "out" / "report.md").read_text()
+    assert "## Acceptance" in md and "**0 of 1 targets met.**" in md
+
