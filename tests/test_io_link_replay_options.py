@@ -1,7 +1,7 @@
 """Deploy configuration fields and replay options that were accepted and had no effect, or
-an effect nobody was told of (session 25 audit): each now works, is refused in one line
-(exit 2) naming it, or is stated.
-"""
+an effect nobody was told of: the UDP-only ``[link]`` fields with ``transport = "tcp"``
+(refused in one line, exit 2), ``replay --preset`` with the logged overrides (left out and
+said), and the deploy's speed caps in a replay (replayed as logged)."""
 
 from __future__ import annotations
 
