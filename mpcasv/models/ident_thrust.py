@@ -23,9 +23,10 @@ equations is repeated here.
 Identified: the surge and yaw inertia and damping, ``m`` (= ``m - X_udot`` with ``X_udot =
 0``), ``X_u``, ``X_uu``, ``I_z`` (= ``I_z - N_rdot``), ``N_r``, ``N_rr``
 (:data:`HULL_COEFFS`), by simulation-error least squares (``scipy.optimize.least_squares``
-with CasADi's exact Jacobian) over replay windows re-initialised from the measurement, on
-the first ``1 - validation`` of the log; the rest is held out and replayed the same way
-(speed, heading and yaw-rate RMS: :func:`replay_metrics`).
+with the exact Jacobian, :mod:`mpcasv.models.ident_windows`) over replay windows
+re-initialised from the measurement, on the first ``1 - validation`` of the log; the rest
+is held out and replayed the same way (speed, heading and yaw-rate RMS:
+:func:`replay_metrics`).
 """
 
 from __future__ import annotations
@@ -40,6 +41,7 @@ from scipy.optimize import least_squares
 
 from mpcasv.errors import LogError
 from mpcasv.models.ident_cov import METHOD, window_covariance
+from mpcasv.models.ident_windows import Windows
 from mpcasv.models.params import MODEL_COEFFS, VesselParams
 from mpcasv.models.vessel import IX, NX, VesselModel, rk4_expr
 
@@ -172,16 +174,16 @@ class _Replay:
                  n_sub: int):  # fmt: skip
         dt = float(df["t"].iloc[1] - df["t"].iloc[0])
         model = VesselModel(prior)
-        th = ca.MX.sym("theta", len(coeffs))
+        th = ca.SX.sym("theta", len(coeffs))
         p0 = prior.vector()
-        entries = [ca.MX(float(v)) for v in p0]
+        entries = [ca.SX(float(v)) for v in p0]
         for j, name in enumerate(coeffs):
             entries[MODEL_COEFFS.index(name)] = scale[j] * th[j]
         # Y_ur = m - X_udot: cancels the centripetal sway force (:func:`vsim_structure`)
         im, iu = MODEL_COEFFS.index("m"), MODEL_COEFFS.index("Y_ur")
         entries[iu] = entries[im] - prior.X_udot
         p = ca.vertcat(*entries)
-        xs, a_s, ps = ca.SX.sym("x", NX), ca.SX.sym("a", 2), ca.SX.sym("p", len(MODEL_COEFFS))
+        xs, a_s = ca.SX.sym("x", NX), ca.SX.sym("a", 2)
         c0 = ca.DM.zeros(2)
         N_diff = float(p0[MODEL_COEFFS.index("N_diff")])
         x, h = xs, dt / n_sub
@@ -191,8 +193,8 @@ class _Replay:
             Xf, Nm = tmap.forces([a_s[0], a_s[1]], U)
             act = ca.vertcat(Xf, Nm / N_diff)
             x = ca.vertcat(x[: IX["T"]], act)
-            x = rk4_expr(lambda x_, u_, c_: model.f_param(x_, u_, c_, ps), x, act, c0, h)
-        step = ca.Function("map_step", [xs, a_s, ps], [x])
+            x = rk4_expr(lambda x_, u_, c_: model.f_param(x_, u_, c_, p), x, act, c0, h)
+        step = ca.Function("map_step", [xs, a_s, th], [x])
         W = max(10, int(round(window_s / dt)))
         nwin = len(df) // W
         if nwin < 1:
@@ -203,13 +205,8 @@ class _Replay:
         for c in ("N", "E", "psi", "u", "v", "r"):
             x0[IX[c]] = df[c].to_numpy()[: n : W]
         self.Y = np.vstack([df[c].to_numpy()[:n] for c in OUTPUTS])
-        Xsim = step.mapaccum("window", W).map(nwin)(ca.DM(x0), A, ca.repmat(p, 1, n))
-        Ysim = ca.vertcat(*[Xsim[IX[c], :] for c in OUTPUTS])
-        err = Ysim - self.Y
-        err[0, :] = ca.atan2(ca.sin(err[0, :]), ca.cos(err[0, :]))
-        res = ca.vec(ca.diag(np.array(_WEIGHT)) @ err)
-        self.fun = ca.Function("res", [th], [res, ca.jacobian(res, th)])
-        self.sim = ca.Function("sim", [th], [Ysim])
+        win = Windows(step, x0, A, self.Y, [IX[c] for c in OUTPUTS], _WEIGHT, wrap=[0])
+        self.fun, self.sim = win.residuals, win.simulate  # theta -> (res, jac, Ysim); Ysim
         self.windows, self.W = nwin, W
 
 
@@ -266,8 +263,8 @@ def identify_through_map(df: pd.DataFrame, prior: VesselParams, tmap: ThrusterMa
         key = th.tobytes()
         if key not in cache:
             cache.clear()
-            r, J = rp_tr.fun(th)
-            cache[key] = (np.array(r).ravel(), np.array(J))
+            r, J, _ = rp_tr.fun(th)
+            cache[key] = (r, J)
         return cache[key]
 
     sol = least_squares(lambda th: both(th)[0], th0, jac=lambda th: both(th)[1],

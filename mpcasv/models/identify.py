@@ -28,7 +28,8 @@ Actuator states are reconstructed from the set-points through the model's known 
 2. simulation error: the logged inputs are replayed through the shared model (RK4 of
    ``VesselModel.f_param`` with a symbolic parameter vector, built once as one CasADi function
    of the parameters, mapped over windows re-initialised from the smoothed measurement every
-   ``window`` seconds), ``scipy.optimize.least_squares`` with CasADi's exact Jacobian;
+   ``window`` seconds), ``scipy.optimize.least_squares`` with the exact Jacobian (forward
+   sensitivities along each window, :mod:`mpcasv.models.ident_windows`);
 3. validation: the last ``validation`` fraction of every log is held out and replayed the same
    way; fit = ``100 (1 - |y - y_sim| / |y - mean(y)|)`` per channel.
 
@@ -62,6 +63,7 @@ from scipy.signal import savgol_filter
 
 from mpcasv.errors import LogError
 from mpcasv.models.ident_cov import METHOD, window_covariance
+from mpcasv.models.ident_windows import Windows
 from mpcasv.models.params import MODEL_COEFFS, VesselParams
 from mpcasv.models.vessel import IX, NX, VesselModel, rk4_expr
 
@@ -212,14 +214,15 @@ class Problem:
             raise ValueError(f"not model coefficients: {unknown}; known: {MODEL_COEFFS}")
         self.model = VesselModel(prior)
         self.n = len(self.coeffs)
-        th = ca.MX.sym("theta", self.n + 2)
-        p0 = prior.vector()
-        entries = [ca.MX(float(v)) for v in p0]
+
+    def _p_c(self, th: ca.SX) -> tuple[ca.SX, ca.SX]:
+        """The model's parameter vector and the current, expressions of ``theta``."""
+        p0 = self.prior.vector()
+        entries = [ca.SX(float(v)) for v in p0]
         for j, name in enumerate(self.coeffs):
             i = MODEL_COEFFS.index(name)
             entries[i] = float(p0[i]) * th[j]
-        self.theta, self.p = th, ca.vertcat(*entries)
-        self.c = th[self.n :] if current else ca.MX.zeros(2)
+        return ca.vertcat(*entries), (th[self.n :] if self.current else ca.SX.zeros(2))
 
     def theta0(self) -> np.ndarray:
         return np.concatenate([np.ones(self.n), np.zeros(2)])
@@ -233,63 +236,67 @@ class Problem:
         vals = {c: float(getattr(self.prior, c) * theta[j]) for j, c in enumerate(self.coeffs)}
         return self.prior.with_coeffs(**vals)
 
-    def equation_error(self, parts: list[Prepared]) -> ca.Function:
-        """Residual function ``theta -> (res, jac)`` of the equation error (weighted)."""
+    def equation_error(self, parts: list[Prepared]):
+        """The weighted equation error as a function ``theta -> (res, jac)``: ``res`` of shape
+        ``(3 N,)`` (the u, v, r accelerations of each of the ``N`` samples together), ``jac``
+        ``(3 N, n + 2)``; the model and its derivative in ``theta`` per sample (CasADi SX),
+        mapped over the samples."""
         Xs = np.vstack([pr.Xs for pr in parts]).T
         U = np.vstack([pr.U for pr in parts]).T
         nd = np.vstack([pr.nudot for pr in parts]).T
         w = 1.0 / np.maximum(nd.std(axis=1), 1e-6)
-        fmap = self.model.f_param.map(Xs.shape[1])
-        pred = fmap(Xs, U, ca.repmat(self.c, 1, Xs.shape[1]), ca.repmat(self.p, 1, Xs.shape[1]))
-        res = ca.vec(ca.diag(w) @ (pred[IX["u"] : IX["r"] + 1, :] - nd))
-        return ca.Function("ee", [self.theta], [res, ca.jacobian(res, self.theta)])
+        xs, us, th = ca.SX.sym("x", NX), ca.SX.sym("u", 2), ca.SX.sym("theta", self.n + 2)
+        p, c = self._p_c(th)
+        acc = self.model.f_param(xs, us, c, p)[IX["u"] : IX["r"] + 1]
+        N, m = Xs.shape[1], self.n + 2
+        fmap = ca.Function("ee", [xs, us, th], [acc, ca.jacobian(acc, th)]).map(N)
+
+        def fun(theta):
+            F, J = fmap(Xs, U, np.tile(np.asarray(theta, float)[:, None], (1, N)))
+            res = (w[:, None] * (np.array(F) - nd)).ravel(order="F")
+            J = np.array(J).reshape(3, N, m) * w[:, None, None]  # sample k: columns k m ..
+            return res, J.transpose(1, 0, 2).reshape(3 * N, m)
+
+        return fun
 
     def replay(self, parts: list[Prepared], window_s: float,
-               what: str = "logs") -> tuple[ca.Function, dict]:  # fmt: skip
-        """Simulation-error function ``z -> (res, jac, Ysim)`` over replay windows.
+               what: str = "logs") -> tuple[Windows, dict]:  # fmt: skip
+        """Simulation error over replay windows: a :class:`~mpcasv.models.ident_windows.Windows`
+        whose ``residuals(z)`` gives ``(res, jac, Ysim)``.
 
         ``z = [theta, dpsi0, du0, dv0, dr0 per window]``: each window starts from the smoothed
         measurement plus a small estimated correction of its initial state (multiple
         shooting with initial-state estimation: without it the smoothing and noise of the
         initial states bias the inertia estimates). The RK4 step of the shared model is
-        symbolic in the parameters; it is accumulated over one window (``mapaccum``) and
-        mapped over all windows (``map``), once.
+        symbolic in ``theta``; it and its forward sensitivities are accumulated over a window
+        and mapped over all windows, built once (:mod:`mpcasv.models.ident_windows`).
         """
         dt = parts[0].dt
         W = max(10, int(round(window_s / dt)))
         x0, U, Y = _windows(parts, W, what)
-        xs, us = ca.SX.sym("x", NX), ca.SX.sym("u", 2)
-        cs, ps = ca.SX.sym("c", 2), ca.SX.sym("p", len(MODEL_COEFFS))
-        f = lambda x, u, c: self.model.f_param(x, u, c, ps)  # noqa: E731
-        step = ca.Function("step", [xs, us, cs, ps], [rk4_expr(f, xs, us, cs, dt)])
-        nwin = x0.shape[1]
-        dx = ca.MX.sym("dx0", 4, nwin)  # psi, u, v, r
-        X0 = ca.DM(x0) + ca.vertcat(ca.MX.zeros(2, nwin), dx, ca.MX.zeros(NX - 6, nwin))
-        sim = step.mapaccum("window", W).map(nwin)
-        Xsim = sim(X0, U, ca.repmat(self.c, 1, W * nwin), ca.repmat(self.p, 1, W * nwin))
+        xs, us, th = ca.SX.sym("x", NX), ca.SX.sym("u", 2), ca.SX.sym("theta", self.n + 2)
+        p, c = self._p_c(th)
+        f = lambda x, u, c_: self.model.f_param(x, u, c_, p)  # noqa: E731
+        step = ca.Function("step", [xs, us, th], [rk4_expr(f, xs, us, c, dt)])
         out = [IX[c] for c in OUTPUTS]
-        Ysim = ca.vertcat(*[Xsim[i, :] for i in out])
         meas_noise = np.concatenate([pr.X[:, out] - pr.Xs[:, out] for pr in parts]).std(axis=0)
         floor = np.array([math.radians(0.2), 0.01, 0.01, math.radians(0.1)])
         w = 1.0 / np.maximum(meas_noise, floor)
-        err = Ysim - Y
-        err[0, :] = ca.atan2(ca.sin(err[0, :]), ca.cos(err[0, :]))  # heading difference
-        res = ca.vec(ca.diag(w) @ err)
-        z = ca.vertcat(self.theta, ca.vec(dx))
-        fun = ca.Function("sim", [z], [res, ca.jacobian(res, z), Ysim])
-        replay = ca.Function("replay", [z], [Ysim])
-        return fun, {
+        win = Windows(step, x0, U, Y, out, w, wrap=[0],  # 0: the heading
+                      x0_rows=[IX["psi"], IX["u"], IX["v"], IX["r"]])  # fmt: skip
+        return win, {
             "Y": Y,
             "W": W,
-            "windows": nwin,
+            "windows": win.nwin,
             "weights": w,
-            "n_x0": 4 * nwin,
-            "replay": replay,
+            "n_x0": win.nd * win.nwin,
+            "replay": win.simulate,
         }
 
 
-def _solve(fun: ca.Function, theta0, bounds, max_nfev: int = 100):
-    """``least_squares`` on a CasADi ``z -> (res, jac, ...)``, one evaluation per point."""
+def _solve(fun, theta0, bounds, max_nfev: int = 100):
+    """``least_squares`` on ``z -> (res, jac, ...)`` (a CasADi function or a Python callable
+    returning arrays), one evaluation per point."""
     cache: dict = {}
 
     def both(th):
@@ -373,7 +380,8 @@ def identify(logs: list[pd.DataFrame], prior: VesselParams, coeffs=IDENTIFIED,
     bounds = prob.bounds()
     th0 = prob.theta0()
     names = [source(df, i) for i, df in enumerate(logs)]
-    J0 = np.array(prob.equation_error(list(train))(th0)[1])[:, : prob.n]
+    ee_fun = prob.equation_error(list(train))
+    J0 = ee_fun(th0)[1][:, : prob.n]
     check_identifiable(J0, prob.coeffs, logs, names)  # before minutes of fitting
     sim_tr, info_tr = prob.replay(list(train), window_s, "the logs' training parts")
     held = f"the logs' validation parts (the last {validation:g} of each log, --validation)"
@@ -395,11 +403,11 @@ def identify(logs: list[pd.DataFrame], prior: VesselParams, coeffs=IDENTIFIED,
 
     evaluate("prior", th0)
     say(f"equation error on {sum(len(p.U) for p in train)} samples ...")
-    ee = _solve(prob.equation_error(list(train)), th0, bounds)
+    ee = _solve(ee_fun, th0, bounds)
     say(f"  {ee.nfev} evaluations, status {ee.status}: {ee.message}")
     evaluate("equation_error", ee.x)
     say(f"simulation error on {info_tr['windows']} windows of {info_tr['W']} steps ...")
-    se = _solve(sim_tr, ext(ee.x, info_tr), bounds_ext(info_tr))
+    se = _solve(sim_tr.residuals, ext(ee.x, info_tr), bounds_ext(info_tr))
     say(f"  {se.nfev} evaluations, status {se.status}: {se.message}")
     theta = se.x[: len(th0)]
     evaluate("simulation_error", theta)
