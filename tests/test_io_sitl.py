@@ -210,3 +210,31 @@ def test_the_sitl_runs_the_world_mpcasv_simulate_runs(tmp_path, nominal):
     assert drawn != nominal  # seed 3 draws a current the nominal scenario does not have
     run = json.loads((tmp_path / "run" / "run.json").read_text())
     assert run["realisation"] == real.as_dict()
+
+
+@pytest.mark.parametrize(("change", "match"), [
+    ({"preset": "no-such-preset"}, "no-such-preset"),
+    ({"preset": "mpc-multi"}, "mpc-multi"),  # a preset of another controller
+])
+def test_a_scenario_whose_controller_cannot_run_is_refused_without_building_it(
+        tmp_path, monkeypatch, change, match):
+    """The SITL validates the scenario's controller and preset as ``simulate`` would, and
+    builds no controller (the deploy does): an MPC scenario loaded its solver for nothing."""
+    import dataclasses
+
+    import mpcasv.controllers as controllers
+    import mpcasv.controllers.registry as registry
+    from mpcasv.config import ConfigError
+
+    sc = load_scenario(Path(__file__).parents[1] / "experiments/scenarios/case3.toml")
+    built = []
+    for module in (controllers, registry):
+        monkeypatch.setattr(module, "make_controller", lambda *a, **k: built.append(a))
+    opt = SitlOptions(discovery_port=0, out=tmp_path)
+    with pytest.raises(ConfigError, match=match):
+        Sitl(dataclasses.replace(sc, **change), opt)
+    mpc = dataclasses.replace(sc, controller="mpc-single", preset="mpc-single")
+    sitl = Sitl(mpc, opt)
+    sitl.jsonl.close()
+    sitl.lsf.close()
+    assert built == []
