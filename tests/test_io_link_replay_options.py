@@ -147,3 +147,215 @@ def test_replay_applies_the_logged_speed_caps(tmp_path):
     assert (rep.n_steps, rep.n_differ) == (3, 0), rep.table
     (note,) = rep.notes
     assert "controller_speed_cap" in note and "1.2 m/s" in note and "command_max 2 m/s" in note
+
+
+# --- 4. session-25 review: replay's guard, caps, speeds and the logged controller ----------
+
+def _spy_guard(monkeypatch) -> list:
+    """The guard parameters every replayed decision is guarded with."""
+    from mpcasv.io import replay as replay_mod
+
+    seen = []
+    real = replay_mod.guard
+
+    def spy(cmd, obs, status, ages, p):
+        seen.append(p)
+        return real(cmd, obs, status, ages, p)
+
+    monkeypatch.setattr(replay_mod, "guard", spy)
+    return seen
+
+
+def test_replay_with_another_preset_gets_that_presets_whole_guard(tmp_path, monkeypatch):
+    """`replay LOG --preset paper1-sim` on a paper1-field log took the guard speed from
+    paper1-sim and the keep-out sphere (and every watchdog limit) from the logged guard:
+    two guards mixed. The replayed controller's guard is now built as the deploy builds it
+    (guard_params), from it and the logged [watchdog]: paper1-sim's r_in is 30 m."""
+    from mpcasv.controllers import make_controller
+    from mpcasv.io.config import WatchdogSpec
+    from mpcasv.io.deploystep import guard_params
+    from mpcasv.io.replay import replay
+
+    log = _deploy_log(tmp_path, {"name": "hybrid-single", "preset": "paper1-field"})
+    seen = _spy_guard(monkeypatch)
+    replay(log, preset="paper1-sim")
+    want = guard_params(WatchdogSpec(), make_controller("hybrid-single", 1, "paper1-sim"))
+    assert seen == [want] and want.r_keep == pytest.approx(30.0)
+    seen.clear()
+    replay(log)  # the logged controller and preset: the logged guard, as the deploy had it
+    assert seen[0].r_keep == 10.0 and seen[0].speed == 1.5
+
+
+def test_replay_with_a_controller_when_the_logged_one_is_unknown(tmp_path, capsys):
+    """A log of a controller this version does not know ('hybrid-old', renamed since):
+    `replay LOG --controller hybrid-single` exited 2 "unknown controller 'hybrid-old'"
+    (the logged preset was resolved for the logged name). It replays again."""
+    import json
+
+    from mpcasv.cli import main
+
+    log = _deploy_log(tmp_path, {"name": "hybrid-single", "overrides": {"speed": 1.0}})
+    recs = [json.loads(line) for line in log.read_text().splitlines()]
+    recs[0]["config"]["controller"]["name"] = "hybrid-old"  # its default preset, logged None
+    log.write_text("".join(json.dumps(r) + "\n" for r in recs))
+    assert main(["replay", str(log), "--controller", "hybrid-single"]) == 0
+    out = capsys.readouterr().out
+    assert "with hybrid-single (preset paper1-sim)" in out  # hybrid-single's default
+    assert "written for hybrid-old with its default preset" in out
+
+
+def test_replay_shows_the_logged_and_replayed_speeds(tmp_path, capsys):
+    """A decision that differed only in its speed showed a row with the same mode, reason,
+    AUV and waypoint (0.0 m): the speeds were not in the table. They are now, printed and in
+    --json."""
+    import json
+
+    import pandas as pd
+
+    from mpcasv.cli import main
+
+    log = _deploy_log(tmp_path, {"name": "hybrid-single", "preset": "paper1-field"})
+    recs = [json.loads(line) for line in log.read_text().splitlines()]
+    assert recs[1]["cmd"]["mode"] == "transit" and recs[1]["cmd"]["speed"] == 2.5
+    recs[1]["cmd"]["speed"] = 1.75  # the deploy sent another speed
+    log.write_text("".join(json.dumps(r) + "\n" for r in recs))
+    out_json = tmp_path / "cmp.jsonl"
+    assert main(["replay", str(log), "--json", str(out_json)]) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert "logged_speed" in out[-2] and "replay_speed" in out[-2]
+    assert out[-1].split()[-2:] == ["1.8", "2.5"]  # 1.75 at one decimal
+    row = pd.read_json(out_json, lines=True).iloc[0]
+    assert (row["logged_speed"], row["replay_speed"]) == (1.75, 2.5)
+
+
+def _cap_deploy(tmp_path, monkeypatch):
+    """A hybrid-single deploy (speed_feedback, command_max 2 m/s) on a clock the test sets
+    (``now[0]``), with a ``decide(t, asv_N)`` writing a decision at deploy clock 1000 + t."""
+    import dataclasses
+
+    from mpcasv.interface import ASVState, AUVEstimate, Observation
+    from mpcasv.io.deploy import Deploy
+
+    data = _config(vehicle=[{"role": "asv", "id": 0x2801, "address": "127.0.0.1:6002"},
+                            {"role": "auv", "id": 0x2811, "address": "127.0.0.1:6003"}],
+                   link={"port": 0, "announce_to": [], "plan_done_timeout": 0.3},
+                   controller={"speed_feedback": True}, speed={"command_max": 2.0},
+                   log={"dir": str(tmp_path)})  # fmt: skip
+    dep = Deploy(deploy_config_from_dict(data))
+    now = [1000.0]
+    monkeypatch.setattr(dep.clock, "now", lambda: now[0])
+    dep.event("started", config=dataclasses.asdict(dep.cfg), guard=dataclasses.asdict(dep.gp))
+
+    def decide(t: float, asv_N: float) -> None:
+        now[0] = 1000.0 + t
+        auv = AUVEstimate(1000.0, 0.0, 0.0, 0.0, 0.0, (1.0, 0.0, 0.0, 1.0), t)
+        obs = Observation(t, ASVState(asv_N, 0.0, 0.0, 1.2), True, (auv,))
+        dep._act(t, now[0], obs, ["ok"], [0.0], dep.controller.step(obs), 0.0)
+
+    return dep, now, decide
+
+
+class _Task:
+    """A stand-in for the field mode's step task."""
+
+    def __init__(self, done: bool) -> None:
+        self._done = done
+
+    def done(self) -> bool:
+        return self._done
+
+
+def test_a_cap_during_a_field_step_waits_for_the_next_step_and_replays(tmp_path, monkeypatch):
+    """Field mode: the controller steps in the step thread while the event loop's
+    _speed_feedback capped it (controller.params replaced mid-step) and logged
+    controller_speed_cap BEFORE the step in flight wrote its record; replay, in log order,
+    capped the replayed controller before a decision that had not seen the cap. The deploy now
+    applies a cap between steps (before the next one starts) and every step record holds the
+    cap its decision saw (speed_cap), which replay applies. The replay's note gives the cap's
+    time in the table's units (s after the first decision), not on the deploy clock."""
+    import asyncio
+
+    from mpcasv.io import replay as replay_mod
+    from mpcasv.io.imc import NavState
+    from mpcasv.io.logs import read_jsonl
+
+    dep, now, decide = _cap_deploy(tmp_path, monkeypatch)
+    decide(0.0, 0.0)
+    dep.link.asv.id = 0x2801
+    dep._step_task = _Task(done=False)  # a field-mode step is solving
+    for k in range(1, 400):  # commanded 2.0 (capped), made 1.2: a persistent shortfall
+        t = 0.1 * k
+        now[0] = 1000.0 + t
+        dep._on_state(dep.link.asv, NavState(t, 0.12 * k, 0, 0, 0, 1.2, 0, 0, 1.2, 0, 0, 0),
+                      now[0])  # fmt: skip
+    assert dep.cap_pending == 1.2 and dep.speed_cap is None  # waits for the step in flight
+    assert dep.controller.params.speed == 2.5
+    decide(40.0, 48.0)  # the step in flight writes its decision: no cap seen
+    dep._step_task = _Task(done=True)
+    seen = []
+
+    async def step_async(ts, now_):
+        seen.append(dep.controller.params.speed)
+
+    monkeypatch.setattr(dep, "step_async", step_async)
+
+    async def tick():
+        now[0] = 1040.9
+        dep.schedule_step(40.9, now[0])
+        await dep._step_task
+
+    asyncio.run(tick())
+    assert seen == [1.2] and dep.speed_cap == 1.2 and dep.cap_pending is None
+    decide(41.0, 49.2)
+    dep.jsonl.close()
+    dep.lsf.close()
+    steps = read_jsonl(dep.jsonl.path, "step")
+    assert [r["speed_cap"] for r in steps] == [None, None, 1.2]
+    assert [r["cmd"]["speed"] for r in steps] == [2.0, 2.0, 1.2]
+    speeds = []  # the replayed controller's speed at each decision
+    real = replay_mod.make_controller
+
+    def spy(*a, **kw):
+        ctl = real(*a, **kw)
+        step = ctl.step
+        ctl.step = lambda obs: (speeds.append(ctl.params.speed), step(obs))[1]
+        return ctl
+
+    monkeypatch.setattr(replay_mod, "make_controller", spy)
+    rep = replay_mod.replay(dep.jsonl.path)
+    assert (rep.n_steps, rep.n_differ) == (3, 0), rep.table
+    assert speeds == [2.5, 2.5, 1.2]
+    (note,) = rep.notes
+    assert "1.2 m/s 40.9 s after the first decision" in note, note
+
+
+def test_replay_of_an_older_log_places_a_cap_by_time(tmp_path, monkeypatch):
+    """A log written before the step records held their cap: a controller_speed_cap logged
+    before a step whose decision began earlier (its clock; the cap came while it was solving)
+    reaches the replayed controller from the next decision on; the commands are capped in log
+    order, as the older deploy capped them."""
+    import json
+
+    from mpcasv.io import replay as replay_mod
+
+    log = _deploy_log(tmp_path, {"name": "hybrid-single", "preset": "paper1-field"})
+    started, step = [json.loads(line) for line in log.read_text().splitlines()]
+    s1 = step | {"t": 1.0, "clock": 1.0, "cmd": step["cmd"] | {"speed": 1.2}}
+    s2 = step | {"t": 2.0, "clock": 2.0, "cmd": step["cmd"] | {"speed": 1.2}}
+    cap = {"kind": "event", "event": "controller_speed_cap", "t": 1.5, "old": 2.5, "new": 1.2,
+           "plan": None}  # fmt: skip
+    log.write_text("".join(json.dumps(r) + "\n" for r in (started, step, cap, s1, s2)))
+    speeds = []
+    real = replay_mod.make_controller
+
+    def spy(*a, **kw):
+        ctl = real(*a, **kw)
+        step_ = ctl.step
+        ctl.step = lambda obs: (speeds.append(ctl.params.speed), step_(obs))[1]
+        return ctl
+
+    monkeypatch.setattr(replay_mod, "make_controller", spy)
+    rep = replay_mod.replay(log)
+    assert speeds == [2.5, 2.5, 1.2]  # the decision at clock 1.0 began before the cap
+    assert rep.n_differ == 0, rep.table  # its command capped as logged
+    assert "1.2 m/s 1.5 s after the first decision" in rep.notes[0]

@@ -4,6 +4,7 @@ no effect (session 24 audit): each now works or is refused up front in one line 
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from pathlib import Path
 
@@ -14,7 +15,7 @@ from mpcasv.cli import main
 from mpcasv.config import ConfigError
 from mpcasv.interface import ASVState, AUVEstimate, Observation
 from mpcasv.io import replay as replay_mod
-from mpcasv.io.config import deploy_config_from_dict
+from mpcasv.io.config import WatchdogSpec, deploy_config_from_dict
 from mpcasv.io.records import cmd_to_dict, obs_to_dict
 from mpcasv.models.params import load_vessel
 
@@ -70,12 +71,14 @@ def _deploy_log(folder: Path, controller: dict, acoustics: dict | None = None) -
     ctl.reset(1)
     guard = {"stale_s": 5.0, "lost_s": 60.0, "v_max": 1.5, "w_max": 0.5, "r_keep": 10.0,
              "margin_m": 5.0, "speed": 1.5}  # fmt: skip
-    config = {"controller": {"preset": None, "overrides": {}, **controller}}
+    config = {"controller": {"preset": None, "overrides": {}, **controller},
+              "watchdog": dataclasses.asdict(WatchdogSpec())}
     if acoustics is not None:
         config["acoustics"] = acoustics
     started = {"kind": "event", "event": "started", "guard": guard, "config": config}
-    step = {"kind": "step", "t": 0.0, "obs": obs_to_dict(obs), "cmd": cmd_to_dict(ctl.step(obs)),
-            "override": None, "status": ["ok"], "ages": [0.0]}  # fmt: skip
+    step = {"kind": "step", "t": 0.0, "clock": 0.0, "obs": obs_to_dict(obs),
+            "cmd": cmd_to_dict(ctl.step(obs)), "override": None, "status": ["ok"],
+            "ages": [0.0]}  # fmt: skip
     log = folder / "deploy.jsonl"
     log.write_text("".join(json.dumps(r) + "\n" for r in (started, step)))
     return log
@@ -174,7 +177,7 @@ def test_keep_out_m_is_accepted_for_a_controller_without_a_domain():
 
     cfg = deploy_config_from_dict(_config(controller={"name": "goto", "preset": "goto"},
                                           watchdog={"keep_out_m": 30.0}))  # fmt: skip
-    assert guard_params(cfg, make_controller("goto", 1)).r_keep == 30.0
+    assert guard_params(cfg.watchdog, make_controller("goto", 1)).r_keep == 30.0
 
 
 def test_the_propeller_threshold_without_thrusters_is_refused(tmp_path, capsys):

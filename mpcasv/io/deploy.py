@@ -110,7 +110,7 @@ class Deploy(Phases, BoatFeedback, FieldMode):
         self.jsonl = JsonlWriter(self.log_dir / "deploy.jsonl")
         self.link = ImcLink(cfg, self.clock, self.lsf, self._on_state, self._on_message,
                             self._on_event)  # fmt: skip
-        self.gp = guard_params(cfg, self.controller)
+        self.gp = guard_params(cfg.watchdog, self.controller)
         self.phase = WAITING
         self.t_next = -math.inf  # next supervisory tick (ASV state time)
         self.request_id = 0
@@ -263,7 +263,7 @@ class Deploy(Phases, BoatFeedback, FieldMode):
             "override": override, "sent": sent, "status": status, "ages": ages,
             "step_ms": step_ms, "followref": self.followref, "diag": diag() if diag else {},
             "propeller_source": self._propeller_source, "thrusters": self.thrusters.values(),
-            "speed": self.speed.status(), "speed_capped": capped,
+            "speed": self.speed.status(), "speed_cap": self.speed_cap, "speed_capped": capped,
         })  # fmt: skip
         return cmd
 

@@ -104,7 +104,17 @@ class BoatFeedback:
         timers, warm start) is kept; an MPC's plan is capped at it too
         (:meth:`~mpcasv.mpc.controller.MPCController.set_speed_cap`: the planned thrust held
         to the steady thrust of that speed). Logged as ``controller_speed_cap`` (``plan``:
-        the plan's cap, None for a controller without a plan; :func:`cap_controller_speed`)."""
+        the plan's cap, None for a controller without a plan; :func:`cap_controller_speed`).
+
+        Between steps only: while a field-mode step is solving in the step thread (which
+        reads the controller's parameters), the cap waits and is applied before the next step
+        starts (:meth:`~mpcasv.io.deploystep.FieldMode.schedule_step`), so a decision sees
+        one cap throughout, on its controller and on its command, and its step record says
+        which (``speed_cap``: what :mod:`mpcasv.io.replay` applies)."""
+        if self.step_in_flight():
+            self.cap_pending = speed
+            return
+        self.cap_pending = None
         old, new, plan = cap_controller_speed(self.controller, speed)
         self.speed_cap = speed
         self.event("controller_speed_cap", old=old, new=new, plan=plan)

@@ -18,7 +18,7 @@ import logging
 import time
 
 from mpcasv.interface import Command
-from mpcasv.io.config import DeployConfig, build_controller
+from mpcasv.io.config import DeployConfig, WatchdogSpec, build_controller
 from mpcasv.io.watchdog import GuardParams, guard_sources
 
 log = logging.getLogger("mpcasv.deploy")
@@ -53,12 +53,13 @@ def check_budget(cfg: DeployConfig, controller, log=log.warning) -> bool:
     return True
 
 
-def guard_params(cfg: DeployConfig, controller) -> GuardParams:
-    """Guard parameters: watchdog limits, and the keep-out sphere of the controller's
-    ``avoid`` option (:class:`mpcasv.hybrid.avoidance.AvoidanceParams`), else its domain's
-    ``r_in``, else ``watchdog.keep_out_m``; the controller's ``speed``, else
-    ``watchdog.guard_speed`` (:func:`~mpcasv.io.watchdog.guard_sources`)."""
-    wd = cfg.watchdog
+def guard_params(wd: WatchdogSpec, controller) -> GuardParams:
+    """Guard parameters: the watchdog limits of ``wd`` (a deploy configuration's
+    ``[watchdog]``), and the keep-out sphere of the controller's ``avoid`` option
+    (:class:`mpcasv.hybrid.avoidance.AvoidanceParams`), else its domain's ``r_in``, else
+    ``watchdog.keep_out_m``; the controller's ``speed``, else ``watchdog.guard_speed``
+    (:func:`~mpcasv.io.watchdog.guard_sources`). One definition for the deploy and its
+    replay with another controller or preset (:func:`mpcasv.io.replay.replay`)."""
     params = getattr(controller, "params", None)
     domain = getattr(controller, "domain", None)
     keep, speed_from = guard_sources(params, domain)
@@ -130,6 +131,7 @@ class FieldMode:
         self.step_errors = 0  # steps that raised (both modes: see step_failed)
         self.between_solves = 0  # steps with solves after their command (log_between)
         self.between_ms_max = 0.0  # the longest of them, wall ms
+        self.cap_pending: float | None = None  # a speed cap waiting for the step in flight
         if self.field_mode:
             check_budget(self.cfg, self.controller)
             start_field_mode(self.controller, solver_factory)
@@ -139,12 +141,19 @@ class FieldMode:
     def schedule_step(self, ts: float, now: float) -> None:
         """Start the decision at ``ts`` in the step thread; a tick that comes while the
         previous one is still solving is skipped (event ``step_skipped``)."""
-        if self._step_task is not None and not self._step_task.done():
+        if self.step_in_flight():
             self.skipped_steps += 1
             self.event("step_skipped", t=ts, reason="the previous step is still solving")
             return
+        if self.cap_pending is not None:  # a cap that came during the last step: now
+            self.set_controller_speed(self.cap_pending)
         self._step_task = asyncio.get_running_loop().create_task(self.step_async(ts, now))
         self._step_task.add_done_callback(functools.partial(self._step_ended, ts))
+
+    def step_in_flight(self) -> bool:
+        """Field mode: a step (or its work after the command) is running in the step
+        thread; the controller is not to be changed from the event loop meanwhile."""
+        return self._step_task is not None and not self._step_task.done()
 
     def _step_ended(self, ts: float, task: asyncio.Task) -> None:
         """Field mode: the step task's exception, if any, goes to :meth:`step_failed`."""

@@ -5,11 +5,13 @@ controller was given (estimates already inflated by the watchdogs), the watchdog
 and the command sent. Replay builds the controller named in the log (or another one / another
 preset) for the boat the deploy drove (the logged ``controller.vessel`` and ``[acoustics]``:
 :func:`mpcasv.io.deploycontroller.field_boat`, as the deploy built it), feeds it the same
-Observations in order, applies the same guard with the logged verdicts, and compares command
-by command (:func:`mpcasv.io.records.same_command`). The deploy's speed caps are replayed
-as logged: each ``controller_speed_cap`` event (``controller.speed_feedback``) caps the
-controller where it stands in the log, and every transit command is capped as the deploy
-capped it (that cap and ``speed.command_max``: :func:`mpcasv.io.deployfeedback.cap_command`).
+Observations in order, applies the guard with the logged verdicts (the logged guard, or the
+replayed controller's built as the deploy builds it) and compares command by command
+(:func:`mpcasv.io.records.same_command`; the table has both speeds). The deploy's speed caps
+are replayed as logged: each decision with the ``controller.speed_feedback`` cap it saw
+(:func:`replay` says how an older log's are placed), and every transit command capped as the
+deploy capped it (that cap and ``speed.command_max``:
+:func:`mpcasv.io.deployfeedback.cap_command`).
 The logged ``controller.overrides`` were written for the logged controller and preset: they
 are applied only when replaying those, and the report says so when they are left out.
 Replaying with the logged controller must reproduce every decision; anything else points at
@@ -25,8 +27,11 @@ import pandas as pd
 
 from mpcasv.config import ConfigError, parse
 from mpcasv.controllers import make_controller, preset_used
+from mpcasv.interface import Mode
+from mpcasv.io.config import WatchdogSpec
 from mpcasv.io.deploycontroller import field_boat
 from mpcasv.io.deployfeedback import cap_command, cap_controller_speed
+from mpcasv.io.deploystep import guard_params
 from mpcasv.io.logs import read_jsonl
 from mpcasv.io.records import cmd_from_dict, obs_from_dict, same_command
 from mpcasv.io.watchdog import GuardParams, guard
@@ -92,9 +97,46 @@ def logged_boat(cfg: dict, source: str | Path = "<deploy log>"):
                           "relative path is the deploy's: replay from its folder)") from None
 
 
+def _preset_named(name: str, preset: str | None) -> str:
+    """The preset of controller ``name`` as a note names it: ``"preset P"`` with P the preset
+    used (:func:`preset_used`); for a controller this version does not know (a log's older
+    name: nothing of it is built) the logged preset, else ``"its default preset"``."""
+    try:
+        return f"preset {preset_used(name, preset)}"
+    except ConfigError:
+        return f"preset {preset}" if preset else "its default preset"
+
+
+def _cap_of(event: dict) -> float:
+    """The cap a ``controller_speed_cap`` event applied: the plan's, else the new speed (a
+    cap is applied only below the controller's speed, so new = the cap)."""
+    return float(event["plan"] if event.get("plan") is not None else event["new"])
+
+
+def _cap(ctl, cap: float) -> None:
+    """Cap ``ctl`` at ``cap`` as the deploy did (:func:`cap_controller_speed`); a controller
+    without a ``speed`` gets the cap on its commands only."""
+    if hasattr(getattr(ctl, "params", None), "speed"):
+        cap_controller_speed(ctl, cap)
+
+
 def replay(log: str | Path, controller: str | None = None, preset: str | None = None,
            tol_m: float = 0.5) -> ReplayReport:  # fmt: skip
-    """Replay the decisions of a deploy log (see the module docstring)."""
+    """Replay the decisions of a deploy log (see the module docstring).
+
+    The guard: the logged one when replaying the logged controller and preset; else the
+    replayed controller's, built as the deploy builds it (:func:`~mpcasv.io.deploystep.
+    guard_params`, its keep-out sphere and speed, with the logged ``[watchdog]`` values).
+
+    The speed caps: a step record of a deploy since the cap is applied between steps holds
+    the cap its decision saw (``speed_cap``: its controller capped before the step started,
+    its command capped at it), and the replay applies exactly that. An older log's step
+    records do not: its caps are then taken in time order for the controller (a
+    ``controller_speed_cap`` event counts for a step whose decision began, its ``clock``,
+    at or after the event's ``t``: a cap that came while a field-mode step was solving is
+    not seen by that step) and in log order for the commands (the older deploy capped a
+    command with the cap in force when it was sent).
+    """
     path = _log_path(log)
     records = read_jsonl(path)
     started = [r for r in records if r.get("kind") == "event" and r.get("event") == "started"]
@@ -107,38 +149,53 @@ def replay(log: str | Path, controller: str | None = None, preset: str | None = 
     c = cfg["controller"]
     name = controller or c["name"]
     preset = preset or (c["preset"] if name == c["name"] else None)
-    # the logged controller and preset: the deploy's overrides and guard speed are theirs
-    same = (name, preset_used(name, preset)) == (c["name"], preset_used(c["name"], c["preset"]))
+    # the logged controller and preset: the deploy's overrides and guard are theirs (the
+    # logged preset is resolved only for a controller of that name: one this version knows)
+    same = name == c["name"] and preset_used(name, preset) == preset_used(name, c["preset"])
     notes = []
     if not same and c["overrides"]:
         notes.append(f"the logged controller.overrides {c['overrides']} are not applied: they "
-                     f"were written for {c['name']} with preset "
-                     f"{preset_used(c['name'], c['preset'])}")  # fmt: skip
+                     f"were written for {c['name']} with "
+                     f"{_preset_named(c['name'], c['preset'])}")  # fmt: skip
     n_auv = len(steps[0]["obs"]["auvs"])
     ctl = make_controller(name, n_auv, preset, c["overrides"] if same else None,
                           boat=logged_boat(cfg, path))  # fmt: skip
     ctl.reset(n_auv)
-    g = started[0]["guard"]
-    gp = GuardParams(**g) if same else GuardParams(**(g | {"speed": float(getattr(
-        getattr(ctl, "params", None), "speed", g["speed"]))}))  # fmt: skip
+    if same:
+        gp = GuardParams(**started[0]["guard"])
+    else:  # the replayed controller's guard, as the deploy would have built it
+        if not isinstance(cfg.get("watchdog"), dict):
+            raise ConfigError(f"{path}: no logged [watchdog] values (the guard of another "
+                              "controller or preset is built from them)")  # fmt: skip
+        gp = guard_params(parse(WatchdogSpec, cfg["watchdog"], f"{path}: watchdog"), ctl)
     command_max = (cfg.get("speed") or {}).get("command_max")
-    speed_cap, caps = None, []
+    t0 = steps[0]["clock"]
+    cmd_cap = ctl_cap = None  # the cap on the commands, the cap applied to the controller
+    pending, caps = [], []  # an older log's caps not yet applied to the controller; notes
     rows = []
-    for s in records:  # in the order the deploy wrote them: a cap, then the steps after it
+    for s in records:  # in the order the deploy wrote them
         if s.get("kind") == "event" and s.get("event") == "controller_speed_cap":
-            # the cap the deploy applied: the plan's, else the new speed (a cap is applied
-            # only below the controller's speed, so new = the cap)
-            speed_cap = float(s["plan"] if s.get("plan") is not None else s["new"])
-            if hasattr(getattr(ctl, "params", None), "speed"):  # else: its commands only
-                cap_controller_speed(ctl, speed_cap)
-            caps.append(f"{speed_cap:g} m/s at t = {s['t']:.1f}")
+            cap = _cap_of(s)
+            pending.append((s["t"], cap))
+            cmd_cap = cap
+            dt = s["t"] - t0
+            caps.append(f"{cap:g} m/s {abs(dt):.1f} s {'after' if dt >= 0 else 'before'} "
+                        "the first decision")  # fmt: skip
             continue
         if s.get("kind") != "step":
             continue
+        if "speed_cap" in s:  # the cap this decision saw, recorded by the deploy
+            cmd_cap = s["speed_cap"]
+            if cmd_cap is not None and cmd_cap != ctl_cap:
+                _cap(ctl, cmd_cap)
+                ctl_cap = cmd_cap
+        else:  # an older log: the caps that came before the decision began
+            while pending and pending[0][0] <= s["clock"]:
+                _cap(ctl, pending.pop(0)[1])
         obs = obs_from_dict(s["obs"])
         raw = ctl.step(obs)
         cmd, override = guard(raw, obs, s["status"], s["ages"], gp)
-        cmd = cap_command(cmd, speed_cap, command_max)[0]
+        cmd = cap_command(cmd, cmd_cap, command_max)[0]
         logged = cmd_from_dict(s["cmd"])
         dist = float("nan")
         if cmd.waypoint is not None and logged.waypoint is not None:
@@ -148,6 +205,7 @@ def replay(log: str | Path, controller: str | None = None, preset: str | None = 
             "t": s["t"], "logged_mode": str(logged.mode), "replay_mode": str(cmd.mode),
             "logged_reason": str(logged.reason), "replay_reason": str(cmd.reason),
             "logged_auv": logged.auv, "replay_auv": cmd.auv, "waypoint_diff_m": dist,
+            "logged_speed": _speed(logged), "replay_speed": _speed(cmd),
             "logged_override": s["override"], "replay_override": override,
             "same": same_command(cmd, logged, tol_m),
         })  # fmt: skip
@@ -158,6 +216,11 @@ def replay(log: str | Path, controller: str | None = None, preset: str | None = 
                                   *([f"speed.command_max {command_max:g} m/s"]
                                     if command_max is not None else [])]))  # fmt: skip
     return ReplayReport(path, name, preset_used(name, preset), pd.DataFrame(rows), tuple(notes))
+
+
+def _speed(cmd) -> float:
+    """A transit's speed (m/s); NaN for standby (its speed is ignored)."""
+    return float(cmd.speed) if cmd.mode is Mode.TRANSIT else float("nan")
 
 
 def print_replay(rep: ReplayReport, show: int = 20) -> None:
@@ -181,7 +244,7 @@ def print_replay(rep: ReplayReport, show: int = 20) -> None:
             print(f"  {a:8.1f} .. {b:8.1f}  ({i - start} steps)")
             start = None
     cols = ["t", "logged_mode", "replay_mode", "logged_reason", "replay_reason", "logged_auv",
-            "replay_auv", "waypoint_diff_m"]  # fmt: skip
+            "replay_auv", "waypoint_diff_m", "logged_speed", "replay_speed"]  # fmt: skip
     sub = t.loc[diff, cols].head(show).copy()
     sub["t"] = sub["t"] - t0
     print(sub.to_string(index=False, float_format=lambda v: f"{v:.1f}"))
