@@ -285,11 +285,12 @@ def _deploy_stub(steps: int, heard: list[bool], state: list[bool],
                              nav=object() if s else None,
                              spec=SimpleNamespace(tcp=f"127.0.0.1:{6001 + k}" if tcp else None))
              for k, (h, s) in enumerate(zip(heard, state, strict=True))]  # fmt: skip
-    link = SimpleNamespace(announce_to=() if tcp else ("127.0.0.1:30100",), transport=transport)
+    link = SimpleNamespace(announce_to=() if tcp else ("127.0.0.1:30100",), transport=transport,
+                           bind="127.0.0.1")
     stub = SimpleNamespace(
         steps=steps, phase="waiting", cfg=SimpleNamespace(link=link),
         link=SimpleNamespace(peers=peers, endpoint=None if tcp else SimpleNamespace(
-            address=("127.0.0.1", 1))),  # fmt: skip
+            address=("127.0.0.1", 1)), tcp_error=None),  # fmt: skip
     )
     stub.heard = lambda: Phases.heard(stub)
     return stub

@@ -359,3 +359,24 @@ def test_replay_of_an_older_log_places_a_cap_by_time(tmp_path, monkeypatch):
     assert speeds == [2.5, 2.5, 1.2]  # the decision at clock 1.0 began before the cap
     assert rep.n_differ == 0, rep.table  # its command capped as logged
     assert "1.2 m/s 1.5 s after the first decision" in rep.notes[0]
+
+
+def test_a_tcp_run_that_connects_nowhere_names_link_bind_and_the_error(tmp_path, capsys):
+    """Vehicles' backseat servers on another network (192.0.2.10) with link.bind left at
+    127.0.0.1: every connection fails at once (EINVAL: no route from a loopback address).
+    The run's last line asked only whether DUNE was running at the 'tcp' addresses; it now
+    names link.bind and the last connection error."""
+    import tomli_w
+
+    from mpcasv.cli import main
+
+    veh = [{"role": "asv", "id": 0x2801, "tcp": "192.0.2.10:6001"},
+           {"role": "auv", "id": 0x2802, "tcp": "192.0.2.10:6002"}]  # fmt: skip
+    data = _config(vehicle=veh, link={"transport": "tcp"}, clock={"speedup": 20.0},
+                   log={"dir": str(tmp_path / "log")})  # fmt: skip
+    path = tmp_path / "deploy.toml"
+    path.write_text(tomli_w.dumps(data))
+    assert main(["deploy", str(path), "--dry-run", "--duration", "4", "--quiet"]) == 1
+    (line,) = capsys.readouterr().err.strip().splitlines()
+    assert "no vehicle heard" in line and "192.0.2.10:6001" in line
+    assert "link.bind 127.0.0.1" in line and "The last connection failed: " in line, line

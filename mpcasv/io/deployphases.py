@@ -130,8 +130,9 @@ class Phases:
 
     def no_decision(self, seconds: float) -> str | None:
         """None if the run made a decision; else why not, in one line (the vehicles never
-        heard, or never in state, and where we announce and listen), for a run of ``seconds``
-        of the deploy clock."""
+        heard, or never in state, and where we announce and listen; over TCP where we
+        connect from, ``link.bind``, and the last connection error), for a run of
+        ``seconds`` of the deploy clock."""
         if self.steps:
             return None
         lk, peers = self.cfg.link, self.link.peers
@@ -141,8 +142,11 @@ class Phases:
             of = f"no vehicle heard in {took} (of {', '.join(p.label for p in peers)})"
             if lk.transport == "tcp":  # no Announce over TCP: link.announce_to is not read
                 to = ", ".join(f"{p.label} {p.spec.tcp}" for p in peers)
+                err = self.link.tcp_error
+                last = f" The last connection failed: {err[0]}: {err[1]}" if err else ""
                 return (f"{of}: is DUNE (or mpcasv sitl --tcp) running, with its TCP backseat "
-                        f"server where the 'tcp' addresses say ({to})?")  # fmt: skip
+                        f"server where the 'tcp' addresses say ({to}), and reachable from "
+                        f"link.bind {lk.bind} (our end of the connections)?{last}")  # fmt: skip
             ep = self.link.endpoint  # None: the link never started
             where = f"; we listen on {ep.address[0]}:{ep.address[1]}" if ep is not None else ""
             to = ", ".join(lk.announce_to) or "nowhere (link.announce_to = [])"

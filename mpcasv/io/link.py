@@ -123,6 +123,8 @@ class ImcLink(PeerDirectory):
         self.relayed: Counter[str] = Counter()
         self.sent: Counter[str] = Counter()
         self.datagrams = 0  # received, all sockets
+        #: TCP: the last failed connection, ``(vehicle label, error)``; None: none failed
+        self.tcp_error: tuple[str, str] | None = None
         self._names: dict[int, str] = {}  # message id -> name (imcpy.Factory), memoised
         self._reject_window: dict[str, tuple[float, int]] = {}
         self.endpoint: UdpEndpoint | None = None
@@ -209,6 +211,7 @@ class ImcLink(PeerDirectory):
                 await p.stream.run()
                 self.event("tcp_closed", vehicle=p.label)
             except OSError as exc:
+                self.tcp_error = (p.label, str(exc))
                 self.event("tcp_connect_failed", vehicle=p.label, error=str(exc))
             p.stream = None
             await self.clock.sleep(2.0)
