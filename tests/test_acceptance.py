@@ -189,7 +189,8 @@ def test_the_report_says_which_targets_are_not_met_and_where_to_read_why(tmp_pat
     (tmp_path / "one").mkdir()
     md1 = write_report(tmp_path / "one", SimpleNamespace(suite=suite, jobs=list(range(len(one))),
                                                          skipped=[]), one)[0].read_text()
-    assert "**The suite's acceptance targets are not judged**: no paired comparison." in md1
+    assert ("**The suite's acceptance targets are not judged**: no paired comparison (1 "
+            "controller variant(s) with results).") in md1
     del suite.acceptance  # a suite without targets: no section
     (tmp_path / "b").mkdir()
     assert "## Acceptance" not in write_report(tmp_path / "b", exp, df)[0].read_text()

@@ -25,12 +25,13 @@ behaviour = { transit = { heading_deg = 0.0, speed = 1.0, depth = 20.0 } }
 """
 
 
-def _suite(tmp: Path) -> Path:
+def _suite(tmp: Path, variants: int = 2) -> Path:
     """Two go-to variants (one slower) on a 20-s scenario, one seed, with a target the
-    slower one cannot be shown to meet (one pair: too few for a verdict of 'met')."""
+    slower one cannot be shown to meet (one pair: too few for a verdict of 'met');
+    ``variants=1``: the first alone."""
     (tmp / "demo.toml").write_text(SCENARIO)
     path = tmp / "acc.toml"
-    path.write_text(textwrap.dedent("""
+    text = textwrap.dedent("""
         name = "acc"
         scenarios = ["demo.toml"]
         seeds = [0]
@@ -46,7 +47,11 @@ def _suite(tmp: Path) -> Path:
         overrides = { speed = 0.5 }
         [acceptance]
         targets = { propeller_on_s = -0.5 }
-    """))  # fmt: skip
+    """)  # fmt: skip
+    if variants == 1:
+        text = text.replace(text[text.index('[[controllers]]\nlabel = "slow"'):
+                                 text.index("[acceptance]")], "")  # fmt: skip
+    path.write_text(text)
     return path
 
 
@@ -58,7 +63,8 @@ def test_no_report_says_the_acceptance_was_not_judged(tmp_path, capsys):
     out = capsys.readouterr().out
     lines = [ln for ln in out.splitlines() if ln.startswith("acceptance:")]
     assert len(lines) == 1, out
-    assert "1 [acceptance] target not judged" in lines[0] and "--no-report" in lines[0]
+    assert "1 [acceptance] target not judged: it is judged in the report" in lines[0]
+    assert "--no-report" in lines[0]
     assert not (tmp_path / "out" / "report.md").exists()
     # the same command with the report: judged there, the line not printed; a target not
     # met is a research result, not an error: exit 0 (docs/experiments.md, "Exit status")
@@ -69,3 +75,21 @@ def test_no_report_says_the_acceptance_was_not_judged(tmp_path, capsys):
     md = (tmp_path / "out" / "report.md").read_text()
     assert "## Acceptance" in md and "**0 of 1 targets met.**" in md
 
+
+
+def test_no_report_with_one_variant_says_the_report_could_not_judge_either(tmp_path, capsys):
+    """With one variant the report says "acceptance targets are not judged: no paired
+    comparison"; --no-report advised rerunning without it to judge them. Both now give the
+    same reason (acceptance.why_not_judged, one definition)."""
+    suite = _suite(tmp_path, variants=1)
+    assert main(["compare", str(suite), "--out", str(tmp_path / "out"), "--workers", "1",
+                 "--quiet", "--no-report"]) == 0  # fmt: skip
+    out = capsys.readouterr().out
+    (line,) = [ln for ln in out.splitlines() if ln.startswith("acceptance:")]
+    why = "no paired comparison (1 controller variant(s) with results)"
+    assert line.endswith(f"not judged by the report either: {why}"), line
+    assert "rerun" not in line
+    assert main(["compare", str(suite), "--out", str(tmp_path / "out"), "--workers", "1",
+                 "--quiet"]) == 0  # fmt: skip
+    md = (tmp_path / "out" / "report.md").read_text()
+    assert f"**The suite's acceptance targets are not judged**: {why}." in md

@@ -209,3 +209,12 @@ def report_parts(results: pd.DataFrame, acc: Acceptance, names: list[str],
                 f" What stands in the way: {acc.explained_in}." if acc.explained_in else "")
         parts.append((f"{other} vs {names[0]}", display_table(t), says))
     return head, rule, parts
+
+
+def why_not_judged(results: pd.DataFrame) -> str | None:
+    """Why a suite's targets cannot be judged on ``results`` (None: they can, in the
+    report): no paired comparison (:func:`mpcasv.experiments.stats.comparison_problem`).
+    One definition for the report's acceptance section and for ``mpcasv compare
+    --no-report``'s line."""
+    why = paired.comparison_problem(results)
+    return None if why is None else f"no paired comparison ({why})"

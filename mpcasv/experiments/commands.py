@@ -56,6 +56,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from mpcasv.config import ConfigError
+    from mpcasv.experiments import acceptance
     from mpcasv.experiments.report import READ_LINE
     from mpcasv.experiments.runner import JOB_TIMEOUT_S, is_url, run_suite
     from mpcasv.experiments.suite import load_suite
@@ -103,8 +104,13 @@ def run(args: argparse.Namespace) -> int:
         print(f"report: {out / 'report.html'} (and report.md)")
     elif suite.acceptance is not None:  # judged only in the report: say it was not
         n = len(suite.acceptance.targets)
-        print(f"acceptance: the suite's {n} [acceptance] target{'s' * (n > 1)} not judged: "
-              "they are judged in the report, which --no-report skips (rerun the same command "
-              "without --no-report: finished jobs are not run again)")  # fmt: skip
+        what = (f"the suite's {n} [acceptance] target{'s' * (n > 1)} not judged: "
+                f"{'they are' if n > 1 else 'it is'}")  # fmt: skip
+        why = acceptance.why_not_judged(results)
+        if why is None:
+            print(f"acceptance: {what} judged in the report, which --no-report skips (rerun "
+                  "the same command without --no-report: finished jobs are not run again)")
+        else:  # the report could not judge them either, and says so
+            print(f"acceptance: {what} not judged by the report either: {why}")
     print(f"results table: import pandas as pd; df = {READ_LINE.format(out=out)}")
     return 0 if ok == len(exp.jobs) else 1

@@ -195,17 +195,15 @@ def write_report(out: Path, exp, results: pd.DataFrame, stats=None) -> tuple[Pat
     md.append("")
     names = paired.variants(results) if len(ok) else []
     runs = with_list_summaries(results) if len(ok) else results
-    table, why = pd.DataFrame(), f"{len(names)} controller variant(s) with results"
-    if len(names) > 1:
+    table, why = pd.DataFrame(), paired.comparison_problem(results)
+    if why is None:
         rest = [
             m
             for m in better
             if better[m] and m not in headline and not (m.endswith("_auv") and m[:-4] in better)
         ]  # lists of a scalar: once
-        try:
-            table = paired.paired_table(runs, [*headline, *rest], better)
-        except paired.PairingError as exc:  # a table whose columns do not identify pairs
-            why = str(exc)
+        table = paired.paired_table(runs, [*headline, *rest], better)
+        why = "no metric with a direction in this results table"  # if the table is empty
     fronts = getattr(exp, "fronts", None)  # entries naming a tuned front (tune_match)
     if fronts:
         from mpcasv.experiments.tune_match import MATCHED_NOTE, matched_table
@@ -218,8 +216,9 @@ def write_report(out: Path, exp, results: pd.DataFrame, stats=None) -> tuple[Pat
     acc = getattr(suite, "acceptance", None)  # the suite's targets (acceptance.py), if any
     if not len(table):
         bullet(f"**No paired comparison**: {why}.")
-        if acc is not None:
-            bullet("**The suite's acceptance targets are not judged**: no paired comparison.")
+        if acc is not None:  # the reason compare --no-report gives (acceptance.why_not_judged)
+            not_judged = acceptance.why_not_judged(results) or f"no paired comparison ({why})"
+            bullet(f"**The suite's acceptance targets are not judged**: {not_judged}.")
     else:
         key = paired.pair_key(results)
         ref = names[0]

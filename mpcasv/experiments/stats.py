@@ -104,6 +104,28 @@ def variants(results: pd.DataFrame) -> list[str]:
     return list(dict.fromkeys(ok[COMPARE]))
 
 
+def comparison_problem(results: pd.DataFrame) -> str | None:
+    """Why no paired comparison can be made of ``results`` (None: it can): fewer than two
+    variants with ``status == "ok"`` rows, or a table whose columns do not identify the
+    pairs (:func:`pair_key`: a pairing column missing, or two ok rows of a variant sharing a
+    key). One definition for the report's headline and acceptance sections and for
+    ``mpcasv compare --no-report`` (:func:`mpcasv.experiments.acceptance.why_not_judged`)."""
+    names = variants(results) if len(results) else []
+    if len(names) < 2:
+        return f"{len(names)} controller variant(s) with results"
+    try:
+        key = pair_key(results)
+    except PairingError as exc:
+        return str(exc)
+    ok = results[results["status"] == "ok"]
+    for v in names:
+        dup = ok[ok[COMPARE] == v].duplicated(key)
+        if dup.any():
+            return (f"{v}: {int(dup.sum())} rows share a pairing key {key}; the key does not "
+                    "identify the job")  # fmt: skip
+    return None
+
+
 def missing_metrics(results: pd.DataFrame, metrics: Sequence[str]) -> list[str]:
     """The metrics of ``metrics`` without a column in ``results`` (e.g. an older table)."""
     return [m for m in metrics if m not in results]
