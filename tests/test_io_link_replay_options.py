@@ -380,3 +380,99 @@ def test_a_tcp_run_that_connects_nowhere_names_link_bind_and_the_error(tmp_path,
     (line,) = capsys.readouterr().err.strip().splitlines()
     assert "no vehicle heard" in line and "192.0.2.10:6001" in line
     assert "link.bind 127.0.0.1" in line and "The last connection failed: " in line, line
+
+
+# --- 5. session-25 review: the link fields a transport never reads, in one check ------------
+
+def _refusal(data: dict) -> str:
+    from mpcasv.config import ConfigError
+
+    with pytest.raises(ConfigError) as err:
+        deploy_config_from_dict(data, "deploy.toml")
+    return str(err.value)
+
+
+def test_tcp_refuses_unread_link_fields_and_addresses_in_one_line_with_advice_that_works(
+        tmp_path, capsys):  # fmt: skip
+    """With TCP a vehicle's `address` was refused by the model validator ("invalid
+    configuration; FILE: (top level): ...") and the UDP-only [link] fields later, in a
+    second round with another prefix; both advised "or set transport = 'udp'", which then
+    got the vehicles' `tcp` refused. Now one line names them all, and either advice loads."""
+    veh = [TCP_VEHICLES[0] | {"address": "127.0.0.1:6002"}, TCP_VEHICLES[1]]
+    data = _config(vehicle=veh, link={"transport": "tcp", "port": 6010})
+    _deploy_refused(data, tmp_path, capsys, "deploy.toml: link.port, vehicle.address (of "
+                    "0x2801): not read with link.transport = 'tcp'", "remove them")  # fmt: skip
+    assert "invalid configuration" not in _refusal(data)
+    # the advice: remove them; or UDP, with every 'tcp' removed
+    assert deploy_config_from_dict(_config(vehicle=TCP_VEHICLES, link={"transport": "tcp"}))
+    assert "remove every 'tcp'" in _refusal(data)
+    udp = _config(vehicle=[{k: v for k, v in x.items() if k != "tcp"} for x in veh],
+                  link={"transport": "udp", "port": 6010})  # fmt: skip
+    assert deploy_config_from_dict(udp).link.transport == "udp"
+    # with every vehicle addressed, the UDP advice names the discovery fields too
+    both = [v | {"address": f"127.0.0.1:{6002 + k}"} for k, v in enumerate(TCP_VEHICLES)]
+    msg = _refusal(_config(vehicle=both, link={"transport": "tcp", "discovery_group":
+                                               "224.0.75.70"}))  # fmt: skip
+    assert "remove every 'tcp' and link.discovery_group" in msg, msg
+
+
+def test_udp_with_a_vehicle_tcp_advises_what_tcp_needs(tmp_path, capsys):
+    """A vehicle's `tcp` with UDP: refused in the same check (same prefix); the advice to
+    switch to TCP says what else TCP needs (every vehicle's 'tcp' and 'id', no 'address')."""
+    veh = [{"role": "asv", "id": 0x2801, "tcp": "127.0.0.1:6001", "address": "127.0.0.1:6002"},
+           {"role": "auv", "id": 0x2802}]  # fmt: skip
+    msg = _refusal(_config(vehicle=veh))
+    assert msg.startswith("deploy.toml: vehicle.tcp (of 0x2801): read only with "), msg
+    assert "give every vehicle a 'tcp' and an 'id', and remove every 'address'" in msg
+
+
+@pytest.mark.parametrize("field, value", [
+    ("discovery_ports", [30102]), ("discovery_group", "224.0.75.70"),
+    ("discovery_bind", "127.0.0.1"),
+])  # fmt: skip
+def test_udp_discovery_fields_with_every_vehicle_addressed_are_refused(field, value, tmp_path,
+                                                                       capsys):  # fmt: skip
+    """Under UDP the discovery sockets are opened only for a vehicle without `address`
+    (ImcLink.start): with every vehicle addressed the discovery fields, written, were never
+    read. Refused in the same check; with one vehicle unaddressed, or left at their
+    defaults, they load."""
+    addressed = [{"role": "asv", "id": 0x2801, "address": "127.0.0.1:6002"},
+                 {"role": "auv", "id": 0x2802, "address": "127.0.0.1:6003"}]  # fmt: skip
+    _deploy_refused(_config(vehicle=addressed, link={field: value}), tmp_path, capsys,
+                    f"link.{field}: not read when every vehicle has an 'address'",
+                    "remove it")  # fmt: skip
+    learnt = [addressed[0], {"role": "auv", "id": 0x2802}]
+    assert deploy_config_from_dict(_config(vehicle=learnt, link={field: value}))
+    assert deploy_config_from_dict(_config(vehicle=addressed))  # defaults: never refused
+
+
+def test_the_shipped_deploy_configurations_load():
+    """experiments/deploy/*.toml (dune-otter.toml wrote discovery_ports with both vehicles
+    addressed: unread)."""
+    from pathlib import Path
+
+    from mpcasv.io.config import load_deploy_config
+
+    files = sorted((Path(__file__).parents[1] / "experiments" / "deploy").glob("*.toml"))
+    assert len(files) >= 3
+    for f in files:
+        load_deploy_config(f)
+
+
+def test_rehearsal_config_for_a_tcp_base_leaves_out_the_vehicles_addresses():
+    """deploy_config_for removed a TCP base's UDP-only [link] fields but kept the vehicles'
+    `address` (refused with TCP): the rehearsal's configuration did not load."""
+    from mpcasv.io.rehearsal import deploy_config_for
+
+    base = _config(vehicle=[v | {"address": f"127.0.0.1:{7000 + k}"}
+                            for k, v in enumerate(TCP_VEHICLES)],
+                   link={"transport": "tcp", "port": 6010})  # fmt: skip
+    cfg = deploy_config_for({"discovery": "127.0.0.1:30100"}, base, "/tmp/x", 4.0)
+    loaded = deploy_config_from_dict(cfg)
+    assert all(v.address is None for v in loaded.vehicle)
+    assert (loaded.clock.speedup, loaded.log.dir) == (4.0, "/tmp/x")
+    udp = deploy_config_for({"discovery": "127.0.0.1:30100"},
+                            _config(vehicle=[{k: v for k, v in x.items() if k != "tcp"}
+                                             for x in base["vehicle"]]), "/tmp/x", 4.0)  # fmt: skip
+    assert "discovery_ports" not in udp["link"]  # every vehicle addressed: none to open
+    assert deploy_config_from_dict(udp)

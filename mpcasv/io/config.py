@@ -31,7 +31,7 @@ from mpcasv.models.acoustics import AcousticParams
 __all__ = [  # the controller's part is mpcasv.io.deploycontroller's, re-exported
     "MIN_SOLVE_MS", "DeployConfig", "build_controller", "check_controller",
     "check_field_budget", "controller_overrides", "deploy_boat", "deploy_config_from_dict",
-    "UDP_ONLY", "check_link", "load_deploy_config", "parse_address",
+    "DISCOVERY", "UDP_ONLY", "check_link", "load_deploy_config", "parse_address",
 ]  # fmt: skip
 
 #: An IMC system id (0xFFFF is broadcast, never a vehicle).
@@ -43,6 +43,9 @@ CONTROL_PERIOD_MAX = 60.0
 #: data port, sends no Announce and opens no discovery socket (:meth:`ImcLink.start`)
 UDP_ONLY = ("port", "announce_to", "announce_period", "discovery_ports", "discovery_group",
             "discovery_bind")  # fmt: skip
+#: ``[link]`` fields read only with ``transport = "udp"`` and a vehicle without ``address``
+#: (learnt from its Announce, heard on the discovery ports)
+DISCOVERY = ("discovery_ports", "discovery_group", "discovery_bind")
 
 
 def parse_address(text: str) -> tuple[str, int]:
@@ -313,18 +316,7 @@ class DeployConfig:
         if self.link.transport == "tcp" and any(v.tcp is None or v.id is None
                                                 for v in self.vehicle):  # fmt: skip
             raise ValueError("link.transport = 'tcp' needs 'tcp' and 'id' for every vehicle")
-        tcp = [v.label for v in self.vehicle if v.tcp is not None]
-        if self.link.transport == "udp" and tcp:
-            raise ValueError(f"vehicle.tcp (given for {', '.join(tcp)}) is read only with "
-                             "link.transport = 'tcp' (the transport is 'udp'): set "
-                             "link.transport = 'tcp' or remove 'tcp'")  # fmt: skip
-        udp = [v.label for v in self.vehicle if v.address is not None]
-        if self.link.transport == "tcp" and udp:
-            raise ValueError(f"vehicle.address (given for {', '.join(udp)}) is read only with "
-                             "link.transport = 'udp' (the transport is 'tcp': each vehicle is "
-                             "reached at its 'tcp' address): remove 'address' or set "
-                             "link.transport = 'udp'")  # fmt: skip
-        return self
+        return self  # the fields the transport does not read: check_link
 
     @property
     def asv(self) -> Vehicle:
@@ -354,19 +346,57 @@ def deploy_config_from_dict(data: dict, source: str | Path = "<deploy config>") 
 
 
 def check_link(cfg: DeployConfig, link_set, source: str | Path) -> None:
-    """Refuse a ``[link]`` field set explicitly (named in ``link_set``) that the run would
-    never read: the :data:`UDP_ONLY` ones with ``transport = "tcp"``. Defaults are never
-    refused.
+    """Refuse, in one line, every link field written in the file that the run would never
+    read (``link_set``: the ``[link]`` keys written; a vehicle's ``address`` and ``tcp`` are
+    None unless written). Defaults are never refused.
+
+    - ``transport = "tcp"``: the :data:`UDP_ONLY` ``[link]`` fields and a vehicle's
+      ``address`` (the link connects to each vehicle's ``tcp`` backseat server: it binds no
+      data port, sends no Announce and opens no discovery socket);
+    - ``transport = "udp"``: a vehicle's ``tcp``, and the :data:`DISCOVERY` fields when every
+      vehicle has an ``address`` (nobody to discover: no discovery socket is opened,
+      :meth:`mpcasv.io.link.ImcLink.start`).
+
+    The advice works as given: removing the fields named loads the file.
 
     Raises
     ------
     ConfigError
-        One line naming ``source``, the fields, the transport and what to do.
+        One line naming ``source``, every unread field, why, and what to do.
     """
-    unread = [f"link.{f}" for f in UDP_ONLY if f in link_set]
-    if cfg.link.transport == "tcp" and unread:
-        raise ConfigError(f"{source}: {', '.join(unread)}: not read with link.transport = "
-                          "'tcp' (the link connects to each vehicle's 'tcp' backseat server: "
-                          "it binds no data port, sends no Announce and opens no discovery "
-                          f"port): remove {'it' if len(unread) == 1 else 'them'}, or set "
-                          "transport = 'udp'")  # fmt: skip
+    link = [f for f in UDP_ONLY if f in link_set]
+    address = [v.label for v in cfg.vehicle if v.address is not None]
+    tcp = [v.label for v in cfg.vehicle if v.tcp is not None]
+    groups, other = [], None  # (fields, why they are not read); the other transport's advice
+    if cfg.link.transport == "tcp":
+        fields = [f"link.{f}" for f in link]
+        fields += [f"vehicle.address (of {', '.join(address)})"] if address else []
+        n = len(link) + len(address)  # fields named, a vehicle's each
+        if fields:
+            groups.append((fields, "not read with link.transport = 'tcp' (the link connects "
+                           "to each vehicle's 'tcp' backseat server: it binds no data port, "
+                           "sends no Announce, opens no discovery port and sends nothing to a "
+                           "vehicle's UDP 'address')"))  # fmt: skip
+            found = [f"link.{f}" for f in DISCOVERY if f in link_set]
+            also = (f" and {', '.join(found)} (every vehicle has an 'address')"
+                    if found and len(address) == len(cfg.vehicle) else "")  # fmt: skip
+            other = f"to use UDP instead, set link.transport = 'udp' and remove every 'tcp'{also}"
+    else:
+        n = len(tcp)
+        if tcp:
+            groups.append(([f"vehicle.tcp (of {', '.join(tcp)})"], "read only with "
+                           "link.transport = 'tcp' (the transport is 'udp')"))  # fmt: skip
+            drop = [*(["every 'address'"] if address else []), *(f"link.{f}" for f in link)]
+            other = ("to use DUNE's TCP backseat instead, set link.transport = 'tcp' and give "
+                     "every vehicle a 'tcp' and an 'id'"
+                     + (f", and remove {', '.join(drop)}" if drop else ""))  # fmt: skip
+        found = [f"link.{f}" for f in DISCOVERY if f in link_set]
+        if found and len(address) == len(cfg.vehicle):
+            groups.append((found, "not read when every vehicle has an 'address' (nobody to "
+                           "discover: the link opens no discovery socket)"))  # fmt: skip
+            n += len(found)
+    if not groups:
+        return
+    text = "; ".join(f"{', '.join(f)}: {why}" for f, why in groups)
+    raise ConfigError(f"{source}: {text}: remove {'it' if n == 1 else 'them'}"
+                      + (f" (or, {other})" if other else ""))

@@ -161,20 +161,26 @@ def wait_ready(proc, out: str | Path, timeout: float = 60.0) -> dict:
 
 def deploy_config_for(ready: dict, base: dict, log_dir: str | Path, speedup: float) -> dict:
     """A deploy configuration (as a dict) for the SITL described by ``ready``: ``base`` with
-    the discovery address, a free port on 127.0.0.1, no discovery ports of our own (the SITL
-    answers our Announce at our data port; parallel tests cannot share DUNE's), the clock
-    and the log folder set. With ``link.transport = "tcp"`` in ``base`` only ``bind`` is
-    set and ``base``'s UDP-only link fields are removed (refused with TCP:
-    :data:`mpcasv.io.config.UDP_ONLY`)."""
+    the clock (``speedup``) and the log folder (``log_dir``) set, and its link set for the
+    SITL on 127.0.0.1. UDP: the SITL's discovery address as ``announce_to``, a free data
+    port, and no discovery ports of our own when a vehicle has no ``address`` (the SITL
+    answers our Announce at our data port; parallel tests cannot share DUNE's). TCP
+    (``link.transport = "tcp"`` in ``base``): ``bind`` set, and ``base``'s fields the TCP
+    link never reads removed (refused at load, :func:`mpcasv.io.config.check_link`): the
+    UDP-only ``[link]`` fields (:data:`mpcasv.io.config.UDP_ONLY`) and every vehicle's
+    ``address``."""
     from mpcasv.io.config import UDP_ONLY
 
     cfg = json.loads(json.dumps(base))
     link = cfg.setdefault("link", {})
     if link.get("transport") == "tcp":
         cfg["link"] = {k: v for k, v in link.items() if k not in UDP_ONLY} | {"bind": "127.0.0.1"}
+        cfg["vehicle"] = [{k: v for k, v in veh.items() if k != "address"}
+                          for veh in cfg.get("vehicle", [])]  # fmt: skip
     else:
-        link |= {"bind": "127.0.0.1", "port": 0, "announce_to": [ready["discovery"]],
-                 "discovery_ports": []}  # fmt: skip
+        link |= {"bind": "127.0.0.1", "port": 0, "announce_to": [ready["discovery"]]}
+        if any("address" not in veh for veh in cfg.get("vehicle", [])):
+            link["discovery_ports"] = []  # (unread, and refused, when all have one)
     cfg.setdefault("clock", {})["speedup"] = float(speedup)
     cfg.setdefault("log", {})["dir"] = str(log_dir)
     return cfg
