@@ -99,11 +99,13 @@ def _file_being_read(exc: BaseException) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Run ``mpcasv``: 0 success, 1 ran and a check of the command failed (``compare``: a
-    job failed; ``tune``: a design FAILs; ``falsify --require-margin``: below it; a suite's
-    ``[acceptance]`` verdict is a result in the report, not such a check), 2 bad input (one
-    line on stderr naming the file and the cause), 130 interrupted. An unexpected exception
-    (a bug) keeps its traceback."""
+    """Run ``mpcasv``: 0 success, 1 ran and a check of the command failed, said on the
+    output (``compare``: a job failed or was lost; ``tune yaw``/``tune speed``: a design
+    FAILs its acceptance; ``falsify``: no run finished without an error, or with
+    ``--require-margin`` the worst margin is below it; ``deploy``: the run made no decision;
+    ``identify``: the held-out validation FAILs; a suite's ``[acceptance]`` verdict is a
+    result in the report, not such a check), 2 bad input (one line on stderr naming the file
+    and the cause), 130 interrupted. An unexpected exception (a bug) keeps its traceback."""
     parser = build_parser()
     args = parser.parse_args(argv)
     try:

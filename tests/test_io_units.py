@@ -398,7 +398,9 @@ def test_sitl_maneuver_escapes_with_the_power_turn_as_simulate_does():
     the world with the maneuver's vector, ``transit`` = 1). Before, only ``simulate`` marked the
     escape: Case 6 seed 3's rehearsal, after a standby inside auv1's domain at t = 250 s with a
     169 degree heading error, commanded the 29 N steering floor where the simulation commanded
-    the 223 N power turn (docs/deploy.md, "Known limits", session 25)."""
+    the 223 N power turn (until session 25 a "Known limits" entry of docs/deploy.md; now
+    documented in docs/deploy.md section 1, "the one escape rule of World.advance", and the
+    Case 6 rehearsal's agreement in section 5)."""
     from mpcasv.config import load_toml
     from mpcasv.control.execution import NCMD, command_vector
     from mpcasv.sim.scenario import scenario_from_dict
