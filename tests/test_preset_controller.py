@@ -13,12 +13,11 @@ import json
 from pathlib import Path
 
 import pytest
+from test_io_silent_options import _deploy_log
 
 from mpcasv.cli import main
 from mpcasv.config import DATA_DIR, ConfigError, load_toml
 from mpcasv.controllers import CONTROLLERS, load_preset, make_controller
-from mpcasv.interface import ASVState, AUVEstimate, Observation
-from mpcasv.io.records import cmd_to_dict, obs_to_dict
 from mpcasv.io.replay import replay
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -187,29 +186,10 @@ def test_simulate_records_the_preset_it_ran_with(tmp_path, capsys):
     assert json.loads((out / "run.json").read_text())["preset"] == "goto"
 
 
-def _deploy_log(folder: Path, name: str, preset) -> Path:
-    """A deploy log of one decision by controller ``name`` with ``preset`` (None: its
-    default, as the deploy configuration's ``controller.preset`` may be)."""
-    obs = Observation(0.0, ASVState(0.0, 0.0, 0.0), True,
-                      (AUVEstimate(200.0, 50.0, 10.0, t_last_fix=0.0),))  # fmt: skip
-    ctl = make_controller(name, 1, preset)
-    ctl.reset(1)
-    cmd = ctl.step(obs)
-    guard = {"stale_s": 5.0, "lost_s": 60.0, "v_max": 1.5, "w_max": 0.5, "r_keep": 10.0,
-             "margin_m": 5.0, "speed": 1.5}  # fmt: skip
-    started = {"kind": "event", "event": "started", "guard": guard,
-               "config": {"controller": {"name": name, "preset": preset, "overrides": {}}}}
-    step = {"kind": "step", "t": 0.0, "obs": obs_to_dict(obs), "cmd": cmd_to_dict(cmd),
-            "override": None, "status": ["ok"], "ages": [0.0]}  # fmt: skip
-    log = folder / "deploy.jsonl"
-    log.write_text("".join(json.dumps(r) + "\n" for r in (started, step)))
-    return log
-
-
 def test_replay_records_the_preset_it_replayed_with(tmp_path, capsys):
     """`replay` of a log whose controller ran its default preset, or with another
     --controller, said "(preset None)"; it names the preset the replay built."""
-    log = _deploy_log(tmp_path, "hybrid-single", None)
+    log = _deploy_log(tmp_path, {"name": "hybrid-single", "preset": None})
     rep = replay(log)
     assert (rep.controller, rep.preset, rep.n_steps, rep.n_differ) == (
         "hybrid-single", "paper1-sim", 1, 0)  # fmt: skip
