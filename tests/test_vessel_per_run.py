@@ -36,12 +36,21 @@ def otter_case(tmp_path, monkeypatch):
     return tmp_path
 
 
-def test_mpc_ignores_scenario_vessel_case_the_mpc_plans_with_the_simulated_boat(otter_case):
+def test_mpc_ignores_scenario_vessel_case_the_mpc_plans_with_the_simulated_boat(otter_case,
+                                                                              monkeypatch):
     """mpc-ignores-scenario-vessel: with the Otter in the scenario, the MPC's model is the
-    Otter's (T_max 239.36 N, u_max 3.086 m/s), equal to the simulator's, not Gretha's."""
+    Otter's (T_max 239.36 N, u_max 3.086 m/s), equal to the simulator's, not Gretha's. The
+    problem is what is checked, not its solver: building fatrop on the uncompiled functions
+    took 23 s of the test's 29 (compiling them for the Otter, longer), so it is not built."""
+    import mpcasv.mpc.controller as mpc_controller
+
     sc = load_scenario(otter_case / "case3-otter.toml")
     boat = Boat.of_scenario(sc)
+    solvers = []
+    monkeypatch.setattr(mpc_controller, "make_solver", lambda ocp, *a, **k: solvers.append(ocp))
+    monkeypatch.setattr(mpc_controller, "_OCP_CACHE", {})  # no solver-less entry left behind
     ctrl = make_controller("mpc-single", 1, "mpc-single", {"solver.compiled": False}, boat=boat)
+    assert solvers == [ctrl.ocp]  # the controller's solver would have been built for it
     model, ep, _ = build_plant(sc)  # what the simulator integrates
     assert ctrl.ocp.vessel == model.params
     assert ctrl.ocp.execution == ep
