@@ -224,7 +224,6 @@ def test_a_standby_that_puts_its_start_off_is_explored(scenarios_dir):
 
 @pytest.mark.parametrize(("case", "seed", "duration", "hooks", "overrides"), [
     ("case7", 1, 900.0, True, {}),
-    ("case6", 0, 1440.0, False, {"solver.step_iter": None}),
 ])
 def test_several_auvs_no_standby_far_from_the_target_for_minutes(tmp_path, case, seed,
                                                                   duration, hooks, overrides):
@@ -245,7 +244,9 @@ def test_several_auvs_no_standby_far_from_the_target_for_minutes(tmp_path, case,
     session 17 (a plan stuck at rest is explored wherever its target is) it takes another
     course without a budget too: no late standby's dearer exploration is taken any more and
     its longest standby away from the target is 28 s (scratch /work/s17/f1/c6.py); the rule
-    itself is checked by ``test_a_late_standby_keeps_its_exploration_even_if_dearer``."""
+    itself is checked by ``test_a_late_standby_keeps_its_exploration_even_if_dearer``. So the
+    Case 6 run (1440 s without the presets' step budget, 42 s of the suite) no longer met the
+    situation it was written for, and was dropped in session 25 to keep the suite short."""
     from mpcasv.controllers import Boat
     from mpcasv.experiments.suite import expand
 
