@@ -14,7 +14,7 @@ from mpcasv.cli import main
 from mpcasv.control.manoeuvres import Noise, simulate_manoeuvre
 from mpcasv.io.identlog import load_log
 from mpcasv.io.lsf import LogError
-from mpcasv.models.ident_cov import METHOD, window_covariance
+from mpcasv.models.ident_cov import METHOD, bartlett_lrv, sigma_uncertainty, window_covariance
 from mpcasv.models.ident_output import report_table, write_params
 from mpcasv.models.identify import (
     DAMPING,
@@ -115,6 +115,7 @@ def test_noise_free_log_replays_exactly_and_identifies_the_truth(tmp_path, prior
         assert res.rel_std[c] < 0.001, (c, res.rel_std[c])  # HAC 1-sigma: measured <= 0.007 %
     assert res.current == pytest.approx((0.0, 0.0), abs=1e-3)
     assert "serially correlated" not in report_table(res, prior)
+    assert "itself uncertain" not in report_table(res, prior)
 
 
 def _ar1(rng, shape, rho):
@@ -124,6 +125,18 @@ def _ar1(rng, shape, rho):
     for t in range(1, shape[-1]):
         x[..., t] = rho * x[..., t - 1] + z[..., t]
     return x
+
+
+def test_sigma_uncertainty_is_the_spread_of_the_bartlett_estimate():
+    """Monte Carlo (seeded): the relative standard deviation of a Bartlett long-run variance
+    with lag L over n white samples is sqrt(4 L / (3 n)), of its square root half that
+    (Andrews 1991, Prop. 1(b)): what ``sigma_rel_sd`` quotes."""
+    rng = np.random.default_rng(7)
+    W, nwin, L = 300, 3, 60
+    sig = [math.sqrt(bartlett_lrv(rng.normal(size=(nwin, W)), L)) for _ in range(400)]
+    spread = np.std(sig) / np.mean(sig)
+    assert spread == pytest.approx(float(sigma_uncertainty(L, W * nwin)), rel=0.2)
+    assert float(sigma_uncertainty(L, W * nwin)) == pytest.approx(math.sqrt(L / (3 * 900)))
 
 
 def test_hac_sigma_is_the_sampling_sigma_for_ar1_errors():
@@ -215,6 +228,9 @@ def test_quoted_sigma_covers_the_error_of_a_late_set_point(zigzag, prior):
     assert min(res.var_ratio.values()) > 4
     table_md = report_table(res, prior)
     assert "serially correlated" in table_md and "filtered" in table_md
+    # three training windows, residuals correlated across them: the 1-sigma is itself shaky
+    assert min(res.sigma_rel_sd.values()) > 0.2
+    assert "1-sigma is itself uncertain (every coefficient)" in table_md
 
 
 def test_manoeuvre_cli_writes_seeded_logs(tmp_path, prior):

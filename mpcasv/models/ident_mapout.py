@@ -110,7 +110,7 @@ def report(fit: MapFit, P: VesselParams, tmap: ThrusterMap, prior: VesselParams,
         lines.append(f"| {c} | {getattr(prior, c):.4g} | {getattr(P, c):.4g} | "
                      f"{100 * sd:.1f} |" if sd < 10 else f"| {c} | {getattr(prior, c):.4g} | "
                      f"{getattr(P, c):.4g} | at bound |")  # fmt: skip
-    lines += report_notes(fit.coeffs, fit.rel_std, fit.var_ratio, "this log")
+    lines += report_notes(fit.coeffs, fit.rel_std, fit.var_ratio, "this log", fit.sigma_rel_sd)
     lines += ["", "| model | part | u RMS (m/s) | r RMS (rad/s) | psi RMS (rad) |",
               "|---|---|---|---|---|"]  # fmt: skip
     for stage, d in fit.metrics.items():

@@ -116,7 +116,7 @@ def report_table(res: Identification, prior: VesselParams, truth: VesselParams |
         if truth:
             line += f" {pt:.4g} | {100 * (pi / pt - 1):+.1f} |"
         lines.append(line)
-    lines += report_notes(res.coeffs, res.rel_std, res.var_ratio)
+    lines += report_notes(res.coeffs, res.rel_std, res.var_ratio, sigma_rel_sd=res.sigma_rel_sd)
     lines += ["", f"Current: V_N = {res.current[0]:.3f} m/s, V_E = {res.current[1]:.3f} m/s", "",
               "| stage | split | " + " | ".join(f"{c} fit % (RMSE)" for c in OUTPUTS) + " |",
               "|---|---|" + "---|" * len(OUTPUTS)]  # fmt: skip

@@ -134,6 +134,9 @@ class MapFit:
     split_s: float  # log time (s from its start) where the held-out part begins
     replay: dict  # "train" / "validation" -> (measured, simulated) arrays (3, n)
     nfev: int
+    #: per coefficient: relative standard deviation of the quoted 1-sigma itself
+    #: (:func:`mpcasv.models.ident_cov.sigma_uncertainty`)
+    sigma_rel_sd: dict = dataclasses.field(default_factory=dict)
     sigma_method: str = METHOD
 
 
@@ -286,6 +289,7 @@ def identify_through_map(df: pd.DataFrame, prior: VesselParams, tmap: ThrusterMa
         rel_std={c: float(s) for c, s in zip(coeffs, std, strict=True)},
         rel_std_plain={c: float(s) for c, s in zip(coeffs, std_plain, strict=True)},
         var_ratio={c: float(r) for c, r in zip(coeffs, cov.ratio, strict=True)},
+        sigma_rel_sd={c: float(r) for c, r in zip(coeffs, cov.sigma_rel_sd, strict=True)},
         metrics={"prior": metrics(th0), "identified": metrics(sol.x)},
         split_s=float(val["t"].iloc[0]),
         replay={"train": (rp_tr.Y, np.array(rp_tr.sim(sol.x))),

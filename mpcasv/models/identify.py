@@ -341,6 +341,9 @@ class Identification:
     #: residual one (:mod:`mpcasv.models.ident_cov`; 1 for white residuals)
     var_ratio: dict = dataclasses.field(default_factory=dict)
     rel_std_plain: dict = dataclasses.field(default_factory=dict)  # (J^T J)^-1 s^2, for reference
+    #: per coefficient: relative standard deviation of the quoted 1-sigma itself
+    #: (:func:`mpcasv.models.ident_cov.sigma_uncertainty`)
+    sigma_rel_sd: dict = dataclasses.field(default_factory=dict)
     sigma_method: str = METHOD
 
 
@@ -416,14 +419,15 @@ def identify(logs: list[pd.DataFrame], prior: VesselParams, coeffs=IDENTIFIED,
                                 cols=np.arange(prob.n))  # fmt: skip
         std = np.sqrt(np.clip(cov.hac, 0, None)) / np.abs(theta[: prob.n])
         std_plain = np.sqrt(np.clip(cov.plain, 0, None)) / np.abs(theta[: prob.n])
-        ratio = cov.ratio
+        ratio, shaky = cov.ratio, cov.sigma_rel_sd
     except np.linalg.LinAlgError:
-        std = std_plain = ratio = np.full(prob.n, math.inf)
+        std = std_plain = ratio = shaky = np.full(prob.n, math.inf)
     # pinv gives a coefficient without effect a 1-sigma of 0 %: it is unknown (inf)
     std = np.where(zero_columns(se.jac[:, : prob.n]), math.inf, std)
     rel_std = {c: float(s) for c, s in zip(prob.coeffs, std, strict=True)}
     rel_std_plain = {c: float(s) for c, s in zip(prob.coeffs, std_plain, strict=True)}
     var_ratio = {c: float(r) for c, r in zip(prob.coeffs, ratio, strict=True)}
+    sigma_rel_sd = {c: float(r) for c, r in zip(prob.coeffs, shaky, strict=True)}
     check_covariance(rel_std, names)
     final = {"train": ext(theta, info_tr), "validation": ext(theta, info_va)}
     return Identification(
@@ -431,6 +435,7 @@ def identify(logs: list[pd.DataFrame], prior: VesselParams, coeffs=IDENTIFIED,
         rel_std=rel_std,
         current=(float(theta[prob.n]), float(theta[prob.n + 1])) if current else (0.0, 0.0),
         metrics=metrics, var_ratio=var_ratio, rel_std_plain=rel_std_plain,
+        sigma_rel_sd=sigma_rel_sd,
         replay={"train": (info_tr["Y"], np.array(info_tr["replay"](final["train"]))),
                 "validation": (info_va["Y"], np.array(info_va["replay"](final["validation"])))},
     )  # fmt: skip
