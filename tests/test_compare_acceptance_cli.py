@@ -7,22 +7,9 @@ from __future__ import annotations
 import textwrap
 from pathlib import Path
 
-from mpcasv.cli import main
+from test_experiments_bad_input import SCENARIO  # the 20-s go-to scenario
 
-SCENARIO = """
-name = "demo"
-duration = 20.0
-controller = "goto"
-preset = "goto"
-[asv.start]
-N = -50.0
-E = -50.0
-psi_deg = 45.0
-[[auv]]
-name = "auv"
-start = { N = 0.0, E = 0.0, depth = 20.0, psi_deg = 0.0 }
-behaviour = { transit = { heading_deg = 0.0, speed = 1.0, depth = 20.0 } }
-"""
+from mpcasv.cli import main
 
 
 def _suite(tmp: Path, variants: int = 2) -> Path:

@@ -265,6 +265,24 @@ class _Task:
         return self._done
 
 
+def _speed_spy(monkeypatch) -> list:
+    """The replayed controller's ``params.speed`` at each of its decisions, appended to the
+    returned list (``replay``'s ``make_controller`` wrapped)."""
+    from mpcasv.io import replay as replay_mod
+
+    speeds = []
+    real = replay_mod.make_controller
+
+    def spy(*a, **kw):
+        ctl = real(*a, **kw)
+        step = ctl.step
+        ctl.step = lambda obs: (speeds.append(ctl.params.speed), step(obs))[1]
+        return ctl
+
+    monkeypatch.setattr(replay_mod, "make_controller", spy)
+    return speeds
+
+
 def test_a_cap_during_a_field_step_waits_for_the_next_step_and_replays(tmp_path, monkeypatch):
     """Field mode: the controller steps in the step thread while the event loop's
     _speed_feedback capped it (controller.params replaced mid-step) and logged
@@ -312,16 +330,7 @@ def test_a_cap_during_a_field_step_waits_for_the_next_step_and_replays(tmp_path,
     steps = read_jsonl(dep.jsonl.path, "step")
     assert [r["speed_cap"] for r in steps] == [None, None, 1.2]
     assert [r["cmd"]["speed"] for r in steps] == [2.0, 2.0, 1.2]
-    speeds = []  # the replayed controller's speed at each decision
-    real = replay_mod.make_controller
-
-    def spy(*a, **kw):
-        ctl = real(*a, **kw)
-        step = ctl.step
-        ctl.step = lambda obs: (speeds.append(ctl.params.speed), step(obs))[1]
-        return ctl
-
-    monkeypatch.setattr(replay_mod, "make_controller", spy)
+    speeds = _speed_spy(monkeypatch)  # the replayed controller's speed at each decision
     rep = replay_mod.replay(dep.jsonl.path)
     assert (rep.n_steps, rep.n_differ) == (3, 0), rep.table
     assert speeds == [2.5, 2.5, 1.2]
@@ -345,16 +354,7 @@ def test_replay_of_an_older_log_places_a_cap_by_time(tmp_path, monkeypatch):
     cap = {"kind": "event", "event": "controller_speed_cap", "t": 1.5, "old": 2.5, "new": 1.2,
            "plan": None}  # fmt: skip
     log.write_text("".join(json.dumps(r) + "\n" for r in (started, step, cap, s1, s2)))
-    speeds = []
-    real = replay_mod.make_controller
-
-    def spy(*a, **kw):
-        ctl = real(*a, **kw)
-        step_ = ctl.step
-        ctl.step = lambda obs: (speeds.append(ctl.params.speed), step_(obs))[1]
-        return ctl
-
-    monkeypatch.setattr(replay_mod, "make_controller", spy)
+    speeds = _speed_spy(monkeypatch)
     rep = replay_mod.replay(log)
     assert speeds == [2.5, 2.5, 1.2]  # the decision at clock 1.0 began before the cap
     assert rep.n_differ == 0, rep.table  # its command capped as logged
