@@ -119,12 +119,7 @@ def test_replay_applies_the_logged_speed_caps(tmp_path):
     from mpcasv.io.logs import read_jsonl
     from mpcasv.io.replay import replay
 
-    data = _config(vehicle=[{"role": "asv", "id": 0x2801, "address": "127.0.0.1:6002"},
-                            {"role": "auv", "id": 0x2811, "address": "127.0.0.1:6003"}],
-                   link={"port": 0, "announce_to": [], "plan_done_timeout": 0.3},
-                   controller={"speed_feedback": True}, speed={"command_max": 2.0},
-                   log={"dir": str(tmp_path)})  # fmt: skip
-    dep = Deploy(deploy_config_from_dict(data))
+    dep = Deploy(deploy_config_from_dict(_cap_config(tmp_path)))
     dep.event("started", config=dataclasses.asdict(dep.cfg), guard=dataclasses.asdict(dep.gp))
 
     def decide(t: float, asv_N: float) -> None:
@@ -228,6 +223,16 @@ def test_replay_shows_the_logged_and_replayed_speeds(tmp_path, capsys):
     assert (row["logged_speed"], row["replay_speed"]) == (1.75, 2.5)
 
 
+def _cap_config(tmp_path) -> dict:
+    """A hybrid-single deploy configuration with speed_feedback and command_max 2 m/s, its
+    log in ``tmp_path``."""
+    return _config(vehicle=[{"role": "asv", "id": 0x2801, "address": "127.0.0.1:6002"},
+                            {"role": "auv", "id": 0x2811, "address": "127.0.0.1:6003"}],
+                   link={"port": 0, "announce_to": [], "plan_done_timeout": 0.3},
+                   controller={"speed_feedback": True}, speed={"command_max": 2.0},
+                   log={"dir": str(tmp_path)})  # fmt: skip
+
+
 def _cap_deploy(tmp_path, monkeypatch):
     """A hybrid-single deploy (speed_feedback, command_max 2 m/s) on a clock the test sets
     (``now[0]``), with a ``decide(t, asv_N)`` writing a decision at deploy clock 1000 + t."""
@@ -236,12 +241,7 @@ def _cap_deploy(tmp_path, monkeypatch):
     from mpcasv.interface import ASVState, AUVEstimate, Observation
     from mpcasv.io.deploy import Deploy
 
-    data = _config(vehicle=[{"role": "asv", "id": 0x2801, "address": "127.0.0.1:6002"},
-                            {"role": "auv", "id": 0x2811, "address": "127.0.0.1:6003"}],
-                   link={"port": 0, "announce_to": [], "plan_done_timeout": 0.3},
-                   controller={"speed_feedback": True}, speed={"command_max": 2.0},
-                   log={"dir": str(tmp_path)})  # fmt: skip
-    dep = Deploy(deploy_config_from_dict(data))
+    dep = Deploy(deploy_config_from_dict(_cap_config(tmp_path)))
     now = [1000.0]
     monkeypatch.setattr(dep.clock, "now", lambda: now[0])
     dep.event("started", config=dataclasses.asdict(dep.cfg), guard=dataclasses.asdict(dep.gp))
