@@ -67,6 +67,11 @@ def test_shapes_that_do_not_agree_are_refused():
     step = _step(load_vessel("gretha"), 0.2)
     with pytest.raises(ValueError, match="do not agree"):
         Windows(step, np.zeros((NX, 2)), np.zeros((2, 31)), np.zeros((1, 31)), [2], [1.0])
+    with pytest.raises(ValueError, match="1 weights and wrapped rows"):
+        Windows(step, np.zeros((NX, 2)), np.zeros((2, 30)), np.zeros((3, 30)), [2, 3, 5], [1.0])
+    with pytest.raises(ValueError, match="outside the 8 states"):
+        Windows(step, np.zeros((NX, 2)), np.zeros((2, 30)), np.zeros((1, 30)), [2], [1.0],
+                x0_rows=[9])  # fmt: skip
     win = Windows(step, np.zeros((NX, 2)), np.zeros((2, 30)), np.zeros((1, 30)), [2], [1.0])
     with pytest.raises(ValueError, match="5 parameters given, 4 expected"):
         win.residuals(np.zeros(5))

@@ -14,7 +14,14 @@ from mpcasv.cli import main
 from mpcasv.control.manoeuvres import Noise, simulate_manoeuvre
 from mpcasv.io.identlog import load_log
 from mpcasv.io.lsf import LogError
-from mpcasv.models.ident_cov import METHOD, bartlett_lrv, sigma_uncertainty, window_covariance
+from mpcasv.models.ident_cov import (
+    METHOD,
+    SHAKY,
+    bartlett_lrv,
+    sigma_uncertainty,
+    uncertain_sigma_note,
+    window_covariance,
+)
 from mpcasv.models.ident_output import report_table, write_params
 from mpcasv.models.identify import (
     DAMPING,
@@ -127,16 +134,26 @@ def _ar1(rng, shape, rho):
     return x
 
 
-def test_sigma_uncertainty_is_the_spread_of_the_bartlett_estimate():
+@pytest.mark.parametrize("L", [1, 10, 60])
+def test_sigma_uncertainty_is_the_spread_of_the_bartlett_estimate(L):
     """Monte Carlo (seeded): the relative standard deviation of a Bartlett long-run variance
-    with lag L over n white samples is sqrt(4 L / (3 n)), of its square root half that
-    (Andrews 1991, Prop. 1(b)): what ``sigma_rel_sd`` quotes."""
+    with lag L (bandwidth L + 1) over n white samples is sqrt(4 (L + 1) / (3 n)), of its
+    square root half that (Andrews 1991, Prop. 1(b)): what ``sigma_rel_sd`` quotes. At L = 1
+    the bandwidth matters: sqrt(L / 3n) would be 30 % low."""
     rng = np.random.default_rng(7)
-    W, nwin, L = 300, 3, 60
-    sig = [math.sqrt(bartlett_lrv(rng.normal(size=(nwin, W)), L)) for _ in range(400)]
+    W, nwin = 300, 3
+    sig = [math.sqrt(bartlett_lrv(rng.normal(size=(nwin, W)), L)) for _ in range(600)]
     spread = np.std(sig) / np.mean(sig)
-    assert spread == pytest.approx(float(sigma_uncertainty(L, W * nwin)), rel=0.2)
-    assert float(sigma_uncertainty(L, W * nwin)) == pytest.approx(math.sqrt(L / (3 * 900)))
+    assert spread == pytest.approx(float(sigma_uncertainty(L, W * nwin)), rel=0.15)
+    assert float(sigma_uncertainty(L, W * nwin)) == pytest.approx(math.sqrt((L + 1) / 2700))
+
+
+def test_the_uncertain_sigma_note_names_the_coefficients_above_the_limit():
+    shaky = {"X_u": 0.05, "N_r": SHAKY + 0.01, "I_z": 0.3}
+    note = uncertain_sigma_note(shaky, "this log")
+    assert "(N_r, I_z)" in note and "about 30 %" in note and "samples of this log" in note
+    assert "every coefficient" in uncertain_sigma_note({"X_u": 0.3, "N_r": 0.25})
+    assert uncertain_sigma_note({"X_u": SHAKY, "N_r": 0.0}) is None
 
 
 def test_hac_sigma_is_the_sampling_sigma_for_ar1_errors():
@@ -202,7 +219,8 @@ def test_identify_cli_records_the_sigma_basis(zigzag, tmp_path):
     assert main(["identify", str(log), "--out", str(out), "--quiet"]) == 0
     rec = json.loads((tmp_path / "p-report" / "identify.json").read_text())
     assert rec["sigma_method"] == METHOD
-    assert set(rec["var_ratio"]) == set(rec["rel_std"]) == set(rec["rel_std_plain"])
+    assert set(rec["var_ratio"]) == set(rec["rel_std"]) == set(rec["rel_std_plain"]) == set(
+        rec["sigma_rel_sd"])
     assert "1-sigma: Newey-West" in (tmp_path / "p-report" / "identify.md").read_text()
 
 
@@ -228,7 +246,7 @@ def test_quoted_sigma_covers_the_error_of_a_late_set_point(zigzag, prior):
     assert min(res.var_ratio.values()) > 4
     table_md = report_table(res, prior)
     assert "serially correlated" in table_md and "filtered" in table_md
-    # three training windows, residuals correlated across them: the 1-sigma is itself shaky
+    # three training windows and a lag as long as a window: the 1-sigma is itself shaky
     assert min(res.sigma_rel_sd.values()) > 0.2
     assert "1-sigma is itself uncertain (every coefficient)" in table_md
 

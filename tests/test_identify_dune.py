@@ -192,7 +192,8 @@ def test_map_sigma_is_on_the_same_basis_as_identify(identified):
     folder = out.with_name(out.stem + "-report")
     rec = json.loads((folder / "identify.json").read_text())
     assert rec["sigma_method"] == METHOD
-    assert set(rec["var_ratio"]) == set(rec["rel_std"]) == set(rec["rel_std_plain"])
+    assert set(rec["var_ratio"]) == set(rec["rel_std"]) == set(rec["rel_std_plain"]) == set(
+        rec["sigma_rel_sd"])
     assert f"# 1-sigma: {METHOD}." in out.read_text()
     assert "Newey-West HAC" in load_vessel(out).provenance["X_u"]
     md = (folder / "identify.md").read_text()

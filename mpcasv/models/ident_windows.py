@@ -65,7 +65,8 @@ class Windows:
     Raises
     ------
     ValueError
-        Shapes that do not agree.
+        Shapes that do not agree; weights not one per output; wrapped rows, outputs or
+        corrected states out of range.
     """
 
     def __init__(self, step: ca.Function, x0: np.ndarray, A: np.ndarray, Y: np.ndarray,
@@ -75,6 +76,12 @@ class Windows:
         self.W = A.shape[1] // max(self.nwin, 1)
         if A.shape[1] != self.W * self.nwin or Y.shape != (len(out), A.shape[1]):
             raise ValueError(f"windows: x0 {x0.shape}, A {A.shape}, Y {Y.shape} do not agree")
+        if len(weights) != len(out) or not set(wrap) <= set(range(len(out))):
+            raise ValueError(f"windows: {len(weights)} weights and wrapped rows {list(wrap)} "
+                             f"for {len(out)} outputs")  # fmt: skip
+        if not set(out) | set(x0_rows) <= set(range(nx)):
+            raise ValueError(f"windows: outputs {list(out)} or corrected states "
+                             f"{list(x0_rows)} outside the {nx} states")  # fmt: skip
         self.n_th = step.size1_in(2)
         self.x0, self.A, self.Y = np.asarray(x0, float), np.asarray(A, float), Y
         self.out, self.wrap = list(out), list(wrap)

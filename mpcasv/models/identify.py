@@ -201,7 +201,9 @@ def _windows(parts: list[Prepared], W: int, what: str = "logs"):
 
 
 class Problem:
-    """The identification problem on the shared model, its CasADi functions built once.
+    """The identification problem on the shared model: its residual functions (equation
+    error, replay windows) are built for given log parts by :meth:`equation_error` and
+    :meth:`replay`.
 
     ``theta = [s_1 .. s_n, V_N, V_E]``: scale factors of the identified coefficients relative
     to the prior (1 = prior) and the current (m/s).
@@ -304,7 +306,7 @@ def _solve(fun, theta0, bounds, max_nfev: int = 100):
         if key not in cache:
             cache.clear()
             out = fun(th)
-            cache[key] = (np.array(out[0]).ravel(), np.array(out[1]))
+            cache[key] = (np.asarray(out[0]).ravel(), np.asarray(out[1]))  # no copy
         return cache[key]
 
     return least_squares(lambda th: both(th)[0], theta0, jac=lambda th: both(th)[1],
