@@ -23,7 +23,8 @@ simulator's thruster map
 (:mod:`mpcasv.models.ident_thrust`): the actuation-to-force map is DUNE's own, not a
 proportional one. Its table (:func:`map_table`) holds the actuations as DUNE applied them:
 over ``[t_k, t_k+1)`` the latest SetThrusterActuation of each thruster at ``t_k + dt / 2``
-(DUNE's controller answers each EstimatedState within a millisecond).
+(DUNE's controller answers each EstimatedState within a millisecond; the timing and its
+evidence: :data:`mpcasv.models.ident_thrust.ACTUATION_ADVANCE`).
 """
 
 from __future__ import annotations
@@ -186,16 +187,27 @@ def _differential_inputs(df: pd.DataFrame, path, prior: VesselParams) -> pd.Data
 
 
 
-def map_table(path: Path, vehicle: str | None = None) -> tuple[pd.DataFrame, pd.DataFrame]:
+def map_table(path: Path, vehicle: str | None = None,
+              advance: int | None = None) -> tuple[pd.DataFrame, pd.DataFrame]:  # fmt: skip
     """(table of :data:`mpcasv.models.ident_thrust.MAP_COLUMNS`, the vehicle's
     :func:`~mpcasv.io.lsf.read_lsf` rows) of a DUNE log of a boat with thrusters 0 and 1.
+
+    Row ``k`` holds EstimatedState ``k`` (at ``t_k``) and, as ``a_0``, ``a_1``, the
+    actuation that acts over the step ``[t_k, t_k+1)``: the latest SetThrusterActuation of
+    each thruster before ``t_(k + advance) + dt / 2``. ``advance`` (samples; default
+    :data:`mpcasv.models.ident_thrust.ACTUATION_ADVANCE` = 0, chosen by the data, evidence
+    there) shifts the actuations earlier (``+1``: the one sent a step later) or later
+    (``-1``: a step late). With 0 the step from ``t_k`` carries DUNE's answer to
+    EstimatedState ``k`` (logged 0.12 ms after it, median).
 
     Raises
     ------
     LogError
         Unreadable log, unknown vehicle, or no SetThrusterActuation of thruster 0 or 1.
     """
-    from mpcasv.models.ident_thrust import check_table
+    from mpcasv.models.ident_thrust import ACTUATION_ADVANCE, check_table
+
+    advance = ACTUATION_ADVANCE if advance is None else int(advance)
 
     df = read_lsf(path)
     chosen = pick_vehicle(df, path, vehicle)
@@ -211,7 +223,7 @@ def map_table(path: Path, vehicle: str | None = None) -> tuple[pd.DataFrame, pd.
         if s.empty:
             raise LogError(f"{path}: missing messages: no SetThrusterActuation id {i} (a vessel "
                            "with two thrusters needs both)")  # fmt: skip
-        k = np.searchsorted(s["t"].to_numpy(float), t + dt / 2, side="right") - 1
+        k = np.searchsorted(s["t"].to_numpy(float), t + (advance + 0.5) * dt, side="right") - 1
         table[f"a_{i}"] = np.where(k >= 0, s["value"].to_numpy(float)[np.clip(k, 0, None)], 0.0)
     return check_table(table, path), df
 

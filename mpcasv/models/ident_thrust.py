@@ -27,6 +27,11 @@ with the exact Jacobian, :mod:`mpcasv.models.ident_windows`) over replay windows
 re-initialised from the measurement, on the first ``1 - validation`` of the log; the rest
 is held out and replayed the same way (speed, heading and yaw-rate RMS:
 :func:`replay_metrics`).
+
+Timing: table row ``k`` is the state at ``t_k`` and the actuations over ``[t_k, t_k+1)``
+(:data:`MAP_COLUMNS`, :data:`ACTUATION_ADVANCE`); a replay step from row ``k`` is compared
+with the measurement at row ``k + 1`` (:class:`~mpcasv.models.ident_windows.Windows`: the
+outputs *after* each step).
 """
 
 from __future__ import annotations
@@ -49,13 +54,31 @@ from mpcasv.models.vessel import IX, NX, VesselModel, rk4_expr
 HULL_COEFFS = ("m", "I_z", "X_u", "X_uu", "N_r", "N_rr")
 #: sign of each (bounds of the fit): +1 positive, -1 negative (Fossen's convention)
 _SIGN = {"m": 1, "I_z": 1, "X_u": -1, "X_uu": -1, "N_r": -1, "N_rr": -1}
-#: columns of a thruster-map identification table
+#: columns of a thruster-map identification table: row ``k`` holds the state measured at
+#: ``t_k`` and the actuations ``a_0``, ``a_1`` that act over the step ``[t_k, t_k+1)``
 MAP_COLUMNS = ("t", "N", "E", "psi", "u", "v", "r", "a_0", "a_1")
+#: Timing (samples): the step from EstimatedState ``k`` carries the actuation DUNE sent in
+#: answer to EstimatedState ``k + ACTUATION_ADVANCE`` (:func:`mpcasv.io.identlog.map_table`).
+#: Evidence, DUNE's Otter log (dune-otter-ident, session 25): SetThrusterActuation (10 Hz per
+#: thruster) is logged 0.12 ms (median; 0.03-0.6 ms, 0-99th percentile) after the
+#: EstimatedState it answers; EstimatedState (10 Hz) is the latest SimulatedState (25 Hz,
+#: VSIM's step) 10.6 ms later (median) and matches it best shifted by 0.02 s (u RMS 0.0018
+#: m/s, r 0.008 rad/s; at 0.1 s: 0.015, 0.066); VSIM applies an actuation from its next step
+#: (the README's free-run check), about 30 ms after it is sent. So the actuation acts over
+#: ``[t_k, t_k+1)`` but for its first 0.3 step: 0 samples to the nearest step. The fit says
+#: the same (``mpcasv identify``, validation 0.3, Y after each step): held-out r RMS 0.082,
+#: 0.018, 0.077, 0.164 rad/s and I_z 20.4, 12.16, 21.4, 1001 kg m^2 (Config.ini: 12) for
+#: advances -1, 0, +1, +2; VSIM's own hull replays best at 0 too (held-out u 0.021, 0.0084,
+#: 0.021, 0.025 m/s). Before session 25 the table's actuations were a step late (a
+#: zero-order hold without tolerance, :func:`_hold_rows`) and the replay compared each step
+#: with the measurement one step earlier: the two errors cancelled.
+ACTUATION_ADVANCE = 0
 OUTPUTS = ("psi", "u", "r")
 #: weights of the residuals (1 / typical error): psi (rad), u (m/s), r (rad/s). The heading
 #: is reported, not fitted: DUNE's yaw loop chatters (true r std about 4 deg/s on straight
 #: legs) with each thruster's moment at its clip, so a replay's heading drifts by timing
-#: alone; even VSIM's own parameters give 0.1 rad RMS over 10-s windows (docs/deploy.md)
+#: alone; even VSIM's own parameters give 0.044 rad RMS over 10-s windows (docs/deploy.md;
+#: 0.10 rad with the replay a step misaligned, before session 25)
 _WEIGHT = (0.0, 1 / 0.01, 1 / 0.02)
 
 
@@ -161,13 +184,25 @@ def check_table(df: pd.DataFrame, source) -> pd.DataFrame:
     grid = np.arange(t[0], t[-1] + 1e-9, dt)
     out = {"t": grid - grid[0]}
     psi = np.unwrap(df["psi"].to_numpy())
+    hold = _hold_rows(t, grid, dt)
     for c in MAP_COLUMNS[1:]:
         y = psi if c == "psi" else df[c].to_numpy()
-        if c.startswith("a_"):  # set-points: zero-order hold
-            out[c] = y[np.clip(np.searchsorted(t, grid, side="right") - 1, 0, len(t) - 1)]
-        else:
-            out[c] = np.interp(grid, t, y)
+        out[c] = y[hold] if c.startswith("a_") else np.interp(grid, t, y)
     return pd.DataFrame(out)
+
+
+def _hold_rows(t: np.ndarray, grid: np.ndarray, dt: float) -> np.ndarray:
+    """Row of ``t`` whose set-point holds at each ``grid`` time: the row whose
+    ``[t_k - dt/2, t_k + dt/2)`` holds it (a row's set-point acts over its own step).
+
+    The tolerance of half a step matters: ``grid`` is ``t_0 + k dt`` with ``dt`` the median
+    step, and logged times jitter and drift around it. In DUNE's Otter log
+    (dune-otter-ident) ``t_k - grid_k`` is 0.18 to 3.6 ms (5th-95th percentile, up to
+    7.3 ms), so a plain ``searchsorted(t, grid, side="right") - 1`` took the *previous*
+    row at 6,633 of the 6,651 samples: every actuation one step late (it was compensated,
+    by accident, by comparing each replayed step with the measurement one step earlier).
+    """
+    return np.clip(np.searchsorted(t, grid + dt / 2, side="right") - 1, 0, len(t) - 1)
 
 
 class _Replay:
@@ -199,15 +234,19 @@ class _Replay:
             x = rk4_expr(lambda x_, u_, c_: model.f_param(x_, u_, c_, p), x, act, c0, h)
         step = ca.Function("map_step", [xs, a_s, th], [x])
         W = max(10, int(round(window_s / dt)))
-        nwin = len(df) // W
+        nwin = (len(df) - 1) // W  # a window of W steps needs W + 1 samples
         if nwin < 1:
-            raise LogError(f"log part of {len(df)} samples is shorter than one window ({W})")
+            raise LogError(f"log part of {len(df)} samples is shorter than one window ({W} "
+                           "steps)")  # fmt: skip
         n = nwin * W
+        # step k goes from sample k to sample k + 1 under row k's actuations (map_table: the
+        # actuation that acts over [t_k, t_k+1)); Y is the measurement *after* each step
+        # (the Windows contract), samples 1 .. n
         A = df[["a_0", "a_1"]].to_numpy()[:n].T
         x0 = np.zeros((NX, nwin))
         for c in ("N", "E", "psi", "u", "v", "r"):
             x0[IX[c]] = df[c].to_numpy()[: n : W]
-        self.Y = np.vstack([df[c].to_numpy()[:n] for c in OUTPUTS])
+        self.Y = np.vstack([df[c].to_numpy()[1 : n + 1] for c in OUTPUTS])
         win = Windows(step, x0, A, self.Y, [IX[c] for c in OUTPUTS], _WEIGHT, wrap=[0])
         self.fun, self.sim = win.residuals, win.simulate  # theta -> (res, jac, Ysim); Ysim
         self.windows, self.W = nwin, W
