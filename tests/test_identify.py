@@ -404,3 +404,18 @@ def test_two_thruster_lsf_is_mapped_to_total_and_differential_thrust(tmp_path):
         load_log(path, prior=load_vessel("gretha"))  # a steerable prior needs the servo
     # ... and the message says why and what to try (review, session 5)
     assert "thrusters 0 and 1" in str(err.value) and "--vessel otter" in str(err.value)
+
+
+def test_a_set_point_holds_from_the_grid_instant_nearest_its_logged_time():
+    """Logged times drift by milliseconds against the median-step grid (DUNE's Otter log:
+    0.18-3.6 ms ahead): each set-point holds over its own step, not the one after it (a
+    plain zero-order hold took the previous row at 6,633 of 6,651 samples there). The CSV
+    case too: a grid a few 1e-16 s short of the logged times."""
+    from mpcasv.models.identify import hold_rows
+
+    k = np.arange(200)
+    grid = 0.1 * k
+    for ahead in (3.6e-3, 7.3e-3, 4e-16, -0.04):  # logged time minus grid time (s)
+        assert np.array_equal(hold_rows(grid + ahead, grid, 0.1)[1:], k[1:]), ahead
+    # a row half a step or more after a grid instant is the next instant's
+    assert hold_rows(grid + 0.06, grid, 0.1)[5] == 4

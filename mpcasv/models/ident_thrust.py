@@ -47,6 +47,7 @@ from scipy.optimize import least_squares
 from mpcasv.errors import LogError
 from mpcasv.models.ident_cov import METHOD, window_covariance
 from mpcasv.models.ident_windows import Windows
+from mpcasv.models.identify import hold_rows
 from mpcasv.models.params import MODEL_COEFFS, VesselParams
 from mpcasv.models.vessel import IX, NX, VesselModel, rk4_expr
 
@@ -70,8 +71,8 @@ MAP_COLUMNS = ("t", "N", "E", "psi", "u", "v", "r", "a_0", "a_1")
 #: 0.018, 0.077, 0.164 rad/s and I_z 20.4, 12.16, 21.4, 1001 kg m^2 (Config.ini: 12) for
 #: advances -1, 0, +1, +2; VSIM's own hull replays best at 0 too (held-out u 0.021, 0.0084,
 #: 0.021, 0.025 m/s). Before session 25 the table's actuations were a step late (a
-#: zero-order hold without tolerance, :func:`_hold_rows`) and the replay compared each step
-#: with the measurement one step earlier: the two errors cancelled.
+#: zero-order hold without tolerance; now :func:`mpcasv.models.identify.hold_rows`) and the
+#: replay compared each step with the measurement one step earlier: the two cancelled.
 ACTUATION_ADVANCE = 0
 OUTPUTS = ("psi", "u", "r")
 #: weights of the residuals (1 / typical error): psi (rad), u (m/s), r (rad/s). The heading
@@ -184,25 +185,11 @@ def check_table(df: pd.DataFrame, source) -> pd.DataFrame:
     grid = np.arange(t[0], t[-1] + 1e-9, dt)
     out = {"t": grid - grid[0]}
     psi = np.unwrap(df["psi"].to_numpy())
-    hold = _hold_rows(t, grid, dt)
+    hold = hold_rows(t, grid, dt)
     for c in MAP_COLUMNS[1:]:
         y = psi if c == "psi" else df[c].to_numpy()
         out[c] = y[hold] if c.startswith("a_") else np.interp(grid, t, y)
     return pd.DataFrame(out)
-
-
-def _hold_rows(t: np.ndarray, grid: np.ndarray, dt: float) -> np.ndarray:
-    """Row of ``t`` whose set-point holds at each ``grid`` time: the row whose
-    ``[t_k - dt/2, t_k + dt/2)`` holds it (a row's set-point acts over its own step).
-
-    The tolerance of half a step matters: ``grid`` is ``t_0 + k dt`` with ``dt`` the median
-    step, and logged times jitter and drift around it. In DUNE's Otter log
-    (dune-otter-ident) ``t_k - grid_k`` is 0.18 to 3.6 ms (5th-95th percentile, up to
-    7.3 ms), so a plain ``searchsorted(t, grid, side="right") - 1`` took the *previous*
-    row at 6,633 of the 6,651 samples: every actuation one step late (it was compensated,
-    by accident, by comparing each replayed step with the measurement one step earlier).
-    """
-    return np.clip(np.searchsorted(t, grid + dt / 2, side="right") - 1, 0, len(t) - 1)
 
 
 class _Replay:
