@@ -387,3 +387,23 @@ def test_plan_forecast_follows_the_plan_through_its_turn():
     np.testing.assert_allclose(a.predict([0.0, 40.0, 100.0]), pred)  # unchanged by later news
     kf = make_estimator("kalman", initial=AUVEstimate(0, 0, 10, 1.0, 0.5, t_last_fix=0.0))
     np.testing.assert_allclose(kf.estimate(0.0).predict([0.0, 100.0]), [[0, 0], [100, 50]])
+
+
+def test_a_ratio_with_a_zero_baseline_is_nan_without_a_warning():
+    """A short run whose baseline estimator made no jump: the jump ratio is undefined (NaN),
+    said by the value, not by a numpy RuntimeWarning on 0/0 (the suite printed one)."""
+    import warnings
+
+    import pandas as pd
+
+    from mpcasv.estimation.evaluate import acceptance_ratios
+
+    cols = ("pos_error_rms_m", "pos_error_rms_linked_m", "belief_range_jump_max_m",
+            "jump_after_acquisition_max_m")  # fmt: skip
+    table = pd.DataFrame([{"estimator": "acoustic", **dict.fromkeys(cols, 0.0), cols[0]: 4.0},
+                          {"estimator": "kalman", **dict.fromkeys(cols, 0.0), cols[0]: 1.0}])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        r = acceptance_ratios(table)
+    assert r["pos_error_rms_ratio"] == 0.25
+    assert math.isnan(r["range_jump_ratio"]) and math.isnan(r["jump_after_acquisition_ratio"])

@@ -24,6 +24,7 @@ Run as a script to print the table (and optionally plot)::
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 from collections.abc import Sequence
 from contextlib import contextmanager
@@ -185,7 +186,8 @@ def compare_estimators(
 def acceptance_ratios(table: pd.DataFrame, candidate: str = "kalman",
                       baseline: str = "acoustic") -> dict:  # fmt: skip
     """Seed-averaged ratios candidate / baseline of the RMS position errors and of the largest
-    believed-range jumps (issue 8 asks for <= 0.5 with ``kalman`` vs ``acoustic``)."""
+    believed-range jumps (issue 8 asks for <= 0.5 with ``kalman`` vs ``acoustic``); NaN where
+    the baseline's figure is 0 or NaN (e.g. no jump in a short run): no ratio is defined."""
     mean = table.groupby("estimator").mean(numeric_only=True)
     for name in (candidate, baseline):
         if name not in mean.index:
@@ -197,7 +199,8 @@ def acceptance_ratios(table: pd.DataFrame, candidate: str = "kalman",
         "range_jump_ratio": "belief_range_jump_max_m",
         "jump_after_acquisition_ratio": "jump_after_acquisition_max_m",
     }
-    return {name: float(c[col] / b[col]) for name, col in ratio.items()}
+    return {name: float(c[col] / b[col]) if b[col] > 0 else math.nan
+            for name, col in ratio.items()}
 
 
 def plot_estimators(runs: dict, path: str | Path, auv: int = 0) -> Path:
