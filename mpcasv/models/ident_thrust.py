@@ -47,7 +47,7 @@ from scipy.optimize import least_squares
 from mpcasv.errors import LogError
 from mpcasv.models.ident_cov import METHOD, window_covariance
 from mpcasv.models.ident_windows import Windows
-from mpcasv.models.identify import hold_rows
+from mpcasv.models.identify import hold_rows, regular_grid
 from mpcasv.models.params import MODEL_COEFFS, VesselParams
 from mpcasv.models.vessel import IX, NX, VesselModel, rk4_expr
 
@@ -165,12 +165,13 @@ class MapFit:
 
 
 def check_table(df: pd.DataFrame, source) -> pd.DataFrame:
-    """A thruster-map identification table (:data:`MAP_COLUMNS`) on a uniform time grid.
+    """A thruster-map identification table (:data:`MAP_COLUMNS`) on a uniform time grid
+    (:func:`mpcasv.models.identify.regular_grid`).
 
     Raises
     ------
     LogError
-        Missing columns, non-finite values, time not increasing, too short.
+        Missing columns, non-finite values, time not increasing, too short, a gap.
     """
     missing = [c for c in MAP_COLUMNS if c not in df.columns]
     if missing:
@@ -181,8 +182,7 @@ def check_table(df: pd.DataFrame, source) -> pd.DataFrame:
     t = df["t"].to_numpy()
     if len(t) < 100 or np.any(np.diff(t) <= 0):
         raise LogError(f"{source}: need at least 100 samples with t strictly increasing")
-    dt = float(np.median(np.diff(t)))
-    grid = np.arange(t[0], t[-1] + 1e-9, dt)
+    grid, dt = regular_grid(t, source)
     out = {"t": grid - grid[0]}
     psi = np.unwrap(df["psi"].to_numpy())
     hold = hold_rows(t, grid, dt)
