@@ -23,11 +23,11 @@ from mpcasv.models.ident_cov import (
     window_covariance,
 )
 from mpcasv.models.ident_output import report_table, write_params
+from mpcasv.models.ident_table import REQUIRED
 from mpcasv.models.identify import (
     DAMPING,
     IDENTIFIED,
     OUTPUTS,
-    REQUIRED,
     Problem,
     fit_metrics,
     identify,
@@ -411,7 +411,7 @@ def test_a_set_point_holds_from_the_grid_instant_nearest_its_logged_time():
     0.18-3.6 ms ahead): each set-point holds over its own step, not the one after it (a
     plain zero-order hold took the previous row at 6,633 of 6,651 samples there). The CSV
     case too: a grid a few 1e-16 s short of the logged times."""
-    from mpcasv.models.identify import hold_rows
+    from mpcasv.models.ident_table import hold_rows
 
     k = np.arange(200)
     grid = 0.1 * k
@@ -433,7 +433,7 @@ def test_a_jittered_log_keeps_every_set_point_on_its_own_step(seed):
     """Logged times with +-4 ms of jitter: the grid is the span over its steps, so it does not
     drift against them (a median-step grid drifted 1 to 148 ms over 150 s on these seeds:
     steering switches a step off, N_rdot 23 % off in a new user's run, session 25)."""
-    from mpcasv.models.identify import identification_table
+    from mpcasv.models.ident_table import identification_table
 
     rng = np.random.default_rng(seed)
     k = np.arange(1501)
@@ -447,7 +447,7 @@ def test_a_jittered_log_keeps_every_set_point_on_its_own_step(seed):
 def test_a_gap_in_the_log_is_refused_in_one_line():
     """A 3-s hole (30 samples missing) would be bridged by straight lines and shift the fit
     without a word: refused, naming where; a missing sample or two is bridged."""
-    from mpcasv.models.identify import identification_table
+    from mpcasv.models.ident_table import identification_table
 
     k = np.arange(1501)
     t, delta = 0.1 * k, np.where((k // 75) % 2 == 0, 0.35, -0.35)

@@ -37,7 +37,8 @@ import pandas as pd
 
 from mpcasv.errors import LogError
 from mpcasv.io.lsf import read_lsf, read_messages
-from mpcasv.models.identify import IDENTIFIED, identification_table, identify
+from mpcasv.models.ident_table import identification_table
+from mpcasv.models.identify import IDENTIFIED, identify
 from mpcasv.models.params import MODEL_COEFFS, VesselParams
 
 __all__ = ["load_log", "map_table", "pick_vehicle", "run_cli"]
@@ -45,7 +46,7 @@ __all__ = ["load_log", "map_table", "pick_vehicle", "run_cli"]
 
 def load_log(path: Path, prior: VesselParams, vehicle: str | None = None) -> pd.DataFrame:
     """Read one log (CSV, parquet or DUNE LSF) into the identification table
-    (:func:`mpcasv.models.identify.identification_table`).
+    (:func:`mpcasv.models.ident_table.identification_table`).
 
     ``vehicle`` selects one vehicle of a DUNE log (name or IMC id); see the module docstring.
 

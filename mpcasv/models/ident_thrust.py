@@ -46,8 +46,8 @@ from scipy.optimize import least_squares
 
 from mpcasv.errors import LogError
 from mpcasv.models.ident_cov import METHOD, window_covariance
+from mpcasv.models.ident_table import hold_rows, regular_grid
 from mpcasv.models.ident_windows import Windows
-from mpcasv.models.identify import hold_rows, regular_grid
 from mpcasv.models.params import MODEL_COEFFS, VesselParams
 from mpcasv.models.vessel import IX, NX, VesselModel, rk4_expr
 
@@ -71,7 +71,7 @@ MAP_COLUMNS = ("t", "N", "E", "psi", "u", "v", "r", "a_0", "a_1")
 #: 0.018, 0.077, 0.164 rad/s and I_z 20.4, 12.16, 21.4, 1001 kg m^2 (Config.ini: 12) for
 #: advances -1, 0, +1, +2; VSIM's own hull replays best at 0 too (held-out u 0.021, 0.0084,
 #: 0.021, 0.025 m/s). Before session 25 the table's actuations were a step late (a
-#: zero-order hold without tolerance; now :func:`mpcasv.models.identify.hold_rows`) and the
+#: zero-order hold without tolerance; now :func:`mpcasv.models.ident_table.hold_rows`) and the
 #: replay compared each step with the measurement one step earlier: the two cancelled.
 ACTUATION_ADVANCE = 0
 OUTPUTS = ("psi", "u", "r")
@@ -166,7 +166,7 @@ class MapFit:
 
 def check_table(df: pd.DataFrame, source) -> pd.DataFrame:
     """A thruster-map identification table (:data:`MAP_COLUMNS`) on a uniform time grid
-    (:func:`mpcasv.models.identify.regular_grid`).
+    (:func:`mpcasv.models.ident_table.regular_grid`).
 
     Raises
     ------
