@@ -367,6 +367,8 @@ def check_link(cfg: DeployConfig, link_set, source: str | Path) -> None:
     link = [f for f in UDP_ONLY if f in link_set]
     address = [v.label for v in cfg.vehicle if v.address is not None]
     tcp = [v.label for v in cfg.vehicle if v.tcp is not None]
+    found = [f"link.{f}" for f in DISCOVERY if f in link_set]  # unread if all addressed
+    all_addressed = len(address) == len(cfg.vehicle)
     groups, other = [], None  # (fields, why they are not read); the other transport's advice
     if cfg.link.transport == "tcp":
         fields = [f"link.{f}" for f in link]
@@ -377,9 +379,8 @@ def check_link(cfg: DeployConfig, link_set, source: str | Path) -> None:
                            "to each vehicle's 'tcp' backseat server: it binds no data port, "
                            "sends no Announce, opens no discovery port and sends nothing to a "
                            "vehicle's UDP 'address')"))  # fmt: skip
-            found = [f"link.{f}" for f in DISCOVERY if f in link_set]
             also = (f" and {', '.join(found)} (every vehicle has an 'address')"
-                    if found and len(address) == len(cfg.vehicle) else "")  # fmt: skip
+                    if found and all_addressed else "")  # fmt: skip
             other = f"to use UDP instead, set link.transport = 'udp' and remove every 'tcp'{also}"
     else:
         n = len(tcp)
@@ -390,8 +391,7 @@ def check_link(cfg: DeployConfig, link_set, source: str | Path) -> None:
             other = ("to use DUNE's TCP backseat instead, set link.transport = 'tcp' and give "
                      "every vehicle a 'tcp' and an 'id'"
                      + (f", and remove {', '.join(drop)}" if drop else ""))  # fmt: skip
-        found = [f"link.{f}" for f in DISCOVERY if f in link_set]
-        if found and len(address) == len(cfg.vehicle):
+        if found and all_addressed:
             groups.append((found, "not read when every vehicle has an 'address' (nobody to "
                            "discover: the link opens no discovery socket)"))  # fmt: skip
             n += len(found)
