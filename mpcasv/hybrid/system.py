@@ -18,9 +18,10 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Callable, Hashable, Sequence
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-import pandas as pd
+if TYPE_CHECKING:  # pandas only for the jump log: a solver worker (controller import) skips it
+    import pandas as pd
 
 __all__ = ["HybridAutomaton", "HybridError", "Jump", "Mode", "Transition", "ZenoError"]
 
@@ -158,6 +159,8 @@ class HybridAutomaton:
 
     def jump_log(self) -> pd.DataFrame:
         """The jump log as a DataFrame with columns ``t, j, from_mode, to_mode, cause``."""
+        import pandas as pd
+
         cols = [f.name for f in dataclasses.fields(Jump)]
         return pd.DataFrame([dataclasses.astuple(jp) for jp in self._log], columns=cols)
 
