@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -162,6 +163,28 @@ def test_lookahead_moves_the_centre_and_grows_the_domain():
     now, ahead = estimate_shape(av, DOM, est, 5.0), estimate_shape(av, DOM, est, 5.0, 10.0)
     np.testing.assert_allclose(ahead.center[0], [10.0, 0.0])
     assert ahead.rho[0] > now.rho[0]
+
+
+@pytest.mark.parametrize("kind", ["fixed", "uncertainty", "reachable"])
+def test_stages_at_once_equal_each_stage_alone(kind):
+    """An MPC's horizon in one call (lookahead shape (S,), depth forecast (S, K)) gives, bit
+    for bit, the radii of one call per stage with the AUVs' depths replaced."""
+    av = AvoidanceParams(kind=kind, r_keep=30.0)
+    est = [_est(5.0, -3.0, 25.0, 0.8, 0.3, 4.0, 2.0), _est(-40.0, 60.0, 4.0, 0.0, -1.2, 1.0, 7.0)]
+    ahead = np.array([0.0, 4.0, 8.0, 30.0, 90.0])
+    depth = np.array([[25.0, 4.0], [20.0, 3.0], [15.0, 1.0], [5.0, 0.0], [0.0, 0.0]])
+    asv = np.array([[[3.0, 1.0]], [[0.0, 9.0]], [[-8.0, 2.0]], [[-20.0, 30.0]], [[40.0, -5.0]]])
+    at_once = estimate_shape(av, DOM, est, 10.0, ahead, depth)
+    rel = asv - at_once.center
+    r_all = at_once.radius(np.arctan2(rel[..., 1], rel[..., 0]))
+    assert r_all.shape == (5, 2)
+    for k in range(5):
+        alone = [dataclasses.replace(e, depth=float(d)) for e, d in zip(est, depth[k], strict=True)]
+        shape = estimate_shape(av, DOM, alone, 10.0, float(ahead[k]))
+        rel_k = asv[k] - shape.center
+        np.testing.assert_array_equal(shape.radius(np.arctan2(rel_k[..., 1], rel_k[..., 0])),
+                                      r_all[k])  # fmt: skip
+        np.testing.assert_array_equal(shape.center, at_once.center[k])
 
 
 # --- the smooth (MPC) form ----------------------------------------------------------------------

@@ -287,17 +287,26 @@ def avoidance_shape(
 
 
 def estimate_shape(avoid: AvoidanceParams, domain: DomainParams | None, auvs, t: float,
-                   lookahead: float = 0.0) -> AvoidanceShape:  # fmt: skip
+                   lookahead: ArrayLike = 0.0, depth: ArrayLike | None = None,
+                   ) -> AvoidanceShape:  # fmt: skip
     """The domains of the AUVs of an observation (``obs.auvs``, :class:`AUVEstimate` s) at
     time ``t + lookahead``: centres moved along the estimated velocity, fix ages grown (for an
-    MPC stage ``lookahead`` s ahead; 0 for the hybrid controllers)."""
+    MPC stage ``lookahead`` s ahead; 0 for the hybrid controllers).
+
+    ``lookahead`` (s) is a float or an array of shape (S,) (S stages at once: the shape's
+    arrays then have shape (S, K, ...)); ``depth`` (m, shape (K,) or (S, K)) replaces the
+    estimates' depths (an MPC's depth forecast), None keeps them."""
     a = list(auvs)
     col = {f: np.array([getattr(e, f) for e in a], float)
            for f in ("N", "E", "depth", "v_N", "v_E", "t_last_fix")}  # fmt: skip
     sigma = np.array([e.sigma for e in a], float)
+    ahead = np.asarray(lookahead, float)
+    if ahead.ndim:  # one row per stage
+        ahead = ahead[:, None]
     return avoidance_shape(
-        avoid, domain, col["N"] + col["v_N"] * lookahead, col["E"] + col["v_E"] * lookahead,
-        col["depth"], col["v_N"], col["v_E"], sigma, t + lookahead - col["t_last_fix"],
+        avoid, domain, col["N"] + col["v_N"] * ahead, col["E"] + col["v_E"] * ahead,
+        col["depth"] if depth is None else np.asarray(depth, float), col["v_N"], col["v_E"],
+        sigma, t + ahead - col["t_last_fix"],
     )  # fmt: skip
 
 

@@ -5,7 +5,6 @@ the plan assumes, the initial state and the OCP's parameter vector. A mixin of
 
 from __future__ import annotations
 
-import dataclasses
 import math
 
 import numpy as np
@@ -106,15 +105,13 @@ class WorldView:
         return np.maximum(d0[None, :] + np.asarray(ts, float)[:, None] * self.w_depth[None, :],
                           0.0)  # fmt: skip
 
-    def _radii(self, obs: Observation, lookahead: float, asv_NE, depth=None) -> np.ndarray:
+    def _radii(self, obs: Observation, lookahead, asv_NE, depth=None) -> np.ndarray:
         """Anti-collision radius (r_inner / r_avoid) of each AUV ``lookahead`` s ahead, along
         the bearing from the AUV to ``asv_NE``, at the AUVs' ``depth`` (forecast; None: the
-        estimates')."""
-        auvs = obs.auvs
-        if depth is not None:
-            auvs = tuple(dataclasses.replace(a, depth=float(d))
-                         for a, d in zip(auvs, depth, strict=True))  # fmt: skip
-        shape = estimate_shape(self.params.avoidance, self.domain, auvs, obs.t, lookahead)
+        estimates'): shape (K,), or (S, K) for S stages at once (``lookahead`` shape (S,),
+        ``asv_NE`` (S, 1, 2) or (2,), ``depth`` (S, K))."""
+        shape = estimate_shape(self.params.avoidance, self.domain, obs.auvs, obs.t, lookahead,
+                               depth)  # fmt: skip
         rel = np.asarray(asv_NE, float) - shape.center
         return np.asarray(shape.radius(np.arctan2(rel[..., 1], rel[..., 0])), float)
 
@@ -192,11 +189,9 @@ class WorldView:
         # AUV rising towards the surface grows (r_inner / r_avoid from 0 below r_in)
         depth = self.depth_forecast(obs, ts)
         if self.params.avoidance.kind == "fixed":
-            r_lo = np.stack([self._radii(obs, 0.0, obs.asv.position, depth[k])
-                             for k in range(N + 1)])  # fmt: skip
+            r_lo = self._radii(obs, np.zeros(N + 1), obs.asv.position, depth)
         else:
-            r_lo = np.stack([self._radii(obs, float(ts[k]), asv[k], depth[k])
-                             for k in range(N + 1)])  # fmt: skip
+            r_lo = self._radii(obs, np.asarray(ts, float), asv, depth)
         if self.multi:
             r_hi = np.full((N + 1, K), R_HI_NONE)
         else:
