@@ -112,7 +112,8 @@ def test_a_diverged_response_never_reads_as_settled():
 
 @pytest.fixture(scope="module")
 def zigzag():
-    return simulate_manoeuvre(VesselModel(load_vessel("gretha")), "zigzag", duration=60.0)
+    # 121 s: long enough to identify from (1,203 samples at the default --validation)
+    return simulate_manoeuvre(VesselModel(load_vessel("gretha")), "zigzag", duration=121.0)
 
 
 def test_a_steering_that_never_varies_is_refused_naming_the_coefficient(tmp_path, capsys,

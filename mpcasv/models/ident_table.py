@@ -6,6 +6,8 @@ for every identification (:func:`regular_grid`, :func:`hold_rows`; the thruster-
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pandas as pd
 
@@ -34,8 +36,8 @@ def identification_table(df: pd.DataFrame, path) -> pd.DataFrame:
     if bad:
         raise LogError(f"{path}: non-numeric or missing values in {bad}")
     t = df["t"].to_numpy(float)
-    if len(t) < 100:
-        raise LogError(f"{path}: too short ({len(t)} samples; at least 100 needed)")
+    if len(t) < 2:  # the length a fit needs is checked where it is known: check_length
+        raise LogError(f"{path}: too short ({len(t)} sample; a time step needs 2)")
     if np.any(np.diff(t) <= 0):
         raise LogError(f"{path}: time column t is not strictly increasing")
     grid, dt = regular_grid(t, path)
@@ -47,6 +49,70 @@ def identification_table(df: pd.DataFrame, path) -> pd.DataFrame:
         out[c] = src[hold] if c in ("T_cmd", "delta_cmd") else np.interp(grid, t, src)
     out.attrs["source"] = str(path)  # named in identify()'s refusals
     return out
+
+
+def window_steps(window_s: float, dt: float) -> int:
+    """Steps of a replay window of ``window_s`` seconds at step ``dt`` (at least 10): one
+    rule for both identifications (:mod:`mpcasv.models.identify`,
+    :mod:`mpcasv.models.ident_thrust`)."""
+    return max(10, int(round(window_s / dt)))
+
+
+def split_index(n: int, validation: float) -> int:
+    """Samples of a log of ``n`` in its training part: the first ``round(n (1 -
+    validation))``; the rest is held out (one rule for both identifications)."""
+    return int(round(n * (1.0 - validation)))
+
+
+def min_samples(W: int, validation: float, n_shared: int = 0, n_out: int = 1,
+                n_corr: int = 0) -> int:  # fmt: skip
+    """The fewest samples a log needs for a replay-window fit: its training part
+    (:func:`split_index`) and its held-out part each hold one whole replay window of ``W``
+    steps (``W + 1`` samples: a window's outputs are the samples after each step), and the
+    training part's residuals (``n_out`` per step) are at least the parameters fitted
+    (``n_shared`` for the whole fit plus ``n_corr`` initial-state corrections per window).
+
+    With the default 30-s windows at 0.1 s (``W = 300``) and ``validation = 0.25`` that is
+    1,203 samples (the held-out quarter must hold 301; "at least 100" was the rule until
+    session 26). The parameter count does not bind for ``identify()`` (four outputs, four
+    corrections a window: ``4 W >= p + 4`` for every ``W >= 10`` and all 31 model
+    coefficients with the current; one window of 300 steps: 1,200 residuals, 14 parameters by
+    default)."""
+    n = 2 * (W + 1)
+    while True:  # the parts grow with n (k by 0 or 1 a sample), so the first n that fits
+        k = split_index(n, validation)
+        if k >= W + 1 and n - k >= W + 1:
+            steps = k - 1
+            if n_out * steps >= n_shared + n_corr * math.ceil(steps / W):
+                return n
+        n += 1
+
+
+def check_length(n: int, dt: float, W: int, validation: float, source, n_shared: int = 0,
+                 n_out: int = 1, n_corr: int = 0) -> None:  # fmt: skip
+    """Refuse a log of ``n`` samples shorter than :func:`min_samples` in one line: the
+    samples needed and given (and seconds), why, and a ``--validation`` that would do when
+    one would.
+
+    Raises
+    ------
+    LogError
+        Too short, naming ``source``.
+    """
+    need = min_samples(W, validation, n_shared, n_out, n_corr)
+    if n >= need:
+        return
+    fits = [v / 100 for v in range(1, 90)
+            if min_samples(W, v / 100, n_shared, n_out, n_corr) <= n]  # fmt: skip
+    hint = (f"; --validation {min(fits, key=lambda v: abs(v - validation)):g} would fit it"
+            if fits else "; no --validation fits it (the fewest samples, at 0.5: "
+            f"{min_samples(W, 0.5, n_shared, n_out, n_corr)})")  # fmt: skip
+    k = split_index(n, validation)
+    raise LogError(f"{source}: too short to identify from: {need} samples ({need * dt:g} s) "
+                   f"needed, {n} given ({n * dt:g} s): one whole {W}-step ({W * dt:g} s) "
+                   "replay window must fit in each of the training and validation parts (the "
+                   f"last {validation:g} held out, --validation), which have {k} and {n - k} "
+                   f"samples{hint}")  # fmt: skip
 
 
 #: the longest gap a log may have, in its steps: a shorter one is bridged (states

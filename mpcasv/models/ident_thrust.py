@@ -46,7 +46,13 @@ from scipy.optimize import least_squares
 
 from mpcasv.errors import LogError
 from mpcasv.models.ident_cov import METHOD, window_covariance
-from mpcasv.models.ident_table import hold_rows, regular_grid
+from mpcasv.models.ident_table import (
+    check_length,
+    hold_rows,
+    regular_grid,
+    split_index,
+    window_steps,
+)  # fmt: skip
 from mpcasv.models.ident_windows import Windows
 from mpcasv.models.params import MODEL_COEFFS, VesselParams
 from mpcasv.models.vessel import IX, NX, VesselModel, rk4_expr
@@ -180,8 +186,8 @@ def check_table(df: pd.DataFrame, source) -> pd.DataFrame:
     if not np.isfinite(df.to_numpy()).all():
         raise LogError(f"{source}: non-finite values in {list(MAP_COLUMNS)}")
     t = df["t"].to_numpy()
-    if len(t) < 100 or np.any(np.diff(t) <= 0):
-        raise LogError(f"{source}: need at least 100 samples with t strictly increasing")
+    if len(t) < 2 or np.any(np.diff(t) <= 0):  # the length a fit needs: check_length
+        raise LogError(f"{source}: need at least 2 samples with t strictly increasing")
     grid, dt = regular_grid(t, source)
     out = {"t": grid - grid[0]}
     psi = np.unwrap(df["psi"].to_numpy())
@@ -189,7 +195,9 @@ def check_table(df: pd.DataFrame, source) -> pd.DataFrame:
     for c in MAP_COLUMNS[1:]:
         y = psi if c == "psi" else df[c].to_numpy()
         out[c] = y[hold] if c.startswith("a_") else np.interp(grid, t, y)
-    return pd.DataFrame(out)
+    table = pd.DataFrame(out)
+    table.attrs["source"] = str(source)  # named in identify_through_map()'s refusals
+    return table
 
 
 class _Replay:
@@ -220,7 +228,7 @@ class _Replay:
             x = ca.vertcat(x[: IX["T"]], act)
             x = rk4_expr(lambda x_, u_, c_: model.f_param(x_, u_, c_, p), x, act, c0, h)
         step = ca.Function("map_step", [xs, a_s, th], [x])
-        W = max(10, int(round(window_s / dt)))
+        W = window_steps(window_s, dt)
         nwin = (len(df) - 1) // W  # a window of W steps needs W + 1 samples
         if nwin < 1:
             raise LogError(f"log part of {len(df)} samples is shorter than one window ({W} "
@@ -264,7 +272,8 @@ def identify_through_map(df: pd.DataFrame, prior: VesselParams, tmap: ThrusterMa
         ``validation`` not in (0, 0.9), a coefficient not in :data:`HULL_COEFFS`, or a
         prior without differential actuation.
     LogError
-        A part shorter than one replay window.
+        A log too short for one whole replay window in each of its training and validation
+        parts (:func:`mpcasv.models.ident_table.check_length`).
     """
     if not 0.0 < validation < 0.9:
         raise ValueError(f"validation fraction {validation} not in (0, 0.9)")
@@ -273,7 +282,11 @@ def identify_through_map(df: pd.DataFrame, prior: VesselParams, tmap: ThrusterMa
         raise ValueError(f"through a thruster map only {HULL_COEFFS} are identified, not {bad}")
     if prior.actuation != "differential" or len(tmap.y) != 2:
         raise ValueError("a thruster map needs a differential-thrust prior and two thrusters")
-    k = int(round(len(df) * (1.0 - validation)))
+    dt = float(df["t"].iloc[1] - df["t"].iloc[0])
+    check_length(len(df), dt, window_steps(window_s, dt), validation,
+                 df.attrs.get("source", "the log"), n_shared=len(coeffs),
+                 n_out=sum(w > 0 for w in _WEIGHT))  # fmt: skip
+    k = split_index(len(df), validation)
     train, val = df.iloc[:k].reset_index(drop=True), df.iloc[k:].reset_index(drop=True)
     v0 = np.array([getattr(prior, c) for c in coeffs], float)
     scale = np.array([abs(v) if v != 0 else 1.0 for v in v0])

@@ -63,6 +63,7 @@ from scipy.signal import savgol_filter
 
 from mpcasv.errors import LogError
 from mpcasv.models.ident_cov import METHOD, window_covariance
+from mpcasv.models.ident_table import check_length, split_index, window_steps
 from mpcasv.models.ident_windows import Windows
 from mpcasv.models.params import MODEL_COEFFS, VesselParams
 from mpcasv.models.vessel import IX, NX, VesselModel, rk4_expr
@@ -119,7 +120,7 @@ def prepare(df: pd.DataFrame, prior: VesselParams, smooth_s: float = 1.5) -> Pre
 
 def split(pr: Prepared, validation: float) -> tuple[Prepared, Prepared]:
     """(training, validation): the validation part is the last ``validation`` fraction."""
-    k = int(round(len(pr.U) * (1.0 - validation)))
+    k = split_index(len(pr.U), validation)
     cut = lambda a, s: a[s]  # noqa: E731
     head = Prepared(pr.dt, *(cut(a, slice(0, k)) for a in (pr.X, pr.Xs, pr.U, pr.nudot)))
     tail = Prepared(pr.dt, *(cut(a, slice(k, None)) for a in (pr.X, pr.Xs, pr.U, pr.nudot)))
@@ -220,7 +221,7 @@ class Problem:
         and mapped over all windows, built once (:mod:`mpcasv.models.ident_windows`).
         """
         dt = parts[0].dt
-        W = max(10, int(round(window_s / dt)))
+        W = window_steps(window_s, dt)
         x0, U, Y = _windows(parts, W, what)
         xs, us, th = ca.SX.sym("x", NX), ca.SX.sym("u", 2), ca.SX.sym("theta", self.n + 2)
         p, c = self._p_c(th)
@@ -305,7 +306,9 @@ def identify(logs: list[pd.DataFrame], prior: VesselParams, coeffs=IDENTIFIED,
     LogError
         Coefficients the logs cannot identify (:mod:`mpcasv.models.ident_checks`: their
         regression columns are zero or collinear, e.g. a steering set-point that never varies,
-        or their 1-sigma is not finite), logs with different time steps, logs too short.
+        or their 1-sigma is not finite), logs with different time steps, a log too short
+        for one whole replay window in each of its training and validation parts
+        (:func:`mpcasv.models.ident_table.check_length`).
     """
     from mpcasv.models.ident_checks import (
         check_covariance,
@@ -322,6 +325,11 @@ def identify(logs: list[pd.DataFrame], prior: VesselParams, coeffs=IDENTIFIED,
         if progress
         else (lambda m: None)
     )
+    names = [source(df, i) for i, df in enumerate(logs)]
+    for df, name in zip(logs, names, strict=True):  # before smoothing: it needs a few samples
+        dt = float(df["t"].iloc[1] - df["t"].iloc[0])
+        check_length(len(df), dt, window_steps(window_s, dt), validation, name,
+                     n_shared=len(coeffs) + 2, n_out=len(OUTPUTS), n_corr=4)  # fmt: skip
     prepared = [prepare(df, prior) for df in logs]
     dts = {round(pr.dt, 6) for pr in prepared}
     if len(dts) != 1:
@@ -330,7 +338,6 @@ def identify(logs: list[pd.DataFrame], prior: VesselParams, coeffs=IDENTIFIED,
     prob = Problem(prior, coeffs, current)
     bounds = prob.bounds()
     th0 = prob.theta0()
-    names = [source(df, i) for i, df in enumerate(logs)]
     ee_fun = prob.equation_error(list(train))
     J0 = ee_fun(th0)[1][:, : prob.n]
     check_identifiable(J0, prob.coeffs, logs, names)  # before minutes of fitting

@@ -1,0 +1,84 @@
+"""What a new user's walk-through of ``mpcasv identify`` found (session 26): the length a fit
+needs, samples left after the last whole replay window, the advice for a coefficient at its
+bound, the report's figures and wording, and the validation bar."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from mpcasv.cli import main
+from mpcasv.control.manoeuvres import simulate_manoeuvre
+from mpcasv.errors import LogError
+from mpcasv.models.ident_table import min_samples, split_index
+from mpcasv.models.identify import Problem, identify, prepare, split
+from mpcasv.models.params import load_vessel
+from mpcasv.models.vessel import VesselModel
+
+
+@pytest.fixture(scope="module")
+def prior():
+    return load_vessel("gretha")
+
+
+def _zigzag(prior, seconds: float) -> pd.DataFrame:
+    return simulate_manoeuvre(VesselModel(prior), "zigzag", duration=seconds)
+
+
+@pytest.mark.parametrize("validation", [0.25, 0.3, 0.5])
+def test_min_samples_is_one_whole_window_in_each_part(prior, validation):
+    """The fewest samples is where both parts first hold a whole 300-step window (301
+    samples): 1,203 at the default 0.25 (the walk-through's "about 1200"), not 100."""
+    W = 300
+    need = min_samples(W, validation, n_shared=10, n_out=4, n_corr=4)
+    for n in (need - 1, need):
+        k = split_index(n, validation)
+        assert (min(k, n - k) >= W + 1) == (n == need), (n, k)
+    assert min_samples(W, 0.25) == 1203
+    # the windows identify() builds: one in each part at the minimum, none a sample below
+    log = _zigzag(prior, 130.0)
+    prob = Problem(prior)
+    for n in (need, need - 1):
+        parts = split(prepare(log.iloc[:n].reset_index(drop=True), prior), validation)
+        if n == need:
+            for part in parts:
+                assert prob.replay([part], 30.0)[1]["windows"] >= 1
+        else:
+            with pytest.raises(LogError):
+                for part in parts:
+                    prob.replay([part], 30.0)
+
+
+def test_a_log_too_short_for_the_fit_is_refused_with_the_samples_needed(prior, tmp_path,
+                                                                       capsys):  # fmt: skip
+    """A 110-s zig-zag (1,101 samples) has a 30-s window in its training part but not in its
+    held-out quarter (275 samples): refused in one line, exit 2, with the numbers needed and
+    given and a --validation that would fit it; nothing written."""
+    log = tmp_path / "zz.csv"
+    _zigzag(prior, 110.0).to_csv(log, index=False)
+    out = tmp_path / "p.toml"
+    assert main(["identify", str(log), "--out", str(out), "--quiet"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1, err
+    assert "1203 samples (120.3 s) needed, 1101 given (110.1 s)" in err[0], err
+    assert "826 and 275 samples" in err[0] and "--validation 0.28 would fit it" in err[0], err
+    assert not out.exists()
+    with pytest.raises(LogError, match="1203 samples"):
+        identify([_zigzag(prior, 110.0)], prior)
+
+
+def test_the_thruster_map_fit_needs_one_window_in_each_part_too():
+    from mpcasv.models.ident_thrust import ThrusterMap, check_table, identify_through_map
+
+    n = 1002  # validation 0.3: 701 + 301 samples fit; 1001 leaves 300 held out
+    assert min_samples(300, 0.3, n_shared=6, n_out=2) == n
+    t = 0.1 * np.arange(n - 1)
+    df = pd.DataFrame({c: np.zeros(n - 1) for c in ("N", "E", "psi", "u", "v", "r", "a_0",
+                                                     "a_1")} | {"t": t})  # fmt: skip
+    table = check_table(df, "short.lsf")
+    tmap = ThrusterMap(K_n=0.9, K_nu=10.7, n_max=41.7, F_max=12, Q_max=6, y=(-1.0, 1.0))
+    otter = load_vessel("otter")
+    with pytest.raises(LogError, match=r"^short\.lsf: too short .*1002 samples .*1001 given"):
+        identify_through_map(table, otter, tmap, validation=0.3)
+
