@@ -82,3 +82,21 @@ def test_the_thruster_map_fit_needs_one_window_in_each_part_too():
     with pytest.raises(LogError, match=r"^short\.lsf: too short .*1002 samples .*1001 given"):
         identify_through_map(table, otter, tmap, validation=0.3)
 
+
+def test_every_training_sample_is_replayed(prior):
+    """The default 150-s zig-zag's training part (1,126 samples at --validation 0.25) holds
+    three whole 30-s windows (900 steps): the 225 steps after them were left out, unsaid.
+    They are replayed as a fourth, shorter window; the held-out part (375 samples) likewise."""
+    log = _zigzag(prior, 150.0)
+    train, val = split(prepare(log, prior), 0.25)
+    assert (len(train.U), len(val.U)) == (1126, 375)
+    prob = Problem(prior)
+    for part, lengths in ((train, [300, 300, 300, 225]), (val, [300, 74])):
+        win, info = prob.replay([part], 30.0)
+        assert list(info["lengths"]) == lengths and info["windows"] == len(lengths)
+        assert info["Y"].shape[1] == len(part.U) - 1  # every sample after the first
+        assert np.array_equal(info["Y"][1], part.X[1:, 3])  # u, in order
+        z = np.r_[prob.theta0(), np.zeros(info["n_x0"])]
+        res, jac, Ysim = win.residuals(z)
+        assert res.shape == (4 * (len(part.U) - 1),) and jac.shape == (res.size, win.n_z)
+        assert np.allclose(Ysim, win.simulate(z))

@@ -89,3 +89,32 @@ def test_equation_error_jacobian_equals_finite_differences():
                           for e in np.eye(th.size)])  # fmt: skip
     assert res.shape == (jac.shape[0],) and jac.shape[1] == th.size
     assert np.abs(jac - fd).max() <= 1e-5 * np.abs(fd).max()
+
+
+def test_windows_of_several_lengths_equal_casadi_ad_of_each_window():
+    """A shorter window (a part's samples after its last whole window) is replayed with the
+    others: residuals and Jacobian as CasADi's AD of each window replayed on its own."""
+    prior = load_vessel("gretha")
+    rng = np.random.default_rng(4)
+    lengths, out, rows = [12, 5, 12, 1], [IX["psi"], IX["u"], IX["r"]], [IX["u"]]
+    step = _step(prior, 0.2)
+    n, nwin = sum(lengths), len(lengths)
+    x0 = np.zeros((NX, nwin))
+    x0[IX["u"]] = rng.uniform(0.5, 2.0, nwin)
+    A = np.vstack([rng.uniform(50, 200, n), rng.uniform(-0.3, 0.3, n)])
+    Y = rng.normal(size=(3, n))
+    w = np.array([2.0, 5.0, 7.0])
+    win = Windows(step, x0, A, Y, out, w, x0_rows=rows, lengths=lengths)
+    z = np.r_[1.1, 0.9, 0.1, -0.2, rng.uniform(-0.1, 0.1, nwin)]
+    res, jac, Ysim = win.residuals(z)
+    assert res.shape == (3 * n,) and jac.shape == (3 * n, 4 + nwin) and Ysim.shape == (3, n)
+    start = np.r_[0, np.cumsum(lengths)]
+    for j in range(nwin):
+        one = Windows(step, x0[:, j : j + 1], A[:, start[j] : start[j + 1]],
+                      Y[:, start[j] : start[j + 1]], out, w, x0_rows=rows)  # fmt: skip
+        r1, J1, _ = one.residuals(np.r_[z[:4], z[4 + j]])
+        sl = slice(3 * start[j], 3 * start[j + 1])
+        assert np.allclose(res[sl], r1, rtol=0, atol=1e-12)
+        assert np.allclose(jac[sl, :4], J1[:, :4]) and np.allclose(jac[sl, 4 + j], J1[:, 4])
+        assert not np.delete(jac[sl], [0, 1, 2, 3, 4 + j], axis=1).any()
+    assert np.allclose(win.simulate(z), Ysim)

@@ -73,6 +73,7 @@ class Covariance:
     lag: np.ndarray
     sigma_rel_sd: np.ndarray
     method: str = METHOD
+    n: int = 0  # samples the scores were summed over (the n of :func:`sigma_uncertainty`)
 
 
 def nw_lag(W: int) -> int:
@@ -80,13 +81,14 @@ def nw_lag(W: int) -> int:
     return max(1, int(math.floor(4 * (W / 100.0) ** (2.0 / 9.0))))
 
 
-def andrews_lag(h: np.ndarray, W: int) -> int:
-    """Bartlett lag for one score series ``h`` of shape ``(windows, W)`` (see module doc)."""
+def andrews_lag(h: np.ndarray, W: int, n: int | None = None) -> int:
+    """Bartlett lag for one score series ``h`` of shape ``(windows, W)`` (see module doc;
+    ``n``: its samples, when shorter windows are padded with zeros, default ``h.size``)."""
     den = float(np.sum(h[:, :-1] ** 2))
     rho = float(np.sum(h[:, 1:] * h[:, :-1])) / den if den > 0 else 0.0
     rho = min(max(rho, -0.99), 0.99)
     alpha = 4 * rho**2 / ((1 - rho) ** 2 * (1 + rho) ** 2)
-    L = int(math.ceil(1.1447 * (alpha * h.size) ** (1.0 / 3.0)))
+    L = int(math.ceil(1.1447 * (alpha * (h.size if n is None else n)) ** (1.0 / 3.0)))
     return int(min(W - 1, max(nw_lag(W), L)))
 
 
@@ -108,34 +110,44 @@ def bartlett_lrv(h: np.ndarray, L: int) -> float:
     return s
 
 
-def window_covariance(J: np.ndarray, res: np.ndarray, W: int, nwin: int,
-                      cols=None) -> Covariance:  # fmt: skip
+def window_covariance(J: np.ndarray, res: np.ndarray, W: int, nwin: int, cols=None,
+                      lengths=None) -> Covariance:  # fmt: skip
     """HAC and plain variances of the parameters ``cols`` (default all) of a least-squares fit
     with Jacobian ``J`` and residuals ``res``, laid out as the replay functions build them:
-    ``nwin`` windows of ``W`` samples one after the other, each sample's ``k`` output channels
-    together (``ca.vec`` of a ``(k, W * nwin)`` matrix), ``len(res) = k * W * nwin``."""
+    ``nwin`` windows of ``W`` samples one after the other (or of ``lengths``, each at most
+    ``W``: :class:`~mpcasv.models.ident_windows.Windows`), each sample's ``k`` output
+    channels together (``ca.vec`` of a ``(k, n)`` matrix), ``len(res) = k n``."""
+    from mpcasv.models.ident_windows import padded_index
+
     J = np.asarray(J, float)
     e = np.asarray(res, float).ravel()
     N, p = J.shape
-    if N != len(e) or N % (W * nwin):
-        raise ValueError(f"{N} residual rows do not split into {nwin} windows of {W} samples")
-    k = N // (W * nwin)
+    lengths = np.full(nwin, W) if lengths is None else np.asarray(lengths, int)
+    n = int(lengths.sum())
+    if N != len(e) or N % n or len(lengths) != nwin or lengths.max() > W:
+        raise ValueError(f"{N} residual rows do not split into {nwin} windows of {W} samples"
+                         + ("" if n == W * nwin else f" ({n} in all)"))  # fmt: skip
+    k = N // n
     cols = np.arange(p) if cols is None else np.asarray(cols)
     Hinv = np.linalg.pinv(J.T @ J)
     A = Hinv[:, cols]  # (p, m)
     dof = max(1, N - p)
     plain = np.diag(Hinv)[cols] * float(e @ e) / dof
-    # projected scores a_j^T g_t per sample (channels of one instant summed), per window
-    H = ((J @ A) * e[:, None]).reshape(nwin, W, k, len(cols)).sum(axis=2)
+    # projected scores a_j^T g_t per sample (channels of one instant summed), per window; a
+    # shorter window padded with zero scores (they add nothing to any sum)
+    g = ((J @ A) * e[:, None]).reshape(n, k, len(cols)).sum(axis=1)
+    H = np.zeros((nwin * W, len(cols)))
+    H[padded_index(lengths, W)] = g
+    H = H.reshape(nwin, W, len(cols))
     hac, lags = np.empty(len(cols)), np.empty(len(cols), int)
     for j in range(len(cols)):
         h = H[:, :, j]
-        lags[j] = andrews_lag(h, W)
+        lags[j] = andrews_lag(h, W, n)
         hac[j] = bartlett_lrv(h, lags[j]) * N / dof
     with np.errstate(divide="ignore", invalid="ignore"):
         ratio = np.where(plain > 0, hac / plain, 1.0)
     return Covariance(hac=hac, plain=plain, ratio=ratio, lag=lags,
-                      sigma_rel_sd=sigma_uncertainty(lags, W * nwin))
+                      sigma_rel_sd=sigma_uncertainty(lags, n), n=n)
 
 
 def ratio_line(var_ratio: dict) -> str:

@@ -229,21 +229,25 @@ class _Replay:
             x = rk4_expr(lambda x_, u_, c_: model.f_param(x_, u_, c_, p), x, act, c0, h)
         step = ca.Function("map_step", [xs, a_s, th], [x])
         W = window_steps(window_s, dt)
-        nwin = (len(df) - 1) // W  # a window of W steps needs W + 1 samples
-        if nwin < 1:
+        n = len(df) - 1  # steps: a window of W steps needs W + 1 samples
+        if n < W:
             raise LogError(f"log part of {len(df)} samples is shorter than one window ({W} "
                            "steps)")  # fmt: skip
-        n = nwin * W
+        # whole windows, then the steps after the last one as a shorter window (session 26)
+        lengths = [min(W, n - k) for k in range(0, n, W)]
+        nwin = len(lengths)
         # step k goes from sample k to sample k + 1 under row k's actuations (map_table: the
         # actuation that acts over [t_k, t_k+1)); Y is the measurement *after* each step
         # (the Windows contract), samples 1 .. n
         A = df[["a_0", "a_1"]].to_numpy()[:n].T
         x0 = np.zeros((NX, nwin))
         for c in ("N", "E", "psi", "u", "v", "r"):
-            x0[IX[c]] = df[c].to_numpy()[: n : W]
+            x0[IX[c]] = df[c].to_numpy()[:n:W]
         self.Y = np.vstack([df[c].to_numpy()[1 : n + 1] for c in OUTPUTS])
-        win = Windows(step, x0, A, self.Y, [IX[c] for c in OUTPUTS], _WEIGHT, wrap=[0])
+        win = Windows(step, x0, A, self.Y, [IX[c] for c in OUTPUTS], _WEIGHT, wrap=[0],
+                      lengths=lengths)  # fmt: skip
         self.fun, self.sim = win.residuals, win.simulate  # theta -> (res, jac, Ysim); Ysim
+        self.lengths = lengths
         self.windows, self.W = nwin, W
 
 
@@ -313,7 +317,8 @@ def identify_through_map(df: pd.DataFrame, prior: VesselParams, tmap: ThrusterMa
                         bounds=(lo, hi), x_scale="jac", max_nfev=200, xtol=1e-10,
                         ftol=1e-12)  # fmt: skip
     say(f"  {sol.nfev} evaluations, status {sol.status}: {sol.message}")
-    cov = window_covariance(sol.jac, sol.fun, rp_tr.W, rp_tr.windows)  # as identify()'s
+    cov = window_covariance(sol.jac, sol.fun, rp_tr.W, rp_tr.windows,
+                            lengths=rp_tr.lengths)  # as identify()'s
     std = np.sqrt(np.clip(cov.hac, 0, None)) / np.maximum(np.abs(sol.x), 1e-12)
     std_plain = np.sqrt(np.clip(cov.plain, 0, None)) / np.maximum(np.abs(sol.x), 1e-12)
     values = {c: float(scale[j] * sol.x[j]) for j, c in enumerate(coeffs)}

@@ -38,7 +38,17 @@ from collections.abc import Sequence
 import casadi as ca
 import numpy as np
 
-__all__ = ["Windows"]
+__all__ = ["Windows", "padded_index"]
+
+
+def padded_index(lengths: Sequence[int], W: int) -> np.ndarray:
+    """Where the samples of windows of ``lengths`` (each at most ``W``), one after the
+    other, sit when every window is padded to ``W``: window ``j``'s sample ``i`` at
+    ``j W + i``."""
+    lengths = np.asarray(lengths, int)
+    if not len(lengths):
+        return np.zeros(0, int)
+    return np.concatenate([j * W + np.arange(L) for j, L in enumerate(lengths)])
 
 
 class Windows:
@@ -66,6 +76,10 @@ class Windows:
         State indices with an estimated initial correction per window (the parameter vector
         of :meth:`residuals` is then ``[theta, d_0, d_1, ...]``, ``d_j`` of length
         ``len(x0_rows)``); empty for none.
+    lengths:
+        Steps of each window (``A`` and ``Y`` then hold ``sum(lengths)`` columns, window after
+        window); default: ``nwin`` windows of one length. A log's samples after its last
+        whole window form a shorter window (session 26: they were left out silently).
 
     Raises
     ------
@@ -76,11 +90,18 @@ class Windows:
 
     def __init__(self, step: ca.Function, x0: np.ndarray, A: np.ndarray, Y: np.ndarray,
                  out: Sequence[int], weights: Sequence[float], wrap: Sequence[int] = (),
-                 x0_rows: Sequence[int] = ()):  # fmt: skip
+                 x0_rows: Sequence[int] = (), lengths: Sequence[int] | None = None):  # fmt: skip
         nx, self.nwin = x0.shape
-        self.W = A.shape[1] // max(self.nwin, 1)
-        if A.shape[1] != self.W * self.nwin or Y.shape != (len(out), A.shape[1]):
-            raise ValueError(f"windows: x0 {x0.shape}, A {A.shape}, Y {Y.shape} do not agree")
+        if lengths is None:  # windows of one length
+            W = A.shape[1] // max(self.nwin, 1)
+            lengths = [W] * self.nwin
+        self.lengths = np.asarray(lengths, int)
+        self.W = int(self.lengths.max()) if self.nwin else 0
+        self.n = int(self.lengths.sum())  # samples replayed (outputs compared)
+        if (len(self.lengths) != self.nwin or (self.nwin and self.lengths.min() < 1)
+                or A.shape[1] != self.n or Y.shape != (len(out), self.n)):  # fmt: skip
+            raise ValueError(f"windows: x0 {x0.shape}, A {A.shape}, Y {Y.shape} and "
+                             f"{len(self.lengths)} window lengths do not agree")  # fmt: skip
         if len(weights) != len(out) or not set(wrap) <= set(range(len(out))):
             raise ValueError(f"windows: {len(weights)} weights and wrapped rows {list(wrap)} "
                              f"for {len(out)} outputs")  # fmt: skip
@@ -88,7 +109,14 @@ class Windows:
             raise ValueError(f"windows: outputs {list(out)} or corrected states "
                              f"{list(x0_rows)} outside the {nx} states")  # fmt: skip
         self.n_th = step.size1_in(2)
-        self.x0, self.A, self.Y = np.asarray(x0, float), np.asarray(A, float), Y
+        # windows shorter than the longest are padded to it (the window's last input held,
+        # after its last compared sample, so nothing compared depends on the padding) and the
+        # padded samples dropped from every result: CasADi maps one window length
+        self.keep = padded_index(self.lengths, self.W)
+        src = np.repeat(np.cumsum(self.lengths) - 1, self.W)  # each window's last sample
+        src[self.keep] = np.arange(self.n)
+        self.x0, self.A = np.asarray(x0, float), np.asarray(A, float)[:, src]
+        self.Y, self._Ypad = Y, np.asarray(Y, float)[:, src]
         self.out, self.wrap = list(out), list(wrap)
         self.w = np.asarray(weights, float)
         self.x0_rows, self.nd = list(x0_rows), len(x0_rows)
@@ -98,6 +126,8 @@ class Windows:
         self._plain = step.mapaccum("window", self.W).map(self.nwin)
         self.E = np.zeros((nx, self.nd))
         self.E[self.x0_rows, np.arange(self.nd)] = 1.0
+        no = len(self.out)
+        self._rows = (self.keep[:, None] * no + np.arange(no)).ravel()  # residual rows kept
 
     def _sensitivity_map(self) -> ca.Function:
         """The step with its forward sensitivities, accumulated over a window, mapped."""
@@ -121,16 +151,17 @@ class Windows:
         return z[: self.n_th], self.x0 + self.E @ d
 
     def simulate(self, z: np.ndarray) -> np.ndarray:
-        """The simulated outputs, shape ``(len(out), nwin * W)``, at parameters ``z``."""
+        """The simulated outputs, shape ``(len(out), n)`` (``n`` the samples of all windows),
+        at parameters ``z``."""
         th, X0 = self._start(z)
         X = np.array(self._plain(X0, self.A, np.tile(th[:, None], (1, self.A.shape[1]))))
-        return X[self.out]
+        return X[self.out][:, self.keep]
 
     def residuals(self, z: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(res, jac, Ysim)``: the weighted errors ``w_i (y_sim - y)`` in column-major order
-        (sample by sample, the outputs of a sample together), shape ``(len(out) nwin W,)``;
-        their Jacobian with respect to ``z``, dense ``(len(res), n_z)``; the simulated
-        outputs ``(len(out), nwin W)``."""
+        (sample by sample, the outputs of a sample together, window after window), shape
+        ``(len(out) n,)``; their Jacobian with respect to ``z``, dense ``(len(res), n_z)``;
+        the simulated outputs ``(len(out), n)``."""
         th, X0 = self._start(z)
         nx, m, n_th, nd = self._nx, self._m, self.n_th, self.nd
         S0 = np.zeros((nx, m))
@@ -139,7 +170,7 @@ class Windows:
         TH = np.tile(th[:, None], (1, self.A.shape[1]))
         out = np.array(self._sensitivity_map()(Z0, self.A, TH))
         Ysim = out[self.out]
-        err = Ysim - self.Y
+        err = Ysim - self._Ypad
         for i in self.wrap:  # d wrap(e) / de = 1 (the same as CasADi's atan2(sin, cos))
             err[i] = np.arctan2(np.sin(err[i]), np.cos(err[i]))
         res = (self.w[:, None] * err).ravel(order="F")
@@ -153,4 +184,6 @@ class Windows:
             win = np.repeat(np.arange(n) // self.W, no)  # each row's window
             cols = n_th + nd * win[:, None] + np.arange(nd)
             jac[np.arange(no * n)[:, None], cols] = rows[:, n_th:]
-        return res, jac, Ysim
+        if len(self._rows) == len(res):  # no padding
+            return res, jac, Ysim
+        return res[self._rows], jac[self._rows], Ysim[:, self.keep]

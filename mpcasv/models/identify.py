@@ -131,20 +131,25 @@ def split(pr: Prepared, validation: float) -> tuple[Prepared, Prepared]:
 
 
 def _windows(parts: list[Prepared], W: int, what: str = "logs"):
-    """Replay windows of ``W`` steps: initial states, inputs, measured outputs (``what``: the
-    parts' name in the error when none holds a window)."""
-    x0, U, Y = [], [], []
+    """Replay windows of ``W`` steps: initial states, inputs, measured outputs and each
+    window's steps (``what``: the parts' name in the error when one holds no whole window).
+    A part's samples after its last whole window form one shorter window (they were left out,
+    unsaid, until session 26: up to ``W - 1`` samples a part, 225 of the default zig-zag's
+    1,126 training samples)."""
+    x0, U, Y, lengths = [], [], [], []
     out = [IX[c] for c in OUTPUTS]
     for pr in parts:
-        for k in range(0, len(pr.U) - W, W):
+        if len(pr.U) < W + 1:
+            n, dt = len(pr.U), pr.dt
+            raise LogError(f"{what}: one is too short for one {W}-sample ({W * dt:g} s) replay "
+                           f"window: it has {n} samples ({n * dt:g} s)")  # fmt: skip
+        for k in range(0, len(pr.U) - 1, W):
+            L = min(W, len(pr.U) - 1 - k)  # the outputs after each step: samples k+1 .. k+L
             x0.append(pr.Xs[k])
-            U.append(pr.U[k : k + W])
-            Y.append(pr.X[k + 1 : k + W + 1, out])
-    if not x0:
-        n, dt = max(len(pr.U) for pr in parts), parts[0].dt
-        raise LogError(f"{what} are too short for one {W}-sample ({W * dt:g} s) replay window: the "
-                       f"longest has {n} samples ({n * dt:g} s)")  # fmt: skip
-    return np.array(x0).T, np.vstack(U).T, np.vstack(Y).T
+            U.append(pr.U[k : k + L])
+            Y.append(pr.X[k + 1 : k + L + 1, out])
+            lengths.append(L)
+    return np.array(x0).T, np.vstack(U).T, np.vstack(Y).T, lengths
 
 
 class Problem:
@@ -222,7 +227,7 @@ class Problem:
         """
         dt = parts[0].dt
         W = window_steps(window_s, dt)
-        x0, U, Y = _windows(parts, W, what)
+        x0, U, Y, lengths = _windows(parts, W, what)
         xs, us, th = ca.SX.sym("x", NX), ca.SX.sym("u", 2), ca.SX.sym("theta", self.n + 2)
         p, c = self._p_c(th)
         f = lambda x, u, c_: self.model.f_param(x, u, c_, p)  # noqa: E731
@@ -232,11 +237,13 @@ class Problem:
         floor = np.array([math.radians(0.2), 0.01, 0.01, math.radians(0.1)])
         w = 1.0 / np.maximum(meas_noise, floor)
         win = Windows(step, x0, U, Y, out, w, wrap=[0],  # 0: the heading
-                      x0_rows=[IX["psi"], IX["u"], IX["v"], IX["r"]])  # fmt: skip
+                      x0_rows=[IX["psi"], IX["u"], IX["v"], IX["r"]],
+                      lengths=lengths)  # fmt: skip
         return win, {
             "Y": Y,
             "W": W,
             "windows": win.nwin,
+            "lengths": win.lengths,
             "weights": w,
             "n_x0": win.nd * win.nwin,
             "replay": win.simulate,
@@ -371,7 +378,7 @@ def identify(logs: list[pd.DataFrame], prior: VesselParams, coeffs=IDENTIFIED,
     evaluate("simulation_error", theta)
     try:
         cov = window_covariance(se.jac, se.fun, info_tr["W"], info_tr["windows"],
-                                cols=np.arange(prob.n))  # fmt: skip
+                                cols=np.arange(prob.n), lengths=info_tr["lengths"])  # fmt: skip
         std = np.sqrt(np.clip(cov.hac, 0, None)) / np.abs(theta[: prob.n])
         std_plain = np.sqrt(np.clip(cov.plain, 0, None)) / np.abs(theta[: prob.n])
         ratio, shaky = cov.ratio, cov.sigma_rel_sd
