@@ -100,3 +100,86 @@ def test_every_training_sample_is_replayed(prior):
         res, jac, Ysim = win.residuals(z)
         assert res.shape == (4 * (len(part.U) - 1),) and jac.shape == (res.size, win.n_z)
         assert np.allclose(Ysim, win.simulate(z))
+
+
+def _bounded_fit(a_true: float, noise: float, seed: int = 0):
+    """y = a x1 + b x2 + e, ``a <= 0`` (a sign bound), in 4 windows of 50 samples."""
+    from scipy.optimize import least_squares
+
+    rng = np.random.default_rng(seed)
+    X = rng.normal(size=(200, 2))
+    y = X @ np.array([a_true, 1.0]) + noise * rng.normal(size=200)
+    lo, hi = np.array([-np.inf, -np.inf]), np.array([0.0, np.inf])
+    sol = least_squares(lambda th: X @ th - y, np.array([-1.0, 0.5]), jac=lambda th: X,
+                        bounds=(lo, hi))  # fmt: skip
+    return sol, lo, hi
+
+
+def test_a_coefficient_pushed_past_its_bound_is_told_from_one_the_data_cannot_place():
+    """At a bound, release it and step: the data push it past (59 sigma here) or its
+    1-sigma spans the bound (undetermined). Only the second gets "hold it at the prior"."""
+    from mpcasv.models.ident_bounds import at_bounds, bound_notes
+
+    for a_true, noise, verdict in ((0.5, 0.1, "past"), (0.2, 3.0, "undetermined")):
+        sol, lo, hi = _bounded_fit(a_true, noise, seed=1)
+        got = at_bounds(("a", "b"), sol.x, lo, hi, sol.jac, sol.fun, 50, 4, None,
+                        lambda j, v: 10.0 * v, np.array([-1.0, 0.5]), sol.active_mask,
+                        kind="sign")  # fmt: skip
+        assert set(got) == {"a"}, got
+        b = got["a"]
+        assert b["verdict"] == verdict and b["bound"] == 0.0 and b["prior"] == -10.0
+        if verdict == "past":
+            assert b["free"] == pytest.approx(10 * a_true, rel=0.1) and b["z"] > 50
+        note = bound_notes(got, "this log")[1]
+        assert ("hold it at the prior" in note) == (verdict == "undetermined"), note
+        assert ("this log pushes it past" in note) == (verdict == "past"), note
+
+
+def test_the_uncertain_sigma_note_gives_the_lag_and_the_samples():
+    """sqrt((L + 1) / (3 n)) with L = 299 and n = 900 is 33 %: the note gives L and n and the
+    samples that bring it to 20 % at that lag, (L + 1) / (3 0.2^2) = 2,500 (2.8 times)."""
+    from mpcasv.models.ident_cov import uncertain_sigma_note
+
+    note = uncertain_sigma_note({"X_u": 0.333, "N_r": 0.1}, "this log", {"X_u": 299, "N_r": 5},
+                                900)  # fmt: skip
+    assert "lag L = 299 samples over n = 900 samples" in note, note
+    assert "from n = 2,500, 2.8 times the samples" in note and "longer log" in note, note
+
+
+def _fake(prior, current=(0.0, 0.0), sources=("a.csv",), fit_u=60.0):
+    from mpcasv.models.identify import OUTPUTS, Identification
+
+    fits = {"train": {c: {"rmse": 0.1, "fit_pct": 50.0} for c in OUTPUTS},
+            "validation": {c: {"rmse": 0.1, "fit_pct": fit_u if c == "u" else 60.0}
+                           for c in OUTPUTS}}  # fmt: skip
+    Y = np.zeros((4, 10))
+    return Identification(params=prior, coeffs=("X_u",), theta=np.ones(3),
+                          rel_std={"X_u": 0.5}, current=current, var_ratio={"X_u": 9.0},
+                          metrics={s: fits for s in ("prior", "equation_error",
+                                                     "simulation_error")},
+                          replay={"train": (Y, Y), "validation": (Y, Y)},
+                          sigma_rel_sd={"X_u": 0.3}, sigma_lag={"X_u": 299}, sigma_n=900,
+                          sources=sources)  # fmt: skip
+
+
+def test_the_report_reads_right_figures_and_names_the_logs_by_their_number(prior, tmp_path):
+    """A current of -2e-9 m/s was printed "-0.000"; a fit of -0.04 % "-0.0". One log is "this
+    log" in every note, several "these logs"."""
+    from mpcasv.models.ident_cov import fixed
+    from mpcasv.models.ident_output import report_table, write_params
+
+    assert [fixed(x) for x in (-2e-9, 0.0, -0.0, 3.1e-4, -0.0123)] == [
+        "0.000", "0.000", "0.000", "0.00031", "-0.012"]  # fmt: skip
+    assert fixed(-0.04, 1) == "-0.04" and fixed(12.34, 1) == "12.3"
+    one = report_table(_fake(prior, current=(-2e-9, 3.1e-4), fit_u=-0.04), prior)
+    assert "V_N = 0.000 m/s, V_E = 0.00031 m/s" in one, one
+    assert "-0.000" not in one and "-0.0 " not in one and "| -0.04 (0.1) |" in one
+    assert "these logs" not in one and "this log" in one
+    for what in ("Poorly determined by this log", "does not explain this log to its noise",
+                 "the samples of this log"):  # fmt: skip
+        assert what in one, what
+    two = report_table(_fake(prior, sources=("a.csv", "b.csv")), prior)
+    assert "this log" not in two and "does not explain these logs to their noise" in two
+    write_params(tmp_path / "p.toml", _fake(prior, current=(-2e-9, 0.0)), prior, ["a.csv"])
+    assert "V_N = 0.000 m/s, V_E = 0.000 m/s" in (tmp_path / "p.toml").read_text()
+

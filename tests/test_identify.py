@@ -249,6 +249,8 @@ def test_quoted_sigma_covers_the_error_of_a_late_set_point(zigzag, prior):
     # three training windows and a lag as long as a window: the 1-sigma is itself shaky
     assert min(res.sigma_rel_sd.values()) > 0.2
     assert "1-sigma is itself uncertain (every coefficient)" in table_md
+    # ... and says from which lag and how many samples (session 26: it gave neither)
+    assert f"n = {res.sigma_n:,} samples in replay windows" in table_md and "lag L = " in table_md
 
 
 def test_manoeuvre_cli_writes_seeded_logs(tmp_path, prior):

@@ -291,3 +291,27 @@ def test_map_sigma_is_on_the_same_basis_as_identify(identified):
     assert "Newey-West HAC" in load_vessel(out).provenance["X_u"]
     md = (folder / "identify.md").read_text()
     assert "1-sigma: Newey-West" in md
+
+
+@needs_log
+def test_a_coefficient_at_its_sign_bound_is_not_advised_to_be_held_at_the_prior(identified):
+    """Walk-through (session 26): N_rr ends at its sign bound 0 (VSIM's yaw damping is
+    linear); the report named it "poorly determined: hold it at the prior" (-464, the value
+    the log rejects most). Released, the fit would put it at +9.4 (1-sigma 2.0), 4.6 sigma
+    past the bound: the report says the log pushes it past (a structure the boat lacks), and
+    that the prior would contradict the log."""
+    import json
+
+    out = identified[0]
+    folder = out.with_name(out.stem + "-report")
+    rec = json.loads((folder / "identify.json").read_text())
+    b = rec["at_bound"]["N_rr"]
+    assert b["bound"] == 0.0 and b["kind"] == "sign" and b["verdict"] == "past"
+    assert b["free"] > 0 and b["z"] > 2, b
+    assert set(rec["at_bound"]) == {"N_rr"}
+    md = (folder / "identify.md").read_text()
+    assert "| N_rr | -464.4 | 0 | at bound |" in md
+    assert "N_rr ends at its sign bound 0" in md and "this log pushes it past the bound" in md
+    loose = [line for line in md.splitlines() if line.startswith("Poorly determined")]
+    assert all("N_rr" not in line for line in loose), loose
+    assert load_vessel(out).N_rr == 0.0

@@ -308,7 +308,7 @@ def run_map_identification(args, prior: VesselParams, tmap) -> int:
     (folder / "identify.json").write_text(json.dumps({
         "coeffs": {c: getattr(P, c) for c in fit.coeffs}, "rel_std": fit.rel_std,
         "rel_std_plain": fit.rel_std_plain, "var_ratio": fit.var_ratio,
-        "sigma_rel_sd": fit.sigma_rel_sd,
+        "sigma_rel_sd": fit.sigma_rel_sd, "sigma_lag": fit.sigma_lag, "at_bound": fit.at_bound,
         "sigma_method": fit.sigma_method, "metrics": fit.metrics, "split_s": fit.split_s,
         "T_max": P.T_max, "u_max": P.u_max,
         "phases": phases}, indent=1))  # fmt: skip
@@ -352,7 +352,7 @@ def run_cli(args) -> int:
     (folder / "identify.json").write_text(json.dumps({
         "coeffs": {c: getattr(res.params, c) for c in res.coeffs}, "rel_std": res.rel_std,
         "rel_std_plain": res.rel_std_plain, "var_ratio": res.var_ratio,
-        "sigma_rel_sd": res.sigma_rel_sd,
+        "sigma_rel_sd": res.sigma_rel_sd, "sigma_lag": res.sigma_lag, "at_bound": res.at_bound,
         "sigma_method": res.sigma_method, "current": res.current,
         "metrics": res.metrics}, indent=1))  # fmt: skip
     print(table)

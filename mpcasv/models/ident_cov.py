@@ -157,9 +157,26 @@ def ratio_line(var_ratio: dict) -> str:
             f"(J^T J)^-1 s^2: {ratios}")
 
 
-def correlated_warning(var_ratio: dict) -> str | None:
+def data_name(n_logs: int) -> str:
+    """How the report names the data: "this log" for one, "these logs" for several."""
+    return "this log" if n_logs == 1 else "these logs"
+
+
+def fixed(x: float, digits: int = 3, zero: float = 1e-6) -> str:
+    """``x`` with ``digits`` decimals, read as written: a figure that rounds to zero has no
+    minus ("-0.000" was printed for a current of -2e-9 m/s), and a value that rounds to zero
+    but is at least ``zero`` in size keeps two significant digits (0.00042) instead."""
+    if not math.isfinite(x):
+        return str(x)
+    text = f"{x:.{digits}f}"
+    if float(text) != 0.0:
+        return text
+    return f"{x:.2g}" if abs(x) >= zero else f"{0.0:.{digits}f}"
+
+
+def correlated_warning(var_ratio: dict, source: str = "these logs") -> str | None:
     """The report's warning when a coefficient's HAC variance is above :data:`RATIO_WARN`
-    times the plain one (``None`` otherwise)."""
+    times the plain one (``None`` otherwise); ``source`` names the data (:func:`data_name`)."""
     high = {c: r for c, r in var_ratio.items() if r > RATIO_WARN}
     if not high:
         return None
@@ -167,38 +184,58 @@ def correlated_warning(var_ratio: dict) -> str | None:
     return (f"The replay residuals are serially correlated: the HAC variance is up to "
             f"{high[worst]:.0f} times the independent-residual one ({worst}; above "
             f"{RATIO_WARN:g} for {', '.join(high)}; the 1-sigma includes it). Either the model "
-            "does not explain these logs to their noise level (a wrong structure, a set-point "
+            f"does not explain {source} to {'its' if source.startswith('this') else 'their'} "
+            "noise level (a wrong structure, a set-point "
             "logged a step late), or the logged states are filtered (DUNE logs: the "
             "navigation estimator's states are smooth, not white measurements).")  # fmt: skip
 
 
 def report_notes(coeffs, rel_std: dict, var_ratio: dict, source: str = "these logs",
-                 sigma_rel_sd: dict | None = None) -> list[str]:  # fmt: skip
+                 sigma_rel_sd: dict | None = None, at_bound: dict | None = None,
+                 lag: dict | None = None, n: int = 0) -> list[str]:  # fmt: skip
     """The report's lines after the coefficient table, for both identification methods: the
     1-sigma basis with each coefficient's HAC / plain ratio (:func:`ratio_line`), the
-    coefficients whose 1-sigma is above :data:`LOOSE`, :func:`correlated_warning` and
-    :func:`uncertain_sigma_note`; each preceded by a blank line. ``source`` names the data in
-    the text ("these logs")."""
+    coefficients whose 1-sigma is above :data:`LOOSE` (not those at a bound: ``at_bound``,
+    :func:`mpcasv.models.ident_bounds.bound_notes` says what the fit tells of them),
+    :func:`correlated_warning` and :func:`uncertain_sigma_note` (``lag``, ``n``); each
+    preceded by a blank line. ``source`` names the data (:func:`data_name`)."""
+    from mpcasv.models.ident_bounds import bound_notes
+
+    at_bound = at_bound or {}
     lines = ["", ratio_line(var_ratio)] if var_ratio else []
-    loose = [c for c in coeffs if rel_std[c] > LOOSE]
+    loose = [c for c in coeffs if rel_std[c] > LOOSE and c not in at_bound]
     if loose:
+        it = "it" if len(loose) == 1 else "them"
         lines += ["", f"Poorly determined by {source} (1-sigma above {100 * LOOSE:.0f} %): "
-                  f"{', '.join(loose)}; hold them at the prior (--coeffs without them) or log "
-                  "a manoeuvre that excites them (speed steps for the surge terms)."]  # fmt: skip
-    notes = [correlated_warning(var_ratio), uncertain_sigma_note(sigma_rel_sd or {}, source)]
+                  f"{', '.join(loose)}; hold {it} at the prior (--coeffs without {it}) or log "
+                  f"a manoeuvre that excites {it} (speed steps for the surge terms)."]  # fmt: skip
+    lines += bound_notes(at_bound, source)
+    notes = [correlated_warning(var_ratio, source),
+             uncertain_sigma_note(sigma_rel_sd or {}, source, lag, n)]  # fmt: skip
     return lines + [x for note in notes if note for x in ("", note)]
 
 
-def uncertain_sigma_note(sigma_rel_sd: dict, source: str = "these logs") -> str | None:
+def uncertain_sigma_note(sigma_rel_sd: dict, source: str = "these logs",
+                         lag: dict | None = None, n: int = 0) -> str | None:  # fmt: skip
     """The report's line when a quoted 1-sigma is itself uncertain by more than
-    :data:`SHAKY` (:func:`sigma_uncertainty`; ``None`` when none is)."""
+    :data:`SHAKY` (:func:`sigma_uncertainty`; ``None`` when none is). With the Bartlett
+    ``lag`` per coefficient and the ``n`` samples the scores were summed over it gives the
+    formula's figures and the samples that would bring it to :data:`SHAKY` at that lag."""
     shaky = {c: r for c, r in sigma_rel_sd.items() if r > SHAKY}
     if not shaky:
         return None
     which = "every coefficient" if len(shaky) == len(sigma_rel_sd) else ", ".join(shaky)
-    worst = max(shaky.values())
+    worst = max(shaky, key=shaky.get)
+    figures = ""
+    if lag and n and worst in lag:
+        L = int(lag[worst])
+        need = math.ceil((L + 1) / (3 * SHAKY**2))
+        figures = (f" ({worst}: lag L = {L} samples over n = {n:,} samples in replay windows, "
+                   f"sqrt((L + 1) / (3 n)); at that lag it falls to {100 * SHAKY:.0f} % from "
+                   f"n = {need:,}, {need / n:.1f} times the samples)")  # fmt: skip
     return (f"The quoted 1-sigma is itself uncertain ({which}): its HAC variance sums the "
             f"scores over a lag that is long against the samples of {source} in replay "
             "windows, so it rests on few independent pieces; the 1-sigma's own relative "
-            f"standard deviation is about {100 * worst:.0f} % (asymptotic). Read it as an "
-            "order of magnitude; longer or more logs give more samples.")  # fmt: skip
+            f"standard deviation is about {100 * shaky[worst]:.0f} %{figures} (asymptotic). "
+            "Read it as an order of magnitude; a longer log, or more logs, give more "
+            "samples.")  # fmt: skip

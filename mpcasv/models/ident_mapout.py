@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from mpcasv.models.ident_cov import report_notes
+from mpcasv.models.ident_cov import data_name, fixed, report_notes
 from mpcasv.models.ident_thrust import MapFit, ThrusterMap
 from mpcasv.models.params import VesselParams
 from mpcasv.models.vessel import resistance, top_speed
@@ -58,10 +58,12 @@ def written_vessel(fit: MapFit, tmap: ThrusterMap, name: str, held: dict[str, st
         if key == "name":
             continue
         if key in fit.coeffs:
-            sd = fit.rel_std[key]
-            sd_txt = (f"1-sigma {100 * sd:.1f} % (Newey-West HAC within replay windows; "
-                      f"variance {fit.var_ratio[key]:.3g} x the independent-residual one)"
-                      if sd < 10 else "at its bound 0")  # fmt: skip
+            b = fit.at_bound.get(key)
+            sd_txt = (f"1-sigma {100 * fit.rel_std[key]:.1f} % (Newey-West HAC within replay "
+                      f"windows; variance {fit.var_ratio[key]:.3g} x the independent-residual "
+                      "one)" if b is None else f"at its sign bound {b['bound']:.6g} (the fit "
+                      f"would put it at {b['free']:.4g}, {b['z']:+.1f} sigma past it; the "
+                      "report says what that tells)")  # fmt: skip
             prov[key] = (f"identified by mpcasv identify from {src} through DUNE's thruster "
                          f"map ({tmap.source}): simulation-error least squares, {sd_txt}; "
                          f"{held_out}")  # fmt: skip
@@ -106,11 +108,10 @@ def report(fit: MapFit, P: VesselParams, tmap: ThrusterMap, prior: VesselParams,
     """Markdown: coefficients, held-out errors against the prior's, speed figures."""
     lines = ["| coefficient | start (prior) | identified | 1-sigma % |", "|---|---|---|---|"]
     for c in fit.coeffs:
-        sd = fit.rel_std[c]
-        lines.append(f"| {c} | {getattr(prior, c):.4g} | {getattr(P, c):.4g} | "
-                     f"{100 * sd:.1f} |" if sd < 10 else f"| {c} | {getattr(prior, c):.4g} | "
-                     f"{getattr(P, c):.4g} | at bound |")  # fmt: skip
-    lines += report_notes(fit.coeffs, fit.rel_std, fit.var_ratio, "this log", fit.sigma_rel_sd)
+        sd = "at bound" if c in fit.at_bound else fixed(100 * fit.rel_std[c], 1)
+        lines.append(f"| {c} | {getattr(prior, c):.4g} | {getattr(P, c):.4g} | {sd} |")
+    lines += report_notes(fit.coeffs, fit.rel_std, fit.var_ratio, data_name(1), fit.sigma_rel_sd,
+                          fit.at_bound, fit.sigma_lag, fit.sigma_n)  # fmt: skip
     lines += ["", "| model | part | u RMS (m/s) | r RMS (rad/s) | psi RMS (rad) |",
               "|---|---|---|---|---|"]  # fmt: skip
     for stage, d in fit.metrics.items():

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from mpcasv.models.ident_checks import validation_failures
-from mpcasv.models.ident_cov import report_notes
+from mpcasv.models.ident_cov import data_name, fixed, report_notes
 from mpcasv.models.identify import OUTPUTS, Identification, mass_terms
 from mpcasv.models.params import VesselParams
 
@@ -30,7 +30,7 @@ def write_params(path: Path, res: Identification, prior: VesselParams, sources: 
     import tomli_w
 
     val = res.metrics["simulation_error"]["validation"]
-    fit = ", ".join(f"{c} {v['fit_pct']:.1f} %" for c, v in val.items())
+    fit = ", ".join(f"{c} {fixed(v['fit_pct'], 1)} %" for c, v in val.items())
     failed = validation_failures(res.metrics)
     if failed:
         fit += " (VALIDATION FAILED: fit < 0 %)"
@@ -52,17 +52,21 @@ def write_params(path: Path, res: Identification, prior: VesselParams, sources: 
             prov[key] = (f"top speed of the identified model at T_max = {prior.T_max:g} N "
                          f"(prior declared {prior.u_max:g} m/s: {prior.provenance.get(key, '')})")
         elif key in res.coeffs:
+            b = res.at_bound.get(key)
+            sd = (f"1-sigma {100 * res.rel_std[key]:.1f} % ({SIGMA_BASIS}; variance "
+                  f"{res.var_ratio.get(key, math.nan):.3g} x the independent-residual one)"
+                  if b is None else f"at its bound {b['bound']:.6g} (the fit would put it at "
+                  f"{b['free']:.4g}, {b['z']:+.1f} sigma past it; identify.md says what that "
+                  "tells)")  # fmt: skip
             prov[key] = (f"identified by mpcasv identify from {', '.join(sources)}: simulation-"
-                         f"error least squares, 1-sigma {100 * res.rel_std[key]:.1f} % "
-                         f"({SIGMA_BASIS}; variance {res.var_ratio.get(key, math.nan):.3g} x "
-                         f"the independent-residual one); "
+                         f"error least squares, {sd}; "
                          f"validation fit {fit}; prior {getattr(prior, key):.6g}")  # fmt: skip
         else:
             prov[key] = "held at the prior: " + prior.provenance.get(key, "(no provenance)")
     header = (f"# Identified by `mpcasv identify` from {', '.join(sources)}.\n"
               f"# 1-sigma: {res.sigma_method}.\n"
-              f"# Estimated constant current V_N = {res.current[0]:.3f} m/s, "
-              f"V_E = {res.current[1]:.3f} m/s (not a vessel parameter).\n")  # fmt: skip
+              f"# Estimated constant current V_N = {fixed(res.current[0])} m/s, "
+              f"V_E = {fixed(res.current[1])} m/s (not a vessel parameter).\n")  # fmt: skip
     if failed:
         header += (f"# VALIDATION FAILED: held-out fit below 0 % for {', '.join(failed)}: this "
                    "model predicts the validation data worse than their mean; do not use it as "
@@ -112,27 +116,30 @@ def report_table(res: Identification, prior: VesselParams, truth: VesselParams |
     mt = mass_terms(truth) if truth else {}
     rows += [(k, mp[k], mi[k], math.nan, mt.get(k)) for k in mp]
     for c, p0, pi, sd, pt in rows:
-        line = f"| {c} | {p0:.4g} | {pi:.4g} | {'derived' if math.isnan(sd) else f'{sd:.1f}'} |"
+        sd_txt = ("at bound" if c in res.at_bound else "derived" if math.isnan(sd)
+                  else fixed(sd, 1))  # fmt: skip
+        line = f"| {c} | {p0:.4g} | {pi:.4g} | {sd_txt} |"
         if truth:
-            line += f" {pt:.4g} | {100 * (pi / pt - 1):+.1f} |"
+            err = fixed(100 * (pi / pt - 1), 1)
+            line += f" {pt:.4g} | {'' if err.startswith('-') or float(err) == 0 else '+'}{err} |"
         lines.append(line)
-    lines += report_notes(res.coeffs, res.rel_std, res.var_ratio, sigma_rel_sd=res.sigma_rel_sd)
-    lines += ["", f"Current: V_N = {res.current[0]:.3f} m/s, V_E = {res.current[1]:.3f} m/s", "",
-              "| stage | split | " + " | ".join(f"{c} fit % (RMSE)" for c in OUTPUTS) + " |",
+    source = data_name(len(res.sources)) if res.sources else "these logs"
+    lines += report_notes(res.coeffs, res.rel_std, res.var_ratio, source, res.sigma_rel_sd,
+                          res.at_bound, res.sigma_lag, res.sigma_n)  # fmt: skip
+    lines += ["", f"Current: V_N = {fixed(res.current[0])} m/s, V_E = {fixed(res.current[1])} m/s",
+              "", "| stage | split | " + " | ".join(f"{c} fit % (RMSE)" for c in OUTPUTS) + " |",
               "|---|---|" + "---|" * len(OUTPUTS)]  # fmt: skip
     for stage, d in res.metrics.items():
         for part, m in d.items():
             lines.append(
                 f"| {stage} | {part} | "
-                + " | ".join(f"{m[c]['fit_pct']:.1f} ({m[c]['rmse']:.3g})" for c in OUTPUTS)
+                + " | ".join(f"{fixed(m[c]['fit_pct'], 1)} ({m[c]['rmse']:.3g})" for c in OUTPUTS)
                 + " |"
             )
     lines.append("RMSE in rad, m/s, m/s, rad/s; fits over replay windows re-initialised every "
                  "window from the smoothed measurement.")  # fmt: skip
     failed = validation_failures(res.metrics)
     lines.append("Validation (held-out fit >= 0 % on every channel): " + (
-        "FAIL: " + ", ".join(f"{c} {v:.1f} %" for c, v in failed.items()) +
+        "FAIL: " + ", ".join(f"{c} {fixed(v, 1)} %" for c, v in failed.items()) +
         " (the model predicts the held-out data worse than their mean)" if failed else "PASS"))
     return "\n".join(lines)
-
-

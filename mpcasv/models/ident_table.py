@@ -1,17 +1,23 @@
 """The identification table: a log's rows on a uniform time grid, set-points held, states
 interpolated (:func:`identification_table`), with the grid and the hold as one definition
 for every identification (:func:`regular_grid`, :func:`hold_rows`; the thruster-map table of
-:mod:`mpcasv.models.ident_thrust` uses them too). Fitting is :mod:`mpcasv.models.identify`.
+:mod:`mpcasv.models.ident_thrust` uses them too); the length a fit needs
+(:func:`min_samples`, :func:`check_length`); a table prepared for fitting and its split
+(:func:`prepare`, :func:`split`). Fitting is :mod:`mpcasv.models.identify`.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
 import pandas as pd
+from scipy.signal import savgol_filter
 
 from mpcasv.errors import LogError
+from mpcasv.models.params import VesselParams
+from mpcasv.models.vessel import IX, NX
 
 #: columns of an identification table (:mod:`mpcasv.models.identify`, "Log formats")
 REQUIRED = ("t", "N", "E", "psi", "u", "v", "r", "T_cmd", "delta_cmd")
@@ -166,3 +172,55 @@ def hold_rows(t: np.ndarray, grid: np.ndarray, dt: float) -> np.ndarray:
     were a step late (session 25).
     """
     return np.clip(np.searchsorted(t, grid + dt / 2, side="right") - 1, 0, len(t) - 1)
+
+
+# --- a table prepared for fitting (mpcasv.models.identify; here since session 26: size) -----
+
+
+# --- data preparation ----------------------------------------------------------------------
+
+
+@dataclasses.dataclass(frozen=True)
+class Prepared:
+    """A log prepared for fitting: states with reconstructed actuators, inputs, derivatives."""
+
+    dt: float
+    X: np.ndarray  # (n, NX) measured states (N, E, psi, u, v, r) + reconstructed T, delta
+    Xs: np.ndarray  # same with smoothed psi, u, v, r (initial conditions, equation error)
+    U: np.ndarray  # (n, 2) set-points
+    nudot: np.ndarray  # (n, 3) Savitzky-Golay derivatives of u, v, r
+
+
+def prepare(df: pd.DataFrame, prior: VesselParams, smooth_s: float = 1.5) -> Prepared:
+    """Reconstruct actuator states through the known lags (exact ZOH) and smooth."""
+    dt = float(df["t"].iloc[1] - df["t"].iloc[0])
+    U = df[["T_cmd", "delta_cmd"]].to_numpy(float)
+    n = len(df)
+    X = np.zeros((n, NX))
+    for c in ("N", "E", "psi", "u", "v", "r"):
+        X[:, IX[c]] = df[c].to_numpy(float)
+    X[:, IX["psi"]] = np.unwrap(X[:, IX["psi"]])  # logs wrap heading; smoothing must not
+    for j, (name, tau) in enumerate((("T", prior.T_thrust), ("delta", prior.T_delta))):
+        a = 1.0 - math.exp(-dt / tau)
+        y = np.empty(n)
+        y[0] = U[0, j]
+        for k in range(n - 1):
+            y[k + 1] = y[k] + a * (U[k, j] - y[k])
+        X[:, IX[name]] = y
+    win = max(5, int(round(smooth_s / dt)) | 1)
+    Xs = X.copy()
+    nudot = np.zeros((n, 3))
+    for i, c in enumerate(("u", "v", "r")):
+        Xs[:, IX[c]] = savgol_filter(X[:, IX[c]], win, 2)
+        nudot[:, i] = savgol_filter(X[:, IX[c]], win, 2, deriv=1, delta=dt)
+    Xs[:, IX["psi"]] = savgol_filter(X[:, IX["psi"]], win, 2)
+    return Prepared(dt=dt, X=X, Xs=Xs, U=U, nudot=nudot)
+
+
+def split(pr: Prepared, validation: float) -> tuple[Prepared, Prepared]:
+    """(training, validation): the validation part is the last ``validation`` fraction."""
+    k = split_index(len(pr.U), validation)
+    cut = lambda a, s: a[s]  # noqa: E731
+    head = Prepared(pr.dt, *(cut(a, slice(0, k)) for a in (pr.X, pr.Xs, pr.U, pr.nudot)))
+    tail = Prepared(pr.dt, *(cut(a, slice(k, None)) for a in (pr.X, pr.Xs, pr.U, pr.nudot)))
+    return head, tail

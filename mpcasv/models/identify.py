@@ -28,10 +28,15 @@ Actuator states are reconstructed from the set-points through the model's known 
 2. simulation error: the logged inputs are replayed through the shared model (RK4 of
    ``VesselModel.f_param`` with a symbolic parameter vector, built once as one CasADi function
    of the parameters, mapped over windows re-initialised from the smoothed measurement every
-   ``window`` seconds), ``scipy.optimize.least_squares`` with the exact Jacobian (forward
-   sensitivities along each window, :mod:`mpcasv.models.ident_windows`);
+   ``window`` seconds; a part's samples after its last whole window form a shorter last
+   window), ``scipy.optimize.least_squares`` with the exact Jacobian (forward sensitivities
+   along each window, :mod:`mpcasv.models.ident_windows`); a coefficient that ends at its
+   bound is analysed (:mod:`mpcasv.models.ident_bounds`);
 3. validation: the last ``validation`` fraction of every log is held out and replayed the same
    way; fit = ``100 (1 - |y - y_sim| / |y - mean(y)|)`` per channel.
+
+Each log must hold one whole window in each part
+(:func:`mpcasv.models.ident_table.check_length`: 1,203 samples at 0.1 s and the defaults).
 
 The unknown constant current ``[V_N, V_E]`` is estimated with the parameters.
 
@@ -59,11 +64,11 @@ import casadi as ca
 import numpy as np
 import pandas as pd
 from scipy.optimize import least_squares
-from scipy.signal import savgol_filter
 
 from mpcasv.errors import LogError
+from mpcasv.models.ident_bounds import active, at_bounds
 from mpcasv.models.ident_cov import METHOD, window_covariance
-from mpcasv.models.ident_table import check_length, split_index, window_steps
+from mpcasv.models.ident_table import Prepared, check_length, prepare, split, window_steps
 from mpcasv.models.ident_windows import Windows
 from mpcasv.models.params import MODEL_COEFFS, VesselParams
 from mpcasv.models.vessel import IX, NX, VesselModel, rk4_expr
@@ -76,55 +81,6 @@ OUTPUTS = ("psi", "u", "v", "r")
 def mass_terms(p: VesselParams) -> dict[str, float]:
     """Total (rigid-body + added) mass terms ``m11, m22, m33`` (kg, kg, kg m^2)."""
     return {"m11": p.m - p.X_udot, "m22": p.m - p.Y_vdot, "m33": p.I_z - p.N_rdot}
-
-
-# --- data preparation ----------------------------------------------------------------------
-
-
-@dataclasses.dataclass(frozen=True)
-class Prepared:
-    """A log prepared for fitting: states with reconstructed actuators, inputs, derivatives."""
-
-    dt: float
-    X: np.ndarray  # (n, NX) measured states (N, E, psi, u, v, r) + reconstructed T, delta
-    Xs: np.ndarray  # same with smoothed psi, u, v, r (initial conditions, equation error)
-    U: np.ndarray  # (n, 2) set-points
-    nudot: np.ndarray  # (n, 3) Savitzky-Golay derivatives of u, v, r
-
-
-def prepare(df: pd.DataFrame, prior: VesselParams, smooth_s: float = 1.5) -> Prepared:
-    """Reconstruct actuator states through the known lags (exact ZOH) and smooth."""
-    dt = float(df["t"].iloc[1] - df["t"].iloc[0])
-    U = df[["T_cmd", "delta_cmd"]].to_numpy(float)
-    n = len(df)
-    X = np.zeros((n, NX))
-    for c in ("N", "E", "psi", "u", "v", "r"):
-        X[:, IX[c]] = df[c].to_numpy(float)
-    X[:, IX["psi"]] = np.unwrap(X[:, IX["psi"]])  # logs wrap heading; smoothing must not
-    for j, (name, tau) in enumerate((("T", prior.T_thrust), ("delta", prior.T_delta))):
-        a = 1.0 - math.exp(-dt / tau)
-        y = np.empty(n)
-        y[0] = U[0, j]
-        for k in range(n - 1):
-            y[k + 1] = y[k] + a * (U[k, j] - y[k])
-        X[:, IX[name]] = y
-    win = max(5, int(round(smooth_s / dt)) | 1)
-    Xs = X.copy()
-    nudot = np.zeros((n, 3))
-    for i, c in enumerate(("u", "v", "r")):
-        Xs[:, IX[c]] = savgol_filter(X[:, IX[c]], win, 2)
-        nudot[:, i] = savgol_filter(X[:, IX[c]], win, 2, deriv=1, delta=dt)
-    Xs[:, IX["psi"]] = savgol_filter(X[:, IX["psi"]], win, 2)
-    return Prepared(dt=dt, X=X, Xs=Xs, U=U, nudot=nudot)
-
-
-def split(pr: Prepared, validation: float) -> tuple[Prepared, Prepared]:
-    """(training, validation): the validation part is the last ``validation`` fraction."""
-    k = split_index(len(pr.U), validation)
-    cut = lambda a, s: a[s]  # noqa: E731
-    head = Prepared(pr.dt, *(cut(a, slice(0, k)) for a in (pr.X, pr.Xs, pr.U, pr.nudot)))
-    tail = Prepared(pr.dt, *(cut(a, slice(k, None)) for a in (pr.X, pr.Xs, pr.U, pr.nudot)))
-    return head, tail
 
 
 # --- fitting ---------------------------------------------------------------------------------
@@ -301,6 +257,13 @@ class Identification:
     #: (:func:`mpcasv.models.ident_cov.sigma_uncertainty`)
     sigma_rel_sd: dict = dataclasses.field(default_factory=dict)
     sigma_method: str = METHOD
+    #: coefficient -> what the fit tells of one at its bound (0.2 or 5 x the prior):
+    #: :func:`mpcasv.models.ident_bounds.at_bounds`; empty when none is
+    at_bound: dict = dataclasses.field(default_factory=dict)
+    #: per coefficient: the Bartlett lag of its 1-sigma (samples), and the samples it summed
+    sigma_lag: dict = dataclasses.field(default_factory=dict)
+    sigma_n: int = 0
+    sources: tuple[str, ...] = ()  # the logs, as the refusals name them
 
 
 def identify(logs: list[pd.DataFrame], prior: VesselParams, coeffs=IDENTIFIED,
@@ -348,8 +311,11 @@ def identify(logs: list[pd.DataFrame], prior: VesselParams, coeffs=IDENTIFIED,
     ee_fun = prob.equation_error(list(train))
     J0 = ee_fun(th0)[1][:, : prob.n]
     check_identifiable(J0, prob.coeffs, logs, names)  # before minutes of fitting
-    sim_tr, info_tr = prob.replay(list(train), window_s, "the logs' training parts")
-    held = f"the logs' validation parts (the last {validation:g} of each log, --validation)"
+    one = len(logs) == 1
+    sim_tr, info_tr = prob.replay(list(train), window_s, "the log's training part" if one
+                                  else "the logs' training parts")  # fmt: skip
+    held = (f"the log's validation part (its last {validation:g}, --validation)" if one else
+            f"the logs' validation parts (the last {validation:g} of each log, --validation)")
     sim_va, info_va = prob.replay(list(val), window_s, held)
     metrics = {}
 
@@ -374,16 +340,25 @@ def identify(logs: list[pd.DataFrame], prior: VesselParams, coeffs=IDENTIFIED,
     say(f"simulation error on {info_tr['windows']} windows of {info_tr['W']} steps ...")
     se = _solve(sim_tr.residuals, ext(ee.x, info_tr), bounds_ext(info_tr))
     say(f"  {se.nfev} evaluations, status {se.status}: {se.message}")
-    theta = se.x[: len(th0)]
+    lo, hi = bounds_ext(info_tr)
+    at_bound = at_bounds(prob.coeffs, se.x, lo, hi, se.jac, se.fun, info_tr["W"],
+                         info_tr["windows"], info_tr["lengths"],
+                         lambda j, v: float(getattr(prior, prob.coeffs[j]) * v), th0,
+                         se.active_mask)  # fmt: skip
+    side = active(se.x[: prob.n], lo[: prob.n], hi[: prob.n], se.active_mask[: prob.n])
+    theta = se.x[: len(th0)].copy()
+    theta[: prob.n] = np.where(side > 0, hi[: prob.n], np.where(side < 0, lo[: prob.n],
+                                                                theta[: prob.n]))  # fmt: skip
     evaluate("simulation_error", theta)
     try:
         cov = window_covariance(se.jac, se.fun, info_tr["W"], info_tr["windows"],
                                 cols=np.arange(prob.n), lengths=info_tr["lengths"])  # fmt: skip
         std = np.sqrt(np.clip(cov.hac, 0, None)) / np.abs(theta[: prob.n])
         std_plain = np.sqrt(np.clip(cov.plain, 0, None)) / np.abs(theta[: prob.n])
-        ratio, shaky = cov.ratio, cov.sigma_rel_sd
+        ratio, shaky, lags, n_sigma = cov.ratio, cov.sigma_rel_sd, cov.lag, cov.n
     except np.linalg.LinAlgError:
         std = std_plain = ratio = shaky = np.full(prob.n, math.inf)
+        lags, n_sigma = np.zeros(prob.n, int), 0
     # pinv gives a coefficient without effect a 1-sigma of 0 %: it is unknown (inf)
     std = np.where(zero_columns(se.jac[:, : prob.n]), math.inf, std)
     rel_std = {c: float(s) for c, s in zip(prob.coeffs, std, strict=True)}
@@ -397,7 +372,9 @@ def identify(logs: list[pd.DataFrame], prior: VesselParams, coeffs=IDENTIFIED,
         rel_std=rel_std,
         current=(float(theta[prob.n]), float(theta[prob.n + 1])) if current else (0.0, 0.0),
         metrics=metrics, var_ratio=var_ratio, rel_std_plain=rel_std_plain,
-        sigma_rel_sd=sigma_rel_sd,
+        sigma_rel_sd=sigma_rel_sd, at_bound=at_bound,
+        sigma_lag={c: int(L) for c, L in zip(prob.coeffs, lags, strict=True)},
+        sigma_n=int(n_sigma), sources=tuple(names),
         replay={"train": (info_tr["Y"], np.array(info_tr["replay"](final["train"]))),
                 "validation": (info_va["Y"], np.array(info_va["replay"](final["validation"])))},
     )  # fmt: skip
