@@ -146,7 +146,7 @@ def test_the_uncertain_sigma_note_gives_the_lag_and_the_samples():
     assert "from n = 2,500, 2.8 times the samples" in note and "longer log" in note, note
 
 
-def _fake(prior, current=(0.0, 0.0), sources=("a.csv",), fit_u=60.0):
+def _fake(prior, current=(0.0, 0.0), sources=("a.csv",), verr=None, fit_u=60.0):
     from mpcasv.models.identify import OUTPUTS, Identification
 
     fits = {"train": {c: {"rmse": 0.1, "fit_pct": 50.0} for c in OUTPUTS},
@@ -159,7 +159,7 @@ def _fake(prior, current=(0.0, 0.0), sources=("a.csv",), fit_u=60.0):
                                                      "simulation_error")},
                           replay={"train": (Y, Y), "validation": (Y, Y)},
                           sigma_rel_sd={"X_u": 0.3}, sigma_lag={"X_u": 299}, sigma_n=900,
-                          sources=sources)  # fmt: skip
+                          sources=sources, validation_error=verr or {})  # fmt: skip
 
 
 def test_the_report_reads_right_figures_and_names_the_logs_by_their_number(prior, tmp_path):
@@ -183,3 +183,54 @@ def test_the_report_reads_right_figures_and_names_the_logs_by_their_number(prior
     write_params(tmp_path / "p.toml", _fake(prior, current=(-2e-9, 0.0)), prior, ["a.csv"])
     assert "V_N = 0.000 m/s, V_E = 0.000 m/s" in (tmp_path / "p.toml").read_text()
 
+
+def test_a_model_worse_than_the_prior_on_held_out_data_fails_validation(
+        prior, tmp_path, capsys, monkeypatch):  # fmt: skip
+    """The bar was only "fit >= 0 %" (better than the held-out data's mean). Now the held-out
+    weighted error (the fit's criterion) may not exceed the prior's by more than 2 % of the
+    prior's or of the noise level: exit 1, one stdout line, the TOML marked."""
+    import mpcasv.io.identlog as identlog
+    from mpcasv.models.ident_checks import worse_than_prior
+
+    assert worse_than_prior({"prior": 1.0, "identified": 1.019}) is None
+    assert worse_than_prior({"prior": 1.0, "identified": 1.5}) == 1.5
+    assert worse_than_prior({"prior": 2.0, "identified": 2.05}) == 1.025
+    # both far below the noise level (1): a ratio means nothing (noise-free, prior = truth)
+    assert worse_than_prior({"prior": 3.41e-7, "identified": 3.56e-7}) is None
+    assert worse_than_prior({}) is None
+    verr = {"prior": 1.0, "identified": 2.0, "weights": {}}
+    monkeypatch.setattr(identlog, "identify", lambda logs, p, c, **kw: _fake(p, verr=verr))
+    log = tmp_path / "z.csv"
+    _zigzag(prior, 121.0).to_csv(log, index=False)
+    out = tmp_path / "p.toml"
+    assert main(["identify", str(log), "--coeffs", "X_u", "--out", str(out), "--quiet"]) == 1
+    text = capsys.readouterr().out
+    assert "validation FAIL: held-out weighted error 2 x the prior's" in text, text
+    assert "Validation against the prior (held-out weighted error" in text
+    assert ": 2 against 1, 2 x: FAIL" in text
+    assert "# VALIDATION FAILED: held-out weighted error 2 x the prior's" in out.read_text()
+
+
+def test_a_fit_spoiled_in_its_training_part_passes_fit_0_but_not_the_prior_bar(prior):
+    """The noise-free default zig-zag of the prior (the truth), every steering switch of its
+    training part logged a step late: the identified model's held-out fits are 91-97 %, far
+    above the old bar (0 %), yet it predicts the held-out part worse than the prior, which
+    replays it exactly (weighted error measured 2.4 against 3.4e-7: at twice the noise
+    level against nothing). FAIL, keep the prior."""
+    from mpcasv.models.ident_checks import validation_failures, worse_than_prior
+    from mpcasv.models.ident_output import report_table
+
+    log = _zigzag(prior, 150.0)
+    d = log["delta_cmd"].to_numpy().copy()
+    k = split_index(len(d), 0.25)
+    for i in np.flatnonzero(np.diff(d[:k]) != 0) + 1:
+        d[i] = d[i - 1]
+    log["delta_cmd"] = d
+    res = identify([log], prior)
+    assert not validation_failures(res.metrics)  # the old bar passes it
+    assert min(m["fit_pct"] for m in res.metrics["simulation_error"]["validation"].values()) > 80
+    assert res.validation_error["prior"] < 1e-3 < 1.0 < res.validation_error["identified"]
+    assert worse_than_prior(res.validation_error) > 1e3
+    assert "Validation against the prior" in report_table(res, prior)
+    assert ": FAIL (the identified model predicts the held-out data worse than the prior" in (
+        report_table(res, prior))

@@ -354,6 +354,7 @@ def run_cli(args) -> int:
         "rel_std_plain": res.rel_std_plain, "var_ratio": res.var_ratio,
         "sigma_rel_sd": res.sigma_rel_sd, "sigma_lag": res.sigma_lag, "at_bound": res.at_bound,
         "sigma_method": res.sigma_method, "current": res.current,
+        "validation_error": res.validation_error,
         "metrics": res.metrics}, indent=1))  # fmt: skip
     print(table)
     print(f"wrote {args.out} and {folder}/ (identify.md, identify.json, identify_replay.png)")

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from mpcasv.models.ident_checks import validation_failures
+from mpcasv.models.ident_checks import PRIOR_MARGIN, validation_failures, worse_than_prior
 from mpcasv.models.ident_cov import data_name, fixed, report_notes
 from mpcasv.models.identify import OUTPUTS, Identification, mass_terms
 from mpcasv.models.params import VesselParams
@@ -32,8 +32,11 @@ def write_params(path: Path, res: Identification, prior: VesselParams, sources: 
     val = res.metrics["simulation_error"]["validation"]
     fit = ", ".join(f"{c} {fixed(v['fit_pct'], 1)} %" for c, v in val.items())
     failed = validation_failures(res.metrics)
+    worse = worse_than_prior(res.validation_error)
     if failed:
         fit += " (VALIDATION FAILED: fit < 0 %)"
+    if worse:
+        fit += f" (VALIDATION FAILED: held-out weighted error {worse:.3g} x the prior's)"
     from mpcasv.models.vessel import top_speed
 
     data = {f.name: getattr(res.params, f.name) for f in dataclasses.fields(res.params)}
@@ -71,6 +74,10 @@ def write_params(path: Path, res: Identification, prior: VesselParams, sources: 
         header += (f"# VALIDATION FAILED: held-out fit below 0 % for {', '.join(failed)}: this "
                    "model predicts the validation data worse than their mean; do not use it as "
                    "is.\n")  # fmt: skip
+    if worse:
+        header += (f"# VALIDATION FAILED: held-out weighted error {worse:.3g} x the prior's: this "
+                   "model predicts the validation data worse than the prior does; keep the "
+                   "prior.\n")  # fmt: skip
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(header + tomli_w.dumps({**data, "provenance": prov}))
 
@@ -142,4 +149,20 @@ def report_table(res: Identification, prior: VesselParams, truth: VesselParams |
     lines.append("Validation (held-out fit >= 0 % on every channel): " + (
         "FAIL: " + ", ".join(f"{c} {fixed(v, 1)} %" for c, v in failed.items()) +
         " (the model predicts the held-out data worse than their mean)" if failed else "PASS"))
+    lines.append(prior_line(res.validation_error))
     return "\n".join(lines)
+
+
+def prior_line(verr: dict) -> str:
+    """The report's second validation bar: the held-out weighted error (the fit's criterion)
+    of the identified model against the prior's
+    (:func:`mpcasv.models.ident_checks.worse_than_prior`)."""
+    if not verr:
+        return "Validation against the prior: not recorded"
+    e0, e1 = verr["prior"], verr["identified"]
+    ratio = e1 / e0 if e0 > 0 else math.inf
+    verdict = ("FAIL (the identified model predicts the held-out data worse than the prior: "
+               "keep the prior)" if worse_than_prior(verr) else "PASS")  # fmt: skip
+    return (f"Validation against the prior (held-out weighted error, the fit's criterion, 1 at "
+            f"the noise level; at most the prior's + {PRIOR_MARGIN:g} x the larger of the "
+            f"two): {e1:.3g} against {e0:.3g}, {ratio:.3g} x: {verdict}")

@@ -33,7 +33,8 @@ Actuator states are reconstructed from the set-points through the model's known 
    along each window, :mod:`mpcasv.models.ident_windows`); a coefficient that ends at its
    bound is analysed (:mod:`mpcasv.models.ident_bounds`);
 3. validation: the last ``validation`` fraction of every log is held out and replayed the same
-   way; fit = ``100 (1 - |y - y_sim| / |y - mean(y)|)`` per channel.
+   way; fit = ``100 (1 - |y - y_sim| / |y - mean(y)|)`` per channel, and the held-out weighted
+   error against the prior's (:func:`mpcasv.models.ident_checks.worse_than_prior`).
 
 Each log must hold one whole window in each part
 (:func:`mpcasv.models.ident_table.check_length`: 1,203 samples at 0.1 s and the defaults).
@@ -264,6 +265,9 @@ class Identification:
     sigma_lag: dict = dataclasses.field(default_factory=dict)
     sigma_n: int = 0
     sources: tuple[str, ...] = ()  # the logs, as the refusals name them
+    #: held-out weighted error (the fit's criterion) of "prior" and "identified", with the
+    #: channel "weights": :func:`mpcasv.models.ident_checks.weighted_error`
+    validation_error: dict = dataclasses.field(default_factory=dict)
 
 
 def identify(logs: list[pd.DataFrame], prior: VesselParams, coeffs=IDENTIFIED,
@@ -284,6 +288,7 @@ def identify(logs: list[pd.DataFrame], prior: VesselParams, coeffs=IDENTIFIED,
         check_covariance,
         check_identifiable,
         source,
+        weighted_error,
         zero_columns,
     )
 
@@ -367,6 +372,10 @@ def identify(logs: list[pd.DataFrame], prior: VesselParams, coeffs=IDENTIFIED,
     sigma_rel_sd = {c: float(r) for c, r in zip(prob.coeffs, shaky, strict=True)}
     check_covariance(rel_std, names)
     final = {"train": ext(theta, info_tr), "validation": ext(theta, info_va)}
+    w = dict(zip(OUTPUTS, (float(x) for x in info_tr["weights"]), strict=True))
+    verr = {"prior": weighted_error(metrics["prior"]["validation"], w),
+            "identified": weighted_error(metrics["simulation_error"]["validation"], w),
+            "weights": w}  # fmt: skip
     return Identification(
         params=prob.params(theta), coeffs=prob.coeffs, theta=theta,
         rel_std=rel_std,
@@ -374,7 +383,7 @@ def identify(logs: list[pd.DataFrame], prior: VesselParams, coeffs=IDENTIFIED,
         metrics=metrics, var_ratio=var_ratio, rel_std_plain=rel_std_plain,
         sigma_rel_sd=sigma_rel_sd, at_bound=at_bound,
         sigma_lag={c: int(L) for c, L in zip(prob.coeffs, lags, strict=True)},
-        sigma_n=int(n_sigma), sources=tuple(names),
+        sigma_n=int(n_sigma), sources=tuple(names), validation_error=verr,
         replay={"train": (info_tr["Y"], np.array(info_tr["replay"](final["train"]))),
                 "validation": (info_va["Y"], np.array(info_va["replay"](final["validation"])))},
     )  # fmt: skip
