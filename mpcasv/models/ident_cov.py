@@ -230,12 +230,12 @@ def uncertain_sigma_note(sigma_rel_sd: dict, source: str = "these logs",
     if lag and n and worst in lag:
         L = int(lag[worst])
         need = math.ceil((L + 1) / (3 * SHAKY**2))
-        figures = (f" ({worst}: lag L = {L} samples over n = {n:,} samples in replay windows, "
+        figures = (f"; {worst}: lag L = {L} samples over n = {n:,} samples in replay windows, "
                    f"sqrt((L + 1) / (3 n)); at that lag it falls to {100 * SHAKY:.0f} % from "
-                   f"n = {need:,}, {need / n:.1f} times the samples)")  # fmt: skip
+                   f"n = {need:,}, {need / n:.1f} times the samples")  # fmt: skip
     return (f"The quoted 1-sigma is itself uncertain ({which}): its HAC variance sums the "
             f"scores over a lag that is long against the samples of {source} in replay "
             "windows, so it rests on few independent pieces; the 1-sigma's own relative "
-            f"standard deviation is about {100 * shaky[worst]:.0f} %{figures} (asymptotic). "
+            f"standard deviation is about {100 * shaky[worst]:.0f} % (asymptotic{figures}). "
             "Read it as an order of magnitude; a longer log, or more logs, give more "
             "samples.")  # fmt: skip
