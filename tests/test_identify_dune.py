@@ -210,6 +210,16 @@ def test_identified_hull_is_the_simulators_own(identified):
 
 
 @needs_log
+def test_the_shipped_vessel_file_is_what_the_command_writes(identified):
+    """``mpcasv/data/vessels/dune-otter.toml`` is the output of its documented command
+    (docs/deploy.md): a change to the identification that moves the fit shows here, and the
+    shipped file is regenerated with it (it lagged a whole session behind a timing fix)."""
+    fitted, shipped = load_vessel(identified[0]), load_vessel("dune-otter")
+    for c in ("m", "I_z", "X_u", "X_uu", "N_r", "N_rr", "Y_ur", "T_max", "u_max", "y_thr"):
+        assert getattr(shipped, c) == pytest.approx(getattr(fitted, c), rel=1e-4, abs=1e-9), c
+
+
+@needs_log
 def test_written_vessel_speeds_and_provenance(identified):
     out, _, tm = identified
     P = load_vessel(out)
