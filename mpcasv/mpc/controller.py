@@ -219,6 +219,7 @@ class MPCController(WorldView, Safety, PlanOutput, Targeting, SpeedCap, Carry):
         self.observer.reset()
         #: the current the plan assumes (V_N, V_E), m/s (``params.current``; set each step)
         self.current = np.zeros(2)
+        self.current_noted = False  # said once that the current is stronger than tested
         self.tau = np.zeros(n_auv)  # expected fix ages (s)
         self.stand_off = False  # the standing-time term off this step (worldview, M7s)
         self.t_prev: float | None = None

@@ -6,6 +6,7 @@ the plan assumes, the initial state and the OCP's parameter vector. A mixin of
 from __future__ import annotations
 
 import math
+import sys
 
 import numpy as np
 
@@ -22,6 +23,10 @@ _STAND = WEIGHT_NAMES.index("stand")
 R_HI_NONE = 1.0e5  # "no outer bound" (m)
 TAU_UNKNOWN = 600.0  # fix age used for an AUV never fixed (s)
 W_MAX_DEPTH = 2.0  # bound on the estimated vertical speed of an AUV (m/s)
+#: the strongest current (m/s) the MPC has been run in without being carried off (session 26:
+#: 0.75 m/s held, 1.0 m/s carried the ASV hundreds of metres past its AUVs; docs/mpc.md,
+#: "Known problems", strong currents); above it the controller says so once per run
+CURRENT_TESTED = 0.75
 
 
 def ranges(asv_NE: np.ndarray, pa: np.ndarray) -> np.ndarray:
@@ -129,14 +134,27 @@ class WorldView:
         est = self.observer.update(measurement(obs))
         mode = self.params.current
         if mode == "estimated":
-            return est
+            return self._note_strong(obs, est, "estimated on board")
         if mode == "zero":
             return np.zeros(2)
         if obs.current_oracle is None:
             raise ValueError("MPC current = 'oracle': the observation carries no true current "
                              "(only the simulator provides it, for ablations); use "
                              "current = 'estimated'")  # fmt: skip
-        return np.asarray(obs.current_oracle, float)
+        return self._note_strong(obs, np.asarray(obs.current_oracle, float), "the true one")
+
+    def _note_strong(self, obs: Observation, current: np.ndarray, what: str) -> np.ndarray:
+        """``current`` (m/s, shape (2,)); the first time in a run that it is stronger than
+        :data:`CURRENT_TESTED`, one line on stderr saying that the MPC is untested there."""
+        speed = float(np.hypot(*current))
+        if round(speed, 2) > CURRENT_TESTED and not self.current_noted:
+            self.current_noted = True
+            print(f"note: {self.name} at t = {obs.t:.0f} s: the current ({what}) is "
+                  f"{speed:.2f} m/s, above the {CURRENT_TESTED} m/s the MPC has been run in "
+                  "without being carried off; at 1.0 m/s its plans let the ASV drift past the "
+                  "AUVs (docs/mpc.md, \"Known problems\": strong currents); the hybrid "
+                  "controllers held there", file=sys.stderr)  # fmt: skip
+        return current
 
     def _x0(self, obs: Observation) -> np.ndarray:
         """Plan initial state: the observed thrust and steering (``obs.actuators``) when the
