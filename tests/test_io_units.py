@@ -252,7 +252,8 @@ def test_deploy_watchdogs_in_the_decisions(tmp_path):
     now = 1000.0 + 40.0 + 3.5  # no ASV state for 3.5 s > asv_stale_s = 3
     dep.watch()
     assert dep.phase == ASV_STALE
-    asv.nav_recv = now
+    nav = NavState(now, 0.0, 0.0, 0.0, 0.0, 0.0, 0, 0, 0, 0, 0, 0)  # stamped after the verdict
+    asv.nav, asv.nav_recv = nav, now
     dep._on_state(asv, nav, now)
     assert dep.phase in (WAITING, RUNNING)
 

@@ -13,8 +13,9 @@ Phases: ``waiting`` (for the ASV's and every AUV's first state) -> ``starting``
 (PlanControl START FollowReference sent; waits for the answer with the same request id;
 retried after ``plan_start_timeout``) -> ``running``. The ASV's state older than
 ``asv_stale_s`` -> ``asv_stale``: no more References (DUNE then ends the maneuver on its
-timeout and stops), reported; when states come back -> ``waiting`` and FollowReference is
-started again. A FollowRefState TIMEOUT for our maneuver also restarts it.
+timeout and stops), reported; when a state stamped after that verdict comes (not a late one
+from before it: :meth:`~mpcasv.io.deployphases.Phases.asv_back`) -> ``waiting`` and
+FollowReference is started again. A FollowRefState TIMEOUT for our maneuver also restarts it.
 
 Shutdown (Ctrl-C / SIGTERM, or ``duration``): stop deciding (states are no longer used),
 stop announcing, heart-beating and listening for discovery; a standby Reference (speed 0)
@@ -132,6 +133,9 @@ class Deploy(Phases, BoatFeedback, FieldMode):
         self.steps = 0
         self.overrides = 0
         self.stale_events = 0
+        self.stale_mark = math.inf  # the ASV's own clock when it was called stale (asv_back)
+        self.late_states = 0  # ASV states read while stale but stamped before the verdict
+        self._late_reported = 0  # the outage (stale_events) whose first late state was logged
         self._waiting_for: tuple = ()
         self._propeller_source = "command"
         self.last_cmd: Command | None = None
@@ -161,9 +165,8 @@ class Deploy(Phases, BoatFeedback, FieldMode):
             if ev is not None:
                 self.event(ev.pop("event"), **ev)
                 self._speed_feedback()
-            if self.phase == ASV_STALE:
-                self.phase = WAITING
-                self.event("asv_resumed", vehicle=p.label)
+            if self.phase == ASV_STALE and not self.asv_back(p, nav, now):
+                return  # a late state, from before the verdict: the ASV is not back
             self._advance(now)
             if self.phase == RUNNING:
                 self._maybe_step(nav.t, now)
@@ -335,7 +338,7 @@ class Deploy(Phases, BoatFeedback, FieldMode):
                    "skipped_steps": self.skipped_steps, "step_errors": self.step_errors,
                    "between_solves": self.between_solves,
                    "between_ms_max": round(self.between_ms_max, 3),
-                   "asv_stale_events": self.stale_events,
+                   "asv_stale_events": self.stale_events, "asv_late_states": self.late_states,
                    "plan_completed": self.plan_done.is_set(), "load": self.load(),
                    "heard": self.heard(),
                    **self.link.counters()}  # fmt: skip

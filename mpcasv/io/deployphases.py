@@ -89,6 +89,31 @@ class Phases:
         self.pending, self.phase = (self.request_id, now), STARTING
         self.event("plan_start_sent", request_id=self.request_id)
 
+    def asv_back(self, p, nav, now: float) -> bool:
+        """While the ASV is stale: whether its state ``nav`` (just accepted, read at ``now``)
+        brings it back (phase ``waiting``, event ``asv_resumed``).
+
+        Only a state stamped after the verdict does: after ``stale_mark``, the ASV's own clock
+        at the verdict, extrapolated from its last state before it (its timestamp plus the
+        deploy-clock time since it arrived). A state stamped before, read late (sent before
+        the outage and queued, or sent by a vehicle process that was itself starved of CPU),
+        is evidence of the past the verdict already judged silent: it is counted
+        (``asv_late_states`` in the summary; event ``asv_late_state`` for the first of each
+        outage) and resumes nothing. Before session 26 any state read while stale resumed
+        the loop, and a killed ASV's late states were taken for it coming back.
+        """
+        if nav.t > self.stale_mark:
+            self.phase = WAITING
+            self.event("asv_resumed", vehicle=p.label, state_t=nav.t,
+                       after_verdict_s=nav.t - self.stale_mark)  # fmt: skip
+            return True
+        self.late_states += 1
+        if self._late_reported != self.stale_events:  # the first of this outage
+            self._late_reported = self.stale_events
+            self.event("asv_late_state", vehicle=p.label, state_t=nav.t,
+                       before_verdict_s=self.stale_mark - nav.t)  # fmt: skip
+        return False
+
     def watch(self) -> None:
         """One pass of the watchdogs (called every 0.25 s of the deploy clock).
 
@@ -107,6 +132,7 @@ class Phases:
                        limit_s=wd.asv_stale_s)  # fmt: skip
             self.phase, self.pending = ASV_STALE, None
             self.stale_events += 1
+            self.stale_mark = asv.nav.t + (now - asv.nav_recv)  # the ASV's clock, now
         for k, p in enumerate(self.link.auvs):
             if p.nav is None:
                 continue
