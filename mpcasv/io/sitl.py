@@ -368,10 +368,18 @@ class Sitl(AsvDune):
 
 
 def run_sitl(scenario: Scenario, opt: SitlOptions) -> dict:
-    """Run the SITL until its duration, SIGINT or SIGTERM (signals as in the module doc)."""
+    """Run the SITL until its duration, SIGINT or SIGTERM (signals as in the module doc).
+
+    The world is built (seconds: the scenario's realisation, the vessel model) before the event
+    loop starts, as the deploy builds its controller: a Ctrl-C meanwhile raises
+    KeyboardInterrupt at once (``mpcasv sitl`` exits 130, nothing bound or written). Built
+    inside the loop, before its handlers, it met asyncio's own SIGINT handler, which only
+    cancels the main task: the build ran on to its end (5.8 s after the Ctrl-C on a loaded
+    host), then the SITL stopped at its first await without its shutdown (session 26).
+    """
+    sitl = Sitl(scenario, opt)
 
     async def main() -> dict:
-        sitl = Sitl(scenario, opt)
         stop = asyncio.Event()
         loop = asyncio.get_running_loop()
         for sig in (signal.SIGINT, signal.SIGTERM):
