@@ -35,6 +35,7 @@ def needed_libraries(builds: Iterable[tuple[str, int, Any, Any, Boat | None]]) -
         if kind.libraries is None:
             continue
         params = load_preset(name, preset, overrides)
+        check_auv_count(name, n_auv, params, preset)  # e.g. the visiting order's limit
         if boat is not None:
             check_boat(params, boat, str(resolve("presets", preset_used(name, preset))))
         for lib in kind.libraries(params, n_auv, boat):

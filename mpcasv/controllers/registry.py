@@ -46,6 +46,14 @@ CONTROLLERS: dict[str, str] = {
     "mpc-multi": "mpcasv.mpc.controller:KIND_MULTI",
 }
 
+#: controller name -> ``"module:function"``: ``function(params)`` gives the most AUVs those
+#: parameters can serve and why (``(limit, reason)``), or None (no limit but the kind's
+#: ``multi``). The one place a preset's AUV limit is declared; :func:`check_auv_count` reads
+#: it (simulate, compare and tune's suite validation, the library preparation, sitl, deploy)
+AUV_LIMITS: dict[str, str] = {
+    "mpc-multi": "mpcasv.mpc.order:auv_limit",  # target_rule = "order": MAX_ENUMERATED AUVs
+}
+
 #: preset fields that name a file: resolved relative to the preset file that names them
 PATH_FIELDS = ("vessel", "execution")
 
@@ -302,17 +310,37 @@ def check_boat(params: Any, boat: Boat, source: str) -> None:
             )
 
 
-def check_auv_count(name: str, n_auv: int) -> ControllerKind:
+def auv_limit(name: str, params: Any) -> tuple[int, str] | None:
+    """The most AUVs controller ``name`` with parameters ``params`` serves and why
+    (:data:`AUV_LIMITS`), or None: no limit beyond the kind's ``multi``."""
+    if name not in AUV_LIMITS:
+        return None
+    module, attr = AUV_LIMITS[name].split(":")
+    return getattr(importlib.import_module(module), attr)(params)
+
+
+def check_auv_count(name: str, n_auv: int, params: Any = None, preset: str | Path | None = None,
+                    holder: str = "the scenario") -> ControllerKind:  # fmt: skip
     """The kind of controller ``name`` if it handles ``n_auv`` AUVs.
+
+    With ``params`` (loaded from ``preset``, named in the message), also their own limit
+    (:func:`auv_limit`: e.g. the visiting order of ``mpc-multi-order``). ``holder`` is what
+    has the AUVs, for the message (``"the config"`` in a deployment).
 
     Raises
     ------
     ConfigError
-        Unknown controller, or several AUVs for a one-AUV controller.
+        Unknown controller, several AUVs for a one-AUV controller, or more AUVs than the
+        parameters serve.
     """
     kind = controller_kind(name)
     if n_auv > 1 and not kind.multi:
-        raise ConfigError(f"controller {name!r} handles one AUV, the scenario has {n_auv}")
+        raise ConfigError(f"controller {name!r} handles one AUV, {holder} has {n_auv}")
+    limit = None if params is None else auv_limit(name, params)
+    if limit is not None and n_auv > limit[0]:
+        raise ConfigError(f"controller {name!r} with preset {preset_used(name, preset)!r} "
+                          f"handles at most {limit[0]} AUVs, {holder} has {n_auv} "
+                          f"({limit[1]})")  # fmt: skip
     return kind
 
 
@@ -331,8 +359,9 @@ def make_controller(
         Unknown controller or preset, invalid preset, too many AUVs for the kind, or a preset
         that names another vessel than ``boat``'s.
     """
-    kind = check_auv_count(name, n_auv)
+    check_auv_count(name, n_auv)  # before the preset: "handles one AUV" comes first
     params = load_preset(name, preset, overrides)
+    kind = check_auv_count(name, n_auv, params, preset)  # before building (compiling)
     if boat is not None:
         check_boat(params, boat, str(resolve("presets", preset_used(name, preset))))
     return kind.build(params, n_auv, boat)

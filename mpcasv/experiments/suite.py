@@ -352,6 +352,7 @@ def expand(name_or_path: str | Path) -> Expansion:
         controller, bad preset or override key, empty list or grid, unknown estimator.
     """
     from mpcasv.controllers import load_preset
+    from mpcasv.controllers.registry import check_auv_count
     from mpcasv.estimation import has_plan
     from mpcasv.experiments.conditions import conditions, realisations
     from mpcasv.experiments.suite_entries import (
@@ -389,6 +390,7 @@ def expand(name_or_path: str | Path) -> Expansion:
                     overrides |= combo
                     try:
                         params = load_preset(cname, preset, overrides)
+                        check_auv_count(cname, len(sc.auv), params, preset)  # e.g. the order's
                     except ConfigError as exc:
                         raise ConfigError(f"{where}: {exc}") from None
                     grid = ",".join(f"{k}={_fmt(v)}" for k, v in combo.items())

@@ -123,7 +123,8 @@ def check_controller(cfg: DeployConfig, source: str | Path,
     vehicle is contacted), and that no ``[watchdog]`` field set explicitly (the names in
     ``watchdog_set``) goes unread with this controller and mode (:func:`check_watchdog`)."""
     from mpcasv.config import ConfigError, resolve
-    from mpcasv.controllers import check_boat, controller_kind, load_preset
+    from mpcasv.controllers import check_boat, load_preset
+    from mpcasv.controllers.registry import check_auv_count
     from mpcasv.estimation import ESTIMATORS
 
     c = cfg.controller
@@ -132,13 +133,11 @@ def check_controller(cfg: DeployConfig, source: str | Path,
             f"{source}: controller.estimator: unknown {c.estimator!r}; known {sorted(ESTIMATORS)}"
         )
     try:
-        kind = controller_kind(c.name)
-        if len(cfg.auvs) > 1 and not kind.multi:
-            raise ConfigError(f"controller {c.name!r} handles one AUV, the config has "
-                              f"{len(cfg.auvs)}")  # fmt: skip
+        check_auv_count(c.name, len(cfg.auvs), holder="the config")
         if c.vessel is not None:
             resolve("vessels", c.vessel)
         params = load_preset(c.name, c.preset, controller_overrides(cfg))
+        check_auv_count(c.name, len(cfg.auvs), params, c.preset, holder="the config")
         check_boat(params, deploy_boat(cfg), str(c.preset or c.name))
         check_field_budget(params)
     except ConfigError as exc:

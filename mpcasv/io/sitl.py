@@ -103,7 +103,8 @@ class Sitl(AsvDune):
         # that cannot run is refused here as simulate refuses it; validated, not built (an
         # MPC would load its solver library for nothing)
         check_auv_count(scenario.controller, len(scenario.auv))
-        load_preset(scenario.controller, scenario.preset)
+        check_auv_count(scenario.controller, len(scenario.auv),
+                        load_preset(scenario.controller, scenario.preset), scenario.preset)
         self.world = World(scenario, opt.seed)  # judged by the scenario's domain (issue 12)
         self.domain = self.world.domain
         self.Tc = scenario.sim.control_period

@@ -43,7 +43,8 @@ from mpcasv.models.auv_nav import (
     fix_variance,
 )
 
-#: enumerating K! orders is cheap up to here (24 orders)
+#: enumerating K! orders is cheap up to here (24 orders); a run with more AUVs is refused
+#: before it starts (:func:`auv_limit`, read by the registry's ``check_auv_count``)
 MAX_ENUMERATED = 4
 MEET_ITERATIONS = 40
 MEET_TOL = 0.01  # s
@@ -177,6 +178,19 @@ def order_cost(order: Sequence[int], asv_NE: np.ndarray, forecasts: Sequence[For
         nav += P[i] * (W - t_done[i]) + dr_variance_integral(m.eps_a, t_done[i] - t_ref[i],
                                                              W - t_ref[i])  # fmt: skip
     return m.nav / m.V_ref * nav + m.e_go * transit, arrive
+
+
+def auv_limit(params) -> tuple[int, str] | None:
+    """The most AUVs controller parameters ``params`` can serve, with the reason, if the
+    visiting order limits them (``target_rule = "order"``: ``MAX_ENUMERATED``); else None.
+
+    Read by :func:`mpcasv.controllers.registry.check_auv_count`, so that such a run is
+    refused before it compiles or runs (rather than by :func:`best_order` at its first step).
+    """
+    if getattr(params, "target_rule", None) != "order":
+        return None
+    return MAX_ENUMERATED, ('target_rule = "order" enumerates the K! visiting orders; '
+                            "preset mpc-multi has no limit")
 
 
 def best_order(asv_NE: np.ndarray, forecasts: Sequence[Forecast], depth: np.ndarray,
