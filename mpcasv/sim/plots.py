@@ -13,6 +13,37 @@ import numpy as np
 
 AUV_COLOURS = ("tab:orange", "tab:green", "tab:purple", "tab:brown", "tab:pink")
 
+#: a series with fewer samples than this is drawn with markers (a one-sample line, e.g. of a
+#: one-second run, drew nothing) and its bands as bars at the samples (a fill has no width)
+FEW = 3
+
+
+def _marks(n: int) -> dict:
+    """Line keywords for a series of ``n`` samples: markers when there are few."""
+    return {"marker": "o", "ms": 4} if n < FEW else {}
+
+
+def _band(ax, t, lo, hi, where=None, step=None, **kw) -> None:
+    """``fill_between(t, lo, hi)``; with fewer than :data:`FEW` samples, a bar (thick
+    vertical line) per sample, which a zero-width fill is not."""
+    if len(t) >= FEW:
+        ax.fill_between(t, lo, hi, where=where, step=step, **kw)
+        return
+    t = np.asarray(t, float)
+    lo, hi = np.broadcast_to(lo, t.shape), np.broadcast_to(hi, t.shape)
+    keep = np.ones(t.shape, bool) if where is None else np.asarray(where, bool)
+    if keep.any():
+        ax.vlines(t[keep], np.asarray(lo)[keep], np.asarray(hi)[keep], lw=8, **kw)
+
+
+def _time_axis(ax, t) -> None:
+    """With few samples, the time axis from the run's start (0 s) past the last sample
+    (matplotlib's own limits around one sample at 1 s were 0.96-1.04 s)."""
+    if len(t) and len(t) < FEW:
+        t0, t1 = min(0.0, float(np.min(t))), float(np.max(t))
+        pad = 0.05 * max(t1 - t0, 1e-9)
+        ax.set_xlim(t0 - pad, t1 + pad)
+
 
 def _n_auv(ts) -> int:
     return sum(1 for c in ts.columns if c.startswith("auv") and c.endswith("_N"))
@@ -25,11 +56,17 @@ def run_title(result, what: str) -> str:
 
 
 def plot_paths(result, path: str | Path) -> Path:
+    """:func:`paths_figure` saved to ``path``."""
+    return _save(paths_figure(result), path)
+
+
+def paths_figure(result):
     """North-East paths of the ASV (standby positions marked) and the AUVs, plus any MPC
-    plans recorded during the run (dashed)."""
+    plans recorded during the run (dashed). Returns the figure."""
     ts = result.timeseries
+    mk = _marks(len(ts))
     fig, ax = plt.subplots(figsize=(7, 7))
-    ax.plot(ts["E"], ts["N"], color="tab:blue", lw=1.2, label="ASV")
+    ax.plot(ts["E"], ts["N"], color="tab:blue", lw=1.2, label="ASV", **mk)
     sb = ts["mode"] == "standby"
     ax.plot(ts["E"][sb], ts["N"][sb], ".", ms=2, color="tab:blue", alpha=0.4,
             label="ASV in standby")  # fmt: skip
@@ -37,7 +74,7 @@ def plot_paths(result, path: str | Path) -> Path:
     for k in range(_n_auv(ts)):
         c = AUV_COLOURS[k % len(AUV_COLOURS)]
         name = result.scenario.auv[k].name
-        ax.plot(ts[f"auv{k}_E"], ts[f"auv{k}_N"], color=c, lw=1, label=f"AUV {name}")
+        ax.plot(ts[f"auv{k}_E"], ts[f"auv{k}_N"], color=c, lw=1, label=f"AUV {name}", **mk)
         ax.plot(ts[f"auv{k}_E"].iloc[0], ts[f"auv{k}_N"].iloc[0], "s", color=c)
     for i, (_, plan) in enumerate(result.plans):
         ax.plot(plan.E, plan.N, "--", color="tab:red", lw=0.8,
@@ -48,13 +85,19 @@ def plot_paths(result, path: str | Path) -> Path:
     ax.grid(alpha=0.3)
     ax.legend(loc="best", fontsize=8)
     ax.set_title(run_title(result, "paths"))
-    return _save(fig, path)
+    return fig
 
 
 def plot_ranges(result, path: str | Path) -> Path:
+    """:func:`range_figure` saved to ``path``."""
+    return _save(range_figure(result), path, tight=False)
+
+
+def range_figure(result):
     """ASV-AUV horizontal range per AUV with r_inner, r_t +- eps and r_outer when known;
-    the believed (estimated) range dashed; standby shaded."""
+    the believed (estimated) range dashed; standby shaded. Returns the figure."""
     ts = result.timeseries
+    mk = _marks(len(ts))
     n = _n_auv(ts)
     fig, axes = plt.subplots(n, 1, figsize=(9, 2.6 * n + 0.6), sharex=True, squeeze=False)
     t = ts["t"].to_numpy()
@@ -65,20 +108,22 @@ def plot_ranges(result, path: str | Path) -> Path:
         if f"r_inner{k}" in ts:
             top = max(top, 1.15 * float(ts[f"r_t{k}"].max() + (eps or 0)))
             inner = "r_avoid" if n > 1 else "r_inner"  # Paper 2's name with several AUVs
-            ax.fill_between(t, 0, ts[f"r_inner{k}"], color="tab:red", alpha=0.15,
-                            label=f"inside {inner}")  # fmt: skip
-            ax.plot(t, ts[f"r_t{k}"], color="tab:green", lw=1, label="r_t")
+            _band(ax, t, 0, ts[f"r_inner{k}"].to_numpy(), color="tab:red", alpha=0.15,
+                  label=f"inside {inner}")  # fmt: skip
+            ax.plot(t, ts[f"r_t{k}"], color="tab:green", lw=1, label="r_t", **mk)
             if eps is not None:
-                ax.fill_between(t, ts[f"r_t{k}"] - eps, ts[f"r_t{k}"] + eps, color="tab:green",
-                                alpha=0.15, label="target domain")  # fmt: skip
+                r_t = ts[f"r_t{k}"].to_numpy()
+                _band(ax, t, r_t - eps, r_t + eps, color="tab:green", alpha=0.15,
+                      label="target domain")  # fmt: skip
             if ts[f"r_outer{k}"].min() < 2 * top:  # Paper 2 has no outer boundary
-                ax.plot(t, ts[f"r_outer{k}"], color="tab:red", lw=1, ls=":", label="r_outer")
+                ax.plot(t, ts[f"r_outer{k}"], color="tab:red", lw=1, ls=":", label="r_outer",
+                        **mk)  # fmt: skip
                 top = max(top, 1.1 * float(ts[f"r_outer{k}"].max()))
-        ax.plot(t, ts[f"range{k}"], color="tab:blue", lw=1.2, label="range (true)")
+        ax.plot(t, ts[f"range{k}"], color="tab:blue", lw=1.2, label="range (true)", **mk)
         ax.plot(t, ts[f"est_range{k}"], color="k", lw=0.8, ls="--", alpha=0.7,
-                label="range (believed)")  # fmt: skip
-        ax.fill_between(t, 0, top, where=sb, color="grey", alpha=0.12, step="mid",
-                        label="standby")  # fmt: skip
+                label="range (believed)", **(mk and {"marker": "x", "ms": 6}))  # fmt: skip
+        _band(ax, t, 0, top, where=sb, color="grey", alpha=0.12, step="mid", label="standby")
+        _time_axis(ax, t)
         ax.set_ylim(0, top)
         ax.set_ylabel(f"range to {result.scenario.auv[k].name} (m)")
         ax.grid(alpha=0.3)
@@ -87,7 +132,7 @@ def plot_ranges(result, path: str | Path) -> Path:
     axes[-1, 0].set_xlabel("time (s)")
     fig.suptitle(run_title(result, "ASV-AUV range"))
     fig.tight_layout(rect=(0, 0.06 if n > 1 else 0.1, 1, 1))
-    return _save(fig, path, tight=False)
+    return fig
 
 
 def plot_fix_age(result, path: str | Path) -> Path:
@@ -100,17 +145,21 @@ def fix_age_figure(result):
     the age of the last fix that arrived at all (thin), from the simulator's ground truth.
     Returns the figure (the caller saves and closes it)."""
     ts = result.timeseries
+    mk = _marks(len(ts))
     fig, ax = plt.subplots(figsize=(11, 3.4))
     for k in range(_n_auv(ts)):
         c = AUV_COLOURS[k % len(AUV_COLOURS)]
         name = result.scenario.auv[k].name
         if f"rfix_age{k}" in ts and result.domain is not None:
             ax.plot(ts["t"], ts[f"rfix_age{k}"], color=c, lw=1.3,
-                    label=f"{name}: reliable-fix age tau")  # fmt: skip
+                    label=f"{name}: reliable-fix age tau", **mk)  # fmt: skip
         ax.plot(ts["t"], ts[f"fix_age{k}"], color=c, lw=0.7, alpha=0.6,
-                label=f"{name}: fix age (any fix)")  # fmt: skip
+                label=f"{name}: fix age (any fix)", **(mk and {"marker": "x", "ms": 6}))
         rel = result.reliable_fix_times[k]
         ax.plot(rel, np.zeros(len(rel)), "|", color=c, ms=8)
+    _time_axis(ax, ts["t"].to_numpy())
+    if len(ts) < FEW:  # an age is >= 0: from 0, not matplotlib's +-4 % around one value
+        ax.set_ylim(bottom=0)
     ax.set_xlabel("time (s)")
     ax.set_ylabel("age (s)")
     ax.grid(alpha=0.3)
