@@ -142,3 +142,49 @@ def test_a_current_stronger_than_tested_is_said_once_per_run(capsys):
     ctrl.reset(1)  # a new run says it again
     plan_current(0.0, (0.0, -1.5))
     assert len(capsys.readouterr().err.splitlines()) == 1
+
+
+def test_the_ground_speed_bounds_widen_with_the_current():
+    """The OCP's sanity bounds on u and v (ground speeds in body axes) are still-water ones:
+    ``OCP.bounds`` widens them by the planned current's speed for stages 1..N (a boat at rest
+    in the water moves at |c| over the ground), and leaves everything else as it is."""
+    ctrl = make_controller("mpc-multi", 2, "mpc-multi")
+    ocp = ctrl.ocp
+    d = ocp.dims
+    p = np.zeros(d.npar)
+    lb0, ub0 = ocp.bounds(p)
+    p[d.nx : d.nx + 2] = (0.6, -0.8)  # 1.0 m/s
+    lb, ub = ocp.bounds(p)
+    for i, scale in ((3, 1.0), (4, 0.5)):  # u, v: scaled by s_z
+        idx = d.nb * np.arange(1, d.N + 1) + i
+        assert ocp.s_z[i] == scale
+        np.testing.assert_allclose(lb[idx], lb0[idx] - 1.0 / scale)
+        np.testing.assert_allclose(ub[idx], ub0[idx] + 1.0 / scale)
+    rest = np.ones(d.nw, bool)
+    rest[d.nb * np.arange(1, d.N + 1)[:, None] + np.array([3, 4])] = False
+    np.testing.assert_array_equal(lb[rest], lb0[rest])
+    np.testing.assert_array_equal(ub[rest], ub0[rest])
+
+
+def test_a_strong_current_does_not_carry_the_asv_past_its_auvs(tmp_path):
+    """Two loitering surface AUVs 300 m apart across a 1 m/s current (a tester's scenario,
+    session 26): before the bounds on the ground speeds were widened with the current, the
+    plans could not point across it (|v| <= 1 m/s) and ran downstream, skimming AUV 0's
+    target circle at 84 m and going on past it (191 m off at 150 s, 579 m at 300 s). Now the
+    ASV comes within the reliable-fix range r_t + eps_plus (80 m) and stays near."""
+    path = tmp_path / "cross-current.toml"
+    path.write_text('name = "cross-current"\nduration = 150.0\ncontroller = "mpc-multi"\n'
+                    'preset = "mpc-multi"\ncurrent = [0.0, -1.0]\n'
+                    '[asv.start]\nN = -150.0\nE = 0.0\n'
+                    '[[auv]]\nname = "a"\nstart = { N = 0.0, E = -150.0, depth = 0.0 }\n'
+                    '[auv.behaviour.loiter]\n'
+                    '[[auv]]\nname = "b"\nstart = { N = 0.0, E = 150.0, depth = 0.0 }\n'
+                    '[auv.behaviour.loiter]\n')  # fmt: skip
+    sc = load_scenario(path)
+    from mpcasv.controllers import Boat
+
+    ctrl = make_controller("mpc-multi", 2, "mpc-multi", boat=Boat.of_scenario(sc))
+    ts = simulate(sc, ctrl, seed=0).timeseries
+    assert ts["range0"].min() < 80.0
+    assert ts["range0"].iloc[-1] < 120.0, ts["range0"].iloc[-1]
+    assert ctrl.fallbacks == 0

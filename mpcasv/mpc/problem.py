@@ -273,7 +273,9 @@ class OCP(StageTerms, PlanDynamics, WarmStart, VarianceObjective, ParamLayout):
         self.equality = ([True] * nx + [False] * d.nh) * N
 
         # loose "sanity" bounds on the velocities and fix ages, never active in a sensible plan:
-        # they keep a solver's trial points where the model cannot overflow
+        # they keep a solver's trial points where the model cannot overflow. u and v are
+        # velocities over the ground (body axes): these are their bounds in still water, and
+        # :meth:`bounds` widens them by the speed of the current the plan assumes
         zlb = [-math.inf, -math.inf, -math.inf, -0.5, -1.0, -0.5, 0, 0] + [0.0] * K
         zub = [math.inf, math.inf, math.inf, vp.u_max + 0.5, 1.0, 0.5, 0, 0] + [1e4] * K
         zlb[6], zub[6] = vp.T_min, vp.T_max
@@ -345,11 +347,25 @@ class OCP(StageTerms, PlanDynamics, WarmStart, VarianceObjective, ParamLayout):
     def bounds(self, p: np.ndarray, T_cap: float | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Scaled ``lbx, ubx`` with stage 0 fixed to the initial state in ``p``; with a thrust
         cap ``T_cap`` (N; a speed cap, :meth:`thrust_caps`) the thrust's upper bound of
-        stages 1..N lowered to it (None: the vessel's ``T_max``, unchanged)."""
+        stages 1..N lowered to it (None: the vessel's ``T_max``, unchanged).
+
+        The sanity bounds on the surge and sway speeds over the ground (``u``, ``v``) are
+        widened by the speed ``|c|`` of the current in ``p``: over the ground a boat at rest in
+        the water moves at ``|c|`` in some direction of its body axes, so the still-water
+        bounds would forbid headings across a current of 1 m/s (``|v| <= 1``) and drifting
+        astern in one above 0.5 m/s (``u >= -0.5``). Before session 26 they did: in 1.0 m/s
+        the plans could only point along the current and ran downstream past the AUVs
+        (docs/mpc.md, "Known problems")."""
         d = self.dims
         nx = d.nx
         lbx, ubx = self.lbx.copy(), self.ubx.copy()
         lbx[:nx] = ubx[:nx] = p[:nx] / self.s_z
+        c = float(np.hypot(p[nx], p[nx + 1]))  # the current the plan assumes (m/s)
+        if c > 0:
+            for i in (3, 4):  # u, v of stages 1..N
+                idx = d.nb * np.arange(1, d.N + 1) + i
+                lbx[idx] -= c / self.s_z[i]
+                ubx[idx] += c / self.s_z[i]
         if T_cap is not None:
             ubx[d.nb * np.arange(1, d.N + 1) + 6] = self.thrust_caps(p[6], T_cap) / self.s_z[6]
         return lbx, ubx

@@ -35,6 +35,8 @@ class OptiReference:
         o += (N + 1) * d.n_stage_par
         gp = ca.vertcat(P[nx : nx + 2], P[o : o + d.n_global_par - 2])
         lb, ub = ocp.lbx, ocp.ubx  # scaled, stage-interleaved
+        # the ground speeds' bounds widened by the current's speed, as OCP.bounds does
+        widen = ca.sqrt(P[nx] ** 2 + P[nx + 1] ** 2) / ocp.s_z
         J = 0
         opti.subject_to(Z[0] == P[:nx] / ocp.s_z)
         for k in range(N):
@@ -51,8 +53,8 @@ class OptiReference:
             base = k * d.nb
             self._bounds(opti, V[k], lb[base + nx : base + d.nb], ub[base + nx : base + d.nb])
             if k > 0:
-                self._bounds(opti, Z[k], lb[base : base + nx], ub[base : base + nx])
-        self._bounds(opti, Z[N], lb[N * d.nb :], ub[N * d.nb :])
+                self._bounds(opti, Z[k], lb[base : base + nx], ub[base : base + nx], widen)
+        self._bounds(opti, Z[N], lb[N * d.nb :], ub[N * d.nb :], widen)
         J += ocp.term(Z[N], SP[:, N - 1], SP[:, N], gp)
         opti.minimize(J)
         opts = {"print_time": False, "ipopt.print_level": 0, "ipopt.sb": "yes"}
@@ -64,8 +66,13 @@ class OptiReference:
         self.opti, self.P, self.J = opti, P, J
 
     @staticmethod
-    def _bounds(opti, x, lo, hi) -> None:
+    def _bounds(opti, x, lo, hi, widen=None) -> None:
+        """``lo <= x <= hi``; with ``widen`` (a state's: MX, scaled) the ground speeds u and v
+        (entries 3 and 4) by that much more on each side (:meth:`OCP.bounds`)."""
         for i in range(x.numel()):
+            if widen is not None and i in (3, 4):
+                opti.subject_to(opti.bounded(lo[i] - widen[i], x[i], hi[i] + widen[i]))
+                continue
             if math.isfinite(lo[i]) and math.isfinite(hi[i]):
                 opti.subject_to(opti.bounded(lo[i], x[i], hi[i]))
             elif math.isfinite(lo[i]):
