@@ -118,9 +118,9 @@ def test_the_plan_starts_from_the_observed_actuators_when_known():
 
 
 def test_a_current_stronger_than_tested_is_said_once_per_run(capsys):
-    """Above ``CURRENT_TESTED`` (0.75 m/s; at 1.0 m/s the MPC was measured to let the ASV be
-    carried past its AUVs, docs/mpc.md "Known problems") the controller says so on stderr,
-    once per run (again after a reset), with the current it plans with; not at or below it."""
+    """Above ``CURRENT_TESTED`` (1.0 m/s; at 1.5 m/s mpc-single was measured beyond r_outer
+    for most of a run, docs/mpc.md "Known problems") the controller says so on stderr, once
+    per run (again after a reset), with the current it plans with; not at or below it."""
     from mpcasv.mpc.worldview import CURRENT_TESTED
 
     ctrl = make_controller("mpc-single", 1, "mpc-single", overrides={"current": "oracle"})
@@ -134,10 +134,10 @@ def test_a_current_stronger_than_tested_is_said_once_per_run(capsys):
     ctrl.reset(1)
     plan_current(0.0, (0.0, -CURRENT_TESTED))  # at the limit: nothing
     assert capsys.readouterr().err == ""
-    np.testing.assert_array_equal(plan_current(1.0, (0.6, -0.8)), [0.6, -0.8])  # 1.0 m/s
+    np.testing.assert_array_equal(plan_current(1.0, (0.72, -0.96)), [0.72, -0.96])  # 1.2 m/s
     plan_current(2.0, (0.0, -1.5))
     err = capsys.readouterr().err.splitlines()
-    assert len(err) == 1 and "1.00 m/s" in err[0] and "t = 1 s" in err[0], err
+    assert len(err) == 1 and "1.20 m/s" in err[0] and "t = 1 s" in err[0], err
     assert "the true one" in err[0] and "docs/mpc.md" in err[0]
     ctrl.reset(1)  # a new run says it again
     plan_current(0.0, (0.0, -1.5))

@@ -23,10 +23,11 @@ _STAND = WEIGHT_NAMES.index("stand")
 R_HI_NONE = 1.0e5  # "no outer bound" (m)
 TAU_UNKNOWN = 600.0  # fix age used for an AUV never fixed (s)
 W_MAX_DEPTH = 2.0  # bound on the estimated vertical speed of an AUV (m/s)
-#: the strongest current (m/s) the MPC has been run in without being carried off (session 26:
-#: 0.75 m/s held, 1.0 m/s carried the ASV hundreds of metres past its AUVs; docs/mpc.md,
-#: "Known problems", strong currents); above it the controller says so once per run
-CURRENT_TESTED = 0.75
+#: the strongest current (m/s) the MPC has been run in without being carried off (session 26,
+#: with the ground-speed bounds widened by the current: 1.0 m/s held; at 1.5 m/s mpc-single
+#: spent most of a run beyond r_outer where the hybrid held; docs/mpc.md, "Known problems",
+#: strong currents); above it the controller says so once per run
+CURRENT_TESTED = 1.0
 
 
 def ranges(asv_NE: np.ndarray, pa: np.ndarray) -> np.ndarray:
@@ -150,10 +151,10 @@ class WorldView:
         if round(speed, 2) > CURRENT_TESTED and not self.current_noted:
             self.current_noted = True
             print(f"note: {self.name} at t = {obs.t:.0f} s: the current ({what}) is "
-                  f"{speed:.2f} m/s, above the {CURRENT_TESTED} m/s the MPC has been run in "
-                  "without being carried off; at 1.0 m/s its plans let the ASV drift past the "
-                  "AUVs (docs/mpc.md, \"Known problems\": strong currents); the hybrid "
-                  "controllers held there", file=sys.stderr)  # fmt: skip
+                  f"{speed:.2f} m/s, above the {CURRENT_TESTED:g} m/s the MPC has been run in "
+                  "without being carried off; at 1.5 m/s mpc-single spent most of a run beyond "
+                  "r_outer where the hybrid controller held (docs/mpc.md, \"Known problems\": "
+                  "strong currents)", file=sys.stderr)  # fmt: skip
         return current
 
     def _x0(self, obs: Observation) -> np.ndarray:
