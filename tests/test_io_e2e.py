@@ -205,6 +205,15 @@ def test_case6_rehearsal_matches_simulation(tmp_path):
 OUTAGE_SPEEDUP = 5.0
 
 
+def _case3_rehearsal(tmp_path, base: dict, speedup: float):
+    """A Case 3 SITL (2000 s at ``speedup``) and a deploy of ``base`` against it: (sitl,
+    deploy, deploy log, SITL log)."""
+    sitl, ready = start_sitl(SCENARIOS / "case3.toml", tmp_path / "sitl", "--speedup",
+                             str(speedup), "--duration", "2000", "--quiet")  # fmt: skip
+    deploy = start_deploy(deploy_config_for(ready, base, tmp_path / "deploy", speedup), tmp_path)
+    return sitl, deploy, tmp_path / "deploy" / "deploy.jsonl", tmp_path / "sitl" / "sitl.jsonl"
+
+
 def test_asv_killed_and_restarted(tmp_path):
     """SIGUSR1 kills the SITL ASV's IMC system: deploy reports it within its limit, stops
     commanding; SIGUSR2 brings it back: FollowReference is restarted and control resumes;
@@ -212,10 +221,7 @@ def test_asv_killed_and_restarted(tmp_path):
     base = load_toml(CONFIGS / "sitl-case3.toml")
     limit = base["watchdog"]["asv_stale_s"]
     speedup = OUTAGE_SPEEDUP
-    sitl, ready = start_sitl(SCENARIOS / "case3.toml", tmp_path / "sitl", "--speedup",
-                             str(speedup), "--duration", "2000", "--quiet")  # fmt: skip
-    deploy = start_deploy(deploy_config_for(ready, base, tmp_path / "deploy", speedup), tmp_path)
-    log, sitl_log = tmp_path / "deploy" / "deploy.jsonl", tmp_path / "sitl" / "sitl.jsonl"
+    sitl, deploy, log, sitl_log = _case3_rehearsal(tmp_path, base, speedup)
     procs = [sitl, deploy]
     try:
         _wait(lambda: len(_records(log, "step")) >= 20, 60, "20 decisions", procs)
@@ -266,10 +272,7 @@ def test_asv_killed_while_the_sitl_is_starved(tmp_path):
     and read after it, brought the ASV "back" (asv_resumed, FollowReference START to a dead
     ASV, asv_stale again: 5 of 6 runs before session 26). Only the restart may."""
     base = load_toml(CONFIGS / "sitl-case3.toml")
-    sitl, ready = start_sitl(SCENARIOS / "case3.toml", tmp_path / "sitl", "--speedup",
-                             str(SPEEDUP), "--duration", "2000", "--quiet")  # fmt: skip
-    deploy = start_deploy(deploy_config_for(ready, base, tmp_path / "deploy", SPEEDUP), tmp_path)
-    log, sitl_log = tmp_path / "deploy" / "deploy.jsonl", tmp_path / "sitl" / "sitl.jsonl"
+    sitl, deploy, log, sitl_log = _case3_rehearsal(tmp_path, base, SPEEDUP)
     procs = [sitl, deploy]
     try:
         _wait(lambda: len(_records(log, "step")) >= 20, 60, "20 decisions", procs)
