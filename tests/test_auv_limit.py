@@ -63,6 +63,16 @@ def test_make_controller_refuses_before_building():
         make_controller("mpc-multi", 5, "mpc-multi-order")
 
 
+def test_a_built_controller_reset_for_more_auvs_refuses_before_rebuilding(monkeypatch):
+    """Through the Python API a controller built for 2 AUVs may be run on a 5-AUV scenario
+    (``simulate`` calls ``reset(5)``): refused there, before a 5-AUV problem is built (it
+    compiled one, then crashed in ``best_order`` at the first step)."""
+    ctrl = make_controller("mpc-multi", 2, "mpc-multi-order")
+    monkeypatch.setattr(ctrl, "_setup", lambda n: pytest.fail(f"rebuilt for {n} AUVs"))
+    with pytest.raises(ValueError, match="at most 4 AUVs with these parameters, got 5"):
+        ctrl.reset(5)
+
+
 def test_simulate_refuses_five_auvs_in_one_line_and_writes_nothing(tmp_path, capsys):
     path = tmp_path / "m5loit.toml"
     path.write_text(scenario(5))

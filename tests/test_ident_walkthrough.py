@@ -36,6 +36,9 @@ def test_min_samples_is_one_whole_window_in_each_part(prior, validation):
         k = split_index(n, validation)
         assert (min(k, n - k) >= W + 1) == (n == need), (n, k)
     assert min_samples(W, 0.25) == 1203
+    for bad in (0.0, 1.0, -0.1):  # a part that never holds a window: refused, not a hang
+        with pytest.raises(ValueError, match="validation must be in"):
+            min_samples(W, bad)
     # the windows identify() builds: one in each part at the minimum, none a sample below
     log = _zigzag(prior, 130.0)
     prob = Problem(prior)
@@ -133,6 +136,10 @@ def test_a_coefficient_pushed_past_its_bound_is_told_from_one_the_data_cannot_pl
         note = bound_notes(got, "this log")[1]
         assert ("hold it at the prior" in note) == (verdict == "undetermined"), note
         assert ("this log pushes it past" in note) == (verdict == "past"), note
+        assert ("the term is dropped" in note) == (verdict == "past"), note
+        # a positivity floor (a mass at 1e-3 x its prior) drops no term
+        floor = {"m": got["a"] | {"bound": 0.0309, "prior": 30.9}}
+        assert "the term is dropped" not in bound_notes(floor, "this log")[1]
 
 
 def test_the_uncertain_sigma_note_gives_the_lag_and_the_samples():
@@ -198,6 +205,9 @@ def test_a_model_worse_than_the_prior_on_held_out_data_fails_validation(
     # both far below the noise level (1): a ratio means nothing (noise-free, prior = truth)
     assert worse_than_prior({"prior": 3.41e-7, "identified": 3.56e-7}) is None
     assert worse_than_prior({}) is None
+    # a prior whose replay diverged (inf - inf: NaN) is no yardstick: not "worse than it"
+    assert worse_than_prior({"prior": float("nan"), "identified": 0.5}) is None
+    assert worse_than_prior({"prior": float("inf"), "identified": 0.5}) is None
     verr = {"prior": 1.0, "identified": 2.0, "weights": {}}
     monkeypatch.setattr(identlog, "identify", lambda logs, p, c, **kw: _fake(p, verr=verr))
     log = tmp_path / "z.csv"

@@ -107,9 +107,10 @@ def bound_notes(at_bound: dict[str, dict], source: str = "these logs") -> list[s
             text = (f"{head}{trade}): {source} {push} it past the bound. A sign is physics, "
                     "so the model's structure is wrong for this boat: the term is not in its "
                     "dynamics, or another term it stands in for is missing. Written at the "
-                    f"bound {b['bound']:.4g}, the term is dropped, the closest the model gets "
-                    f"to {source}; holding it at the prior ({b['prior']:.4g}) would contradict "
-                    f"{it}.")  # fmt: skip
+                    f"bound {b['bound']:.4g}"
+                    + (", the term is dropped" if b["bound"] == 0 else "")
+                    + f", the closest the model gets to {source}; holding it at the prior "
+                    f"({b['prior']:.4g}) would contradict {it}.")  # fmt: skip
         elif b["verdict"] == "past":
             text = (f"{head}{trade}): {source} {push} it past the bound: the prior "
                     f"({b['prior']:.4g}) is off by more than that factor, or the model's "

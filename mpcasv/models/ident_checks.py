@@ -135,9 +135,10 @@ def worse_than_prior(validation_error: dict) -> float | None:
     """The identified model's held-out weighted error over the prior's when it exceeds it by
     more than ``PRIOR_MARGIN`` of the prior's or of the noise level (1), whichever is larger
     (``validation_error``: ``{"prior": ..., "identified": ...}``, :func:`weighted_error`),
-    else ``None`` (also when not recorded)."""
+    else ``None`` (also when not recorded, and when the prior's replay diverged: a non-finite
+    error is no yardstick)."""
     e0, e1 = validation_error.get("prior"), validation_error.get("identified")
-    if e0 is None or e1 is None:
+    if e0 is None or e1 is None or not np.isfinite(e0):
         return None
     if np.isfinite(e1) and e1 <= e0 + PRIOR_MARGIN * max(e0, 1.0):
         return None

@@ -83,7 +83,14 @@ def min_samples(W: int, validation: float, n_shared: int = 0, n_out: int = 1,
     session 26). The parameter count does not bind for ``identify()`` (four outputs, four
     corrections a window: ``4 W >= p + 4`` for every ``W >= 10`` and all 31 model
     coefficients with the current; one window of 300 steps: 1,200 residuals, 14 parameters by
-    default)."""
+    default).
+
+    Raises
+    ------
+    ValueError
+        ``validation`` outside (0, 1): a part would never hold a window."""
+    if not 0.0 < validation < 1.0:
+        raise ValueError(f"validation must be in (0, 1), got {validation}")
     n = 2 * (W + 1)
     while True:  # the parts grow with n (k by 0 or 1 a sample), so the first n that fits
         k = split_index(n, validation)

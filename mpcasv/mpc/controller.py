@@ -53,6 +53,7 @@ from mpcasv.mpc.carry import Carry, Deferred
 from mpcasv.mpc.deadline import DeadlineSolver
 from mpcasv.mpc.dynamics import warn_course_unstable
 from mpcasv.mpc.hung import HungSolve, idle_limit
+from mpcasv.mpc.order import auv_limit
 from mpcasv.mpc.params import MPCParams
 from mpcasv.mpc.plan_check import PLAN_CHECK_S, plan_energy
 from mpcasv.mpc.plan_output import PlanOutput
@@ -213,6 +214,10 @@ class MPCController(WorldView, Safety, PlanOutput, Targeting, SpeedCap, Carry):
     def reset(self, n_auv: int) -> None:
         if not self.multi and n_auv != 1:
             raise ValueError(f"{self.name} serves one AUV, got {n_auv}")
+        limit = auv_limit(self.params)  # before a problem for n_auv is built
+        if limit is not None and n_auv > limit[0]:
+            raise ValueError(f"{self.name} serves at most {limit[0]} AUVs with these "
+                             f"parameters, got {n_auv} ({limit[1]})")  # fmt: skip
         if n_auv != self.ocp.dims.n_auv:
             self._setup(n_auv)
         self.hybrid.reset(n_auv)

@@ -150,7 +150,7 @@ class WorldView:
         speed = float(np.hypot(*current))
         if round(speed, 2) > CURRENT_TESTED and not self.current_noted:
             self.current_noted = True
-            print(f"note: {self.name} at t = {obs.t:.0f} s: the current ({what}) is "
+            print(f"mpcasv: warning: {self.name} at t = {obs.t:.0f} s: the current ({what}) is "
                   f"{speed:.2f} m/s, above the {CURRENT_TESTED:g} m/s the MPC has been run in "
                   "without being carried off; at 1.5 m/s mpc-single spent most of a run beyond "
                   "r_outer where the hybrid controller held (docs/mpc.md, \"Known problems\": "
