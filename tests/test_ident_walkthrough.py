@@ -244,3 +244,12 @@ def test_a_fit_spoiled_in_its_training_part_passes_fit_0_but_not_the_prior_bar(p
     assert "Validation against the prior" in report_table(res, prior)
     assert ": FAIL (the identified model predicts the held-out data worse than the prior" in (
         report_table(res, prior))
+
+
+@pytest.mark.parametrize("lag", [0, 1, 10, 256])
+def test_samples_for_inverts_the_sigma_uncertainty(lag):
+    """The note's "from n = ..." is the first n at which sqrt((L + 1) / (3 n)) reaches 20 %."""
+    from mpcasv.models.ident_cov import SHAKY, samples_for, sigma_uncertainty
+
+    n = samples_for(lag, SHAKY)
+    assert sigma_uncertainty(lag, n) <= SHAKY < sigma_uncertainty(lag, n - 1)

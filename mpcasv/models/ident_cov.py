@@ -102,6 +102,12 @@ def sigma_uncertainty(lag, n: int) -> np.ndarray:
     return np.sqrt((np.asarray(lag, float) + 1.0) / (3.0 * n))
 
 
+def samples_for(lag: int, rel_sd: float) -> int:
+    """The fewest samples over which :func:`sigma_uncertainty` at ``lag`` is at most
+    ``rel_sd``: ``ceil((lag + 1) / (3 rel_sd^2))``."""
+    return math.ceil((lag + 1) / (3.0 * rel_sd**2))
+
+
 def bartlett_lrv(h: np.ndarray, L: int) -> float:
     """Sum over windows of the Bartlett-weighted long-run variance of ``h`` (windows, W)."""
     s = float(np.sum(h * h))
@@ -229,7 +235,7 @@ def uncertain_sigma_note(sigma_rel_sd: dict, source: str = "these logs",
     figures = ""
     if lag and n and worst in lag:
         L = int(lag[worst])
-        need = math.ceil((L + 1) / (3 * SHAKY**2))
+        need = samples_for(L, SHAKY)
         figures = (f"; {worst}: lag L = {L} samples over n = {n:,} samples in replay windows, "
                    f"sqrt((L + 1) / (3 n)); at that lag it falls to {100 * SHAKY:.0f} % from "
                    f"n = {need:,}, {need / n:.1f} times the samples")  # fmt: skip

@@ -55,7 +55,7 @@ from mpcasv.models.ident_table import (
     window_steps,
 )  # fmt: skip
 from mpcasv.models.ident_vsim import LAG_S, Y_V, vsim_structure  # noqa: F401 (re-exported)
-from mpcasv.models.ident_windows import Windows
+from mpcasv.models.ident_windows import Windows, window_lengths
 from mpcasv.models.params import MODEL_COEFFS, VesselParams
 from mpcasv.models.vessel import IX, NX, VesselModel, rk4_expr
 
@@ -241,8 +241,7 @@ class _Replay:
         if n < W:
             raise LogError(f"log part of {len(df)} samples is shorter than one window ({W} "
                            "steps)")  # fmt: skip
-        # whole windows, then the steps after the last one as a shorter window (session 26)
-        lengths = [min(W, n - k) for k in range(0, n, W)]
+        lengths = window_lengths(n, W)  # whole windows, then a shorter one (session 26)
         nwin = len(lengths)
         # step k goes from sample k to sample k + 1 under row k's actuations (map_table: the
         # actuation that acts over [t_k, t_k+1)); Y is the measurement *after* each step

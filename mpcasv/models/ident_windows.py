@@ -38,7 +38,14 @@ from collections.abc import Sequence
 import casadi as ca
 import numpy as np
 
-__all__ = ["Windows", "padded_index"]
+__all__ = ["Windows", "padded_index", "window_lengths"]
+
+
+def window_lengths(n_steps: int, W: int) -> list[int]:
+    """The replay windows over a part of ``n_steps`` steps (``n_steps + 1`` samples): whole
+    windows of ``W`` steps, then the steps after the last one as one shorter window (they were
+    left out, unsaid, until session 26). Both identifications split their parts here."""
+    return [min(W, n_steps - k) for k in range(0, n_steps, W)]
 
 
 def padded_index(lengths: Sequence[int], W: int) -> np.ndarray:

@@ -70,7 +70,7 @@ from mpcasv.errors import LogError
 from mpcasv.models.ident_bounds import active, at_bounds
 from mpcasv.models.ident_cov import METHOD, window_covariance
 from mpcasv.models.ident_table import Prepared, check_length, prepare, split, window_steps
-from mpcasv.models.ident_windows import Windows
+from mpcasv.models.ident_windows import Windows, window_lengths
 from mpcasv.models.params import MODEL_COEFFS, VesselParams
 from mpcasv.models.vessel import IX, NX, VesselModel, rk4_expr
 
@@ -100,8 +100,8 @@ def _windows(parts: list[Prepared], W: int, what: str = "logs"):
             n, dt = len(pr.U), pr.dt
             raise LogError(f"{what}: one is too short for one {W}-sample ({W * dt:g} s) replay "
                            f"window: it has {n} samples ({n * dt:g} s)")  # fmt: skip
-        for k in range(0, len(pr.U) - 1, W):
-            L = min(W, len(pr.U) - 1 - k)  # the outputs after each step: samples k+1 .. k+L
+        for j, L in enumerate(window_lengths(len(pr.U) - 1, W)):
+            k = j * W  # the outputs after each step: samples k+1 .. k+L
             x0.append(pr.Xs[k])
             U.append(pr.U[k : k + L])
             Y.append(pr.X[k + 1 : k + L + 1, out])
