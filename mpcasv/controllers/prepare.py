@@ -19,9 +19,8 @@ from typing import Any
 from mpcasv.config import resolve
 from mpcasv.controllers.registry import (
     Boat,
-    check_auv_count,
     check_boat,
-    load_preset,
+    checked_preset,
     preset_used,
 )
 
@@ -31,11 +30,10 @@ def needed_libraries(builds: Iterable[tuple[str, int, Any, Any, Boat | None]]) -
     ``(name, n_auv, preset, overrides, boat)``, one per cache path, in first-seen order."""
     seen: dict = {}
     for name, n_auv, preset, overrides, boat in builds:
-        kind = check_auv_count(name, n_auv)  # before compiling a library it cannot use
+        # before compiling a library it cannot use (e.g. the visiting order's AUV limit)
+        kind, params = checked_preset(name, n_auv, preset, overrides)
         if kind.libraries is None:
             continue
-        params = load_preset(name, preset, overrides)
-        check_auv_count(name, n_auv, params, preset)  # e.g. the visiting order's limit
         if boat is not None:
             check_boat(params, boat, str(resolve("presets", preset_used(name, preset))))
         for lib in kind.libraries(params, n_auv, boat):

@@ -319,6 +319,25 @@ def auv_limit(name: str, params: Any) -> tuple[int, str] | None:
     return getattr(importlib.import_module(module), attr)(params)
 
 
+def checked_preset(name: str, n_auv: int, preset: str | Path | None = None,
+                   overrides: dict | None = None,
+                   holder: str = "the scenario") -> tuple[ControllerKind, Any]:  # fmt: skip
+    """``(kind, params)`` of controller ``name`` with ``preset`` and ``overrides``, checked
+    for ``n_auv`` AUVs: the kind's "handles one AUV" first (before the preset is read), then
+    the parameters' own limit (:func:`check_auv_count`). The one sequence for
+    :func:`make_controller`, the library preparation, sitl and deploy (before anything is
+    compiled or run).
+
+    Raises
+    ------
+    ConfigError
+        As :func:`check_auv_count` and :func:`load_preset`.
+    """
+    check_auv_count(name, n_auv, holder=holder)
+    params = load_preset(name, preset, overrides)
+    return check_auv_count(name, n_auv, params, preset, holder), params
+
+
 def check_auv_count(name: str, n_auv: int, params: Any = None, preset: str | Path | None = None,
                     holder: str = "the scenario") -> ControllerKind:  # fmt: skip
     """The kind of controller ``name`` if it handles ``n_auv`` AUVs.
@@ -359,9 +378,7 @@ def make_controller(
         Unknown controller or preset, invalid preset, too many AUVs for the kind, or a preset
         that names another vessel than ``boat``'s.
     """
-    check_auv_count(name, n_auv)  # before the preset: "handles one AUV" comes first
-    params = load_preset(name, preset, overrides)
-    kind = check_auv_count(name, n_auv, params, preset)  # before building (compiling)
+    kind, params = checked_preset(name, n_auv, preset, overrides)  # before building
     if boat is not None:
         check_boat(params, boat, str(resolve("presets", preset_used(name, preset))))
     return kind.build(params, n_auv, boat)

@@ -123,8 +123,8 @@ def check_controller(cfg: DeployConfig, source: str | Path,
     vehicle is contacted), and that no ``[watchdog]`` field set explicitly (the names in
     ``watchdog_set``) goes unread with this controller and mode (:func:`check_watchdog`)."""
     from mpcasv.config import ConfigError, resolve
-    from mpcasv.controllers import check_boat, load_preset
-    from mpcasv.controllers.registry import check_auv_count
+    from mpcasv.controllers import check_boat
+    from mpcasv.controllers.registry import checked_preset
     from mpcasv.estimation import ESTIMATORS
 
     c = cfg.controller
@@ -133,11 +133,10 @@ def check_controller(cfg: DeployConfig, source: str | Path,
             f"{source}: controller.estimator: unknown {c.estimator!r}; known {sorted(ESTIMATORS)}"
         )
     try:
-        check_auv_count(c.name, len(cfg.auvs), holder="the config")
+        _, params = checked_preset(c.name, len(cfg.auvs), c.preset, controller_overrides(cfg),
+                                   "the config")  # fmt: skip
         if c.vessel is not None:
             resolve("vessels", c.vessel)
-        params = load_preset(c.name, c.preset, controller_overrides(cfg))
-        check_auv_count(c.name, len(cfg.auvs), params, c.preset, holder="the config")
         check_boat(params, deploy_boat(cfg), str(c.preset or c.name))
         check_field_budget(params)
     except ConfigError as exc:

@@ -89,7 +89,7 @@ class Sitl(AsvDune):
     """The SITL runner (see the module docstring)."""
 
     def __init__(self, scenario: Scenario, opt: SitlOptions) -> None:
-        from mpcasv.controllers.registry import check_auv_count, load_preset
+        from mpcasv.controllers.registry import checked_preset
         from mpcasv.sim.uncertainty import run_scenario
         from mpcasv.sim.world import World
 
@@ -102,9 +102,7 @@ class Sitl(AsvDune):
         # the scenario's controller and preset are the deploy's, but a scenario naming ones
         # that cannot run is refused here as simulate refuses it; validated, not built (an
         # MPC would load its solver library for nothing)
-        check_auv_count(scenario.controller, len(scenario.auv))
-        check_auv_count(scenario.controller, len(scenario.auv),
-                        load_preset(scenario.controller, scenario.preset), scenario.preset)
+        checked_preset(scenario.controller, len(scenario.auv), scenario.preset)
         self.world = World(scenario, opt.seed)  # judged by the scenario's domain (issue 12)
         self.domain = self.world.domain
         self.Tc = scenario.sim.control_period
