@@ -188,3 +188,37 @@ def test_a_strong_current_does_not_carry_the_asv_past_its_auvs(tmp_path):
     assert ts["range0"].min() < 80.0
     assert ts["range0"].iloc[-1] < 120.0, ts["range0"].iloc[-1]
     assert ctrl.fallbacks == 0
+
+
+def test_the_opti_reference_has_the_same_bounds_in_a_current():
+    """The straightforward Opti + IPOPT formulation (``mpcasv bench mpc``'s yardstick) bounds
+    every primal entry as ``OCP.bounds`` does, the ground speeds' widening by the current
+    included: each of its rows that bounds one variable has the OCP's bounds."""
+    import casadi as ca
+
+    from mpcasv.mpc.reference import OptiReference
+
+    ctrl = make_controller("mpc-single", 1, "mpc-single")
+    ocp = ctrl.ocp
+    d = ocp.dims
+    ref = OptiReference(ocp)
+    p = np.zeros(d.npar)
+    p[d.nx : d.nx + 2] = (0.6, -0.8)  # 1 m/s
+    ref.opti.set_value(ref.P, p)
+    values = ref.opti.value_parameters()
+    lbg = np.array(ref.opti.value(ref.opti.lbg, values)).ravel()
+    ubg = np.array(ref.opti.value(ref.opti.ubg, values)).ravel()
+    J = ca.Function("J", [ref.w, ref.P], [ca.jacobian(ref.opti.g, ref.w)])(np.zeros(d.nw), p)
+    J = J.full()
+    lb, ub = ocp.bounds(p)
+    uv = 0
+    for row in range(J.shape[0]):
+        nz = np.flatnonzero(J[row])
+        if len(nz) != 1 or J[row, nz[0]] != 1.0 or nz[0] < d.nx:  # stage 0: an equality
+            continue
+        i = nz[0]
+        uv += i % d.nb in (3, 4)
+        for mine, ocps in ((lbg[row], lb[i]), (ubg[row], ub[i])):
+            if np.isfinite(mine):
+                assert mine == pytest.approx(ocps, abs=1e-12), (i, i % d.nb, mine, ocps)
+    assert uv == 2 * d.N  # u and v of stages 1..N, each bounded

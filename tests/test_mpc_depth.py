@@ -78,6 +78,37 @@ def test_the_plan_forecasts_depth_and_the_radii_grow_over_the_horizon():
     assert ctrl.w_depth[0] == 0.0
 
 
+@pytest.mark.parametrize("kind", ["uncertainty", "reachable"])
+def test_each_stages_radius_is_the_domain_then_along_the_previous_plan(kind):
+    """With a growing domain (kinds ``uncertainty``, ``reachable``) stage k's radius is the
+    domain ``t_k`` ahead at the forecast depth, along the bearing to the previous plan's stage-k
+    position: the horizon computed at once equals one ``estimate_shape`` per stage."""
+    import dataclasses
+
+    from mpcasv.hybrid.avoidance import estimate_shape
+
+    ctrl = make_controller("mpc-multi", 2, "mpc-multi", overrides={"avoidance.kind": kind})
+    ctrl.reset(2)
+    auvs = (AUVEstimate(40.0, -30.0, 12.0, 0.8, 0.4, (4.0, 0.0, 0.0, 4.0), 3.0),
+            AUVEstimate(-60.0, 90.0, 3.0, -0.5, 1.1, (1.0, 0.0, 0.0, 1.0), 8.0))  # fmt: skip
+    obs = Observation(10.0, ASVState(0.0, 0.0, 0.3, 1.2), True, auvs)
+    ocp = ctrl.ocp
+    ts = ocp.t_stage
+    Z = np.zeros((ocp.dims.N + 1, ocp.dims.nx))  # a previous plan heading north-east
+    Z[:, 0], Z[:, 1] = 1.0 * ts, 0.7 * ts
+    ctrl.w_prev = ocp.join(Z, np.zeros((ocp.dims.N, ocp.dims.nu)))
+    ctrl.w_depth[:] = (-0.4, 0.0)  # AUV 0 rising
+    par = ocp.unpack_par(ctrl.parameters(obs))
+    depth = ctrl.depth_forecast(obs, ts)
+    for k, t in enumerate(ts):
+        stage = [dataclasses.replace(a, depth=float(d)) for a, d in zip(auvs, depth[k],
+                                                                           strict=True)]
+        shape = estimate_shape(ctrl.params.avoidance, ctrl.domain, stage, obs.t, float(t))
+        rel = Z[k, 0:2] - shape.center
+        r = shape.radius(np.arctan2(rel[:, 1], rel[:, 0]))
+        np.testing.assert_allclose(par["r_lo"][k], r + ctrl.params.margin, rtol=0, atol=1e-12)
+
+
 def test_the_fix_rate_model_uses_the_scenarios_acoustic_channel(scenarios_dir):
     """Case 5 has no USBL, only status reports every 30 s: the plan's fix rate is 1 / 30 s
     times the success probability, not the default channel's 1 / 5 s."""
