@@ -6,3 +6,17 @@ docs/ for the workflows.
 """
 
 __version__ = "0.1.0"
+
+
+def run() -> int:
+    """The ``mpcasv`` console script: :func:`mpcasv.cli.main`, with a Ctrl-C while the
+    program is still loading (its imports, before ``main`` can catch it) ending it as one
+    during a command does: one line on stderr, exit 130, no traceback."""
+    import sys
+
+    try:
+        from mpcasv.cli import main
+    except KeyboardInterrupt:
+        print("mpcasv: interrupted", file=sys.stderr)
+        return 130
+    return main()

@@ -1,5 +1,5 @@
 import sys
 
-from mpcasv.cli import main
+from mpcasv import run
 
-sys.exit(main())
+sys.exit(run())

@@ -106,8 +106,11 @@ def main(argv: list[str] | None = None) -> int:
     ``identify``: the held-out validation FAILs; a suite's ``[acceptance]`` verdict is a
     result in the report, not such a check), 2 bad input (one line on stderr naming the file
     and the cause), 130 interrupted. An unexpected exception (a bug) keeps its traceback."""
-    parser = build_parser()
-    args = parser.parse_args(argv)
+    try:  # building the parser imports the commands' modules: a Ctrl-C may come there too
+        args = build_parser().parse_args(argv)
+    except KeyboardInterrupt:
+        print("mpcasv: interrupted", file=sys.stderr)
+        return 130
     try:
         return int(args.func(args) or 0)
     except KeyboardInterrupt:

@@ -148,3 +148,34 @@ def test_acceptance_failure_stays_exit_1(bad, capsys):
                  "paper1-field", "--budget", "1", "--worst", "1", "--out", str(bad / "f"),
                  "--quiet", "--require-margin", "1000"])  # fmt: skip
     assert code == 1
+
+
+def test_a_ctrl_c_while_the_program_loads_is_one_line_and_exit_130(monkeypatch, capsys):
+    """A Ctrl-C before a command runs (the console script importing ``mpcasv.cli``, or the
+    parser importing the commands' modules) ends it as one during a command does: one line,
+    exit 130, no traceback (a helper's walk-through, session 26: it printed
+    KeyboardInterrupt's traceback)."""
+    import importlib.abc
+    import sys
+
+    import mpcasv
+    import mpcasv.cli as cli
+
+    def interrupted(*a, **k):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(cli, "build_parser", interrupted)
+    assert cli.main(["simulate", "x.toml"]) == 130
+    assert capsys.readouterr().err.strip().splitlines() == ["mpcasv: interrupted"]
+
+    class CtrlCOnImport(importlib.abc.MetaPathFinder):
+        def find_spec(self, name, path=None, target=None):
+            if name == "mpcasv.cli":
+                raise KeyboardInterrupt
+            return None
+
+    monkeypatch.delitem(sys.modules, "mpcasv.cli")
+    monkeypatch.delattr(mpcasv, "cli", raising=False)
+    monkeypatch.setattr(sys, "meta_path", [CtrlCOnImport(), *sys.meta_path])
+    assert mpcasv.run() == 130
+    assert capsys.readouterr().err.strip().splitlines() == ["mpcasv: interrupted"]
