@@ -219,9 +219,13 @@ PINNED: dict[str, tuple[float, float]] = {
     # the worst case of the printed eq. 8 (-46.28 m there), run with S1/S2
     "falsified-crossing-multi-printed-eq8": (-8.830, 28),  # [-21.073, 42]; search -20.622 m
     "falsified-pursuer-single-hybrid-single-1": (-40.178, 76),  # unchanged; search -29.681 m
-    # no longer a counterexample (search: -25.858 m, 28 s); session 12: the standing-time
-    # term (M7s, off while an AUV threatens the ASV) in the preset, 4.987 m without it
-    "falsified-pursuer-single-mpc-single-1": (3.091, 0),  # {0.443, 0} [1.553, 0]
+    # search: -25.858 m, 28 s; session 12: the standing-time term (M7s, off while an AUV
+    # threatens the ASV) in the preset, 4.987 m without it; no counterexample until session
+    # 25 (3.091 m, 0 s). Session 26's ground-speed bounds widened by the current (0.197 m/s
+    # here) moved the run from t = 59 s on (chaotic: another path), and it is one again: in
+    # its last 4 s a standby coasting at 0.5-0.6 m/s towards the surfaced AUV ends 2.06 m
+    # inside r_inner (the plan predicted it would stop outside; docs/mpc.md "Known problems")
+    "falsified-pursuer-single-mpc-single-1": (-2.063, 4),  # 3.091/0 {0.443, 0} [1.553, 0]
 }
 #: chaotic cases: bounds (margin at least, longest stay at most) around the spread of the run
 #: over the last bits of the floating point. The mpc-multi case's last bits depend on the CPU

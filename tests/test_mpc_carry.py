@@ -45,9 +45,12 @@ def _instrument(ctrl) -> dict:
                                   ctrl._diag["mpc_source"])  # fmt: skip
 
     def finished():
-        d = ctrl.deferred
+        d, explored = ctrl.deferred, ctrl.explored
         finish()
-        log["deferred"].append((d, ctrl.w_prev, ctrl._diag.get("mpc_deferred_source")))
+        source = ctrl._diag.get("mpc_deferred_source")
+        if ctrl.explored > explored:  # the work explored (a target change, a threat): its
+            source = "explored"  # plan may be the exploration's, not the warm solve's
+        log["deferred"].append((d, ctrl.w_prev, source))
 
     def between_logged():
         n = ctrl.explore_adopted
