@@ -3,7 +3,7 @@ with ``mpc-multi`` / ``mpc-multi-order`` compiled a 5-AUV MPC for 38 s, then cra
 control step in ``best_order`` with a traceback, exit 1; in ``compare`` a job error).
 
 The limit is declared once (:func:`mpcasv.mpc.order.auv_limit`, ``MAX_ENUMERATED``, listed in
-:data:`mpcasv.controllers.registry.AUV_LIMITS`) and read by ``check_auv_count``: simulate, the
+the ``mpc-multi`` kind's ``auv_limit``) and read by ``check_auv_count``: simulate, the
 suite validation of compare and tune, sitl, deploy and ``make_controller``.
 """
 

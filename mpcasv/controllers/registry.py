@@ -46,14 +46,6 @@ CONTROLLERS: dict[str, str] = {
     "mpc-multi": "mpcasv.mpc.controller:KIND_MULTI",
 }
 
-#: controller name -> ``"module:function"``: ``function(params)`` gives the most AUVs those
-#: parameters can serve and why (``(limit, reason)``), or None (no limit but the kind's
-#: ``multi``). The one place a preset's AUV limit is declared; :func:`check_auv_count` reads
-#: it (simulate, compare and tune's suite validation, the library preparation, sitl, deploy)
-AUV_LIMITS: dict[str, str] = {
-    "mpc-multi": "mpcasv.mpc.order:auv_limit",  # target_rule = "order": MAX_ENUMERATED AUVs
-}
-
 #: preset fields that name a file: resolved relative to the preset file that names them
 PATH_FIELDS = ("vessel", "execution")
 
@@ -121,7 +113,9 @@ class ControllerKind:
     :class:`Boat` (None: the controller's own default, for use outside a run).
     ``libraries(params, n_auv, boat)``, when given, lists the compiled libraries the
     controller loads (cached on disk), so that they can be compiled before a sweep starts
-    (:mod:`mpcasv.controllers.prepare`).
+    (:mod:`mpcasv.controllers.prepare`). ``auv_limit(params)``, when given, is the most AUVs
+    those parameters serve and why (``(limit, reason)``), or None (no limit but ``multi``):
+    read by :func:`check_auv_count` before anything is compiled or run.
     """
 
     name: str
@@ -130,6 +124,7 @@ class ControllerKind:
     default_preset: str
     multi: bool = False  # handles several AUVs
     libraries: Callable[[Any, int, Boat | None], list] | None = None
+    auv_limit: Callable[[Any], tuple[int, str] | None] | None = None
 
 
 def controller_kind(name: str) -> ControllerKind:
@@ -311,12 +306,10 @@ def check_boat(params: Any, boat: Boat, source: str) -> None:
 
 
 def auv_limit(name: str, params: Any) -> tuple[int, str] | None:
-    """The most AUVs controller ``name`` with parameters ``params`` serves and why
-    (:data:`AUV_LIMITS`), or None: no limit beyond the kind's ``multi``."""
-    if name not in AUV_LIMITS:
-        return None
-    module, attr = AUV_LIMITS[name].split(":")
-    return getattr(importlib.import_module(module), attr)(params)
+    """The most AUVs controller ``name`` with parameters ``params`` serves and why (its
+    kind's ``auv_limit``), or None: no limit beyond the kind's ``multi``."""
+    limit = controller_kind(name).auv_limit
+    return None if limit is None else limit(params)
 
 
 def checked_preset(name: str, n_auv: int, preset: str | Path | None = None,

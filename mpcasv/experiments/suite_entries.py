@@ -56,7 +56,7 @@ def _usable_controllers(suite: Suite, path: Path, names: list[str]):
 def _controller_and_preset(entry: ControllerEntry, sc, where: str, base: Path, choice=None):
     """The registered controller name and preset reference of ``entry`` on scenario ``sc``
     (``choice``: the entry's :class:`~mpcasv.experiments.tune_match.FrontChoice`)."""
-    from mpcasv.controllers import controller_kind
+    from mpcasv.controllers.registry import check_auv_count
 
     n_auv = len(sc.auv)
     cname = entry.controller_for(n_auv)
@@ -64,9 +64,10 @@ def _controller_and_preset(entry: ControllerEntry, sc, where: str, base: Path, c
         key = "multi" if n_auv > 1 else "single"
         raise ConfigError(f"{where}: no controller for {n_auv} AUV(s): give '{key}' or "
                           "restrict 'scenarios'")  # fmt: skip
-    if n_auv > 1 and not controller_kind(cname).multi:
-        raise ConfigError(f"{where}: controller {cname!r} handles one AUV, the scenario has "
-                          f"{n_auv}")  # fmt: skip
+    try:
+        check_auv_count(cname, n_auv)
+    except ConfigError as exc:
+        raise ConfigError(f"{where}: {exc}") from None
     if choice is not None:
         if cname != choice.controller:
             raise ConfigError(f"{where}: the front {choice.folder} tuned {choice.controller!r}, "

@@ -426,4 +426,4 @@ def _libraries(multi: bool):
 KIND_SINGLE = ControllerKind("mpc-single", MPCParams, _build_single, "mpc-single",
                              libraries=_libraries(False))  # fmt: skip
 KIND_MULTI = ControllerKind("mpc-multi", MPCParams, _build_multi, "mpc-multi", multi=True,
-                            libraries=_libraries(True))  # fmt: skip
+                            libraries=_libraries(True), auv_limit=auv_limit)  # fmt: skip

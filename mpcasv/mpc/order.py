@@ -184,7 +184,8 @@ def auv_limit(params) -> tuple[int, str] | None:
     """The most AUVs controller parameters ``params`` can serve, with the reason, if the
     visiting order limits them (``target_rule = "order"``: ``MAX_ENUMERATED``); else None.
 
-    Read by :func:`mpcasv.controllers.registry.check_auv_count`, so that such a run is
+    The ``mpc-multi`` kind's ``auv_limit``, read by
+    :func:`mpcasv.controllers.registry.check_auv_count`, so that such a run is
     refused before it compiles or runs (rather than by :func:`best_order` at its first step).
     """
     if getattr(params, "target_rule", None) != "order":
