@@ -165,4 +165,4 @@ def prior_line(verr: dict) -> str:
                "keep the prior)" if worse_than_prior(verr) else "PASS")  # fmt: skip
     return (f"Validation against the prior (held-out weighted error, the fit's criterion, 1 at "
             f"the noise level; at most the prior's + {PRIOR_MARGIN:g} x the larger of the "
-            f"two): {e1:.3g} against {e0:.3g}, {ratio:.3g} x: {verdict}")
+            f"prior's and 1): {e1:.3g} against {e0:.3g}, {ratio:.3g} x: {verdict}")

@@ -169,8 +169,8 @@ def hold_rows(t: np.ndarray, grid: np.ndarray, dt: float) -> np.ndarray:
     own step. One rule for every identification table (this module's, and the thruster map's
     actuations, :func:`mpcasv.models.ident_thrust.check_table`).
 
-    The half-step tolerance matters: ``grid`` is ``t_0 + k dt`` with ``dt`` the median step,
-    and logged times are rounded, jitter and drift around it. A plain ``searchsorted(t, grid,
+    The half-step tolerance matters: ``grid`` is ``t_0 + k dt`` (:func:`regular_grid`), and
+    logged times are rounded, jitter and drift around it. A plain ``searchsorted(t, grid,
     side="right") - 1`` took the previous row, one step late, wherever the grid fell just
     before the logged time: a CSV that rounds ``t`` to 6 digits made the median step 3.6e-16 s
     short for logs of 137 s or more at 0.1 s (every steering switch a step late until session
@@ -182,9 +182,6 @@ def hold_rows(t: np.ndarray, grid: np.ndarray, dt: float) -> np.ndarray:
 
 
 # --- a table prepared for fitting (mpcasv.models.identify; here since session 26: size) -----
-
-
-# --- data preparation ----------------------------------------------------------------------
 
 
 @dataclasses.dataclass(frozen=True)
@@ -227,7 +224,6 @@ def prepare(df: pd.DataFrame, prior: VesselParams, smooth_s: float = 1.5) -> Pre
 def split(pr: Prepared, validation: float) -> tuple[Prepared, Prepared]:
     """(training, validation): the validation part is the last ``validation`` fraction."""
     k = split_index(len(pr.U), validation)
-    cut = lambda a, s: a[s]  # noqa: E731
-    head = Prepared(pr.dt, *(cut(a, slice(0, k)) for a in (pr.X, pr.Xs, pr.U, pr.nudot)))
-    tail = Prepared(pr.dt, *(cut(a, slice(k, None)) for a in (pr.X, pr.Xs, pr.U, pr.nudot)))
-    return head, tail
+    arrays = (pr.X, pr.Xs, pr.U, pr.nudot)
+    return (Prepared(pr.dt, *(a[:k] for a in arrays)),
+            Prepared(pr.dt, *(a[k:] for a in arrays)))  # fmt: skip
