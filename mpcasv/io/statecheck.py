@@ -12,10 +12,17 @@ which every state fails the time checks against the last accepted one. States th
 the time checks are kept as a *chain* while they agree with each other on the new time base
 (timestamps increasing with the arrival clock, within ``clock_slack_s``; positions within the
 speed bound) and their positions agree with the last accepted state over the *arrival* time
-elapsed. When ``clock_step_states`` states form such a chain, the link re-anchors on the new
-time base: the last of them is accepted and :class:`ClockStep` (with the offset, new minus
-old time base) is reported. The states before it stay rejected (counted); a chain broken by
-an inconsistent state starts again from that state.
+elapsed. When ``clock_step_states`` states form such a chain *and* it arrived over at least
+half the time its timestamps span, the link re-anchors on the new time base: the last of them
+is accepted and :class:`ClockStep` (with the offset, new minus old time base) is reported.
+The states before it stay rejected (counted); a chain broken by an inconsistent state starts
+again from that state; a chain that came too fast waits for more states (an accepted state
+ends it). The spread rule tells a step from late states: after a step the vehicle keeps
+sending at its own rate, so arrival gaps match timestamp gaps; states held by a network stall
+(or reordered) and delivered together after a newer one agree with each other and with the
+last position too, but arrive as a burst, and are only ``out_of_order`` (before session 28
+three of them re-anchored the link on a spurious backward step of about their lag, which
+then shifted every fresh timestamp).
 
 Re-anchoring maps the new time base back onto the old one: from then on the vehicle's
 timestamps are handed on minus the (accumulated) offset, so that the deploy's decision grid
@@ -70,6 +77,14 @@ def _consistent(a: NavState, a_recv: float, b: NavState, b_recv: float, vmax: fl
     if math.hypot(b.N - a.N, b.E - a.E) > vmax * dt + wd.jump_margin_m:
         return "jump"
     return None
+
+
+def _spread(chain: list[tuple[NavState, float]]) -> bool:
+    """Whether the chain arrived over at least half the time its timestamps span: a vehicle
+    sending on a new time base sends at its own rate; a burst of late (held, duplicated or
+    reordered) states comes faster than twice that rate, however its timestamps agree."""
+    (first, first_recv), (last, last_recv) = chain[0], chain[-1]
+    return last_recv - first_recv >= 0.5 * (last.t - first.t)
 
 
 def check_state(es: imcpy.EstimatedState, track: StateTrack, now: float, origin: Origin,
@@ -127,7 +142,7 @@ def _clock_step(nav: NavState, now: float, track: StateTrack, vmax: float,
         elif abs((nav.t - last.t) - (now - last_recv)) > wd.clock_slack_s:
             track.chain.clear()
     track.chain.append((nav, now))
-    if len(track.chain) < wd.clock_step_states:
+    if len(track.chain) < wd.clock_step_states or not _spread(track.chain):
         return None
     offset = nav.t - (prev.t + elapsed)
     return ClockStep(offset, len(track.chain), prev.t, nav.t)
