@@ -237,7 +237,10 @@ class MPCParams:
         The plan keeps this far inside the donut (m): ``r_inner + margin <= r`` (and
         ``r <= r_outer - margin``); the fallback check uses the radii themselves.
     lookahead : float
-        The TRANSIT waypoint is the planned position this far ahead (s) ...
+        The TRANSIT waypoint is the planned position this far ahead (s), less the planned
+        current's drift over that time (the point as seen in the water: the execution
+        level's line of sight points the bow at the waypoint, and the plan's bow points
+        there, crabbing) ...
     min_carrot : float
         ... pushed out to at least this distance from the ASV (m) so that line-of-sight
         guidance has a well-defined bearing.

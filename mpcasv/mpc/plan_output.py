@@ -50,7 +50,7 @@ class PlanOutput:
         look = min(P.lookahead, ts[-1])
         target = np.array([np.interp(look, ts, Z[:, 0]), np.interp(look, ts, Z[:, 1])])
         here = obs.asv.position
-        delta = target - here
+        delta = target - here - par["current"] * look  # the planned point as seen in the water
         dn = float(np.hypot(*delta))
         if ocp.heading:  # M1h: the execution level's line of sight is the planned psi_ref
             psi_cmd = self._heading_command(obs, float(np.interp(min(P.speed_lead, ts[-1]), ts,

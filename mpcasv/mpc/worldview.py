@@ -24,9 +24,11 @@ R_HI_NONE = 1.0e5  # "no outer bound" (m)
 TAU_UNKNOWN = 600.0  # fix age used for an AUV never fixed (s)
 W_MAX_DEPTH = 2.0  # bound on the estimated vertical speed of an AUV (m/s)
 #: the strongest current (m/s) the MPC has been run in without being carried off (session 26,
-#: with the ground-speed bounds widened by the current: 1.0 m/s held; at 1.5 m/s mpc-single
-#: spent most of a run beyond r_outer where the hybrid held; docs/mpc.md, "Known problems",
-#: strong currents); above it the controller says so once per run
+#: with the ground-speed bounds widened by the current). Session 28 (the waypoint aimed where
+#: the plan points the bow; one AUV, 300 s): mpc-single held within r_outer at 1.5-2 m/s in 7
+#: of 8 runs, but in a current across its approach it stayed 81-158 m off without a reliable
+#: fix (docs/mpc.md, "Known problems", strong currents); above it the controller says so
+#: once per run
 CURRENT_TESTED = 1.0
 
 
@@ -152,9 +154,9 @@ class WorldView:
             self.current_noted = True
             print(f"mpcasv: warning: {self.name} at t = {obs.t:.0f} s: the current ({what}) is "
                   f"{speed:.2f} m/s, above the {CURRENT_TESTED:g} m/s the MPC has been run in "
-                  "without being carried off; at 1.5 m/s mpc-single spent most of a run beyond "
-                  "r_outer where the hybrid controller held (docs/mpc.md, \"Known problems\": "
-                  "strong currents)", file=sys.stderr)  # fmt: skip
+                  "without being carried off; in a current across its approach mpc-single was "
+                  "measured 81-158 m off its AUV without a reliable fix at 1.5-2 m/s (docs/mpc.md, "
+                  "\"Known problems\": strong currents)", file=sys.stderr)  # fmt: skip
         return current
 
     def _x0(self, obs: Observation) -> np.ndarray:
