@@ -225,13 +225,17 @@ def test_the_opti_reference_has_the_same_bounds_in_a_current():
     assert uv == 2 * d.N  # u and v of stages 1..N, each bounded
 
 
-def test_the_transit_waypoint_points_the_bow_where_the_plan_does_in_a_current():
+@pytest.mark.parametrize("course_control", [False, True])
+def test_the_transit_waypoint_points_the_bow_where_the_plan_does_in_a_current(course_control):
     """The execution level's line of sight points the bow at the waypoint (no crab
     compensation), so the MPC hands it the planned point as seen in the water: a plan that
     crosses a 0.8 m/s current heading North at 1 m/s over the ground must point the bow
     upstream, along the water velocity (1, -0.8) m/s. Before session 28 the waypoint was the
-    planned ground point, straight North, and the boat was carried off the plan."""
-    ctrl = make_controller("mpc-single", 1, "mpc-single")
+    planned ground point, straight North, and the boat was carried off the plan. A vehicle
+    that controls its course (``course_control``, DUNE's default) compensates the crab angle
+    itself: it gets the planned ground point, straight North."""
+    ctrl = make_controller("mpc-single", 1, "mpc-single",
+                           overrides={"course_control": course_control})  # fmt: skip
     ctrl.reset(1)
     ocp = ctrl.ocp
     obs = Observation(0.0, ASVState(0.0, 0.0, 0.0, 1.0), True,
@@ -250,7 +254,48 @@ def test_the_transit_waypoint_points_the_bow_where_the_plan_does_in_a_current():
         assert cmd.mode is Mode.TRANSIT
         bearing[c_E] = np.arctan2(cmd.waypoint[1], cmd.waypoint[0])
     assert bearing[0.0] == pytest.approx(0.0, abs=1e-9)
-    assert bearing[0.8] == pytest.approx(np.arctan2(-0.8, 1.0), abs=1e-6)
+    crab = 0.0 if course_control else np.arctan2(-0.8, 1.0)
+    assert bearing[0.8] == pytest.approx(crab, abs=1e-6)
+
+
+def test_course_control_is_refused_where_the_plan_hands_a_heading():
+    """M1h hands the planned heading (crab angle included) as the bearing to the waypoint: a
+    vehicle that controls its course would correct it again, so the combination is refused
+    when the problem is built, with a one-line reason."""
+    from mpcasv.config import ConfigError
+
+    with pytest.raises(ConfigError, match="course_control with M1h steering"):
+        make_controller("mpc-single", 1, "mpc-single", overrides={
+            "course_control": True, "horizon.steering": "heading"})  # fmt: skip
+
+
+def test_with_m1h_the_waypoint_lies_the_planned_ground_distance_ahead_in_a_current():
+    """M1h: the waypoint lies along the planned heading reference at the planned point's
+    *ground* distance (at least ``min_carrot``), whatever the current: the current's drift
+    bends the bearing of the plain waypoint, not M1h's, and must not shorten M1h's carrot."""
+    ctrl = make_controller("mpc-single", 1, "mpc-single",
+                           overrides={"horizon.steering": "heading"})  # fmt: skip
+    ctrl.reset(1)
+    ocp = ctrl.ocp
+    assert ocp.heading
+    obs = Observation(0.0, ASVState(0.0, 0.0, 0.0, 1.0), True,
+                      (AUVEstimate(150.0, 0.0, 0.0),))  # fmt: skip
+    p = ctrl.parameters(obs)
+    d = ocp.dims
+    dist = {}
+    for c_N in (0.0, -1.2):  # against the plan's track: 18 m of drift over the lookahead
+        p[d.nx : d.nx + 2] = (c_N, 0.0)
+        Z, V = ocp.split(ocp.rollout(p))
+        ts = ocp.dt * np.arange(Z.shape[0])
+        Z[:, 0], Z[:, 1], Z[:, 2], Z[:, 7] = ts * 3.0, 0.0, 0.0, 0.0  # North at 3 m/s
+        Z[:, 3], Z[:, 6] = 3.0, 100.0
+        ctrl._store_plan(0.0, ocp.join(Z, V))
+        cmd = ctrl._command(obs, ocp.join(Z, V), p)
+        assert cmd.mode is Mode.TRANSIT
+        dist[c_N] = float(np.hypot(*cmd.waypoint))
+    look = min(ctrl.params.lookahead, float(ts[-1]))
+    assert dist[0.0] == pytest.approx(3.0 * look, rel=1e-9)
+    assert dist[-1.2] == pytest.approx(dist[0.0], rel=1e-9)
 
 
 def test_a_loitering_auv_in_a_1_5_m_s_current_is_held_within_r_outer(tmp_path):

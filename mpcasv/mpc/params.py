@@ -240,10 +240,17 @@ class MPCParams:
         The TRANSIT waypoint is the planned position this far ahead (s), less the planned
         current's drift over that time (the point as seen in the water: the execution
         level's line of sight points the bow at the waypoint, and the plan's bow points
-        there, crabbing) ...
+        there, crabbing; not with ``course_control``) ...
     min_carrot : float
         ... pushed out to at least this distance from the ASV (m) so that line-of-sight
         guidance has a well-defined bearing.
+    course_control : bool
+        Whether the execution level steers the course over the ground at the TRANSIT
+        waypoint (DUNE's PathController ``Course Control``: true in DUNE's defaults, false in
+        its stock Otter configuration), so that it compensates the crab angle itself: the
+        waypoint is then the planned ground point, not less the current's drift (which would
+        compensate it twice). False (default): it points the bow at the waypoint, as the
+        simulator's and the SITL's line of sight do (docs/deploy.md, "Course control").
     speed_min : float
         Lowest speed cap handed to the execution level (m/s).
     speed_rule : {"max", "mean", "plan"}
@@ -331,6 +338,7 @@ class MPCParams:
     margin: NonNeg = 5.0
     lookahead: Pos = 15.0
     min_carrot: Pos = 25.0
+    course_control: bool = False
     speed_min: Pos = 0.5
     speed_rule: Literal["max", "mean", "plan"] = "max"
     speed_lead: Pos = 1.0

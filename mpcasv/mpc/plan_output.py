@@ -50,14 +50,15 @@ class PlanOutput:
         look = min(P.lookahead, ts[-1])
         target = np.array([np.interp(look, ts, Z[:, 0]), np.interp(look, ts, Z[:, 1])])
         here = obs.asv.position
-        delta = target - here - par["current"] * look  # the planned point as seen in the water
-        dn = float(np.hypot(*delta))
+        delta = target - here
         if ocp.heading:  # M1h: the execution level's line of sight is the planned psi_ref
             psi_cmd = self._heading_command(obs, float(np.interp(min(P.speed_lead, ts[-1]), ts,
                                                                  Z[:, 7])))  # fmt: skip
-            delta = np.array([math.cos(psi_cmd), math.sin(psi_cmd)]) * max(dn, 1.0)
-            dn = float(np.hypot(*delta))
-        elif dn < 1e-6:  # plan does not move: head along the current heading
+            delta = np.array([math.cos(psi_cmd), math.sin(psi_cmd)]) * max(np.hypot(*delta), 1)
+        elif not P.course_control:  # the planned point as seen in the water: the plan's bow
+            delta = delta - par["current"] * look  # points there, crabbing
+        dn = float(np.hypot(*delta))
+        if dn < 1e-6:  # no bearing to the point (the plan's, or in the water): keep the heading
             delta, dn = np.array([math.cos(obs.asv.psi), math.sin(obs.asv.psi)]), 1.0
         wp = here + delta / dn * max(dn, P.min_carrot)
         if P.speed_rule == "max":

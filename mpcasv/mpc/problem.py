@@ -32,6 +32,7 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
+from mpcasv.config import ConfigError
 from mpcasv.control.params import load_execution
 from mpcasv.models.envelope import course_instability
 from mpcasv.models.params import load_vessel
@@ -156,6 +157,12 @@ class OCP(StageTerms, PlanDynamics, WarmStart, VarianceObjective, ParamLayout):
             steering = "heading" if course_instability(self.model) else "rudder"
         #: the plan's eighth state is the heading reference of the execution level (M1h)
         self.heading = steering == "heading"
+        if self.heading and params.course_control:  # docs/deploy.md, "Course control"
+            raise ConfigError("course_control with M1h steering (horizon.steering 'heading', or "
+                              "'auto' on a course-unstable hull): the waypoint's bearing is the "
+                              "planned heading, which a vehicle that controls its course would "
+                              "correct for the crab angle again; set horizon.steering = 'rudder' "
+                              "or the vehicle's Course Control = false")  # fmt: skip
         self.dd_max = R_REF_MAX if self.heading else vp.delta_rate_max
         self.variance = params.objective == "variance"
         self.dims = Dims(hz.N + hz.tail_N, n_auv, outer, wt.worst > 0,
