@@ -89,7 +89,7 @@ class Deploy(Phases, BoatFeedback, FieldMode):
         Overrides ``cfg.log.dir``.
     solver_factory : callable, optional
         Field mode (controllers with ``use_deadline``): builds the worker's solver (tests:
-        :meth:`mpcasv.mpc.controller.MPCController.use_deadline`); None: the controller's own.
+        :meth:`mpcasv.mpc.solving.Solving.use_deadline`); None: the controller's own.
     """
 
     def __init__(self, cfg: DeployConfig, dry_run: bool = False, log_dir: Path | None = None,

@@ -91,7 +91,7 @@ MIN_SOLVE_MS = 1.0
 
 def check_field_budget(params) -> None:
     """Refuse a ``solver.budget_ms`` that can never work in the field: the deadline keeps
-    :data:`~mpcasv.mpc.controller.STEP_RESERVE_S` of every step's budget for the fallback and
+    :data:`~mpcasv.mpc.solving.STEP_RESERVE_S` of every step's budget for the fallback and
     its command, and the solves need :data:`MIN_SOLVE_MS` of the rest; with less, each solve
     would be abandoned at once (its worker killed and replaced) and every step would take the
     fallback. Parameters without ``solver`` (the hybrid controllers) pass.
@@ -104,7 +104,7 @@ def check_field_budget(params) -> None:
     budget = getattr(getattr(params, "solver", None), "budget_ms", None)
     if budget is None:
         return
-    from mpcasv.mpc.controller import STEP_RESERVE_S
+    from mpcasv.mpc.solving import STEP_RESERVE_S
 
     reserve = STEP_RESERVE_S * 1e3
     if budget < reserve + MIN_SOLVE_MS:

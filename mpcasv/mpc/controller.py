@@ -31,12 +31,17 @@ Every step (docs/mpc.md, "Controller"):
    ``standby_time``, else TRANSIT to the planned position ``lookahead`` seconds ahead (pushed
    out to ``min_carrot`` m) at a speed from the plan (``speed_rule``: a cap over the
    lookahead, or the planned speed one period ahead), labelled AVOIDANCE or TRACKING.
+
+Where the solves run (in this process, in the simulation's hang guard's worker, or in the
+field mode's worker against the step's deadline) is :mod:`mpcasv.mpc.solving`; the other
+mixins: :mod:`~mpcasv.mpc.worldview`, :mod:`~mpcasv.mpc.safety`,
+:mod:`~mpcasv.mpc.plan_output`, :mod:`~mpcasv.mpc.target`, :mod:`~mpcasv.mpc.speedcap`,
+:mod:`~mpcasv.mpc.carry`.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import functools
 import math
 import time
 from dataclasses import dataclass
@@ -52,7 +57,7 @@ from mpcasv.models.acoustics import AcousticParams
 from mpcasv.mpc.carry import Carry, Deferred
 from mpcasv.mpc.deadline import DeadlineSolver
 from mpcasv.mpc.dynamics import warn_course_unstable
-from mpcasv.mpc.hung import HungSolve, idle_limit
+from mpcasv.mpc.hung import HungSolve
 from mpcasv.mpc.order import auv_limit
 from mpcasv.mpc.params import MPCParams
 from mpcasv.mpc.plan_check import PLAN_CHECK_S, plan_energy
@@ -60,14 +65,11 @@ from mpcasv.mpc.plan_output import PlanOutput
 from mpcasv.mpc.problem import OCP, channel_vector
 from mpcasv.mpc.rescue import funnel
 from mpcasv.mpc.safety import Safety
-from mpcasv.mpc.solvers import SolveResult, make_solver
+from mpcasv.mpc.solvers import make_solver
+from mpcasv.mpc.solving import Solving
 from mpcasv.mpc.speedcap import SpeedCap
 from mpcasv.mpc.target import Targeting
 from mpcasv.mpc.worldview import WorldView
-
-#: field mode: part of the step's budget kept for the fallback and the command after a
-#: missed solve deadline (s)
-STEP_RESERVE_S = 0.03
 
 _OCP_CACHE: dict = {}
 
@@ -100,7 +102,7 @@ def worker_solver(params: MPCParams, n_auv: int, multi: bool, boat):
     return build_ocp(params, n_auv, multi, log=lambda *a: None, boat=boat)[1]
 
 
-class MPCController(WorldView, Safety, PlanOutput, Targeting, SpeedCap, Carry):
+class MPCController(WorldView, Safety, PlanOutput, Targeting, SpeedCap, Carry, Solving):
     """Fix-age NMPC with donut constraints and a hybrid safety fallback.
 
     Parameters
@@ -149,51 +151,6 @@ class MPCController(WorldView, Safety, PlanOutput, Targeting, SpeedCap, Carry):
         self._setup(n_auv)
         self.reset(n_auv)
         warn_course_unstable(self.ocp)
-
-    def use_deadline(self, factory=None, start_timeout: float = 600.0,
-                     spare: bool = True) -> None:  # fmt: skip
-        """Field mode: every step's solves run in a worker process and are abandoned at the
-        step's budget ``solver.budget_ms`` (the step then takes the hybrid fallback's command,
-        reason ``deadline``; the next step starts warm from the previous plan, on a spare
-        worker). Set by the deploy loop; in simulation only through :meth:`use_hang_guard`
-        (no spare, a CPU-time limit instead of the budget: iteration limits decide and wall
-        time is only measured, ``mpc_over_budget``, so runs are reproducible).
-
-        ``factory`` (tests): builds the worker's solver (default: this controller's problem,
-        its compiled library loaded from the cache). Blocks until the first worker is ready.
-        ``spare``: keep a spare worker ready (:class:`~mpcasv.mpc.deadline.DeadlineSolver`;
-        False for the simulation's hang guard).
-
-        Raises
-        ------
-        RuntimeError
-            The worker could not build the solver within ``start_timeout`` s.
-        """
-        if self.deadline is not None:
-            self.deadline.close()
-        factory = factory or functools.partial(worker_solver, self.params, self.ocp.dims.n_auv,
-                                               self.multi, self.boat)  # fmt: skip
-        self.deadline = DeadlineSolver(factory, start_timeout, spare)
-        self._deadline_n = self.ocp.dims.n_auv
-        self._hang_guard = False
-
-    def use_hang_guard(self) -> None:
-        """Simulation: the solves run in a worker process and only one on which the worker
-        has spent ``solver.hang_s`` s of CPU time (or that has used no CPU for
-        :func:`~mpcasv.mpc.hung.idle_limit` s: a worker stopped or blocked) is abandoned
-        (:class:`~mpcasv.mpc.solver_params.SolverParams`; ``hang_s = 0``: solves stay in this
-        process, unguarded)."""
-        if not self.params.solver.hang_guard:
-            self.close()
-            return
-        self.use_deadline(spare=False)  # no spare: a hang is rare, and wall time decides nothing
-        self._hang_guard = True
-
-    def close(self) -> None:
-        """Stop the solver workers (the field mode's or the hang guard's; none: no-op)."""
-        if self.deadline is not None:
-            self.deadline.close()
-            self.deadline = None
 
     # ------------------------------------------------------------------ set-up
     def _setup(self, n_auv: int) -> None:
@@ -281,42 +238,6 @@ class MPCController(WorldView, Safety, PlanOutput, Targeting, SpeedCap, Carry):
         self._used_plan: PlannedTrajectory | None = None
 
     # ------------------------------------------------------------------ per step
-    def _solve(self, p: np.ndarray, w0: np.ndarray, lam_x=None, lam_g=None,
-               max_iter: int | None = None) -> SolveResult:  # fmt: skip
-        """One solve (``max_iter``: this solve's iteration limit, None: ``solver.max_iter``):
-        in this process (``hang_s = 0``: only the iteration limit decides), in the hang
-        guard's worker (simulation: abandoned only after ``solver.hang_s`` s of its CPU time,
-        then kept in :attr:`hung_solves`), or in the field mode's worker with what is left of
-        this step's budget."""
-        # the speed cap's thrust bound (passed only when set: no cap, the calls as before)
-        cap = {} if self.T_cap is None else {"T_cap": self.T_cap}
-        if self.deadline is None:
-            if max_iter is None and not cap:
-                return self.solver.solve(p, w0, lam_x, lam_g)
-            return self.solver.solve(p, w0, lam_x, lam_g, max_iter, **cap)
-        if self._hang_guard:  # simulation: abandon only a hung solve (SolverParams.hang_s),
-            hang_s = self.params.solver.hang_s  # judged by its worker's CPU time, not the load
-            res = self.deadline.solve(p, w0, lam_x, lam_g, max_iter, cpu_timeout=hang_s,
-                                      timeout=idle_limit(hang_s), **cap)  # fmt: skip
-            if not res.ok and res.status == "deadline":  # counted, never hidden, and kept
-                self._hung += 1  # for a replay (mpcasv replay-solve)
-                self.hung_solves.append(HungSolve(
-                    self.t_prev, self.params, self.ocp.dims.n_auv, self.multi, self.boat,
-                    *(None if a is None else np.array(a, float) for a in (p, w0, lam_x, lam_g)),
-                    max_iter, self.T_cap, hang_s))  # fmt: skip
-            return res
-        return self.deadline.solve(p, w0, lam_x, lam_g, max_iter, timeout=self._left(), **cap)
-
-    def _over_budget(self) -> int:
-        """1 if more than ``budget_ms`` of wall time has passed since ``_t_step`` (a
-        diagnostic in simulation, never a decision), else 0."""
-        return int((time.perf_counter() - self._t_step) * 1e3 > self.params.solver.budget_ms)
-
-    def _left(self) -> float:
-        """Field mode: seconds left of this step's solve budget."""
-        return (self.params.solver.budget_ms / 1e3 - STEP_RESERVE_S
-                - (time.perf_counter() - self._t_step))  # fmt: skip
-
     def step(self, obs: Observation) -> Command:
         self._hung = 0  # solves abandoned as hung this step (simulation's hang guard)
         self.between_steps()  # the previous step's exploration, if nobody ran it yet

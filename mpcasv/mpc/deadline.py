@@ -16,8 +16,8 @@ A worker started from the main thread dies with the process that started it (Lin
 The warm start stays in the controller (the previous plan moved one period ahead), so the
 step after an overrun starts warm whatever happened to the worker.
 
-In the field (:meth:`mpcasv.mpc.controller.MPCController.use_deadline`) the deadline is wall
-time. Simulation's hang guard (:meth:`~mpcasv.mpc.controller.MPCController.use_hang_guard`)
+In the field (:meth:`mpcasv.mpc.solving.Solving.use_deadline`) the deadline is wall
+time. Simulation's hang guard (:meth:`~mpcasv.mpc.solving.Solving.use_hang_guard`)
 judges a solve by the CPU time its worker has spent on it instead (``cpu_timeout``): a hung
 fatrop spins (docs/mpc.md "Known problems"), while a solve starved by the machine's load uses
 little CPU, so the load does not decide which solve is abandoned (wall-clock time does not

@@ -54,7 +54,7 @@ class SolverParams:
         SQP iterations of the ``qp`` variant per step (1 = real-time iteration).
     budget_ms : float
         Wall-time budget of one control step's solves (ms). In the field
-        (:meth:`~mpcasv.mpc.controller.MPCController.use_deadline`, set by the deploy loop) a
+        (:meth:`~mpcasv.mpc.solving.Solving.use_deadline`, set by the deploy loop) a
         hard deadline: the solve runs in a worker process and is abandoned at the budget (the
         hybrid fallback commands that step). In simulation it decides nothing (runs are
         reproduced exactly under any load): a step over it is only counted
