@@ -316,8 +316,9 @@ def test_between_steps_ms_max_is_null_when_no_solve_ran_between_steps(tmp_path):
 
 
 class _Flagged:
-    """A go-to controller whose diagnostics flag every third step as carried, hung and over
-    budget (as an MPC's ``mpc_source``, ``mpc_hung``, ``mpc_over_budget``)."""
+    """A go-to controller whose diagnostics flag every third step as carried, hung, over
+    budget and planned in an untested current (as an MPC's ``mpc_source``, ``mpc_hung``,
+    ``mpc_over_budget``, ``mpc_cur_untested``)."""
 
     name = "goto"
 
@@ -336,15 +337,17 @@ class _Flagged:
     def diagnostics(self):
         f = self.k % 3 == 0
         return {"mpc_source": "carried" if f else "plan", "mpc_hung": int(f),
-                "mpc_over_budget": int(f)}  # fmt: skip
+                "mpc_over_budget": int(f), "mpc_cur_untested": float(f)}  # fmt: skip
 
 
 @pytest.mark.parametrize("every_step", [False, True])
 def test_step_counts_count_controller_steps_whatever_the_log(every_step):
     """``carried_steps``, ``solver_hangs`` and ``over_budget_steps`` count controller steps:
     the same with one row per plant step (``log_every_step``, 10 rows per step here) as with
-    one per step (they counted rows before session 14: ten times too many)."""
+    one per step (they counted rows before session 14: ten times too many);
+    ``current_untested_s`` is those steps' control periods (1 s each here)."""
     res = simulate(_stationary_auv("flags", 30.0, every_step), _Flagged(), seed=0)
     assert len(res.timeseries) == (300 if every_step else 30)
     m = compute_metrics(res)
     assert m["carried_steps"] == m["solver_hangs"] == m["over_budget_steps"] == 10
+    assert m["current_untested_s"] == 10.0

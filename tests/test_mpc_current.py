@@ -319,3 +319,53 @@ def test_a_loitering_auv_in_a_1_5_m_s_current_is_held_within_r_outer(tmp_path):
     assert m["beyond_outer_s"] < 30.0, m["beyond_outer_s"]
     assert m["plan_tracking_error_m"] < 7.0, m["plan_tracking_error_m"]
     assert m["collision_domain_s"] == 0.0 and ctrl.fallbacks == 0
+
+
+def test_untested_current_is_the_rounded_speed_above_current_tested():
+    """The one rule (``mpcasv.mpc.worldview.untested_current``): the current's speed rounded
+    to 0.01 m/s above ``CURRENT_TESTED`` = 1.0 m/s, in any direction."""
+    from mpcasv.mpc.worldview import CURRENT_TESTED, untested_current
+
+    assert CURRENT_TESTED == 1.0
+    assert not untested_current((0.0, 1.0)) and not untested_current((0.6, -0.8))  # 1.0 m/s
+    assert not untested_current((0.0, -1.004))  # rounds to 1.00
+    assert untested_current((0.0, -1.006)) and untested_current((1.006, 0.0))  # 1.01
+    assert untested_current(np.array([0.0, -1.5])) and not untested_current((0.0, 0.0))
+    with pytest.raises(TypeError):
+        untested_current((1.0,))
+
+
+_STRONG = ('name = "strong"\nduration = 60.0\ncontroller = "mpc-single"\n'
+           'preset = "mpc-single"\ncurrent = [0.0, {E}]\n'
+           '[asv.start]\nN = -100.0\nE = 0.0\n'
+           '[[auv]]\nname = "a"\nstart = {{ N = 0.0, E = 0.0, depth = 0.0 }}\n'
+           '[auv.behaviour.loiter]\n')  # fmt: skip
+
+
+@pytest.mark.parametrize("east", [-1.5, -0.5])
+def test_the_time_planned_in_an_untested_current_is_a_metric(tmp_path, east):
+    """A run's stderr line is not in its results: each step's diagnostic
+    ``mpc_cur_untested`` (1.0 while the current planned with, as estimated on board, is above
+    ``CURRENT_TESTED``) and the metric ``current_untested_s`` are. 60 s with a loitering AUV in
+    a 1.5 m/s current: some of the run (the estimate first has to build up); 0.5 m/s: none;
+    a controller that plans with no current: 0 in either."""
+    from mpcasv.controllers import Boat
+    from mpcasv.experiments.metrics import compute_metrics
+    from mpcasv.mpc.worldview import untested_current
+
+    path = tmp_path / "strong.toml"
+    path.write_text(_STRONG.format(E=east))
+    sc = load_scenario(path)
+    ctrl = make_controller("mpc-single", 1, "mpc-single", boat=Boat.of_scenario(sc))
+    res = simulate(sc, ctrl, seed=0)
+    ts, m = res.timeseries, compute_metrics(res)
+    flag = ts["mpc_cur_untested"].to_numpy()
+    rule = [untested_current(c) for c in ts[["mpc_cur_N", "mpc_cur_E"]].to_numpy()]
+    np.testing.assert_array_equal(flag, np.array(rule, float))  # the plan's current, the rule
+    assert m["current_untested_s"] == flag.sum() * sc.sim.control_period
+    if east == -1.5:
+        assert 0.0 < m["current_untested_s"] < 60.0, m["current_untested_s"]
+    else:
+        assert m["current_untested_s"] == 0.0
+    hybrid = make_controller("hybrid-single", 1, "paper1-field")
+    assert compute_metrics(simulate(sc, hybrid, seed=0))["current_untested_s"] == 0.0

@@ -141,6 +141,14 @@ _BASE: dict[str, MetricInfo] = {
     "over_budget_steps": _i("1", "lower", "MPC steps whose solve took longer than the field "
                             "budget_ms (wall clock: measured only, it changes no decision in "
                             "simulation)"),
+    "current_untested_s": _i("s", None, "time (whole control periods) the MPC planned with "
+                             "a current above the 1.0 m/s it has been tested in "
+                             "(mpcasv.mpc.worldview.CURRENT_TESTED, the speed rounded to "
+                             "0.01 m/s; per step: diagnostic mpc_cur_untested): its figures "
+                             "there are outside what was measured; 0 for the controllers that "
+                             "plan with no current (the hybrids, an MPC with current = "
+                             "'zero')", "docs/mpc.md, \"Known problems\": "
+                             "strong currents"),
     # --- does the boat do what the MPC planned? (issue 16 item 4) -------------------------
     "plan_tracking_error_m": _i("m", "lower", "RMS over the MPC's used plans (steps not handed "
                                 "to the fallback) and the offsets h = 5, 10, 15 s of the "

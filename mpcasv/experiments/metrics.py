@@ -255,6 +255,10 @@ def compute_metrics(result) -> dict:
         "solver_hangs": int(steps["mpc_hung"].sum()) if "mpc_hung" in steps else 0,
         "over_budget_steps": int(steps["mpc_over_budget"].sum())
         if "mpc_over_budget" in steps else 0,
+        # control periods (one row each) whose plan assumed a current above CURRENT_TESTED
+        "current_untested_s": (float(steps["mpc_cur_untested"].sum())
+                               * result.scenario.sim.control_period)
+        if "mpc_cur_untested" in steps else 0.0,
         **plan_following(steps),  # one row per step (with log_every_step: 10x the plans)
         # per-AUV lists
         "auv_distance_m_auv": auv_d,

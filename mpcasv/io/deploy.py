@@ -149,9 +149,10 @@ class Deploy(Phases, BoatFeedback, FieldMode):
         elif rec.get("event") == "between_error":
             log.error("controller's work after the step at t = %.3f failed: %s (the command "
                       "was sent; the next tick steps again)", rec.get("t"), rec.get("error"))
-        elif rec.get("event") != "reject":
+        elif rec.get("event") != "reject":  # a current above the tested one: also --quiet
             detail = {k: v for k, v in rec.items() if k not in ("kind", "event", "t")}
-            log.info("%s %s", rec["event"], detail)
+            level = logging.WARNING if rec["event"] == "current_untested" else logging.INFO
+            log.log(level, "%s %s", rec["event"], detail)
 
     def event(self, name: str, **info) -> None:
         self.link.event(name, phase=self.phase, **info)
@@ -260,11 +261,13 @@ class Deploy(Phases, BoatFeedback, FieldMode):
         self.steps += 1
         self.overrides += override is not None
         diag = getattr(self.controller, "diagnostics", None)
+        diag = diag() if diag else {}  # once per step: the record and current_untested
+        self.note_untested_current(ts, diag)
         self.jsonl.write({
             "kind": "step", "t": ts, "clock": now, "step": self.steps,
             "obs": obs_to_dict(obs), "controller_cmd": cmd_to_dict(raw), "cmd": cmd_to_dict(cmd),
             "override": override, "sent": sent, "status": status, "ages": ages,
-            "step_ms": step_ms, "followref": self.followref, "diag": diag() if diag else {},
+            "step_ms": step_ms, "followref": self.followref, "diag": diag,
             "propeller_source": self._propeller_source, "thrusters": self.thrusters.values(),
             "speed": self.speed.status(), "speed_cap": self.speed_cap, "speed_capped": capped,
         })  # fmt: skip

@@ -15,6 +15,7 @@ import concurrent.futures
 import contextlib
 import functools
 import logging
+import math
 import time
 
 from mpcasv.interface import Command
@@ -131,6 +132,9 @@ class FieldMode:
         self.step_errors = 0  # steps that raised (both modes: see step_failed)
         self.between_solves = 0  # steps with solves after their command (log_between)
         self.between_ms_max = 0.0  # the longest of them, wall ms
+        #: when the controller first planned with a current above the tested one (event
+        #: ``current_untested``, once per run; None: not yet)
+        self.current_untested_t: float | None = None
         self.cap_pending: float | None = None  # a speed cap waiting for the step in flight
         if self.field_mode:
             check_budget(self.cfg, self.controller)
@@ -170,6 +174,26 @@ class FieldMode:
         self.step_errors += 1
         log.debug("step at t = %s raised", ts, exc_info=exc)
         self.event("step_error", t=ts, error=f"{type(exc).__name__}: {exc}".splitlines()[0])
+
+    def note_untested_current(self, ts: float, diag: dict) -> None:
+        """Event ``current_untested`` (once per run, at the first decision whose controller
+        diagnostics ``diag`` carry ``mpc_cur_untested`` = 1: an MPC that plans with a current
+        above :data:`~mpcasv.mpc.worldview.CURRENT_TESTED`), with the decision's time ``t``
+        (s), the current's ``speed`` (m/s, from ``mpc_cur_N`` / ``mpc_cur_E``) and the
+        ``tested`` limit (m/s). Controllers without the diagnostic: nothing.
+
+        Raises
+        ------
+        KeyError
+            ``diag`` flags the current but does not carry it (``mpc_cur_N`` / ``mpc_cur_E``).
+        """
+        if self.current_untested_t is not None or not diag.get("mpc_cur_untested"):
+            return
+        from mpcasv.mpc.worldview import CURRENT_TESTED  # an MPC: its modules are loaded
+
+        self.current_untested_t = ts
+        speed = math.hypot(diag["mpc_cur_N"], diag["mpc_cur_E"])
+        self.event("current_untested", t=ts, speed=speed, tested=CURRENT_TESTED)
 
     async def step_async(self, ts: float, now: float) -> Command | None:
         """One decision, the controller stepped in the step thread (field mode): the event

@@ -69,7 +69,7 @@ from mpcasv.mpc.solvers import make_solver
 from mpcasv.mpc.solving import Solving
 from mpcasv.mpc.speedcap import SpeedCap
 from mpcasv.mpc.target import Targeting
-from mpcasv.mpc.worldview import WorldView
+from mpcasv.mpc.worldview import WorldView, untested_current
 
 _OCP_CACHE: dict = {}
 
@@ -308,6 +308,8 @@ class MPCController(WorldView, Safety, PlanOutput, Targeting, SpeedCap, Carry, S
         c_est = self.observer.current
         self._diag |= {"mpc_cur_N": float(self.current[0]), "mpc_cur_E": float(self.current[1]),
                        "mpc_est_cur_N": float(c_est[0]), "mpc_est_cur_E": float(c_est[1])}
+        # 1.0: the current planned with is above the tested one (metric current_untested_s)
+        self._diag["mpc_cur_untested"] = float(untested_current(self.current))
         self._diag["mpc_target_switches"] = self.target_switches  # cumulative
         if reason is not None:
             self.t_depart = None  # the hybrid's step: no standby promise of the plan

@@ -32,6 +32,21 @@ W_MAX_DEPTH = 2.0  # bound on the estimated vertical speed of an AUV (m/s)
 CURRENT_TESTED = 1.0
 
 
+def untested_current(current) -> bool:
+    """Whether the MPC has not been tested in ``current`` (N, E components, m/s): its speed,
+    rounded to 0.01 m/s, is above :data:`CURRENT_TESTED` (1.004 m/s is not, 1.006 m/s is; a
+    NaN component is not). The one definition of the rule: the stderr warning of a run
+    (:meth:`WorldView._note_strong`), the per-step diagnostic ``mpc_cur_untested``, the metric
+    ``current_untested_s`` and the deploy's event ``current_untested`` all come from it.
+
+    Raises
+    ------
+    TypeError
+        ``current`` does not have two components.
+    """
+    return round(float(np.hypot(*current)), 2) > CURRENT_TESTED
+
+
 def ranges(asv_NE: np.ndarray, pa: np.ndarray) -> np.ndarray:
     """Horizontal ranges (m) from ASV positions ``(..., 2)`` to AUV positions ``(..., K, 2)``
     (shape ``(..., K)``)."""
@@ -149,9 +164,9 @@ class WorldView:
     def _note_strong(self, obs: Observation, current: np.ndarray, what: str) -> np.ndarray:
         """``current`` (m/s, shape (2,)); the first time in a run that it is stronger than
         :data:`CURRENT_TESTED`, one line on stderr saying that the MPC is untested there."""
-        speed = float(np.hypot(*current))
-        if round(speed, 2) > CURRENT_TESTED and not self.current_noted:
+        if untested_current(current) and not self.current_noted:
             self.current_noted = True
+            speed = float(np.hypot(*current))
             print(f"mpcasv: warning: {self.name} at t = {obs.t:.0f} s: the current ({what}) is "
                   f"{speed:.2f} m/s, above the {CURRENT_TESTED:g} m/s the MPC has been run in "
                   "without being carried off; in a current across its approach mpc-single was "
