@@ -28,8 +28,10 @@ Every step (docs/mpc.md, "Controller"):
    bounds are relaxed along a funnel (:func:`~mpcasv.mpc.rescue.funnel`) and the problem is
    solved;
 5. the command: STANDBY while the plan keeps the thrust below the propeller-on threshold for
-   ``standby_time``, else TRANSIT to the planned position ``lookahead`` seconds ahead (pushed
-   out to ``min_carrot`` m) at a speed from the plan (``speed_rule``: a cap over the
+   ``standby_time``, else TRANSIT to the planned position ``lookahead`` seconds ahead, less
+   the planned current's drift over that time unless the vehicle controls its course
+   (``course_control``; :mod:`~mpcasv.mpc.plan_output`), pushed out to ``min_carrot`` m, at a
+   speed from the plan (``speed_rule``: a cap over the
    lookahead, or the planned speed one period ahead), labelled AVOIDANCE or TRACKING.
 
 Where the solves run (in this process, in the simulation's hang guard's worker, or in the
