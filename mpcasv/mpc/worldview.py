@@ -24,11 +24,11 @@ R_HI_NONE = 1.0e5  # "no outer bound" (m)
 TAU_UNKNOWN = 600.0  # fix age used for an AUV never fixed (s)
 W_MAX_DEPTH = 2.0  # bound on the estimated vertical speed of an AUV (m/s)
 #: the strongest current (m/s) the MPC has been run in without being carried off (session 26,
-#: with the ground-speed bounds widened by the current). Session 28 (the waypoint aimed where
-#: the plan points the bow; one AUV, 300 s): mpc-single held within r_outer at 1.5-2 m/s in 7
-#: of 8 runs, but in a current across its approach it stayed 81-158 m off without a reliable
-#: fix (docs/mpc.md, "Known problems", strong currents); above it the controller says so
-#: once per run
+#: with the ground-speed bounds widened by the current). Session 29 (the waypoint aimed where
+#: the plan points the bow; suite strong-currents, one AUV, 300 s): mpc-single stayed within
+#: r_outer at 1-2 m/s in 11 of 12 conditions (2 seeds each), but in a current across its
+#: approach it got no reliable fix from 1 m/s, 107-165 m off (docs/mpc.md, "Known problems",
+#: strong currents); above it the controller says so once per run
 CURRENT_TESTED = 1.0
 
 
@@ -170,7 +170,7 @@ class WorldView:
             print(f"mpcasv: warning: {self.name} at t = {obs.t:.0f} s: the current ({what}) is "
                   f"{speed:.2f} m/s, above the {CURRENT_TESTED:g} m/s the MPC has been run in "
                   "without being carried off; in a current across its approach mpc-single was "
-                  "measured 81-158 m off its AUV without a reliable fix at 1.5-2 m/s (docs/mpc.md, "
+                  "measured 107-165 m off its AUV without a reliable fix at 1-2 m/s (docs/mpc.md, "
                   "\"Known problems\": strong currents)", file=sys.stderr)  # fmt: skip
         return current
 
