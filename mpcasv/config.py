@@ -32,6 +32,9 @@ FinitePos = Pos
 DURATION_MAX = 7 * 86400.0
 #: A run's duration (s): in ``(0, DURATION_MAX]``.
 Duration = Annotated[float, Strict(), Field(gt=0, le=DURATION_MAX, allow_inf_nan=False)]
+#: A boolean given as true or false, never as a string or a number ("yes", 1 and "off" were
+#: taken as booleans).
+Flag = Annotated[bool, Strict()]
 #: A number >= 0.
 NonNeg = Annotated[float, Strict(), Field(ge=0)]
 #: A probability in [0, 1].

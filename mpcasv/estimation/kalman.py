@@ -38,7 +38,7 @@ import math
 
 import numpy as np
 
-from mpcasv.config import NonNeg, Pos, PosOrInf, frozen
+from mpcasv.config import Flag, NonNeg, Pos, PosOrInf, frozen
 from mpcasv.interface import AUVEstimate
 from mpcasv.models.acoustics import Fix, Report
 
@@ -82,7 +82,7 @@ class KalmanParams:
     sigma_p0: NonNeg = 1.0
     sigma_speed: NonNeg = 0.1
     sigma_heading_deg: NonNeg = 5.0
-    report_velocity: bool = True
+    report_velocity: Flag = True
 
 
 def cv_model(dt: float, q: float, tau_v: float = math.inf) -> tuple[np.ndarray, np.ndarray]:

@@ -28,7 +28,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from mpcasv.config import ConfigError, FinitePos, Float, PathName, frozen, load_toml, parse
+from mpcasv.config import ConfigError, FinitePos, Flag, Float, PathName, frozen, load_toml, parse
 
 #: scenario fields that are instants of the run (s from its start; fnmatch patterns): a
 #: searched value past the run's duration changes nothing
@@ -45,7 +45,7 @@ class ParamSpec:
     low: Float
     high: Float
     field: str | tuple[str, ...] | None = None
-    integer: bool = False
+    integer: Flag = False
     plus: str | None = None
 
 

@@ -30,6 +30,7 @@ from pydantic import model_validator
 from mpcasv.config import (
     ConfigError,
     Duration,
+    Flag,
     Float,
     PathName,
     Seed,
@@ -94,7 +95,7 @@ class ControllerEntry:
     grid: dict[str, Any] = dataclasses.field(default_factory=dict)
     scenarios: tuple[str, ...] | None = None
     domain_from: Literal["preset", "scenario"] = "preset"
-    optional: bool = False
+    optional: Flag = False
     front: str | None = None  # folder of a tuned front (mpcasv.experiments.tune_match)
     at: str | None = None  # the matched metric of the front (None: energy_J; only with front)
     level: Float | None = None  # its level (the metric's unit)

@@ -17,7 +17,7 @@ from typing import Annotated, Any, Literal
 
 from pydantic import Field, Strict, field_validator, model_validator
 
-from mpcasv.config import ConfigError, Float, NonNeg, Pos, frozen, load_toml, parse
+from mpcasv.config import ConfigError, Flag, Float, NonNeg, Pos, frozen, load_toml, parse
 from mpcasv.io.deploycontroller import (
     MIN_SOLVE_MS,
     build_controller,
@@ -195,7 +195,7 @@ class ControllerSpec:
     # vessel model (preset field 'vessel', the MPCs) get it as an override; None: the preset's
     vessel: str | None = None
     # feed the learned achievable speed back into the controller's 'speed' (see SpeedSpec)
-    speed_feedback: bool = False
+    speed_feedback: Flag = False
 
     @field_validator("control_period")
     @classmethod

@@ -25,7 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 from pydantic import model_validator
 
-from mpcasv.config import NonNeg, Pos, Prob, frozen
+from mpcasv.config import Flag, NonNeg, Pos, Prob, frozen
 
 
 @frozen
@@ -34,7 +34,7 @@ class AcousticParams:
 
     T0: Pos = 5.0  # USBL fix period per AUV (s)
     T_report: Pos = 30.0  # status report period (s)
-    usbl: bool = True  # USBL fixes available (False: only status reports, as in Case 5)
+    usbl: Flag = True  # USBL fixes available (False: only status reports, as in Case 5)
     d1: Pos = 500.0  # slant range of good reception (m)
     d2: Pos = 800.0  # slant range of sporadic reception (m)
     p_good: Prob = 0.95  # success probability below d1 (guess)

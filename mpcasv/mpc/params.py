@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from typing import Literal
 
-from mpcasv.config import NonNeg, NonNegInt, Pos, PosInt, frozen
+from mpcasv.config import Flag, NonNeg, NonNegInt, Pos, PosInt, frozen
 from mpcasv.estimation.current import CurrentObserverParams
 from mpcasv.hybrid.avoidance import AvoidanceParams
 from mpcasv.hybrid.domains import DomainParams
@@ -96,7 +96,7 @@ class FixRateParams:
     w_range: Pos = 10.0
     T_quiet: Pos | None = None
     w_thrust: Pos = 4.0
-    noisy_fixes: bool = False
+    noisy_fixes: Flag = False
     inset: NonNeg = 0.0
 
 
@@ -338,7 +338,7 @@ class MPCParams:
     margin: NonNeg = 5.0
     lookahead: Pos = 15.0
     min_carrot: Pos = 25.0
-    course_control: bool = False
+    course_control: Flag = False
     speed_min: Pos = 0.5
     speed_rule: Literal["max", "mean", "plan"] = "max"
     speed_lead: Pos = 1.0

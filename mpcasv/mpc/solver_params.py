@@ -9,7 +9,7 @@ from typing import Annotated, Literal
 
 from pydantic import Field, Strict
 
-from mpcasv.config import NonNeg, Pos, PosInt, frozen
+from mpcasv.config import Flag, NonNeg, Pos, PosInt, frozen
 
 SolverName = Literal["fatrop", "ipopt", "qp"]
 
@@ -121,7 +121,7 @@ class SolverParams:
     """
 
     solver: SolverName = "fatrop"
-    compiled: bool = True
+    compiled: Flag = True
     cflags: str = "-O3 -march=native"
     threads: PosInt = 1
     max_iter: Annotated[int, Strict(), Field(ge=0)] = 50

@@ -16,7 +16,7 @@ from typing import Annotated, Literal
 
 from pydantic import Field, Strict, model_validator
 
-from mpcasv.config import Float, Label, NonNeg, Pos, PosInt, frozen
+from mpcasv.config import Flag, Float, Label, NonNeg, Pos, PosInt, frozen
 from mpcasv.models.auv import AUVLimits
 from mpcasv.models.behaviours import (
     Abort,
@@ -238,7 +238,7 @@ class AUVSpec:
     start: Start = Start()
     limits: AUVLimits = AUVLimits()
     events: tuple[Event, ...] = ()
-    modem_at_surface: bool = True  # False: no acoustics while at the surface (Case 5)
+    modem_at_surface: Flag = True  # False: no acoustics while at the surface (Case 5)
 
     @model_validator(mode="after")
     def _speeds(self) -> AUVSpec:

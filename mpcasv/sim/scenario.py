@@ -16,6 +16,7 @@ from pydantic import model_validator
 from mpcasv.config import (
     ConfigError,
     Duration,
+    Flag,
     Float,
     PathName,
     Pos,
@@ -54,7 +55,7 @@ class ASVSpec:
 class SimSpec:
     dt: Pos = 0.1  # plant step (s)
     control_period: Pos = 1.0  # supervisory period (s)
-    log_every_step: bool = False  # log at the plant step instead of the supervisory period
+    log_every_step: Flag = False  # log at the plant step instead of the supervisory period
 
     @model_validator(mode="after")
     def _multiple(self) -> SimSpec:
