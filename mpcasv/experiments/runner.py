@@ -98,6 +98,8 @@ def simulate_job(job: Job, run_dir: Path) -> dict:
     boat = Boat.of_scenario(scenario)  # one vessel per run: the simulator's and the MPC's
     controller = make_controller(job.controller, job.n_auv, job.preset, dict(job.overrides),
                                  boat=boat)  # fmt: skip
+    if hasattr(controller, "say_current"):  # the metric and the sweep's last lines say it
+        controller.say_current = False
     result = simulate(scenario, controller, job.seed, job.estimator)
     extra = {"job_id": job.job_id, "suite": job.suite, "variant": job.variant,
              "preset": job.preset, "overrides": dict(job.overrides),

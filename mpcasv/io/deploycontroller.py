@@ -77,6 +77,8 @@ def build_controller(cfg: DeployConfig, speed: float | None = None, log=print):
                               boat=deploy_boat(cfg))  # fmt: skip
     finally:
         done.set()
+    if hasattr(ctl, "say_current"):  # the event current_untested says it, in the run's time
+        ctl.say_current = False
     if getattr(ctl, "needs_current_oracle", False):  # only a simulator knows the true current
         raise ConfigError(f"controller {c.name}: current = 'oracle' needs the simulator's true "
                           "current; in a deployment use 'estimated' or 'zero'")  # fmt: skip

@@ -193,7 +193,7 @@ class FieldMode:
 
         self.current_untested_t = ts
         speed = math.hypot(diag["mpc_cur_N"], diag["mpc_cur_E"])
-        self.event("current_untested", t=ts, speed=speed, tested=CURRENT_TESTED)
+        self.event("current_untested", t=ts, speed=round(speed, 2), tested=CURRENT_TESTED)
 
     async def step_async(self, ts: float, now: float) -> Command | None:
         """One decision, the controller stepped in the step thread (field mode): the event

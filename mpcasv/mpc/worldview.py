@@ -161,11 +161,19 @@ class WorldView:
                              "current = 'estimated'")  # fmt: skip
         return self._note_strong(obs, np.asarray(obs.current_oracle, float), "the true one")
 
+    #: print :meth:`_note_strong`'s line; False where the caller says it in its own terms: a
+    #: sweep (metric ``current_untested_s`` and one line at its end; each job's line would
+    #: name no job and break the progress bar) and a deploy (event ``current_untested``)
+    say_current = True
+
     def _note_strong(self, obs: Observation, current: np.ndarray, what: str) -> np.ndarray:
         """``current`` (m/s, shape (2,)); the first time in a run that it is stronger than
-        :data:`CURRENT_TESTED`, one line on stderr saying that the MPC is untested there."""
+        :data:`CURRENT_TESTED`, one line on stderr saying that the MPC is untested there
+        (unless :attr:`say_current` is False)."""
         if untested_current(current) and not self.current_noted:
             self.current_noted = True
+            if not self.say_current:
+                return current
             speed = float(np.hypot(*current))
             print(f"mpcasv: warning: {self.name} at t = {obs.t:.0f} s: the current ({what}) is "
                   f"{speed:.2f} m/s, above the {CURRENT_TESTED:g} m/s the MPC has been run in "

@@ -127,4 +127,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"  {'solver_hangs':24s} {metrics['solver_hangs']} (solves abandoned after "
               "solver.hang_s s of the solver's CPU time: docs/mpc.md 'Known problems'; solve "
               f"them again: mpcasv replay-solve {out / 'hung_solves.pkl'})")
+    if metrics.get("current_untested_s"):  # an MPC planning in a current it is untested in
+        print(f"  {'current_untested_s':24s} {metrics['current_untested_s']:.3f} (its plan's "
+              "current above the tested one: docs/mpc.md 'Known problems', strong currents)")
     return 0
