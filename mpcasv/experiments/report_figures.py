@@ -342,17 +342,24 @@ def compare_figure(out: Path, reps: pd.DataFrame, scenario: str, path: Path) -> 
     gs = fig.add_gridspec(n, 3, width_ratios=[1.2, 1.4, 1.4])
     axp = fig.add_subplot(gs[:, 0])
     ts0 = series[0][1]
-    for k in range(n):
-        axp.plot(ts0[f"auv{k}_E"], ts0[f"auv{k}_N"], color="0.5", lw=0.8)
-        axp.text(ts0[f"auv{k}_E"].iloc[0], ts0[f"auv{k}_N"].iloc[0], names[k], fontsize=7)
+    for k in range(n):  # a start dot and an end square: an AUV that stays put is drawn too
+        E, N = ts0[f"auv{k}_E"], ts0[f"auv{k}_N"]
+        axp.plot(E, N, color="0.5", lw=0.8)
+        axp.plot(E.iloc[0], N.iloc[0], "o", color="0.5", ms=3)
+        axp.plot(E.iloc[-1], N.iloc[-1], "s", color="0.5", ms=4)
+        axp.annotate(names[k], (E.iloc[0], N.iloc[0]), xytext=(3, 3), textcoords="offset points",
+                     fontsize=7)  # fmt: skip
     for i, (v, ts) in enumerate(series):
-        axp.plot(ts["E"], ts["N"], color=colours[i % len(colours)], lw=1.1, label=f"ASV {v}")
+        c = colours[i % len(colours)]
+        axp.plot(ts["E"], ts["N"], color=c, lw=1.1, label=f"ASV {v}")
+        axp.plot(ts["E"].iloc[0], ts["N"].iloc[0], "o", color=c, ms=3)
+    axp.margins(0.08)  # room for the names beside the dots
     axp.set_aspect("equal", adjustable="datalim")
     axp.set_xlabel("East (m)")
     axp.set_ylabel("North (m)")
     axp.legend(fontsize=7)
     axp.grid(alpha=0.3)
-    axp.set_title("paths (AUVs grey)", fontsize=9)
+    axp.set_title("paths (AUVs grey; dots: starts, squares: AUVs' ends)", fontsize=9)
     # Paper 2's reliable-fix age tau_k (eq. 9) where the runs recorded it, else the fix age
     rel = all(f"rfix_age{k}" in ts for _, ts in series for k in range(n))
     age, age_name = ("rfix_age", "τ reliable-fix age") if rel else ("fix_age", "fix age")

@@ -250,7 +250,8 @@ class MPCParams:
         its stock Otter configuration), so that it compensates the crab angle itself: the
         waypoint is then the planned ground point, not less the current's drift (which would
         compensate it twice). False (default): it points the bow at the waypoint, as the
-        simulator's and the SITL's line of sight do (docs/deploy.md, "Course control").
+        simulator's and the SITL's line of sight do (docs/deploy.md, "Course control"); true
+        in a simulation is the crab-blind waypoint of before session 28 (an ablation).
     speed_min : float
         Lowest speed cap handed to the execution level (m/s).
     speed_rule : {"max", "mean", "plan"}
