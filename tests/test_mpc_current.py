@@ -298,19 +298,14 @@ def test_with_m1h_the_waypoint_lies_the_planned_ground_distance_ahead_in_a_curre
     assert dist[-1.2] == pytest.approx(dist[0.0], rel=1e-9)
 
 
-def test_a_loitering_auv_in_a_1_5_m_s_current_is_held_within_r_outer(tmp_path):
+def test_a_loitering_auv_in_a_1_5_m_s_current_is_held_within_r_outer(scenarios_dir):
     """A surface AUV loitering in a 1.5 m/s current flowing West, the ASV starting 100 m
-    South of it (a tester's scenario, session 27): with the waypoint the planned ground
-    point, the boat crabbed off its plans (tracking error 9.8 m) and spent 199 s of 300
-    beyond r_outer; aiming where the plan points the bow, it stays within r_outer and closer
-    to its plans (measured when written: 0 s, 4.3 m)."""
-    path = tmp_path / "hold.toml"
-    path.write_text('name = "hold"\nduration = 300.0\ncontroller = "mpc-single"\n'
-                    'preset = "mpc-single"\ncurrent = [0.0, -1.5]\n'
-                    '[asv.start]\nN = -100.0\nE = 0.0\n'
-                    '[[auv]]\nname = "a"\nstart = { N = 0.0, E = 0.0, depth = 0.0 }\n'
-                    '[auv.behaviour.loiter]\n')  # fmt: skip
-    sc = load_scenario(path)
+    South of it (loiter-surface; a tester's scenario, session 27): with the waypoint the
+    planned ground point, the boat crabbed off its plans (tracking error 9.8 m) and spent
+    199 s of 300 beyond r_outer; aiming where the plan points the bow, it stays within
+    r_outer and closer to its plans (measured when written: 0 s, 4.3 m)."""
+    sc = scenario_with(load_scenario(scenarios_dir / "loiter-surface.toml"),
+                       current=(0.0, -1.5))  # fmt: skip
     from mpcasv.controllers import Boat
     from mpcasv.experiments.metrics import compute_metrics
 
