@@ -127,6 +127,16 @@ class WeightParams:
     running : float
         Per second with the propeller running, whatever the thrust (noise, wear): favours
         short brisk transits and long standby over slow economical ones.
+    floor : float
+        On the planned ground surge below ``speed_min`` while the propeller runs:
+        ``floor * sig((T - T_on) / w_T) * (speed_min - u)_+^2`` per (m/s)^2 (eq. M4f): the
+        TRANSIT command clips its speed to ``[speed_min, u_max]`` (the execution level's speed
+        loop tracks a positive ground speed), so a plan that thrusts lightly upstream and drifts
+        back is one the execution level cannot follow. Soft: from standstill the boat
+        accelerates from ``u = 0`` with the propeller on. Compiled in (not a runtime weight);
+        0 (default) leaves the term out. Opt-in, measured worse at 10 (session 29: plan and
+        execution closer in currents, but fewer reliable fixes and 2.6 times the collision-
+        domain time on the paper cases; docs/mpc.md "Known problems", strong currents).
     tail : float
         Length of the tail the terminal cost stands for (s).
     terminal : {"projected", "visit"}
@@ -157,6 +167,7 @@ class WeightParams:
     slack: Pos = 10.0
     deadband: NonNeg = 1.0
     running: NonNeg = 0.0
+    floor: NonNeg = 0.0
     tail: NonNeg = 60.0
     terminal: Literal["projected", "visit"] = "projected"
     U_go: Pos = 2.5

@@ -40,6 +40,10 @@ class StageTerms:
         running = sigmoid((T - self.T_on) / w_T)  # ~1 while the propeller runs
         L += W["deadband"] * running * sigmoid((self.T_floor - T) / w_T)
         L += W["running"] * running  # (M4c) propeller time (noise, wear), whatever the thrust
+        w_floor = self.params.weights.floor  # compiled in: 0 builds the problem without it
+        if w_floor > 0:  # (M4f) no ground surge below speed_min while the propeller runs: the
+            # TRANSIT command clips its speed there, the execution level cannot follow it
+            L += w_floor * running * ca.fmax(self.params.speed_min - u, 0) ** 2
         if ext is not None:
             L += self._variance_stage(z, sp, ext)  # (M4n, M4d)
         return L
