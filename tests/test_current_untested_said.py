@@ -26,21 +26,24 @@ start = {{ N = 0.0, E = 0.0, depth = 0.0 }}
 """
 
 
+SUITE = textwrap.dedent("""
+    name = "s"
+    scenarios = ["loiter.toml"]
+    seeds = [0]
+    current = [[0.0, -1.5], [0.0, -0.5]]
+    plots = "none"
+    [[controllers]]
+    label = "mpc"
+    single = "mpc-single"
+    multi = "mpc-multi"
+    preset = "mpc-single"
+    """)
+
+
 def test_a_sweep_says_it_once_at_its_end_naming_the_runs(tmp_path, capsys):
     (tmp_path / "loiter.toml").write_text(LOITER.format(duration=20.0))
     suite = tmp_path / "s.toml"
-    suite.write_text(textwrap.dedent("""
-        name = "s"
-        scenarios = ["loiter.toml"]
-        seeds = [0]
-        current = [[0.0, -1.5], [0.0, -0.5]]
-        plots = "none"
-        [[controllers]]
-        label = "mpc"
-        single = "mpc-single"
-        multi = "mpc-multi"
-        preset = "mpc-single"
-        """))
+    suite.write_text(SUITE)
     out = tmp_path / "out"
     assert main(["compare", str(suite), "--out", str(out), "--workers", "1",
                  "--job-timeout", "0", "--no-report", "--quiet"]) == 0  # fmt: skip
@@ -50,6 +53,24 @@ def test_a_sweep_says_it_once_at_its_end_naming_the_runs(tmp_path, capsys):
     assert len(said) == 1, err
     assert said[0].startswith("mpcasv: warning: 1 of 2 runs planned"), said
     assert "loiter (0,-1.5)" in said[0], said
+
+
+def test_a_tuning_batch_says_it_once_naming_the_runs(tmp_path, capsys):
+    """``mpcasv tune controller`` runs its trials' jobs through the same worker code (each
+    job's own line off): each batch says it in one line."""
+    from mpcasv.experiments.suite import expand
+    from mpcasv.experiments.tune_controller import run_batch
+
+    (tmp_path / "loiter.toml").write_text(LOITER.format(duration=20.0))
+    suite = tmp_path / "s.toml"
+    suite.write_text(SUITE)
+    jobs = expand(suite).jobs
+    rows = run_batch(jobs, tmp_path / "train", 1, None, True, "trials 0-0")
+    assert len(rows) == 2
+    err = capsys.readouterr().err
+    assert "at t = " not in err, err
+    said = [line for line in err.splitlines() if "runs planned with a current above" in line]
+    assert len(said) == 1 and "1 of 2 runs" in said[0], err
 
 
 def test_simulate_says_it_and_prints_the_metric(tmp_path, capsys):

@@ -58,7 +58,7 @@ def run(args: argparse.Namespace) -> int:
     from mpcasv.config import ConfigError
     from mpcasv.experiments import acceptance
     from mpcasv.experiments.report import READ_LINE
-    from mpcasv.experiments.runner import JOB_TIMEOUT_S, is_url, run_suite
+    from mpcasv.experiments.runner import JOB_TIMEOUT_S, is_url, run_suite, say_untested_current
     from mpcasv.experiments.suite import load_suite
     from mpcasv.experiments.workers import check_workers
     from mpcasv.outputs import check_not_other_output, check_output_folder
@@ -96,7 +96,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"{c.label}: {c.controller} front point trial {c.trial} of {c.folder} "
               f"({c.at} {c.front_level:.5g}, {c.source} mean; asked {c.level:.5g})")  # fmt: skip
     print(f"run folders: {stats.runs}")
-    _say_untested_current(results)
+    say_untested_current(results)
     for name, err in stats.error_jobs:
         print(f"  error in {name}: {err}")
     if stats.lost:
@@ -116,22 +116,3 @@ def run(args: argparse.Namespace) -> int:
     print(f"results table: import pandas as pd; df = {READ_LINE.format(out=out)}")
     return 0 if ok == len(exp.jobs) else 1
 
-
-def _say_untested_current(results) -> None:
-    """One line on stderr when runs of the sweep had an MPC plan with a current above
-    :data:`~mpcasv.mpc.worldview.CURRENT_TESTED` (column ``current_untested_s``): each job's
-    own line is off in a sweep (it names no job)."""
-    import sys
-
-    if "current_untested_s" not in results:
-        return
-    runs = results[results["current_untested_s"] > 0]
-    if not len(runs):
-        return
-    from mpcasv.mpc.worldview import CURRENT_TESTED
-
-    where = ", ".join(sorted({f"{s} ({c})" for s, c in zip(runs["scenario"], runs["current"],
-                                                           strict=True)}))  # fmt: skip
-    print(f"mpcasv: warning: {len(runs)} of {len(results)} runs planned with a current above "
-          f"the {CURRENT_TESTED:g} m/s the MPC has been tested in (current_untested_s > 0; "
-          f"docs/mpc.md, \"Known problems\": strong currents): {where}", file=sys.stderr)

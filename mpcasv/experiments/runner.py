@@ -394,3 +394,26 @@ def run_suite(suite: str | Path, out: str | Path, workers: int = 1, dask: str | 
 
         write_report(out, exp, results, stats)
     return stats, exp, results
+
+
+def say_untested_current(results) -> None:
+    """One line on stderr when runs (``results``: rows of jobs with their metrics, as a
+    sweep's results table) had an MPC plan with a current above
+    :data:`~mpcasv.mpc.worldview.CURRENT_TESTED` (column ``current_untested_s``), naming
+    their scenarios and currents: each job's own line is off in a sweep (:func:`simulate_job`;
+    it would name no job). Called at the end of ``mpcasv compare`` and of each batch of
+    ``mpcasv tune controller``."""
+    import sys
+
+    if "current_untested_s" not in results:
+        return
+    runs = results[results["current_untested_s"] > 0]
+    if not len(runs):
+        return
+    from mpcasv.mpc.worldview import CURRENT_TESTED
+
+    where = ", ".join(sorted({f"{s} ({c})" for s, c in zip(runs["scenario"], runs["current"],
+                                                           strict=True)}))  # fmt: skip
+    print(f"mpcasv: warning: {len(runs)} of {len(results)} runs planned with a current above "
+          f"the {CURRENT_TESTED:g} m/s the MPC has been tested in (current_untested_s > 0; "
+          f"docs/mpc.md, \"Known problems\": strong currents): {where}", file=sys.stderr)

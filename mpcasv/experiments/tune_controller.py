@@ -260,7 +260,12 @@ def _suggest(trial, spec: TuneSpec) -> dict:
 def run_batch(jobs: list[Job], out: Path, workers: int, dask: str | None, quiet: bool,
               name: str):  # fmt: skip
     """Run the jobs without a part in ``out`` (the runner's machinery); their rows."""
-    from mpcasv.experiments.runner import SweepStats, prepare_controllers, run_jobs
+    from mpcasv.experiments.runner import (
+        SweepStats,
+        prepare_controllers,
+        run_jobs,
+        say_untested_current,
+    )
     from mpcasv.experiments.store import done_ids, read_parts
 
     out.mkdir(parents=True, exist_ok=True)
@@ -271,7 +276,10 @@ def run_batch(jobs: list[Job], out: Path, workers: int, dask: str | None, quiet:
         stats = SweepStats(name, len(jobs), len(jobs) - len(todo), workers=workers)
         run_jobs(sorted(todo, key=lambda j: (-j.cost, j.index)), out, stats, workers, dask,
                  quiet)  # fmt: skip
-    return read_parts(out, [j.job_id for j in jobs])
+    rows = read_parts(out, [j.job_id for j in jobs])
+    if todo and len(rows):
+        say_untested_current(rows[rows["job_id"].isin({j.job_id for j in todo})])
+    return rows
 
 
 def aggregate(spec: TuneSpec, rows) -> tuple[list[float] | None, float, str | None]:

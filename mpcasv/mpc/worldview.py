@@ -26,9 +26,11 @@ W_MAX_DEPTH = 2.0  # bound on the estimated vertical speed of an AUV (m/s)
 #: the strongest current (m/s) the MPC has been run in without being carried off (session 26,
 #: with the ground-speed bounds widened by the current). Session 29 (the waypoint aimed where
 #: the plan points the bow; suite strong-currents, one AUV, 300 s): mpc-single stayed within
-#: r_outer at 1-2 m/s in 11 of 12 conditions (2 seeds each), but in a current across its
-#: approach it got no reliable fix from 1 m/s, 107-165 m off (docs/mpc.md, "Known problems",
-#: strong currents); above it the controller says so once per run
+#: r_outer at 1-2 m/s in 11 of 12 conditions (2 seeds each), but with the current towards
+#: the West (across its approach or its AUV's track) it got no reliable fix at 1-2 m/s,
+#: 82-165 m off, already at 1.0 m/s (docs/mpc.md, "Known problems", strong currents): so
+#: "tested" means "not carried beyond r_outer", not "fixes as in still water"; above it the
+#: controller says so once per run
 CURRENT_TESTED = 1.0
 
 
@@ -177,9 +179,10 @@ class WorldView:
             speed = float(np.hypot(*current))
             print(f"mpcasv: warning: {self.name} at t = {obs.t:.0f} s: the current ({what}) is "
                   f"{speed:.2f} m/s, above the {CURRENT_TESTED:g} m/s the MPC has been run in "
-                  "without being carried off; in a current across its approach mpc-single was "
-                  "measured 107-165 m off its AUV without a reliable fix at 1-2 m/s (docs/mpc.md, "
-                  "\"Known problems\": strong currents)", file=sys.stderr)  # fmt: skip
+                  "without being carried off; in a current across its approach or its AUV's "
+                  "track mpc-single was measured 82-165 m off without a reliable fix at 1-2 m/s "
+                  "(docs/mpc.md, \"Known problems\": strong currents)",
+                  file=sys.stderr)  # fmt: skip
         return current
 
     def _x0(self, obs: Observation) -> np.ndarray:
