@@ -33,7 +33,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from mpcasv.config import SEED_MAX, ConfigError, Flag, load_toml
+from mpcasv.config import SEED_MAX, ConfigError, load_toml
 
 #: default objectives (metrics.json keys, all "lower is better"; issue 17 item 1)
 DEFAULT_OBJECTIVES = ("reliable_fix_age_p95_s", "nav_error_rms_m", "energy_J")
@@ -53,8 +53,8 @@ class ParamRange:
     name: str  # dotted preset field, e.g. "domain.delta_r"
     low: float
     high: float
-    log: Flag = False
-    int: Flag = False
+    log: bool = False  # checked by _range (a plain dataclass: no validation here)
+    int: bool = False
 
 
 @dataclass(frozen=True)
