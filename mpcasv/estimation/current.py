@@ -26,6 +26,12 @@ for the model's 3-DOF ``C_RB``), so (C1) needs no current. The current is a rand
 and the model's error a white velocity noise ``N(0, q_nu dt I)`` on ``nu_r``. Linearised by
 CasADi (the Jacobian of (C1), chained over the sub-steps).
 
+Prior at the first measurement (C0; :meth:`CurrentObserver._prior`): the current
+``0 +- sigma_c0`` per axis, the speed through the water ``+- sigma_nu0`` per body axis,
+centred on the ground velocity while the propeller runs and on zero while it is off (how the
+first ground velocity splits between the boat's motion and the current is not known; the
+motion that follows tells), the yaw rate as measured.
+
 Measurement (3): the ground velocity in body axes and the yaw rate, with the heading ``psi``
 measured:
 
@@ -39,8 +45,8 @@ hull's drag stops it), so the ground velocity becomes the current (the drift); w
 propeller running, the model's prediction of ``u_r`` from the thrust (trim) is what the
 ground speed along the heading is compared with. Without the actuators' values
 (``actuators = None``, e.g. a deploy without thruster feedback) the model cannot predict
-``nu_r`` while the propeller runs: its noise is then ``q_blind`` and the current is learnt
-only while drifting.
+``nu_r`` while the propeller runs: ``nu_r`` is then held, with the noise ``q_blind``, and the
+current is learnt only while drifting.
 
 The filter is deterministic: no random draws; the same measurements give the same estimate.
 A model that differs from the boat (hull, loads, wind) shows up as a current: what is
@@ -92,6 +98,20 @@ class CurrentObserverParams:
         Measurement noise of the yaw rate (rad/s).
     sigma_c0 : float
         Initial standard deviation of the current per axis (m/s); the initial estimate is 0.
+        1 m/s: the boat does not know the current when it starts, and tidal streams reach
+        2 m/s. With 0.3 a 2 m/s current took 30 s to be found within 10 % from a start at
+        rest over ground (``tests/test_current_observer.py``, the start's tests).
+    sigma_nu0 : float
+        Initial standard deviation of the speed through the water per body axis (m/s): how
+        the first ground velocity splits into the boat's own motion and the current is not
+        known (C0). Before, the split was taken as known (the ground velocity all through the
+        water, to within ``sigma_v``), and only the slow random walk (C2) could move it: a
+        boat drifting in 0.15-2 m/s took 120-200 s to find the current, one started at rest
+        over ground in 1 m/s more than 200 s. 0.3 (session 31): with 1 m/s the first
+        estimates overshot (an error of 2.8 m/s 2 s into a transit in 2 m/s; up to 1.8
+        m/s above the current's speed over 24 starts), and the MPC met them with hung
+        solves; 0.3 keeps the overshoot to 0.7 m/s on the first sample (0.24 after it) and
+        settles within 10 % in 0-21 s (docs/mpc.md, "Known problems", the observer's start).
     h_max : float
         Longest RK4 sub-step of (C1) (s): RK4 is stable on Gretha's fast sway-yaw pole (about
         -2.4 1/s at 2.5 m/s) for sub-steps up to about 1.1 s; a stiffer hull takes shorter
@@ -103,7 +123,8 @@ class CurrentObserverParams:
     q_blind: Pos = 1.0
     sigma_v: Pos = 0.05
     sigma_r: Pos = 0.01
-    sigma_c0: Pos = 0.3
+    sigma_c0: Pos = 1.0
+    sigma_nu0: Pos = 0.3
     h_max: Pos = 0.5
 
 
@@ -213,11 +234,8 @@ class CurrentObserver:
         z = np.array([m.u, m.v, m.r], float)
         if not (np.all(np.isfinite(z)) and math.isfinite(m.psi)):
             raise ValueError(f"current observer: non-finite measurement at t = {m.t}")
-        P = self.params
-        if self.s is None:  # first measurement: water-relative = ground, current 0 +- sigma_c0
-            self.s = np.array([m.u, m.v, m.r, 0.0, 0.0])
-            self.P = np.diag([P.sigma_v**2, P.sigma_v**2, P.sigma_r**2,
-                              P.sigma_c0**2, P.sigma_c0**2])  # fmt: skip
+        if self.s is None:  # the prior (C0), conditioned on this first measurement below
+            self.s, self.P = self._prior(m)
         else:
             dt = m.t - self._last.t
             if dt < 0:
@@ -228,6 +246,21 @@ class CurrentObserver:
         self._last = m
         return self.current
 
+    def _prior(self, m: MotionMeasurement) -> tuple[np.ndarray, np.ndarray]:
+        """The state's prior at the first measurement (C0): the current 0 +- ``sigma_c0``;
+        the speed through the water +- ``sigma_nu0``, centred on the ground velocity while
+        the propeller runs (a boat under way moves through the water) and on zero while it
+        is off (a boat drifting moves with the water); the yaw rate as measured. Both means
+        are guesses: how the ground velocity splits is learnt from the motion that follows
+        (the hull's drag stops it in the water; the thrust holds a known speed), within
+        0-21 s (``tests/test_current_observer.py``)."""
+        P = self.params
+        nu0 = (m.u, m.v) if m.propeller_on else (0.0, 0.0)
+        s = np.array([*nu0, m.r, 0.0, 0.0])
+        cov = np.diag([P.sigma_nu0**2, P.sigma_nu0**2, P.sigma_r**2,
+                       P.sigma_c0**2, P.sigma_c0**2])  # fmt: skip
+        return s, cov
+
     def _predict(self, dt: float, a: MotionMeasurement, b: MotionMeasurement) -> None:
         P = self.params
         known = a.actuators is not None and b.actuators is not None
@@ -236,13 +269,16 @@ class CurrentObserver:
             q_nu = P.q_nu
         elif not (a.propeller_on or b.propeller_on):  # drifting: thrust 0, drive amidships
             act, q_nu = np.zeros(2), P.q_nu
-        else:  # propeller running, thrust unknown: the model cannot predict nu_r
-            act, q_nu = np.zeros(2), P.q_blind
+        else:  # propeller running, thrust unknown: the model cannot predict nu_r, which is
+            # held (a random walk of q_blind): predicting it with the thrust at zero, as
+            # before session 30, slowed it every step and the filter put the difference into
+            # the current (0.58 m/s in still water after 2 minutes with sigma_c0 = 1)
+            act, q_nu = None, P.q_blind
         # sub-steps of at most h_max, more where the hull is stiff (a turn of Fossen's Otter)
         n = max(math.ceil(dt / P.h_max - 1e-9), rk4_sub_steps(self.model, dt, lags=False))
         h = dt / n
         nu, J = self.s[0:3], np.eye(3)
-        for _ in range(n):
+        for _ in range(n if act is not None else 0):
             nu_next, Jk = self._step(nu, act, h)
             nu, J = np.asarray(nu_next, float).ravel(), np.asarray(Jk, float) @ J
         F = np.eye(NS)
