@@ -20,6 +20,27 @@ from pydantic.dataclasses import dataclass as _pydantic_dataclass
 
 T = TypeVar("T")
 
+
+def between(lo: float, hi: float, unit: str = "", why: str = "", *, lo_open: bool = False,
+            integer: bool = False) -> Any:
+    """A number in ``[lo, hi]`` (``(lo, hi]`` with ``lo_open``), given as a number (an integer
+    with ``integer``), never as a string, a bool, nan or inf. Out of range it is refused with
+    the range and ``why`` the bound is there: ``20000 m is outside the allowed range
+    [0, 11000] m (the deepest ocean is 10.9 km)``."""
+    u = f" {unit}" if unit else ""
+    span = f"{'(' if lo_open else '['}{lo:g}, {hi:g}]{u}"
+    because = f" ({why})" if why else ""
+
+    def check(v: float) -> float:
+        if v < lo or (lo_open and v == lo) or v > hi:
+            raise ValueError(f"{v:g}{u} is outside the allowed range {span}{because}")
+        return v
+
+    if integer:
+        return Annotated[int, Strict(), AfterValidator(check)]
+    return Annotated[float, Strict(), Field(allow_inf_nan=False), AfterValidator(check)]
+
+
 #: A finite real number given as a number (int or float), never as a string, a bool, nan or inf.
 Float = Annotated[float, Strict(), Field(allow_inf_nan=False)]
 #: A strictly positive finite number (inf in a speed or a weight was a traceback mid-run).
@@ -31,14 +52,39 @@ FinitePos = Pos
 #: The longest simulated run (s): a week (``duration = 1e300`` was accepted and ran for ever)
 DURATION_MAX = 7 * 86400.0
 #: A run's duration (s): in ``(0, DURATION_MAX]``.
-Duration = Annotated[float, Strict(), Field(gt=0, le=DURATION_MAX, allow_inf_nan=False)]
+Duration = between(0, DURATION_MAX, "s", "a week at most", lo_open=True)
+
+# The size of a scenario's world: bounds of every depth, AUV speed and horizontal coordinate
+# or length a scenario file gives (docs/experiments.md, "Bounds"). A depth of 20000 m, a
+# waypoint 1e9 m down and a lawnmower leg of 1e12 m were accepted.
+#: The deepest depth (m): the deepest ocean (Challenger Deep, 10.9 km), rounded up.
+DEPTH_MAX = 11000.0
+#: The fastest AUV (m/s): about 10 knots, twice the fastest survey AUVs (the LAUV's 2 m/s,
+#: REMUS 600 and HUGIN 2.5-3 m/s) and beyond what an ASV accompanies (Gretha: 2.5 m/s).
+AUV_SPEED_MAX = 5.0
+#: The farthest anything in a run can go (m): the fastest AUV for the longest run, 3024 km.
+#: Every horizontal coordinate (``|N|``, ``|E|``) and length of a scenario lies within it.
+DISTANCE_MAX = AUV_SPEED_MAX * DURATION_MAX
+#: A depth (m): in ``[0, DEPTH_MAX]``.
+Depth = between(0, DEPTH_MAX, "m", "the deepest ocean is 10.9 km")
+#: A horizontal coordinate, N or E (m): within ``DISTANCE_MAX`` of the origin.
+Coord = between(-DISTANCE_MAX, DISTANCE_MAX, "m", "what the fastest AUV covers in a week")
+#: A horizontal length or range (m): in ``(0, DISTANCE_MAX]``.
+Length = between(0, DISTANCE_MAX, "m", "what the fastest AUV covers in a week", lo_open=True)
+#: A time within a run (s): in ``[0, DURATION_MAX]``.
+Time = between(0, DURATION_MAX, "s", "the longest run is a week")
+#: A heading or angle (deg): ten turns either way at most (1e20 left the boat unable to turn:
+#: a yaw step of 0.01 rad is lost in a float of that size).
+Heading = between(-3600, 3600, "deg", "ten turns either way")
 #: A boolean given as true or false, never as a string or a number ("yes", 1 and "off" were
 #: taken as booleans).
 Flag = Annotated[bool, Strict()]
 #: A number >= 0.
 NonNeg = Annotated[float, Strict(), Field(ge=0)]
-#: A probability in [0, 1].
-Prob = Annotated[float, Strict(), Field(ge=0, le=1)]
+#: A finite number >= 0 (``nan`` is "not a finite number", not "should be >= 0"; inf refused).
+FiniteNonNeg = Annotated[float, Strict(), Field(ge=0, allow_inf_nan=False)]
+#: A probability in [0, 1] (nan or inf: "not a finite number").
+Prob = Annotated[float, Strict(), Field(ge=0, le=1, allow_inf_nan=False)]
 #: A strictly positive integer.
 PosInt = Annotated[int, Strict(), Field(gt=0)]
 #: An integer >= 0.
@@ -95,6 +141,16 @@ class ConfigError(ValueError):
     """A configuration file (or mapping) is invalid; the message names the source and field."""
 
 
+class FieldError(ValueError):
+    """Raised by a model validator about one of its fields (a dotted path below the model,
+    ``"limits.speed_max"``): :func:`parse` names that field where the model's own location
+    alone (``auv[0]``, or ``(top level)``) would not say which one is wrong."""
+
+    def __init__(self, field: str, message: str):
+        super().__init__(message)
+        self.field = field
+
+
 def check_seed(seed: int, what: str = "--seed") -> int:
     """``seed`` if it is an integer in ``[0, SEED_MAX]``.
 
@@ -126,7 +182,7 @@ def parse(cls: type[T], data: Mapping[str, Any], source: str | Path = "<mapping>
     try:
         return TypeAdapter(cls).validate_python(dict(data))
     except ValidationError as exc:
-        lines = [f"{source}: {_format_loc(e['loc'])}: {_message(e)}" for e in exc.errors()]
+        lines = [f"{source}: {_where(e)}: {_message(e)}" for e in exc.errors()]
         if len(lines) > MAX_PROBLEMS:  # an empty vessel file listed ~40 missing fields
             lines = [*lines[:MAX_PROBLEMS], f"... and {len(lines) - MAX_PROBLEMS} more"]
         raise ConfigError("invalid configuration\n  " + "\n  ".join(lines)) from None
@@ -136,8 +192,22 @@ def parse(cls: type[T], data: Mapping[str, Any], source: str | Path = "<mapping>
 MAX_PROBLEMS = 6
 
 
+def _where(error: dict) -> str:
+    """The field of one problem: pydantic's location, and below it the field a
+    :class:`FieldError` names."""
+    loc = tuple(error["loc"])
+    cause = (error.get("ctx") or {}).get("error")
+    if isinstance(cause, FieldError):
+        loc += tuple(int(p) if p.isdigit() else p for p in cause.field.split("."))
+    return _format_loc(loc)
+
+
 def _message(error: dict) -> str:
-    """Pydantic's message without its "Value error, " prefix (our validators' own words)."""
+    """Pydantic's message without its "Value error, " prefix (our validators' own words);
+    nan or inf where a finite number belongs: "nan is not a finite number" (it read "Input
+    should be greater than or equal to 0" for a nan depth)."""
+    if error.get("type") == "finite_number":
+        return f"{error.get('input')!r} is not a finite number"
     msg = str(error["msg"])
     return msg.removeprefix("Value error, ") if error.get("type") == "value_error" else msg
 
