@@ -13,11 +13,282 @@ for ever.
 from __future__ import annotations
 
 import math
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
 
 import pytest
 from pydantic import model_validator
 
-from mpcasv.config import ConfigError, FieldError, Prob, between, frozen
+from mpcasv.cli import main
+from mpcasv.config import (
+    DEPTH_MAX,
+    DISTANCE_MAX,
+    ConfigError,
+    FieldError,
+    Prob,
+    between,
+    frozen,
+)
+from mpcasv.sim.scenario import load_scenario
+
+BASE = """\
+name = "bad"
+duration = 20.0
+controller = "goto"
+preset = "goto"
+[asv]
+vessel = "gretha"
+execution = "gretha"
+[asv.start]
+N = -50.0
+E = -50.0
+speed = 0.0
+depth = 0.0
+[sim]
+dt = 0.1
+control_period = 1.0
+[acoustics]
+T0 = 5.0
+d2 = 800.0
+sigma_range = 0.5
+p_good = 0.95
+[navigation]
+eps_a = 0.002
+
+[[auv]]
+name = "auv"
+start = { N = 0.0, E = 0.0, depth = 20.0, speed = 0.0 }
+limits = { speed_max = 2.0, depth_rate_max = 0.5 }
+[auv.behaviour.plan]
+speed = 1.5
+surface_speed = 0.0
+acceptance = 5.0
+route = [ { waypoints = [[300.0, 0.0, 20.0]] } ]
+"""
+WAYPOINTS = "waypoints = [[300.0, 0.0, 20.0]]"
+ROUTE = f"route = [ {{ {WAYPOINTS} }} ]"
+PLAN = """[auv.behaviour.plan]
+speed = 1.5
+surface_speed = 0.0
+acceptance = 5.0
+""" + ROUTE
+
+
+def _mower(length="300.0", spacing="50.0", legs="4", depth="20.0", heading="0.0") -> str:
+    """One lawnmower route segment."""
+    return (f"{{ lawnmower = {{ origin = [0.0, 0.0], length = {length}, spacing = {spacing}, "
+            f"legs = {legs}, depth = {depth}, heading_deg = {heading} }} }}")  # fmt: skip
+
+
+def _lawnmower(**kwargs) -> str:
+    """A route of one lawnmower."""
+    return f"route = [ {_mower(**kwargs)} ]"
+
+
+def _events(*events: str) -> str:
+    return ROUTE + "".join(f"\n[[auv.events]]\n{e}" for e in events)
+
+
+#: (id, text replaced in BASE, replacement, the field the message must name, words it must hold):
+#: the AUVs (empty lists, bounds, nan and inf, wrong types, speeds within the limits)
+AUV_CASES = [
+    ("empty waypoints", WAYPOINTS, "waypoints = []",
+     "auv[0].behaviour.plan.route[0].waypoints", ["empty"]),
+    ("empty route", ROUTE, "route = []", "auv[0].behaviour.plan.route", ["empty"]),
+    ("empty waypoints of a switch event", ROUTE,
+     _events("t = 5.0\nplan = { speed = 1.0, route = [ { waypoints = [] } ] }"),
+     "auv[0].events[0].plan.route[0].waypoints", ["empty"]),
+    ("lawnmower legs 1e7", ROUTE, _lawnmower(legs="10000000"),
+     "auv[0].behaviour.plan.route[0].lawnmower.legs", ["[1, 5000]"]),
+    ("lawnmower length 1e12", ROUTE, _lawnmower(length="1e12"),
+     "auv[0].behaviour.plan.route[0].lawnmower.length", ["(0, 3.024e+06] m"]),
+    ("lawnmower spacing inf", ROUTE, _lawnmower(spacing="inf"),
+     "auv[0].behaviour.plan.route[0].lawnmower.spacing", ["not a finite number"]),
+    ("lawnmower legs beyond the coordinates", ROUTE, _lawnmower(spacing="3e6", legs="3"),
+     "auv[0].behaviour.plan.route[0].lawnmower", ["beyond the allowed 3.024e+06 m"]),
+    ("lawnmower heading 1e300", ROUTE, _lawnmower(heading="1e300"),
+     "auv[0].behaviour.plan.route[0].lawnmower.heading_deg", ["[-3600, 3600] deg"]),
+    ("AUV depth 20000 m", "depth = 20.0, speed", "depth = 20000.0, speed",
+     "auv[0].start.depth", ["20000 m", "[0, 11000] m"]),
+    ("waypoint depth 1e9", WAYPOINTS, "waypoints = [[300.0, 0.0, 1e9]]",
+     "auv[0].behaviour.plan.route[0].waypoints[0][2]", ["[0, 11000] m"]),
+    ("waypoint N 1e300", WAYPOINTS, "waypoints = [[1e300, 0.0, 20.0]]",
+     "auv[0].behaviour.plan.route[0].waypoints[0][0]", ["3.024e+06"]),
+    ("lawnmower depth 12000", ROUTE, _lawnmower(depth="12000.0"),
+     "auv[0].behaviour.plan.route[0].lawnmower.depth", ["[0, 11000] m"]),
+    ("yoyo to 1e5 m", "acceptance = 5.0", "acceptance = 5.0\nyoyo = [10.0, 1e5]",
+     "auv[0].behaviour.plan.yoyo[1]", ["[0, 11000] m"]),
+    ("acceptance 1e300", "acceptance = 5.0", "acceptance = 1e300",
+     "auv[0].behaviour.plan.acceptance", ["(0, 3.024e+06] m"]),
+    ("speed_max 1e300", "speed_max = 2.0", "speed_max = 1e300",
+     "auv[0].limits.speed_max", ["(0, 5] m/s"]),
+    ("depth rate 1e300", "depth_rate_max = 0.5", "depth_rate_max = 1e300",
+     "auv[0].limits.depth_rate_max", ["(0, 5] m/s"]),
+    ("start speed above speed_max", "depth = 20.0, speed = 0.0", "depth = 20.0, speed = 3.0",
+     "auv[0].start.speed", ["exceeds limits.speed_max 2.0"]),
+    ("surface speed above speed_max", "surface_speed = 0.0", "surface_speed = 3.0",
+     "auv[0].behaviour.plan.surface_speed", ["exceeds limits.speed_max 2.0"]),
+    ("event at 1e9 s", ROUTE, _events('t = 1e9\nkind = "abort"'),
+     "auv[0].events[0].t", ["[0, 604800] s"]),
+    ("loiter event depth 1e9", ROUTE, _events('t = 5.0\nkind = "loiter"\ndepth = 1e9'),
+     "auv[0].events[0].depth", ["[0, 11000] m"]),
+    ("rise rate 1e300", ROUTE, _events('t = 5.0\nkind = "abort"\nrise_rate = 1e300'),
+     "auv[0].events[0].rise_rate", ["(0, 5] m/s"]),
+    ("pursuer period inf", PLAN, "[auv.behaviour.pursuer]\nspeed = 1.0\nupdate_period = inf",
+     "auv[0].behaviour.pursuer.update_period", ["not a finite number"]),
+    ("transit heading 1e20", PLAN, "[auv.behaviour.transit]\nheading_deg = 1e20\nspeed = 1.0",
+     "auv[0].behaviour.transit.heading_deg", ["[-3600, 3600] deg"]),
+    ("AUV depth nan", "depth = 20.0, speed", "depth = nan, speed",
+     "auv[0].start.depth", ["nan is not a finite number"]),
+    ("waypoint depth inf", WAYPOINTS, "waypoints = [[300.0, 0.0, inf]]",
+     "auv[0].behaviour.plan.route[0].waypoints[0][2]", ["inf is not a finite number"]),
+    ("event time nan", ROUTE, _events('t = nan\nkind = "abort"'),
+     "auv[0].events[0].t", ["nan is not a finite number"]),
+    ("depth as a string", "depth = 20.0, speed", 'depth = "20", speed',
+     "auv[0].start.depth", ["valid number"]),
+    ("legs as a float", ROUTE, _lawnmower(legs="4.5"),
+     "auv[0].behaviour.plan.route[0].lawnmower.legs", ["valid integer"]),
+]  # fmt: skip
+
+CASES = AUV_CASES
+
+
+def _write(tmp_path: Path, old: str, new: str) -> Path:
+    assert old in BASE, old
+    path = tmp_path / "bad.toml"
+    path.write_text(BASE.replace(old, new, 1))
+    return path
+
+
+def test_the_base_scenario_is_valid(tmp_path):
+    sc = load_scenario(_write(tmp_path, "", ""))
+    assert sc.auv[0].start.depth == 20.0 and sc.sim.dt == 0.1
+
+
+@pytest.mark.parametrize(("old", "new", "field", "words"), [c[1:] for c in CASES],
+                         ids=[c[0] for c in CASES])  # fmt: skip
+def test_a_bad_scenario_is_refused_at_load_naming_the_file_and_the_field(
+    tmp_path, capsys, old, new, field, words
+):
+    path = _write(tmp_path, old, new)
+    with pytest.raises(ConfigError) as err:
+        load_scenario(path)
+    problems = [ln.strip() for ln in str(err.value).splitlines() if str(path) in ln]
+    assert len(problems) == 1, str(err.value)
+    assert problems[0].startswith(f"{path}: {field}: "), problems[0]
+    assert all(w in problems[0] for w in words), (words, problems[0])
+    # the command: exit 2, one line naming the file and the field, nothing written
+    out = tmp_path / "out"
+    assert main(["simulate", str(path), "--out", str(out), "--quiet", "--no-plots"]) == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 1, lines
+    assert f"{path}: {field}: " in lines[0] and all(w in lines[0] for w in words), lines[0]
+    assert not out.exists()
+
+
+def test_the_bounds_themselves_are_allowed(tmp_path):
+    """Each bound is a value a file may give (the deepest ocean, 5000 legs, a 0.2-s step,
+    60-s control periods of 600 plant steps, a vessel's top speed)."""
+    text = (BASE.replace("depth = 20.0, speed", f"depth = {DEPTH_MAX}, speed")
+            .replace("dt = 0.1\ncontrol_period = 1.0", "dt = 0.1\ncontrol_period = 60.0")
+            .replace("speed = 0.0\ndepth = 0.0", "speed = 2.5\ndepth = 0.0")
+            .replace(ROUTE, _lawnmower(legs="5000", length="10.0", spacing="1.0"))
+            .replace("speed_max = 2.0", "speed_max = 5.0"))  # fmt: skip
+    path = tmp_path / "edge.toml"
+    path.write_text(text)
+    sc = load_scenario(path)
+    assert sc.auv[0].start.depth == DEPTH_MAX and sc.sim.n_sub == 600
+    assert len(sc.auv[0].behaviour.plan.route[0].points()) == 10_000
+    (tmp_path / "step.toml").write_text(BASE.replace("dt = 0.1", "dt = 0.2"))
+    assert load_scenario(tmp_path / "step.toml").sim.dt == 0.2
+    far = BASE.replace(WAYPOINTS, f"waypoints = [[{DISTANCE_MAX}, {-DISTANCE_MAX}, 0.0]]")
+    (tmp_path / "far.toml").write_text(far)
+    assert load_scenario(tmp_path / "far.toml").auv[0].behaviour.plan.route[0].waypoints
+
+
+def test_more_than_ten_thousand_waypoints_in_one_plan_are_refused(tmp_path):
+    route = f"route = [ {_mower(legs='5000')}, {_mower(legs='1')} ]"
+    path = _write(tmp_path, ROUTE, route)
+    with pytest.raises(ConfigError, match=r"auv\[0\]\.behaviour\.plan\.route: 10002 waypoints"):
+        load_scenario(path)
+
+
+def test_a_models_own_refusal_is_named_at_load_whatever_the_checks_miss(tmp_path, monkeypatch):
+    """The check of last resort: the AUV's behaviour objects are built at load, so a model's
+    ValueError (the one behind the empty-waypoints crash) names the AUV and its behaviour."""
+    import mpcasv.sim.auv_spec as auv_spec
+
+    def refuse(*args, **kwargs):
+        raise ValueError("a plan needs waypoints as rows (N, E, depth)")
+
+    monkeypatch.setattr(auv_spec, "Plan", refuse)
+    with pytest.raises(ConfigError) as err:
+        load_scenario(_write(tmp_path, "", ""))
+    assert "auv[0].behaviour: refused by the AUV model: a plan needs waypoints" in str(err.value)
+
+
+def test_compare_refuses_the_bad_scenario_up_front_instead_of_a_job_error(tmp_path, capsys):
+    """The empty route was a job error in ``mpcasv compare`` (exit 1, the traceback in the
+    table); now the suite is refused before any job starts."""
+    path = _write(tmp_path, WAYPOINTS, "waypoints = []")
+    suite = tmp_path / "s.toml"
+    suite.write_text(textwrap.dedent("""
+        name = "s"
+        scenarios = ["bad.toml"]
+        seeds = [0]
+        plots = "none"
+        [[controllers]]
+        label = "goto"
+        name = "goto"
+        preset = "goto"
+    """))  # fmt: skip
+    out = tmp_path / "out"
+    assert main(["compare", str(suite), "--out", str(out), "--workers", "1"]) == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in lines[0], lines
+    assert f"{path}: auv[0].behaviour.plan.route[0].waypoints: empty" in lines[0], lines[0]
+    assert not (out / "parts").exists()
+
+
+@pytest.mark.parametrize(("old", "new", "field"), [
+    (WAYPOINTS, "waypoints = []", "auv[0].behaviour.plan.route[0].waypoints"),
+    (ROUTE, _lawnmower(length="1e12", legs="10000000"), "lawnmower.length"),
+], ids=["empty waypoints", "lawnmower 1e7 legs of 1e12 m"])  # fmt: skip
+def test_the_installed_command_exits_2_with_one_line(tmp_path, old, new, field):
+    """The reviewer's cases through a real process: a traceback and exit 1 (empty waypoints), a
+    hang (1e7 legs of 1e12 m: both fields named, on one line)."""
+    path = _write(tmp_path, old, new)
+    proc = subprocess.run(
+        [sys.executable, "-m", "mpcasv", "simulate", str(path), "--out", str(tmp_path / "o"),
+         "--quiet", "--no-plots"],
+        capture_output=True, text=True, timeout=120,
+    )  # fmt: skip
+    assert proc.returncode == 2, proc.stderr
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in proc.stderr, proc.stderr
+    assert str(path) in lines[0] and field in lines[0], lines[0]
+    if "legs" in new:
+        assert "lawnmower.legs" in lines[0]
+
+
+def test_nan_and_inf_read_not_a_finite_number_for_every_kind_of_bound():
+    """``>= 0`` (a depth), ``[0, 1]`` (a probability) and a range (a heading) alike."""
+    from mpcasv.sim.scenario import scenario_from_dict
+
+    auv = {"name": "a", "behaviour": {"transit": {"heading_deg": 0.0, "speed": 1.0}}}
+    cases = [(("auv", 0, "start", "depth"), math.nan), (("acoustics", "p_sporadic"), math.inf),
+             (("auv", 0, "behaviour", "transit", "heading_deg"), -math.inf)]  # fmt: skip
+    for where, value in cases:
+        data = {"name": "n", "duration": 10.0, "auv": [dict(auv, start={})], "acoustics": {}}
+        node = data
+        for key in where[:-1]:
+            node = node[key]
+        node[where[-1]] = value
+        with pytest.raises(ConfigError) as err:
+            scenario_from_dict(data, "n.toml")
+        assert f"{value!r} is not a finite number" in str(err.value), str(err.value)
 
 
 @frozen

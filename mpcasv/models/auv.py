@@ -16,22 +16,32 @@ from functools import lru_cache
 import casadi as ca
 import numpy as np
 
-from mpcasv.config import Pos, frozen
+from mpcasv.config import AUV_SPEED_MAX, between, frozen
 
 NA = 5  # AUV state size
 K_PSI = 1.0  # heading P-gain (1/s) before the turn-rate limit
 K_DEPTH = 0.5  # depth P-gain (1/s) before the depth-rate limit
 T_SPEED = 2.0  # speed first-order lag (s) before the acceleration limit
 
+#: Bounds of an AUV's limits (scenario files: ``limits``, limits events, an abort's rise rate;
+#: docs/experiments.md, "Bounds"): no AUV goes faster than AUV_SPEED_MAX, nor dives or rises
+#: faster than it moves; the heading loop (K_PSI on an error of at most pi rad) never turns
+#: faster than 180 deg/s; no propeller-driven AUV accelerates at 1 g.
+SpeedLimit = between(0, AUV_SPEED_MAX, "m/s", "no AUV is faster", lo_open=True)
+TurnRateLimit = between(0, 180, "deg/s", "the heading loop never turns faster", lo_open=True)
+DepthRateLimit = between(0, AUV_SPEED_MAX, "m/s", "no AUV dives or rises faster than it moves",
+                         lo_open=True)  # fmt: skip
+AccelLimit = between(0, 9.81, "m/s^2", "1 g", lo_open=True)
+
 
 @frozen
 class AUVLimits:
     """Motion limits of an AUV (defaults: OceanScan LAUV, PAPER-FACTS §1)."""
 
-    speed_max: Pos = 2.0  # m/s (thesis: max 2 m/s)
-    turn_rate_max_deg: Pos = 10.0  # deg/s (guess for a 1.8 m LAUV)
-    depth_rate_max: Pos = 0.5  # m/s (guess)
-    accel_max: Pos = 0.2  # m/s^2 (guess)
+    speed_max: SpeedLimit = 2.0  # m/s (thesis: max 2 m/s)
+    turn_rate_max_deg: TurnRateLimit = 10.0  # deg/s (guess for a 1.8 m LAUV)
+    depth_rate_max: DepthRateLimit = 0.5  # m/s (guess)
+    accel_max: AccelLimit = 0.2  # m/s^2 (guess)
 
     def vector(self) -> np.ndarray:
         return np.array(

@@ -12,12 +12,27 @@ Behaviours: ``plan``, ``pursuer``, ``transit``, ``loiter`` (exactly one). Events
 from __future__ import annotations
 
 import math
-from typing import Annotated, Literal
+from typing import Literal
 
-from pydantic import Field, Strict, model_validator
+from pydantic import model_validator
 
-from mpcasv.config import Flag, Float, Label, NonNeg, Pos, PosInt, frozen
-from mpcasv.models.auv import AUVLimits
+from mpcasv.config import (
+    AUV_SPEED_MAX,
+    DISTANCE_MAX,
+    DURATION_MAX,
+    Coord,
+    Depth,
+    FieldError,
+    FiniteNonNeg,
+    Flag,
+    Heading,
+    Label,
+    Length,
+    Time,
+    between,
+    frozen,
+)
+from mpcasv.models.auv import AccelLimit, AUVLimits, DepthRateLimit, SpeedLimit, TurnRateLimit
 from mpcasv.models.behaviours import (
     Abort,
     Loiter,
@@ -30,40 +45,70 @@ from mpcasv.models.behaviours import (
     lawnmower,
 )
 
+# Bounds of the numbers below (docs/experiments.md, "Bounds"): depths within the ocean
+# (DEPTH_MAX), horizontal coordinates and lengths within what a run can cover (DISTANCE_MAX),
+# AUV speeds up to AUV_SPEED_MAX (and the AUV's own limits.speed_max: AUVSpec), times within
+# the longest run (DURATION_MAX), headings ten turns either way; nan and inf are "not a finite
+# number" everywhere.
+#: A speed (m/s): in ``(0, AUV_SPEED_MAX]`` (and within the AUV's limits: :class:`AUVSpec`).
+Speed = between(0, AUV_SPEED_MAX, "m/s", "no AUV is faster", lo_open=True)
+#: A speed that may be 0 (m/s): ``[0, AUV_SPEED_MAX]``.
+Speed0 = between(0, AUV_SPEED_MAX, "m/s", "no AUV is faster")
+#: A duration within a run (s): ``(0, DURATION_MAX]``.
+Span = between(0, DURATION_MAX, "s", "the longest run is a week", lo_open=True)
+#: Legs of one lawnmower: ``[1, LEGS_MAX]`` (``legs = 1e7`` built for ever).
+LEGS_MAX = 5000
+Legs = between(1, LEGS_MAX, "legs", "a week-long run meets fewer waypoints", integer=True)
+#: The distance between two lawnmower legs (m): ``[0, DISTANCE_MAX]``.
+Spacing = between(0, DISTANCE_MAX, "m", "what the fastest AUV covers in a week")
+#: Waypoints of one plan, all its segments together: a week-long run (the longest) at 2 m/s
+#: passing a waypoint every minute meets about 10 000.
+WAYPOINTS_MAX = 10_000
+
 
 @frozen
 class Start:
-    N: Float = 0.0  # m
-    E: Float = 0.0  # m
-    #: heading (deg); ten turns either way at most (1e20 left the boat unable to turn: a yaw
-    #: step of 0.01 rad is lost in a float of that size)
-    psi_deg: Annotated[float, Strict(), Field(ge=-3600, le=3600, allow_inf_nan=False)] = 0.0
-    depth: NonNeg = 0.0  # m
-    speed: NonNeg = 0.0  # m/s
+    N: Coord = 0.0  # m
+    E: Coord = 0.0  # m
+    psi_deg: Heading = 0.0  # deg
+    depth: Depth = 0.0  # m (the ASV's: 0, Scenario checks)
+    #: m/s: an AUV's within its limits.speed_max (AUVSpec), the ASV's within its vessel's
+    #: u_max (Scenario)
+    speed: FiniteNonNeg = 0.0
 
 
 @frozen
 class LawnmowerSpec:
-    origin: tuple[Float, Float]
-    length: Pos
-    spacing: NonNeg
-    legs: PosInt
-    heading_deg: Float = 0.0
-    depth: NonNeg = 0.0
+    origin: tuple[Coord, Coord]
+    length: Length
+    spacing: Spacing
+    legs: Legs
+    heading_deg: Heading = 0.0
+    depth: Depth = 0.0
     turn: Literal["right", "left"] = "right"
 
 
 @frozen
 class Segment:
-    """One piece of a route: explicit waypoints ``[[N, E, depth], ...]`` or a lawnmower."""
+    """One piece of a route: explicit waypoints ``[[N, E, depth], ...]`` (at least one) or a
+    lawnmower (whose corners must lie within the coordinate bounds too)."""
 
-    waypoints: tuple[tuple[Float, Float, NonNeg], ...] | None = None
+    waypoints: tuple[tuple[Coord, Coord, Depth], ...] | None = None
     lawnmower: LawnmowerSpec | None = None
 
     @model_validator(mode="after")
     def _one(self) -> Segment:
         if (self.waypoints is None) == (self.lawnmower is None):
             raise ValueError("a route segment needs exactly one of 'waypoints' or 'lawnmower'")
+        if self.waypoints is not None and not self.waypoints:
+            raise FieldError("waypoints", "empty: give at least one [N, E, depth] (or leave "
+                             "the segment out)")  # fmt: skip
+        if self.lawnmower is not None:
+            far = max(abs(float(x)) for x in self.points()[:, :2].ravel())
+            if far > DISTANCE_MAX:
+                raise FieldError("lawnmower", f"its legs reach {far:.4g} m from the origin, "
+                                 f"beyond the allowed {DISTANCE_MAX:g} m (what the fastest AUV "
+                                 "covers in a week)")  # fmt: skip
         return self
 
     def points(self):
@@ -76,17 +121,21 @@ class Segment:
 
 @frozen
 class PlanSpec:
-    speed: Pos
+    speed: Speed
     route: tuple[Segment, ...]
-    acceptance: Pos = 5.0
-    yoyo: tuple[NonNeg, NonNeg] | None = None
-    surface: tuple[tuple[NonNeg, NonNeg], ...] = ()
-    surface_speed: NonNeg = 0.0
+    acceptance: Length = 5.0
+    yoyo: tuple[Depth, Depth] | None = None
+    surface: tuple[tuple[Time, Time], ...] = ()
+    surface_speed: Speed0 = 0.0
 
     @model_validator(mode="after")
     def _check(self) -> PlanSpec:
         if not self.route:
-            raise ValueError("a plan needs a non-empty route")
+            raise FieldError("route", "empty: a plan needs at least one segment")
+        n = sum(len(seg.points()) for seg in self.route)
+        if n > WAYPOINTS_MAX:
+            raise FieldError("route", f"{n} waypoints, more than the allowed {WAYPOINTS_MAX} "
+                             "(a week-long run meets fewer)")  # fmt: skip
         if self.yoyo is not None and self.yoyo[0] >= self.yoyo[1]:
             raise ValueError("yoyo must be [d_min, d_max] with d_min < d_max")
         if any(b <= a for a, b in self.surface):
@@ -96,16 +145,16 @@ class PlanSpec:
 
 @frozen
 class PursuerSpec:
-    speed: Pos
-    depth: NonNeg = 0.0
-    update_period: NonNeg = 0.0  # s between re-aims at the ASV (0: continuous pursuit)
+    speed: Speed
+    depth: Depth = 0.0
+    update_period: Time = 0.0  # s between re-aims at the ASV (0: continuous pursuit)
 
 
 @frozen
 class TransitSpec:
-    heading_deg: Float
-    speed: Pos
-    depth: NonNeg = 0.0
+    heading_deg: Heading
+    speed: Speed
+    depth: Depth = 0.0
 
 
 @frozen
@@ -113,9 +162,9 @@ class LoiterSpec:
     """Hold position at ``at`` (default: where the AUV is when it starts loitering) and
     ``depth`` (default: its depth then), moving back at up to ``speed`` when pushed away."""
 
-    at: tuple[Float, Float] | None = None  # (N, E), m
-    depth: NonNeg | None = None  # m
-    speed: Pos = 0.5  # m/s
+    at: tuple[Coord, Coord] | None = None  # (N, E), m
+    depth: Depth | None = None  # m
+    speed: Speed = 0.5  # m/s
 
 
 @frozen
@@ -179,20 +228,20 @@ class Event:
       ``accel_max``) replace the ones in force from then on.
     """
 
-    t: NonNeg
+    t: Time
     kind: Literal["switch", "abort", "loiter", "limits"] = "switch"
     plan: PlanSpec | None = None
     pursuer: PursuerSpec | None = None
     transit: TransitSpec | None = None
-    rise_rate: Pos | None = None  # m/s (abort)
-    at: tuple[Float, Float] | None = None  # (N, E) m (loiter)
-    depth: NonNeg | None = None  # m (loiter)
-    speed: Pos | None = None  # m/s (loiter)
-    duration: Pos | None = None  # s (loiter)
-    speed_max: Pos | None = None  # m/s (limits)
-    turn_rate_max_deg: Pos | None = None  # deg/s (limits)
-    depth_rate_max: Pos | None = None  # m/s (limits)
-    accel_max: Pos | None = None  # m/s^2 (limits)
+    rise_rate: DepthRateLimit | None = None  # m/s (abort)
+    at: tuple[Coord, Coord] | None = None  # (N, E) m (loiter)
+    depth: Depth | None = None  # m (loiter)
+    speed: Speed | None = None  # m/s (loiter)
+    duration: Span | None = None  # s (loiter)
+    speed_max: SpeedLimit | None = None  # m/s (limits)
+    turn_rate_max_deg: TurnRateLimit | None = None  # deg/s (limits)
+    depth_rate_max: DepthRateLimit | None = None  # m/s (limits)
+    accel_max: AccelLimit | None = None  # m/s^2 (limits)
 
     @model_validator(mode="after")
     def _kind(self) -> Event:
@@ -242,20 +291,33 @@ class AUVSpec:
 
     @model_validator(mode="after")
     def _speeds(self) -> AUVSpec:
-        """Every behaviour's speed within the speed_max in force when it starts (a later limits
-        event may lower it: the kinematics then clip the speed)."""
+        """Every speed (the start's, each behaviour's and a plan's surface speed) within the
+        speed_max in force when it starts (a later limits event may lower it: the kinematics
+        then clip the speed); and the behaviour objects build (the check of last resort: a
+        model's own refusal, named by field, at load rather than mid-run)."""
         u_max, where = self.limits.speed_max, "limits.speed_max"
-        spec = self.behaviour.spec
-        if spec.speed > u_max:
-            raise ValueError(f"behaviour speed {spec.speed} exceeds {where} {u_max}")
+        if self.start.speed > u_max:
+            raise FieldError("start.speed", f"{self.start.speed} m/s exceeds {where} {u_max}")
+        for field, speed in _speeds_of(self.behaviour.spec, "behaviour"):
+            if speed > u_max:
+                raise FieldError(field, f"{speed} m/s exceeds {where} {u_max}")
         for i, ev in sorted(enumerate(self.events), key=lambda iev: iev[1].t):
             if ev.kind == "limits" and ev.speed_max is not None:
                 u_max, where = ev.speed_max, f"speed_max of events[{i}] (t = {ev.t} s)"
-            speed = ev.speed if ev.kind == "loiter" else (
-                ev.behaviour().spec.speed if ev.kind == "switch" else None)  # fmt: skip
-            if speed is not None and speed > u_max:
-                raise ValueError(f"events[{i}] (t = {ev.t} s): speed {speed} exceeds {where} "
-                                 f"{u_max} in force then")  # fmt: skip
+            if ev.kind == "loiter" and ev.speed is not None:
+                speeds = [(f"events.{i}.speed", ev.speed)]
+            elif ev.kind == "switch":
+                speeds = _speeds_of(ev.behaviour().spec, f"events.{i}")
+            else:
+                speeds = []
+            for field, speed in speeds:
+                if speed > u_max:
+                    raise FieldError(field, f"(t = {ev.t} s): {speed} m/s exceeds {where} "
+                                     f"{u_max} in force then")  # fmt: skip
+        try:
+            self.build_behaviour()
+        except ValueError as exc:  # every model refusal is a bug of these checks: name it
+            raise FieldError("behaviour", f"refused by the AUV model: {exc}") from None
         return self
 
     def build_behaviour(self):
@@ -266,6 +328,16 @@ class AUVSpec:
             return initial
         return Scripted(initial, [(ev.t, ev.action()) for ev in self.events],
                         limits=self.limits.vector())  # fmt: skip
+
+
+def _speeds_of(spec, where: str) -> list[tuple[str, float]]:
+    """``(field, speed)`` of a behaviour spec (of ``where``, ``behaviour`` or ``events.i``):
+    its speed, and a plan's surface speed."""
+    kind = type(spec).__name__.removesuffix("Spec").lower()
+    out = [(f"{where}.{kind}.speed", spec.speed)]
+    if isinstance(spec, PlanSpec):
+        out.append((f"{where}.plan.surface_speed", spec.surface_speed))
+    return out
 
 
 __all__ = ["Start", "LawnmowerSpec", "Segment", "PlanSpec", "PursuerSpec", "TransitSpec",
