@@ -152,7 +152,39 @@ AUV_CASES = [
      "auv[0].behaviour.plan.route[0].lawnmower.legs", ["valid integer"]),
 ]  # fmt: skip
 
-CASES = AUV_CASES
+#: the ASV, its vessel and execution files, the plant step, the channel, the current
+WORLD_CASES = [
+    ("plant step 5 s", "dt = 0.1\ncontrol_period = 1.0", "dt = 5.0\ncontrol_period = 5.0",
+     "sim.dt", ["5 s", "[0.001, 0.2] s"]),
+    ("plant step 1e-6 s (a million steps compiled)", "dt = 0.1", "dt = 1e-6",
+     "sim.dt", ["[0.001, 0.2] s"]),
+    ("control period 1e5 s", "control_period = 1.0", "control_period = 1e5",
+     "sim.control_period", ["(0, 60] s"]),
+    ("control period 2000 plant steps", "dt = 0.1\ncontrol_period = 1.0",
+     "dt = 0.01\ncontrol_period = 20.0", "sim.control_period", ["2000 plant steps", "1000"]),
+    ("ASV faster than its vessel", "speed = 0.0\ndepth = 0.0", "speed = 5.0\ndepth = 0.0",
+     "asv.start.speed", ["u_max = 2.5 m/s", "'gretha'"]),
+    ("ASV under water", "speed = 0.0\ndepth = 0.0", "speed = 0.0\ndepth = 5.0",
+     "asv.start.depth", ["at the surface"]),
+    ("ping period 1e-9 s (looped for ever)", "T0 = 5.0", "T0 = 1e-9",
+     "acoustics.T0", ["[1, 604800] s"]),
+    ("acoustic range 1e300", "d2 = 800.0", "d2 = 1e300", "acoustics.d2", ["(0, 20000] m"]),
+    ("range noise inf", "sigma_range = 0.5", "sigma_range = inf",
+     "acoustics.sigma_range", ["not a finite number"]),
+    ("INS noise inf", "eps_a = 0.002", "eps_a = inf", "navigation.eps_a", ["not a finite number"]),
+    ("current field knot at inf", "[navigation]", "[current_field]\nknots = [[inf, 0.0, 0.0]]\n"
+     "[navigation]", "current_field.knots[0][0]", ["not a finite number"]),
+    ("current field origin 1e300", "[navigation]", "[current_field]\norigin = [1e300, 0.0]\n"
+     "[navigation]", "current_field.origin[0]", ["3.024e+06"]),
+    ("unknown vessel", 'vessel = "gretha"', 'vessel = "nope"',
+     "asv.vessel", ["unknown vessel 'nope'", "'dune-otter'", "'gretha'", "'otter'"]),
+    ("unknown execution", 'execution = "gretha"', 'execution = "nope"',
+     "asv.execution", ["unknown execution 'nope'", "'gretha'"]),
+    ("probability nan", "p_good = 0.95", "p_good = nan",
+     "acoustics.p_good", ["nan is not a finite number"]),
+]  # fmt: skip
+
+CASES = AUV_CASES + WORLD_CASES
 
 
 def _write(tmp_path: Path, old: str, new: str) -> Path:
@@ -213,6 +245,21 @@ def test_more_than_ten_thousand_waypoints_in_one_plan_are_refused(tmp_path):
     path = _write(tmp_path, ROUTE, route)
     with pytest.raises(ConfigError, match=r"auv\[0\]\.behaviour\.plan\.route: 10002 waypoints"):
         load_scenario(path)
+
+
+def test_a_plant_step_above_the_execution_levels_filter_constant_is_refused(tmp_path):
+    """dt <= 0.2 s is not enough with an execution level whose yaw derivative filter is faster:
+    its Euler step diverges above 2 T_f (checked against the scenario's own execution file)."""
+    from mpcasv.config import DATA_DIR
+
+    text = (DATA_DIR / "execution" / "gretha.toml").read_text().replace("T_f = 0.2", "T_f = 0.05")
+    (tmp_path / "fast.toml").write_text(text)
+    path = _write(tmp_path, 'execution = "gretha"', 'execution = "fast.toml"')
+    with pytest.raises(ConfigError) as err:
+        load_scenario(path)
+    assert f"{path}: sim.dt: 0.1 s is above the yaw derivative filter's T_f = 0.05 s" in str(
+        err.value
+    )
 
 
 def test_a_models_own_refusal_is_named_at_load_whatever_the_checks_miss(tmp_path, monkeypatch):

@@ -25,24 +25,40 @@ from dataclasses import dataclass
 import numpy as np
 from pydantic import model_validator
 
-from mpcasv.config import Flag, NonNeg, Pos, Prob, frozen
+from mpcasv.config import DURATION_MAX, Flag, Prob, between, frozen
+
+# Bounds of the channel's numbers (docs/experiments.md, "Bounds"; nan and inf refused as "not
+# a finite number"):
+#: A ping or report period (s): at least a second (a USBL fix waits for the ping's round trip,
+#: 1 s to 750 m; ``T0 = 1e-9`` looped for ever over the pings of one period) and at most the
+#: longest run.
+Period = between(1.0, DURATION_MAX, "s", "a round trip takes about a second; a run a week")
+#: The longest acoustic range (m): about twice the longest-range USBL systems' ~10 km.
+ACOUSTIC_RANGE_MAX = 20000.0
+AcousticRange = between(0, ACOUSTIC_RANGE_MAX, "m", "no USBL reaches further", lo_open=True)
+#: A bearing error, 1 sigma (deg): beyond half a turn a bearing says nothing.
+BearingSigma = between(0, 180, "deg", "beyond half a turn a bearing says nothing")
+#: A range error, 1 sigma (m): no larger than the longest range.
+RangeSigma = between(0, ACOUSTIC_RANGE_MAX, "m", "no larger than the longest acoustic range")
+#: A GPS error, 1 sigma (m): 1 km off is no fix (a GPS fix is 2-10 m).
+GpsSigma = between(0, 1000, "m", "a GPS fix is metres, 1 km off is no fix")
 
 
 @frozen
 class AcousticParams:
     """Acoustic channel parameters (PAPER-FACTS §1; guesses marked)."""
 
-    T0: Pos = 5.0  # USBL fix period per AUV (s)
-    T_report: Pos = 30.0  # status report period (s)
+    T0: Period = 5.0  # USBL fix period per AUV (s)
+    T_report: Period = 30.0  # status report period (s)
     usbl: Flag = True  # USBL fixes available (False: only status reports, as in Case 5)
-    d1: Pos = 500.0  # slant range of good reception (m)
-    d2: Pos = 800.0  # slant range of sporadic reception (m)
+    d1: AcousticRange = 500.0  # slant range of good reception (m)
+    d2: AcousticRange = 800.0  # slant range of sporadic reception (m)
     p_good: Prob = 0.95  # success probability below d1 (guess)
     p_sporadic: Prob = 0.3  # success probability in (d1, d2] (guess)
     propeller_factor: Prob = 0.63  # multiplier while the propeller runs (Norgren et al.: 63 %)
-    sigma_bearing_deg: NonNeg = 1.0  # USBL bearing error, 1 sigma (deg; guess)
-    sigma_range: NonNeg = 0.5  # USBL range noise, 1 sigma (m; guess)
-    gps_sigma: NonNeg = 2.0  # AUV position error after a GPS fix at the surface (m)
+    sigma_bearing_deg: BearingSigma = 1.0  # USBL bearing error, 1 sigma (deg; guess)
+    sigma_range: RangeSigma = 0.5  # USBL range noise, 1 sigma (m; guess)
+    gps_sigma: GpsSigma = 2.0  # AUV position error after a GPS fix at the surface (m)
 
     @model_validator(mode="after")
     def _order(self) -> AcousticParams:
@@ -55,8 +71,11 @@ class AcousticParams:
 class NavParams:
     """AUV inertial navigation drift between fixes (thesis eq. 2.7)."""
 
-    eps_a: NonNeg = 0.002  # accelerometer noise, RMS (m/s^2); MRU 5 value from the thesis
-    drift_per_distance: NonNeg = 0.0  # extra drift as a fraction of distance travelled
+    #: accelerometer noise, RMS (m/s^2); MRU 5 value from the thesis. At most 1 m/s^2 (eq. 2.7
+    #: puts the AUV 450 m off 30 s after a fix: no navigation at all; IMUs: 1e-4 to 0.1)
+    eps_a: between(0, 1.0, "m/s^2", "1 m/s^2 is 450 m off 30 s after a fix") = 0.002
+    #: extra drift as a fraction of distance travelled (at most 1: all of it)
+    drift_per_distance: between(0, 1.0, "", "a drift as long as the way is no navigation") = 0.0
 
 
 def success_probability(slant, propeller_on, p: AcousticParams):

@@ -26,7 +26,7 @@ import math
 import numpy as np
 from pydantic import model_validator
 
-from mpcasv.config import Float, NonNeg, Pos, Prob, frozen
+from mpcasv.config import Coord, Float, Length, Prob, Time, frozen
 
 #: current speeds above this are refused: the ASV (Gretha, ~2 m/s) could not hold station
 V_MAX = 2.0
@@ -37,10 +37,12 @@ class CurrentField:
     """The ``[current_field]`` table: a time profile and a spatial gradient added to the
     scenario's constant current, and how much of it carries the AUVs (see module docstring)."""
 
-    knots: tuple[tuple[NonNeg, Float, Float], ...] = ()  # (t s, dV_N m/s, dV_E m/s)
+    # (t s, dV_N m/s, dV_E m/s): t within the longest run; the speeds bounded with the
+    # gradient by Scenario's check (the whole field within 2 m/s)
+    knots: tuple[tuple[Time, Float, Float], ...] = ()
     gradient: tuple[tuple[Float, Float], tuple[Float, Float]] | None = None  # G, 1/s
-    origin: tuple[Float, Float] = (0.0, 0.0)  # p_0 (N, E), m
-    radius: Pos = 1000.0  # m: the gradient's displacement is held beyond this
+    origin: tuple[Coord, Coord] = (0.0, 0.0)  # p_0 (N, E), m
+    radius: Length = 1000.0  # m: the gradient's displacement is held beyond this
     auv_factor: Prob = 1.0  # fraction of the current carrying the AUVs
 
     @model_validator(mode="after")

@@ -11,16 +11,17 @@ import dataclasses
 import math
 from pathlib import Path
 
-from pydantic import model_validator
+from pydantic import field_validator, model_validator
 
 from mpcasv.config import (
     ConfigError,
     Duration,
+    FieldError,
     Flag,
     Float,
     PathName,
-    Pos,
     anchor,
+    between,
     frozen,
     is_path,
     load_toml,
@@ -46,22 +47,76 @@ from mpcasv.sim.uncertainty import Uncertain, check_uncertain
 
 @frozen
 class ASVSpec:
+    """The ASV: where it starts (at the surface: ``depth`` 0; ``speed`` at most the vessel's
+    ``u_max``), its vessel and its execution level (shipped names or TOML paths, loaded and
+    checked when the scenario is: an unknown one is refused naming the field and the shipped
+    names)."""
+
     start: Start = Start()
     vessel: str = "gretha"  # shipped name or TOML path
     execution: str = "gretha"  # shipped name or TOML path
 
+    @field_validator("vessel")
+    @classmethod
+    def _vessel(cls, v: str) -> str:
+        from mpcasv.models.params import load_vessel
+
+        _loads(load_vessel, v)
+        return v
+
+    @field_validator("execution")
+    @classmethod
+    def _execution(cls, v: str) -> str:
+        from mpcasv.control.params import load_execution
+
+        _loads(load_execution, v)
+        return v
+
+
+def _loads(load, name: str):
+    """``load(name)``; its ConfigError as one line (a ValueError: the field is named by
+    :func:`~mpcasv.config.parse`)."""
+    try:
+        return load(name)
+    except ConfigError as exc:
+        lines = (ln.strip() for ln in str(exc).splitlines())
+        raise ValueError("; ".join(ln for ln in lines if ln)) from None
+
+
+#: The plant step's bounds (s). The execution level (guidance, yaw PID, speed loop) samples at
+#: ``dt``: every shipped gain is tuned at 0.1 s (the autopilot's 10 Hz, docs/tuning.md) and the
+#: yaw PID's derivative filter (explicit Euler, time constant ``yaw.T_f``: 0.2 s for Gretha) is
+#: stable only below 2 T_f and free of overshoot up to T_f. Case 3 runs the same (0.1 %) at
+#: 0.2 s as at 0.1 s; at 0.5 s the yaw loop fails (600 s of propeller instead of 220 s). The
+#: vessel's RK4 itself is sub-stepped to its fastest pole (models/envelope.py) at any dt.
+#: Below 1 ms (no autopilot samples faster) a run is millions of steps.
+DT_MIN, DT_MAX = 0.001, 0.2
+#: The longest supervisory period (s): seconds, not hours (the papers' is 1 s; the same bound
+#: as a deployment's ``controller.control_period``)
+CONTROL_PERIOD_MAX = 60.0
+#: The most plant steps per supervisory period: they are compiled into one CasADi function
+#: (1000 take about 8 s; ``dt = 1e-6`` hung building a million)
+N_SUB_MAX = 1000
+
 
 @frozen
 class SimSpec:
-    dt: Pos = 0.1  # plant step (s)
-    control_period: Pos = 1.0  # supervisory period (s)
+    dt: between(DT_MIN, DT_MAX, "s", "the execution level samples at dt") = 0.1  # plant step
+    #: supervisory period (s): a multiple of dt
+    control_period: between(0, CONTROL_PERIOD_MAX, "s", "seconds, not hours",
+                            lo_open=True) = 1.0  # fmt: skip
     log_every_step: Flag = False  # log at the plant step instead of the supervisory period
 
     @model_validator(mode="after")
     def _multiple(self) -> SimSpec:
         n = self.control_period / self.dt
         if abs(n - round(n)) > 1e-9 or round(n) < 1:
-            raise ValueError("control_period must be a positive multiple of dt")
+            raise FieldError("control_period", f"{self.control_period:g} s: a positive "
+                             f"multiple of dt ({self.dt:g} s) is needed")  # fmt: skip
+        if round(n) > N_SUB_MAX:
+            raise FieldError("control_period", f"{self.control_period:g} s is {round(n)} plant "
+                             f"steps of dt = {self.dt:g} s, more than the allowed {N_SUB_MAX} "
+                             "(each period's steps are compiled into one function)")  # fmt: skip
         return self
 
     @property
@@ -97,26 +152,51 @@ class Scenario:
     @model_validator(mode="after")
     def _check(self) -> Scenario:
         if not self.auv:
-            raise ValueError("a scenario needs at least one [[auv]]")
+            raise FieldError("auv", "empty: a scenario needs at least one [[auv]]")
         from mpcasv.estimation import ESTIMATORS  # here, not at import: estimation imports sim
 
         if self.estimator not in ESTIMATORS:
-            raise ValueError(f"estimator: unknown estimator {self.estimator!r}; known: "
+            raise FieldError("estimator", f"unknown estimator {self.estimator!r}; known: "
                              f"{sorted(ESTIMATORS)}")  # fmt: skip
         names = [a.name for a in self.auv]
         if len(set(names)) != len(names):
-            raise ValueError(f"AUV names must be unique, got {names}")
+            raise FieldError("auv", f"AUV names must be unique, got {names}")
         if math.hypot(*self.current) > V_MAX:
-            raise ValueError("current above 2 m/s is not supported (the ASV could not hold)")
+            raise FieldError("current", "above 2 m/s is not supported (the ASV could not hold)")
         if self.current_field is not None:
             top = math.hypot(*self.current) + self.current_field.extra_max()
             if top > V_MAX:
-                raise ValueError(f"current_field: the current may reach {top:.3g} m/s (|current| "
-                                 "+ largest knot + ||gradient|| x radius), above 2 m/s (the ASV "
-                                 "could not hold)")  # fmt: skip
+                raise FieldError("current_field", f"the current may reach {top:.3g} m/s "
+                                 "(|current| + largest knot + ||gradient|| x radius), above "
+                                 "2 m/s (the ASV could not hold)")  # fmt: skip
+        self._check_asv()
         if not self.uncertain.is_empty():
-            check_uncertain(self)
+            try:
+                check_uncertain(self)
+            except ValueError as exc:  # "uncertain.<field>: <cause>": name the field
+                field, _, cause = str(exc).partition(": ")
+                raise FieldError(field, cause) from None
         return self
+
+    def _check_asv(self) -> None:
+        """The ASV at the surface, no faster than its vessel, and a plant step its execution
+        level can sample at (the files are loaded: :class:`ASVSpec` has checked them)."""
+        from mpcasv.control.params import load_execution
+        from mpcasv.models.params import load_vessel
+
+        start = self.asv.start
+        if start.depth != 0.0:
+            raise FieldError("asv.start.depth", f"{start.depth:g} m: the ASV is at the surface "
+                             "(depth belongs to an AUV's start)")  # fmt: skip
+        u_max = load_vessel(self.asv.vessel).u_max
+        if start.speed > u_max:
+            raise FieldError("asv.start.speed", f"{start.speed:g} m/s exceeds the top speed "
+                             f"u_max = {u_max:g} m/s of vessel {self.asv.vessel!r}")  # fmt: skip
+        T_f = load_execution(self.asv.execution).yaw.T_f
+        if self.sim.dt > T_f:
+            raise FieldError("sim.dt", f"{self.sim.dt:g} s is above the yaw derivative filter's "
+                             f"T_f = {T_f:g} s of execution {self.asv.execution!r} (its Euler "
+                             "step needs dt <= T_f)")  # fmt: skip
 
     @property
     def n_steps(self) -> int:
