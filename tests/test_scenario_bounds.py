@@ -184,7 +184,28 @@ WORLD_CASES = [
      "acoustics.p_good", ["nan is not a finite number"]),
 ]  # fmt: skip
 
-CASES = AUV_CASES + WORLD_CASES
+#: an [uncertain] table's supports within the same bounds
+UNCERTAIN_CASES = [
+    ("uncertain offset beyond the coordinates", "[navigation]",
+     '[uncertain.auv.all]\noffset_N = { dist = "uniform", low = 0.0, high = 1e300 }\n'
+     "[navigation]", "uncertain.auv (auv)", ["offset_N", "3.024e+06"]),
+    ("uncertain ASV start beyond the coordinates", "[navigation]",
+     '[uncertain.asv]\nstart_E = { dist = "uniform", low = 0.0, high = 1e300 }\n'
+     "[navigation]", "uncertain.asv.start_E", ["3.024e+06"]),
+    ("uncertain rotation beyond ten turns", "[navigation]",
+     '[uncertain.auv.all]\nrotation_deg = { dist = "uniform", low = 0.0, high = 4000.0 }\n'
+     "[navigation]", "uncertain.auv (auv)", ["rotation_deg", "+-3600 deg"]),
+    ("uncertain event shift beyond the week", ROUTE,
+     _events('t = 600000.0\nkind = "abort"') + '\n[uncertain.auv.all]\nevent_time_s = '
+     '{ dist = "uniform", low = 0.0, high = 10000.0 }',
+     "uncertain.auv (auv).event_time_s", ["604800 s"]),
+    ("uncertain speed factor above speed_max by the surface speed", "surface_speed = 0.0\n"
+     "acceptance = 5.0\n" + ROUTE, "surface_speed = 2.0\nacceptance = 5.0\n" + ROUTE
+     + '\n[uncertain.auv.all]\nspeed_factor = { dist = "uniform", low = 0.9, high = 1.1 }',
+     "uncertain.auv (auv).speed_factor", ["fastest speed 2.0"]),
+]  # fmt: skip
+
+CASES = AUV_CASES + WORLD_CASES + UNCERTAIN_CASES
 
 
 def _write(tmp_path: Path, old: str, new: str) -> Path:

@@ -28,7 +28,7 @@ import json
 import math
 from typing import Any
 
-from mpcasv.config import ConfigError, frozen
+from mpcasv.config import DISTANCE_MAX, DURATION_MAX, ConfigError, frozen
 from mpcasv.sim.distributions import Choice, Dist, Normal, Uniform, stream
 
 
@@ -139,8 +139,86 @@ def check_uncertain(sc) -> None:
                                  "uncertain.auv.all (say it once)")  # fmt: skip
     _check_current(sc, unc.current)
     _check_acoustics(sc, unc.acoustics)
+    _check_asv(sc, unc.asv)
     for spec in sc.auv:
         _check_auv(spec, auv_uncertainty(unc, spec.name))
+        _check_auv_geometry(spec, auv_uncertainty(unc, spec.name))
+
+
+#: the bound of every heading of a scenario (deg): ten turns either way (mpcasv.config.Heading)
+HEADING_MAX = 3600.0
+
+
+def _span(given: dict[str, Any], key: str) -> tuple[float, float]:
+    """The support of ``given[key]``, (0, 0) when it is not uncertain."""
+    return given[key].support() if key in given else (0.0, 0.0)
+
+
+def _check_asv(sc, au: ASVUncertainty) -> None:
+    """The ASV's start stays within the coordinate and heading bounds for every draw."""
+    given, start = _given(au), sc.asv.start
+    for key, nominal, bound in (("start_N", start.N, DISTANCE_MAX),
+                                ("start_E", start.E, DISTANCE_MAX),
+                                ("start_psi_deg", start.psi_deg, HEADING_MAX)):  # fmt: skip
+        lo, hi = _span(given, key)
+        if max(abs(nominal + lo), abs(nominal + hi)) > bound:
+            raise ValueError(f"uncertain.asv.{key}: support [{lo}, {hi}] may move the start "
+                             f"({nominal}) beyond the allowed +-{bound:g}")  # fmt: skip
+
+
+def _points(spec) -> list[tuple[float, float]]:
+    """Every horizontal point of an AUV's specification that its offsets and rotation move:
+    its start, its plans' waypoints (lawnmowers' included) and its loiter points."""
+    pts = [(spec.start.N, spec.start.E)]
+    for b in (spec.behaviour, *spec.events):
+        if getattr(b, "plan", None) is not None:
+            pts += [(float(p[0]), float(p[1])) for seg in b.plan.route for p in seg.points()]
+        loiter = getattr(b, "loiter", None)
+        for at in (getattr(b, "at", None), None if loiter is None else loiter.at):
+            if at is not None:
+                pts.append((at[0], at[1]))
+    return pts
+
+
+def _headings(spec) -> list[float]:
+    """The headings a rotation turns: lawnmowers' and transits' (the start's apart)."""
+    out = []
+    for b in (spec.behaviour, *spec.events):
+        if getattr(b, "plan", None) is not None:
+            out += [seg.lawnmower.heading_deg for seg in b.plan.route if seg.lawnmower]
+        if getattr(b, "transit", None) is not None:
+            out.append(b.transit.heading_deg)
+    return out
+
+
+def _check_auv_geometry(spec, given: dict[str, Any]) -> None:
+    """An AUV's offsets, rotation and start shifts keep every point within the coordinate
+    bound and every heading within ten turns, for every draw (conservatively: a rotated point
+    may lie anywhere on its circle about the start)."""
+    keys = [k for k in ("offset_N", "offset_E", "rotation_deg", "start_N", "start_E",
+                        "start_psi_deg") if k in given]  # fmt: skip
+    if not keys:
+        return
+    where = f"uncertain.auv ({spec.name})"
+    N0, E0 = spec.start.N, spec.start.E
+    rot = max(abs(x) for x in _span(given, "rotation_deg"))
+    for i, (axis, origin) in enumerate((("N", N0), ("E", E0))):
+        off = _span(given, f"offset_{axis}")
+        shift = _span(given, f"start_{axis}")
+        for k, p in enumerate(_points(spec)):
+            r = math.hypot(p[0] - N0, p[1] - E0)
+            lo, hi = (-r, r) if rot > 0 else (p[i] - origin, p[i] - origin)
+            extra = shift if k == 0 else (0.0, 0.0)  # start_N/E move the start only
+            reach = max(abs(origin + lo + off[0] + extra[0]), abs(origin + hi + off[1] + extra[1]))
+            if reach > DISTANCE_MAX:
+                raise ValueError(f"{where}: {', '.join(keys)} may move a point of the AUV to "
+                                 f"{axis} = {reach:.4g} m, beyond the allowed +-{DISTANCE_MAX:g} "
+                                 "m (what the fastest AUV covers in a week)")  # fmt: skip
+    psi = max(abs(x) for x in _span(given, "start_psi_deg"))
+    for h in [spec.start.psi_deg + math.copysign(psi, spec.start.psi_deg), *_headings(spec)]:
+        if abs(h) + rot > HEADING_MAX:
+            raise ValueError(f"{where}: {', '.join(keys)} may turn a heading ({h} deg) beyond "
+                             f"the allowed +-{HEADING_MAX:g} deg (ten turns either way)")
 
 
 def _check_current(sc, cu: CurrentUncertainty) -> None:
@@ -188,7 +266,8 @@ def _check_auv(spec, given: dict[str, Any]) -> None:
     behaviours = [b for b in _behaviours(spec) if b is not None]
     if "speed_factor" in given:
         lo, hi = given["speed_factor"].support()
-        top = max((b.speed for b in behaviours), default=0.0)
+        top = max((max(b.speed, getattr(b, "surface_speed", 0.0)) for b in behaviours),
+                  default=0.0)  # fmt: skip
         if not behaviours:
             raise ValueError(f"{where}.speed_factor: the AUV has no plan, pursuer or transit, so "
                              "it changes nothing")  # fmt: skip
@@ -202,16 +281,19 @@ def _check_auv(spec, given: dict[str, Any]) -> None:
         if not times:
             raise ValueError(f"{where}.event_time_s: the AUV has no events, so it changes nothing")
         gap = min((b - a for a, b in zip(times, times[1:], strict=False)), default=math.inf)
-        if times[0] + lo < 0 or hi - lo >= gap:
+        if times[0] + lo < 0 or times[-1] + hi > DURATION_MAX or hi - lo >= gap:
             raise ValueError(f"{where}.event_time_s: support [{lo}, {hi}] s must keep the events "
-                             f"at t >= 0 and in order (first at {times[0]} s, closest two "
+                             f"at 0 <= t <= {DURATION_MAX:g} s (a week, the longest run) and in "
+                             f"order (first at {times[0]} s, last at {times[-1]} s, closest two "
                              f"{gap} s apart)")  # fmt: skip
     if "update_period_s" in given:
         if not any(hasattr(b, "update_period") for b in behaviours):
             raise ValueError(f"{where}.update_period_s: the AUV never pursues, so it changes "
                              "nothing")  # fmt: skip
-        if given["update_period_s"].support()[0] < 0:
-            raise ValueError(f"{where}.update_period_s: must be >= 0 s")
+        lo, hi = given["update_period_s"].support()
+        if lo < 0 or hi > DURATION_MAX:
+            raise ValueError(f"{where}.update_period_s: support [{lo}, {hi}] s must lie in "
+                             f"[0, {DURATION_MAX:g}] s (a week, the longest run)")  # fmt: skip
 
 
 # ----------------------------------------------------------------------------- drawing
