@@ -399,3 +399,15 @@ def test_config_ranges_name_their_bound_and_a_field_below_the_model():
     assert problem({"inner": [{"p": math.nan}]}) == "x.toml: inner[0].p: nan is not a finite number"
     assert problem({"inner": [{}, {}]}) == "x.toml: inner[1].legs: not two"
     assert "valid integer" in problem({"inner": [{"legs": 2.0}]})
+
+
+def test_a_scenario_without_a_preset_runs_with_its_controllers_default(tmp_path, capsys):
+    """``preset`` may be left out (default "default"): `mpcasv simulate` looked up a preset
+    named 'default' and exited 2 ("unknown preset 'default'")."""
+    path = _write(tmp_path, 'preset = "goto"\n', "")
+    path.write_text(path.read_text().replace("duration = 20.0", "duration = 3.0"))
+    assert load_scenario(path).preset == "default"
+    out = tmp_path / "run"
+    assert main(["simulate", str(path), "--out", str(out), "--quiet", "--no-plots"]) == 0, (
+        capsys.readouterr().err)
+    assert (out / "metrics.json").exists()
