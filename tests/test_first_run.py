@@ -45,9 +45,14 @@ def test_compile_estimate_grows_with_the_auvs_and_the_sub_steps():
     assert compile_estimate(1, n_sub=2) == one  # fewer sub-steps are not measured: no less
 
 
-def test_listed_library_is_the_one_the_controller_loads():
+def test_listed_library_is_the_one_the_controller_loads(monkeypatch):
     """The path needed_libraries computes is the path MPCController loads (same functions and
-    key as mpcasv.mpc.codegen.compiled_library)."""
+    key as mpcasv.mpc.codegen.compiled_library). The process's OCP cache is emptied for the
+    test: an earlier test in the same process that built this controller (test_mpc_depth's
+    first, for one) left it there, and the controller then loaded no library at all."""
+    from mpcasv.mpc import controller
+
+    monkeypatch.setattr(controller, "_OCP_CACHE", {})
     boat = Boat.load()
     (lib,) = needed_libraries([("mpc-single", 1, "mpc-single", None, boat)])
     codegen._LOADED.clear()
