@@ -20,7 +20,7 @@ from mpcasv.estimation import (
 )
 from mpcasv.estimation.evaluate import acceptance_ratios, compare_estimators
 from mpcasv.estimation.kalman import cv_model
-from mpcasv.estimation.plan import Polyline
+from mpcasv.estimation.survey_plan import Polyline
 from mpcasv.interface import AUVEstimate
 from mpcasv.models.acoustics import Fix, Report
 from mpcasv.models.auv import AUVLimits, auv_step_function

@@ -8,10 +8,9 @@ from mpcasv.estimation.base import (
     make_estimator,
 )
 from mpcasv.estimation.kalman import KalmanEstimator, KalmanParams
-from mpcasv.estimation.plan import (
+from mpcasv.estimation.plan import PlanEstimator, PlanParams
+from mpcasv.estimation.survey_plan import (
     KnownPlan,
-    PlanEstimator,
-    PlanParams,
     check_plan_estimator,
     has_plan,
     known_plan,

@@ -98,7 +98,7 @@ def _plan(initial=None, plan=None, plan_params=None, kalman=None, **_):
 #: name -> factory(initial=AUVEstimate or None, **options) -> estimator. Options understood
 #: (others are ignored, so every estimator can be built with the same call): ``kalman``
 #: (:class:`~mpcasv.estimation.kalman.KalmanParams`), ``plan``
-#: (:class:`~mpcasv.estimation.plan.KnownPlan` or None), ``plan_params``
+#: (:class:`~mpcasv.estimation.survey_plan.KnownPlan` or None), ``plan_params``
 #: (:class:`~mpcasv.estimation.plan.PlanParams`).
 ESTIMATORS: dict[str, Callable[..., AUVEstimator]] = {
     "perfect": lambda initial=None, **_: PerfectEstimator(),
@@ -119,7 +119,7 @@ def make_estimator(name: str, initial: AUVEstimate | None = None, **options) -> 
         The AUV's known initial state.
     **options
         ``kalman=KalmanParams``, ``plan=KnownPlan`` (the AUV's plan as the ASV knows it, see
-        :func:`mpcasv.estimation.plan.known_plan`), ``plan_params=PlanParams``; ignored by
+        :func:`mpcasv.estimation.survey_plan.known_plan`), ``plan_params=PlanParams``; ignored by
         estimators that do not use them.
     """
     try:

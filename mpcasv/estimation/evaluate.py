@@ -35,7 +35,7 @@ import pandas as pd
 
 from mpcasv.config import ConfigError
 from mpcasv.estimation.base import ESTIMATORS
-from mpcasv.estimation.plan import check_plan_estimator, has_plan
+from mpcasv.estimation.survey_plan import check_plan_estimator, has_plan
 from mpcasv.sim.scenario import Scenario
 
 __all__ = [
