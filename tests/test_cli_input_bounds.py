@@ -15,7 +15,7 @@ import pytest
 
 from mpcasv.cli import main
 from mpcasv.config import SEED_MAX, ConfigError, check_seed, parse
-from mpcasv.experiments.suite import load_suite
+from mpcasv.experiments.suite_file import load_suite
 from mpcasv.sim.scenario import load_scenario
 
 ROOT = Path(__file__).resolve().parents[1]

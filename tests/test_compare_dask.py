@@ -17,7 +17,7 @@ import pandas as pd
 import pytest
 
 from mpcasv.experiments.runner import run_suite
-from mpcasv.experiments.suite import SCENARIOS_DIR
+from mpcasv.experiments.suite_file import SCENARIOS_DIR
 
 distributed = pytest.importorskip("distributed")
 

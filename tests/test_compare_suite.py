@@ -9,7 +9,8 @@ import pytest
 from mpcasv.cli import main
 from mpcasv.config import ConfigError
 from mpcasv.controllers import registry as controllers
-from mpcasv.experiments.suite import SCENARIOS_DIR, SUITES_DIR, expand
+from mpcasv.experiments.suite import expand
+from mpcasv.experiments.suite_file import SCENARIOS_DIR, SUITES_DIR
 
 GOOD = """
 name = "t"

@@ -13,7 +13,8 @@ import pytest
 from mpcasv.controllers import Boat, make_controller
 from mpcasv.controllers.prepare import about, needed_libraries, prepare
 from mpcasv.experiments.runner import prepare_controllers
-from mpcasv.experiments.suite import SCENARIOS_DIR, expand
+from mpcasv.experiments.suite import expand
+from mpcasv.experiments.suite_file import SCENARIOS_DIR
 from mpcasv.mpc import codegen
 from mpcasv.mpc.derivatives import nlp_functions
 from mpcasv.mpc.prepare import RUNTIME_WEIGHTS, Library, compile_estimate, structure_key

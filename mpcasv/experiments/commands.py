@@ -59,7 +59,7 @@ def run(args: argparse.Namespace) -> int:
     from mpcasv.experiments import acceptance
     from mpcasv.experiments.report import READ_LINE
     from mpcasv.experiments.runner import JOB_TIMEOUT_S, is_url, run_suite, say_untested_current
-    from mpcasv.experiments.suite import load_suite
+    from mpcasv.experiments.suite_file import load_suite
     from mpcasv.experiments.workers import check_workers
     from mpcasv.outputs import check_not_other_output, check_output_folder
 

@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING
 from mpcasv.config import ConfigError
 
 if TYPE_CHECKING:
-    from mpcasv.experiments.suite import Suite
+    from mpcasv.experiments.suite_file import Suite
 
 
 def axis_label(current) -> str:

@@ -10,7 +10,7 @@ from pathlib import Path
 from typing import Any
 
 from mpcasv.config import ConfigError, anchor
-from mpcasv.experiments.suite import ControllerEntry, Suite, _flatten
+from mpcasv.experiments.suite_file import ControllerEntry, Suite, _flatten
 
 
 def _preset_ref(preset: str, base: Path) -> str:
