@@ -15,8 +15,9 @@ from refusal import assert_refused_in_one_line
 from mpcasv.cli import main
 from mpcasv.config import ConfigError
 from mpcasv.experiments.suite import expand
+from mpcasv.sim.realisation import Realisation, apply
 from mpcasv.sim.scenario import load_scenario, scenario_from_dict
-from mpcasv.sim.uncertainty import Realisation, apply, distributions, draw, realise
+from mpcasv.sim.uncertainty import distributions, draw, realise
 
 BASE = """
 name = "t"

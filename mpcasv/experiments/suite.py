@@ -54,7 +54,7 @@ class Job:
     plots: bool
     cost: float  # rough relative run time, for scheduling long jobs first
     current_axis: str = "scenario"  # the suite's current value: "scenario", "off" or "V_N,V_E"
-    realisation: str = ""  # id of the drawn realisation (mpcasv.sim.uncertainty.Realisation)
+    realisation: str = ""  # id of the drawn realisation (mpcasv.sim.realisation.Realisation)
     current_realised: tuple[float, float] | None = None  # (V_N, V_E) m/s simulated (drawn)
 
     @property
