@@ -24,8 +24,8 @@ FAILING = pending_jobs(QUICK, QUICK.path.parent / "no-such-dir")[0]  # the first
 # little (so that the kill lands in the middle of the sweep).
 DRIVER = textwrap.dedent("""
     import os, sys, time
-    from mpcasv.experiments import runner
-    real = runner.simulate_job
+    from mpcasv.experiments import job_worker
+    real = job_worker.simulate_job
 
     def simulate_job(job, run_dir):
         if job.job_id == os.environ["FAIL_JOB"]:
@@ -33,7 +33,7 @@ DRIVER = textwrap.dedent("""
         time.sleep(0.3)
         return real(job, run_dir)
 
-    runner.simulate_job = simulate_job
+    job_worker.simulate_job = simulate_job
     from mpcasv.cli import main
     sys.exit(main(sys.argv[1:]))
 """)

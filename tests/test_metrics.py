@@ -278,8 +278,8 @@ def test_between_steps_ms_max_is_null_when_no_solve_ran_between_steps(tmp_path):
     results table, the summary and the paired statistics take it as missing."""
     import json
 
+    from mpcasv.experiments.job_worker import _metric_columns
     from mpcasv.experiments.report import summary_table
-    from mpcasv.experiments.runner import _metric_columns
     from mpcasv.experiments.stats import paired_table
     from mpcasv.experiments.store import read_parts, write_part
     from mpcasv.sim.record import write_run

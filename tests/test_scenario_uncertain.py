@@ -220,7 +220,7 @@ def test_a_realisation_round_trips_through_run_json(tmp_path):
 
 
 def test_the_runner_records_the_realisation_of_its_job(tmp_path):
-    from mpcasv.experiments.runner import run_job
+    from mpcasv.experiments.job_worker import run_job
 
     suite = write(tmp_path, f"""
         name = "u"

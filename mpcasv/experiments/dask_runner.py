@@ -11,7 +11,8 @@ from __future__ import annotations
 from pathlib import Path
 
 from mpcasv.config import ConfigError
-from mpcasv.experiments.runner import SweepStats, finish_job, record_row, run_job
+from mpcasv.experiments.job_worker import run_job
+from mpcasv.experiments.runner import SweepStats, finish_job, record_row
 from mpcasv.experiments.suite import Job
 
 __all__ = ["check_dask_cluster", "check_dask_workers", "connect", "hang_guarded", "run_dask"]
