@@ -1,0 +1,265 @@
+"""``mpcasv tune yaw`` and ``mpcasv tune speed`` behind the command line (parsed in
+:mod:`mpcasv.control.commands`): the checks before any work, the designs, their acceptance, the
+provenance written with them and the execution TOML (written only when the acceptance passes).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import shlex
+from pathlib import Path
+
+from mpcasv.config import ConfigError
+
+DEFAULT_SPEEDS = "0.5,1,1.5,2,2.5"  # Gretha's: 0.2 ... 1.0 u_max (the default for any vessel)
+SPEED_FRACTIONS = (0.2, 0.4, 0.6, 0.8, 1.0)
+DESIGN_FRACTION = 0.4  # default --design-speed / top speed: Gretha's 1 m/s
+WN_PER_SPEED = 0.3  # default --wn-per-speed, rad/m
+
+
+def _command_line(args: argparse.Namespace, name: str) -> str:
+    """The command as it could be typed again (from the parsed options, not sys.argv)."""
+    parts = ["mpcasv", name]
+    for key, v in vars(args).items():
+        if key in ("func", "command", "tune_what", "quiet") or v is None or v is False:
+            continue
+        opt = "--" + key.replace("_", "-") if key != "T_f" else "--T-f"
+        if v is True:
+            parts.append(opt)
+        else:
+            text = ",".join(f"{x:g}" for x in v) if isinstance(v, list) else str(v)
+            parts += [opt, shlex.quote(text)]
+    return " ".join(parts)
+
+
+def _provenance(old: str, key: str, text: str) -> str:
+    """Replace the ``key: ...`` part of a ``"; "``-separated provenance string."""
+    parts = [p for p in old.split(" | ") if p and not p.startswith(f"{key}: ")]
+    parts = [p for p in parts if p.split(":")[0] in ("yaw", "speed", "reference")]
+    return " | ".join(sorted([*parts, f"{key}: {text}"]))
+
+
+def _setup(args, what: str):
+    """Load and check everything before any work (one line, exit 2, for bad input)."""
+    from mpcasv.control import tuning_checks as tc
+    from mpcasv.control.params import load_execution
+    from mpcasv.control.tuning_yaw import check_speeds
+    from mpcasv.models.params import load_vessel
+    from mpcasv.models.vessel import VesselModel
+    from mpcasv.outputs import check_output_file, check_output_folder
+
+    tc.check_positive(args)
+    tc.check_lists(args, increasing=("speeds",) if what == "yaw" else ())
+    model = VesselModel(load_vessel(args.vessel))
+    try:
+        ep = load_execution(args.base)
+    except ConfigError as exc:
+        raise ConfigError(f"--base {args.base}: {exc}") from None
+    top = min(model.top_speed, model.params.u_max)
+    if args.speeds is None:
+        args.speeds = [round(f * top, 4) for f in SPEED_FRACTIONS]
+    check_speeds(model, args.speeds, "--speeds")
+    if what == "speed":
+        if args.design_speed is None:
+            args.design_speed = round(DESIGN_FRACTION * top, 4)
+        tc.check_speed_limits(model, args)
+    check_output_folder(args.out)
+    toml = check_output_file(args.toml or args.out / "execution.toml", "--toml", (".toml",),
+                             parents=True)  # fmt: skip
+    return model, ep, toml
+
+
+def _write_if_pass(ok: bool, toml: Path, ep, what: str) -> str:
+    """Write the execution TOML only when the acceptance passed; the words for the summary.
+
+    A design that fails its acceptance (exit 1) leaves ``--toml`` as it was: the file is what
+    the simulator and ``--base`` load, and a failing design written there would be used as if
+    good (it was, until session 17). Its gains are in the report (yaw.json, speed.md)."""
+    from mpcasv.control.tuning import write_execution_toml
+
+    if not ok:
+        return f"{toml} NOT written (acceptance FAIL; the {what} design is in the report)"
+    write_execution_toml(toml, ep, _header(ep))
+    return f"wrote {toml}"
+
+
+def run_tune_yaw(args: argparse.Namespace) -> int:
+    from mpcasv.config import replace
+    from mpcasv.control.tuning_checks import check_yaw_limits
+    from mpcasv.control.tuning_report import plot_yaw, yaw_table
+    from mpcasv.control.tuning_yaw import CourseUnstable, tune_yaw
+
+    if args.wn is not None and args.wn_per_speed is not None:  # was silently ignored
+        raise ConfigError(f"--wn-per-speed {args.wn_per_speed:g} with --wn "
+                          f"{','.join(f'{w:g}' for w in args.wn)}"
+                          ": --wn sets the natural frequencies itself, so --wn-per-speed would "
+                          "be unused: give one of them")  # fmt: skip
+    if args.wn is None and args.wn_per_speed is None:
+        args.wn_per_speed = WN_PER_SPEED  # (in the provenance's command line, as given)
+    model, ep, toml = _setup(args, "yaw")
+    speeds = args.speeds
+    if args.wn is None:
+        wn = [args.wn_per_speed * u for u in speeds]
+    elif len(args.wn) in (1, len(speeds)):
+        wn = args.wn * len(speeds) if len(args.wn) == 1 else args.wn
+    else:
+        raise ConfigError(f"--wn: {len(args.wn)} values for {len(speeds)} speeds")
+    check_yaw_limits(model, args, wn)
+    args.out.mkdir(parents=True, exist_ok=True)
+    try:
+        ep_new, designs, runs = tune_yaw(model, ep, speeds, wn, args.zeta, args.integral_ratio,
+                                         args.T_f, args.dt, progress=not args.quiet)  # fmt: skip
+    except CourseUnstable as exc:
+        raise ConfigError(f"{args.vessel}: {exc}") from None
+    plot_yaw(model, designs, runs, args.T_f, args.out)
+    table = yaw_table(designs)
+    # nan (a margin neither python-control nor the sweep could compute) fails every >= test
+    ok = all(d.sampled["phase_margin_deg"] >= 45 and d.sampled["gain_margin_db"] >= 6
+             and d.linear["phase_margin_deg"] >= 45 and d.linear["gain_margin_db"] >= 6
+             and d.linear["stable"] and d.sampled["stable"]
+             and math.isfinite(d.nonlinear["settling_s"]) for d in designs)  # fmt: skip
+    ts_max = max(d.nonlinear["settling_s"] for d in designs)
+    cmd = _command_line(args, "tune yaw")
+    text = (f"{cmd}: pole placement on first-order Nomoto models of vessel "
+            f"{model.params.name}, wn {[round(w, 3) for w in wn]} rad/s, zeta {args.zeta}, "
+            f"integral pole {args.integral_ratio} wn, T_f {args.T_f} s; min PM "
+            f"{min(d.sampled['phase_margin_deg'] for d in designs):.0f} deg, min GM "
+            f"{min(d.sampled['gain_margin_db'] for d in designs):.1f} dB (sampled, steering lag "
+            f"incl.); nonlinear 45 deg step settles to 2 deg within {ts_max:.1f} s")  # fmt: skip
+    ep_new = replace(ep_new, provenance=_provenance(ep.provenance, "yaw", text))
+    wrote = _write_if_pass(ok, toml, ep_new, "yaw")
+    (args.out / "yaw.md").write_text(table + "\n")
+    (args.out / "yaw.json").write_text(json.dumps([_design_dict(d) for d in designs], indent=1))
+    print(table)
+    print(
+        f"{wrote}; wrote {args.out}/yaw.md, yaw.json and plots; acceptance "
+        f"(PM >= 45 deg, GM >= 6 dB, nonlinear step settles): {'PASS' if ok else 'FAIL'}"
+    )
+    return 0 if ok else 1
+
+
+def run_tune_speed(args: argparse.Namespace) -> int:
+    from mpcasv.config import replace
+    from mpcasv.control.params import SpeedReference
+    from mpcasv.control.tuning_report import plot_speed, speed_tables
+    from mpcasv.control.tuning_speed import (
+        place_speed_pi,
+        recommend,
+        speed_figures,
+        surge_plant,
+        turn_grid,
+    )  # fmt: skip
+
+    model, ep, toml = _setup(args, "speed")
+    args.out.mkdir(parents=True, exist_ok=True)
+    g = place_speed_pi(model, args.design_speed, args.w, args.zeta)
+    ep_new = replace(ep, speed=g)
+    loop = {
+        u: (
+            speed_figures(surge_plant(model, u), g),
+            speed_figures(surge_plant(model, u), g, args.dt),
+        )
+        for u in args.speeds
+    }
+    pairs = [(a, b) for a in args.u_ff for b in args.k_u]
+    field = (ep.reference.u_ff, ep.reference.k_u)
+    grids = {}
+    # the grid and the pirouette check tune eq. 3.1 itself: the optional power turn is off
+    ep_31 = replace(ep_new, turn_thrust=0.0)
+    for d in args.distance:
+        rows, runs = turn_grid(model, ep_31, [*pairs, (model.params.u_max, 0.0)], distance=d,
+                               progress=not args.quiet)  # fmt: skip
+        grids[d] = (rows, runs)
+    # recommend on the grid (the last row, "no reference model", is a baseline only)
+    by_pair: dict = {}
+    for rows, _ in grids.values():
+        for r in rows[:-1]:
+            by_pair.setdefault((r.u_ff, r.k_u), []).append(r)
+    from mpcasv.control.tuning_speed import TurnRow
+
+    merged = [
+        TurnRow(
+            u_ff=k[0],
+            k_u=k[1],
+            figures={
+                f"{d}m/{a}": f
+                for d, rs in zip(args.distance, v, strict=True)
+                for a, f in rs.figures.items()
+            },
+        )
+        for k, v in by_pair.items()
+    ]
+    try:
+        best = recommend(merged)
+    except ValueError as exc:  # every pair pirouetted: reported, the field values are kept
+        best = None
+        none_reason = str(exc)
+    ok_loop = all(c["phase_margin_deg"] >= 45 and c["gain_margin_db"] >= 6 and c["stable"]
+                  for f in loop.values() for c in f)  # fmt: skip
+    cmd = _command_line(args, "tune speed")
+    text = (f"{cmd}: PI by pole placement on the linearised surge model at "
+            f"{args.design_speed} m/s, w {args.w} rad/s, zeta {args.zeta}; min PM "
+            f"{min(f[1]['phase_margin_deg'] for f in loop.values()):.0f} deg (sampled, thrust "
+            f"lag incl.)")  # fmt: skip
+    prov = _provenance(ep.provenance, "speed", text)
+    if args.set_reference and best is None:
+        raise ConfigError(f"--set-reference: {none_reason}")
+    if args.set_reference:
+        ep_new = replace(ep_new, reference=SpeedReference(u_ff=best.u_ff, k_u=best.k_u))
+        prov = _provenance(
+            prov, "reference", f"{_command_line(args, 'tune speed')}: recommended by the turn grid"
+        )
+    elif "reference: " not in prov or "reference: field tuning" in prov:
+        prov = _provenance(
+            prov,
+            "reference",
+            "field tuning, thesis §3.4.1 (kept; the turn grid "
+            + (f"of mpcasv tune speed recommends u_ff={best.u_ff}, k_u={best.k_u})" if best
+               else "of mpcasv tune speed found no pirouette-free pair)"),
+        )
+    ep_new = replace(ep_new, provenance=prov)
+    wrote = _write_if_pass(ok_loop, toml, ep_new, "speed")
+    plot_speed(model, g, grids, field, best, args.out)
+    from mpcasv.control.tuning_report import plot_pirouette
+    from mpcasv.control.tuning_speed import PIROUETTE_CASE, pirouette_check
+
+    a, d, u0 = PIROUETTE_CASE
+    plot_pirouette(pirouette_check(model, ep_31, a, d, u0), (d * math.cos(math.radians(a)),
+                   d * math.sin(math.radians(a))), args.out,
+                   f"{model.params.name}: waypoint {d:g} m at {a:g} deg, from {u0:g} m/s, "
+                   f"command u_max = {model.params.u_max:g} m/s")  # fmt: skip
+    text_tables = speed_tables(g, loop, grids, best)
+    (args.out / "speed.md").write_text(text_tables + "\n")
+    print(text_tables)
+    print(
+        (f"recommended (u_ff, k_u) = ({best.u_ff}, {best.k_u})" if best else
+         "no recommended (u_ff, k_u): every pair of the grid pirouetted")
+        + f"; {wrote}; wrote "
+        f"{args.out}/speed.md and plots; loop margins {'PASS' if ok_loop else 'FAIL'}"
+    )
+    return 0 if ok_loop else 1
+
+
+def _header(ep) -> list[str]:
+    lines = [
+        "Execution level of Gretha: yaw PID gain schedule, speed loop, surge-speed reference",
+        "model. GENERATED by `mpcasv tune yaw` ([yaw]) and `mpcasv tune speed` ([speed]) on the",
+        "shared vessel model (mpcasv/data/vessels/gretha.toml, derived, not identified);",
+        "[reference] is the field tuning of thesis §3.4.1 unless the provenance says otherwise.",
+        "Regenerate (yaw, speed, then yaw again so that its nonlinear check uses the new speed",
+        "loop; the designs themselves do not depend on each other):",
+        "  mpcasv tune yaw --out runs/tune-yaw --toml mpcasv/data/execution/gretha.toml",
+        "  mpcasv tune speed --out runs/tune-speed --toml mpcasv/data/execution/gretha.toml",
+        "  mpcasv tune yaw --out runs/tune-yaw --toml mpcasv/data/execution/gretha.toml",
+        "Provenance of each table:",
+    ]
+    return lines + [f"  {p}" for p in ep.provenance.split(" | ")]
+
+
+def _design_dict(d) -> dict:
+    import dataclasses
+
+    out = dataclasses.asdict(d)
+    return json.loads(json.dumps(out, default=float).replace("Infinity", "null"))
