@@ -322,7 +322,7 @@ def test_a_range_end_the_preset_refuses_is_refused_before_any_trial(params, word
 def test_range_ends_valid_with_some_setting_of_the_others_are_kept(tmp_path):
     """delta_r = 5 is refused with the preset's eps_minus (10 m) but not with eps_minus at its
     low end (2 m): the search may run it (combinations are found per trial)."""
-    from mpcasv.experiments.tune_controller import check_presets
+    from mpcasv.experiments.tune_jobs import check_presets
     from mpcasv.experiments.tune_space import load_spec
 
     ranges = _ranges(tmp_path, '"domain.delta_r" = { low = 5.0, high = 50.0 }\n'

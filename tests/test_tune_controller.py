@@ -216,7 +216,7 @@ def test_bad_search_settings_are_refused_in_one_line(tmp_path, capsys, extra, ca
 def test_a_trial_the_preset_refuses_fails_without_a_run(tmp_path):
     """eps_minus > delta_r is refused by the preset (Paper 1: the target domain would reach
     into the collision domain): such values are named, not simulated."""
-    from mpcasv.experiments.tune_controller import invalid_preset, training_jobs
+    from mpcasv.experiments.tune_jobs import invalid_preset, training_jobs
     from mpcasv.experiments.tune_space import load_spec
 
     spec = load_spec(_write(tmp_path))

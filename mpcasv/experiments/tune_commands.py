@@ -62,12 +62,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run_tune_controller(args: argparse.Namespace) -> int:
-    from mpcasv.experiments.tune_controller import (
-        check_presets,
-        evaluate_heldout,
-        search,
-        study_size,
-    )
+    from mpcasv.experiments.tune_controller import evaluate_heldout, search, study_size
+    from mpcasv.experiments.tune_jobs import check_presets
     from mpcasv.experiments.tune_outputs import write_outputs
     from mpcasv.experiments.tune_space import load_spec
     from mpcasv.experiments.workers import check_workers

@@ -23,12 +23,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from mpcasv.experiments.tune_controller import (
-    front_trials,
-    heldout_jobs,
-    training_jobs,
-    trial_jobs,
-)
+from mpcasv.experiments.tune_controller import front_trials
+from mpcasv.experiments.tune_jobs import heldout_jobs, training_jobs, trial_jobs
 from mpcasv.experiments.tune_space import TuneSpec
 
 
