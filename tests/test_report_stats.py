@@ -14,7 +14,7 @@ from scipy import stats as sps
 
 from mpcasv.experiments import stats
 from mpcasv.experiments.report import directions, write_report
-from mpcasv.experiments.report_figures import ENVELOPE_BINS, fix_age_trace
+from mpcasv.experiments.report_series import ENVELOPE_BINS, fix_age_trace
 from mpcasv.experiments.stats import HEADLINE, paired_stat, paired_table, significant_win_loss
 
 BETTER = {"min_range_m": "higher", "energy_J": "lower", "nav_error_rms_m": "lower"}
@@ -260,7 +260,7 @@ def _write_timeseries(out, df: pd.DataFrame, n: int = 50) -> None:
 
 
 def test_ecdfs_pool_every_run_auv_and_step_of_a_case_per_variant(tmp_path):
-    from mpcasv.experiments.report_figures import ecdf_panels
+    from mpcasv.experiments.report_series import ecdf_panels
 
     df = results({"min_range_m": 2.0})
     _write_timeseries(tmp_path, df)
@@ -319,7 +319,7 @@ def test_a_panel_draws_every_variant_alike_when_one_needs_the_envelope():
     """paper run, Case 4 (compare-case4.png): the hybrid's tau (many fixes) was drawn as its
     envelope, a staircase, the MPC's (few) as a raw saw-tooth, and the y label carried the
     last variant's (empty) suffix; one decision per panel now."""
-    from mpcasv.experiments.report_figures import needs_envelope
+    from mpcasv.experiments.report_series import needs_envelope
 
     t = np.arange(0.0, 1242.0)
     many, few = t % 7.0, t % 300.0  # 177 resets / 4 resets

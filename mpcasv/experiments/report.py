@@ -31,6 +31,7 @@ import pandas as pd
 
 from mpcasv.experiments import acceptance
 from mpcasv.experiments import report_figures as rf
+from mpcasv.experiments import report_series as rs
 from mpcasv.experiments import stats as paired
 from mpcasv.experiments.metrics import METRIC_INFO
 from mpcasv.experiments.report_figures import CONDITION, num
@@ -326,16 +327,16 @@ def write_report(out: Path, exp, results: pd.DataFrame, stats=None) -> tuple[Pat
                    "run's clock, and the navigation error does not depend on the controller.")
         t = scenario_table(summ, scenario, auv_names)
         both(_md_table(t) + "\n", t.to_html())
-        ecdf, notes = rf.ecdf_figure(out, ok, scenario, figdir / f"ecdf-{scenario}.png")
+        ecdf, notes = rs.ecdf_figure(out, ok, scenario, figdir / f"ecdf-{scenario}.png")
         for n_ in notes:
             bullet(n_)
-        reps = rf.representative_runs(ok, scenario)
+        reps = rs.representative_runs(ok, scenario)
         figs = [ecdf] if ecdf else []
-        lost = [r["run_dir"] for _, r in reps.iterrows() if not rf.has_timeseries(out, r)]
+        lost = [r["run_dir"] for _, r in reps.iterrows() if not rs.has_timeseries(out, r)]
         if lost:
             bullet(f"No figure of the representative runs: no time series in {', '.join(lost)}.")
         else:
-            figs.append(rf.compare_figure(out, reps, scenario, figdir / f"compare-{scenario}.png"))
+            figs.append(rs.compare_figure(out, reps, scenario, figdir / f"compare-{scenario}.png"))
         figs.append(
             rf.box_figure(ok, scenario, BOX_METRICS, better, figdir / f"box-{scenario}.png")
         )
@@ -343,7 +344,7 @@ def write_report(out: Path, exp, results: pd.DataFrame, stats=None) -> tuple[Pat
             figure(fig)
         links_md, links_html = [], []
         for _, r in reps.iterrows():
-            pngs = sorted(rf.run_path(out, r["run_dir"]).glob("*.png"))
+            pngs = sorted(rs.run_path(out, r["run_dir"]).glob("*.png"))
             if pngs:
                 links_md.append(f"{r['variant']}: " + ", ".join(
                     f"[{p.stem}]({run_link(p, out)})" for p in pngs))  # fmt: skip
