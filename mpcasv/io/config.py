@@ -4,7 +4,8 @@ One file says who we are on the IMC network, which vehicles to talk to (by IMC i
 system name, with their roles), the local frame's origin, the link (UDP or DUNE's TCP
 backseat port), the controller and its preset, the watchdog limits, the clock and the log
 folder. Unknown keys, missing fields, wrong types and impossible numbers are refused with
-the file and field named (:class:`mpcasv.config.ConfigError`). Example files:
+the file and field named (:class:`mpcasv.config.ConfigError`). The sections about the run
+itself (controller, clock, log) are in :mod:`mpcasv.io.config_run`. Example files:
 ``experiments/deploy/sitl-case3.toml`` and ``sitl-case6.toml``; field by field in
 ``docs/deploy.md``.
 """
@@ -13,11 +14,12 @@ from __future__ import annotations
 
 import ipaddress
 from pathlib import Path
-from typing import Annotated, Any, Literal
+from typing import Annotated, Literal
 
 from pydantic import Field, Strict, field_validator, model_validator
 
-from mpcasv.config import ConfigError, Flag, Float, NonNeg, Pos, frozen, load_toml, parse
+from mpcasv.config import ConfigError, Float, NonNeg, Pos, frozen, load_toml, parse
+from mpcasv.io.config_run import ClockSpec, ControllerSpec, LogSpec
 from mpcasv.io.deploycontroller import (
     MIN_SOLVE_MS,
     build_controller,
@@ -37,8 +39,6 @@ __all__ = [  # the controller's part is mpcasv.io.deploycontroller's, re-exporte
 #: An IMC system id (0xFFFF is broadcast, never a vehicle).
 ImcId = Annotated[int, Strict(), Field(ge=0, le=0xFFFE)]
 Port = Annotated[int, Strict(), Field(ge=0, le=65535)]
-#: The longest control period accepted (s): a supervisory period is seconds, not hours
-CONTROL_PERIOD_MAX = 60.0
 #: ``[link]`` fields read only with ``transport = "udp"``: the TCP backseat link binds no
 #: data port, sends no Announce and opens no discovery socket (:meth:`ImcLink.start`)
 UDP_ONLY = ("port", "announce_to", "announce_period", "discovery_ports", "discovery_group",
@@ -182,31 +182,6 @@ class LinkSpec:
 
 
 @frozen
-class ControllerSpec:
-    """The supervisory controller, as in the simulator (same registry, same presets)."""
-
-    name: str
-    preset: str | None = None  # shipped preset name or TOML path (default: the kind's)
-    estimator: str = "perfect"
-    control_period: Pos = 1.0  # s between decisions (the papers' timers count seconds)
-    scenario: str | None = None  # scenario TOML: the AUVs' plans, for "plan" only (refused else)
-    overrides: dict[str, Any] = Field(default_factory=dict)
-    # the boat in the water (shipped vessel name or TOML path): controllers that plan with a
-    # vessel model (preset field 'vessel', the MPCs) get it as an override; None: the preset's
-    vessel: str | None = None
-    # feed the learned achievable speed back into the controller's 'speed' (see SpeedSpec)
-    speed_feedback: Flag = False
-
-    @field_validator("control_period")
-    @classmethod
-    def _period(cls, v: float) -> float:
-        if v > CONTROL_PERIOD_MAX:
-            raise ValueError(f"{v:g} s: a control period is at most {CONTROL_PERIOD_MAX:g} s "
-                             "(the papers' is 1 s)")  # fmt: skip
-        return v
-
-
-@frozen
 class WatchdogSpec:
     """Limits (s of the deploy clock, m, m/s) and input plausibility checks."""
 
@@ -253,34 +228,6 @@ class SpeedSpec:
     # the autopilot's own limit (DUNE: [General] Maximum Absolute Speed, 2.5 m/s for the
     # Otter): every transit speed sent is capped at it (a plan may ask for the model's u_max)
     command_max: Pos | None = None
-
-
-@frozen
-class ClockSpec:
-    """``speedup`` > 1 only against a SITL started with the same ``--speedup``."""
-
-    speedup: Pos = 1.0
-
-    @field_validator("speedup")
-    @classmethod
-    def _speedup(cls, v: float) -> float:
-        from mpcasv.io.sitloptions import SPEEDUP_MAX, SPEEDUP_MIN
-
-        if not SPEEDUP_MIN <= v <= SPEEDUP_MAX:
-            raise ValueError(f"{v:g}: a clock factor is in [{SPEEDUP_MIN:g}, {SPEEDUP_MAX:g}] "
-                             "(1: real time)")  # fmt: skip
-        return v
-
-
-@frozen
-class LogSpec:
-    dir: str = "runs/deploy"
-    flush_s: Annotated[float, Strict(), Field(gt=0, le=1.0)] = 0.5  # wall seconds
-    reject_log_per_s: Annotated[int, Strict(), Field(ge=1)] = 50  # detailed lines per reason
-    # imc.lsf: "used" = the packets the deploy decodes and everything it sends; "all" = also
-    # every other datagram received (DUNE's bus traffic: about 2.5 MB/min from two vehicles)
-    lsf: Literal["all", "used"] = "used"
-    load_report_s: Pos = 60.0  # a 'load' event (datagrams/s, CPU) this often (deploy clock)
 
 
 @frozen
