@@ -133,7 +133,16 @@ class ImcLink(PeerDirectory):
 
     # --- life cycle ------------------------------------------------------------------------
     async def start(self) -> None:
-        """Bind (UDP) or connect (TCP) and start announcing and heart-beating."""
+        """Bind (UDP) or connect (TCP) and start announcing and heart-beating. If it fails
+        (or is cancelled) part way, whatever it had opened is closed (:meth:`close`) before
+        the exception goes on: a failed start leaves no socket behind."""
+        try:
+            await self._start()
+        except BaseException:
+            self.close()
+            raise
+
+    async def _start(self) -> None:
         link = self.cfg.link
         if link.transport == "udp":
             self.endpoint = await UdpEndpoint.open(link.bind, link.port, self.handle_datagram)
@@ -149,11 +158,22 @@ class ImcLink(PeerDirectory):
         self._tasks.append(asyncio.create_task(self._every(link.heartbeat_period, self.heartbeat)))
 
     async def stop(self) -> None:
+        """Stop the Announce/Heartbeat (and TCP) tasks, wait for them to end, then
+        :meth:`close`."""
         for t in self._tasks:
             t.cancel()
         for t in self._tasks:
             with contextlib.suppress(asyncio.CancelledError):
                 await t
+        self.close()
+
+    def close(self) -> None:
+        """Cancel the tasks (without waiting for them: callable outside the event loop, or
+        while it is being torn down) and close every socket and TCP stream. Safe to call
+        repeatedly."""
+        for t in self._tasks:
+            if not t.done():  # (one ended with its event loop needs nothing)
+                t.cancel()
         self._tasks.clear()
         for p in self.peers:
             if p.stream is not None:

@@ -34,6 +34,10 @@ class _LogFile:
         enc = None if "b" in self.mode else "utf-8"
         self._fh: IO | None = self.path.open(self.mode, encoding=enc)
 
+    @property
+    def closed(self) -> bool:
+        return self._fh is None
+
     def flush(self) -> None:
         if self._fh is not None:
             self._fh.flush()

@@ -118,6 +118,11 @@ class UdpEndpoint:
             return False
 
     @property
+    def closed(self) -> bool:
+        """Closed (or closing: the socket is released at the event loop's next pass)."""
+        return self._transport.is_closing()
+
+    @property
     def receive_errors(self) -> int:
         return self._protocol.errors
 
