@@ -95,50 +95,60 @@ class Deploy(Phases, BoatFeedback, FieldMode):
     def __init__(self, cfg: DeployConfig, dry_run: bool = False, log_dir: Path | None = None,
                  solver_factory=None):  # fmt: skip
         self.cfg, self.dry_run = cfg, dry_run
-        self.clock = Clock(cfg.clock.speedup)
-        self.t_started = self.clock.now()  # the deploy clock when the link started (run())
-        c = cfg.controller
-        self.n_auv = len(cfg.auvs)
-        self.controller = build_controller(cfg, log=log.info)
-        self.controller.reset(self.n_auv)
-        self.init_field_mode(solver_factory)  # before any socket is opened
-        self.domain = getattr(self.controller, "domain", None)
-        plans = known_plans(cfg)
-        self.estimators = [make_estimator(c.estimator, initial=None, plan=plans[k])
-                           for k in range(self.n_auv)]  # fmt: skip
-        self.log_dir = Path(log_dir or cfg.log.dir)
-        self.lsf = LsfWriter(self.log_dir / "imc.lsf")
-        self.jsonl = JsonlWriter(self.log_dir / "deploy.jsonl")
-        self.link = ImcLink(cfg, self.clock, self.lsf, self._on_state, self._on_message,
-                            self._on_event)  # fmt: skip
-        self.gp = guard_params(cfg.watchdog, self.controller)
-        self.phase = WAITING
-        self.t_next = -math.inf  # next supervisory tick (ASV state time)
-        self.request_id = 0
-        self.pending: tuple[int, float] | None = None  # (request id, sent at)
-        self.retry_at = -math.inf
-        self.started = False  # FollowReference has been started at least once
-        self.status = ["missing"] * self.n_auv
-        wd = cfg.watchdog
-        self.thrusters = Thrusters(wd.asv_stale_s, wd.propeller_on_threshold)
-        self.speed = SpeedWatch(cfg.speed)
-        self.speed_cap: float | None = None  # applied to the controller (speed_feedback)
-        self.closing = False  # shutdown begun: no more decisions
-        self.plan_request: int | None = None  # request id of the running FollowReference
-        self.plan_done = asyncio.Event()
-        self._propeller_note: str | None = None
-        self._cpu0, self._wall0 = time.process_time(), time.monotonic()
-        self._load_mark = (self._cpu0, self._wall0, 0)
-        self.followref: dict | None = None
-        self.steps = 0
-        self.overrides = 0
-        self.stale_events = 0
-        self.stale_mark = math.inf  # the ASV's own clock when it was called stale (asv_back)
-        self.late_states = 0  # ASV states read while stale but stamped before the verdict
-        self._late_reported = 0  # the outage (stale_events) whose first late state was logged
-        self._waiting_for: tuple = ()
-        self._propeller_source = "command"
-        self.last_cmd: Command | None = None
+        # what close() releases; None until opened (a constructor that fails closes them)
+        self.lsf: LsfWriter | None = None
+        self.jsonl: JsonlWriter | None = None
+        self.link: ImcLink | None = None
+        self.field_mode = False
+        self._summary_written = False
+        try:
+            self.clock = Clock(cfg.clock.speedup)
+            self.t_started = self.clock.now()  # the deploy clock when the link started (run())
+            c = cfg.controller
+            self.n_auv = len(cfg.auvs)
+            self.controller = build_controller(cfg, log=log.info)
+            self.controller.reset(self.n_auv)
+            self.init_field_mode(solver_factory)  # before any socket is opened
+            self.domain = getattr(self.controller, "domain", None)
+            plans = known_plans(cfg)
+            self.estimators = [make_estimator(c.estimator, initial=None, plan=plans[k])
+                               for k in range(self.n_auv)]  # fmt: skip
+            self.log_dir = Path(log_dir or cfg.log.dir)
+            self.lsf = LsfWriter(self.log_dir / "imc.lsf")
+            self.jsonl = JsonlWriter(self.log_dir / "deploy.jsonl")
+            self.link = ImcLink(cfg, self.clock, self.lsf, self._on_state, self._on_message,
+                                self._on_event)  # fmt: skip
+            self.gp = guard_params(cfg.watchdog, self.controller)
+            self.phase = WAITING
+            self.t_next = -math.inf  # next supervisory tick (ASV state time)
+            self.request_id = 0
+            self.pending: tuple[int, float] | None = None  # (request id, sent at)
+            self.retry_at = -math.inf
+            self.started = False  # FollowReference has been started at least once
+            self.status = ["missing"] * self.n_auv
+            wd = cfg.watchdog
+            self.thrusters = Thrusters(wd.asv_stale_s, wd.propeller_on_threshold)
+            self.speed = SpeedWatch(cfg.speed)
+            self.speed_cap: float | None = None  # applied to the controller (speed_feedback)
+            self.closing = False  # shutdown begun: no more decisions
+            self.plan_request: int | None = None  # request id of the running FollowReference
+            self.plan_done = asyncio.Event()
+            self._propeller_note: str | None = None
+            self._cpu0, self._wall0 = time.process_time(), time.monotonic()
+            self._load_mark = (self._cpu0, self._wall0, 0)
+            self.followref: dict | None = None
+            self.steps = 0
+            self.overrides = 0
+            self.stale_events = 0
+            self.stale_mark = math.inf  # the ASV's own clock when it was called stale (asv_back)
+            self.late_states = 0  # ASV states read while stale but stamped before the verdict
+            self._late_reported = 0  # the outage (stale_events) whose first late state was logged
+            self._waiting_for: tuple = ()
+            self._propeller_source = "command"
+            self.last_cmd: Command | None = None
+        except BaseException:
+            self.close()
+            raise
 
     # --- reports -------------------------------------------------------------------------
     def _on_event(self, rec: dict) -> None:
@@ -151,7 +161,8 @@ class Deploy(Phases, BoatFeedback, FieldMode):
                       "was sent; the next tick steps again)", rec.get("t"), rec.get("error"))
         elif rec.get("event") != "reject":  # a current above the tested one: also --quiet
             detail = {k: v for k, v in rec.items() if k not in ("kind", "event", "t")}
-            level = logging.WARNING if rec["event"] == "current_untested" else logging.INFO
+            level = (logging.WARNING if rec["event"] in ("current_untested", "aborted")
+                     else logging.INFO)  # fmt: skip
             log.log(level, "%s %s", rec["event"], detail)
 
     def event(self, name: str, **info) -> None:
@@ -276,7 +287,17 @@ class Deploy(Phases, BoatFeedback, FieldMode):
     # --- run and stop --------------------------------------------------------------------
     async def run(self, stop: asyncio.Event, duration: float | None = None) -> dict:
         """Run until ``stop`` is set (or ``duration`` s of the deploy clock); return the
-        final counters."""
+        final counters.
+
+        A run that fails (the link cannot bind, say) or is cancelled is aborted
+        (:meth:`abort`) and the exception goes on."""
+        try:
+            return await self._run(stop, duration)
+        except BaseException as exc:
+            self.abort(exc)
+            raise
+
+    async def _run(self, stop: asyncio.Event, duration: float | None) -> dict:
         await self.link.start()
         self.t_started = self.clock.now()
         self.event(
@@ -292,9 +313,11 @@ class Deploy(Phases, BoatFeedback, FieldMode):
                  asyncio.create_task(self._flush_loop())]  # fmt: skip
         if duration is not None:
             tasks.append(asyncio.create_task(self._stop_after(duration, stop)))
-        await stop.wait()
-        for t in tasks:
-            t.cancel()
+        try:
+            await stop.wait()
+        finally:  # (cancelled: run() aborts)
+            for t in tasks:
+                t.cancel()
         for t in tasks:
             with contextlib.suppress(asyncio.CancelledError):
                 await t
@@ -337,6 +360,13 @@ class Deploy(Phases, BoatFeedback, FieldMode):
         await asyncio.sleep(0.05)  # let the last datagrams leave
         await self.link.stop()
         await self.stop_stepping()
+        summary = self.write_summary()
+        self.close()
+        return summary
+
+    def write_summary(self, **extra) -> dict:
+        """Write the ``summary`` record (the last one: the link is closed and nothing is
+        decided any more) with ``extra`` fields; return it."""
         summary = {"steps": self.steps, "overrides": self.overrides,
                    "skipped_steps": self.skipped_steps, "step_errors": self.step_errors,
                    "between_solves": self.between_solves,
@@ -348,10 +378,51 @@ class Deploy(Phases, BoatFeedback, FieldMode):
         why = self.no_decision(self.clock.now() - self.t_started)
         if why is not None:
             summary["no_decision"] = why
+        summary |= extra
         self.jsonl.write({"kind": "summary", "t": self.clock.now(), **summary})
-        self.jsonl.close()
-        self.lsf.close()
+        self._summary_written = True
         return summary
+
+    def abort(self, exc: BaseException) -> None:
+        """A run that failed or was cancelled (not stopped): event ``aborted`` (``reason``:
+        ``"cancelled"``, or the exception's type and first line), the ``summary`` with the
+        same ``aborted`` field, then :meth:`close`. Nothing is waited for and nothing more
+        is sent: no final standby, no MANDONE (a FollowReference we had started ends on
+        DUNE's ``link.followref_timeout``, as after an ``asv_stale``); a solve in flight is
+        abandoned. After the summary (the run had finished): only :meth:`close`."""
+        if isinstance(exc, asyncio.CancelledError):
+            reason = "cancelled"
+        else:
+            reason = f"{type(exc).__name__}: {exc}".splitlines()[0]
+        try:
+            if not self._summary_written:
+                self.closing = True
+                self.event("aborted", reason=reason)
+                self.link.close()
+                self.close_field_mode()
+                self.write_summary(aborted=reason)
+        finally:
+            self.close()
+
+    def close(self) -> None:
+        """Release what the deploy holds, without its shutdown: the link's sockets, the
+        solver workers and the step thread (field mode), the log files. Safe to call
+        repeatedly, and on a deploy that never ran; :meth:`run` closes on every way out.
+        Also ``with Deploy(...) as deploy:``."""
+        try:
+            if self.link is not None:
+                self.link.close()
+            self.close_field_mode()
+        finally:
+            for f in (self.jsonl, self.lsf):
+                if f is not None:
+                    f.close()
+
+    def __enter__(self) -> Deploy:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
 
     async def shutdown(self) -> dict:
         """:meth:`begin_shutdown`, wait for DUNE's "plan completed" (at most
@@ -383,13 +454,13 @@ def run_deploy(config: str | Path, dry_run: bool = False, log_dir: Path | None =
     check_local(cfg, config, log_dir, port=not prepare)
     if prepare:
         return prepare_controller(cfg)
-    deploy = Deploy(cfg, dry_run, log_dir)
+    with Deploy(cfg, dry_run, log_dir) as deploy:
 
-    async def main() -> dict:
-        stop = asyncio.Event()
-        loop = asyncio.get_running_loop()
-        for sig in (signal.SIGINT, signal.SIGTERM):
-            loop.add_signal_handler(sig, stop.set)
-        return await deploy.run(stop, duration)
+        async def main() -> dict:
+            stop = asyncio.Event()
+            loop = asyncio.get_running_loop()
+            for sig in (signal.SIGINT, signal.SIGTERM):
+                loop.add_signal_handler(sig, stop.set)
+            return await deploy.run(stop, duration)
 
-    return asyncio.run(main())
+        return asyncio.run(main())

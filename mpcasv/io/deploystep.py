@@ -245,8 +245,19 @@ class FieldMode:
         if self._step_task is not None:
             with contextlib.suppress(Exception):
                 await asyncio.wait_for(asyncio.shield(self._step_task), 5.0)
+        self.close_field_mode()
+
+    def close_field_mode(self) -> None:
+        """Field mode: stop the solver workers and the step thread now (a solve in flight
+        is abandoned). Safe to call repeatedly, and on a field mode that failed to start."""
+        task = getattr(self, "_step_task", None)  # (none: init_field_mode never ran)
+        if task is not None and not task.done():
+            task.cancel()  # (its thread's solve ends at the deadline, unheard)
         if self.field_mode:
-            self.controller.close()
-            self._step_pool.shutdown(wait=False, cancel_futures=True)
             self.field_mode = False
+            try:
+                self.controller.close()
+            finally:
+                if self._step_pool is not None:
+                    self._step_pool.shutdown(wait=False, cancel_futures=True)
 
