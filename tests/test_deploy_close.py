@@ -192,3 +192,60 @@ def test_a_stopped_run_is_not_aborted(tmp_path):
     assert "aborted" not in summary
     assert not _events(tmp_path / "log" / "deploy.jsonl", "aborted")
     assert dep.link.endpoint.closed and dep.jsonl.closed and dep.lsf.closed
+
+
+# --- the SITL -------------------------------------------------------------------------------------
+
+
+def _sitl(tmp_path):
+    from mpcasv.io.sitl import Sitl, SitlOptions
+    from mpcasv.sim.scenario import load_scenario
+
+    return Sitl(load_scenario(CASE3), SitlOptions(speedup=20.0, discovery_port=0, out=tmp_path))
+
+
+def test_a_sitl_whose_start_fails_closes_its_sockets_and_logs(tmp_path, monkeypatch):
+    from mpcasv.io.simvehicle import SimVehicle
+
+    sitl = _sitl(tmp_path)
+    real = SimVehicle.open
+
+    async def open_(self, host):
+        if self.role == "auv":
+            raise OSError("port taken")
+        await real(self, host)
+
+    monkeypatch.setattr(SimVehicle, "open", open_)
+    with pytest.raises(OSError, match="port taken"):
+        asyncio.run(sitl.run(asyncio.Event()))
+    assert sitl.discovery.closed
+    assert all(v.endpoint is None and v.announcer is None for v in sitl.vehicles)
+    assert sitl.jsonl.closed and sitl.lsf.closed
+    assert _events(tmp_path / "sitl.jsonl", "aborted")
+
+
+def test_a_cancelled_sitl_closes_its_sockets_and_logs(tmp_path):
+    sitl = _sitl(tmp_path)
+
+    async def main():
+        task = asyncio.create_task(sitl.run(asyncio.Event()))
+        assert await _until(lambda: sitl.epoch > 0, 10.0)
+        task.cancel()
+        with pytest.raises(asyncio.CancelledError):
+            await task
+        await asyncio.sleep(0.05)
+        assert asyncio.all_tasks() == {asyncio.current_task()}  # its log flusher ended too
+
+    asyncio.run(main())
+    assert sitl.discovery.closed
+    assert all(v.endpoint is None for v in sitl.vehicles)
+    assert sitl.jsonl.closed and sitl.lsf.closed
+    assert [e["reason"] for e in _events(tmp_path / "sitl.jsonl", "aborted")] == ["cancelled"]
+    assert not (tmp_path / "run").exists()
+
+
+def test_sitl_close_is_repeatable(tmp_path):
+    sitl = _sitl(tmp_path)
+    sitl.close()
+    sitl.close()
+    assert sitl.jsonl.closed and sitl.lsf.closed

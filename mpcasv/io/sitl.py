@@ -114,6 +114,7 @@ class Sitl(AsvDune):
         self.auvs = [SimVehicle(self, opt.auv_name(a.name), opt.auv_id_base + k, "auv", k)
                      for k, a in enumerate(scenario.auv)]  # fmt: skip
         self.vehicles = [self.asv, *self.auvs]
+        self.discovery: UdpEndpoint | None = None  # bound by start()
         self.directory: dict[int, list[Addr]] = {}  # who announced to the discovery socket
         self.maneuver: FollowRefManeuver | None = None
         self.plan_owner: tuple | None = None  # (request id, plan id, node, stream) of START
@@ -244,11 +245,36 @@ class Sitl(AsvDune):
         print(json.dumps({"ready": ready}), flush=True)
 
     async def run(self, stop: asyncio.Event) -> dict:
+        """Run until ``stop`` is set or the duration is reached; then :meth:`finish`. A run
+        that fails (a port taken after the options were checked, say) or is cancelled
+        writes event ``aborted`` (``reason``) and closes its sockets and logs
+        (:meth:`close`, no ``run/`` folder) before the exception goes on."""
+        try:
+            return await self._run(stop)
+        except BaseException as exc:
+            if not self.jsonl.closed:
+                reason = ("cancelled" if isinstance(exc, asyncio.CancelledError)
+                          else f"{type(exc).__name__}: {exc}".splitlines()[0])  # fmt: skip
+                self.event("aborted", reason=reason)
+            self.close()
+            raise
+
+    async def _run(self, stop: asyncio.Event) -> dict:
         self._stop = stop
         await self.start()
         n_steps = self.opt.periods(self.sc)
         per = round(self.Tc / self.h)
         flusher = asyncio.create_task(self._flush_loop())
+        try:
+            rows = await self._loop(stop, n_steps, per)
+        finally:
+            flusher.cancel()
+        with contextlib.suppress(asyncio.CancelledError):
+            await flusher
+        return self.finish(*rows)
+
+    async def _loop(self, stop: asyncio.Event, n_steps: int, per: int) -> tuple[float, int]:
+        """The ticks until ``stop`` or ``n_steps`` periods; (wall seconds, overruns)."""
         boundary = 0  # tick index of the next period boundary
         next_announce = 0.0
         outage = self.opt.asv_outage
@@ -285,10 +311,7 @@ class Sitl(AsvDune):
                     self._advance()
                     boundary = self.n + per
             self.n += 1
-        flusher.cancel()
-        with contextlib.suppress(asyncio.CancelledError):
-            await flusher
-        return self.finish(time.perf_counter() - wall0, overruns)
+        return time.perf_counter() - wall0, overruns
 
     async def _flush_loop(self) -> None:
         while True:
@@ -332,6 +355,27 @@ class Sitl(AsvDune):
         row["asv_alive"] = self.asv.alive
         self.rows.append(row)
 
+    def close_sockets(self) -> None:
+        """Close every vehicle's sockets (and TCP server and its clients) and the discovery
+        socket. Safe to call repeatedly, and before :meth:`start` or after it failed."""
+        for v in self.vehicles:
+            v.close()
+            if v.tcp_server is not None:
+                v.tcp_server.close()
+            for stream in list(v.tcp_clients):
+                stream.close()
+        if self.discovery is not None:
+            self.discovery.close()
+
+    def close(self) -> None:
+        """Close the sockets and the logs, writing no run folder (:meth:`finish` does that
+        at the end of a run). Safe to call repeatedly."""
+        try:
+            self.close_sockets()
+        finally:
+            self.jsonl.close()
+            self.lsf.close()
+
     def finish(self, wall_s: float, overruns: int) -> dict:
         """Close the sockets and write the run folder; return the run info."""
         import pandas as pd
@@ -341,11 +385,7 @@ class Sitl(AsvDune):
         from mpcasv.sim.scenario import scenario_with
         from mpcasv.sim.simulator import RunResult
 
-        for v in self.vehicles:
-            v.close()
-            if v.tcp_server is not None:
-                v.tcp_server.close()
-        self.discovery.close()
+        self.close_sockets()
         w = self.world
         info = {"ts_offset": self.ts_offset, "periods": len(self.rows), "speedup":
                 self.opt.speedup, "overruns": overruns, "counts": self.counts,
