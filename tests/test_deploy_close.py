@@ -8,6 +8,7 @@ from __future__ import annotations
 import asyncio
 import dataclasses
 import socket
+import subprocess
 from pathlib import Path
 
 import imcpy
@@ -249,3 +250,25 @@ def test_sitl_close_is_repeatable(tmp_path):
     sitl.close()
     sitl.close()
     assert sitl.jsonl.closed and sitl.lsf.closed
+
+
+# --- the rehearsal helpers ------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("which", ["sitl", "deploy"])
+def test_the_rehearsal_helpers_keep_no_stderr_file_open(tmp_path, monkeypatch, which):
+    """The child has its own copy of the stderr file; ours is closed once it is started."""
+    from mpcasv.io import rehearsal
+
+    given = []
+
+    class Popen:
+        def __init__(self, cmd, stdout=None, stderr=None):
+            given.append(stderr)
+
+    monkeypatch.setattr(subprocess, "Popen", Popen)
+    if which == "sitl":
+        rehearsal.start_sitl(CASE3, tmp_path / "sitl", wait=False)
+    else:
+        rehearsal.start_deploy({"log": {"dir": str(tmp_path)}}, tmp_path)
+    assert len(given) == 1 and given[0].closed

@@ -139,8 +139,8 @@ def start_sitl(scenario: str | Path, out: str | Path, *args: str, discovery_port
     cmd = [sys.executable, "-m", "mpcasv", "sitl", str(scenario), "--discovery-port",
            str(discovery_port), "--base-port", "0", "--out", str(out), "--ready-file",
            str(ready_file), *args]  # fmt: skip
-    err = (out / "sitl.stderr").open("w")
-    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=err)
+    with (out / "sitl.stderr").open("w") as err:  # the child has its own copy
+        proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=err)
     return proc, (wait_ready(proc, out, timeout) if wait else None)
 
 
@@ -154,6 +154,7 @@ def wait_ready(proc, out: str | Path, timeout: float = 60.0) -> dict:
     while not ready_file.exists():
         if proc.poll() is not None or time.monotonic() > t_end:
             proc.kill()
+            proc.wait()  # reaped: no zombie, no "still running" ResourceWarning
             raise RuntimeError(f"mpcasv sitl did not start: {(out / 'sitl.stderr').read_text()}")
         time.sleep(0.05)
     return json.loads(ready_file.read_text())
@@ -197,6 +198,6 @@ def start_deploy(config: dict, workdir: str | Path, *args: str):
     workdir.mkdir(parents=True, exist_ok=True)
     path = workdir / "deploy.toml"
     path.write_text(tomli_w.dumps(config))
-    err = (workdir / "deploy.stderr").open("w")
-    return subprocess.Popen([sys.executable, "-m", "mpcasv", "deploy", str(path), *args],
-                            stdout=subprocess.DEVNULL, stderr=err)  # fmt: skip
+    with (workdir / "deploy.stderr").open("w") as err:  # the child has its own copy
+        return subprocess.Popen([sys.executable, "-m", "mpcasv", "deploy", str(path), *args],
+                                stdout=subprocess.DEVNULL, stderr=err)  # fmt: skip
