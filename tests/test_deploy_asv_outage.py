@@ -73,11 +73,12 @@ def test_late_states_from_before_the_outage_do_not_bring_the_asv_back(tmp_path):
     assert summary["asv_stale_events"] == 1
 
 
-def test_a_fresh_state_after_the_verdict_brings_the_asv_back_at_once(tmp_path):
+def test_a_fresh_state_after_the_verdict_brings_the_asv_back_at_once(tmp_path, request):
     """The same outage without late states: the first state after it resumes the loop
     (a restarted DUNE's first state, stamped 4 s after the last one, 4 s of deploy clock
     later)."""
     dep, clock, t_last = _running(tmp_path)
+    request.addfinalizer(dep.close)  # its logs (it never runs)
     clock.t += 3.5
     dep.watch()
     assert dep.phase == ASV_STALE

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import imcpy
 import pytest
-from test_io_link import ASV_ID, Fake, _cfg, _until
+from test_io_link import ASV_ID, Fake, _cfg, _until, run
 
 from mpcasv.io import deploy as deploy_mod
 from mpcasv.io.deploy import Deploy
@@ -152,25 +152,22 @@ def test_a_cancelled_run_is_aborted_closes_everything_and_sends_no_mandone(tmp_p
         task = asyncio.create_task(dep.run(asyncio.Event()))
         assert await _until(lambda: dep.link.endpoint is not None)
         asv = await Fake("fake-asv", ASV_ID, imcpy.SystemType.USV).open()
-        try:
-            to = dep.link.endpoint.address
-            asv.announce(to, dep.clock.now())
-            assert await _until(lambda: bool(dep.link.asv.addresses))
-            dep.started = True  # as if FollowReference were running
-            await asyncio.sleep(0.05)
-            before = len(asv.received)
-            task.cancel()
-            with pytest.raises(asyncio.CancelledError):
-                await task
-            await asyncio.sleep(0.1)
-            got["after"] = [type(m).__name__ for m in asv.received[before:]]
-            # the deploy's tasks (watchdogs, log flushes) and the link's are ended too
-            assert asyncio.all_tasks() == {asyncio.current_task()}
-        finally:
-            asv.ep.close()
+        to = dep.link.endpoint.address
+        asv.announce(to, dep.clock.now())
+        assert await _until(lambda: bool(dep.link.asv.addresses))
+        dep.started = True  # as if FollowReference were running
+        await asyncio.sleep(0.05)
+        before = len(asv.received)
+        task.cancel()
+        with pytest.raises(asyncio.CancelledError):
+            await task
+        await asyncio.sleep(0.1)
+        got["after"] = [type(m).__name__ for m in asv.received[before:]]
+        # the deploy's tasks (watchdogs, log flushes) and the link's are ended too
+        assert asyncio.all_tasks() == {asyncio.current_task()}
         return dep
 
-    dep = asyncio.run(main())
+    dep = run(main)
     assert "Reference" not in got["after"]
     assert dep.link.endpoint.closed and dep.jsonl.closed and dep.lsf.closed
     assert dep.link._tasks == []

@@ -60,8 +60,7 @@ def test_a_current_above_the_tested_one_is_one_deploy_event(tmp_path, caplog):
     assert flags == [0.0, 1.0, 1.0, 1.0, 0.0, 1.0]
     assert all(math.isclose(np.hypot(s["diag"]["mpc_cur_N"], s["diag"]["mpc_cur_E"]),
                             1.5 if f else 0.5) for s, f in zip(steps, flags, strict=True))
-    dep.jsonl.close()
-    dep.lsf.close()
+    dep.close()
 
 
 def test_a_controller_without_the_diagnostic_raises_no_event(tmp_path):
@@ -77,5 +76,4 @@ def test_a_controller_without_the_diagnostic_raises_no_event(tmp_path):
     assert not [e for e in read_jsonl(tmp_path / "deploy.jsonl", "event")
                 if e["event"] == "current_untested"]  # fmt: skip
     assert dep.current_untested_t is None
-    dep.jsonl.close()
-    dep.lsf.close()
+    dep.close()

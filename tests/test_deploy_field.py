@@ -15,6 +15,7 @@ import imcpy
 import pytest
 import tomli_w
 from test_io_link import ASV_ID, AUV_ID, Fake, _cfg
+from test_io_link import run as run_closing_fakes
 
 from mpcasv.cli import main
 from mpcasv.io.deploy import Deploy
@@ -88,7 +89,7 @@ def test_link_and_watchdogs_run_while_a_solve_hangs(tmp_path):
         stop.set()
         return await task
 
-    summary = asyncio.run(run())
+    summary = run_closing_fakes(run)
     steps = read_jsonl(tmp_path / "log" / "deploy.jsonl", "step")
     assert steps, "no decision"
     first = steps[0]
@@ -139,14 +140,12 @@ def test_achievable_speed_caps_a_planned_speed(tmp_path):
     last = read_jsonl(tmp_path / "deploy.jsonl", "step")[-1]
     assert last["controller_cmd"]["speed"] == 3.4 and last["cmd"]["speed"] == 0.7
     assert last["speed_capped"] is True
-    dep.jsonl.close()
-    dep.lsf.close()
+    dep.close()
     # the autopilot's own limit (DUNE's Maximum Absolute Speed) caps it too
     lim = Deploy(asv_cfg(tmp_path / "lim", speed={"command_max": 2.5}), dry_run=True)
     lim.controller, lim.observation = Planner(), dep.observation
     assert lim.step(0.0, 0.0).speed == 2.5
-    lim.jsonl.close()
-    lim.lsf.close()
+    lim.close()
 
 
 def test_otter_deploy_config_plans_with_the_identified_otter(monkeypatch):
@@ -204,7 +203,7 @@ def test_a_step_that_raises_is_logged_not_lost(tmp_path):
     try:
         asyncio.run(run())
     finally:
-        dep.controller.close()
+        dep.close()  # the solver workers and the logs (it never runs)
     dep.jsonl.flush()
     errors = [e for e in read_jsonl(tmp_path / "log" / "deploy.jsonl", "event")
               if e["event"] == "step_error"]  # fmt: skip
@@ -273,7 +272,7 @@ def test_an_inline_step_that_raises_is_logged_when_it_happens_and_the_deploy_goe
         return dep, await task
 
     with caplog.at_level(logging.ERROR, logger="mpcasv.deploy"):
-        dep, summary = asyncio.run(run())
+        dep, summary = run_closing_fakes(run)
     errors = [e for e in read_jsonl(tmp_path / "log" / "deploy.jsonl", "event")
               if e["event"] == "step_error"]  # fmt: skip
     assert len(errors) == summary["step_errors"] == dep.step_errors >= 2

@@ -96,8 +96,7 @@ def test_speed_feedback_caps_the_controllers_speed(tmp_path):
             assert "controller_speed_cap" in names
         else:
             assert dep.speed_cap is None and later.speed == v0 > 1.2
-        dep.jsonl.close()
-        dep.lsf.close()
+        dep.close()
 
 
 def test_shutdown_order_and_plan_done_timeout(tmp_path):

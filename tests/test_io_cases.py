@@ -34,7 +34,8 @@ class FakeClock:  # the deploy clock, advanced by hand
 def dry_deploy(tmp_path, **extra):
     """A dry-run deploy loop (one ASV 0x2801 at 10.0.10.50, one AUV 0x2811 at 10.0.10.60,
     hybrid-single) on a :class:`FakeClock`, logging into ``tmp_path``; ``extra``: more
-    configuration tables (e.g. ``watchdog``). Returns ``(deploy, clock)``."""
+    configuration tables (e.g. ``watchdog``). Returns ``(deploy, clock)``; the deploy never
+    runs: close it (its logs)."""
     from mpcasv.io.deploy import Deploy
 
     cfg = deploy_config_from_dict({
@@ -210,13 +211,14 @@ def test_case_replay_given_binary_log(name, tmp_path, capsys):
     assert "not a deploy log" in err[0] and name in err[0] and "LSF" in err[0]
 
 
-def test_case_vehicle_clock_step_twice_and_asv_grid(tmp_path):
+def test_case_vehicle_clock_step_twice_and_asv_grid(tmp_path, request):
     """Case vehicle-clock-step on the ASV, backward then forward: the deploy keeps deciding
     once per control period on the re-anchored timestamps (a backward step would otherwise
     stop its decision grid until the vehicle clock caught up)."""
     from mpcasv.io.deploy import RUNNING
 
     dep, clock = dry_deploy(tmp_path)
+    request.addfinalizer(dep.close)  # its logs (it never runs)
     vclock = clock.t
     for k in range(120):  # 60 s at 2 Hz
         clock.t += 0.5

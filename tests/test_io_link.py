@@ -42,7 +42,9 @@ def _cfg(tmp_path, speedup=1.0, **watchdog):
 
 
 class Fake:
-    """A vehicle (or an intruder) with its own UDP socket."""
+    """A vehicle (or an intruder) with its own UDP socket (closed by :func:`run`)."""
+
+    opened: list[Fake] = []  # every Fake opened and not yet closed
 
     def __init__(self, name: str, imc_id: int, sys_type=imcpy.SystemType.UUV):
         self.name, self.id, self.sys_type = name, imc_id, sys_type
@@ -51,7 +53,11 @@ class Fake:
 
     async def open(self):
         self.ep = await UdpEndpoint.open("127.0.0.1", 0, self._recv)
+        Fake.opened.append(self)
         return self
+
+    def close(self):
+        self.ep.close()
 
     def _recv(self, data, addr):
         self.received.append(decode(data)[0])
@@ -76,6 +82,20 @@ class Fake:
 
     def kinds(self) -> set[str]:
         return {type(m).__name__ for m in self.received}
+
+
+def run(main):
+    """``asyncio.run(main())``; the fakes it opened are closed at its end, passed or failed
+    (the deploy it started is closed by its run: stopped, or aborted when cancelled)."""
+
+    async def closing():
+        try:
+            return await main()
+        finally:
+            while Fake.opened:
+                Fake.opened.pop().close()
+
+    return asyncio.run(closing())
 
 
 async def _until(pred, timeout=3.0):
@@ -184,7 +204,7 @@ def test_bad_input_rejected_counted_logged(tmp_path):
         assert sum(summary["rejects"].values()) == len(expected)
         assert set(summary["rejects"]) == set(expected)
 
-    asyncio.run(main())
+    run(main)
 
 
 def _random_message(rng: np.random.Generator) -> imcpy.Message:
@@ -312,7 +332,7 @@ def test_fuzz_10000_datagrams(tmp_path):
                  if r["event"] == "reject"]  # fmt: skip
         assert set(r["reason"] for r in lines) == set(summary["rejects"])
 
-    asyncio.run(main())
+    run(main)
 
 
 @given(st.binary(max_size=400))
@@ -378,7 +398,7 @@ def test_only_configured_vehicles_drive_the_controller(tmp_path):
         assert not {"PlanControl", "Reference"} & asv.kinds()
         assert "Heartbeat" in asv.kinds()
 
-    asyncio.run(main())
+    run(main)
 
 
 def test_header_layout_matches_imcpy():
@@ -419,4 +439,4 @@ def test_discovery_socket_learns_a_name_only_vehicle(tmp_path):
         events = [r["event"] for r in read_jsonl(tmp_path / "log" / "deploy.jsonl", "event")]
         assert "discovery" in events and "discovered" in events
 
-    asyncio.run(main())
+    run(main)

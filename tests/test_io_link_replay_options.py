@@ -134,8 +134,7 @@ def test_replay_applies_the_logged_speed_caps(tmp_path):
         dep._on_state(dep.link.asv, NavState(t, 0.12 * k, 0, 0, 0, 1.2, 0, 0, 1.2, 0, 0, 0), t)
     decide(40.0, 48.0)
     decide(41.0, 49.2)
-    dep.jsonl.close()
-    dep.lsf.close()
+    dep.close()
     logged = [r["cmd"]["speed"] for r in read_jsonl(dep.jsonl.path, "step")]
     assert logged == [2.0, 1.2, 1.2]  # both caps at work (the preset's speed is 2.5 m/s)
     rep = replay(dep.jsonl.path)
@@ -325,8 +324,7 @@ def test_a_cap_during_a_field_step_waits_for_the_next_step_and_replays(tmp_path,
     asyncio.run(tick())
     assert seen == [1.2] and dep.speed_cap == 1.2 and dep.cap_pending is None
     decide(41.0, 49.2)
-    dep.jsonl.close()
-    dep.lsf.close()
+    dep.close()
     steps = read_jsonl(dep.jsonl.path, "step")
     assert [r["speed_cap"] for r in steps] == [None, None, 1.2]
     assert [r["cmd"]["speed"] for r in steps] == [2.0, 2.0, 1.2]

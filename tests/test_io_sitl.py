@@ -23,12 +23,15 @@ PC = imcpy.PlanControl
 
 
 class Node:
+    opened: list[Node] = []  # every Node opened and not yet closed (by _run)
+
     def __init__(self):
         self.got: list[imcpy.Message] = []
         self.sources: dict[str, set] = {}  # message name -> (host, port) it came from
 
     async def open(self):
         self.ep = await UdpEndpoint.open("127.0.0.1", 0, self._recv)
+        Node.opened.append(self)
         return self
 
     def _recv(self, data, addr):
@@ -69,6 +72,8 @@ def _run(tmp_path, body, **opt):
             await body(sitl)
         finally:
             stop.set()
+            while Node.opened:
+                Node.opened.pop().ep.close()
             await task
         return sitl
 
@@ -235,6 +240,5 @@ def test_a_scenario_whose_controller_cannot_run_is_refused_without_building_it(
         Sitl(dataclasses.replace(sc, **change), opt)
     mpc = dataclasses.replace(sc, controller="mpc-single", preset="mpc-single")
     sitl = Sitl(mpc, opt)
-    sitl.jsonl.close()
-    sitl.lsf.close()
+    sitl.close()
     assert built == []

@@ -220,11 +220,12 @@ def test_guard_policy():
     assert math.hypot(cmd.waypoint[0] - 60.0, cmd.waypoint[1]) == pytest.approx(80.0)
 
 
-def test_deploy_watchdogs_in_the_decisions(tmp_path):
+def test_deploy_watchdogs_in_the_decisions(tmp_path, request):
     """Stale AUV -> inflated covariance and the guard in the logged decision; lost ->
     standby; stale ASV -> phase asv_stale (no decisions) until its state returns."""
     cfg = deploy_config_from_dict(BASE | {"log": {"dir": str(tmp_path)}})
     dep = Deploy(cfg, dry_run=True)
+    request.addfinalizer(dep.close)  # its logs (it never runs)
     asv, auv = dep.link.asv, dep.link.auvs[0]
     now = 1000.0
     dep.clock.now = lambda: now
@@ -330,8 +331,7 @@ def test_real_dune_messages_through_the_deploy_link(tmp_path):
     last = table.iloc[-1]
     assert link.asv.nav.t == last["t"]
     assert math.hypot(link.asv.nav.N - last["N"], link.asv.nav.E - last["E"]) < 0.01
-    dep.jsonl.close()
-    dep.lsf.close()
+    dep.close()
 
 
 def test_compare_metrics_tolerances():
@@ -350,7 +350,7 @@ def test_compare_metrics_tolerances():
 
 
 @pytest.mark.parametrize("estimator", ["perfect", "acoustic", "kalman", "plan"])
-def test_deploy_feeds_the_simulators_estimators(tmp_path, estimator):
+def test_deploy_feeds_the_simulators_estimators(tmp_path, estimator, request):
     """Each AUV EstimatedState reaches the estimator as in the simulator (a status report,
     and the truth for 'perfect'); the belief follows a straight-running AUV."""
     ctl = {"name": "hybrid-single", "preset": "paper1-field", "estimator": estimator}
@@ -359,6 +359,7 @@ def test_deploy_feeds_the_simulators_estimators(tmp_path, estimator):
                               / "case3.toml")  # fmt: skip
     cfg = deploy_config_from_dict(BASE | {"controller": ctl, "log": {"dir": str(tmp_path)}})
     dep = Deploy(cfg, dry_run=True)
+    request.addfinalizer(dep.close)  # its logs (it never runs)
     asv, auv = dep.link.asv, dep.link.auvs[0]
     asv.id = 0x2801
     for i in range(20):

@@ -210,6 +210,4 @@ def test_deploy_speed_feedback_reaches_the_mpcs_plan(tmp_path):
         assert ctrl.plan.extra["T"][1:].max() <= ctrl.T_cap + 1e-3  # the worker's bounds
         assert ctrl.plan.extra["u"].max() <= 1.2 + TOL
     finally:
-        ctrl.close()
-        dep.jsonl.close()
-        dep.lsf.close()
+        dep.close()  # the solver workers too

@@ -451,13 +451,15 @@ def test_drain_reads_the_datagrams_waiting_in_the_socket():
 
 
 @pytest.mark.parametrize("waiting", [True, False])
-def test_the_watchdog_reads_waiting_states_before_calling_the_asv_stale(tmp_path, waiting):
+def test_the_watchdog_reads_waiting_states_before_calling_the_asv_stale(tmp_path, waiting,
+                                                                         request):  # fmt: skip
     from test_io_cases import _es, dry_deploy
 
     from mpcasv.io.deploy import ASV_STALE, RUNNING
     from mpcasv.io.logs import read_jsonl
 
     dep, clock = dry_deploy(tmp_path, watchdog={"asv_stale_s": 3.0, "auv_stale_s": 3.0})
+    request.addfinalizer(dep.close)  # its logs (it never runs)
     link = dep.link
 
     def states(t):
