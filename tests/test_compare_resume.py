@@ -62,6 +62,8 @@ def test_killed_sweep_resumes_with_every_job_exactly_once(tmp_path):
     assert proc.poll() is None, proc.communicate()  # still running: killed mid-sweep
     os.kill(proc.pid, signal.SIGKILL)
     proc.wait()
+    proc.stdout.close()  # (not read: a child it left may still hold them)
+    proc.stderr.close()
     before = {p.stem for p in parts.glob("*.parquet")}
     assert 4 <= len(before) < len(QUICK.jobs)
     assert FAILING.job_id in before  # the failing job ran first and was recorded

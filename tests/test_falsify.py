@@ -165,6 +165,8 @@ def test_killed_search_resumes_without_losing_a_finished_run(tmp_path):
     assert proc.poll() is None, proc.communicate()  # still running: killed mid-search
     os.kill(proc.pid, signal.SIGKILL)
     proc.wait()
+    proc.stdout.close()  # (not read: a child it left may still hold them)
+    proc.stderr.close()
     before = _finished(db)
     assert 5 <= len(before) < 12
     done = subprocess.run(_falsify_cmd(family, out, 12), env=env, capture_output=True,

@@ -280,8 +280,10 @@ def test_a_solver_worker_dies_with_the_process_that_started_it(tmp_path):
         assert not _alive(worker), "the solver worker outlived its parent"
     finally:
         parent.kill()
+        parent.wait()
         if worker is not None and _alive(worker):  # (the test failed: do not leave it)
             os.kill(worker, 9)
+        parent.stdout.close()
 
 
 _PAUSED_SCRIPT = '''
