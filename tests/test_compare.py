@@ -63,8 +63,10 @@ def test_two_local_workers_and_dask_give_identical_results(serial, pool, tmp_pat
     pool_out, pool = pool
     pd.testing.assert_frame_equal(_comparable(pool), _comparable(ref))
     assert pool["worker"].nunique() == 2  # both workers did jobs
+    # (HTTP on a free loopback port: 8787, the default even with None, may be taken by a
+    # parallel test's cluster; the retry then leaked a socket)
     with distributed.LocalCluster(processes=True, n_workers=2, threads_per_worker=1,
-                                  dashboard_address=None) as cluster:  # fmt: skip
+                                  dashboard_address="127.0.0.1:0") as cluster:  # fmt: skip
         stats, _, dask = run_suite("quick", tmp_path / "dask", dask=cluster.scheduler_address,
                                    quiet=True, report=False,
                                    runs_dir=tmp_path / "dask" / "runs")  # fmt: skip

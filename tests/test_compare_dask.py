@@ -56,8 +56,11 @@ def dask_setup(worker):
 def cluster(tmp_path_factory):
     where = tmp_path_factory.mktemp("worker-cwd")
     preload = textwrap.dedent(PRELOAD).format(where=str(where))
+    # dashboard_address None still serves HTTP, on 8787: taken by a parallel test's cluster,
+    # distributed's retry leaked a socket (ResourceWarning); a free port on loopback instead
     with distributed.LocalCluster(processes=True, n_workers=1, threads_per_worker=1,
-                                  dashboard_address=None, preload=[preload]) as c:  # fmt: skip
+                                  dashboard_address="127.0.0.1:0",
+                                  preload=[preload]) as c:  # fmt: skip
         yield c, where
 
 
@@ -178,7 +181,7 @@ def test_mpc_jobs_run_on_workers_started_as_the_refusal_says(tmp_path):
     path.write_text(MPC_SUITE)
     with dask.config.set({"distributed.worker.daemon": False}), distributed.LocalCluster(
             processes=True, n_workers=1, threads_per_worker=1,
-            dashboard_address=None) as c:  # fmt: skip
+            dashboard_address="127.0.0.1:0") as c:  # fmt: skip
         stats, exp, df = run_suite(path, tmp_path / "out", dask=c.scheduler_address,
                                    quiet=True, report=False,
                                    runs_dir=str(tmp_path / "runs"))  # fmt: skip
