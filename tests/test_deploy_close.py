@@ -140,6 +140,25 @@ def test_a_run_whose_link_cannot_bind_is_aborted_and_closes_everything(tmp_path)
     assert summary["kind"] == "summary" and summary["aborted"] == aborted["reason"]
 
 
+def test_an_abort_that_cannot_write_its_summary_raises_the_runs_own_error(tmp_path):
+    busy = _busy_udp_port()
+    try:
+        cfg = _cfg(tmp_path)
+        cfg = dataclasses.replace(cfg, link=dataclasses.replace(cfg.link,
+                                                                port=busy.getsockname()[1]))
+        dep = Deploy(cfg, dry_run=True)
+
+        def broken(**extra):
+            raise RuntimeError("disk full")
+
+        dep.write_summary = broken
+        with pytest.raises(OSError):
+            asyncio.run(dep.run(asyncio.Event()))
+    finally:
+        busy.close()
+    assert dep.jsonl.closed and dep.lsf.closed
+
+
 def test_a_cancelled_run_is_aborted_closes_everything_and_sends_no_mandone(tmp_path):
     """A run cancelled (not stopped: no Ctrl-C, SIGTERM or duration) after it had started
     FollowReference: event ``aborted``, the summary's ``aborted``, every socket and log

@@ -401,6 +401,9 @@ class Deploy(Phases, BoatFeedback, FieldMode):
                 self.link.close()
                 self.close_field_mode()
                 self.write_summary(aborted=reason)
+        except Exception:  # the exception that aborted the run is the one to raise
+            log.warning("the aborted run's event or summary could not be written",
+                        exc_info=True)  # fmt: skip
         finally:
             self.close()
 
