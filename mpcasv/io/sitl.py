@@ -266,12 +266,12 @@ class Sitl(AsvDune):
         per = round(self.Tc / self.h)
         flusher = asyncio.create_task(self._flush_loop())
         try:
-            rows = await self._loop(stop, n_steps, per)
+            wall_s, overruns = await self._loop(stop, n_steps, per)
         finally:
             flusher.cancel()
         with contextlib.suppress(asyncio.CancelledError):
             await flusher
-        return self.finish(*rows)
+        return self.finish(wall_s, overruns)
 
     async def _loop(self, stop: asyncio.Event, n_steps: int, per: int) -> tuple[float, int]:
         """The ticks until ``stop`` or ``n_steps`` periods; (wall seconds, overruns)."""
@@ -428,4 +428,7 @@ def run_sitl(scenario: Scenario, opt: SitlOptions) -> dict:
                                 lambda: asyncio.ensure_future(sitl.restart_asv()))  # fmt: skip
         return await sitl.run(stop)
 
-    return asyncio.run(main())
+    try:
+        return asyncio.run(main())
+    finally:
+        sitl.close()  # (closed already unless the event loop failed before the run)
