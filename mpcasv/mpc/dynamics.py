@@ -24,6 +24,7 @@ from __future__ import annotations
 import functools
 import math
 import sys
+from typing import NamedTuple
 
 import casadi as ca
 import numpy as np
@@ -47,9 +48,81 @@ NXV = 8  # vessel part of the plan state
 #: rate bound (rad/s) of the heading reference with ``steering = "heading"`` (M1h): the plan's
 #: sanity bound on the yaw rate
 R_REF_MAX = 0.5
+#: the plan's sanity bounds on its velocities through the water: surge from ``-U_ASTERN``
+#: to ``U_ABOVE`` above the vessel's top speed, sway within ``+-V_SANE`` (m/s), yaw rate
+#: within ``+-R_SANE`` (rad/s): the OCP's box bounds on the velocities over the ground
+#: (widened there by the current) and :func:`water_guard`'s (widened here by it)
+U_ASTERN, U_ABOVE, V_SANE, R_SANE = 0.5, 0.5, 1.0, 0.5
+#: how far beyond those bounds (m/s, m/s, rad/s) :func:`water_guard` saturates u, v and r
+W_GUARD = (0.5, 0.5, 0.25)
 #: largest |lambda h| of the plan's RK4 sub-steps on the closed loop of M1h: its fast poles are
 #: everywhere, and near the stability bound a stage is stable but not accurate
 RK4_ACCURATE = 2.0
+
+
+class GuardBounds(NamedTuple):
+    """Still-water bounds of :func:`water_guard`: surge through the water from ``u_lo`` to
+    ``u_hi``, sway within ``+-v_max`` (m/s), yaw rate within ``+-r_max`` (rad/s)."""
+
+    u_lo: float
+    u_hi: float
+    v_max: float
+    r_max: float
+
+
+def guard_bounds(model) -> GuardBounds:
+    """:class:`GuardBounds` of ``model`` (a :class:`~mpcasv.models.vessel.VesselModel`): the
+    OCP's still-water sanity box (``-U_ASTERN .. u_max + U_ABOVE``, ``V_SANE``, ``R_SANE``),
+    widened to 1.1 times the extremes of the vessel's manoeuvring envelope where those
+    reach further (its full-steering turns: dune-otter 1.18 rad/s, the shipped Otter
+    0.67 rad/s; Gretha's stay inside the box), so the plan of any manoeuvre the vessel can
+    make is the shared model's."""
+    X, u_max = envelope_states(model), model.params.u_max
+    return GuardBounds(min(-U_ASTERN, 1.1 * float(X[:, 3].min())),
+                       max(u_max + U_ABOVE, 1.1 * float(X[:, 3].max())),
+                       max(V_SANE, 1.1 * float(np.abs(X[:, 4]).max())),
+                       max(R_SANE, 1.1 * float(np.abs(X[:, 5]).max())))  # fmt: skip
+
+
+def water_guard(x, c, bounds: GuardBounds):
+    """The plan state ``x`` (``(8,)``, SX/MX) with its surge and sway speeds through the water
+    and its yaw rate kept within the physically reachable ones, as the shared model sees them
+    in the plan (``c``: the current ``[V_N, V_E]``, m/s; ``bounds``: :func:`guard_bounds`).
+
+    The OCP's sanity bounds are a box on the velocities over the ground, widened by the
+    current's speed ``|c|`` (a box cannot know the heading), so a solver's trial point may
+    run upstream at ``u_max + 0.5 + 2|c|`` through the water. There the hull's quadratic
+    damping puts a pole beyond the RK4 sub-steps' stability bound (Gretha: 4.1 1/s at
+    4.5 m/s, 2 m/s against; 2.785 / h = 2.8 is the bound) and a stage's integration
+    overflows: fatrop met Inf in the surge rows of the continuity constraints and hung
+    (docs/mpc.md, "Known problems": strong currents). fatrop's trial points may also leave
+    the box itself (a yaw rate beyond it feeds the surge through ``m v r`` and overflows in
+    ``N_rr |r| r``). Here the water-relative speeds ``u_r = u - u_c``, ``v_r = v - v_c``
+    (``[u_c, v_c] = R(psi)^T c``, eq. 2.6) are bounded to ``[u_lo - |c|_1, max(u_hi, |c|_1 +
+    U_ABOVE)]`` and ``+-(v_max + |c|_1)`` (``|c|_1 = |V_N| + |V_E| >= |c|``: a boat at rest
+    over the ground is inside) and the yaw rate to ``+-r_max``, beyond them
+    saturated smoothly (``b + W tanh((a - b) / W)``, ``W`` of :data:`W_GUARD`; continuous to
+    the second derivative).
+    Inside them the state is returned exactly (the correction is an exact 0), so a plan
+    that stays where a boat can go is integrated by the shared model unchanged; outside, the
+    derivatives are bounded and the integration stays finite."""
+    cs, sn = ca.cos(x[2]), ca.sin(x[2])
+    u_r = x[3] - (cs * c[0] + sn * c[1])  # (2.6): nu_r = nu - R(psi)^T [V_N, V_E, 0]
+    v_r = x[4] - (-sn * c[0] + cs * c[1])
+    c1 = ca.fabs(c[0]) + ca.fabs(c[1])
+    b = bounds
+    du = _beyond(u_r, b.u_lo - c1, ca.fmax(b.u_hi, c1 + U_ABOVE), W_GUARD[0])
+    dv = _beyond(v_r, -b.v_max - c1, b.v_max + c1, W_GUARD[1])
+    dr = _beyond(x[5], -b.r_max, b.r_max, W_GUARD[2])
+    return ca.vertcat(x[0:3], x[3] + du, x[4] + dv, x[5] + dr, x[6:])
+
+
+def _beyond(a, lo, hi, w):
+    """The correction that saturates ``a`` smoothly within ``w`` beyond ``[lo, hi]``: exactly
+    0 inside."""
+    over, under = a - hi, a - lo
+    return (ca.if_else(over > 0, w * ca.tanh(over / w) - over, 0)
+            + ca.if_else(under < 0, w * ca.tanh(under / w) - under, 0))
 
 
 class PlanDynamics:
@@ -114,8 +187,14 @@ class PlanDynamics:
         and the set-points' rates; with ``steering = "heading"`` the steering angle from the
         heading reference ``x[7]`` (M1h, :meth:`steering_angle`)."""
         xa = ca.vertcat(x[0:7], self.steering_angle(x)) if self.heading else x
+        xa = water_guard(xa, q[0:2], self.guard)
         xd = xdot_expr(xa, xa[6:8], q[0:2], self.model.p)
         return ca.vertcat(xd[0:6], w[0], w[1])
+
+    @functools.cached_property
+    def guard(self) -> GuardBounds:
+        """The plan vessel's :func:`guard_bounds`."""
+        return guard_bounds(self.model)
 
     def steering_angle(self, x):
         """The steering angle (rad) of plan state ``x`` (SX/MX/DM, ``x[0:8]``): ``x[7]`` with

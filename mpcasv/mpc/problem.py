@@ -40,7 +40,11 @@ from mpcasv.models.vessel import VesselModel
 from mpcasv.mpc.dynamics import (  # noqa: F401 (NXV, RK4_LAMBDA_H re-exported)
     NXV,
     R_REF_MAX,
+    R_SANE,
     RK4_LAMBDA_H,
+    U_ABOVE,
+    U_ASTERN,
+    V_SANE,
     PlanDynamics,
 )
 from mpcasv.mpc.layout import (  # the parameter vector's layout (re-exported names)
@@ -283,8 +287,8 @@ class OCP(StageTerms, PlanDynamics, WarmStart, VarianceObjective, ParamLayout):
         # they keep a solver's trial points where the model cannot overflow. u and v are
         # velocities over the ground (body axes): these are their bounds in still water, and
         # :meth:`bounds` widens them by the speed of the current the plan assumes
-        zlb = [-math.inf, -math.inf, -math.inf, -0.5, -1.0, -0.5, 0, 0] + [0.0] * K
-        zub = [math.inf, math.inf, math.inf, vp.u_max + 0.5, 1.0, 0.5, 0, 0] + [1e4] * K
+        zlb = [-math.inf, -math.inf, -math.inf, -U_ASTERN, -V_SANE, -R_SANE, 0, 0] + [0.0] * K
+        zub = [math.inf, math.inf, math.inf, vp.u_max + U_ABOVE, V_SANE, R_SANE, 0, 0] + [1e4] * K
         zlb[6], zub[6] = vp.T_min, vp.T_max
         if not self.heading:  # a heading reference (M1h) is unbounded
             zlb[7], zub[7] = -vp.delta_max, vp.delta_max
