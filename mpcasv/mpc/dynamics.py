@@ -48,12 +48,12 @@ NXV = 8  # vessel part of the plan state
 #: rate bound (rad/s) of the heading reference with ``steering = "heading"`` (M1h): the plan's
 #: sanity bound on the yaw rate
 R_REF_MAX = 0.5
-#: the plan's sanity bounds on its velocities through the water: surge from ``-U_ASTERN``
-#: to ``U_ABOVE`` above the vessel's top speed, sway within ``+-V_SANE`` (m/s), yaw rate
-#: within ``+-R_SANE`` (rad/s): the OCP's box bounds on the velocities over the ground
-#: (widened there by the current) and :func:`water_guard`'s (widened here by it)
+#: the plan's sanity bounds on its velocities: surge from ``-U_ASTERN`` to ``U_ABOVE`` above
+#: the vessel's top speed, sway within ``+-V_SANE`` (m/s), yaw rate within ``+-R_SANE``
+#: (rad/s). The OCP's box puts them on the velocities over the ground (widened there by the
+#: current's speed); :func:`water_guard` on those through the water (widened by ``|c|_1``)
 U_ASTERN, U_ABOVE, V_SANE, R_SANE = 0.5, 0.5, 1.0, 0.5
-#: how far beyond those bounds (m/s, m/s, rad/s) :func:`water_guard` saturates u, v and r
+#: how far beyond its bounds (m/s, m/s, rad/s) :func:`water_guard` saturates u_r, v_r and r
 W_GUARD = (0.5, 0.5, 0.25)
 #: largest |lambda h| of the plan's RK4 sub-steps on the closed loop of M1h: its fast poles are
 #: everywhere, and near the stability bound a stage is stable but not accurate
@@ -73,10 +73,11 @@ class GuardBounds(NamedTuple):
 def guard_bounds(model) -> GuardBounds:
     """:class:`GuardBounds` of ``model`` (a :class:`~mpcasv.models.vessel.VesselModel`): the
     OCP's still-water sanity box (``-U_ASTERN .. u_max + U_ABOVE``, ``V_SANE``, ``R_SANE``),
-    widened to 1.1 times the extremes of the vessel's manoeuvring envelope where those
-    reach further (its full-steering turns: dune-otter 1.18 rad/s, the shipped Otter
-    0.67 rad/s; Gretha's stay inside the box), so the plan of any manoeuvre the vessel can
-    make is the shared model's."""
+    widened to 1.1 times the extremes of the vessel's manoeuvring envelope where those reach
+    further (its full-steering turns: dune-otter 1.18 rad/s, the shipped Otter 0.67 rad/s;
+    Gretha's stay inside the box), so that a sub-step's state in such a turn is not
+    saturated. (The OCP's box still bounds the stages' yaw rate to ``R_SANE`` for every
+    vessel: a plan's nodes cannot turn as fast as those hulls can.)"""
     X, u_max = envelope_states(model), model.params.u_max
     return GuardBounds(min(-U_ASTERN, 1.1 * float(X[:, 3].min())),
                        max(u_max + U_ABOVE, 1.1 * float(X[:, 3].max())),
@@ -85,44 +86,45 @@ def guard_bounds(model) -> GuardBounds:
 
 
 def water_guard(x, c, bounds: GuardBounds):
-    """The plan state ``x`` (``(8,)``, SX/MX) with its surge and sway speeds through the water
-    and its yaw rate kept within the physically reachable ones, as the shared model sees them
-    in the plan (``c``: the current ``[V_N, V_E]``, m/s; ``bounds``: :func:`guard_bounds`).
+    """The plan state ``x`` (``(8,)``, SX/MX) as the shared model sees it inside the plan's
+    integration: its surge and sway speeds through the water and its yaw rate kept within
+    ``bounds`` (:func:`guard_bounds`) widened by the current ``c = [V_N, V_E]`` (m/s).
 
-    The OCP's sanity bounds are a box on the velocities over the ground, widened by the
-    current's speed ``|c|`` (a box cannot know the heading), so a solver's trial point may
-    run upstream at ``u_max + 0.5 + 2|c|`` through the water. There the hull's quadratic
-    damping puts a pole beyond the RK4 sub-steps' stability bound (Gretha: 4.1 1/s at
-    4.5 m/s, 2 m/s against; 2.785 / h = 2.8 is the bound) and a stage's integration
-    overflows: fatrop met Inf in the surge rows of the continuity constraints and hung
-    (docs/mpc.md, "Known problems": strong currents). fatrop's trial points may also leave
-    the box itself (a yaw rate beyond it feeds the surge through ``m v r`` and overflows in
-    ``N_rr |r| r``). Here the water-relative speeds ``u_r = u - u_c``, ``v_r = v - v_c``
-    (``[u_c, v_c] = R(psi)^T c``, eq. 2.6) are bounded to ``[u_lo - |c|_1, max(u_hi, |c|_1 +
-    U_ABOVE)]`` and ``+-(v_max + |c|_1)`` (``|c|_1 = |V_N| + |V_E| >= |c|``: a boat at rest
-    over the ground is inside) and the yaw rate to ``+-r_max``, beyond them
-    saturated smoothly (``b + W tanh((a - b) / W)``, ``W`` of :data:`W_GUARD`; continuous to
-    the second derivative).
-    Inside them the state is returned exactly (the correction is an exact 0), so a plan
-    that stays where a boat can go is integrated by the shared model unchanged; outside, the
-    derivatives are bounded and the integration stays finite."""
+    Why. The OCP's sanity bounds are a box on the velocities over the ground, widened by the
+    current's speed ``|c|`` (a box cannot know the heading): heading upstream in 2 m/s its
+    corner is ``u_max + 0.5 + 2|c|`` = 7.0 m/s through the water for Gretha. The hull's
+    sway-yaw mode is faster the faster it goes through the water: 3.9 1/s at the still-water
+    box's corner, 7.1 at the 2-m/s one, 4.0-4.1 at top speed against 2 m/s, where her 1-s RK4
+    sub-steps hold 2.8. A sub-step amplifies that mode, the quadratic sway and yaw damping
+    runs away, and the surge rows (``m v r``) overflowed to Inf: fatrop hung on such trial
+    points (docs/mpc.md, "Known problems": strong currents), which also leave the box.
+
+    What. ``u_r = u - u_c``, ``v_r = v - v_c`` (``[u_c, v_c] = R(psi)^T c``, eq. 2.6) are kept
+    in ``[u_lo - |c|_1, max(u_hi, |c|_1 + U_ABOVE)]`` and ``+-(v_max + |c|_1)`` (``|c|_1 =
+    |V_N| + |V_E| >= |c|``: a boat at rest over the ground is inside), the yaw rate in
+    ``+-r_max``; beyond, a component is saturated smoothly, ``b + W tanh((a - b) / W)`` (``W``
+    of :data:`W_GUARD`; continuous to the second derivative), so the derivatives stay bounded
+    and every stage finite. Inside, each component is returned unchanged (the value exactly;
+    CasADi's derivatives of the longer expression agree to rounding, 1e-14), so a stage whose
+    RK4 points stay inside is the shared model's. It is not the true motion when the plan's
+    current is wrong by more than the bounds' margins (``current = "zero"`` in a strong
+    current, an estimate not yet settled): the model's unguarded RK4 is not either there."""
     cs, sn = ca.cos(x[2]), ca.sin(x[2])
-    u_r = x[3] - (cs * c[0] + sn * c[1])  # (2.6): nu_r = nu - R(psi)^T [V_N, V_E, 0]
-    v_r = x[4] - (-sn * c[0] + cs * c[1])
+    u_c, v_c = cs * c[0] + sn * c[1], -sn * c[0] + cs * c[1]  # (2.6): R(psi)^T [V_N, V_E]
     c1 = ca.fabs(c[0]) + ca.fabs(c[1])
     b = bounds
-    du = _beyond(u_r, b.u_lo - c1, ca.fmax(b.u_hi, c1 + U_ABOVE), W_GUARD[0])
-    dv = _beyond(v_r, -b.v_max - c1, b.v_max + c1, W_GUARD[1])
-    dr = _beyond(x[5], -b.r_max, b.r_max, W_GUARD[2])
-    return ca.vertcat(x[0:3], x[3] + du, x[4] + dv, x[5] + dr, x[6:])
+    u = _kept(x[3], u_c, b.u_lo - c1, ca.fmax(b.u_hi, c1 + U_ABOVE), W_GUARD[0])
+    v = _kept(x[4], v_c, -b.v_max - c1, b.v_max + c1, W_GUARD[1])
+    r = _kept(x[5], 0.0, -b.r_max, b.r_max, W_GUARD[2])
+    return ca.vertcat(x[0:3], u, v, r, x[6:])
 
 
-def _beyond(a, lo, hi, w):
-    """The correction that saturates ``a`` smoothly within ``w`` beyond ``[lo, hi]``: exactly
-    0 inside."""
-    over, under = a - hi, a - lo
-    return (ca.if_else(over > 0, w * ca.tanh(over / w) - over, 0)
-            + ca.if_else(under < 0, w * ca.tanh(under / w) - under, 0))
+def _kept(a, a_c, lo, hi, w):
+    """``a`` (over the ground) whose part through the water ``a - a_c`` is saturated smoothly
+    within ``w`` beyond ``[lo, hi]``: ``a`` itself inside (no rounding, no cancellation)."""
+    a_r = a - a_c
+    return ca.if_else(a_r > hi, a_c + hi + w * ca.tanh((a_r - hi) / w),
+                      ca.if_else(a_r < lo, a_c + lo + w * ca.tanh((a_r - lo) / w), a))
 
 
 class PlanDynamics:
@@ -185,7 +187,8 @@ class PlanDynamics:
     def _vessel_rhs(self, x, w, q):
         """The vessel part of M1: the shared model's rigid body (actuators at their set-points)
         and the set-points' rates; with ``steering = "heading"`` the steering angle from the
-        heading reference ``x[7]`` (M1h, :meth:`steering_angle`)."""
+        heading reference ``x[7]`` (M1h, :meth:`steering_angle`). The model sees the state
+        through :func:`water_guard` (its velocities kept where a boat can go)."""
         xa = ca.vertcat(x[0:7], self.steering_angle(x)) if self.heading else x
         xa = water_guard(xa, q[0:2], self.guard)
         xd = xdot_expr(xa, xa[6:8], q[0:2], self.model.p)

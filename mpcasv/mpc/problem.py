@@ -21,7 +21,7 @@ Stage-interleaved layout (what fatrop's structure detection and a Riccati recurs
 The rigid-body part of the dynamics is the shared model's :func:`~mpcasv.models.vessel.xdot_expr`
 evaluated with the actuators at their set-points (``u = x[6:8]``), i.e. the actuator lags
 (0.3 s, 0.5 s) are removed by singular perturbation and the plan drives ``T`` and ``delta``
-through their rates.
+through their rates; it sees the state through :func:`~mpcasv.mpc.dynamics.water_guard`.
 """
 
 from __future__ import annotations
