@@ -121,17 +121,25 @@ def test_a_deploy_whose_controller_cannot_be_built_raises_that(tmp_path, monkeyp
         Deploy(_cfg(tmp_path), dry_run=True)
 
 
-def test_a_run_whose_link_cannot_bind_is_aborted_and_closes_everything(tmp_path):
+def _run_on_a_busy_port(tmp_path: Path, prepare=lambda dep: None) -> Deploy:
+    """A dry-run Deploy whose link's port is taken, ``prepare(dep)`` before its run, run: the
+    bind fails (OSError, checked); returns the Deploy."""
     busy = _busy_udp_port()
     try:
         cfg = _cfg(tmp_path)
         cfg = dataclasses.replace(cfg, link=dataclasses.replace(cfg.link,
                                                                 port=busy.getsockname()[1]))
         dep = Deploy(cfg, dry_run=True)
+        prepare(dep)
         with pytest.raises(OSError):
             asyncio.run(dep.run(asyncio.Event()))
     finally:
         busy.close()
+    return dep
+
+
+def test_a_run_whose_link_cannot_bind_is_aborted_and_closes_everything(tmp_path):
+    dep = _run_on_a_busy_port(tmp_path)
     assert dep.jsonl.closed and dep.lsf.closed
     log = tmp_path / "log" / "deploy.jsonl"
     (aborted,) = _events(log, "aborted")
@@ -141,21 +149,10 @@ def test_a_run_whose_link_cannot_bind_is_aborted_and_closes_everything(tmp_path)
 
 
 def test_an_abort_that_cannot_write_its_summary_raises_the_runs_own_error(tmp_path):
-    busy = _busy_udp_port()
-    try:
-        cfg = _cfg(tmp_path)
-        cfg = dataclasses.replace(cfg, link=dataclasses.replace(cfg.link,
-                                                                port=busy.getsockname()[1]))
-        dep = Deploy(cfg, dry_run=True)
+    def broken(**extra):
+        raise RuntimeError("disk full")
 
-        def broken(**extra):
-            raise RuntimeError("disk full")
-
-        dep.write_summary = broken
-        with pytest.raises(OSError):
-            asyncio.run(dep.run(asyncio.Event()))
-    finally:
-        busy.close()
+    dep = _run_on_a_busy_port(tmp_path, lambda dep: setattr(dep, "write_summary", broken))
     assert dep.jsonl.closed and dep.lsf.closed
 
 
