@@ -28,7 +28,7 @@ COMMAND_MODULES = (
     "mpcasv.experiments.tune_commands",  # tune controller (extends "tune": after the above)
     "mpcasv.io.commands",  # deploy, sitl, replay, log
     "mpcasv.bench",  # bench
-    "mpcasv.mpc.hung",  # replay-solve
+    "mpcasv.mpc.hung_cli",  # replay-solve
 )
 
 

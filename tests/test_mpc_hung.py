@@ -132,6 +132,28 @@ def test_the_run_folder_keeps_the_hung_solves_and_the_command_replays_them(
     assert not (tmp_path / "run2" / hung.FILE_NAME).exists()
 
 
+def test_a_record_keeps_its_problems_digest_and_a_replay_names_another_problem(
+        hung_run, tmp_path, capsys):  # fmt: skip
+    """The record's digest is the problem's (the same problem rebuilt here: no note); a record
+    whose digest differs (another version's equations with the same sizes: session 32's guard
+    changed the dynamics, not the sizes) or that has none (written before) is named before its
+    replay, which still runs."""
+    c, res, _ = hung_run
+    (s,) = res.hung_solves
+    assert s.problem == hung.problem_digest(c.ocp) and hung.same_problem(s) is True
+    other = dataclasses.replace(s, problem="0" * 16)
+    old = dataclasses.replace(s, problem="")
+    assert hung.same_problem(other) is False and hung.same_problem(old) is None
+    for rec, words in ((s, None), (other, "is not the one that hung"),
+                       (old, "without the problem's digest")):  # fmt: skip
+        f = tmp_path / "hung.pkl"
+        f.write_bytes(pickle.dumps([rec]))
+        assert _exit_code(["replay-solve", f, "--max-iter", "3"]) == 0
+        out = capsys.readouterr().out
+        assert "0 of 1 hung again" in out
+        assert ("note:" in out) == (words is not None) and (words is None or words in out)
+
+
 def test_a_qp_replay_says_feasible_not_converged(hung_run, tmp_path, capsys):
     """The QP variant's ``ok`` is a feasible plan, not convergence, and its work is bounded by
     ``qp_iters`` (no iteration limit): the replay's line says so (it said "converged (status

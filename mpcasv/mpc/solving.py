@@ -19,7 +19,7 @@ import time
 import numpy as np
 
 from mpcasv.mpc.deadline import DeadlineSolver
-from mpcasv.mpc.hung import HungSolve, idle_limit
+from mpcasv.mpc.hung import HungSolve, idle_limit, problem_digest
 from mpcasv.mpc.solvers import SolveResult
 
 #: field mode: part of the step's budget kept for the fallback and the command after a
@@ -106,7 +106,7 @@ class Solving:
                 self.hung_solves.append(HungSolve(
                     self.t_prev, self.params, self.ocp.dims.n_auv, self.multi, self.boat,
                     *(None if a is None else np.array(a, float) for a in (p, w0, lam_x, lam_g)),
-                    max_iter, self.T_cap, hang_s))  # fmt: skip
+                    max_iter, self.T_cap, hang_s, problem_digest(self.ocp)))  # fmt: skip
             return res
         return self.deadline.solve(p, w0, lam_x, lam_g, max_iter, timeout=self._left(), **cap)
 
