@@ -13,8 +13,11 @@ straight-line trims.
 Not sampled (a session-9 review): speeds through the water above top speed (a boat running
 with a current it does not know of), astern thrust (no shipped vessel has ``T_min < 0``) and
 complex poles' smaller RK4 bound (2.62 at 122 degrees). Gretha's 4 plan sub-steps of 1 s
-leave no margin there: from a top-speed trim in an unmodelled 0.6 m/s current a plan stage is
-off by 100, as it was before this module; covering it would take her plan to 5 sub-steps.
+leave no margin there: from a top-speed trim in an unmodelled 0.6 m/s current a plan stage was
+off by 100, as it was before this module. Since session 32 the plan's dynamics see the state
+through :func:`mpcasv.mpc.dynamics.water_guard`, which keeps the speeds through the water
+within the envelope's reach (widened by the planned current): such a stage stays finite and
+bounded, though not accurate.
 """
 
 from __future__ import annotations
