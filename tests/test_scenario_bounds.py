@@ -411,3 +411,18 @@ def test_a_scenario_without_a_preset_runs_with_its_controllers_default(tmp_path,
     assert main(["simulate", str(path), "--out", str(out), "--quiet", "--no-plots"]) == 0, (
         capsys.readouterr().err)
     assert (out / "metrics.json").exists()
+
+
+@pytest.mark.parametrize("controller", ["goto", "hybrid-single", "mpc-single"])
+def test_a_scenario_without_a_preset_means_its_controllers_default_everywhere(controller):
+    """The scenario format's ``preset = "default"`` (left out) is the controller's default
+    preset in the one place presets are resolved (``preset_used``): paper-table, sitl and the
+    estimator evaluation looked a preset named 'default' up and refused it ("unknown
+    preset"); only simulate had its own exception."""
+    from mpcasv.controllers import load_preset
+    from mpcasv.controllers.registry import checked_preset, controller_kind, preset_used
+
+    assert preset_used(controller, "default") == controller_kind(controller).default_preset
+    assert load_preset(controller, "default") == load_preset(controller)
+    _, params = checked_preset(controller, 1, "default")  # sitl's and deploy's check
+    assert params == load_preset(controller)

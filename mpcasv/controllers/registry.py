@@ -138,17 +138,26 @@ def controller_kind(name: str) -> ControllerKind:
         raise ConfigError(f"controller {name!r} is not available: {exc}") from None
 
 
+#: a scenario's or a suite's ``preset`` left out: the controller's default preset
+DEFAULT_PRESET = "default"
+
+
 def preset_used(name: str, preset: str | Path | None) -> str:
     """The preset controller ``name`` is built with when given ``preset``: ``preset`` itself
-    (a shipped preset's name or a TOML path, as given), else (None) its kind's default preset
-    (:attr:`ControllerKind.default_preset`), by name: what a run or a replay records.
+    (a shipped preset's name or a TOML path, as given), else (None or :data:`DEFAULT_PRESET`,
+    a scenario file without a preset) its kind's default preset
+    (:attr:`ControllerKind.default_preset`), by name: what a run or a replay records. (Before
+    session 32 "default" was looked up as a preset of that name and refused in paper-table,
+    sitl and the estimator evaluation; simulate alone had its own exception.)
 
     Raises
     ------
     ConfigError
         Unknown controller (:func:`controller_kind`).
     """
-    return str(preset) if preset else controller_kind(name).default_preset
+    if preset and str(preset) != DEFAULT_PRESET:
+        return str(preset)
+    return controller_kind(name).default_preset
 
 
 def _preset_data(name: str, preset: str | Path | None) -> tuple[Path, dict]:
