@@ -93,10 +93,9 @@ def run(args: argparse.Namespace) -> int:
     check_seed(args.seed)
     scenario, real = run_scenario(scenario, args.seed, args.nominal, args.duration)
     name = args.controller or scenario.controller
-    # the scenario's preset runs with its own controller; "default" (a file without a preset)
-    # is that controller's default preset (it was looked up as a preset named 'default')
-    own = scenario.preset if scenario.preset != "default" else None
-    preset = args.params or (own if name == scenario.controller else None)
+    # the scenario's preset runs with its own controller ("default", a file without a preset:
+    # that controller's default preset, controllers.preset_used)
+    preset = args.params or (scenario.preset if name == scenario.controller else None)
     boat = Boat.of_scenario(scenario)  # one vessel per run: the simulator's and the MPC's
     out = check_output_folder(args.out or Path("runs") / f"{scenario.name}-{name}-{args.seed}")
     check_run_dir(out)  # before the run (and before compiling an MPC), not after it
