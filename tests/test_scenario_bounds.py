@@ -261,6 +261,31 @@ def test_the_bounds_themselves_are_allowed(tmp_path):
     assert load_scenario(tmp_path / "far.toml").auv[0].behaviour.plan.route[0].waypoints
 
 
+def _auvs(n: int) -> str:
+    """BASE with ``n`` AUVs (the one of BASE and ``n - 1`` copies, each named apart)."""
+    block = BASE[BASE.index("[[auv]]"):]
+    return BASE + "".join("\n" + block.replace('name = "auv"', f'name = "auv{k}"')
+                          for k in range(1, n))  # fmt: skip
+
+
+def test_more_auvs_than_the_bound_are_refused_at_load(tmp_path, capsys):
+    """500 [[auv]] entries were accepted (no bound on their number): the run went through the
+    simulator and did not finish writing its figures in 5 minutes; an MPC would compile a
+    problem for 500 AUVs. Now at most AUV_COUNT_MAX, the bound itself allowed."""
+    from mpcasv.sim.scenario import AUV_COUNT_MAX
+
+    (tmp_path / "edge.toml").write_text(_auvs(AUV_COUNT_MAX))
+    assert len(load_scenario(tmp_path / "edge.toml").auv) == AUV_COUNT_MAX
+    path = tmp_path / "many.toml"
+    path.write_text(_auvs(AUV_COUNT_MAX + 1))
+    out = tmp_path / "out"
+    assert main(["simulate", str(path), "--out", str(out), "--quiet", "--no-plots"]) == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 1, lines
+    assert f"{path}: auv: {AUV_COUNT_MAX + 1} AUVs: at most {AUV_COUNT_MAX}" in lines[0], lines
+    assert not out.exists()
+
+
 def test_more_than_ten_thousand_waypoints_in_one_plan_are_refused(tmp_path):
     route = f"route = [ {_mower(legs='5000')}, {_mower(legs='1')} ]"
     path = _write(tmp_path, ROUTE, route)

@@ -97,6 +97,13 @@ CONTROL_PERIOD_MAX = 60.0
 #: The most plant steps per supervisory period: they are compiled into one CasADi function
 #: (1000 take about 8 s; ``dt = 1e-6`` hung building a million)
 N_SUB_MAX = 1000
+#: The most AUVs of one scenario. The papers' supervisory controller serves three (Paper 2,
+#: Cases 6-8) and visits them in turn, so each AUV waits for the others' visits: with ten a
+#: fix's age is already ten transits long. The MPC compiles one problem per AUV count whose
+#: every stage holds each AUV's forecast and range bounds (about 18 s to compile for one AUV,
+#: 28 s for three); the range figure has a panel per AUV (2.6 in each). 500 AUVs loaded, and
+#: the run did not finish writing in 5 minutes.
+AUV_COUNT_MAX = 10
 
 
 @frozen
@@ -153,6 +160,11 @@ class Scenario:
     def _check(self) -> Scenario:
         if not self.auv:
             raise FieldError("auv", "empty: a scenario needs at least one [[auv]]")
+        if len(self.auv) > AUV_COUNT_MAX:
+            raise FieldError("auv", f"{len(self.auv)} AUVs: at most {AUV_COUNT_MAX} (the "
+                             "supervisory controllers visit them in turn and the MPC compiles "
+                             "one problem per AUV count: docs/experiments.md, "
+                             "'Bounds')")  # fmt: skip
         from mpcasv.estimation import ESTIMATORS  # here, not at import: estimation imports sim
 
         if self.estimator not in ESTIMATORS:
