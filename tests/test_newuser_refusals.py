@@ -226,22 +226,23 @@ def test_the_kalman_time_constant_still_takes_inf():
 def test_a_controller_or_preset_from_the_scenario_is_refused_naming_the_scenario(
         tmp_path, capsys, controller):  # fmt: skip
     # `controller = "bogus"` in a scenario said "unknown controller 'bogus'" as if --controller
-    # had been given; a scenario preset of another controller, likewise without the scenario
+    # had been given; a scenario preset of another controller, likewise without the scenario.
+    # Since session 32 the unknown name is refused at load, naming the field too
     text = CASE1.read_text()
+    path = tmp_path / "scen.toml"
     if controller is None:
         text = text.replace('controller = "hybrid-single"', 'controller = "bogus"', 1)
-        word = "unknown controller 'bogus'"
+        word = f"{path}: controller: unknown controller 'bogus'"
     else:
         text = text.replace('controller = "hybrid-single"', 'controller = "mpc-single"', 1)
         word = "a preset for hybrid-single"
-    path = tmp_path / "scen.toml"
     path.write_text(text)
     out = tmp_path / "o"
     assert main(["simulate", str(path), "--duration", "5", "--out", str(out), "--quiet",
                  "--no-plots"]) == 2  # fmt: skip
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "Traceback" not in err[0], err
-    assert err[0].split("error: ")[1].startswith(str(path)) and word in err[0], err
+    assert str(path) in err[0].split("error: ")[1] and word in err[0], err
 
 
 @pytest.mark.parametrize(

@@ -182,6 +182,9 @@ WORLD_CASES = [
      "asv.execution", ["unknown execution 'nope'", "'gretha'"]),
     ("probability nan", "p_good = 0.95", "p_good = nan",
      "acoustics.p_good", ["nan is not a finite number"]),
+    ("unknown controller (refused at the run before)", 'controller = "goto"',
+     'controller = "nope"', "controller",
+     ["unknown controller 'nope'", "'hybrid-multi'", "'mpc-single'"]),
 ]  # fmt: skip
 
 #: an [uncertain] table's supports within the same bounds
@@ -342,6 +345,33 @@ def test_compare_refuses_the_bad_scenario_up_front_instead_of_a_job_error(tmp_pa
     lines = capsys.readouterr().err.strip().splitlines()
     assert len(lines) == 1 and "Traceback" not in lines[0], lines
     assert f"{path}: auv[0].behaviour.plan.route[0].waypoints: empty" in lines[0], lines[0]
+    assert not (out / "parts").exists()
+
+
+def test_compare_refuses_a_scenario_with_an_unknown_controller_its_entries_do_not_run(
+        tmp_path, capsys):  # fmt: skip
+    """A scenario's ``controller`` was looked up only when a run used it: a suite whose entries
+    run their own controller ran the scenario with ``controller = "nope"`` without a word (and
+    ``preset = "scenario"`` said the scenario's preset "is for 'nope'")."""
+    path = _write(tmp_path, 'controller = "goto"', 'controller = "nope"')
+    suite = tmp_path / "s.toml"
+    suite.write_text(textwrap.dedent("""
+        name = "s"
+        scenarios = ["bad.toml"]
+        seeds = [0]
+        duration = 2.0
+        plots = "none"
+        [[controllers]]
+        label = "goto"
+        name = "goto"
+        preset = "goto"
+    """))  # fmt: skip
+    out = tmp_path / "out"
+    assert main(["compare", str(suite), "--out", str(out), "--workers", "1", "--quiet",
+                 "--no-report"]) == 2  # fmt: skip
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 1, lines
+    assert f"{path}: controller: unknown controller 'nope'; known: [" in lines[0], lines[0]
     assert not (out / "parts").exists()
 
 
