@@ -138,6 +138,13 @@ def controller_kind(name: str) -> ControllerKind:
         raise ConfigError(f"controller {name!r} is not available: {exc}") from None
 
 
+def check_controller_flag(name: str, flag: str = "--controller") -> None:
+    """Refuse an unknown controller given on the command line, naming the flag (it read
+    "unknown controller" alone, as if from a file)."""
+    if name not in CONTROLLERS:
+        raise ConfigError(f"{flag} {name}: unknown controller; known: {sorted(CONTROLLERS)}")
+
+
 #: a scenario's or a suite's ``preset`` left out: the controller's default preset
 DEFAULT_PRESET = "default"
 

@@ -122,11 +122,13 @@ def check_inputs(args: argparse.Namespace):
     """
     from mpcasv.config import ConfigError, check_path_name, check_seed
     from mpcasv.controllers import load_preset
+    from mpcasv.controllers.registry import check_controller_flag
     from mpcasv.experiments.falsify import SearchSetup, load_family
     from mpcasv.experiments.falsify_folder import check_study_folder, study_identity
     from mpcasv.experiments.workers import check_workers
     from mpcasv.outputs import check_not_other_output, check_output_folder
 
+    check_controller_flag(args.controller)
     for flag in ("budget", "worst"):
         if getattr(args, flag) < 1:
             raise ConfigError(f"--{flag} must be >= 1, got {getattr(args, flag)}")

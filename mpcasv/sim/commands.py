@@ -68,6 +68,7 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError(f"--duration {args.duration:g}: a duration is a number of seconds > 0")
     from mpcasv.controllers import Boat, make_controller, preset_used
     from mpcasv.controllers.prepare import needed_libraries, prepare
+    from mpcasv.controllers.registry import check_controller_flag
     from mpcasv.estimation import ESTIMATORS, check_plan_estimator
     from mpcasv.experiments.metrics import compute_metrics
     from mpcasv.outputs import check_output_folder
@@ -76,6 +77,8 @@ def run(args: argparse.Namespace) -> int:
     from mpcasv.sim.simulator import simulate
     from mpcasv.sim.uncertainty import run_scenario
 
+    if args.controller is not None:  # named as the flag, before the scenario is read
+        check_controller_flag(args.controller)
     if args.estimator and args.estimator not in ESTIMATORS:
         raise ConfigError(f"unknown estimator {args.estimator!r}; known: {sorted(ESTIMATORS)}")
     scenario = load_scenario(args.scenario)
