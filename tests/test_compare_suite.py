@@ -176,6 +176,40 @@ overrides = { "domain.eps_plus" = 12.0 }
         assert job.preset is None  # hybrid-multi's own default preset, the domain replaced
 
 
+@pytest.mark.parametrize(("controller", "domain"), [("hybrid-single", True), ("goto", False)])
+def test_domain_from_scenario_on_a_scenario_without_a_preset_is_its_controllers_default(
+        tmp_path, capsys, controller, domain):  # fmt: skip
+    """A scenario that leaves ``preset`` out runs its controller's default preset
+    (``preset_used``); ``domain_from = "scenario"`` looked a preset named 'default' up and
+    refused the suite with "unknown preset 'default'" alone (no suite, entry or scenario)."""
+    from mpcasv.config import load_toml, resolve
+    from mpcasv.controllers.registry import controller_kind
+
+    text = (SCENARIOS_DIR / "case1.toml").read_text().replace('preset = "paper1-sim"\n', "", 1)
+    text = text.replace('controller = "hybrid-single"', f'controller = "{controller}"', 1)
+    write(tmp_path, text, "nopreset.toml")
+    suite = write(tmp_path, """
+        name = "t"
+        scenarios = ["nopreset.toml"]
+        seeds = [0]
+        duration = 5.0
+        [[controllers]]
+        label = "other"
+        name = "mpc-single"
+        domain_from = "scenario"
+    """)  # fmt: skip
+    if domain:
+        job = expand(suite).jobs[0]
+        default = load_toml(resolve("presets", controller_kind(controller).default_preset))
+        assert dict(job.overrides) == {f"domain.{k}": v for k, v in default["domain"].items()}
+        return
+    assert main(["compare", str(suite), "--out", str(tmp_path / "out"), "--quiet"]) == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 1 and str(suite) in lines[0], lines
+    assert ("the scenario's preset 'goto' (the default of its controller 'goto': it names "
+            "none) has no [domain] table") in lines[0], lines[0]
+
+
 @pytest.mark.parametrize("path", sorted(SUITES_DIR.glob("*.toml")), ids=lambda p: p.stem)
 def test_every_shipped_suite_expands(path):
     """A shipped suite that no longer validates (renamed preset key, bad label) fails here."""

@@ -83,15 +83,22 @@ def _controller_and_preset(entry: ControllerEntry, sc, where: str, base: Path, c
 
 
 def _scenario_domain(entry: ControllerEntry, sc, where: str) -> dict[str, Any]:
-    """``domain.*`` overrides from the scenario's own preset (``domain_from = "scenario"``)."""
+    """``domain.*`` overrides from the scenario's own preset (``domain_from = "scenario"``):
+    the preset its controller runs with (:func:`~mpcasv.controllers.registry.preset_used`: a
+    scenario without a preset means its controller's default preset; it was looked up as a
+    preset named 'default' and refused without the suite, scenario or entry)."""
     from mpcasv.config import load_toml, resolve
+    from mpcasv.controllers.registry import DEFAULT_PRESET, preset_used
 
     if entry.domain_from != "scenario":
         return {}
-    domain = load_toml(resolve("presets", sc.preset)).get("domain")
+    preset = preset_used(sc.controller, sc.preset)
+    domain = load_toml(resolve("presets", preset)).get("domain")
     if not isinstance(domain, Mapping):
+        whose = (f" (the default of its controller {sc.controller!r}: it names none)"
+                 if sc.preset == DEFAULT_PRESET else "")  # fmt: skip
         raise ConfigError(f"{where}: domain_from = 'scenario', but the scenario's preset "
-                          f"{sc.preset!r} has no [domain] table")  # fmt: skip
+                          f"{preset!r}{whose} has no [domain] table")  # fmt: skip
     return _flatten(domain, "domain.")
 
 
