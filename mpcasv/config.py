@@ -65,6 +65,13 @@ AUV_SPEED_MAX = 5.0
 #: The farthest anything in a run can go (m): the fastest AUV for the longest run, 3024 km.
 #: Every horizontal coordinate (``|N|``, ``|E|``) and length of a scenario lies within it.
 DISTANCE_MAX = AUV_SPEED_MAX * DURATION_MAX
+#: The most AUVs one ASV serves, in a scenario or a deployment. The papers' supervisory
+#: controller serves three (Paper 2, Cases 6-8) and visits them in turn, so each AUV waits for
+#: the others' visits: with ten a fix's age is already ten transits long. The MPC compiles one
+#: problem per AUV count whose every stage holds each AUV's forecast and range bounds (about
+#: 18 s to compile for one AUV, 28 s for three); a run's range figure has a panel per AUV.
+#: 500 AUVs loaded, and the run did not finish writing in 5 minutes.
+AUV_COUNT_MAX = 10
 #: A depth (m): in ``[0, DEPTH_MAX]``.
 Depth = between(0, DEPTH_MAX, "m", "the deepest ocean is 10.9 km")
 #: A horizontal coordinate, N or E (m): within ``DISTANCE_MAX`` of the origin.

@@ -79,6 +79,22 @@ def test_config_two_auvs_need_a_multi_controller():
     assert [v.label for v in ok.auvs] == ["a", "0x0009"]
 
 
+def test_config_more_auvs_than_a_scenario_may_have_are_refused():
+    """A deployment had no bound on its AUVs (12 loaded and built hybrid-multi); a scenario
+    has AUV_COUNT_MAX (docs/experiments.md, "Bounds"): the same here."""
+    from mpcasv.config import AUV_COUNT_MAX
+
+    auvs = [{"role": "auv", "id": 100 + k} for k in range(AUV_COUNT_MAX)]
+    data = BASE | {"controller": {"name": "hybrid-multi"}}
+    ok = deploy_config_from_dict(data | {"vehicle": [BASE["vehicle"][0], *auvs]})
+    assert len(ok.auvs) == AUV_COUNT_MAX
+    many = [BASE["vehicle"][0], *auvs, {"role": "auv", "id": 99}]
+    with pytest.raises(ConfigError) as err:
+        deploy_config_from_dict(data | {"vehicle": many}, "deploy.toml")
+    assert f"deploy.toml: vehicle: {AUV_COUNT_MAX + 1} vehicles with role 'auv': at most" in (
+        str(err.value))
+
+
 # --- IMC conversions ---------------------------------------------------------------------------
 @pytest.mark.parametrize("anchor_NE", [(0.0, 0.0), (900.0, -700.0), (-5000.0, 3000.0)])
 @pytest.mark.parametrize("depth", [0.0, 3.5, 50.0])

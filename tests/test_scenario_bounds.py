@@ -275,7 +275,7 @@ def test_more_auvs_than_the_bound_are_refused_at_load(tmp_path, capsys):
     """500 [[auv]] entries were accepted (no bound on their number): the run went through the
     simulator and did not finish writing its figures in 5 minutes; an MPC would compile a
     problem for 500 AUVs. Now at most AUV_COUNT_MAX, the bound itself allowed."""
-    from mpcasv.sim.scenario import AUV_COUNT_MAX
+    from mpcasv.config import AUV_COUNT_MAX
 
     (tmp_path / "edge.toml").write_text(_auvs(AUV_COUNT_MAX))
     assert len(load_scenario(tmp_path / "edge.toml").auv) == AUV_COUNT_MAX

@@ -18,7 +18,17 @@ from typing import Annotated, Literal
 
 from pydantic import Field, Strict, field_validator, model_validator
 
-from mpcasv.config import ConfigError, Float, NonNeg, Pos, frozen, load_toml, parse
+from mpcasv.config import (
+    AUV_COUNT_MAX,
+    ConfigError,
+    FieldError,
+    Float,
+    NonNeg,
+    Pos,
+    frozen,
+    load_toml,
+    parse,
+)
 from mpcasv.io.config_run import ClockSpec, ControllerSpec, LogSpec
 from mpcasv.io.deploycontroller import (
     MIN_SOLVE_MS,
@@ -254,6 +264,10 @@ class DeployConfig:
             raise ValueError(f"exactly one vehicle with role 'asv' is needed, got {roles}")
         if "auv" not in roles:
             raise ValueError("at least one vehicle with role 'auv' is needed")
+        if roles.count("auv") > AUV_COUNT_MAX:
+            raise FieldError("vehicle", f"{roles.count('auv')} vehicles with role 'auv': at most "
+                             f"{AUV_COUNT_MAX}, as in a scenario (docs/experiments.md, "
+                             "'Bounds')")  # fmt: skip
         ids = [v.id for v in self.vehicle if v.id is not None]
         names = [v.name for v in self.vehicle if v.name]
         if len(set(ids)) != len(ids) or len(set(names)) != len(names):

@@ -14,6 +14,7 @@ from pathlib import Path
 from pydantic import field_validator, model_validator
 
 from mpcasv.config import (
+    AUV_COUNT_MAX,
     ConfigError,
     Duration,
     FieldError,
@@ -97,13 +98,6 @@ CONTROL_PERIOD_MAX = 60.0
 #: The most plant steps per supervisory period: they are compiled into one CasADi function
 #: (1000 take about 8 s; ``dt = 1e-6`` hung building a million)
 N_SUB_MAX = 1000
-#: The most AUVs of one scenario. The papers' supervisory controller serves three (Paper 2,
-#: Cases 6-8) and visits them in turn, so each AUV waits for the others' visits: with ten a
-#: fix's age is already ten transits long. The MPC compiles one problem per AUV count whose
-#: every stage holds each AUV's forecast and range bounds (about 18 s to compile for one AUV,
-#: 28 s for three); the range figure has a panel per AUV (2.6 in each). 500 AUVs loaded, and
-#: the run did not finish writing in 5 minutes.
-AUV_COUNT_MAX = 10
 
 
 @frozen
