@@ -251,6 +251,8 @@ def test_a_controller_or_preset_from_the_scenario_is_refused_naming_the_scenario
         ([], "no such file"),  # a missing scenario: a ConfigError traceback, exit 1
         (["--estimators", "bogus"], "unknown estimator(s) ['bogus']"),  # ValueError traceback
         (["--seeds", "-1"], "--seeds"),  # a numpy traceback
+        # said after the runs had started (their progress bar), without the flag
+        (["--controller", "nope"], "--controller nope: unknown controller"),
     ],
 )
 def test_the_estimation_harness_refuses_bad_input_in_one_line(tmp_path, capsys, extra, word):

@@ -269,6 +269,10 @@ def main(argv: Sequence[str] | None = None) -> int:
 def _run(args: argparse.Namespace, load_scenario) -> int:
     from mpcasv.outputs import PLOT_SUFFIXES, check_output_file
 
+    if args.controller is not None:  # before the scenario and the runs (it was said after
+        from mpcasv.controllers.registry import check_controller_flag  # the progress bar)
+
+        check_controller_flag(args.controller)
     if any(s < 0 for s in args.seeds):
         raise ConfigError(f"--seeds {args.seeds}: seeds are integers >= 0")
     if args.plot is not None:  # before the runs: `--plot out.txt` failed in savefig after them
