@@ -325,21 +325,28 @@ def test_a_models_own_refusal_is_named_at_load_whatever_the_checks_miss(tmp_path
     assert "auv[0].behaviour: refused by the AUV model: a plan needs waypoints" in str(err.value)
 
 
-def test_compare_refuses_the_bad_scenario_up_front_instead_of_a_job_error(tmp_path, capsys):
-    """The empty route was a job error in ``mpcasv compare`` (exit 1, the traceback in the
-    table); now the suite is refused before any job starts."""
-    path = _write(tmp_path, WAYPOINTS, "waypoints = []")
+def _goto_suite(tmp_path, extra: str = ""):
+    """A suite file running ``goto`` on ``bad.toml`` (seed 0, no plots), ``extra`` lines added."""
     suite = tmp_path / "s.toml"
     suite.write_text(textwrap.dedent("""
         name = "s"
         scenarios = ["bad.toml"]
         seeds = [0]
         plots = "none"
+    """) + extra + textwrap.dedent("""
         [[controllers]]
         label = "goto"
         name = "goto"
         preset = "goto"
     """))  # fmt: skip
+    return suite
+
+
+def test_compare_refuses_the_bad_scenario_up_front_instead_of_a_job_error(tmp_path, capsys):
+    """The empty route was a job error in ``mpcasv compare`` (exit 1, the traceback in the
+    table); now the suite is refused before any job starts."""
+    path = _write(tmp_path, WAYPOINTS, "waypoints = []")
+    suite = _goto_suite(tmp_path)
     out = tmp_path / "out"
     assert main(["compare", str(suite), "--out", str(out), "--workers", "1"]) == 2
     lines = capsys.readouterr().err.strip().splitlines()
@@ -354,18 +361,7 @@ def test_compare_refuses_a_scenario_with_an_unknown_controller_its_entries_do_no
     run their own controller ran the scenario with ``controller = "nope"`` without a word (and
     ``preset = "scenario"`` said the scenario's preset "is for 'nope'")."""
     path = _write(tmp_path, 'controller = "goto"', 'controller = "nope"')
-    suite = tmp_path / "s.toml"
-    suite.write_text(textwrap.dedent("""
-        name = "s"
-        scenarios = ["bad.toml"]
-        seeds = [0]
-        duration = 2.0
-        plots = "none"
-        [[controllers]]
-        label = "goto"
-        name = "goto"
-        preset = "goto"
-    """))  # fmt: skip
+    suite = _goto_suite(tmp_path, "duration = 2.0")
     out = tmp_path / "out"
     assert main(["compare", str(suite), "--out", str(out), "--workers", "1", "--quiet",
                  "--no-report"]) == 2  # fmt: skip

@@ -127,10 +127,16 @@ class ControllerKind:
     auv_limit: Callable[[Any], tuple[int, str] | None] | None = None
 
 
+def unknown_controller(name: str) -> str | None:
+    """Why ``name`` is not a controller ("unknown controller 'x'; known: [...]"), or None."""
+    return None if name in CONTROLLERS else (
+        f"unknown controller {name!r}; known: {sorted(CONTROLLERS)}")
+
+
 def controller_kind(name: str) -> ControllerKind:
     """Look up a controller kind by name, with a clear error for unknown names."""
-    if name not in CONTROLLERS:
-        raise ConfigError(f"unknown controller {name!r}; known: {sorted(CONTROLLERS)}")
+    if (why := unknown_controller(name)) is not None:
+        raise ConfigError(why)
     module, attr = CONTROLLERS[name].split(":")
     try:
         return getattr(importlib.import_module(module), attr)
@@ -141,8 +147,8 @@ def controller_kind(name: str) -> ControllerKind:
 def check_controller_flag(name: str, flag: str = "--controller") -> None:
     """Refuse an unknown controller given on the command line, naming the flag (it read
     "unknown controller" alone, as if from a file)."""
-    if name not in CONTROLLERS:
-        raise ConfigError(f"{flag} {name}: unknown controller; known: {sorted(CONTROLLERS)}")
+    if (why := unknown_controller(name)) is not None:
+        raise ConfigError(f"{flag} {name}: {why}")
 
 
 #: a scenario's or a suite's ``preset`` left out: the controller's default preset

@@ -159,11 +159,10 @@ class Scenario:
                              "supervisory controllers visit them in turn and the MPC compiles "
                              "one problem per AUV count: docs/experiments.md, "
                              "'Bounds')")  # fmt: skip
-        from mpcasv.controllers.registry import CONTROLLERS
+        from mpcasv.controllers.registry import unknown_controller
 
-        if self.controller not in CONTROLLERS:
-            raise FieldError("controller", f"unknown controller {self.controller!r}; known: "
-                             f"{sorted(CONTROLLERS)}")  # fmt: skip
+        if (why := unknown_controller(self.controller)) is not None:
+            raise FieldError("controller", why)
         from mpcasv.estimation import ESTIMATORS  # here, not at import: estimation imports sim
 
         if self.estimator not in ESTIMATORS:
