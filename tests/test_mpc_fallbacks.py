@@ -114,6 +114,27 @@ def test_a_refused_plan_no_deeper_than_the_escape_is_used(ctrl, monkeypatch):
     assert cmd.reason != Reason.FALLBACK and ctrl.diagnostics()["mpc_ok"] == 1
 
 
+def test_an_auv_the_current_carries_the_asv_to_is_a_threat(ctrl):
+    """A still AUV 80 m north of an ASV at rest (anti-collision radius 50 m, margin 5 m:
+    beyond its radius plus the 20 m buffer): no threat in still water; a 0.5 m/s current
+    towards it carries the stopped ASV within 50 m in the 60 s horizon, so it is one (and the
+    escape guess exists); the same current across the line is not. Before session 34 the
+    ASV was held where it was and the AUV was no threat in any current."""
+    from mpcasv.mpc.rescue import threats
+
+    obs = Observation(0.0, ASVState(0.0, 0.0, 0.0, 0.0), False,
+                      (AUVEstimate(80.0, 0.0, 0.0, 0.0, 0.0),))  # fmt: skip
+    p = ctrl.parameters(obs)
+    par = ctrl.ocp.unpack_par(p)  # views into p
+    assert par["r_lo"][0, 0] == 55.0 and ctrl.ocp.t_stage[-1] == 60.0
+    m = ctrl.params.margin
+    assert not threats(ctrl.ocp, p, m).any() and escape_guess(ctrl.ocp, p, m) is None
+    par["current"][:] = (0.5, 0.0)
+    assert threats(ctrl.ocp, p, m).all() and escape_guess(ctrl.ocp, p, m) is not None
+    par["current"][:] = (0.0, 0.5)
+    assert not threats(ctrl.ocp, p, m).any()
+
+
 def test_far_from_every_auv_a_refused_plan_goes_to_the_hybrid(ctrl, monkeypatch):
     """No AUV near (no escape to compare with) and no solve converges: the hybrid controller
     takes the step, with the solver's reason."""

@@ -86,3 +86,29 @@ def test_the_guess_keeps_out_of_a_stopped_auv_in_the_way(scenarios_dir):
     assert gap.min() > 0.0, f"the guess comes {-gap.min():.1f} m inside r_lo"
     start, end = (np.hypot(*(Z[i, :2] - par["pa"][i, 1])) for i in (0, -1))
     assert start - end > 25.0  # and it gets on (from rest and round the disc: 38 m in 60 s)
+
+
+def test_a_turn_towards_a_goal_astern_keeps_its_side():
+    """The guesses steer stage by stage for a goal heading (``steered_rollout``). With the goal
+    astern, flipping 0.1 rad across the stern from one stage to the next (as the bearing of a
+    point near astern does when the boat moves), a turn beyond ``TURN_COMMIT`` keeps its
+    side: the steering stays at the lock and the heading turns one way through more than a
+    full circle in the horizon. Before session 34 each stage took the shorter side: the
+    steering chattered lock to lock and the heading stayed within 0.6 rad of its start."""
+    from mpcasv.controllers import make_controller
+    from mpcasv.interface import ASVState, AUVEstimate, Observation
+
+    c = make_controller("mpc-single", 1, "mpc-single")
+    c.reset(1)
+    obs = Observation(0.0, ASVState(0.0, 0.0, 0.0, 2.0), True,
+                      (AUVEstimate(400.0, 400.0, 0.0),))  # fmt: skip
+    p, ocp = c.parameters(obs), c.ocp
+    assert not ocp.heading  # steering planned (the heading-reference plan is M1h's)
+
+    def astern(k, z):
+        return z[2] + math.pi + (0.05 if k % 2 else -0.05)
+
+    Z, _ = ocp.split(ocp.steered_rollout(p, astern, lambda k, z: 0.5 * ocp.vessel.T_max))
+    steer = Z[1:, 7]
+    assert np.all(steer > 0.0)  # one side throughout (the first stage's e is +pi - 0.05)
+    assert np.all(np.diff(Z[:, 2]) > 0.0) and Z[-1, 2] > 2.0 * math.pi

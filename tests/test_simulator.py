@@ -116,6 +116,29 @@ def test_current_pushes_a_standing_asv():
     assert math.isfinite(v_end) and abs(ts.timeseries["E"].iloc[-1]) < 1.0
 
 
+@pytest.mark.parametrize("speed", [0.0, 1.0])
+def test_the_asv_starts_carried_by_the_current(speed):
+    """``asv.start.speed`` is through the water: the boat starts moving with the current as
+    well, not held against it (before session 34 its ground velocity was ``speed`` along its
+    heading and a standing ASV took about 90 s to pick up the drift). Its first second,
+    propeller off, covers the current plus its own way (the drag of 1 m/s slows it little in
+    1 s)."""
+    from mpcasv.control.execution import NCMD
+    from mpcasv.sim.world import World
+
+    data = json.loads(json.dumps(BASE)) | {"current": [0.3, -0.2]}
+    data["asv"] = {"start": {"N": 0.0, "E": 0.0, "psi_deg": 60.0, "speed": speed}}
+    w = World(scenario_from_dict(data), seed=0)
+    psi = math.radians(60.0)
+    vN = w.x[3] * math.cos(psi) - w.x[4] * math.sin(psi)  # body -> NED
+    vE = w.x[3] * math.sin(psi) + w.x[4] * math.cos(psi)
+    assert (vN, vE) == pytest.approx((0.3 + speed * math.cos(psi), -0.2 + speed * math.sin(psi)))
+    w.advance(np.zeros(NCMD))
+    own = speed * np.array([math.cos(psi), math.sin(psi)])
+    moved = w.x[:2] - (np.array([0.3, -0.2]) + own)
+    assert np.hypot(*moved) < 0.05 + 0.1 * speed, moved
+
+
 def test_multi_auv_ranges_pair_each_auv_with_the_asv_at_the_same_instant():
     """range_min{k} is AUV k's own closest approach within the period, at plant resolution."""
     data = json.loads(json.dumps(BASE))

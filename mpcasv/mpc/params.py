@@ -154,7 +154,7 @@ class WeightParams:
         single-AUV presets since session 12) the terminal cost sees the fix age where the
         plan ends but not that the ASV must leave soon after: each plan moved first and
         stood by last, and the next plan did the same. Set to 0 for a step while an AUV
-        threatens the ASV held where it is (a pursuer re-aims at the ASV).
+        threatens the ASV adrift (a pursuer re-aims at the ASV).
     """
 
     age: NonNeg = 1.0

@@ -28,16 +28,19 @@ import numpy as np
 from mpcasv.mpc.problem import OCP
 
 #: AUVs closer than their anti-collision radius (margin included) plus this (m), at some
-#: stage with the ASV held where it is, are the ones to escape from
+#: stage with the ASV adrift (carried by the plan's current), are the ones to escape from
 ESCAPE_BUFFER = 20.0
 
 
 def threats(ocp: OCP, p: np.ndarray, margin: float) -> np.ndarray:
     """Which AUVs (bool, shape (K,)) come within their anti-collision radius plus
     ``ESCAPE_BUFFER`` (``r_lo`` in ``p`` includes the plan's ``margin``, taken off here) of the
-    ASV held where it is, at some stage of the horizon."""
+    ASV adrift (propeller off, carried by the plan's current from where it is), at some stage
+    of the horizon. Not held where it is: a boat that stops moves with the water, and an AUV
+    the current carries it onto is a threat as well."""
     par = ocp.unpack_par(p)
-    here = par["z0"][0:2]
+    here = par["z0"][None, 0:2] + ocp.t_stage[:, None] * par["current"][None, :]  # (N+1, 2)
+    here = here[:, None, :]  # against each AUV
     dist = np.hypot(*(par["pa"] - here).transpose(2, 0, 1))  # (N+1, K)
     return np.any(dist < par["r_lo"] - margin + ESCAPE_BUFFER, axis=0)
 

@@ -16,6 +16,10 @@ from mpcasv.mpc.variance import N_NAV
 #: clearance (m) of the exploration's guess beyond the plan's inner range bound ``r_lo`` (which
 #: already holds the plan's 5 m margin): 15 m beyond the anti-collision radius in all
 CLEAR = 10.0
+#: a turn by more than this (rad, 135 deg) keeps its side until it is done: with the goal
+#: near astern the shorter side flips with each small change of heading, and the guess's
+#: steering used to chatter lock to lock instead of turning
+TURN_COMMIT = 0.75 * math.pi
 
 
 def around(here: np.ndarray, goal: np.ndarray, centres: np.ndarray, radii: np.ndarray) -> float:
@@ -139,17 +143,17 @@ class WarmStart:
         Z = np.zeros((d.N + 1, d.nx))
         Z[0] = par["z0"]
         rates = np.zeros((d.N, 2))
+        side = 0.0  # the side (+1, -1) of a turn beyond TURN_COMMIT under way, else 0
         for k in range(d.N):
             z = Z[k]
             psi_des = goal_heading(k, z)
             if self.heading:  # the heading reference (M1h) towards the goal, else the heading
-                e = (z[2] if psi_des is None else psi_des) - z[7]
-                steer_des = z[7] + math.atan2(math.sin(e), math.cos(e))
+                e, side = _committed(z[2] if psi_des is None else psi_des, z[7], side)
+                steer_des = z[7] + e
             elif psi_des is None:
-                steer_des = 0.0
+                steer_des, side = 0.0, 0.0
             else:
-                e = psi_des - z[2]
-                e = math.atan2(math.sin(e), math.cos(e))
+                e, side = _committed(psi_des, z[2], side)
                 steer_des = float(np.clip(e, -vp.delta_max, vp.delta_max))
             T_des = float(np.clip(thrust(k, z), vp.T_min, vp.T_max))
             dt = self.dts[k]
@@ -214,6 +218,18 @@ class WarmStart:
     def shift_lam_x(self, lam: np.ndarray, frac: float) -> np.ndarray:
         """Bound multipliers moved ``frac`` fine stages ahead."""
         return self.shift(lam, frac)
+
+
+def _committed(psi_des: float, psi: float, side: float) -> tuple[float, float]:
+    """The turn (rad) from ``psi`` to ``psi_des``: the shorter way, except that a turn beyond
+    ``TURN_COMMIT`` already under way on ``side`` (+1, -1; 0: none) keeps it. Returns the
+    turn and the side to keep at the next stage."""
+    e = math.atan2(math.sin(psi_des - psi), math.cos(psi_des - psi))
+    if abs(e) <= TURN_COMMIT:
+        return e, 0.0
+    if side and math.copysign(1.0, e) != side:
+        e += side * 2.0 * math.pi  # the other way round, as committed
+    return e, math.copysign(1.0, e)
 
 
 def interp_rows(A: np.ndarray, s: np.ndarray) -> np.ndarray:

@@ -257,7 +257,7 @@ class WorldView:
 
     def _stand_off_under_threat(self, p: np.ndarray) -> None:
         """``p`` without the standing-time term (M7s, ``weights.stand`` set to 0, in place)
-        while an AUV threatens the ASV held where it is (:func:`~mpcasv.mpc.rescue.threats`:
+        while an AUV threatens the ASV adrift (:func:`~mpcasv.mpc.rescue.threats`:
         within its anti-collision radius plus 20 m at some stage). M7s extrapolates the AUV
         in a straight line past the horizon; an AUV that closes in on the ASV may be turning
         towards it (a pursuer re-aims), and no place is then one to stand at (docs/mpc.md,

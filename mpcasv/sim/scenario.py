@@ -48,8 +48,9 @@ from mpcasv.sim.uncertainty import Uncertain, check_uncertain
 
 @frozen
 class ASVSpec:
-    """The ASV: where it starts (at the surface: ``depth`` 0; ``speed`` at most the vessel's
-    ``u_max``), its vessel and its execution level (shipped names or TOML paths, loaded and
+    """The ASV: where it starts (at the surface: ``depth`` 0; ``speed`` through the water, at
+    most the vessel's ``u_max``: the simulator starts it carried by the current as well), its
+    vessel and its execution level (shipped names or TOML paths, loaded and
     checked when the scenario is: an unknown one is refused naming the field and the shipped
     names)."""
 

@@ -129,6 +129,12 @@ class World:
         self.x = np.zeros(NX)
         self.x[[0, 1, 2, 3]] = s0.N, s0.E, math.radians(s0.psi_deg), s0.speed
         self.x[6] = self.model.thrust_for_speed(s0.speed) if s0.speed > 0 else 0.0
+        # start.speed is through the water and the boat is not held against the current: it
+        # starts carried by it (nu = nu_r + R(psi)^T [V_N, V_E], eq. 2.6; nu over ground)
+        cN, cE = self.current_at_asv()
+        cpsi, spsi = math.cos(self.x[2]), math.sin(self.x[2])
+        self.x[3] += cpsi * cN + spsi * cE
+        self.x[4] += -spsi * cN + cpsi * cE
         self.z = np.zeros(NZ)
         self.S = np.array(
             [[a.start.N, a.start.E, a.start.depth, math.radians(a.start.psi_deg), a.start.speed]
