@@ -112,3 +112,22 @@ def test_a_turn_towards_a_goal_astern_keeps_its_side():
     steer = Z[1:, 7]
     assert np.all(steer > 0.0)  # one side throughout (the first stage's e is +pi - 0.05)
     assert np.all(np.diff(Z[:, 2]) > 0.0) and Z[-1, 2] > 2.0 * math.pi
+
+
+def test_a_committed_turn_keeps_its_side_only_beyond_turn_commit():
+    """``_committed``: a turn beyond ``TURN_COMMIT`` (135 deg) takes the shorter side and
+    commits to it; while committed, a goal that crosses the stern is reached the committed
+    way (the longer one); at or within ``TURN_COMMIT`` the shorter way, and the commitment
+    ends."""
+    from mpcasv.mpc.warmstart import TURN_COMMIT, _committed
+
+    e, side = _committed(math.pi - 0.1, 0.0, 0.0)  # a new turn to port of the stern: free
+    assert e == pytest.approx(math.pi - 0.1) and side == 1.0
+    e, side = _committed(-(math.pi - 0.1), 0.0, 1.0)  # crossed the stern: kept to +
+    assert e == pytest.approx(math.pi + 0.1) and side == 1.0
+    e, side = _committed(-(math.pi - 0.1), 0.0, -1.0)  # committed the same way: as it is
+    assert e == pytest.approx(-(math.pi - 0.1)) and side == -1.0
+    e, side = _committed(-TURN_COMMIT, 0.0, 1.0)  # at TURN_COMMIT: the shorter way, ended
+    assert e == pytest.approx(-TURN_COMMIT) and side == 0.0
+    e, side = _committed(0.5, 6.0 * math.pi + 0.2, 1.0)  # unwrapped: the wrapped difference
+    assert e == pytest.approx(0.3) and side == 0.0

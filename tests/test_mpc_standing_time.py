@@ -103,8 +103,9 @@ def test_the_terminal_cost_prefers_ending_ahead_of_the_auv_only_with_stand():
 ])
 def test_the_standing_time_is_off_while_an_auv_threatens_the_asv(auv_N, stand_off):
     """M7s extrapolates the AUV in a straight line past the horizon; a pursuer re-aims at the
-    ASV, so while an AUV comes within its anti-collision radius plus 20 m of the ASV held
-    where it is (at some stage), the step's ``stand`` weight is 0 (runtime, no recompile).
+    ASV, so while an AUV comes within its anti-collision radius plus 20 m of the ASV adrift
+    (carried by the plan's current; none here: where it is) at some stage, the step's
+    ``stand`` weight is 0 (runtime, no recompile).
     A still AUV at 20 m depth (r_inner 45.8 m): the threshold is 65.8 m."""
     from mpcasv.controllers import make_controller
     from mpcasv.interface import ASVState, AUVEstimate, Observation

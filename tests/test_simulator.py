@@ -139,6 +139,21 @@ def test_the_asv_starts_carried_by_the_current(speed):
     assert np.hypot(*moved) < 0.05 + 0.1 * speed, moved
 
 
+def test_the_asv_starts_carried_by_the_current_field_where_it_is():
+    """With a ``[current_field]`` the start's drift is the field at t = 0 at the ASV's start
+    (its gradient makes it differ from the constant part there)."""
+    from mpcasv.sim.world import World
+
+    data = json.loads(json.dumps(BASE)) | {"current": [0.1, 0.0], "current_field": {
+        "gradient": [[0.0, 0.0], [0.0, 0.001]], "radius": 1000.0, "auv_factor": 0.0}}
+    data["asv"] = {"start": {"N": 0.0, "E": 200.0, "psi_deg": 90.0}}
+    w = World(scenario_from_dict(data), seed=0)
+    cN, cE = w.current_at_asv()
+    assert (cN, cE) == pytest.approx((0.1, 0.2))  # V_0 + G (p - p_0), p_0 the origin
+    # heading East: surge along E, sway to starboard (South)
+    assert (w.x[3], w.x[4]) == pytest.approx((cE, -cN))
+
+
 def test_multi_auv_ranges_pair_each_auv_with_the_asv_at_the_same_instant():
     """range_min{k} is AUV k's own closest approach within the period, at plant resolution."""
     data = json.loads(json.dumps(BASE))

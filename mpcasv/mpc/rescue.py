@@ -37,7 +37,10 @@ def threats(ocp: OCP, p: np.ndarray, margin: float) -> np.ndarray:
     ``ESCAPE_BUFFER`` (``r_lo`` in ``p`` includes the plan's ``margin``, taken off here) of the
     ASV adrift (propeller off, carried by the plan's current from where it is), at some stage
     of the horizon. Not held where it is: a boat that stops moves with the water, and an AUV
-    the current carries it onto is a threat as well."""
+    the current carries it onto is a threat as well (session 34). The AVOIDANCE label and the
+    exploration's "already there" test (:mod:`mpcasv.mpc.plan_output`, :mod:`mpcasv.mpc.safety`)
+    still hold the ASV where it is: session 17 tried the drift there and dropped it (7 hangs,
+    more time in the collision domain; docs/mpc.md "Controller step" 3), not re-measured since."""
     par = ocp.unpack_par(p)
     here = par["z0"][None, 0:2] + ocp.t_stage[:, None] * par["current"][None, :]  # (N+1, 2)
     here = here[:, None, :]  # against each AUV

@@ -148,6 +148,8 @@ class WarmStart:
             z = Z[k]
             psi_des = goal_heading(k, z)
             if self.heading:  # the heading reference (M1h) towards the goal, else the heading
+                if psi_des is None:  # no goal: no committed turn (the reference meets psi)
+                    side = 0.0
                 e, side = _committed(z[2] if psi_des is None else psi_des, z[7], side)
                 steer_des = z[7] + e
             elif psi_des is None:
