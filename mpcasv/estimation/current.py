@@ -64,6 +64,7 @@ import numpy as np
 from mpcasv.config import Pos, frozen
 from mpcasv.interface import Observation
 from mpcasv.models.envelope import rk4_sub_steps
+from mpcasv.models.frames import ned_to_body
 from mpcasv.models.vessel import NX, VesselModel
 
 __all__ = [
@@ -158,9 +159,8 @@ def measurement_from_estimated_state(t: float, psi: float, vx: float, vy: float,
     (N, e.g. a SetThrusterActuation value x T_max) and ``delta`` (rad) when the boat reports
     them (both, else the actuators count as unknown: the current is learnt while drifting).
     """
-    c, s = math.cos(psi), math.sin(psi)
     act = None if thrust is None or delta is None else (float(thrust), float(delta))
-    return MotionMeasurement(t, psi, c * vx + s * vy, -s * vx + c * vy, r, propeller_on, act)
+    return MotionMeasurement(t, psi, *ned_to_body(psi, vx, vy), r, propeller_on, act)
 
 
 def _relative_step(model: VesselModel) -> ca.Function:

@@ -76,6 +76,7 @@ from mpcasv.io.simvehicle import SimVehicle
 from mpcasv.io.sitlasv import AsvDune
 from mpcasv.io.sitloptions import SitlOptions
 from mpcasv.io.transport import Clock, UdpEndpoint
+from mpcasv.models.frames import body_to_ned
 from mpcasv.sim.scenario import Scenario
 
 __all__ = ["Sitl", "SitlOptions"]
@@ -151,7 +152,7 @@ class Sitl(AsvDune):
     # --- states ----------------------------------------------------------------------------
     def _nav_asv(self, x: np.ndarray) -> NavState:
         N, E, psi, u, v, r = (float(a) for a in x[:6])
-        vN, vE = u * math.cos(psi) - v * math.sin(psi), u * math.sin(psi) + v * math.cos(psi)
+        vN, vE = body_to_ned(psi, u, v)
         return NavState(self.now(), N, E, 0.0, psi, u, v, r, vN, vE, math.nan, math.nan)
 
     def _nav_auv(self, S: np.ndarray, k: int) -> NavState:

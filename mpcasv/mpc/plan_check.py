@@ -10,6 +10,7 @@ import math
 import numpy as np
 
 from mpcasv.interface import PlannedTrajectory
+from mpcasv.models.frames import ned_to_body
 
 __all__ = ["PLAN_CHECK_S", "commands_standby", "plan_energy", "planned_standby"]
 
@@ -31,7 +32,7 @@ def plan_energy(plan: PlannedTrajectory, t1: float, n: int = 20) -> float:
     x = plan.extra
     T, u, psi = (np.interp(t, plan.t, x[k]) for k in ("T", "u", "psi"))
     c = x["current"]
-    power = T * np.abs(u - (c[0] * np.cos(psi) + c[1] * np.sin(psi)))
+    power = T * np.abs(u - ned_to_body(psi, c[0], c[1])[0])
     return float(np.sum(0.5 * (power[1:] + power[:-1]) * np.diff(t)))
 
 

@@ -13,6 +13,7 @@ import numpy as np
 from mpcasv.estimation.current import measurement
 from mpcasv.hybrid.avoidance import estimate_shape
 from mpcasv.interface import Observation
+from mpcasv.models.frames import ned_to_body
 from mpcasv.mpc.layout import WEIGHT_NAMES
 from mpcasv.mpc.order import meet_time
 from mpcasv.mpc.rescue import threats
@@ -205,7 +206,7 @@ class WorldView:
             T0, d0 = (float(np.clip(T0, vp.T_min, vp.T_max)),
                       float(np.clip(d0, -vp.delta_max, vp.delta_max)))  # fmt: skip
         elif obs.propeller_on:
-            u_c = self.current[0] * math.cos(a.psi) + self.current[1] * math.sin(a.psi)
+            u_c = ned_to_body(a.psi, self.current[0], self.current[1])[0]
             T0 = min(max(ocp.model.thrust_for_speed(max(a.u - u_c, 0.0)), 1.2 * ocp.T_on),
                      vp.T_max)  # fmt: skip
             if self.plan is not None:

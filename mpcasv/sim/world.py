@@ -33,6 +33,7 @@ from mpcasv.models.acoustics import Report, success_probability, usbl_fix
 from mpcasv.models.auv import NA, auv_step_function
 from mpcasv.models.auv_nav import AUVNavFilter
 from mpcasv.models.behaviours import Scripted
+from mpcasv.models.frames import ned_to_body
 from mpcasv.models.params import load_vessel
 from mpcasv.models.vessel import NX, VesselModel
 from mpcasv.sim.account import StepAccount, classify, evaluation_domain
@@ -131,10 +132,9 @@ class World:
         self.x[6] = self.model.thrust_for_speed(s0.speed) if s0.speed > 0 else 0.0
         # start.speed is through the water and the boat is not held against the current: it
         # starts carried by it (nu = nu_r + R(psi)^T [V_N, V_E], eq. 2.6; nu over ground)
-        cN, cE = self.current_at_asv()
-        cpsi, spsi = math.cos(self.x[2]), math.sin(self.x[2])
-        self.x[3] += cpsi * cN + spsi * cE
-        self.x[4] += -spsi * cN + cpsi * cE
+        u_c, v_c = ned_to_body(float(self.x[2]), *self.current_at_asv())
+        self.x[3] += u_c
+        self.x[4] += v_c
         self.z = np.zeros(NZ)
         self.S = np.array(
             [[a.start.N, a.start.E, a.start.depth, math.radians(a.start.psi_deg), a.start.speed]
@@ -242,7 +242,7 @@ class World:
         S_next = w[: NA * m].reshape(NA, m, order="F")
         # the mapped function stacks the AUVs' (NA x n) trajectories side by side
         ST = w[NA * m :].reshape(NA, n, m, order="F").transpose(0, 2, 1)  # [:, k, j]
-        u_c = self.current[0] * np.cos(X[2]) + self.current[1] * np.sin(X[2])
+        u_c = ned_to_body(X[2], self.current[0], self.current[1])[0]
         self.energy_J += float(np.sum(X[6] * np.abs(X[3] - u_c)) * self.dt)  # thrust x speed
         ranges = np.hypot(X[0][None, :] - ST[0], X[1][None, :] - ST[1])
         slants = np.hypot(ranges, ST[2])
