@@ -135,4 +135,24 @@ def run(args: argparse.Namespace) -> int:
     if metrics.get("current_untested_s"):  # an MPC planning in a current it is untested in
         print(f"  {'current_untested_s':24s} {metrics['current_untested_s']:.3f} (its plan's "
               "current above the tested one: docs/mpc.md 'Known problems', strong currents)")
+    for line in too_deep(result):
+        print(line)
     return 0
+
+
+def too_deep(result) -> list[str]:
+    """One line per AUV that was deeper than the evaluation domain's outer sphere ``r_out``
+    for some of the run (``r_outer = 0``, Paper 1 eq. 5: no donut on the surface; the hybrid
+    controllers never stand by there), with the time (s). Empty without a domain."""
+    ts, dom = result.timeseries, result.domain
+    out = []
+    if dom is None or ts.empty:
+        return out
+    dt = float(ts["t"].iloc[1] - ts["t"].iloc[0]) if len(ts) > 1 else 0.0
+    for k, a in enumerate(result.scenario.auv):
+        col = f"r_outer{k}"
+        if col in ts and (n := int((ts[col] <= 0.0).sum())):
+            out.append(f"  AUV {a.name!r}: deeper than the outer sphere (r_out = {dom.r_out:g} m) "
+                       f"for {n * dt:g} s: no donut there (r_outer = 0, Paper 1 eq. 5), so no "
+                       "standby by the hybrid controllers; docs/metrics.md")
+    return out
