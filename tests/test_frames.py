@@ -2,6 +2,8 @@
 integrates (eq. 2.5), and the current's body components are what the model subtracts
 (eq. 2.6): a boat whose velocity over the ground is the current has no speed through water."""
 
+import math
+
 import numpy as np
 import pytest
 
@@ -41,7 +43,14 @@ def test_arrays_and_scalars_agree_and_the_rotations_invert():
     psi, a, b = RNG.uniform(-7, 7, 50), RNG.uniform(-3, 3, 50), RNG.uniform(-3, 3, 50)
     u, v = ned_to_body(psi, a, b)
     assert np.allclose(body_to_ned(psi, u, v), (a, b), atol=1e-12)
-    one = [ned_to_body(float(p), float(x), float(y)) for p, x, y in zip(psi, a, b, strict=True)]
-    assert np.allclose(np.array(one).T, (u, v), atol=1e-14)
+    assert np.array_equal(u, np.cos(psi) * a + np.sin(psi) * b)  # the arrays' old inline form
+
+
+def test_a_scalar_gives_the_bits_of_the_old_inline_math_expressions():
+    for p, x, y in zip(*RNG.uniform(-7, 7, (3, 200)), strict=True):
+        for psi in (float(p), np.float64(p), np.array(p)):  # every scalar through math
+            c, s = math.cos(float(p)), math.sin(float(p))
+            assert ned_to_body(psi, x, y) == (c * x + s * y, -s * x + c * y)
+            assert body_to_ned(psi, x, y) == (x * c - y * s, x * s + y * c)
     # a north current is to port (negative sway) of an east-going boat
     assert ned_to_body(0.5 * np.pi, 1.0, 0.0) == pytest.approx((0.0, -1.0))

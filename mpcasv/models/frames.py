@@ -5,8 +5,10 @@
 (:func:`mpcasv.models.vessel.xdot_expr`) writes the same rotation symbolically; these are
 its numeric form, for the simulator, the estimators, the MPC's world view and the IMC edge.
 
-Scalars (``float``, ``numpy.float64``) go through :mod:`math` and arrays through NumPy, so
-a caller gets the same bits it got with its own ``math.cos`` / ``np.cos`` before.
+Scalars (as a Python ``float``) go through :mod:`math` and arrays through NumPy, so a caller
+gets the same bits it got with its own ``math.cos`` / ``np.cos`` before. The symbolic form is
+written in :func:`mpcasv.models.vessel.xdot_expr` and in the MPC's guard
+(:func:`mpcasv.mpc.dynamics.water_guard`).
 """
 
 from __future__ import annotations
@@ -17,7 +19,8 @@ import numpy as np
 
 
 def _cos_sin(psi):
-    if isinstance(psi, (float, int)):
+    if np.ndim(psi) == 0:  # any scalar (float, int, NumPy scalar, 0-d array): as a float
+        psi = float(psi)
         return math.cos(psi), math.sin(psi)
     return np.cos(psi), np.sin(psi)
 

@@ -141,18 +141,25 @@ def run(args: argparse.Namespace) -> int:
 
 
 def too_deep(result) -> list[str]:
-    """One line per AUV that was deeper than the evaluation domain's outer sphere ``r_out``
-    for some of the run (``r_outer = 0``, Paper 1 eq. 5: no donut on the surface; the hybrid
-    controllers never stand by there), with the time (s). Empty without a domain."""
-    ts, dom = result.timeseries, result.domain
-    out = []
+    """One line per AUV whose depth left no target domain inside the evaluation domain's
+    donut for some of the run: ``r_outer <= r_t - eps_minus`` (Paper 1 eqs. 3-5, 10; with
+    ``r_outer = 0`` below the outer sphere ``r_out``), with the time (s). There the ASV
+    counts as beyond r_outer wherever it is short of ``r_outer``'s reach, and hybrid-single
+    run with this domain never stands by (its jump to STANDBY needs ``r_t - eps_minus < r
+    <= r_outer``). A controller run with another preset decides on its own domain. Empty
+    without a domain."""
+    ts, dom, sc = result.timeseries, result.domain, result.scenario
     if dom is None or ts.empty:
-        return out
-    dt = float(ts["t"].iloc[1] - ts["t"].iloc[0]) if len(ts) > 1 else 0.0
-    for k, a in enumerate(result.scenario.auv):
-        col = f"r_outer{k}"
-        if col in ts and (n := int((ts[col] <= 0.0).sum())):
-            out.append(f"  AUV {a.name!r}: deeper than the outer sphere (r_out = {dom.r_out:g} m) "
-                       f"for {n * dt:g} s: no donut there (r_outer = 0, Paper 1 eq. 5), so no "
-                       "standby by the hybrid controllers; docs/metrics.md")
+        return []
+    dt = sc.sim.dt if sc.sim.log_every_step else sc.sim.control_period  # one row's time
+    out = []
+    for k, a in enumerate(sc.auv):
+        if f"r_outer{k}" not in ts:
+            continue
+        n = int((ts[f"r_outer{k}"] <= ts[f"r_t{k}"] - dom.eps_minus).sum())
+        if n:
+            out.append(f"  AUV {a.name!r}: too deep for the evaluation domain for {n * dt:g} s "
+                       f"(r_outer <= r_t - eps_minus: no target domain inside the donut; r_out "
+                       f"= {dom.r_out:.0f} m): hybrid-single with this domain does not stand by "
+                       "there; docs/metrics.md")
     return out
