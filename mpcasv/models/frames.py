@@ -1,9 +1,8 @@
 """The horizontal rotation between the NED frame and the body frame (Fossen 2011, eq. 2.6).
 
 ``R(psi) = [[cos psi, -sin psi], [sin psi, cos psi]]`` takes a body-frame horizontal vector
-(surge, sway) to NED (north, east); its transpose the other way. The CasADi model
-(:func:`mpcasv.models.vessel.xdot_expr`) writes the same rotation symbolically; these are
-its numeric form, for the simulator, the estimators, the MPC's world view and the IMC edge.
+(surge, sway) to NED (north, east); its transpose the other way. These are its numeric
+form, for the simulator, the estimators, the MPC's world view and the IMC edge.
 
 Scalars (as a Python ``float``) go through :mod:`math` and arrays through NumPy, so a caller
 gets the same bits it got with its own ``math.cos`` / ``np.cos`` before. The symbolic form is

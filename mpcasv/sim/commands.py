@@ -144,7 +144,7 @@ def too_deep(result) -> list[str]:
     """One line per AUV whose depth left no target domain inside the evaluation domain's
     donut for some of the run: ``r_outer <= r_t - eps_minus`` (Paper 1 eqs. 3-5, 10; with
     ``r_outer = 0`` below the outer sphere ``r_out``), with the time (s). There the ASV
-    counts as beyond r_outer wherever it is short of ``r_outer``'s reach, and hybrid-single
+    counts as beyond r_outer wherever it is farther than ``r_outer``, and hybrid-single
     run with this domain never stands by (its jump to STANDBY needs ``r_t - eps_minus < r
     <= r_outer``). A controller run with another preset decides on its own domain. Empty
     without a domain."""
