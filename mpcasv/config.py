@@ -8,6 +8,7 @@ runs. Numbers are strict: ``"1.5"`` (a string) is not a number.
 
 from __future__ import annotations
 
+import codecs
 import dataclasses
 import tomllib
 import unicodedata
@@ -269,6 +270,9 @@ def load_toml(path: str | Path, kind: str | None = None) -> dict[str, Any]:
     except FileNotFoundError:
         raise ConfigError(f"{path}: no such file") from None
     except tomllib.TOMLDecodeError as exc:
+        if path.read_bytes().startswith(codecs.BOM_UTF8):  # TOML forbids it; editors add it
+            raise ConfigError(f"{path}: not valid TOML: it starts with a UTF-8 byte-order mark "
+                              "(BOM); save it as UTF-8 without one") from None  # fmt: skip
         raise ConfigError(f"{path}: not valid TOML: {exc}") from None
     if kind is not None:
         check_kind(data, path, kind)
