@@ -121,13 +121,9 @@ def run_trial(data: dict, source: str, controller: str, preset: str | None, seed
     ctrl = make_controller(controller, len(scenario.auv), preset, boat=Boat.of_scenario(scenario))
     sep = required_separation(ctrl) if r_sep is None else float(r_sep)
     result = simulate(scenario, ctrl, seed)
-    rob = robustness(result.timeseries, len(scenario.auv), sep, _row_period(scenario))
+    rob = robustness(result.timeseries, len(scenario.auv), sep, scenario.sim.row_period)
     return {**rob.__dict__, "r_sep_m": sep, "min_range_m": float(result.min_range_m),
             "fallbacks": int(result.fallbacks)}  # fmt: skip
-
-
-def _row_period(scenario) -> float:
-    return scenario.sim.dt if scenario.sim.log_every_step else scenario.sim.control_period
 
 
 Objective = Literal["margin", "stay"]

@@ -219,8 +219,8 @@ def write_worst(setup, row, rank: int, folder: Path) -> str:
     ctrl = make_controller(setup.controller, len(scenario.auv), setup.preset,
                            boat=Boat.of_scenario(scenario))  # fmt: skip
     result = simulate(scenario, ctrl, setup.seed)
-    period = scenario.sim.dt if scenario.sim.log_every_step else scenario.sim.control_period
-    rob = robustness(result.timeseries, len(scenario.auv), float(row["r_sep_m"]), period)
+    rob = robustness(result.timeseries, len(scenario.auv), float(row["r_sep_m"]),
+                     scenario.sim.row_period)
     if not math.isclose(rob.margin_m, float(row["margin_m"]), abs_tol=1e-6):
         # the runs should be deterministic: say so loudly, keep the rerun (its figures)
         print(f"warning: {name}: the rerun's margin is {rob.margin_m:.3f} m, the search's "

@@ -163,9 +163,7 @@ def compute_metrics(result) -> dict:
     (keys: :data:`METRIC_NAMES`; ``None`` where undefined)."""
     ts: pd.DataFrame = result.timeseries
     n_auv = len(result.scenario.auv)
-    Tc = result.scenario.sim.control_period
-    if result.scenario.sim.log_every_step:  # one row per plant step: weight rows by dt
-        Tc = result.scenario.sim.dt
+    Tc = result.scenario.sim.row_period  # a row's weight (the plant step with log_every_step)
     t_end = float(ts["t"].iloc[-1])
     # one row per controller step (the diagnostics' counts): with one row per plant step the
     # period's last (each holds its period's diagnostics)

@@ -151,14 +151,14 @@ def too_deep(result) -> list[str]:
     ts, dom, sc = result.timeseries, result.domain, result.scenario
     if dom is None or ts.empty:
         return []
-    dt = sc.sim.dt if sc.sim.log_every_step else sc.sim.control_period  # one row's time
     out = []
     for k, a in enumerate(sc.auv):
         if f"r_outer{k}" not in ts:
             continue
         n = int((ts[f"r_outer{k}"] <= ts[f"r_t{k}"] - dom.eps_minus).sum())
         if n:
-            out.append(f"  AUV {a.name!r}: too deep for the evaluation domain for {n * dt:g} s "
+            s = n * sc.sim.row_period
+            out.append(f"  AUV {a.name!r}: too deep for the evaluation domain for {s:g} s "
                        f"(r_outer <= r_t - eps_minus: no target domain inside the donut; r_out "
                        f"= {dom.r_out:.0f} m): hybrid-single with this domain does not stand by "
                        "there; docs/metrics.md")

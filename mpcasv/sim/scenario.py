@@ -125,6 +125,12 @@ class SimSpec:
     def n_sub(self) -> int:
         return int(round(self.control_period / self.dt))
 
+    @property
+    def row_period(self) -> float:
+        """The time (s) one row of a run's time series stands for: the plant step with
+        ``log_every_step``, else the supervisory period."""
+        return self.dt if self.log_every_step else self.control_period
+
 
 @frozen
 class Scenario:
