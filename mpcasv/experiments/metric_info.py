@@ -72,6 +72,11 @@ _BASE: dict[str, MetricInfo] = {
     "standby_fraction": _i("1", None, "DIAGNOSTIC: standby_s / duration_s",
                            "thesis Table 4.1"),
     "mode_switches": _i("1", "lower", "changes of the commanded mode (standby <-> transit)"),
+    "mode_switches_short": _i("1", "lower", "changes of the commanded mode less than 5 s "
+                              "after the previous change (standbys or transits of 1-4 s; "
+                              "the run's first change not counted)"),
+    "propeller_toggles": _i("1", "lower", "changes of the propeller between on and off "
+                            "(true state, sampled once per time-series row)"),
     # --- liveness (Paper 2 eq. 9-10) ----------------------------------------------------
     "reliable_fix_age_max_s": _i("s", "lower", "tau_k = time since AUV k's last reliable fix "
                                  "(a fix that arrived while r_k < r_t,k + eps_plus with the "

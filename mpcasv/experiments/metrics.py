@@ -29,8 +29,12 @@ from mpcasv.experiments.metric_info import (  # re-exported: the names other mod
     auv_column,
 )
 
-__all__ = ["HEADLINE", "METRIC_INFO", "METRIC_NAMES", "WALL_CLOCK", "MetricInfo", "age_stats",
-           "auv_column", "compute_metrics", "plan_following"]
+__all__ = ["HEADLINE", "METRIC_INFO", "METRIC_NAMES", "SHORT_STAY_S", "WALL_CLOCK", "MetricInfo",
+           "age_stats", "auv_column", "compute_metrics", "plan_following"]
+
+#: a commanded mode held less than this (s) before the next change is a short stay
+#: (``mode_switches_short``)
+SHORT_STAY_S = 5.0
 
 
 def _path_length(N: np.ndarray, E: np.ndarray) -> float:
@@ -79,6 +83,14 @@ def _update_jumps(ts: pd.DataFrame, k: int) -> np.ndarray:
     t_fix = ts[col].to_numpy()
     updated = np.flatnonzero(t_fix[1:] != t_fix[:-1])
     return d_est[updated[1:]]
+
+
+def _short_switches(t: np.ndarray, mode: np.ndarray) -> int:
+    """How many changes of the commanded ``mode`` (per row at times ``t``, s) come less than
+    :data:`SHORT_STAY_S` after the previous change: standbys or transits too short for a
+    propulsion system (the first change of a run is not counted)."""
+    t_sw = t[1:][mode[1:] != mode[:-1]]
+    return int(np.sum(np.diff(t_sw) < SHORT_STAY_S - 1e-9))
 
 
 def _max_or_none(ts: pd.DataFrame, *cols: str) -> float | None:
@@ -227,6 +239,8 @@ def compute_metrics(result) -> dict:
         "standby_s": float(np.sum(standby) * Tc),
         "standby_fraction": float(np.mean(standby)),
         "mode_switches": int(np.sum(mode[1:] != mode[:-1])),
+        "mode_switches_short": _short_switches(ts["t"].to_numpy(), mode),
+        "propeller_toggles": int(np.sum(np.diff(ts["propeller_on"].to_numpy(int)) != 0)),
         "reliable_fix_age_max_s": worst(rel_auv["max"]),
         "reliable_fix_age_p95_s": worst(rel_auv["p95"]),
         "reliable_fix_age_mean_s": worst(rel_auv["mean"]),

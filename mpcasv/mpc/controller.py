@@ -313,18 +313,20 @@ class MPCController(WorldView, Safety, PlanOutput, Targeting, SpeedCap, Carry, S
         # 1.0: the current planned with is above the tested one (metric current_untested_s)
         self._diag["mpc_cur_untested"] = float(untested_current(self.current))
         self._diag["mpc_target_switches"] = self.target_switches  # cumulative
+        self._diag["mpc_dwell_held"] = 0  # 1: the dwell rule held the plan's mode back
         if reason is not None:
             self.t_depart = None  # the hybrid's step: no standby promise of the plan
             self.fallbacks += 1
             self.fallback_log.append(FallbackEvent(obs.t, reason, res.status, res.ms))
             if hybrid_cmd.mode is Mode.STANDBY:
-                return Command.standby(hybrid_cmd.auv, Reason.FALLBACK)
-            return Command(Mode.TRANSIT, hybrid_cmd.waypoint, hybrid_cmd.speed, hybrid_cmd.auv,
-                           Reason.FALLBACK)  # fmt: skip
+                return self._issued(obs.t, Command.standby(hybrid_cmd.auv, Reason.FALLBACK))
+            return self._issued(obs.t, Command(Mode.TRANSIT, hybrid_cmd.waypoint,
+                                               hybrid_cmd.speed, hybrid_cmd.auv,
+                                               Reason.FALLBACK))  # fmt: skip
         # the plan commanded (solved, rescued, or the escape manoeuvre) is the one stored:
         # the plan-tracking metrics compare the boat with what it was told to do
         self._store_plan(obs.t, res.w)
-        return self._command(obs, res.w, p)
+        return self._issued(obs.t, self._command(obs, res.w, p, source))
 
     def diagnostics(self) -> dict:
         """Flat per-step record: solver status, iterations, solve time, cost, fallback."""

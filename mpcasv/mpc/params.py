@@ -244,6 +244,11 @@ class MPCParams:
     standby_time : float
         The command is STANDBY when the planned thrust stays below the propeller-on threshold
         for this long (s).
+    min_dwell : float
+        The dwell rule (s; 0: none): a commanded mode (STANDBY or TRANSIT) is kept at least
+        this long before the plan may change it, except a TRANSIT for AVOIDANCE, the escape
+        manoeuvre and fallback steps, which are never held back (docs/mpc.md, "Mode
+        dwell"). Against the plan's STANDBY/TRANSIT chatter (1-4 s standbys and transits).
     margin : float
         The plan keeps this far inside the donut (m): ``r_inner + margin <= r`` (and
         ``r <= r_outer - margin``); the fallback check uses the radii themselves.
@@ -347,6 +352,7 @@ class MPCParams:
     execution: str | None = None
     T_ramp: Pos = 4.0
     standby_time: Pos = 4.0
+    min_dwell: NonNeg = 5.0
     margin: NonNeg = 5.0
     lookahead: Pos = 15.0
     min_carrot: Pos = 25.0

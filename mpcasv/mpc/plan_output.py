@@ -19,6 +19,12 @@ from mpcasv.mpc.worldview import ranges
 class PlanOutput:
     """The command from the plan (mixin; state in the controller)."""
 
+    #: the mode of the last command handed over and when it began (s): the dwell rule
+    #: (``min_dwell``, :meth:`_dwell`)
+    mode_out: Mode | None = None
+    t_mode: float = -math.inf
+    dwell_holds: int = 0  # steps whose plan's mode the dwell rule held back (diagnostic)
+
     def _store_plan(self, t: float, w: np.ndarray) -> None:
         ocp = self.ocp
         Z, V = ocp.split(w)
@@ -32,8 +38,31 @@ class PlanOutput:
             "current": self.current.copy(),
         })  # fmt: skip
 
-    def _command(self, obs: Observation, w: np.ndarray, p: np.ndarray) -> Command:
-        """STANDBY or TRANSIT from the plan (see the module docstring)."""
+    def _issued(self, t: float, cmd: Command) -> Command:
+        """Note the mode of ``cmd``, handed over at ``t`` (s), for the dwell rule."""
+        if cmd.mode is not self.mode_out:
+            self.mode_out, self.t_mode = cmd.mode, t
+        return cmd
+
+    def _dwell(self, t: float, standby: bool, reason: Reason, source: str) -> bool:
+        """The dwell rule (``min_dwell``): whether the plan's mode (``standby`` or a TRANSIT
+        for ``reason``) is held back because the mode commanded began less than
+        ``min_dwell`` s before ``t``. Never for the escape manoeuvre or a plan no deeper
+        than it (``source``), nor for a TRANSIT for AVOIDANCE: leaving an AUV's way is
+        never delayed. Fallback steps (the hybrid's command) are not held either."""
+        want = Mode.STANDBY if standby else Mode.TRANSIT
+        held = (self.mode_out is not None and want is not self.mode_out
+                and t < self.t_mode + self.params.min_dwell - 1e-9
+                and source not in ("escape", "as-escape")
+                and not (want is Mode.TRANSIT and reason is Reason.AVOIDANCE))
+        self.dwell_holds += held
+        self._diag["mpc_dwell_held"] = int(held)
+        return held
+
+    def _command(self, obs: Observation, w: np.ndarray, p: np.ndarray,
+                 source: str = "plan") -> Command:
+        """STANDBY or TRANSIT from the plan (see the module docstring); the mode held for
+        ``min_dwell`` s (:meth:`_dwell`)."""
         P, ocp = self.params, self.ocp
         Z, _ = ocp.split(w)
         ts = ocp.t_stage
@@ -41,7 +70,15 @@ class PlanOutput:
         dist = ranges(Z[:, 0:2], par["pa"])
         served = int(np.argmin(dist[-1] - par["r_t"]))
         self._log_plan(obs.t)
-        if commands_standby(Z[:, 6], ocp.dt, P.standby_time, ocp.T_on):
+        here = obs.asv.position
+        reason = self._transit_reason(here, par)
+        standby = commands_standby(Z[:, 6], ocp.dt, P.standby_time, ocp.T_on)
+        if self._dwell(obs.t, standby, reason, source):
+            standby = not standby
+            if standby:  # the standby goes on until the dwell time is over, at least
+                return Command.standby(auv=served,
+                                       standby_time=self.t_mode + P.min_dwell - obs.t)
+        if standby:
             t_stand = planned_standby(ts, Z[:, 6], ocp.T_on)
             if self.t_depart is None:  # the streak's first standby plan: when it moves off
                 self.t_depart = obs.t + t_stand
@@ -49,7 +86,6 @@ class PlanOutput:
         self.t_depart = None
         look = min(P.lookahead, ts[-1])
         target = np.array([np.interp(look, ts, Z[:, 0]), np.interp(look, ts, Z[:, 1])])
-        here = obs.asv.position
         delta = target - here
         if ocp.heading:  # M1h: the execution level's line of sight is the planned psi_ref
             psi_cmd = self._heading_command(obs, float(np.interp(min(P.speed_lead, ts[-1]), ts,
@@ -70,7 +106,6 @@ class PlanOutput:
         speed = float(np.clip(u_cap, P.speed_min, ocp.vessel.u_max))
         if self.u_plan is not None:  # the plan's speed cap (mpcasv/mpc/speedcap.py)
             speed = min(speed, self.u_plan)
-        reason = self._transit_reason(here, par)
         return Command(Mode.TRANSIT, (float(wp[0]), float(wp[1])), speed, served, reason)
 
     def _heading_command(self, obs: Observation, psi_ref: float) -> float:
