@@ -6,6 +6,7 @@ fallback steps; the metrics count what a propulsion system would see."""
 from __future__ import annotations
 
 import dataclasses
+import math
 
 import numpy as np
 import pandas as pd
@@ -22,6 +23,7 @@ def _out(min_dwell: float) -> PlanOutput:
     out = PlanOutput()
     out.params = load_preset("mpc-single", "mpc-single", {"min_dwell": min_dwell})
     out._diag = {}
+    out._reset_dwell()
     return out
 
 
@@ -43,6 +45,19 @@ def test_a_mode_is_held_for_min_dwell_unless_an_auv_must_be_left():
     out._issued(15.0, Command(Mode.TRANSIT, (0.0, 100.0), 1.0, 0, Reason.TRACKING))
     assert out._dwell(16.0, True, Reason.TRACKING, "plan")  # a transit is held too
     assert not _out(0.0)._dwell(0.0, False, Reason.TRACKING, "plan")
+
+
+def test_a_new_run_starts_without_a_dwell():
+    """The controller's ``reset`` (each run's start) forgets the last run's mode: a run
+    after one that ended in a transit at 100 s may stand by at once."""
+    ctrl = make_controller("mpc-single", 1, "mpc-single")
+    assert ctrl.params.min_dwell == 5.0  # the presets' default
+    ctrl._issued(100.0, Command(Mode.TRANSIT, (0.0, 100.0), 1.0, 0, Reason.TRACKING))
+    ctrl.dwell_holds = 3
+    assert ctrl._dwell(101.0, True, Reason.TRACKING, "plan")
+    ctrl.reset(1)
+    assert (ctrl.mode_out, ctrl.t_mode, ctrl.dwell_holds) == (None, -math.inf, 0)
+    assert not ctrl._dwell(1.0, True, Reason.TRACKING, "plan")
 
 
 def _hand_result(modes, props, dt=1.0):

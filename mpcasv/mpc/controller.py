@@ -214,6 +214,7 @@ class MPCController(WorldView, Safety, PlanOutput, Targeting, SpeedCap, Carry, S
         #: plan commanded was no standby); a later plan still standing by past it is late
         #: (:meth:`Safety._late`)
         self.t_depart: float | None = None
+        self._reset_dwell()
         self.explored = 0  # exploration solves run (in a step or between steps)
         self.explore_adopted = 0  # exploration plans that warm-started the next step
         #: (observation, solved parameters, result) of a step whose exploration is due

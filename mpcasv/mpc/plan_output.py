@@ -19,11 +19,13 @@ from mpcasv.mpc.worldview import ranges
 class PlanOutput:
     """The command from the plan (mixin; state in the controller)."""
 
-    #: the mode of the last command handed over and when it began (s): the dwell rule
-    #: (``min_dwell``, :meth:`_dwell`)
-    mode_out: Mode | None = None
-    t_mode: float = -math.inf
-    dwell_holds: int = 0  # steps whose plan's mode the dwell rule held back (diagnostic)
+    def _reset_dwell(self) -> None:
+        """A run's start for the dwell rule (called by the controller's ``reset``)."""
+        #: the mode of the last command handed over and when it began (s): the dwell rule
+        #: (``min_dwell``, :meth:`_dwell`)
+        self.mode_out: Mode | None = None
+        self.t_mode = -math.inf
+        self.dwell_holds = 0  # steps whose plan's mode the dwell rule held back (diagnostic)
 
     def _store_plan(self, t: float, w: np.ndarray) -> None:
         ocp = self.ocp
