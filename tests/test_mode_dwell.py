@@ -10,6 +10,7 @@ import math
 
 import numpy as np
 import pandas as pd
+import pytest
 
 from mpcasv.controllers import load_preset, make_controller
 from mpcasv.experiments.metrics import SHORT_STAY_S, compute_metrics
@@ -41,7 +42,6 @@ def test_a_mode_is_held_for_min_dwell_unless_an_auv_must_be_left():
     assert not out._dwell(12.0, False, Reason.TRACKING, "escape")
     assert not out._dwell(12.0, False, Reason.TRACKING, "as-escape")
     assert not out._dwell(15.0, False, Reason.TRACKING, "plan")  # 5 s: over
-    assert out.dwell_holds == 2
     out._issued(15.0, Command(Mode.TRANSIT, (0.0, 100.0), 1.0, 0, Reason.TRACKING))
     assert out._dwell(16.0, True, Reason.TRACKING, "plan")  # a transit is held too
     assert not _out(0.0)._dwell(0.0, False, Reason.TRACKING, "plan")
@@ -53,10 +53,9 @@ def test_a_new_run_starts_without_a_dwell():
     ctrl = make_controller("mpc-single", 1, "mpc-single")
     assert ctrl.params.min_dwell == 5.0  # the presets' default
     ctrl._issued(100.0, Command(Mode.TRANSIT, (0.0, 100.0), 1.0, 0, Reason.TRACKING))
-    ctrl.dwell_holds = 3
     assert ctrl._dwell(101.0, True, Reason.TRACKING, "plan")
     ctrl.reset(1)
-    assert (ctrl.mode_out, ctrl.t_mode, ctrl.dwell_holds) == (None, -math.inf, 0)
+    assert (ctrl.cmd_out, ctrl.mode_out, ctrl.t_mode) == (None, None, -math.inf)
     assert not ctrl._dwell(1.0, True, Reason.TRACKING, "plan")
 
 
@@ -143,3 +142,42 @@ def test_in_closed_loop_no_mode_is_shorter_than_the_dwell_unless_an_auv_must_be_
                   or row["mpc_source"] in ("escape", "as-escape") or row["reason"] == "fallback")
         assert exempt, f"a {row['mode']} at {row['t']} s, {t[i] - t[sw[sw < i][-1]]} s after " \
                        f"the previous switch, not exempt ({row['reason']}, {row['mpc_source']})"
+
+
+def test_a_held_mode_hands_over_the_last_command_or_a_standby_for_the_dwell_left():
+    """The Otter's plan turning east from 2 m/s north (an AUV 150 m north, no threat): its
+    TRANSIT at 0 s; at 2 s a plan with the thrust off throughout (a standby plan) gives the
+    same TRANSIT again (waypoint and speed as commanded, not the standby plan's point);
+    from 5 s the STANDBY. Then the moving plan at 7 s gives a STANDBY for the 3 s of dwell
+    left, and at 10 s the TRANSIT."""
+    from test_mpc_heading import _turn_east
+
+    from mpcasv.controllers import Boat
+    from mpcasv.interface import ASVState, AUVEstimate, Observation
+    from mpcasv.mpc.problem import OCP
+
+    P = load_preset("mpc-single", "mpc-single")
+    ocp = OCP(P, 1, outer=True, boat=Boat.load("otter"))
+    out = _out(P.min_dwell)
+    out.ocp, out.domain, out.u_plan, out.t_depart = ocp, P.domain, None, None
+    out.current = np.zeros(2)
+    x0, p, go = _turn_east(ocp)
+    Z, V = ocp.split(go)
+    Z[:, 6] = 0.0
+    stop = ocp.join(Z, V)
+    out._store_plan(0.0, go)
+
+    def at(t, w):
+        obs = Observation(t, ASVState(*x0[0:6]), True, (AUVEstimate(150.0, 0.0, 0.0, 0.0, 0.0),))
+        return out._issued(t, out._command(obs, w, p))
+
+    first = at(0.0, go)
+    assert first.mode is Mode.TRANSIT and first.reason is Reason.TRACKING
+    held = at(2.0, stop)
+    assert out._diag["mpc_dwell_held"] == 1
+    assert (held.mode, held.waypoint, held.speed) == (Mode.TRANSIT, first.waypoint, first.speed)
+    assert at(5.0, stop).mode is Mode.STANDBY
+    assert out._diag["mpc_dwell_held"] == 0
+    kept = at(7.0, go)
+    assert kept.mode is Mode.STANDBY and kept.standby_time == pytest.approx(3.0)
+    assert at(10.0, go).mode is Mode.TRANSIT

@@ -240,7 +240,8 @@ def compute_metrics(result) -> dict:
         "standby_fraction": float(np.mean(standby)),
         "mode_switches": int(np.sum(mode[1:] != mode[:-1])),
         "mode_switches_short": _short_switches(ts["t"].to_numpy(), mode),
-        "propeller_toggles": int(np.sum(np.diff(ts["propeller_on"].to_numpy(int)) != 0)),
+        "propeller_toggles": int(np.sum(np.diff(ts["propeller_on"].fillna(False).to_numpy(bool))
+                                        != 0)),  # fmt: skip
         "reliable_fix_age_max_s": worst(rel_auv["max"]),
         "reliable_fix_age_p95_s": worst(rel_auv["p95"]),
         "reliable_fix_age_mean_s": worst(rel_auv["mean"]),

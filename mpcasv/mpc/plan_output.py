@@ -21,11 +21,11 @@ class PlanOutput:
 
     def _reset_dwell(self) -> None:
         """A run's start for the dwell rule (called by the controller's ``reset``)."""
-        #: the mode of the last command handed over and when it began (s): the dwell rule
-        #: (``min_dwell``, :meth:`_dwell`)
+        #: the last command handed over, its mode and when that mode began (s): the dwell
+        #: rule (``min_dwell``, :meth:`_dwell`)
+        self.cmd_out: Command | None = None
         self.mode_out: Mode | None = None
         self.t_mode = -math.inf
-        self.dwell_holds = 0  # steps whose plan's mode the dwell rule held back (diagnostic)
 
     def _store_plan(self, t: float, w: np.ndarray) -> None:
         ocp = self.ocp
@@ -41,9 +41,10 @@ class PlanOutput:
         })  # fmt: skip
 
     def _issued(self, t: float, cmd: Command) -> Command:
-        """Note the mode of ``cmd``, handed over at ``t`` (s), for the dwell rule."""
+        """Note ``cmd``, handed over at ``t`` (s), for the dwell rule."""
         if cmd.mode is not self.mode_out:
             self.mode_out, self.t_mode = cmd.mode, t
+        self.cmd_out = cmd
         return cmd
 
     def _dwell(self, t: float, standby: bool, reason: Reason, source: str) -> bool:
@@ -57,14 +58,14 @@ class PlanOutput:
                 and t < self.t_mode + self.params.min_dwell - 1e-9
                 and source not in ("escape", "as-escape")
                 and not (want is Mode.TRANSIT and reason is Reason.AVOIDANCE))
-        self.dwell_holds += held
         self._diag["mpc_dwell_held"] = int(held)
         return held
 
     def _command(self, obs: Observation, w: np.ndarray, p: np.ndarray,
                  source: str = "plan") -> Command:
         """STANDBY or TRANSIT from the plan (see the module docstring); the mode held for
-        ``min_dwell`` s (:meth:`_dwell`)."""
+        ``min_dwell`` s (:meth:`_dwell`): a STANDBY for the rest of the dwell time, a TRANSIT
+        towards the waypoint last commanded at the speed last commanded."""
         P, ocp = self.params, self.ocp
         Z, _ = ocp.split(w)
         ts = ocp.t_stage
@@ -76,10 +77,12 @@ class PlanOutput:
         reason = self._transit_reason(here, par)
         standby = commands_standby(Z[:, 6], ocp.dt, P.standby_time, ocp.T_on)
         if self._dwell(obs.t, standby, reason, source):
-            standby = not standby
-            if standby:  # the standby goes on until the dwell time is over, at least
+            if not standby:  # the plan moves: the standby goes on until the dwell is over
                 return Command.standby(auv=served,
                                        standby_time=self.t_mode + P.min_dwell - obs.t)
+            self.t_depart = None  # the plan stands by: the transit goes on as commanded
+            last = self.cmd_out
+            return Command(Mode.TRANSIT, last.waypoint, last.speed, served, reason)
         if standby:
             t_stand = planned_standby(ts, Z[:, 6], ocp.T_on)
             if self.t_depart is None:  # the streak's first standby plan: when it moves off
