@@ -30,7 +30,7 @@ from mpcasv.experiments.metric_info import (  # re-exported: the names other mod
 )
 
 __all__ = ["HEADLINE", "METRIC_INFO", "METRIC_NAMES", "SHORT_STAY_S", "WALL_CLOCK", "MetricInfo",
-           "age_stats", "auv_column", "compute_metrics", "plan_following"]
+           "age_stats", "auv_column", "compute_metrics", "plan_following", "short_switches"]
 
 #: a commanded mode held less than this (s) before the next change is a short stay
 #: (``mode_switches_short``)
@@ -85,12 +85,13 @@ def _update_jumps(ts: pd.DataFrame, k: int) -> np.ndarray:
     return d_est[updated[1:]]
 
 
-def _short_switches(t: np.ndarray, mode: np.ndarray) -> int:
-    """How many changes of the commanded ``mode`` (per row at times ``t``, s) come less than
-    :data:`SHORT_STAY_S` after the previous change: standbys or transits too short for a
-    propulsion system (the first change of a run is not counted)."""
-    t_sw = t[1:][mode[1:] != mode[:-1]]
-    return int(np.sum(np.diff(t_sw) < SHORT_STAY_S - 1e-9))
+def short_switches(t: np.ndarray, mode: np.ndarray) -> np.ndarray:
+    """Rows (indices) where the commanded ``mode`` (per row at times ``t``, s) changes less
+    than :data:`SHORT_STAY_S` after its previous change: standbys or transits too short for
+    a propulsion system (the first change of a run is not counted; ``mode_switches_short``
+    is their number)."""
+    sw = np.flatnonzero(mode[1:] != mode[:-1]) + 1
+    return sw[1:][np.diff(t[sw]) < SHORT_STAY_S - 1e-9]
 
 
 def _max_or_none(ts: pd.DataFrame, *cols: str) -> float | None:
@@ -239,7 +240,7 @@ def compute_metrics(result) -> dict:
         "standby_s": float(np.sum(standby) * Tc),
         "standby_fraction": float(np.mean(standby)),
         "mode_switches": int(np.sum(mode[1:] != mode[:-1])),
-        "mode_switches_short": _short_switches(ts["t"].to_numpy(), mode),
+        "mode_switches_short": len(short_switches(ts["t"].to_numpy(), mode)),
         "propeller_toggles": int(np.sum(np.diff(ts["propeller_on"].fillna(False).to_numpy(bool))
                                         != 0)),  # fmt: skip
         "reliable_fix_age_max_s": worst(rel_auv["max"]),

@@ -21,10 +21,9 @@ class PlanOutput:
 
     def _reset_dwell(self) -> None:
         """A run's start for the dwell rule (called by the controller's ``reset``)."""
-        #: the last command handed over, its mode and when that mode began (s): the dwell
-        #: rule (``min_dwell``, :meth:`_dwell`)
+        #: the last command handed over and when its mode began (s): the dwell rule
+        #: (``min_dwell``, :meth:`_dwell`)
         self.cmd_out: Command | None = None
-        self.mode_out: Mode | None = None
         self.t_mode = -math.inf
 
     def _store_plan(self, t: float, w: np.ndarray) -> None:
@@ -42,8 +41,8 @@ class PlanOutput:
 
     def _issued(self, t: float, cmd: Command) -> Command:
         """Note ``cmd``, handed over at ``t`` (s), for the dwell rule."""
-        if cmd.mode is not self.mode_out:
-            self.mode_out, self.t_mode = cmd.mode, t
+        if self.cmd_out is None or cmd.mode is not self.cmd_out.mode:
+            self.t_mode = t
         self.cmd_out = cmd
         return cmd
 
@@ -54,7 +53,7 @@ class PlanOutput:
         than it (``source``), nor for a TRANSIT for AVOIDANCE: leaving an AUV's way is
         never delayed. Fallback steps (the hybrid's command) are not held either."""
         want = Mode.STANDBY if standby else Mode.TRANSIT
-        held = (self.mode_out is not None and want is not self.mode_out
+        held = (self.cmd_out is not None and want is not self.cmd_out.mode
                 and t < self.t_mode + self.params.min_dwell - 1e-9
                 and source not in ("escape", "as-escape")
                 and not (want is Mode.TRANSIT and reason is Reason.AVOIDANCE))
