@@ -11,6 +11,7 @@ import pytest
 
 from mpcasv.controllers import make_controller
 from mpcasv.interface import ASVState, AUVEstimate, Observation
+from mpcasv.mpc.target import FIRST_TOUR_MIN_AUVS, first_tour_next
 
 
 @pytest.fixture(scope="module")
@@ -61,7 +62,8 @@ def test_an_auv_the_asv_cannot_reach_does_not_keep_the_target(ctrl):
     targets = _run(ctrl, auvs, steps=5, tau0=[500.0, 400.0])
     assert targets == [1] * 5, targets
     assert ctrl.target_switches == 1
-    # the same AUV 0 at 2 m/s (reachable): it keeps the target, as the age rule says
+    # the same AUV 0 at 2 m/s (reachable): it keeps the target (the age rule's choice, and
+    # with the first tour, M9t, the nearer AUV not yet visited)
     auvs = (AUVEstimate(100.0, 0.0, 60.0, 2.0, 0.0), AUVEstimate(0.0, 300.0, 60.0))
     assert _run(ctrl, auvs, steps=3, tau0=[500.0, 400.0]) == [0] * 3
 
@@ -105,6 +107,7 @@ def _first_choice(rule: str) -> int:
         "solver.compiled": False, "target_rule": rule})  # fmt: skip
     c.reset(3)
     c.target, c.tau = 2, np.array([200.0, 150.0, 0.0])
+    c.toured[:] = True  # mid-run: every AUV visited before (no first tour, M9t)
     auvs = (AUVEstimate(600.0, 0.0, 60.0), AUVEstimate(300.0, 0.0, 60.0),
             AUVEstimate(15.0, 0.0, 60.0))  # fmt: skip
     c._choose_target(Observation(0.0, ASVState(0.0, 0.0, 0.0), False, auvs), 1.0)
@@ -187,3 +190,151 @@ def test_a_committed_target_is_left_once_it_has_had_a_fix_since_it_was_chosen():
     assert c.target_switches == (1 if j == 0 else 2)  # the first choice (if a switch), the leave
     assert fixes_at_switch >= 1.0 and max(fixes_when_kept) < 1.0
     assert switched_at >= 3  # not at once: the old rule left it at the first step
+
+
+# ------------------------------------------------ the first tour (eq. M9t)
+def _square_choice(tau, toured=(True, False, False, False), **overrides) -> int:
+    """Four AUVs at the corners of a 500-m square, the ASV beside AUV 0 (the target,
+    committed and served); the AUVs' expected fix ages ``tau`` (s) and which were visited
+    once (``toured``). AUVs 1 and 3 are the square's sides away (500 m), AUV 2 its diagonal
+    (707 m). The target the age rule chooses (no solve)."""
+    c = make_controller("mpc-multi", 4, "mpc-multi",
+                        overrides={"solver.compiled": False, **overrides})  # fmt: skip
+    c.reset(4)
+    c.target, c.tau, c.t_commit = 0, np.array(tau, float), -10.0
+    c.fixes_since[0] = 1.0
+    c.toured[:] = toured
+    auvs = (AUVEstimate(250.0, 250.0, 0.0), AUVEstimate(250.0, -250.0, 0.0),
+            AUVEstimate(-250.0, -250.0, 0.0), AUVEstimate(-250.0, 250.0, 0.0))  # fmt: skip
+    c._choose_target(Observation(0.0, ASVState(230.0, 250.0, 0.0), False, auvs), 1.0)
+    return c.target
+
+
+def test_the_first_tour_goes_round_a_square_where_the_projected_age_crosses_it():
+    """Session 35's sweep (four AUVs at a square's corners, `mpc-multi`: one AUV had no
+    reliable fix in 900 s): with every age about the same the projected age (age + time to
+    go) is largest for the farthest AUV, the diagonal, and the age rule then repeats that
+    crossing cycle. The first tour (M9t) takes a side; once every AUV has been visited,
+    the largest projected age decides again (here: the diagonal)."""
+    tau = [0.0, 300.0, 300.0, 300.0]
+    assert _square_choice(tau, first_tour=False) == 2
+    assert _square_choice(tau) == 3  # the nearer side (the ASV is 20 m south of AUV 0)
+    assert _square_choice(tau, toured=(True, True, True, True)) == 2
+
+
+def test_the_first_tour_is_the_shortest_path_closing_at_the_oldest_visited_auv():
+    """``first_tour_next`` by hand: the ASV at the origin, A 60 m south (the nearest), B 200
+    m north, the tour closing at Z 500 m south (the oldest AUV already visited). A, B, Z:
+    60 + 260 + 700 = 1020 m; B, A, Z: 200 + 260 + 440 = 900 m: B first. Without Z (a
+    closed tour at the start) the nearest, A: 60 + 260 + 260 against 200 + 260 + 260."""
+    pos = np.array([[-60.0, 0.0], [200.0, 0.0], [-500.0, 0.0]])
+    assert first_tour_next(np.zeros(2), pos, [0, 1], close=2) == 1
+    assert first_tour_next(np.zeros(2), pos, [0, 1], close=None) == 0
+    assert first_tour_next(np.zeros(2), pos, [1], close=2) == 1
+    with pytest.raises(ValueError, match="at least one AUV"):
+        first_tour_next(np.zeros(2), pos, [], close=2)
+    many = np.array([[100.0 * (k + 1), 0.0] for k in range(8)])  # beyond the enumeration
+    assert first_tour_next(np.zeros(2), many, list(range(8))[::-1], close=None) == 0
+
+
+def test_the_first_tour_starts_with_every_auv_even_one_whose_age_is_low_because_the_run_began():
+    """Four AUVs on a line 100, 350, 600 and 850 m east of the ASV, no fix yet, the run 1 s
+    old: every expected age is below ``tau_served`` only because the run has just begun.
+    The first tour commits to AUV 0 (the line's order; before, the AUV nearest the start
+    was left out of the first round, its projected age below ``tau_served``), and after an
+    expected fix at AUV 0 moves on to another AUV (on a line several paths are about as
+    long: which one is test_the_first_tour_closes_at_the_oldest_visited_auv's business);
+    without it the farthest AUV comes first."""
+    auvs = tuple(AUVEstimate(0.0, e, 0.0) for e in (100.0, 350.0, 600.0, 850.0))
+    choice = {}
+    for first_tour in (False, True):
+        c = make_controller("mpc-multi", 4, "mpc-multi", overrides={
+            "solver.compiled": False, "first_tour": first_tour})  # fmt: skip
+        c.reset(4)
+        c.tau = np.full(4, 1.0)
+        c._choose_target(Observation(1.0, ASVState(0.0, 0.0, 0.0), False, auvs), 1.0)
+        choice[first_tour] = c.target
+    assert choice == {False: 3, True: 0}
+    assert c.committed and c.target_switches == 0
+    c.fixes_since[0] = c.fixes_run[0] = 1.0  # a fix at AUV 0 (in expectation)
+    c.tau = np.array([5.0, 60.0, 60.0, 60.0])
+    c._choose_target(Observation(60.0, ASVState(0.0, 30.0, 0.0), False, auvs), 1.0)
+    assert c.toured.tolist() == [True, False, False, False]
+    assert c.target != 0 and c.target_switches == 1
+
+
+def _controller(K: int, **overrides):
+    c = make_controller("mpc-multi", K, "mpc-multi",
+                        overrides={"solver.compiled": False, **overrides})  # fmt: skip
+    c.reset(K)
+    return c
+
+
+def test_the_first_tour_closes_at_the_oldest_visited_auv():
+    """AUVs P (100 m north of the ASV) and Q (100 m south) not yet visited; Z1 300 m north
+    and Z2 300 m east of Q's south, both visited. The target, served, is the younger of
+    Z1 and Z2; the path closes at the older: P, Q, Z1 = 100 + 200 + 400 m against Q, P, Z1
+    = 100 + 200 + 200 m (Q first); P, Q, Z2 = 100 + 200 + 200 m against Q, P, Z2 = 100 +
+    200 + 400 m (P first)."""
+    auvs = (AUVEstimate(100.0, 0.0, 0.0), AUVEstimate(-100.0, 0.0, 0.0),
+            AUVEstimate(300.0, 0.0, 0.0), AUVEstimate(-300.0, 0.0, 0.0))  # fmt: skip
+    chosen = {}
+    for served, older in ((3, 2), (2, 3)):
+        c = _controller(4)
+        c.toured[:] = [False, False, True, True]
+        c.target, c.t_commit = served, -10.0
+        c.fixes_since[served] = 1.0
+        c.tau = np.full(4, 300.0)
+        c.tau[served] = 5.0
+        c._choose_target(Observation(0.0, ASVState(0.0, 0.0, 0.0), False, auvs), 1.0)
+        chosen[older] = c.target
+    assert chosen == {2: 1, 3: 0}, chosen
+
+
+def test_a_target_visited_for_dwell_max_without_a_fix_counts_as_visited():
+    """AUV 0 of four, the committed target, not yet visited and without an expected fix
+    (its fix model credits none: a moving AUV keeps the age up), the ASV 20 m from it:
+    once the ASV has spent ``dwell_max`` in its target domain it counts as visited and
+    the first tour moves on."""
+    auvs = (AUVEstimate(20.0, 0.0, 0.0), AUVEstimate(-300.0, 0.0, 0.0),
+            AUVEstimate(-300.0, 300.0, 0.0), AUVEstimate(0.0, 400.0, 0.0))  # fmt: skip
+    c = _controller(4)
+    c.target, c.t_commit = 0, -10.0
+    c.tau = np.full(4, 200.0)
+    c.dwell = c.params.dwell_max - 0.5
+    c._choose_target(Observation(0.0, ASVState(0.0, 0.0, 0.0), False, auvs), 1.0)
+    assert c.toured.tolist() == [True, False, False, False]
+    assert c.target != 0 and c.target_switches == 1
+
+
+def test_with_fix_times_from_the_estimates_a_visit_is_a_fix_after_the_runs_first_step():
+    """``fix_age_source = "estimate"``: the simulator's estimators start with ``t_last_fix =
+    0``, the run's first step; that is no visit (a first version counted every finite fix
+    time, so every AUV was "visited" at once and the first tour did nothing). A fix time
+    after the first step is."""
+    auvs = (AUVEstimate(0.0, 100.0, 0.0, t_last_fix=0.0),
+            AUVEstimate(0.0, 900.0, 0.0, t_last_fix=0.0),
+            AUVEstimate(0.0, 350.0, 0.0, t_last_fix=0.0),
+            AUVEstimate(300.0, 350.0, 0.0, t_last_fix=0.0))  # fmt: skip
+    c = _controller(4, fix_age_source="estimate")
+    c._choose_target(Observation(0.0, ASVState(0.0, 0.0, 0.0), False, auvs), 0.0)
+    assert not c.toured.any() and c.target == 0  # the nearest first
+    auvs = (dataclasses.replace(auvs[0], t_last_fix=40.0), *auvs[1:])
+    c.tau = np.array([5.0, 45.0, 45.0, 45.0])
+    c._choose_target(Observation(45.0, ASVState(0.0, 80.0, 0.0), False, auvs), 1.0)
+    assert c.toured.tolist() == [True, False, False, False]
+    assert c.target != 0 and c.target_switches == 1
+
+
+def test_with_three_auvs_or_fewer_the_first_tour_changes_nothing():
+    """Three AUVs on a line 100, 350 and 600 m east of the ASV at the run's start: every
+    closed tour through three AUVs is the same cycle, so the first tour does not apply
+    (``FIRST_TOUR_MIN_AUVS``); with or without it the age rule takes the farthest (its
+    projected age the largest)."""
+    assert FIRST_TOUR_MIN_AUVS == 4
+    auvs = tuple(AUVEstimate(0.0, e, 0.0) for e in (100.0, 350.0, 600.0))
+    for first_tour in (False, True):
+        c = _controller(3, first_tour=first_tour)
+        c.tau = np.full(3, 1.0)
+        c._choose_target(Observation(1.0, ASVState(0.0, 0.0, 0.0), False, auvs), 1.0)
+        assert c.target == 2, first_tour

@@ -228,6 +228,11 @@ class MPCController(WorldView, Safety, PlanOutput, Targeting, SpeedCap, Carry, S
         self.t_commit = -math.inf
         #: per AUV: expected fixes since then (the fix rate of eq. M3 integrated; mpc/target.py)
         self.fixes_since = np.zeros(n_auv)
+        #: per AUV: expected fixes since the run began, and visited once since then (the
+        #: first tour, M9t; mpc/target.py)
+        self.fixes_run = np.zeros(n_auv)
+        self.toured = np.zeros(n_auv, bool)
+        self.t_run0: float | None = None  # the run's first step (s; mpc/target.py)
         self.target_switches = 0  # changes of target this run (diagnostic, issue 16 item 6)
         #: per AUV: the last two distinct depth estimates (t, depth) and the vertical speed
         self._depth_hist: list[list[tuple[float, float]]] = [[] for _ in range(n_auv)]

@@ -300,6 +300,12 @@ class MPCParams:
         shipped presets): the largest projected fix age ``tau_i + t_go,i`` among those above
         ``tau_served``; ``order`` (opt-in, preset ``mpc-multi-order``): the first AUV of the
         cheapest visiting order over ``order.window`` (:mod:`mpcasv.mpc.order`, eq. O1).
+    first_tour : bool
+        ``age`` rule, four AUVs or more (with three every tour is the same cycle): while
+        some AUV the ASV can reach has not been visited since the run began, the target is
+        the first AUV of the shortest path through those, closing at the oldest AUV already
+        visited (eq. M9t, :mod:`mpcasv.mpc.target`; the age rule then mostly repeats that
+        cycle); False: the largest projected age from the start.
     order : OrderParams
         The visiting-order top level (``target_rule = "order"`` only).
     navigation : NavParams
@@ -365,6 +371,7 @@ class MPCParams:
     tau_served: Pos = 10.0
     dwell_max: Pos = 45.0
     target_rule: Literal["age", "order"] = "age"
+    first_tour: Flag = True
     order: OrderParams = OrderParams()
     navigation: NavParams = NavParams()
     cv_forecast_max: Pos = 60.0

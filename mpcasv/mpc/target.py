@@ -17,7 +17,18 @@ such an AUV kept the target for good, its age growing). Then
 
 - ``age`` (default, the shipped presets): the AUV with the largest projected fix age
   ``tau_i + t_go,i`` (Paper 2's eq. 8 on projected ages) among those whose projected age
-  exceeds ``tau_served``; none such: the target stays;
+  exceeds ``tau_served`` (none such: the target stays);
+  with ``first_tour`` (the default) and at least :data:`FIRST_TOUR_MIN_AUVS` (4) AUVs,
+  while some AUV the ASV can reach has not been visited since the run began (``toured``: a
+  fix since then, in expectation as above, or ``dwell_max`` in its target domain), the
+  target is the first AUV of the shortest path through those that closes at the oldest AUV
+  already visited (eq. M9t, :func:`first_tour_next`), whatever their fix ages (at the
+  start every age is below ``tau_served`` only because the run has just begun). With every
+  age about the same (the run's start) the projected age is largest for the farthest AUV,
+  and the age rule, going next to the AUV visited longest ago, mostly repeats the first
+  round's order: four AUVs at the corners of a square were toured along the diagonals for
+  the whole run (session 35's sweep: one of them had no reliable fix in 900 s). An AUV
+  that could not be reached and becomes reachable later is visited the same way;
 - ``order`` (opt-in, preset ``mpc-multi-order``): a served committed target is left, as with
   the age rule only when another AUV's projected fix age exceeds ``tau_served``, for the
   first AUV of the cheapest visiting order over ``order.window`` that starts elsewhere
@@ -30,6 +41,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import itertools
 import math
 
 import numpy as np
@@ -46,17 +58,57 @@ from mpcasv.mpc.order import (
     transit_cost,
 )
 
+#: the first tour's orders are enumerated up to this many AUVs (m! orders), nearest next beyond
+FIRST_TOUR_ENUMERATED = 6
+#: the first tour (M9t) applies from this many AUVs: with three or fewer every closed tour
+#: through the AUVs is the same cycle, so the first round's order cannot shorten it (measured
+#: with three: Cases 6-8 and a new layout, no better, docs/mpc.md "Closed loop ... session 37")
+FIRST_TOUR_MIN_AUVS = 4
+
+
+def first_tour_next(asv_NE: np.ndarray, pos: np.ndarray, first: list[int],
+                    close: int | None) -> int:  # fmt: skip
+    """The AUV to visit next on the first tour (eq. M9t): the first of the shortest path from
+    the ASV (``asv_NE``, m, shape (2,)) through the AUVs ``first`` (indices into ``pos``,
+    positions now, m, shape (K, 2)) that closes at AUV ``close`` (the oldest AUV already
+    visited). With ``close`` None (no AUV visited yet) the path closes at its own first
+    AUV; a closed tour is as long from any of its AUVs, so the shortest starts at the
+    nearest. Up to :data:`FIRST_TOUR_ENUMERATED` AUVs every order is tried (the order's first
+    AUV is the answer); beyond, the nearest. Lengths are compared to the micrometre, ties go
+    to the lower index.
+
+    Raises
+    ------
+    ValueError
+        ``first`` is empty.
+    """
+    if not first:
+        raise ValueError("the first tour needs at least one AUV not yet visited")
+    P = np.asarray(pos, float)
+    to = np.hypot(*(P - np.asarray(asv_NE, float)).T)  # (K,) m from the ASV
+    if close is None or len(first) > FIRST_TOUR_ENUMERATED:
+        return min(sorted(first), key=lambda i: round(float(to[i]), 6))
+    D = np.hypot(*(P[:, None, :] - P[None, :, :]).transpose(2, 0, 1))  # (K, K) m
+
+    def length(order: tuple[int, ...]) -> float:
+        legs = sum(D[a, b] for a, b in itertools.pairwise(order))
+        return round(float(to[order[0]] + legs + D[order[-1], close]), 6)
+
+    return min(itertools.permutations(sorted(first)), key=length)[0]
+
 
 class Targeting:
-    """The target AUV's choice (mixin; state in the controller: ``target``,
-    ``t_commit``, ``fixes_since``, ``dwell``, ``target_switches``, ``t_explore``,
-    ``order_plan``)."""
+    """The target AUV's choice (mixin; state in the controller: ``target``, ``t_commit``,
+    ``fixes_since``, ``fixes_run``, ``toured``, ``t_run0``, ``dwell``, ``target_switches``,
+    ``t_explore``, ``order_plan``)."""
 
     def _choose_target(self, obs: Observation, elapsed: float) -> None:
         """Keep or change ``self.target`` after ``elapsed`` s (module docstring)."""
         K = len(obs.auvs)
         if K == 1:
             return
+        if self.t_run0 is None:
+            self.t_run0 = obs.t  # the run's first step (the first tour, M9t)
         pos = np.array([a.position for a in obs.auvs])
         r_t = self._radii(obs, 0.0, obs.asv.position) + self.domain.delta_r
         dist = np.hypot(*(pos - obs.asv.position).T)
@@ -68,6 +120,8 @@ class Targeting:
         else:
             fixed = self.fixes_since[j] >= 1.0
         served = (fixed or not self.committed) and self.tau[j] <= self.params.tau_served
+        if self.dwell >= self.params.dwell_max:
+            self.toured[j] = True  # visited (the first tour, M9t; or by a fix: _first_tour)
         order = self.params.target_rule == "order"
         if not (served or self.dwell >= self.params.dwell_max):
             # a committed target the ASV cannot reach (going away faster than U_go) is left
@@ -82,6 +136,8 @@ class Targeting:
             others = np.arange(K) != j
             if not self.committed or np.any(proj[others] > self.params.tau_served):
                 self._choose_by_order(obs, r_t)  # else (every other AUV served) it stays
+            return
+        if self.params.first_tour and K >= FIRST_TOUR_MIN_AUVS and self._first_tour(obs, pos, r_t):
             return
         # commitment (issue 16 item 6): leave the target only for an AUV that needs a visit
         # itself (projected fix age above tau_served); with every other AUV served the target
@@ -98,6 +154,34 @@ class Targeting:
         elif self._reachable(obs, r_t, np.setdiff1d(np.arange(K), cand)).any():
             return  # an unreachable AUV only when no AUV can be reached
         self._switch_to(int(np.argmax(proj)), obs.t)
+
+    def _first_tour(self, obs: Observation, pos: np.ndarray, r_t: np.ndarray) -> bool:
+        """(M9t) While some AUV the ASV can reach has not been visited since the run began,
+        commit to the first AUV of the shortest path through those that closes at the oldest
+        AUV already visited (:func:`first_tour_next`; ``pos`` the AUVs' positions, m, shape
+        (K, 2), ``r_t`` their target circles, m) and return True; else False (the age rule
+        chooses). Visited (``toured``): an expected fix
+        since the run began (the fix rate of eq. M3 integrated, ``fixes_run`` >= 1; with
+        ``fix_age_source = "estimate"`` a fix time after the run's first step, ``t_run0``,
+        whatever the estimator counts as a fix, e.g. an AUV's own status report in the
+        field), or ``dwell_max`` in its target domain.
+        Not yet visited AUVs are candidates whatever their fix age: at the run's start every
+        age is below ``tau_served`` only because the run has just begun (before, the AUV
+        nearest the start was left out of the first round)."""
+        if self.params.fix_age_source == "estimate":  # a fix time after the run's first step
+            self.toured |= np.array([a.t_last_fix > self.t_run0 for a in obs.auvs])
+        else:
+            self.toured |= self.fixes_run >= 1.0
+        first = [i for i in range(len(pos)) if not self.toured[i]]
+        if first:  # (a committed target not yet visited is here only if it cannot be reached)
+            first = [i for i, ok in zip(first, self._reachable(obs, r_t, first), strict=True)
+                     if ok]  # fmt: skip
+        if not first:
+            return False
+        oldest = np.flatnonzero(self.toured)
+        close = None if len(oldest) == 0 else int(oldest[np.argmax(self.tau[oldest])])
+        self._switch_to(first_tour_next(obs.asv.position, pos, first, close), obs.t)
+        return True
 
     def _reachable(self, obs: Observation, r_t: np.ndarray, which) -> np.ndarray:
         """Whether the ASV, leaving now at ``U_go`` (m/s, at most the speed cap), meets the

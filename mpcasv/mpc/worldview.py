@@ -69,6 +69,7 @@ class WorldView:
             return self.tau
         rho = self._rates(obs)
         self.fixes_since += rho * elapsed  # expected fixes since the target's choice (M9)
+        self.fixes_run += rho * elapsed  # ... since the run began (the first tour, M9t)
         if self.ocp.variance:  # (M2') what a fix at this range removes
             slant = np.array([math.hypot(*(a.position - obs.asv.position), a.depth)
                               for a in obs.auvs])  # fmt: skip
