@@ -281,7 +281,8 @@ def test_a_file_of_another_kind_is_named_as_such(name, tmp_path, capsys, no_work
 
 
 def _shipped_kind(path: Path) -> str | None:
-    folder = path.parent.name if path.parent.name != "falsified" else "scenarios"
+    # scenario subfolders (falsified/, layouts/) hold scenarios too
+    folder = "scenarios" if path.parent.parent.name == "scenarios" else path.parent.name
     if folder == "tuning":  # range files and the suites they name share the folder
         return "tuning range" if "objectives" in path.read_text() else "suite"
     return {"scenarios": "scenario", "vessels": "vessel", "execution": "execution",
