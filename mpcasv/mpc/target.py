@@ -120,8 +120,6 @@ class Targeting:
         else:
             fixed = self.fixes_since[j] >= 1.0
         served = (fixed or not self.committed) and self.tau[j] <= self.params.tau_served
-        if self.dwell >= self.params.dwell_max:
-            self.toured[j] = True  # visited (the first tour, M9t; or by a fix: _first_tour)
         order = self.params.target_rule == "order"
         if not (served or self.dwell >= self.params.dwell_max):
             # a committed target the ASV cannot reach (going away faster than U_go) is left
@@ -172,6 +170,8 @@ class Targeting:
             self.toured |= np.array([a.t_last_fix > self.t_run0 for a in obs.auvs])
         else:
             self.toured |= self.fixes_run >= 1.0
+        if self.dwell >= self.params.dwell_max:  # the current target's (reset on a switch)
+            self.toured[self.target] = True
         first = [i for i in range(len(pos)) if not self.toured[i]]
         if first:  # (a committed target not yet visited is here only if it cannot be reached)
             first = [i for i, ok in zip(first, self._reachable(obs, r_t, first), strict=True)
