@@ -48,6 +48,35 @@ def test_waypoint_plan_visits_every_waypoint_within_acceptance():
     assert abs(S[2, -1] - 10.0) < 0.5
 
 
+def test_lawnmower_tighter_than_the_turn_radius_is_followed_to_its_end():
+    """Legs 10 m apart, turn radius 1.5 m/s / 10 deg/s = 8.6 m, acceptance 5 m: the AUV
+    cannot turn into the next corner's circle of acceptance. It switches once past the
+    corner (along-track) and finishes the plan (before, it circled the fourth corner for the
+    rest of the run: shared case of session 38's sweep, line5.toml)."""
+    wp = lawnmower((0, 0), 0.0, 100.0, 10.0, 6)
+    plan = Plan(wp, speed=1.5, acceptance=5.0)
+    S = drive(plan, [0, 0, 0, 0, 0], 900)
+    assert plan.finished
+    # every corner passed close: within the turn radius plus the acceptance
+    r_turn = 1.5 / math.radians(DEFAULT_LIMITS.turn_rate_max_deg)
+    for w in wp:
+        assert np.min(np.hypot(S[0] - w[0], S[1] - w[1])) < r_turn + 5.0
+    # and on its way: the whole route (650 m) in well under twice its time at 1.5 m/s
+    done = np.argmax(np.hypot(S[0] - wp[-1, 0], S[1] - wp[-1, 1]) < 5.0) * 0.1
+    assert 0 < done < 2 * 650.0 / 1.5
+
+
+def test_a_waypoint_is_passed_only_beyond_the_normal_line_through_it():
+    """The along-track switch: behind the line through the waypoint normal to the track,
+    outside the circle, the waypoint is still ahead; beyond it, reached (the first track
+    starts where the AUV was at the plan's first set-point)."""
+    plan = Plan([[100.0, 0.0, 0.0], [100.0, 100.0, 0.0]], speed=1.5, acceptance=5.0)
+    plan.setpoint(0.0, np.zeros(5), np.zeros(2))  # track (0, 0) -> (100, 0)
+    assert plan.setpoint(1.0, np.array([99.0, 20.0, 0, 0, 0]), np.zeros(2))[:2] == (100.0, 0.0)
+    assert plan.setpoint(2.0, np.array([100.5, 20.0, 0, 0, 0]), np.zeros(2))[:2] == (100.0,
+                                                                                      100.0)
+
+
 def test_limits_are_respected():
     lim = AUVLimits(speed_max=2.0, turn_rate_max_deg=10.0, depth_rate_max=0.5, accel_max=0.2)
     plan = Plan([[0, -200, 40], [200, 0, 0]], speed=2.0)
