@@ -222,19 +222,35 @@ def test_the_first_tour_goes_round_a_square_where_the_projected_age_crosses_it()
     assert _square_choice(tau, toured=(True, True, True, True)) == 2
 
 
-def test_the_first_tour_is_the_shortest_path_closing_at_the_oldest_visited_auv():
+def test_the_first_tour_is_the_least_waiting_path_on_to_the_oldest_visited_auv():
     """``first_tour_next`` by hand: the ASV at the origin, A 60 m south (the nearest), B 200
-    m north, the tour closing at Z 500 m south (the oldest AUV already visited). A, B, Z:
-    60 + 260 + 700 = 1020 m; B, A, Z: 200 + 260 + 440 = 900 m: B first. Without Z (a
-    closed tour at the start) the nearest, A: 60 + 260 + 260 against 200 + 260 + 260."""
+    m north, the path ending at Z 500 m south (the oldest AUV already visited). Arrivals
+    A, B, Z: 60 + 320 + 1020 = 1400 m; B, A, Z: 200 + 460 + 900 = 1560 m: A first (the
+    shortest path, B, A, Z at 900 m against 1020, went north first and left A waiting).
+    Without Z: A, B 60 + 320 against B, A 200 + 460."""
     pos = np.array([[-60.0, 0.0], [200.0, 0.0], [-500.0, 0.0]])
-    assert first_tour_next(np.zeros(2), pos, [0, 1], close=2) == 1
+    assert first_tour_next(np.zeros(2), pos, [0, 1], close=2) == 0
     assert first_tour_next(np.zeros(2), pos, [0, 1], close=None) == 0
     assert first_tour_next(np.zeros(2), pos, [1], close=2) == 1
     with pytest.raises(ValueError, match="at least one AUV"):
         first_tour_next(np.zeros(2), pos, [], close=2)
     many = np.array([[100.0 * (k + 1), 0.0] for k in range(8)])  # beyond the enumeration
     assert first_tour_next(np.zeros(2), many, list(range(8))[::-1], close=None) == 0
+
+
+@pytest.mark.parametrize("K", [4, 5, 6, 7])
+def test_the_first_tour_sweeps_a_line_of_auvs_from_the_near_end(K):
+    """K AUVs on a line 250 m apart, the ASV beside the first (just visited, the path's
+    end), the others not yet visited, each a few metres off the line either way: the next
+    target is the nearest, whatever the offsets. Session 38's sweep (five AUVs, the
+    shortest path closing at the first): out-and-back and "far end first, then sweep
+    back" were within 0.4 m of each other and the ASV went to the far end first, passing
+    three AUVs under way; their first reliable fixes came at 693-1031 s."""
+    rng = np.random.default_rng(K)
+    for _ in range(20):
+        pos = np.array([[rng.uniform(-5.0, 5.0), 250.0 * k] for k in range(K)])
+        asv = np.array([0.0, 10.0])
+        assert first_tour_next(asv, pos, list(range(1, K)), close=0) == 1
 
 
 def test_the_first_tour_starts_with_every_auv_even_one_whose_age_is_low_because_the_run_began():
@@ -273,9 +289,9 @@ def _controller(K: int, **overrides):
 def test_the_first_tour_closes_at_the_oldest_visited_auv():
     """AUVs P (100 m north of the ASV) and Q (100 m south) not yet visited; Z1 300 m north
     and Z2 300 m east of Q's south, both visited. The target, served, is the younger of
-    Z1 and Z2; the path closes at the older: P, Q, Z1 = 100 + 200 + 400 m against Q, P, Z1
-    = 100 + 200 + 200 m (Q first); P, Q, Z2 = 100 + 200 + 200 m against Q, P, Z2 = 100 +
-    200 + 400 m (P first)."""
+    Z1 and Z2; the path ends at the older. Arrivals P, Q, Z1 = 100 + 300 + 700 m against
+    Q, P, Z1 = 100 + 300 + 500 m (Q first); P, Q, Z2 = 100 + 300 + 500 m against Q, P, Z2
+    = 100 + 300 + 700 m (P first)."""
     auvs = (AUVEstimate(100.0, 0.0, 0.0), AUVEstimate(-100.0, 0.0, 0.0),
             AUVEstimate(300.0, 0.0, 0.0), AUVEstimate(-300.0, 0.0, 0.0))  # fmt: skip
     chosen = {}

@@ -303,8 +303,8 @@ class MPCParams:
     first_tour : bool
         ``age`` rule, four AUVs or more (with three every tour is the same cycle): while
         some AUV the ASV can reach has not been visited since the run began, the target is
-        the first AUV of the shortest path through those, closing at the oldest AUV already
-        visited (eq. M9t, :mod:`mpcasv.mpc.target`; the age rule then mostly repeats that
+        the first AUV of the path through those, on to the oldest AUV already visited, with
+        the least sum of arrival distances (eq. M9t, :mod:`mpcasv.mpc.target`; the age rule then mostly repeats that
         cycle); False: the largest projected age from the start.
     order : OrderParams
         The visiting-order top level (``target_rule = "order"`` only).

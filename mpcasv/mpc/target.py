@@ -21,8 +21,9 @@ such an AUV kept the target for good, its age growing). Then
   with ``first_tour`` (the default) and at least :data:`FIRST_TOUR_MIN_AUVS` (4) AUVs,
   while some AUV the ASV can reach has not been visited since the run began (``toured``: a
   fix since then, in expectation as above, or ``dwell_max`` in its target domain), the
-  target is the first AUV of the shortest path through those that closes at the oldest AUV
-  already visited (eq. M9t, :func:`first_tour_next`), whatever their fix ages (at the
+  target is the first AUV of the path through those, on to the oldest AUV already visited,
+  with the least sum of arrival distances (eq. M9t, :func:`first_tour_next`), whatever
+  their fix ages (at the
   start every age is below ``tau_served`` only because the run has just begun). With every
   age about the same (the run's start) the projected age is largest for the farthest AUV,
   and the age rule, going next to the AUV visited longest ago, mostly repeats the first
@@ -68,14 +69,18 @@ FIRST_TOUR_MIN_AUVS = 4
 
 def first_tour_next(asv_NE: np.ndarray, pos: np.ndarray, first: list[int],
                     close: int | None) -> int:  # fmt: skip
-    """The AUV to visit next on the first tour (eq. M9t): the first of the shortest path from
-    the ASV (``asv_NE``, m, shape (2,)) through the AUVs ``first`` (indices into ``pos``,
-    positions now, m, shape (K, 2)) that closes at AUV ``close`` (the oldest AUV already
-    visited). With ``close`` None (no AUV visited yet) the path closes at its own first
-    AUV; a closed tour is as long from any of its AUVs, so the shortest starts at the
-    nearest. Up to :data:`FIRST_TOUR_ENUMERATED` AUVs every order is tried (the order's first
-    AUV is the answer); beyond, the nearest. Lengths are compared to the micrometre, ties go
-    to the lower index.
+    """The AUV to visit next on the first tour (eq. M9t): the first of the path from the ASV
+    (``asv_NE``, m, shape (2,)) through the AUVs ``first`` (indices into ``pos``, positions
+    now, m, shape (K, 2)) and then to AUV ``close`` (the oldest AUV already visited; None:
+    no AUV visited yet, the path ends at its last AUV) whose sum of arrival distances is
+    least: each AUV on it waits for the ASV as long as the path up to it (the minimum-latency
+    or travelling-repairman order), so an AUV on the way is visited on the way. (Until
+    session 38 the shortest path closing at ``close``: four AUVs on a line with the ASV at
+    one end, out-and-back and "far end first, then sweep back" were as long, and a few
+    metres of offset sent the ASV past three AUVs to the far end first.) Up to
+    :data:`FIRST_TOUR_ENUMERATED` AUVs every order is tried (the order's first AUV is the
+    answer); beyond, the nearest. Sums are compared to the micrometre, ties go to the lower
+    index.
 
     Raises
     ------
@@ -86,15 +91,16 @@ def first_tour_next(asv_NE: np.ndarray, pos: np.ndarray, first: list[int],
         raise ValueError("the first tour needs at least one AUV not yet visited")
     P = np.asarray(pos, float)
     to = np.hypot(*(P - np.asarray(asv_NE, float)).T)  # (K,) m from the ASV
-    if close is None or len(first) > FIRST_TOUR_ENUMERATED:
+    if len(first) > FIRST_TOUR_ENUMERATED:
         return min(sorted(first), key=lambda i: round(float(to[i]), 6))
     D = np.hypot(*(P[:, None, :] - P[None, :, :]).transpose(2, 0, 1))  # (K, K) m
 
-    def length(order: tuple[int, ...]) -> float:
-        legs = sum(D[a, b] for a, b in itertools.pairwise(order))
-        return round(float(to[order[0]] + legs + D[order[-1], close]), 6)
+    def latency(order: tuple[int, ...]) -> float:
+        stops = order if close is None else (*order, close)
+        arrive = np.cumsum([to[stops[0]], *(D[a, b] for a, b in itertools.pairwise(stops))])
+        return round(float(arrive.sum()), 6)  # M9t: sum of the arrival distances
 
-    return min(itertools.permutations(sorted(first)), key=length)[0]
+    return min(itertools.permutations(sorted(first)), key=latency)[0]
 
 
 class Targeting:
@@ -155,8 +161,8 @@ class Targeting:
 
     def _first_tour(self, obs: Observation, pos: np.ndarray, r_t: np.ndarray) -> bool:
         """(M9t) While some AUV the ASV can reach has not been visited since the run began,
-        commit to the first AUV of the shortest path through those that closes at the oldest
-        AUV already visited (:func:`first_tour_next`; ``pos`` the AUVs' positions, m, shape
+        commit to the first AUV of the path through those on to the oldest AUV already
+        visited with the least sum of arrival distances (:func:`first_tour_next`; ``pos`` the AUVs' positions, m, shape
         (K, 2), ``r_t`` their target circles, m) and return True; else False (the age rule
         chooses). Visited (``toured``): an expected fix
         since the run began (the fix rate of eq. M3 integrated, ``fixes_run`` >= 1; with
