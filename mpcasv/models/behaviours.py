@@ -36,20 +36,25 @@ def lawnmower(
     return np.array([[n, e, depth] for n, e in pts])
 
 
+#: s between a plan's set-points beyond which the heading turned is counted afresh (Plan)
+TURN_GAP_S = 10.0
+
+
 @dataclass
 class Plan:
     """Follow waypoints ``(N, E, depth)`` at ``speed``; hold at the last one (speed 0).
 
-    A waypoint counts as reached within ``acceptance`` m of it (the circle of acceptance) or
-    once the AUV has passed it: beyond the line through it normal to the track from the
-    previous waypoint (for the first, from where the AUV was when the plan began), the
-    along-track switching Fossen (2011, Handbook of Marine Craft Hydrodynamics, §10.3.2)
-    gives for a vehicle that cannot enter the circle, and what DUNE's path controller does (it
-    declares arrival from the along-track distance to the end). Without it an AUV whose turn
-    radius ``U / r_max`` keeps it out of the circle (a lawnmower spacing below about twice
-    the radius) circles the waypoint for the rest of the run. The switch is at the normal line
-    itself, not ``acceptance`` before it, so an AUV that does enter the circle switches where
-    it always did.
+    A waypoint counts as reached within ``acceptance`` m of it (the circle of acceptance),
+    or once the AUV has turned a full circle (2 pi of heading, one way) going for it
+    without reaching it: an AUV whose turn radius ``U / r_max`` keeps it out of the circle
+    (e.g. lawnmower legs closer than about twice the radius) would otherwise circle the
+    waypoint for the rest of the run, as the kinematics steer straight at it. A real
+    vehicle's path controller does not circle either (DUNE declares arrival from the
+    along-track distance to the end). Going for a waypoint ahead, behind or across a current
+    the AUV turns less than a circle, so every plan it can follow switches where it always
+    did. The turn is counted from the heading at each set-point (the supervisory period);
+    after a gap of more than :data:`TURN_GAP_S` between set-points (a pause, a switch to
+    another behaviour and back) it counts afresh.
 
     ``yoyo = (d_min, d_max)`` replaces the waypoint depths with a saw-tooth between the two
     depths; ``surface`` lists ``(t_start, t_end)`` intervals spent at the surface (depth 0,
@@ -64,8 +69,10 @@ class Plan:
     surface_speed: float = 0.0
     index: int = 0
     _yoyo_down: bool = field(default=True, repr=False)
-    #: (N, E) where the AUV was at the plan's first set-point: the first track's start
-    _start: tuple[float, float] | None = field(default=None, repr=False)
+    #: heading turned (rad, signed) going for the current waypoint
+    _turned: float = field(default=0.0, repr=False)
+    #: (t, psi) at the last set-point
+    _last: tuple[float, float] | None = field(default=None, repr=False)
 
     def __post_init__(self) -> None:
         self.waypoints = np.atleast_2d(np.asarray(self.waypoints, float))
@@ -76,22 +83,20 @@ class Plan:
     def finished(self) -> bool:
         return self.index >= len(self.waypoints)
 
-    def _reached(self, N: float, E: float) -> bool:
-        """Within the circle of acceptance of the current waypoint, or past it (class doc)."""
-        w_N, w_E = self.waypoints[self.index, 0], self.waypoints[self.index, 1]
-        if math.hypot(w_N - N, w_E - E) < self.acceptance:
-            return True
-        a_N, a_E = self.waypoints[self.index - 1, :2] if self.index else self._start
-        # along-track position beyond the waypoint: (p - w) . (w - a) >= 0; a zero-length
-        # track (a repeated waypoint, a plan starting on its first) has no direction
-        return (w_N - a_N) * (N - w_N) + (w_E - a_E) * (E - w_E) >= 0 and (w_N, w_E) != (a_N, a_E)
-
     def setpoint(self, t: float, s: np.ndarray, asv_NE: np.ndarray) -> tuple[float, ...]:
-        N, E, d = s[0], s[1], s[2]
-        if self._start is None:
-            self._start = (float(N), float(E))
-        while not self.finished and self._reached(N, E):
+        N, E, d, psi = s[0], s[1], s[2], float(s[3])
+        if self._last is not None and t - self._last[0] <= TURN_GAP_S:
+            self._turned += math.remainder(psi - self._last[1], 2 * math.pi)
+        else:
+            self._turned = 0.0
+        self._last = (t, psi)
+        while not self.finished and (
+            math.hypot(self.waypoints[self.index, 0] - N, self.waypoints[self.index, 1] - E)
+            < self.acceptance
+            or abs(self._turned) >= 2 * math.pi  # circling it: move on (class docstring)
+        ):
             self.index += 1
+            self._turned = 0.0
         wp = self.waypoints[min(self.index, len(self.waypoints) - 1)]
         speed = 0.0 if self.finished else self.speed
         depth = wp[2]

@@ -304,8 +304,9 @@ class MPCParams:
         ``age`` rule, four AUVs or more (with three every tour is the same cycle): while
         some AUV the ASV can reach has not been visited since the run began, the target is
         the first AUV of the path through those, on to the oldest AUV already visited, with
-        the least sum of arrival distances (eq. M9t, :mod:`mpcasv.mpc.target`; the age rule then mostly repeats that
-        cycle); False: the largest projected age from the start.
+        the least sum of arrival distances (eq. M9t, :mod:`mpcasv.mpc.target`; the age
+        rule then mostly repeats that cycle); False: the largest projected age from the
+        start.
     order : OrderParams
         The visiting-order top level (``target_rule = "order"`` only).
     navigation : NavParams

@@ -162,9 +162,9 @@ class Targeting:
     def _first_tour(self, obs: Observation, pos: np.ndarray, r_t: np.ndarray) -> bool:
         """(M9t) While some AUV the ASV can reach has not been visited since the run began,
         commit to the first AUV of the path through those on to the oldest AUV already
-        visited with the least sum of arrival distances (:func:`first_tour_next`; ``pos`` the AUVs' positions, m, shape
-        (K, 2), ``r_t`` their target circles, m) and return True; else False (the age rule
-        chooses). Visited (``toured``): an expected fix
+        visited with the least sum of arrival distances (:func:`first_tour_next`; ``pos``
+        the AUVs' positions, m, shape (K, 2), ``r_t`` their target circles, m) and return
+        True; else False (the age rule chooses). Visited (``toured``): an expected fix
         since the run began (the fix rate of eq. M3 integrated, ``fixes_run`` >= 1; with
         ``fix_age_source = "estimate"`` a fix time after the run's first step, ``t_run0``,
         whatever the estimator counts as a fix, e.g. an AUV's own status report in the
