@@ -48,14 +48,16 @@ def test_waypoint_plan_visits_every_waypoint_within_acceptance():
     assert abs(S[2, -1] - 10.0) < 0.5
 
 
-def test_lawnmower_tighter_than_the_turn_radius_is_followed_to_its_end():
+@pytest.mark.parametrize("period", [1.0, 20.0])
+def test_lawnmower_tighter_than_the_turn_radius_is_followed_to_its_end(period):
     """Legs 10 m apart, turn radius 1.5 m/s / 10 deg/s = 8.6 m, acceptance 5 m: the AUV
     cannot turn into the next corner's circle of acceptance. After a full circle going for
     it, it moves on and finishes the plan (before, it circled the fourth corner for the rest
-    of the run: session 38's sweep, five AUVs on lawnmowers 10 m apart)."""
+    of the run: session 38's sweep, five AUVs on lawnmowers 10 m apart). With set-points
+    every second and every 20 s (more than a half turn of heading between two)."""
     wp = lawnmower((0, 0), 0.0, 100.0, 10.0, 6)
     plan = Plan(wp, speed=1.5, acceptance=5.0)
-    S = drive(plan, [0, 0, 0, 0, 0], 900)
+    S = drive(plan, [0, 0, 0, 0, 0], 900, period=period)
     assert plan.finished
     # every corner passed close: within the turn's diameter plus the acceptance
     r_turn = 1.5 / math.radians(DEFAULT_LIMITS.turn_rate_max_deg)

@@ -36,10 +36,6 @@ def lawnmower(
     return np.array([[n, e, depth] for n, e in pts])
 
 
-#: s between a plan's set-points beyond which the heading turned is counted afresh (Plan)
-TURN_GAP_S = 10.0
-
-
 @dataclass
 class Plan:
     """Follow waypoints ``(N, E, depth)`` at ``speed``; hold at the last one (speed 0).
@@ -52,9 +48,10 @@ class Plan:
     vehicle's path controller does not circle either (DUNE declares arrival from the
     along-track distance to the end). Going for a waypoint ahead, behind or across a current
     the AUV turns less than a circle, so every plan it can follow switches where it always
-    did. The turn is counted from the heading at each set-point (the supervisory period);
-    after a gap of more than :data:`TURN_GAP_S` between set-points (a pause, a switch to
-    another behaviour and back) it counts afresh.
+    did. The turn is the change of the AUV's heading ``s[3]``, which the kinematics
+    (:mod:`mpcasv.models.auv`) integrate without wrapping, so it is exact whatever the
+    supervisory period; it counts from the set-point at which the waypoint became the
+    target, and afresh after :meth:`resume` (a pause: :class:`Scripted`).
 
     ``yoyo = (d_min, d_max)`` replaces the waypoint depths with a saw-tooth between the two
     depths; ``surface`` lists ``(t_start, t_end)`` intervals spent at the surface (depth 0,
@@ -69,10 +66,8 @@ class Plan:
     surface_speed: float = 0.0
     index: int = 0
     _yoyo_down: bool = field(default=True, repr=False)
-    #: heading turned (rad, signed) going for the current waypoint
-    _turned: float = field(default=0.0, repr=False)
-    #: (t, psi) at the last set-point
-    _last: tuple[float, float] | None = field(default=None, repr=False)
+    #: the AUV's heading (rad, unwrapped) when going for the current waypoint began
+    _psi0: float | None = field(default=None, repr=False)
 
     def __post_init__(self) -> None:
         self.waypoints = np.atleast_2d(np.asarray(self.waypoints, float))
@@ -83,20 +78,21 @@ class Plan:
     def finished(self) -> bool:
         return self.index >= len(self.waypoints)
 
+    def resume(self) -> None:
+        """Count the heading turned afresh from the next set-point (after a pause)."""
+        self._psi0 = None
+
     def setpoint(self, t: float, s: np.ndarray, asv_NE: np.ndarray) -> tuple[float, ...]:
         N, E, d, psi = s[0], s[1], s[2], float(s[3])
-        if self._last is not None and t - self._last[0] <= TURN_GAP_S:
-            self._turned += math.remainder(psi - self._last[1], 2 * math.pi)
-        else:
-            self._turned = 0.0
-        self._last = (t, psi)
+        if self._psi0 is None:
+            self._psi0 = psi
         while not self.finished and (
             math.hypot(self.waypoints[self.index, 0] - N, self.waypoints[self.index, 1] - E)
             < self.acceptance
-            or abs(self._turned) >= 2 * math.pi  # circling it: move on (class docstring)
+            or abs(psi - self._psi0) >= 2 * math.pi  # circling it: move on (class docstring)
         ):
             self.index += 1
-            self._turned = 0.0
+            self._psi0 = psi
         wp = self.waypoints[min(self.index, len(self.waypoints) - 1)]
         speed = 0.0 if self.finished else self.speed
         depth = wp[2]
@@ -246,6 +242,8 @@ class Scripted:
     def setpoint(self, t: float, s: np.ndarray, asv_NE: np.ndarray) -> tuple[float, ...]:
         if self._resume is not None and t >= self._resume[0]:
             self.current, self._resume = self._resume[1], None
+            if isinstance(self.current, Plan):
+                self.current.resume()
         while self.events and t >= self.events[0][0]:
             t_ev, action = self.events.pop(0)
             if isinstance(action, SetLimits):
