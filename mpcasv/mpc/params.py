@@ -301,7 +301,7 @@ class MPCParams:
         ``tau_served``; ``order`` (opt-in, preset ``mpc-multi-order``): the first AUV of the
         cheapest visiting order over ``order.window`` (:mod:`mpcasv.mpc.order`, eq. O1).
     first_tour : bool
-        ``age`` rule, four AUVs or more (with three every tour is the same cycle): while
+        ``age`` rule, four AUVs or more (:data:`mpcasv.mpc.target.FIRST_TOUR_MIN_AUVS`): while
         some AUV the ASV can reach has not been visited since the run began, the target is
         the first AUV of the path through those, on to the oldest AUV already visited, with
         the least sum of arrival distances (eq. M9t, :mod:`mpcasv.mpc.target`; the age

@@ -62,8 +62,10 @@ from mpcasv.mpc.order import (
 #: the first tour's orders are enumerated up to this many AUVs (m! orders), nearest next beyond
 FIRST_TOUR_ENUMERATED = 6
 #: the first tour (M9t) applies from this many AUVs: with three or fewer every closed tour
-#: through the AUVs is the same cycle, so the first round's order cannot shorten it (measured
-#: with three: Cases 6-8 and a new layout, no better, docs/mpc.md "Closed loop ... session 37")
+#: through the AUVs is the same cycle, so the shortest-path version (session 37) could not
+#: shorten it (measured with three: Cases 6-8 and a new layout, no better, docs/mpc.md
+#: "Closed loop ... session 37"); the least-waiting version (session 38) was not measured
+#: with three, and the limit is kept
 FIRST_TOUR_MIN_AUVS = 4
 
 
