@@ -13,15 +13,18 @@ from mpcasv.models.behaviours import Plan, Pursuer, Scripted, Transit, lawnmower
 DEFAULT_LIMITS = AUVLimits()
 
 
-def drive(behaviour, s0, seconds, limits=DEFAULT_LIMITS, asv=lambda t: np.zeros(2), period=1.0):
-    """Run one AUV with a behaviour; return times and states (5 x n) at 0.1 s."""
-    step = auv_step_function(0.1, int(period / 0.1), 1)
+def drive(behaviour, s0, seconds, limits=DEFAULT_LIMITS, asv=lambda t: np.zeros(2), period=1.0,
+          current=None):
+    """Run one AUV with a behaviour; return times and states (5 x n) at 0.1 s. ``current``
+    ``(V_N, V_E)`` (m/s): a water current carrying the AUV (None: still water)."""
+    step = auv_step_function(0.1, int(period / 0.1), 1, drift=current is not None)
+    drift = () if current is None else (np.reshape(np.asarray(current, float), (2, 1)),)
     S = np.asarray(s0, float).reshape(5, 1)
     lim = limits.vector().reshape(4, 1)
     out, t = [S[:, 0].copy()], 0.0
     for _ in range(int(seconds / period)):
         sp = np.array(behaviour.setpoint(t, S[:, 0], asv(t)), float).reshape(4, 1)
-        S, traj = step(S, sp, lim)
+        S, traj = step(S, sp, lim, *drift)
         S = np.array(S)
         out.extend(np.array(traj).T)
         t += period
@@ -68,19 +71,6 @@ def test_lawnmower_tighter_than_the_turn_radius_is_followed_to_its_end(period):
     assert 0 < done < 2 * 650.0 / 1.5
 
 
-def _drive_drift(behaviour, s0, seconds, current):
-    """:func:`drive` with a water current ``(V_N, V_E)`` (m/s) carrying the AUV."""
-    step = auv_step_function(0.1, 10, 1, drift=True)
-    S, lim = np.asarray(s0, float).reshape(5, 1), DEFAULT_LIMITS.vector().reshape(4, 1)
-    C, out = np.reshape(current, (2, 1)), [np.asarray(s0, float)]
-    for k in range(int(seconds)):
-        sp = np.array(behaviour.setpoint(float(k), S[:, 0], np.zeros(2)), float).reshape(4, 1)
-        S, traj = step(S, sp, lim, C)
-        S = np.array(S)
-        out.extend(np.array(traj).T)
-    return np.array(out).T
-
-
 @pytest.mark.parametrize("current", [(0.9, 0.5), (1.2, 0.3), (0.7, 0.7), (0.0, -1.0)])
 def test_waypoints_reached_across_a_current_are_not_skipped(current):
     """A square route in a current of up to 1.2 m/s (the AUV 1.5 m/s): each corner is
@@ -89,7 +79,7 @@ def test_waypoints_reached_across_a_current_are_not_skipped(current):
     the current carries a pure-pursuit AUV across that line before the corner)."""
     wp = np.array([[100.0, 0, 0], [100.0, 100, 0], [0.0, 100, 0], [0.0, 0, 0]])
     plan = Plan(wp, speed=1.5, acceptance=5.0)
-    S = _drive_drift(plan, [0, 0, 0, 0, 0], 1500, current)
+    S = drive(plan, [0, 0, 0, 0, 0], 1500, current=current)
     assert plan.finished
     for w in wp:
         assert np.min(np.hypot(S[0] - w[0], S[1] - w[1])) < 5.0 + 0.3
