@@ -238,8 +238,10 @@ PINNED: dict[str, tuple[float, float]] = {
     # observer start (the current found in seconds, not minutes: docs/mpc.md "Known
     # problems", the observer's start) moved it again: 8.664 m, 0 s (with the start's
     # sigma_nu0 = 1 instead of 0.3: -0.945 m, 6 s), the coasting standby still not fixed.
-    # Session 34's start carried by the current: 6.109 m, 0 s (8.664 m, 0 s before)
-    "falsified-pursuer-single-mpc-single-1": (6.109, 0),  # 8.664/0 3.473/0 -2.063/4 3.091/0
+    # Session 34's start carried by the current: 6.109 m, 0 s (8.664 m, 0 s before).
+    # Session 39's integral terminal (M7i) with its accrual gated off under a threat: 8.394
+    # m, 0 s (ungated: -12.270 m, 24 s; docs/mpc.md "Closed loop ... session 39")
+    "falsified-pursuer-single-mpc-single-1": (8.394, 0),  # 6.109/0 8.664/0 3.473/0 -2.063/4
     # {0.443, 0}
 }
 #: chaotic cases: bounds (margin at least, longest stay at most) around the spread of the run

@@ -120,3 +120,35 @@ def test_the_standing_time_is_off_while_an_auv_threatens_the_asv(auv_N, stand_of
     stand = ctrl.ocp.unpack_par(ctrl.parameters(obs))["weights"][WEIGHT_NAMES.index("stand")]
     assert ctrl.stand_off is stand_off
     assert stand == (0.0 if stand_off else 20.0)
+
+
+def _terminal(kind: str, tau: float, d: float) -> float:
+    """Terminal cost (no M7s) of a plan ending at rest ``d`` m South of the only AUV (still),
+    with the AUV's expected fix age ``tau`` s there; r_t = 70 m, the preset's tail 20 s and
+    U_go 2.5 m/s."""
+    ocp = OCP(load_preset("mpc-single", "mpc-single",
+                          {"weights.stand": 0.0, "weights.terminal": kind}),
+              1, outer=True, boat=Boat.load("gretha"))  # fmt: skip
+    gp = np.r_[0.0, 0.0, 80.0, 70.0, 1.0, np.zeros(6), ocp.weight_vector()]
+    x = np.zeros(ocp.dims.nx)
+    x[8] = tau
+    return float(ocp.term(x / ocp.s_z, _sp(d, 0.0), _sp(d, 0.0), gp))
+
+
+def test_the_integral_terminal_is_the_age_accrued_until_the_next_fix():
+    """(M7i) ``age / tau_ref * (tau t + t^2 / 2)``, ``t = t_go + tail``: the running age cost
+    integrated while the ASV goes to the target circle and waits a tail for the fix. Its pull
+    (the cost of ending 100 m further out) grows with the fix age; M7a's does not, which left
+    the MPC trailing 100 m off an AUV it had no fix from for minutes in a 1 m/s cross current
+    (docs/mpc.md, "Closed loop ... session 39")."""
+    t_go = {d: 5.0 * np.log1p(np.exp((d - 70.0) / 5.0)) / 2.5 for d in (80.0, 180.0)}
+    for tau in (0.0, 200.0):
+        for d in (80.0, 180.0):
+            t = t_go[d] + 20.0
+            assert _terminal("integral", tau, d) == pytest.approx((tau * t + t**2 / 2) / 100.0,
+                                                                  rel=1e-5)  # fmt: skip
+    pull = {(kind, tau): _terminal(kind, tau, 180.0) - _terminal(kind, tau, 80.0)
+            for kind in ("projected", "integral") for tau in (0.0, 200.0)}  # fmt: skip
+    assert pull["projected", 200.0] == pytest.approx(pull["projected", 0.0], rel=1e-9)
+    assert pull["integral", 200.0] > 5.0 * pull["integral", 0.0]
+    assert pull["integral", 0.0] > pull["projected", 0.0]  # the age accrued on the way

@@ -185,7 +185,7 @@ class MPCController(WorldView, Safety, PlanOutput, Targeting, SpeedCap, Carry, S
         self.current = np.zeros(2)
         self.current_noted = False  # said once that the current is stronger than tested
         self.tau = np.zeros(n_auv)  # expected fix ages (s)
-        self.stand_off = False  # the standing-time term off this step (worldview, M7s)
+        self.stand_off = False  # M7s and M7i's accrual off this step: a threat (worldview)
         self.t_prev: float | None = None
         self.w_prev: np.ndarray | None = None
         self.w_ok = False  # w_prev is a converged plan the check let through (mpc/carry.py)
@@ -312,7 +312,7 @@ class MPCController(WorldView, Safety, PlanOutput, Targeting, SpeedCap, Carry, S
                        "mpc_plan_t": math.nan}  # fmt: skip
         self._diag |= {f"mpc_plan_{q}{h}": math.nan for h in PLAN_CHECK_S for q in "NET"}
         self._diag["mpc_target"] = self.target
-        self._diag["mpc_stand_off"] = int(self.stand_off)  # M7s off: an AUV threatens (M7s)
+        self._diag["mpc_stand_off"] = int(self.stand_off)  # M7s, M7i accrual off: a threat
         c_est = self.observer.current
         self._diag |= {"mpc_cur_N": float(self.current[0]), "mpc_cur_E": float(self.current[1]),
                        "mpc_est_cur_N": float(c_est[0]), "mpc_est_cur_E": float(c_est[1])}

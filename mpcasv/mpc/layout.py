@@ -28,6 +28,7 @@ WEIGHT_NAMES = (
     "deadband",
     "running",
     "stand",
+    "accrue",
 )
 NW = len(WEIGHT_NAMES)
 #: the acoustic channel as it enters the parameters (channel_vector), in this order
@@ -111,7 +112,7 @@ class ParamLayout:
         return np.array([wt.age / wt.tau_ref, wt.worst / wt.tau_ref, wt.thrust / vp.T_max,
                          wt.power / (vp.T_max * vp.u_max), wt.dT / self.dT_max**2,
                          wt.ddelta / self.dd_max**2, wt.slack, wt.tail, 1 / wt.U_go,
-                         wt.deadband, wt.running, wt.stand])  # fmt: skip
+                         wt.deadband, wt.running, wt.stand, 1.0])  # fmt: skip
 
     def unpack_par(self, p: np.ndarray) -> dict:
         """Inverse of :meth:`pack` (arrays)."""

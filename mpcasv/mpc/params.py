@@ -139,9 +139,12 @@ class WeightParams:
         domain time on the paper cases; docs/mpc.md "Known problems", strong currents).
     tail : float
         Length of the tail the terminal cost stands for (s).
-    terminal : {"projected", "visit"}
+    terminal : {"projected", "integral", "visit"}
         Terminal cost (docs/mpc.md eq. M7): ``projected`` values the tail on the target AUV's
-        projected fix age ``tau + t_go``; ``visit``: all ages grow through the tail except
+        projected fix age ``tau + t_go``; ``integral`` (M7i) on the fix age integrated until
+        the target's next fix, ``tau (t_go + tail) + (t_go + tail)^2 / 2``, the running age
+        cost's own cost-to-go: as ``projected`` near the target circle with a fresh fix, a
+        pull that grows with the age and the distance; ``visit``: all ages grow through the tail except
         the target's, whose visit saves ``(tail - t_go)+ (tau + t_go)`` (kept for comparison:
         with ages beyond ``tail`` it rewards arriving late).
     U_go : float
@@ -169,7 +172,7 @@ class WeightParams:
     running: NonNeg = 0.0
     floor: NonNeg = 0.0
     tail: NonNeg = 60.0
-    terminal: Literal["projected", "visit"] = "projected"
+    terminal: Literal["projected", "integral", "visit"] = "projected"
     U_go: Pos = 2.5
     stand: NonNeg = 0.0
 

@@ -28,6 +28,7 @@ COLD_COMPILE_S = {1: 18.0, 3: 28.0}
 #: in: presets differing only in these share a library (tests/test_first_run.py checks it)
 RUNTIME_WEIGHTS = ("age", "thrust", "power", "dT", "ddelta", "slack", "tail", "U_go",
                    "deadband", "running", "stand")  # fmt: skip
+# ("accrue", the last parameter weight, is not a preset field: 1, or 0 for a step under threat)
 
 _MEMO: dict = {}
 

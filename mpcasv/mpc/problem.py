@@ -239,6 +239,12 @@ class OCP(StageTerms, PlanDynamics, WarmStart, VarianceObjective, ParamLayout):
             LN = self._tail_cost(z, gp[2 + K : 2 + 2 * K], d_fix, target, ch, W, ext)
         elif wt.terminal == "projected":  # (M7a) the target's projected fix age tau + t_go
             LN = T_tail * W["age"] * ca.dot(target, tau + t_go)
+        elif wt.terminal == "integral":  # (M7i) the age integrated until the target's next fix:
+            # M7a + the age accrued on the way, tau t_go + t_go^2 / 2 (its weight "accrue": 1,
+            # 0 under a threat), + tail^2 / 2: tau t + t^2 / 2 with t = t_go + tail
+            accrued = tau * t_go + t_go**2 / 2
+            LN = W["age"] * ca.dot(target, T_tail * (tau + t_go) + W["accrue"] * accrued
+                                   + T_tail**2 / 2)  # fmt: skip
         else:  # (M7b) ages grow through the tail, minus what the visit of the target saves
             reach = SOFT_T * softplus((T_tail - t_go) / SOFT_T)  # (T_tail - t_go)+, s
             saved = reach * (tau + t_go)  # fix age-time saved by visiting that AUV, s^2

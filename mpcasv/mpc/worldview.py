@@ -20,6 +20,7 @@ from mpcasv.mpc.rescue import threats
 from mpcasv.mpc.variance import N_TAIL, fix_gain
 
 _STAND = WEIGHT_NAMES.index("stand")
+_ACCRUE = WEIGHT_NAMES.index("accrue")
 
 R_HI_NONE = 1.0e5  # "no outer bound" (m)
 TAU_UNKNOWN = 600.0  # fix age used for an AUV never fixed (s)
@@ -259,15 +260,17 @@ class WorldView:
 
     def _stand_off_under_threat(self, p: np.ndarray) -> None:
         """``p`` without the standing-time term (M7s, ``weights.stand`` set to 0, in place)
-        while an AUV threatens the ASV adrift (:func:`~mpcasv.mpc.rescue.threats`:
-        within its anti-collision radius plus 20 m at some stage). M7s extrapolates the AUV
-        in a straight line past the horizon; an AUV that closes in on the ASV may be turning
-        towards it (a pursuer re-aims), and no place is then one to stand at (docs/mpc.md,
-        M7s)."""
+        and without the integral terminal's age accrued on the way (M7i, the weight
+        ``accrue`` set to 0: M7a's pull is left) while an AUV threatens the ASV adrift
+        (:func:`~mpcasv.mpc.rescue.threats`: within its anti-collision radius plus 20 m at
+        some stage). Both extrapolate the AUV in a straight line past the horizon; an AUV that
+        closes in on the ASV may be turning towards it (a pursuer re-aims), and no place is
+        then one to stand at or to head for (docs/mpc.md, M7s and M7i)."""
         W = self.ocp.unpack_par(p)["weights"]
-        self.stand_off = bool(W[_STAND] > 0 and threats(self.ocp, p, self.params.margin).any())
+        gated = W[_STAND] > 0 or self.params.weights.terminal == "integral"
+        self.stand_off = bool(gated and threats(self.ocp, p, self.params.margin).any())
         if self.stand_off:
-            W[_STAND] = 0.0
+            W[_STAND] = W[_ACCRUE] = 0.0
 
     def _tail(self, obs: Observation, t_N: float, asv_N: np.ndarray, r_t: np.ndarray):
         """The variance objective's view past the horizon (M7c; :mod:`mpcasv.mpc.variance`):
