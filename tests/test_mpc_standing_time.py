@@ -105,7 +105,8 @@ def test_the_standing_time_is_off_while_an_auv_threatens_the_asv(auv_N, stand_of
     """M7s extrapolates the AUV in a straight line past the horizon; a pursuer re-aims at the
     ASV, so while an AUV comes within its anti-collision radius plus 20 m of the ASV adrift
     (carried by the plan's current; none here: where it is) at some stage, the step's
-    ``stand`` weight is 0 (runtime, no recompile).
+    ``stand`` weight is 0 (runtime, no recompile), and so is the integral terminal's
+    accrual (M7i: a pull towards the AUV that grows with its age).
     A still AUV at 20 m depth (r_inner 45.8 m): the threshold is 65.8 m."""
     from mpcasv.controllers import make_controller
     from mpcasv.interface import ASVState, AUVEstimate, Observation
@@ -117,19 +118,24 @@ def test_the_standing_time_is_off_while_an_auv_threatens_the_asv(auv_N, stand_of
     obs = Observation(0.0, ASVState(0.0, 0.0, 0.0), False, (AUVEstimate(auv_N, 0.0, 20.0),))
     r_inner = float(ctrl.domain.inner(20.0))
     assert r_inner + 20.0 == pytest.approx(65.8, abs=0.05)
-    stand = ctrl.ocp.unpack_par(ctrl.parameters(obs))["weights"][WEIGHT_NAMES.index("stand")]
+    W = ctrl.ocp.unpack_par(ctrl.parameters(obs))["weights"]
     assert ctrl.stand_off is stand_off
-    assert stand == (0.0 if stand_off else 20.0)
+    assert W[WEIGHT_NAMES.index("stand")] == (0.0 if stand_off else 20.0)
+    # the integral terminal's accrual (M7i, the preset's) goes with it
+    assert ctrl.params.weights.terminal == "integral"
+    assert W[WEIGHT_NAMES.index("accrue")] == (0.0 if stand_off else 1.0)
 
 
-def _terminal(kind: str, tau: float, d: float) -> float:
+def _terminal(kind: str, tau: float, d: float, accrue: float = 1.0) -> float:
     """Terminal cost (no M7s) of a plan ending at rest ``d`` m South of the only AUV (still),
     with the AUV's expected fix age ``tau`` s there; r_t = 70 m, the preset's tail 20 s and
-    U_go 2.5 m/s."""
+    U_go 2.5 m/s; ``accrue``: M7i's accrual weight (0 under a threat)."""
     ocp = OCP(load_preset("mpc-single", "mpc-single",
                           {"weights.stand": 0.0, "weights.terminal": kind}),
               1, outer=True, boat=Boat.load("gretha"))  # fmt: skip
-    gp = np.r_[0.0, 0.0, 80.0, 70.0, 1.0, np.zeros(6), ocp.weight_vector()]
+    w = ocp.weight_vector()
+    w[-1] = accrue
+    gp = np.r_[0.0, 0.0, 80.0, 70.0, 1.0, np.zeros(6), w]
     x = np.zeros(ocp.dims.nx)
     x[8] = tau
     return float(ocp.term(x / ocp.s_z, _sp(d, 0.0), _sp(d, 0.0), gp))
@@ -152,3 +158,6 @@ def test_the_integral_terminal_is_the_age_accrued_until_the_next_fix():
     assert pull["projected", 200.0] == pytest.approx(pull["projected", 0.0], rel=1e-9)
     assert pull["integral", 200.0] > 5.0 * pull["integral", 0.0]
     assert pull["integral", 0.0] > pull["projected", 0.0]  # the age accrued on the way
+    # under a threat (accrue = 0) M7a's pull is left
+    gated = _terminal("integral", 200.0, 180.0, 0.0) - _terminal("integral", 200.0, 80.0, 0.0)
+    assert gated == pytest.approx(pull["projected", 200.0], rel=1e-9)

@@ -144,9 +144,10 @@ class WeightParams:
         projected fix age ``tau + t_go``; ``integral`` (M7i) on the fix age integrated until
         the target's next fix, ``tau (t_go + tail) + (t_go + tail)^2 / 2``, the running age
         cost's own cost-to-go: as ``projected`` near the target circle with a fresh fix, a
-        pull that grows with the age and the distance; ``visit``: all ages grow through the tail except
-        the target's, whose visit saves ``(tail - t_go)+ (tau + t_go)`` (kept for comparison:
-        with ages beyond ``tail`` it rewards arriving late).
+        pull that grows with the age and the distance (its accrual ``tau t_go + t_go^2 / 2``
+        off for a step under a threat, as ``stand``); ``visit``: all ages grow through the
+        tail except the target's, whose visit saves ``(tail - t_go)+ (tau + t_go)`` (kept
+        for comparison: with ages beyond ``tail`` it rewards arriving late).
     U_go : float
         Speed used to turn the distance to an AUV's target circle into a time to go (m/s).
     stand : float
