@@ -102,8 +102,12 @@ def test_the_safety_check_names_each_fallback_reason():
 def test_qp_variant_and_default_agree_on_a_simple_case():
     """Case 3 (one AUV on a lawnmower): the same 40 receding-horizon problems solved by the
     default (fatrop) and by the QP variant (linearised, OSQP), each warm-started from its own
-    previous solution, end at the same optimum and the same standby/transit decisions."""
-    params, ctrl, seq = record("case3", "mpc-single", multi=False, steps=40)
+    previous solution, end at the same optimum and the same standby/transit decisions.
+    The terminal is M7a's: with the preset's integral terminal (M7i, session 39) the two
+    track different optima (the QP 4 % costlier at step 10, 3 % cheaper at step 40; median
+    1.7 %; docs/mpc.md, "Known problems")."""
+    params, ctrl, seq = record("case3", "mpc-single", multi=False, steps=40,
+                               overrides={"weights.terminal": "projected"})  # fmt: skip
     ocp = ctrl.ocp
     qp = QPSolver(ocp, dataclasses.replace(params.solver, solver="qp"))
     a = replay(ctrl.solver, ocp, seq, "fatrop")

@@ -47,13 +47,16 @@ POLISH = {
 }  # fmt: skip
 
 
-def record(case: str, preset: str, multi: bool, steps: int = STEPS):
-    """(params, controller, [(p, elapsed stages)]) of a closed-loop MPC run of ``case``."""
-    return record_run(case, preset, multi, steps)[:3]
+def record(case: str, preset: str, multi: bool, steps: int = STEPS,
+           overrides: dict | None = None):  # fmt: skip
+    """(params, controller, [(p, elapsed stages)]) of a closed-loop MPC run of ``case``;
+    ``overrides``: preset fields (dotted names) changed."""
+    return record_run(case, preset, multi, steps, overrides=overrides)[:3]
 
 
 def record_run(case: str, preset: str, multi: bool, steps: int = STEPS,
-               threads: int | None = None, step_iter: int | None = None):  # fmt: skip
+               threads: int | None = None, step_iter: int | None = None,
+               overrides: dict | None = None):  # fmt: skip
     """:func:`record` plus the run's whole controller step times: wall and CPU time (ms) of
     each ``step`` (solves, rescues, the fallback's bookkeeping). The solves run in this
     process (``hang_s = 0``; no decision depends on it), so the CPU time is the step's own
@@ -63,7 +66,7 @@ def record_run(case: str, preset: str, multi: bool, steps: int = STEPS,
     changes where a step carries its plan (docs/mpc.md, "Controller step" 3b)."""
     sc = load_scenario(SCENARIOS / f"{case}.toml")
     sc = scenario_with(sc, duration=float(steps))
-    params = load_preset(preset, preset)
+    params = load_preset(preset, preset, overrides)
     sp = dataclasses.replace(params.solver, hang_s=0.0)
     if threads is not None:
         sp = dataclasses.replace(sp, threads=threads)
