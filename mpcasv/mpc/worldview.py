@@ -267,7 +267,8 @@ class WorldView:
         closes in on the ASV may be turning towards it (a pursuer re-aims), and no place is
         then one to stand at or to head for (docs/mpc.md, M7s and M7i)."""
         W = self.ocp.unpack_par(p)["weights"]
-        gated = W[_STAND] > 0 or self.params.weights.terminal == "integral"
+        gated = W[_STAND] > 0 or (self.params.weights.terminal == "integral"
+                                  and not self.ocp.variance)  # M7c replaces M7i  # fmt: skip
         self.stand_off = bool(gated and threats(self.ocp, p, self.params.margin).any())
         if self.stand_off:
             W[_STAND] = W[_ACCRUE] = 0.0
