@@ -11,6 +11,8 @@ less than one horizon before the AUV reaches ``r_outer``.
 
 from __future__ import annotations
 
+import functools
+
 import casadi as ca
 import numpy as np
 import pytest
@@ -126,13 +128,18 @@ def test_the_standing_time_is_off_while_an_auv_threatens_the_asv(auv_N, stand_of
     assert W[WEIGHT_NAMES.index("accrue")] == (0.0 if stand_off else 1.0)
 
 
+@functools.cache
+def _terminal_ocp(kind: str) -> OCP:
+    return OCP(load_preset("mpc-single", "mpc-single",
+                           {"weights.stand": 0.0, "weights.terminal": kind}),
+               1, outer=True, boat=Boat.load("gretha"))  # fmt: skip
+
+
 def _terminal(kind: str, tau: float, d: float, accrue: float = 1.0) -> float:
     """Terminal cost (no M7s) of a plan ending at rest ``d`` m South of the only AUV (still),
     with the AUV's expected fix age ``tau`` s there; r_t = 70 m, the preset's tail 20 s and
     U_go 2.5 m/s; ``accrue``: M7i's accrual weight (0 under a threat)."""
-    ocp = OCP(load_preset("mpc-single", "mpc-single",
-                          {"weights.stand": 0.0, "weights.terminal": kind}),
-              1, outer=True, boat=Boat.load("gretha"))  # fmt: skip
+    ocp = _terminal_ocp(kind)
     w = ocp.weight_vector()
     w[-1] = accrue
     gp = np.r_[0.0, 0.0, 80.0, 70.0, 1.0, np.zeros(6), w]
