@@ -84,7 +84,11 @@ class Observation:
     far, the thruster feedback is not yet passed on, docs/mpc.md). ``current_oracle``
     (optional): the TRUE current ``(V_N, V_E)`` (m/s) at the ASV, filled by the simulator
     only for a controller that asks for it (attribute ``needs_current_oracle = True``), for
-    ablations; never in the field.
+    ablations; never in the field. ``usbl_fix_times`` (optional): per AUV, the time (s) of the
+    last USBL fix the ASV's own USBL obtained (simulation: every successful ping, the start's
+    known position at t = 0 included; deploy: None so far, DUNE's USBL fixes are not read),
+    whatever the estimator; a fix is reliable or not by where the ASV was and whether its
+    propeller ran (Paper 2 eq. 9), which the controller judges.
     """
 
     t: float
@@ -93,6 +97,7 @@ class Observation:
     auvs: tuple[AUVEstimate, ...]
     actuators: tuple[float, float] | None = None
     current_oracle: tuple[float, float] | None = None
+    usbl_fix_times: tuple[float, ...] | None = None
 
 
 class Mode(StrEnum):

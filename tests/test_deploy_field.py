@@ -223,6 +223,18 @@ def test_an_oracle_current_is_refused_before_any_vehicle(tmp_path, capsys):
     assert len(err) == 1 and "current = 'oracle'" in err[0]
 
 
+def test_observed_fix_ages_are_refused_before_any_vehicle(tmp_path, capsys):
+    """``fix_age_source = "observed"`` (M2o) reads the ASV's own USBL fix times, which the
+    deploy does not take from DUNE yet: refused in one line at --prepare, not at every step."""
+    data = _mpc_cfg(tmp_path)
+    data["controller"]["overrides"]["fix_age_source"] = "observed"
+    path = tmp_path / "deploy.toml"
+    path.write_text(tomli_w.dumps(data))
+    assert main(["deploy", str(path), "--prepare"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "fix_age_source = 'observed'" in err[0], err
+
+
 def test_an_inline_step_that_raises_is_logged_when_it_happens_and_the_deploy_goes_on(
         tmp_path, caplog):  # fmt: skip
     """Review (session 5): outside field mode (the hybrid steps inline, in the link's

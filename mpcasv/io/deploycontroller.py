@@ -82,6 +82,10 @@ def build_controller(cfg: DeployConfig, speed: float | None = None, log=print):
     if getattr(ctl, "needs_current_oracle", False):  # only a simulator knows the true current
         raise ConfigError(f"controller {c.name}: current = 'oracle' needs the simulator's true "
                           "current; in a deployment use 'estimated' or 'zero'")  # fmt: skip
+    if getattr(ctl, "needs_usbl_fixes", False):  # DUNE's USBL fixes are not read yet
+        raise ConfigError(f"controller {c.name}: fix_age_source = 'observed' needs the ASV's "
+                          "own USBL fix times, which the deploy does not read from DUNE yet; "
+                          "use 'model'")  # fmt: skip
     log(f"controller {c.name} ready in {time.perf_counter() - t0:.1f} s")
     return ctl
 

@@ -150,6 +150,9 @@ class MPCController(WorldView, Safety, PlanOutput, Targeting, SpeedCap, Carry, S
         self._hang_guard = False
         #: ``current = "oracle"``: the simulator puts the true current into the observations
         self.needs_current_oracle = params.current == "oracle"
+        #: the ASV's own USBL fix times in every observation (``fix_age_source =
+        #: "observed"``, M2o; the simulator has them, ``mpcasv deploy`` not yet)
+        self.needs_usbl_fixes = params.fix_age_source == "observed"
         self._setup(n_auv)
         self.reset(n_auv)
         warn_course_unstable(self.ocp)
@@ -231,6 +234,9 @@ class MPCController(WorldView, Safety, PlanOutput, Targeting, SpeedCap, Carry, S
         #: per AUV: expected fixes since the run began, and visited once since then (the
         #: first tour, M9t; mpc/target.py)
         self.fixes_run = np.zeros(n_auv)
+        #: the ASV's USBL fix times seen at the previous step (``fix_age_source =
+        #: "observed"``, M2o; None: no step yet)
+        self._seen_fix: np.ndarray | None = None
         self.toured = np.zeros(n_auv, bool)
         self.t_run0: float | None = None  # the run's first step (s; mpc/target.py)
         self.target_switches = 0  # changes of target this run (diagnostic, issue 16 item 6)

@@ -330,10 +330,15 @@ class MPCParams:
     explore_every : float
         While the plan stands still, also solve from a guess heading for the AUV with the
         largest projected fix age this often (s; 0: never). Standing still is a local minimum.
-    fix_age_source : {"model", "estimate"}
+    fix_age_source : {"model", "estimate", "observed"}
         Initial fix ages: ``model`` integrates the same expected-fix-age model (eq. M2) on the
         observed states (works with any estimator, also ``perfect``); ``estimate`` takes
-        ``obs.t - t_last_fix`` of each AUV estimate (needs an estimator fed by fixes).
+        ``obs.t - t_last_fix`` of each AUV estimate (needs an estimator fed by fixes);
+        ``observed`` integrates M2 as ``model`` and, when the ASV's own USBL reports a new
+        fix (``Observation.usbl_fix_times``) while the ASV was quiet within that AUV's
+        reliable-fix range as it believes it (Paper 2 eq. 9), sets that AUV's age to the
+        fix's and counts it as served (M2o, docs/mpc.md); refused (ValueError at the first
+        step) where the observation has no fix times (``mpcasv deploy`` so far).
     current : {"estimated", "oracle", "zero"}
         The current the plan assumes (constant over the horizon; issue 16 item 1):
         ``estimated`` (default): the on-board observer's estimate from the ASV's own motion
@@ -383,7 +388,7 @@ class MPCParams:
     objective: Literal["age", "variance"] = "age"
     variance: VarianceParams = VarianceParams()
     explore_every: NonNeg = 5.0
-    fix_age_source: Literal["model", "estimate"] = "model"
+    fix_age_source: Literal["model", "estimate", "observed"] = "model"
     current: Literal["estimated", "oracle", "zero"] = "estimated"
     initial_actuators: Literal["observed", "trim"] = "observed"
     observer: CurrentObserverParams = CurrentObserverParams()

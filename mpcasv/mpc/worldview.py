@@ -66,8 +66,15 @@ class WorldView:
         if self.params.fix_age_source == "estimate":
             ages = np.array([obs.t - a.t_last_fix for a in obs.auvs])
             return np.where(np.isfinite(ages), np.maximum(ages, 0.0), TAU_UNKNOWN)
-        if elapsed <= 0:
-            return self.tau
+        ages = self.tau if elapsed <= 0 else self._expected_ages(obs, elapsed)
+        if self.params.fix_age_source == "observed":
+            ages = self._observed_fixes(obs, ages)
+        return ages
+
+    def _expected_ages(self, obs: Observation, elapsed: float) -> np.ndarray:
+        """The expected fix ages (s, shape (K,)) ``elapsed`` s (> 0) after ``self.tau``
+        (eq. M2 at the observed state's rates, exact for a constant rate), and the expected
+        fixes counted since the target's choice and the run's start (M9, M9t)."""
         rho = self._rates(obs)
         self.fixes_since += rho * elapsed  # expected fixes since the target's choice (M9)
         self.fixes_run += rho * elapsed  # ... since the run began (the first tour, M9t)
@@ -82,6 +89,38 @@ class WorldView:
         with np.errstate(divide="ignore", invalid="ignore"):
             relaxed = 1 / rho + (self.tau - 1 / rho) * decay
         return np.where(rho > 1e-9, relaxed, self.tau + elapsed)
+
+    def _observed_fixes(self, obs: Observation, ages: np.ndarray) -> np.ndarray:
+        """(M2o, ``fix_age_source = "observed"``) ``ages`` (s, shape (K,)) with the age of
+        each AUV whose fix the ASV's own USBL reported since the previous step while the
+        ASV was quiet within its reliable-fix range (Paper 2 eq. 9, at the believed range)
+        set to that fix's age, and that AUV counted as served (``fixes_since``,
+        ``fixes_run`` at least 1: mpc/target.py). Fix times already there at the run's
+        first step are not news.
+
+        Raises
+        ------
+        ValueError
+            The observation carries no USBL fix times (``mpcasv deploy`` does not read
+            DUNE's yet).
+        """
+        if obs.usbl_fix_times is None:
+            raise ValueError("fix_age_source = 'observed' needs the ASV's own USBL fix times "
+                             "(Observation.usbl_fix_times), which this observation does not "
+                             "carry (mpcasv deploy does not read DUNE's USBL fixes yet): use "
+                             "'model'")  # fmt: skip
+        t_fix = np.asarray(obs.usbl_fix_times, float)
+        seen, self._seen_fix = self._seen_fix, t_fix
+        if seen is None:
+            return ages
+        pos = np.array([a.position for a in obs.auvs])
+        dist = np.hypot(*(pos - obs.asv.position).T)
+        r_t = self._radii(obs, 0.0, obs.asv.position) + self.domain.delta_r
+        reliable = (t_fix > seen) & self.domain.reliable_fix_possible(dist, r_t,
+                                                                      obs.propeller_on)  # eq. 9
+        self.fixes_since[reliable] = np.maximum(self.fixes_since[reliable], 1.0)
+        self.fixes_run[reliable] = np.maximum(self.fixes_run[reliable], 1.0)
+        return np.where(reliable, np.maximum(obs.t - t_fix, 0.0), ages)
 
     def _fix_geometry(self, obs: Observation, r_lo0: np.ndarray):
         """(depth now, d_fix) per AUV: ``d_fix`` is the reliable-fix range of the ``target``

@@ -202,13 +202,15 @@ class World:
         """What a controller sees now (estimators fed with the truth for ``perfect``): the
         ASV's state and its actuators' (thrust, steering) as the boat knows them (exact:
         the simulator has no navigation or actuator sensor noise); the true current only
-        when :attr:`oracle_current` is set (a controller that asked for it, ablations)."""
+        when :attr:`oracle_current` is set (a controller that asked for it, ablations); the
+        ASV's own USBL fix times (the last per AUV)."""
         for k, est in enumerate(self.estimators):
             est.on_truth(self.t, *self.auv_truth(k))
         ests = tuple(e.estimate(self.t) for e in self.estimators)
         oracle = self.current_at_asv() if self.oracle_current else None
         return Observation(self.t, self.asv_state(), self.propeller_on, ests,
-                           (float(self.x[6]), float(self.x[7])), oracle)  # fmt: skip
+                           (float(self.x[6]), float(self.x[7])), oracle,
+                           tuple(float(t) for t in self.last_fix))  # fmt: skip
 
     def advance(self, cmd: np.ndarray) -> Period:
         """Move everything one supervisory period under execution-level command ``cmd``
