@@ -62,10 +62,29 @@ def test_other_fixes_leave_the_expected_age(case):
           "model": {"source": "model"}}[case]  # fmt: skip
     then = (11.0, 0.0) if case == "not news" else (0.0, 0.0)
     c, ages = _ages(then, (11.0, 0.0), **kw)
-    _, model = _ages(then, (11.0, 0.0), source="model", **{k: v for k, v in kw.items()
-                                                            if k != "source"})  # fmt: skip
-    assert np.array_equal(ages, model) and ages[0] > 100.0
-    assert c.fixes_since[0] < 1.0
+    assert ages[0] > 100.0 and c.fixes_since[0] < 1.0
+    if case != "model":  # the same as eq. M2 alone
+        _, model = _ages(then, (11.0, 0.0), source="model",
+                         **{k: v for k, v in kw.items() if k != "source"})  # fmt: skip
+        assert np.array_equal(ages, model)
+
+
+def test_the_observed_fix_serves_the_target_and_the_asv_moves_on():
+    """Through the controller's step: the run's first target, AUV 0 (60 m off, expected age
+    150 s), has a reliable fix; with M2o it is served at once and the target moves to AUV 1
+    (300 m off, 200 s); with the expected ages alone AUV 0's age is still 126 s, above
+    ``tau_served``, and the target stays."""
+    targets = {}
+    for source in ("observed", "model"):
+        c = _ctrl(source)
+        c.reset(2)
+        assert c._seen_fix is None  # a new run: no fix times seen yet
+        c.tau = np.array([150.0, 200.0])
+        c.step(Observation(10.0, ASV0, False, AUVS, usbl_fix_times=(0.0, 0.0)))
+        c.step(Observation(11.0, ASV0, False, AUVS, usbl_fix_times=(11.0, 0.0)))
+        targets[source] = (c.target, round(float(c.tau[0]), 1))
+    assert targets["observed"][0] == 1 and targets["observed"][1] == 0.0
+    assert targets["model"][0] == 0 and targets["model"][1] > 100.0
 
 
 def test_an_observation_without_fix_times_is_refused():

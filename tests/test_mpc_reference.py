@@ -4,7 +4,8 @@ its objective and its constraint rows equal those of the functions compiled for 
 (:func:`mpcasv.mpc.derivatives.nlp_functions`) at the same scaled variables and parameters.
 Issue 16 item 8 compares their speeds, and the benchmark their costs: session 40 found the
 default's receding-horizon costs 27 % below the reference's own (median, Case 3), which is a
-comparison of local minima only if both evaluate one objective."""
+comparison of local minima only if both evaluate one objective. (Its bounds on the variables
+are tested in ``tests/test_mpc_current.py``, the current's widening included.)"""
 
 from __future__ import annotations
 

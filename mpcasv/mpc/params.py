@@ -337,8 +337,9 @@ class MPCParams:
         ``observed`` integrates M2 as ``model`` and, when the ASV's own USBL reports a new
         fix (``Observation.usbl_fix_times``) while the ASV was quiet within that AUV's
         reliable-fix range as it believes it (Paper 2 eq. 9), sets that AUV's age to the
-        fix's and counts it as served (M2o, docs/mpc.md); refused (ValueError at the first
-        step) where the observation has no fix times (``mpcasv deploy`` so far).
+        fix's and counts it as served (M2o, docs/mpc.md); ``mpcasv deploy`` refuses it at
+        ``--prepare`` (it does not read DUNE's USBL fixes yet), and a step whose
+        observation has no fix times raises ValueError.
     current : {"estimated", "oracle", "zero"}
         The current the plan assumes (constant over the horizon; issue 16 item 1):
         ``estimated`` (default): the on-board observer's estimate from the ASV's own motion
