@@ -211,28 +211,24 @@ def test_a_step_that_raises_is_logged_not_lost(tmp_path):
     assert dep.step_errors == 1
 
 
-def test_an_oracle_current_is_refused_before_any_vehicle(tmp_path, capsys):
-    """Only a simulator knows the true current: `current = "oracle"` passed --prepare and
-    would have failed at every step in the field (found in review); it is refused in one line."""
+@pytest.mark.parametrize("field,value,said", [
+    # only a simulator knows the true current: "oracle" passed --prepare and would have
+    # failed at every step in the field (found in review)
+    ("current", "oracle", "current = 'oracle'"),
+    # M2o reads the ASV's own USBL fix times, which the deploy does not take from DUNE yet
+    ("fix_age_source", "observed", "fix_age_source = 'observed'"),
+])  # fmt: skip
+def test_a_simulator_only_setting_is_refused_before_any_vehicle(tmp_path, capsys, field,
+                                                                 value, said):  # fmt: skip
+    """A setting only a simulation can feed is refused in one line at --prepare, not at
+    every step in the field."""
     data = _mpc_cfg(tmp_path)
-    data["controller"]["overrides"]["current"] = "oracle"
+    data["controller"]["overrides"][field] = value
     path = tmp_path / "deploy.toml"
     path.write_text(tomli_w.dumps(data))
     assert main(["deploy", str(path), "--prepare"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "current = 'oracle'" in err[0]
-
-
-def test_observed_fix_ages_are_refused_before_any_vehicle(tmp_path, capsys):
-    """``fix_age_source = "observed"`` (M2o) reads the ASV's own USBL fix times, which the
-    deploy does not take from DUNE yet: refused in one line at --prepare, not at every step."""
-    data = _mpc_cfg(tmp_path)
-    data["controller"]["overrides"]["fix_age_source"] = "observed"
-    path = tmp_path / "deploy.toml"
-    path.write_text(tomli_w.dumps(data))
-    assert main(["deploy", str(path), "--prepare"]) == 2
-    err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "fix_age_source = 'observed'" in err[0], err
+    assert len(err) == 1 and said in err[0], err
 
 
 def test_an_inline_step_that_raises_is_logged_when_it_happens_and_the_deploy_goes_on(
