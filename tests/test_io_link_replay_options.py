@@ -474,3 +474,30 @@ def test_rehearsal_config_for_a_tcp_base_leaves_out_the_vehicles_addresses():
                                              for x in base["vehicle"]]), "/tmp/x", 4.0)  # fmt: skip
     assert "discovery_ports" not in udp["link"]  # every vehicle addressed: none to open
     assert deploy_config_from_dict(udp)
+
+
+@pytest.mark.parametrize("line, said", [
+    ('current = "oracle"', "current = 'oracle'"),
+    ('fix_age_source = "observed"', "fix_age_source = 'observed'"),
+])  # fmt: skip
+def test_replay_refuses_a_preset_that_reads_what_only_a_simulator_observes(tmp_path, capsys,
+                                                                           line, said):  # fmt: skip
+    """A deploy log's observations carry neither the true current nor the ASV's own USBL fix
+    times; `replay --preset P` with such a P ended in a traceback at its first step (exit 1,
+    a new user's finding, session 40). Refused in one line, exit 2, as `deploy --prepare`
+    refuses it."""
+    from pathlib import Path
+
+    import mpcasv
+    from mpcasv.cli import main
+
+    log = _deploy_log(tmp_path, {"name": "mpc-single", "preset": "mpc-single"})
+    text = (Path(mpcasv.__file__).parent / "data" / "presets" / "mpc-single.toml").read_text()
+    preset = tmp_path / "sim-only.toml"
+    key = line.split(" = ")[0]
+    kept = [x for x in text.splitlines() if not x.startswith(f"{key} = ")]  # the preset's own
+    preset.write_text("\n".join(kept).replace('controller = "mpc-single"',
+                                              f'controller = "mpc-single"\n{line}', 1))
+    assert main(["replay", str(log), "--preset", str(preset)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and said in err[0], err

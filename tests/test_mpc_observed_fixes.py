@@ -110,3 +110,17 @@ def test_the_simulator_reports_the_asvs_usbl_fix_times():
         assert obs.usbl_fix_times == tuple(w.last_fix)
         seen |= {t for t in obs.usbl_fix_times if t > 0}
     assert len(seen) >= 3  # pings every T0 = 5 s per AUV, most of them fixes
+
+
+def test_the_variance_objective_refuses_observed_ages():
+    """With ``objective = "variance"`` the ages stand for navigation variances (M2'): a fix
+    at range leaves some, which a reset to the fix's age would drop. A new user's run of the
+    combination (mpc-multi-variance, Case 6, seed 0) followed a served AUV for minutes; it is
+    refused at load."""
+    from mpcasv.config import ConfigError
+    from mpcasv.controllers import load_preset
+
+    with pytest.raises(ConfigError, match="fix_age_source = 'observed' needs objective = 'age'"):
+        load_preset("mpc-multi", "mpc-multi-variance", {"fix_age_source": "observed"})
+    assert load_preset("mpc-multi", "mpc-multi", {"fix_age_source": "observed"}).fix_age_source \
+        == "observed"

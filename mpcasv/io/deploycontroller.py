@@ -79,15 +79,29 @@ def build_controller(cfg: DeployConfig, speed: float | None = None, log=print):
         done.set()
     if hasattr(ctl, "say_current"):  # the event current_untested says it, in the run's time
         ctl.say_current = False
-    if getattr(ctl, "needs_current_oracle", False):  # only a simulator knows the true current
-        raise ConfigError(f"controller {c.name}: current = 'oracle' needs the simulator's true "
-                          "current; in a deployment use 'estimated' or 'zero'")  # fmt: skip
-    if getattr(ctl, "needs_usbl_fixes", False):  # DUNE's USBL fixes are not read yet
-        raise ConfigError(f"controller {c.name}: fix_age_source = 'observed' needs the ASV's "
-                          "own USBL fix times, which the deploy does not read from DUNE yet; "
-                          "use 'model'")  # fmt: skip
+    refuse_simulation_only(ctl, c.name)
     log(f"controller {c.name} ready in {time.perf_counter() - t0:.1f} s")
     return ctl
+
+
+def refuse_simulation_only(ctl, name: str) -> None:
+    """Refuse a controller that reads what only a simulator observes, where a deploy's
+    observations (and so its log's, which ``mpcasv replay`` replays) do not carry it: the
+    true current (``current = "oracle"``) and the ASV's own USBL fix times
+    (``fix_age_source = "observed"``, M2o: DUNE's USBL fixes are not read yet).
+
+    Raises
+    ------
+    ConfigError
+        One line naming the setting and what to use instead.
+    """
+    if getattr(ctl, "needs_current_oracle", False):  # only a simulator knows the true current
+        raise ConfigError(f"controller {name}: current = 'oracle' needs the simulator's true "
+                          "current; in a deployment use 'estimated' or 'zero'")  # fmt: skip
+    if getattr(ctl, "needs_usbl_fixes", False):  # DUNE's USBL fixes are not read yet
+        raise ConfigError(f"controller {name}: fix_age_source = 'observed' needs the ASV's "
+                          "own USBL fix times, which the deploy does not read from DUNE yet; "
+                          "use 'model'")  # fmt: skip
 
 
 #: the least time (ms) a step's solves can work with in the field: a warm-started solve's

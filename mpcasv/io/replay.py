@@ -29,7 +29,7 @@ from mpcasv.config import ConfigError, parse
 from mpcasv.controllers import make_controller, preset_used
 from mpcasv.interface import Mode
 from mpcasv.io.config import WatchdogSpec
-from mpcasv.io.deploycontroller import field_boat
+from mpcasv.io.deploycontroller import field_boat, refuse_simulation_only
 from mpcasv.io.deployfeedback import cap_command, cap_controller_speed
 from mpcasv.io.deploystep import guard_params
 from mpcasv.io.logs import read_jsonl
@@ -160,6 +160,7 @@ def replay(log: str | Path, controller: str | None = None, preset: str | None = 
     n_auv = len(steps[0]["obs"]["auvs"])
     ctl = make_controller(name, n_auv, preset, c["overrides"] if same else None,
                           boat=logged_boat(cfg, path))  # fmt: skip
+    refuse_simulation_only(ctl, name)  # a deploy log has no true current, no USBL fix times
     ctl.reset(n_auv)
     if same:
         gp = GuardParams(**started[0]["guard"])

@@ -10,6 +10,8 @@ from __future__ import annotations
 
 from typing import Literal
 
+from pydantic import model_validator
+
 from mpcasv.config import Flag, NonNeg, NonNegInt, Pos, PosInt, frozen
 from mpcasv.estimation.current import CurrentObserverParams
 from mpcasv.hybrid.avoidance import AvoidanceParams
@@ -337,9 +339,10 @@ class MPCParams:
         ``observed`` integrates M2 as ``model`` and, when the ASV's own USBL reports a new
         fix (``Observation.usbl_fix_times``) while the ASV was quiet within that AUV's
         reliable-fix range as it believes it (Paper 2 eq. 9), sets that AUV's age to the
-        fix's and counts it as served (M2o, docs/mpc.md); ``mpcasv deploy`` refuses it at
-        ``--prepare`` (it does not read DUNE's USBL fixes yet), and a step whose
-        observation has no fix times raises ValueError.
+        fix's and counts it as served (M2o, docs/mpc.md); refused with ``objective =
+        "variance"``, by ``mpcasv deploy`` at ``--prepare`` and by ``mpcasv replay`` (no fix
+        times in the field yet), and a step whose observation has no fix times raises
+        ValueError.
     current : {"estimated", "oracle", "zero"}
         The current the plan assumes (constant over the horizon; issue 16 item 1):
         ``estimated`` (default): the on-board observer's estimate from the ASV's own motion
@@ -393,3 +396,12 @@ class MPCParams:
     current: Literal["estimated", "oracle", "zero"] = "estimated"
     initial_actuators: Literal["observed", "trim"] = "observed"
     observer: CurrentObserverParams = CurrentObserverParams()
+
+    @model_validator(mode="after")
+    def _observed_needs_ages(self) -> MPCParams:
+        if self.fix_age_source == "observed" and self.objective == "variance":
+            raise ValueError("fix_age_source = 'observed' needs objective = 'age': with the "
+                             "variance objective the ages stand for navigation variances, "
+                             "and a fix at range leaves some (M2'), which resetting to the "
+                             "fix's age would drop")  # fmt: skip
+        return self
