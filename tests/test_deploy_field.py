@@ -218,10 +218,17 @@ def test_a_step_that_raises_is_logged_not_lost(tmp_path):
     # M2o reads the ASV's own USBL fix times, which the deploy does not take from DUNE yet
     ("fix_age_source", "observed", "fix_age_source = 'observed'"),
 ])  # fmt: skip
-def test_a_simulator_only_setting_is_refused_before_any_vehicle(tmp_path, capsys, field,
-                                                                 value, said):  # fmt: skip
+def test_a_simulator_only_setting_is_refused_before_any_vehicle(tmp_path, capsys, monkeypatch,
+                                                                 field, value, said):  # fmt: skip
     """A setting only a simulation can feed is refused in one line at --prepare, not at
-    every step in the field."""
+    every step in the field, and before the controller is built (an uncached MPC library
+    would compile for a minute first: a new user's finding, session 40)."""
+    import mpcasv.controllers
+
+    def built(*a, **k):
+        raise AssertionError("the controller was built before the refusal")
+
+    monkeypatch.setattr(mpcasv.controllers, "make_controller", built)
     data = _mpc_cfg(tmp_path)
     data["controller"]["overrides"][field] = value
     path = tmp_path / "deploy.toml"

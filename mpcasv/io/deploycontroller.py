@@ -85,10 +85,11 @@ def build_controller(cfg: DeployConfig, speed: float | None = None, log=print):
 
 
 def refuse_simulation_only(ctl, name: str) -> None:
-    """Refuse a controller that reads what only a simulator observes, where a deploy's
-    observations (and so its log's, which ``mpcasv replay`` replays) do not carry it: the
-    true current (``current = "oracle"``) and the ASV's own USBL fix times
-    (``fix_age_source = "observed"``, M2o: DUNE's USBL fixes are not read yet).
+    """Refuse a controller (or its parameters: the same ``needs_*`` attributes) that reads
+    what only a simulator observes, where a deploy's observations (and so its log's, which
+    ``mpcasv replay`` replays) do not carry it: the true current (``current = "oracle"``)
+    and the ASV's own USBL fix times (``fix_age_source = "observed"``, M2o: DUNE's USBL
+    fixes are not read yet).
 
     Raises
     ------
@@ -159,6 +160,7 @@ def check_controller(cfg: DeployConfig, source: str | Path,
             resolve("vessels", c.vessel)
         check_boat(params, deploy_boat(cfg), str(c.preset or c.name))
         check_field_budget(params)
+        refuse_simulation_only(params, c.name)  # before anything is compiled
     except ConfigError as exc:
         raise ConfigError(f"{source}: controller: {exc}") from None
     check_watchdog(cfg, params, watchdog_set, source)

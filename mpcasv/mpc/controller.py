@@ -149,10 +149,10 @@ class MPCController(WorldView, Safety, PlanOutput, Targeting, SpeedCap, Carry, S
         self.deadline: DeadlineSolver | None = None
         self._hang_guard = False
         #: ``current = "oracle"``: the simulator puts the true current into the observations
-        self.needs_current_oracle = params.current == "oracle"
+        self.needs_current_oracle = params.needs_current_oracle
         #: the ASV's own USBL fix times in every observation (``fix_age_source =
         #: "observed"``, M2o; the simulator has them, ``mpcasv deploy`` not yet)
-        self.needs_usbl_fixes = params.fix_age_source == "observed"
+        self.needs_usbl_fixes = params.needs_usbl_fixes
         self._setup(n_auv)
         self.reset(n_auv)
         warn_course_unstable(self.ocp)

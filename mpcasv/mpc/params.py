@@ -397,6 +397,17 @@ class MPCParams:
     initial_actuators: Literal["observed", "trim"] = "observed"
     observer: CurrentObserverParams = CurrentObserverParams()
 
+    @property
+    def needs_current_oracle(self) -> bool:
+        """The plan reads the simulator's true current (``current = "oracle"``)."""
+        return self.current == "oracle"
+
+    @property
+    def needs_usbl_fixes(self) -> bool:
+        """The fix ages read the ASV's own USBL fix times (``fix_age_source = "observed"``,
+        M2o), which only the simulator's observations carry so far."""
+        return self.fix_age_source == "observed"
+
     @model_validator(mode="after")
     def _observed_needs_ages(self) -> MPCParams:
         if self.fix_age_source == "observed" and self.objective == "variance":
