@@ -69,7 +69,7 @@ def test_other_fixes_leave_the_expected_age(case):
         assert np.array_equal(ages, model)
 
 
-def test_the_observed_fix_serves_the_target_and_the_asv_moves_on():
+def test_the_observed_fix_serves_the_target_and_the_target_moves_on():
     """Through the controller's step: the run's first target, AUV 0 (60 m off, expected age
     150 s), has a reliable fix; with M2o it is served at once and the target moves to AUV 1
     (300 m off, 200 s); with the expected ages alone AUV 0's age is still 126 s, above
