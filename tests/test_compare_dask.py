@@ -10,12 +10,15 @@ worker): a complete table can then only come from the client.
 
 from __future__ import annotations
 
+import dataclasses
+import json
 import textwrap
 from pathlib import Path
 
 import pandas as pd
 import pytest
 
+from mpcasv.controllers import load_preset
 from mpcasv.experiments.runner import run_suite
 from mpcasv.experiments.suite_file import SCENARIOS_DIR
 
@@ -125,6 +128,10 @@ def test_run_folders_go_to_the_named_fsspec_url(tmp_path):
         assert run_dir == f"file://{remote / job.run_name}"
         assert {p.name for p in (remote / job.run_name).iterdir()} >= {
             "metrics.json", "run.json", "timeseries.parquet"}  # fmt: skip
+        # the controller's parameters as the job ran them (its preset and overrides)
+        params = json.loads((remote / job.run_name / "run.json").read_text())["params"]
+        assert params == dataclasses.asdict(load_preset(job.controller, job.preset,
+                                                        dict(job.overrides)))  # fmt: skip
     assert not (out / "runs").exists()
 
 

@@ -186,6 +186,21 @@ def test_simulate_records_the_preset_it_ran_with(tmp_path, capsys):
     assert json.loads((out / "run.json").read_text())["preset"] == "goto"
 
 
+def test_a_run_records_the_parameters_it_ran_with(tmp_path, capsys):
+    """run.json named the preset file only: a copied preset with one line changed (a new
+    user's M2o trial, session 40) left no trace of what ran. It now holds the controller's
+    parameters as run (``params``), for `simulate` and for each `compare` job."""
+    preset = tmp_path / "slow.toml"
+    text = (DATA_DIR / "presets" / "paper1-field.toml").read_text()
+    preset.write_text(text.replace("speed = 2.5", "speed = 1.7", 1))
+    out = tmp_path / "run"
+    assert main(["simulate", str(CASE1), "--controller", "hybrid-single", "--params",
+                 str(preset), "--duration", "2", "--out", str(out), "--quiet",
+                 "--no-plots"]) == 0  # fmt: skip
+    params = json.loads((out / "run.json").read_text())["params"]
+    assert params["speed"] == 1.7 and params["domain"]["eps_plus"] > 0
+
+
 def test_replay_records_the_preset_it_replayed_with(tmp_path, capsys):
     """`replay` of a log whose controller ran its default preset, or with another
     --controller, said "(preset None)"; it names the preset the replay built."""

@@ -55,7 +55,7 @@ def simulate_job(job: Job, run_dir: Path) -> dict:
     """Simulate one job and write its run folder; return its metrics."""
     from mpcasv.controllers import Boat, make_controller
     from mpcasv.experiments.metrics import compute_metrics
-    from mpcasv.sim.record import write_run
+    from mpcasv.sim.record import params_record, write_run
     from mpcasv.sim.simulator import simulate
 
     scenario, realisation = job.realised_scenario()  # the seed's draw of its [uncertain] table
@@ -68,7 +68,8 @@ def simulate_job(job: Job, run_dir: Path) -> dict:
     extra = {"job_id": job.job_id, "suite": job.suite, "variant": job.variant,
              "preset": job.preset, "overrides": dict(job.overrides),
              "estimator": job.estimator, "current": job.current,
-             "realisation": realisation.as_dict(), "boat": boat.describe()}  # fmt: skip
+             "realisation": realisation.as_dict(), "boat": boat.describe(),
+             "params": params_record(controller)}  # fmt: skip
     return write_run(result, run_dir, compute_metrics(result), plots=job.plots, extra=extra)
 
 

@@ -72,7 +72,7 @@ def run(args: argparse.Namespace) -> int:
     from mpcasv.estimation import ESTIMATORS, check_plan_estimator
     from mpcasv.experiments.metrics import compute_metrics
     from mpcasv.outputs import check_output_folder
-    from mpcasv.sim.record import check_run_dir, write_run
+    from mpcasv.sim.record import check_run_dir, params_record, write_run
     from mpcasv.sim.scenario import load_scenario
     from mpcasv.sim.simulator import simulate
     from mpcasv.sim.uncertainty import run_scenario
@@ -116,7 +116,8 @@ def run(args: argparse.Namespace) -> int:
                           f"{exc}") from None  # fmt: skip
     result = simulate(scenario, controller, args.seed, args.estimator, progress=not args.quiet)
     extra = {"preset": preset_used(name, preset), "estimator": args.estimator or scenario.estimator,
-             "realisation": real.as_dict(), "boat": boat.describe()}  # fmt: skip
+             "realisation": real.as_dict(), "boat": boat.describe(),
+             "params": params_record(controller)}  # fmt: skip
     metrics = write_run(result, out, compute_metrics(result), plots=not args.no_plots,
                         extra=extra)  # fmt: skip
     keys = ("duration_s", "asv_distance_m", "min_range_m", "collision_domain_s",

@@ -8,6 +8,7 @@ and handed in: the simulator's package does not import the experiments'."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import pickle
@@ -45,6 +46,15 @@ def check_run_dir(out_dir: str | Path) -> Path:
     return out
 
 
+def params_record(controller) -> dict | None:
+    """The parameters ``controller`` ran with, its preset with every override applied
+    (``run.json``'s ``params``): a run folder says what ran, not only the preset file's
+    name (a new user's finding, session 40: a copied preset with one line changed left no
+    trace); None for a controller without dataclass parameters."""
+    p = getattr(controller, "params", None)
+    return dataclasses.asdict(p) if dataclasses.is_dataclass(p) else None
+
+
 def write_run(result, out_dir: str | Path, metrics: dict, plots: bool = True,
               extra: dict | None = None) -> dict:  # fmt: skip
     """Write the run files into ``out_dir`` (an earlier run's folder there is replaced; any
@@ -52,7 +62,8 @@ def write_run(result, out_dir: str | Path, metrics: dict, plots: bool = True,
     (non-finite numbers as None).
 
     ``run.json`` holds the scenario, controller, seed, wall time, ``extra`` and the boat
-    (``boat``: :meth:`mpcasv.controllers.Boat.describe`, when ``extra`` carries it).
+    (``boat``: :meth:`mpcasv.controllers.Boat.describe`, when ``extra`` carries it) and the
+    controller's parameters (``params``: :func:`params_record`, likewise).
     """
     out = check_run_dir(out_dir)
     out.parent.mkdir(parents=True, exist_ok=True)
