@@ -118,8 +118,7 @@ class Targeting:
         if self.t_run0 is None:
             self.t_run0 = obs.t  # the run's first step (the first tour, M9t)
         pos = np.array([a.position for a in obs.auvs])
-        r_t = self._radii(obs, 0.0, obs.asv.position) + self.domain.delta_r
-        dist = np.hypot(*(pos - obs.asv.position).T)
+        dist, r_t = self._reach_now(obs)
         if self.domain.in_reliable_range(dist[self.target], r_t[self.target]):
             self.dwell += elapsed
         j = self.target

@@ -113,14 +113,20 @@ class WorldView:
         seen, self._seen_fix = self._seen_fix, t_fix
         if seen is None:
             return ages
-        pos = np.array([a.position for a in obs.auvs])
-        dist = np.hypot(*(pos - obs.asv.position).T)
-        r_t = self._radii(obs, 0.0, obs.asv.position) + self.domain.delta_r
+        dist, r_t = self._reach_now(obs)
         reliable = (t_fix > seen) & self.domain.reliable_fix_possible(dist, r_t,
                                                                       obs.propeller_on)  # eq. 9
         self.fixes_since[reliable] = np.maximum(self.fixes_since[reliable], 1.0)
         self.fixes_run[reliable] = np.maximum(self.fixes_run[reliable], 1.0)
         return np.where(reliable, np.maximum(obs.t - t_fix, 0.0), ages)
+
+    def _reach_now(self, obs: Observation) -> tuple[np.ndarray, np.ndarray]:
+        """(horizontal range, target-circle radius ``r_t``) of each AUV now (m, shapes (K,)),
+        at the believed positions and depths: the geometry of Paper 2's reliable-fix rule
+        (eq. 9), for the target's dwell (M9) and the observed fixes (M2o)."""
+        pos = np.array([a.position for a in obs.auvs])
+        dist = np.hypot(*(pos - obs.asv.position).T)
+        return dist, self._radii(obs, 0.0, obs.asv.position) + self.domain.delta_r
 
     def _fix_geometry(self, obs: Observation, r_lo0: np.ndarray):
         """(depth now, d_fix) per AUV: ``d_fix`` is the reliable-fix range of the ``target``
