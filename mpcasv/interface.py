@@ -86,7 +86,8 @@ class Observation:
     only for a controller that asks for it (attribute ``needs_current_oracle = True``), for
     ablations; never in the field. ``usbl_fix_times`` (optional): per AUV, the time (s) of the
     last USBL fix the ASV's own USBL obtained (simulation: every successful ping, the start's
-    known position at t = 0 included; deploy: None so far, DUNE's USBL fixes are not read),
+    known position at t = 0 included; deploy: the timestamp of the last ``UsblFixExtended``
+    the ASV's DUNE sent for that AUV, ``-inf`` before the first),
     whatever the estimator; a fix is reliable or not by where the ASV was and whether its
     propeller ran (Paper 2 eq. 9), which the controller judges.
     """

@@ -215,8 +215,6 @@ def test_a_step_that_raises_is_logged_not_lost(tmp_path):
     # only a simulator knows the true current: "oracle" passed --prepare and would have
     # failed at every step in the field (found in review)
     ("current", "oracle", "current = 'oracle'"),
-    # M2o reads the ASV's own USBL fix times, which the deploy does not take from DUNE yet
-    ("fix_age_source", "observed", "fix_age_source = 'observed'"),
 ])  # fmt: skip
 def test_a_simulator_only_setting_is_refused_before_any_vehicle(tmp_path, capsys, monkeypatch,
                                                                  field, value, said):  # fmt: skip
@@ -236,6 +234,18 @@ def test_a_simulator_only_setting_is_refused_before_any_vehicle(tmp_path, capsys
     assert main(["deploy", str(path), "--prepare"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and said in err[0], err
+
+
+def test_observed_fixes_pass_the_configuration_checks(tmp_path):
+    """M2o (``fix_age_source = "observed"``) was refused at --prepare while the deploy did
+    not read DUNE's UsblFixExtended (session 40); it reads them now (tests/
+    test_deploy_usbl.py), so the configuration loads with it."""
+    from mpcasv.io.config import deploy_config_from_dict
+
+    data = _mpc_cfg(tmp_path)
+    data["controller"]["overrides"]["fix_age_source"] = "observed"
+    cfg = deploy_config_from_dict(data)
+    assert cfg.controller.overrides["fix_age_source"] == "observed"
 
 
 def test_an_inline_step_that_raises_is_logged_when_it_happens_and_the_deploy_goes_on(

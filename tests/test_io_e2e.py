@@ -15,6 +15,7 @@ import time
 from pathlib import Path
 
 import imcpy
+import pandas as pd
 import psutil
 import pytest
 
@@ -136,6 +137,21 @@ def _check_logs(deploy_dir: Path, n_auv: int) -> list[dict]:
     return steps
 
 
+def _check_usbl_fixes(steps: list[dict], sitl_dir: Path) -> None:
+    """Each decision's observation has the time of the last USBL fix the SITL's world made
+    up to it (the ASV's UsblFixExtended, stamped at the fix's own time; session 41): before
+    the first fix none (the world's known start is no fix of the ASV's USBL)."""
+    run = sitl_dir / "run"
+    offset = json.loads((run / "run.json").read_text())["sitl"]["ts_offset"]
+    ts = pd.read_parquet(run / "timeseries.parquet")
+    last_fix = {round(t, 6): t - age for t, age in zip(ts["t"], ts["fix_age0"], strict=True)}
+    seen = [(round(s["t"] - offset, 6), s["obs"]["usbl_fix_times"][0]) for s in steps]
+    seen = [(t, f) for t, f in seen if t in last_fix]
+    assert len(seen) >= len(steps) - 1 and any(f is not None for _, f in seen)
+    for t, f in seen:
+        assert last_fix[t] == 0.0 if f is None else f - offset == pytest.approx(last_fix[t]), t
+
+
 def _check_bind(sockets) -> None:
     assert sockets, "deploy has no socket"
     for c in sockets:
@@ -148,6 +164,7 @@ def test_case3_rehearsal_matches_simulation(tmp_path):
     sc, deploy_dir, sitl_dir, sockets = _rehearse(tmp_path, "case3", 300.0, base)
     _check_bind(sockets)
     steps = _check_logs(deploy_dir, 1)
+    _check_usbl_fixes(steps, sitl_dir)
     m_sim, m_dep = _compare(sc, deploy_dir, sitl_dir)
     table = compare_metrics(m_sim, m_dep)
     print(json.dumps(table, indent=1))

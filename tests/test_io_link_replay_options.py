@@ -482,10 +482,11 @@ def test_rehearsal_config_for_a_tcp_base_leaves_out_the_vehicles_addresses():
 ])  # fmt: skip
 def test_replay_refuses_a_preset_that_reads_what_only_a_simulator_observes(tmp_path, capsys,
                                                                            line, said):  # fmt: skip
-    """A deploy log's observations carry neither the true current nor the ASV's own USBL fix
-    times; `replay --preset P` with such a P ended in a traceback at its first step (exit 1,
-    a new user's finding, session 40). Refused in one line, exit 2, as `deploy --prepare`
-    refuses it."""
+    """A deploy log's observations carry no true current, and a log written before the
+    deploy read DUNE's UsblFixExtended (as this one) no USBL fix times; `replay --preset P`
+    with such a P ended in a traceback at its first step (exit 1, a new user's finding,
+    session 40). Refused in one line, exit 2 (a log with fix times replays M2o:
+    tests/test_deploy_usbl.py)."""
     from pathlib import Path
 
     import mpcasv

@@ -1,4 +1,4 @@
-"""What the ASV really does, next to what it was told: its thrusters and its speed.
+"""What the ASV really does, next to what it was told: its thrusters, its speed and its USBL.
 
 :class:`Thrusters` keeps the last ``SetThrusterActuation`` of every thruster id the ASV sends
 (DUNE's Otter: id 0 port, 1 starboard, about 10 Hz each while its loops are on) and says
@@ -17,6 +17,14 @@ configuration, :class:`mpcasv.io.config.SpeedSpec`). A shortfall that persists s
 *achievable* speed: the mean speed through the water over the window (the boat's own
 propulsion; the speed over ground is logged beside it). DUNE's stock Otter asked for
 2.0 m/s makes 0.8-0.9 m/s (../shared/data/dune-traffic/README.md, 9).
+
+:class:`UsblFixes` keeps the time of the ASV's last USBL fix of each AUV from the
+``UsblFixExtended`` its DUNE dispatches for every USBL position it obtains (DUNE's
+``Transports/Evologics`` "always dispatch[es] UsblFixExtended", its ``target`` the AUV's
+system name; the Otter's ``Transports.UDP`` list forwards it, ../shared/data/dune-otter-ident/
+Config.ini): what ``fix_age_source = "observed"`` (M2o, docs/mpc.md) reads as
+``Observation.usbl_fix_times``. The time is the message's own timestamp (the ASV's clock, as
+its EstimatedState's, corrected by the same clock-step offset), not its arrival.
 """
 
 from __future__ import annotations
@@ -27,7 +35,7 @@ from dataclasses import dataclass, field
 
 from mpcasv.io.config import SpeedSpec
 
-__all__ = ["SpeedWatch", "Thrusters"]
+__all__ = ["SpeedWatch", "Thrusters", "UsblFixes"]
 
 
 @dataclass
@@ -51,6 +59,37 @@ class Thrusters:
 
     def values(self) -> dict[str, float]:
         return {str(k): v for k, (v, _) in sorted(self.last.items())}
+
+
+@dataclass
+class UsblFixes:
+    """The ASV's last USBL fix time (s, ASV clock) of each of ``n`` AUVs.
+
+    ``times`` starts at ``-inf`` (no fix yet); ``counts`` the fixes per AUV; ``unmatched``
+    the fixes of targets that are none of the AUVs, by name.
+    """
+
+    n: int
+    times: list[float] = field(default_factory=list)
+    counts: list[int] = field(default_factory=list)
+    unmatched: dict[str, int] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        self.times = self.times or [-math.inf] * self.n
+        self.counts = self.counts or [0] * self.n
+
+    def fix(self, target: str, t: float, names: list[str | None]) -> int | None:
+        """A fix of system ``target`` stamped ``t`` (s, the ASV's clock corrected), ``names``
+        the AUVs' system names as the link knows them now (None: not known yet): the AUV's
+        index, or None for a target that is no AUV (counted in ``unmatched``). A fix older
+        than the one held (reordered datagrams) leaves the time as it is."""
+        k = names.index(target) if target and target in names else None
+        if k is None:
+            self.unmatched[target] = self.unmatched.get(target, 0) + 1
+            return None
+        self.counts[k] += 1
+        self.times[k] = max(self.times[k], float(t))
+        return k
 
 
 @dataclass

@@ -52,7 +52,7 @@ import imcpy
 from mpcasv.config import ConfigError
 from mpcasv.estimation import make_estimator
 from mpcasv.interface import ASVState, Command, Mode, Observation
-from mpcasv.io.asvwatch import SpeedWatch, Thrusters
+from mpcasv.io.asvwatch import SpeedWatch, Thrusters, UsblFixes
 from mpcasv.io.config import DeployConfig, build_controller, load_deploy_config
 from mpcasv.io.deploycontroller import known_plans
 from mpcasv.io.deployend import Ending
@@ -129,6 +129,7 @@ class Deploy(Phases, BoatFeedback, FieldMode, Ending):
             self.status = ["missing"] * self.n_auv
             wd = cfg.watchdog
             self.thrusters = Thrusters(wd.asv_stale_s, wd.propeller_on_threshold)
+            self.usbl = UsblFixes(self.n_auv)  # the ASV's own USBL fixes (M2o reads them)
             self.speed = SpeedWatch(cfg.speed)
             self.speed_cap: float | None = None  # applied to the controller (speed_feedback)
             self.closing = False  # shutdown begun: no more decisions
@@ -217,6 +218,17 @@ class Deploy(Phases, BoatFeedback, FieldMode, Ending):
                 self.event("followref_timeout", vehicle=p.label)
         elif isinstance(msg, imcpy.SetThrusterActuation):
             self.thrusters.update(msg.id, msg.value, now)
+        elif isinstance(msg, imcpy.UsblFixExtended):
+            self._usbl_fix(p, msg)
+
+    def _usbl_fix(self, p: Peer, msg) -> None:
+        """The ASV's USBL fixed an AUV (``target``: its system name) at the message's time on
+        the ASV's clock (corrected as its states are); a target that is no configured AUV
+        is reported once (event ``usbl_fix_unknown``) and counted."""
+        names = [a.name or a.spec.name for a in self.link.auvs]
+        t = msg.timestamp - p.track.offset
+        if self.usbl.fix(msg.target, t, names) is None and self.usbl.unmatched[msg.target] == 1:
+            self.event("usbl_fix_unknown", vehicle=p.label, target=msg.target, auvs=names)
 
     # --- the supervisory step ------------------------------------------------------------
     def _maybe_step(self, ts: float, now: float) -> None:
@@ -240,7 +252,8 @@ class Deploy(Phases, BoatFeedback, FieldMode, Ending):
             ests.append(e if status[k] == OK else inflate(e, ages[k], self.gp.v_max))
         a = self.link.asv.nav
         on, self._propeller_source = self._propeller_on(now)
-        obs = Observation(ts, ASVState(a.N, a.E, a.psi, a.u, a.v, a.r), on, tuple(ests))
+        obs = Observation(ts, ASVState(a.N, a.E, a.psi, a.u, a.v, a.r), on, tuple(ests),
+                          usbl_fix_times=tuple(self.usbl.times))
         return obs, status, ages
 
     def step(self, ts: float, now: float) -> Command | None:

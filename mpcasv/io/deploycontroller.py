@@ -84,12 +84,12 @@ def build_controller(cfg: DeployConfig, speed: float | None = None, log=print):
     return ctl
 
 
-def refuse_simulation_only(ctl, name: str) -> None:
+def refuse_simulation_only(ctl, name: str, usbl_fixes: bool = True) -> None:
     """Refuse a controller (or its parameters: the same ``needs_*`` attributes) that reads
     what only a simulator observes, where a deploy's observations (and so its log's, which
-    ``mpcasv replay`` replays) do not carry it: the true current (``current = "oracle"``)
-    and the ASV's own USBL fix times (``fix_age_source = "observed"``, M2o: DUNE's USBL
-    fixes are not read yet).
+    ``mpcasv replay`` replays) do not carry it: the true current (``current = "oracle"``);
+    and, where ``usbl_fixes`` is False (a deploy log written before the deploy read DUNE's
+    ``UsblFixExtended``), the ASV's own USBL fix times (``fix_age_source = "observed"``, M2o).
 
     Raises
     ------
@@ -99,10 +99,11 @@ def refuse_simulation_only(ctl, name: str) -> None:
     if getattr(ctl, "needs_current_oracle", False):  # only a simulator knows the true current
         raise ConfigError(f"controller {name}: current = 'oracle' needs the simulator's true "
                           "current; in a deployment use 'estimated' or 'zero'")  # fmt: skip
-    if getattr(ctl, "needs_usbl_fixes", False):  # DUNE's USBL fixes are not read yet
+    if getattr(ctl, "needs_usbl_fixes", False) and not usbl_fixes:
         raise ConfigError(f"controller {name}: fix_age_source = 'observed' needs the ASV's "
-                          "own USBL fix times, which the deploy does not read from DUNE yet; "
-                          "use 'model'")  # fmt: skip
+                          "own USBL fix times, which this log's observations do not carry "
+                          "(written before mpcasv deploy read DUNE's UsblFixExtended); use "
+                          "'model'")  # fmt: skip
 
 
 #: the least time (ms) a step's solves can work with in the field: a warm-started solve's

@@ -57,7 +57,8 @@ class Ending:
                    "between_ms_max": round(self.between_ms_max, 3),
                    "asv_stale_events": self.stale_events, "asv_late_states": self.late_states,
                    "plan_completed": self.plan_done.is_set(), "load": self.load(),
-                   "heard": self.heard(),
+                   "heard": self.heard(), "usbl_fixes": list(self.usbl.counts),
+                   "usbl_fixes_unmatched": dict(self.usbl.unmatched),
                    **self.link.counters()}  # fmt: skip
         why = self.no_decision(self.clock.now() - self.t_started)
         if why is not None:

@@ -31,6 +31,7 @@ __all__ = [
     "reference",
     "stamp",
     "udp_services",
+    "usbl_fix_extended",
 ]
 
 BROADCAST = 0xFFFF  # IMC broadcast system id
@@ -219,6 +220,19 @@ def estimated_state(s: NavState, anchor: Origin, origin: Origin) -> imcpy.Estima
     es.psi, es.u, es.v, es.r = s.psi, s.u, s.v, s.r
     es.vx, es.vy, es.vz = s.v_N, s.v_E, 0.0
     return es
+
+
+def usbl_fix_extended(target: str, N: float, E: float, depth: float, accuracy: float,
+                      origin: Origin) -> imcpy.UsblFixExtended:  # fmt: skip
+    """The UsblFixExtended a DUNE USBL task dispatches for a fix of system ``target`` at
+    ``(N, E)`` (m, local to ``origin``) and ``depth`` (m): WGS-84 ``lat``/``lon`` (rad),
+    ``z`` the depth (``z_units`` DEPTH), ``accuracy`` (m) (header to be stamped by the
+    sender)."""
+    fix = imcpy.UsblFixExtended()
+    fix.target = target
+    fix.lat, fix.lon = to_wgs84(N, E, origin)
+    fix.z, fix.z_units, fix.accuracy = depth, imcpy.ZUnits.DEPTH, accuracy
+    return fix
 
 
 def reference(cmd: Command, asv_NE: tuple[float, float], origin: Origin, lead: float = 0.0,

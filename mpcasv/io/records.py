@@ -2,7 +2,7 @@
 
 Python floats survive a JSON round trip bit for bit, so :func:`obs_from_dict` rebuilds the
 very Observation the controller saw (the JSON log stores NaN and infinities as null: they come
-back as NaN, and as ``-inf`` for ``t_last_fix``).
+back as NaN, and as ``-inf`` for ``t_last_fix`` and the ASV's USBL fix times, "no fix yet").
 """
 
 from __future__ import annotations
@@ -18,22 +18,32 @@ def _f(v, missing: float = math.nan) -> float:
     return missing if v is None else float(v)
 
 
+def _times(ts) -> list[float | None]:
+    return [t if math.isfinite(t) else None for t in ts]
+
+
 def obs_to_dict(obs: Observation) -> dict:
+    """An observation as the deploy log writes it; ``usbl_fix_times`` (the ASV's own USBL
+    fixes, ``fix_age_source = "observed"``) only when the observation has them."""
     a = obs.asv
-    return {
+    d = {
         "t": obs.t,
         "asv": {"N": a.N, "E": a.E, "psi": a.psi, "u": a.u, "v": a.v, "r": a.r},
         "propeller_on": obs.propeller_on,
         "auvs": [
             {"N": e.N, "E": e.E, "depth": e.depth, "v_N": e.v_N, "v_E": e.v_E,
-             "cov": list(e.cov), "t_last_fix": e.t_last_fix if math.isfinite(e.t_last_fix)
-             else None}
+             "cov": list(e.cov), "t_last_fix": _times([e.t_last_fix])[0]}
             for e in obs.auvs
         ],
     }  # fmt: skip
+    if obs.usbl_fix_times is not None:
+        d["usbl_fix_times"] = _times(obs.usbl_fix_times)
+    return d
 
 
 def obs_from_dict(d: dict) -> Observation:
+    """Inverse of :func:`obs_to_dict` (a log written before the deploy read the USBL fixes:
+    ``usbl_fix_times`` None)."""
     auvs = tuple(
         AUVEstimate(
             *(_f(e[k]) for k in ("N", "E", "depth", "v_N", "v_E")),
@@ -42,7 +52,10 @@ def obs_from_dict(d: dict) -> Observation:
         )
         for e in d["auvs"]
     )
-    return Observation(d["t"], ASVState(**d["asv"]), bool(d["propeller_on"]), auvs)
+    fixes = d.get("usbl_fix_times")
+    return Observation(d["t"], ASVState(**d["asv"]), bool(d["propeller_on"]), auvs,
+                       usbl_fix_times=None if fixes is None
+                       else tuple(_f(t, -math.inf) for t in fixes))  # fmt: skip
 
 
 def cmd_to_dict(cmd: Command) -> dict:

@@ -160,7 +160,8 @@ def replay(log: str | Path, controller: str | None = None, preset: str | None = 
     n_auv = len(steps[0]["obs"]["auvs"])
     ctl = make_controller(name, n_auv, preset, c["overrides"] if same else None,
                           boat=logged_boat(cfg, path))  # fmt: skip
-    refuse_simulation_only(ctl, name)  # a deploy log has no true current, no USBL fix times
+    # a deploy log has no true current; an older one no USBL fix times
+    refuse_simulation_only(ctl, name, usbl_fixes="usbl_fix_times" in steps[0]["obs"])
     ctl.reset(n_auv)
     if same:
         gp = GuardParams(**started[0]["guard"])

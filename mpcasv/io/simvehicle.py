@@ -106,12 +106,15 @@ class SimVehicle:
             if self.announcer is not None and self.announcer.sendto(data, a):
                 self.sitl.lsf.write(data)
 
-    def publish(self, msg: imcpy.Message) -> None:
-        """To every system heard from in the last 30 s (and every backseat client)."""
+    def publish(self, msg: imcpy.Message, t: float | None = None) -> None:
+        """To every system heard from in the last 30 s (and every backseat client), stamped
+        now or at ``t`` (a timestamp: a USBL fix obtained between two ticks)."""
         if not self.alive:
             return
         now = self.sitl.now()
         self.stamp(msg)
+        if t is not None:
+            msg.timestamp = t
         for node in self.nodes.values():
             if now - node.last_hb <= HEARD_S and node.services:
                 self._send(msg, node.services[0])

@@ -128,6 +128,7 @@ class Sitl(AsvDune):
         self.ts_offset: float | None = None  # timestamp of world t = 0
         self.held = opt.hold
         self.loops_on = False  # the ASV's control loops ran at the last published state
+        self.fixes_sent = [0] * len(self.auvs)  # the world's USBL fixes sent, per AUV
         self.epoch = 0.0
         self.n = 0
 
@@ -184,6 +185,7 @@ class Sitl(AsvDune):
             x, S = w.x, w.S
         for v in self.auvs:
             v.publish(self._es(v, self._nav_auv(S, v.index)))
+        self.publish_fixes()
         if self.asv.alive:
             loops = bool(self.command_vector()[0] > 0.5)
             if loops or self.loops_on:  # as DUNE: one 0.0 when the loops stop, then none

@@ -151,7 +151,8 @@ class MPCController(WorldView, Safety, PlanOutput, Targeting, SpeedCap, Carry, S
         #: ``current = "oracle"``: the simulator puts the true current into the observations
         self.needs_current_oracle = params.needs_current_oracle
         #: the ASV's own USBL fix times in every observation (``fix_age_source =
-        #: "observed"``, M2o; the simulator has them, ``mpcasv deploy`` not yet)
+        #: "observed"``, M2o; the simulator's and, from DUNE's UsblFixExtended, the deploy's;
+        #: not an older deploy log's, which ``mpcasv replay`` then refuses)
         self.needs_usbl_fixes = params.needs_usbl_fixes
         self._setup(n_auv)
         self.reset(n_auv)

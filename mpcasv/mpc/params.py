@@ -339,10 +339,10 @@ class MPCParams:
         ``observed`` integrates M2 as ``model`` and, when the ASV's own USBL reports a new
         fix (``Observation.usbl_fix_times``) while the ASV was quiet within that AUV's
         reliable-fix range as it believes it (Paper 2 eq. 9), sets that AUV's age to the
-        fix's and counts it as served (M2o, docs/mpc.md); refused with ``objective =
-        "variance"``, by ``mpcasv deploy`` at ``--prepare`` and by ``mpcasv replay`` (no fix
-        times in the field yet), and a step whose observation has no fix times raises
-        ValueError.
+        fix's and counts it as served (M2o, docs/mpc.md; in ``mpcasv deploy`` the fixes are
+        DUNE's ``UsblFixExtended``); refused with ``objective = "variance"`` and by ``mpcasv
+        replay`` of a deploy log without fix times (written before the deploy read them), and
+        a step whose observation has no fix times raises ValueError.
     current : {"estimated", "oracle", "zero"}
         The current the plan assumes (constant over the horizon; issue 16 item 1):
         ``estimated`` (default): the on-board observer's estimate from the ASV's own motion
@@ -405,7 +405,7 @@ class MPCParams:
     @property
     def needs_usbl_fixes(self) -> bool:
         """The fix ages read the ASV's own USBL fix times (``fix_age_source = "observed"``,
-        M2o), which only the simulator's observations carry so far."""
+        M2o): the simulator's observations and the deploy's (DUNE's ``UsblFixExtended``)."""
         return self.fix_age_source == "observed"
 
     @model_validator(mode="after")

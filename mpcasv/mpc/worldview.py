@@ -101,14 +101,14 @@ class WorldView:
         Raises
         ------
         ValueError
-            The observation carries no USBL fix times (``mpcasv deploy`` does not read
-            DUNE's yet).
+            The observation carries no USBL fix times (an observation built by hand, or
+            read from a deploy log written before the deploy read DUNE's).
         """
         if obs.usbl_fix_times is None:
             raise ValueError("fix_age_source = 'observed' needs the ASV's own USBL fix times "
                              "(Observation.usbl_fix_times), which this observation does not "
-                             "carry (mpcasv deploy does not read DUNE's USBL fixes yet): use "
-                             "'model'")  # fmt: skip
+                             "carry (a deploy log written before the deploy read DUNE's "
+                             "UsblFixExtended?): use 'model'")  # fmt: skip
         t_fix = np.asarray(obs.usbl_fix_times, float)
         seen, self._seen_fix = self._seen_fix, t_fix
         if seen is None:

@@ -29,7 +29,7 @@ from mpcasv.control.params import ExecutionParams, load_execution
 from mpcasv.estimation import check_plan_estimator, known_plan, make_estimator
 from mpcasv.hybrid.domains import r_inner, r_outer, r_target
 from mpcasv.interface import ASVState, AUVEstimate, Observation
-from mpcasv.models.acoustics import Report, success_probability, usbl_fix
+from mpcasv.models.acoustics import Fix, Report, success_probability, usbl_fix
 from mpcasv.models.auv import NA, auv_step_function
 from mpcasv.models.auv_nav import AUVNavFilter
 from mpcasv.models.behaviours import Scripted
@@ -169,6 +169,8 @@ class World:
         self.stay = 0.0  # ongoing continuous stay inside a collision domain (s)
         self.fix_times: list[list[float]] = [[] for _ in range(n)]
         self.reliable_times: list[list[float]] = [[] for _ in range(n)]
+        #: every USBL fix as measured (mpcasv sitl's ASV sends them as DUNE's UsblFixExtended)
+        self.fixes: list[list[Fix]] = [[] for _ in range(n)]
         self.energy_J = 0.0
         self.min_range = self.min_slant = math.inf
         #: put the true current into the observations (only for a controller that asks)
@@ -293,6 +295,7 @@ class World:
                         v = np.array([fix.N - S[0, k], fix.E - S[1, k]])
                         self.nav.update(k, t1, v, np.reshape(fix.cov, (2, 2)))
                     fixes[k] += 1
+                    self.fixes[k].append(fix)
                     self.fix_times[k].append(t1)
                     self.last_fix[k] = t1
                     if visiting[k]:

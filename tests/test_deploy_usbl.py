@@ -1,0 +1,184 @@
+"""The ASV's own USBL fixes in the field: ``mpcasv deploy`` reads the UsblFixExtended its DUNE
+dispatches for every USBL position (``target`` the AUV's system name; the Otter's
+``Transports.UDP`` list forwards it), puts the time of each AUV's last fix into the
+observations (``Observation.usbl_fix_times``, what ``fix_age_source = "observed"``, M2o,
+reads), logs it with each decision, and ``mpcasv replay`` replays M2o on such a log; the SITL's
+ASV sends one per USBL fix of its world. Before session 41 the deploy read none and refused M2o.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import dataclasses
+import json
+import math
+
+import pytest
+from test_io_cases import _es, dry_deploy
+
+from mpcasv.config import ConfigError
+from mpcasv.interface import ASVState, AUVEstimate, Observation
+from mpcasv.io.asvwatch import UsblFixes
+from mpcasv.io.geo import Origin
+from mpcasv.io.imc import stamp, usbl_fix_extended
+from mpcasv.io.logs import read_jsonl
+from mpcasv.io.records import obs_from_dict, obs_to_dict
+from mpcasv.io.replay import replay
+
+ASV, AUV = ("10.0.10.50", 6002), ("10.0.10.60", 6002)
+VEHICLES = [{"role": "asv", "id": 0x2801, "name": "otter", "address": "10.0.10.50:6002"},
+            {"role": "auv", "id": 0x2811, "name": "lauv-xplore-1",
+             "address": "10.0.10.60:6002"}]  # fmt: skip
+ORIGIN = Origin.from_degrees(41.18, -8.70)
+
+
+def _fix(src: int, target: str, t: float) -> bytes:
+    msg = usbl_fix_extended(target, 100.0, 0.0, 20.0, 1.5, ORIGIN)
+    return stamp(msg, src, 0xFFFF, t).serialize()
+
+
+def test_the_tracker_keeps_each_auvs_latest_fix():
+    fx = UsblFixes(2)
+    assert fx.times == [-math.inf, -math.inf] and fx.counts == [0, 0]
+    names = ["auv-a", None]  # the second AUV's name not known yet
+    assert fx.fix("auv-a", 10.0, names) == 0
+    assert fx.fix("auv-a", 8.0, names) == 0  # reordered: older than the one held
+    assert fx.times == [10.0, -math.inf] and fx.counts == [2, 0]
+    assert fx.fix("auv-b", 12.0, names) is None  # not (yet) known as an AUV
+    assert fx.fix("auv-b", 13.0, ["auv-a", "auv-b"]) == 1
+    assert fx.times == [10.0, 13.0] and fx.unmatched == {"auv-b": 1}
+
+
+def test_the_deploy_puts_the_asvs_usbl_fixes_into_its_observations(tmp_path):
+    """States at 2 Hz, then UsblFixExtended from the ASV: each decision's observation (and its
+    log record) has the AUV's last fix time by the ASV's clock, ``-inf`` before the first;
+    a fix sent by the AUV itself is not the ASV's USBL (ignored), a fix of another system is
+    one event ``usbl_fix_unknown`` however often it comes, and the summary counts both."""
+    dep, clock = dry_deploy(tmp_path, vehicle=VEHICLES)
+    t = clock.t
+
+    def states(n: int) -> None:
+        nonlocal t
+        for _ in range(n):
+            clock.t += 0.5
+            t += 0.5
+            dep.link.handle_datagram(_es(clock, 0x2811, t, 100.0), AUV)
+            dep.link.handle_datagram(_es(clock, 0x2801, t, 0.0), ASV)
+
+    states(4)
+    assert dep.steps > 0
+    assert dep.observation(t, clock.t)[0].usbl_fix_times == (-math.inf,)
+    t_fix = t + 0.2
+    dep.link.handle_datagram(_fix(0x2801, "lauv-xplore-1", t_fix), ASV)
+    dep.link.handle_datagram(_fix(0x2811, "lauv-xplore-1", t + 0.4), AUV)  # not the ASV's
+    for _ in range(3):
+        dep.link.handle_datagram(_fix(0x2801, "lauv-other", t + 0.3), ASV)
+    assert dep.link.rejects == {}
+    assert dep.link.ignored["UsblFixExtended"] == 1
+    states(4)
+    assert dep.observation(t, clock.t)[0].usbl_fix_times == (t_fix,)
+    # the ASV's clock stepped (its states corrected by the offset): its fixes likewise
+    dep.link.asv.track.offset = 5.0
+    dep.link.handle_datagram(_fix(0x2801, "lauv-xplore-1", t + 5.3), ASV)
+    assert dep.observation(t, clock.t)[0].usbl_fix_times == (pytest.approx(t + 0.3),)
+    asyncio.run(dep.finish())
+    steps = read_jsonl(tmp_path / "deploy.jsonl", "step")
+    logged = [s["obs"]["usbl_fix_times"] for s in steps]
+    assert logged[0] == [None] and [t_fix] in logged  # -inf is written as null
+    assert obs_from_dict(steps[0]["obs"]).usbl_fix_times == (-math.inf,)
+    unknown = [e for e in read_jsonl(tmp_path / "deploy.jsonl", "event")
+               if e["event"] == "usbl_fix_unknown"]  # fmt: skip
+    assert len(unknown) == 1 and unknown[0]["target"] == "lauv-other"
+    assert unknown[0]["auvs"] == ["lauv-xplore-1"]
+    summary = read_jsonl(tmp_path / "deploy.jsonl", "summary")[-1]
+    assert summary["usbl_fixes"] == [2] and summary["usbl_fixes_unmatched"] == {"lauv-other": 3}
+
+
+def test_records_keep_the_fix_times_and_older_logs_have_none():
+    auv = AUVEstimate(200.0, 50.0, 10.0, t_last_fix=0.0)
+    obs = Observation(3.0, ASVState(0.0, 0.0, 0.0), False, (auv, auv),
+                      usbl_fix_times=(1.5, -math.inf))  # fmt: skip
+    d = json.loads(json.dumps(obs_to_dict(obs)))
+    assert d["usbl_fix_times"] == [1.5, None]
+    assert obs_from_dict(d) == obs
+    bare = Observation(3.0, ASVState(0.0, 0.0, 0.0), False, (auv,))
+    assert "usbl_fix_times" not in obs_to_dict(bare)
+    assert obs_from_dict(obs_to_dict(bare)).usbl_fix_times is None
+
+
+def _log(tmp_path, fix_times: bool):
+    """A deploy log of mpc-single's decisions on an AUV 65 m away (inside its reliable-fix
+    range, r_t = 69 m) with the ASV quiet, one USBL fix logged at t = 2 s (``fix_times``:
+    the observations carry the ASV's fix times, as since session 41; else as an older
+    log's)."""
+    from mpcasv.controllers import make_controller
+    from mpcasv.io.config import WatchdogSpec
+    from mpcasv.io.records import cmd_to_dict
+
+    ctl = make_controller("mpc-single", 1, "mpc-single", {"fix_age_source": "observed"})
+    ctl.reset(1)
+    auv = AUVEstimate(65.0, 0.0, 10.0, t_last_fix=0.0)
+    config = {"controller": {"name": "mpc-single", "preset": "mpc-single",
+                             "overrides": {"fix_age_source": "observed"}},
+              "watchdog": dataclasses.asdict(WatchdogSpec())}  # fmt: skip
+    guard = {"stale_s": 5.0, "lost_s": 60.0, "v_max": 1.5, "w_max": 0.5, "r_keep": 10.0,
+             "margin_m": 5.0, "speed": 1.5}  # fmt: skip
+    records = [{"kind": "event", "event": "started", "guard": guard, "config": config}]
+    for t in range(4):
+        obs = Observation(float(t), ASVState(0.0, 0.0, 0.0), False, (auv,),
+                          usbl_fix_times=(-math.inf,) if t < 2 else (2.0,))  # fmt: skip
+        d = obs_to_dict(obs)
+        if not fix_times:
+            del d["usbl_fix_times"]
+        records.append({"kind": "step", "t": float(t), "clock": float(t), "obs": d,
+                        "cmd": cmd_to_dict(ctl.step(obs)), "override": None, "status": ["ok"],
+                        "ages": [0.0]})  # fmt: skip
+    log = tmp_path / "deploy.jsonl"
+    log.write_text("".join(json.dumps(r) + "\n" for r in records))
+    return log, ctl
+
+
+def test_replay_replays_observed_fixes_from_a_log_that_has_them(tmp_path):
+    """M2o replayed on a log with the ASV's fix times: the same decisions (the fix at t = 2 s
+    reset the age the logged decisions were made with); on an older log without them, one
+    line (ConfigError)."""
+    log, ctl = _log(tmp_path, fix_times=True)
+    assert ctl.diagnostics()["mpc_tau0"] < 2.0  # the fix reset the age (else about 3 s)
+    rep = replay(log)
+    assert rep.n_steps == 4 and rep.n_differ == 0
+    old, _ = _log(tmp_path, fix_times=False)
+    with pytest.raises(ConfigError, match="fix_age_source = 'observed'.*do not carry"):
+        replay(old)
+
+
+def test_the_sitl_asv_sends_a_fix_message_per_world_fix():
+    """The SITL's ASV publishes each of its world's USBL fixes once, as a UsblFixExtended
+    naming the AUV's system, at the fix's own time (``ts_offset`` + world time), up to the
+    tick being published; none before the world starts and none while its DUNE is down."""
+    from types import SimpleNamespace
+
+    from mpcasv.io.sitlasv import AsvDune
+    from mpcasv.models.acoustics import Fix
+
+    sent = []
+
+    class Vehicle(SimpleNamespace):
+        def publish(self, msg, t=None):
+            if self.alive:
+                sent.append((msg.target, t, msg.z))
+
+    fixes = [Fix(1.0, 0, 100.0, 0.0, 20.0, (1.0, 0.0, 0.0, 1.0), 102.0),
+             Fix(5.0, 0, 101.0, 0.0, 20.0, (1.0, 0.0, 0.0, 1.0), 103.0),
+             Fix(9.0, 0, 102.0, 0.0, 20.0, (1.0, 0.0, 0.0, 1.0), 104.0)]  # fmt: skip
+    sitl = SimpleNamespace(ts_offset=None, tick=0.0, fixes_sent=[0], origin=ORIGIN,
+                           world=SimpleNamespace(fixes=[fixes]),
+                           asv=Vehicle(alive=True), auvs=[Vehicle(index=0, name="sitl-auv")])
+    sitl.now = lambda: sitl.tick
+    AsvDune.publish_fixes(sitl)  # the world has not started
+    sitl.ts_offset, sitl.tick = 1000.0, 1005.0
+    AsvDune.publish_fixes(sitl)
+    assert sent == [("sitl-auv", 1001.0, 20.0), ("sitl-auv", 1005.0, 20.0)]
+    sitl.asv.alive, sitl.tick = False, 1010.0  # its DUNE down: the fix is lost
+    AsvDune.publish_fixes(sitl)
+    AsvDune.publish_fixes(sitl)
+    assert len(sent) == 2 and sitl.fixes_sent == [3]
