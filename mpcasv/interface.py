@@ -86,8 +86,9 @@ class Observation:
     only for a controller that asks for it (attribute ``needs_current_oracle = True``), for
     ablations; never in the field. ``usbl_fix_times`` (optional): per AUV, the time (s) of the
     last USBL fix the ASV's own USBL obtained (simulation: every successful ping, the start's
-    known position at t = 0 included; deploy: the timestamp of the last ``UsblFixExtended``
-    the ASV's DUNE sent for that AUV, ``-inf`` before the first),
+    known position at t = 0 included; deploy: the latest timestamp of the ``UsblFixExtended``
+    the ASV's DUNE sent for that AUV, on the ASV's clock corrected for its clock steps as its
+    states are, ``-inf`` before the first),
     whatever the estimator; a fix is reliable or not by where the ASV was and whether its
     propeller ran (Paper 2 eq. 9), which the controller judges.
     """

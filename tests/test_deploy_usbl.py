@@ -18,7 +18,7 @@ from test_io_cases import _es, dry_deploy
 
 from mpcasv.config import ConfigError
 from mpcasv.interface import ASVState, AUVEstimate, Observation
-from mpcasv.io.asvwatch import UsblFixes
+from mpcasv.io.asvwatch import MAX_UNMATCHED, UsblFixes
 from mpcasv.io.geo import Origin
 from mpcasv.io.imc import stamp, usbl_fix_extended
 from mpcasv.io.logs import read_jsonl
@@ -43,17 +43,23 @@ def test_the_tracker_keeps_each_auvs_latest_fix():
     names = ["auv-a", None]  # the second AUV's name not known yet
     assert fx.fix("auv-a", 10.0, names) == 0
     assert fx.fix("auv-a", 8.0, names) == 0  # reordered: older than the one held
-    assert fx.times == [10.0, -math.inf] and fx.counts == [2, 0]
+    assert fx.fix("auv-a", 10.0, names) == 0  # the same datagram twice
+    assert fx.times == [10.0, -math.inf] and fx.counts == [1, 0]  # one fix
     assert fx.fix("auv-b", 12.0, names) is None  # not (yet) known as an AUV
     assert fx.fix("auv-b", 13.0, ["auv-a", "auv-b"]) == 1
     assert fx.times == [10.0, 13.0] and fx.unmatched == {"auv-b": 1}
+    for i in range(30):  # a flood of strange targets keeps at most MAX_UNMATCHED names
+        fx.fix(f"x{i}", 1.0, names)
+    assert len(fx.unmatched) == MAX_UNMATCHED + 1 and fx.unmatched["(other)"] == 11
 
 
 def test_the_deploy_puts_the_asvs_usbl_fixes_into_its_observations(tmp_path):
     """States at 2 Hz, then UsblFixExtended from the ASV: each decision's observation (and its
     log record) has the AUV's last fix time by the ASV's clock, ``-inf`` before the first;
     a fix sent by the AUV itself is not the ASV's USBL (ignored), a fix of another system is
-    one event ``usbl_fix_unknown`` however often it comes, and the summary counts both."""
+    one event ``usbl_fix_unknown`` however often it comes, and the summary counts both. A fix
+    stamped later than the ASV's clock can be is rejected (a review's finding, session 41:
+    held as the latest, it hid every real fix after it)."""
     dep, clock = dry_deploy(tmp_path, vehicle=VEHICLES)
     t = clock.t
 
@@ -77,10 +83,10 @@ def test_the_deploy_puts_the_asvs_usbl_fixes_into_its_observations(tmp_path):
     assert dep.link.ignored["UsblFixExtended"] == 1
     states(4)
     assert dep.observation(t, clock.t)[0].usbl_fix_times == (t_fix,)
-    # the ASV's clock stepped (its states corrected by the offset): its fixes likewise
-    dep.link.asv.track.offset = 5.0
-    dep.link.handle_datagram(_fix(0x2801, "lauv-xplore-1", t + 5.3), ASV)
-    assert dep.observation(t, clock.t)[0].usbl_fix_times == (pytest.approx(t + 0.3),)
+    # a fix from the future (6 s past the last state: clock_slack_s is 5 s) is refused
+    dep.link.handle_datagram(_fix(0x2801, "lauv-xplore-1", t + 6.0), ASV)
+    assert dep.link.rejects == {"usbl_fix_time": 1}
+    assert dep.observation(t, clock.t)[0].usbl_fix_times == (t_fix,)
     asyncio.run(dep.finish())
     steps = read_jsonl(tmp_path / "deploy.jsonl", "step")
     logged = [s["obs"]["usbl_fix_times"] for s in steps]
@@ -91,7 +97,52 @@ def test_the_deploy_puts_the_asvs_usbl_fixes_into_its_observations(tmp_path):
     assert len(unknown) == 1 and unknown[0]["target"] == "lauv-other"
     assert unknown[0]["auvs"] == ["lauv-xplore-1"]
     summary = read_jsonl(tmp_path / "deploy.jsonl", "summary")[-1]
-    assert summary["usbl_fixes"] == [2] and summary["usbl_fixes_unmatched"] == {"lauv-other": 3}
+    assert summary["usbl_fixes"] == [1] and summary["usbl_fixes_unmatched"] == {"lauv-other": 3}
+
+
+def test_fixes_follow_the_asvs_clock_step(tmp_path):
+    """The ASV's clock steps 100 s ahead: its states are taken on the new base after
+    ``clock_step_states`` (3) that agree, corrected by the offset; a fix sent while that check
+    runs is rejected (its time base in doubt), one after it is corrected as the states are
+    (a review's finding, session 41: the first fixes after the step were held 100 s in the
+    future and hid every real one)."""
+    dep, clock = dry_deploy(tmp_path, vehicle=VEHICLES)
+    t = clock.t
+    for _ in range(6):
+        clock.t += 0.5
+        t += 0.5
+        dep.link.handle_datagram(_es(clock, 0x2811, t, 100.0), AUV)
+        dep.link.handle_datagram(_es(clock, 0x2801, t, 0.0), ASV)
+    for k in range(5):  # the ASV's clock now reads 100 s ahead
+        clock.t += 0.5
+        t += 0.5
+        dep.link.handle_datagram(_es(clock, 0x2811, t, 100.0), AUV)
+        dep.link.handle_datagram(_es(clock, 0x2801, t + 100.0, 0.0), ASV)
+        if k == 0:
+            assert dep.link.asv.track.chain  # the step is being checked
+            dep.link.handle_datagram(_fix(0x2801, "lauv-xplore-1", t + 100.2), ASV)
+            assert dep.link.rejects["usbl_fix_time"] == 1
+    assert dep.link.asv.track.offset == pytest.approx(100.0, abs=0.01)
+    assert not dep.link.asv.track.chain
+    dep.link.handle_datagram(_fix(0x2801, "lauv-xplore-1", t + 100.2), ASV)
+    assert dep.observation(t, clock.t)[0].usbl_fix_times == (t + 100.2 - dep.link.asv.track.offset,)
+    assert abs(dep.usbl.times[0] - (t + 0.2)) < 0.01
+    dep.close()
+
+
+def test_observed_fixes_need_every_auvs_name(tmp_path):
+    """UsblFixExtended names its target by system name: an AUV configured by IMC id only
+    would never match, and M2o would run on the model's ages without a word (a review's
+    finding, session 41). Refused at load, in one line."""
+    from test_deploy_field import _mpc_cfg
+
+    from mpcasv.io.config import deploy_config_from_dict
+
+    data = _mpc_cfg(tmp_path)
+    data["controller"]["overrides"]["fix_age_source"] = "observed"
+    data["vehicle"][1] = {"role": "auv", "id": 0x2811}
+    with pytest.raises(ConfigError, match="give AUV 0's \\[\\[vehicle\\]\\] a name"):
+        deploy_config_from_dict(data)
 
 
 def test_records_keep_the_fix_times_and_older_logs_have_none():

@@ -152,6 +152,27 @@ def _check_usbl_fixes(steps: list[dict], sitl_dir: Path) -> None:
         assert last_fix[t] == 0.0 if f is None else f - offset == pytest.approx(last_fix[t]), t
 
 
+def _check_actuators(steps: list[dict], sitl_dir: Path, scenario) -> None:
+    """While the ASV's loops run, each decision's observation has the plant's thrust and
+    steering at its time, read from the SITL's SetThrusterActuation and SetServoPosition
+    (float32 on the wire; session 41: before, the deploy passed none and an MPC's plan and
+    current observer started from another state than in ``mpcasv simulate``)."""
+    from mpcasv.models.params import load_vessel
+
+    T_max = load_vessel(scenario.asv.vessel).T_max
+    run = sitl_dir / "run"
+    offset = json.loads((run / "run.json").read_text())["sitl"]["ts_offset"]
+    ts = pd.read_parquet(run / "timeseries.parquet")
+    plant = {round(t, 6): (T, d) for t, T, d in zip(ts["t"], ts["thrust"], ts["delta"],
+                                                     strict=True)}  # fmt: skip
+    running = [(plant[round(s["t"] - offset, 6)], s["obs"]["actuators"]) for s in steps
+               if round(s["t"] - offset, 6) in plant and s["obs"]["actuators"] is not None
+               and s["obs"]["actuators"][0] != 0.0]  # fmt: skip
+    assert len(running) > 50, len(running)
+    for (T, d), (T_obs, d_obs) in running:
+        assert abs(T_obs - T) <= 1e-6 * T_max and abs(d_obs - d) <= 1e-6, (T, d, T_obs, d_obs)
+
+
 def _check_bind(sockets) -> None:
     assert sockets, "deploy has no socket"
     for c in sockets:
@@ -165,6 +186,7 @@ def test_case3_rehearsal_matches_simulation(tmp_path):
     _check_bind(sockets)
     steps = _check_logs(deploy_dir, 1)
     _check_usbl_fixes(steps, sitl_dir)
+    _check_actuators(steps, sitl_dir, sc)
     m_sim, m_dep = _compare(sc, deploy_dir, sitl_dir)
     table = compare_metrics(m_sim, m_dep)
     print(json.dumps(table, indent=1))

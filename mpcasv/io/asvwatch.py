@@ -1,8 +1,9 @@
-"""What the ASV really does, next to what it was told: its thrusters, its speed and its USBL.
+"""What the ASV really does, next to what it was told: its actuators, its speed and its USBL.
 
 :class:`Thrusters` keeps the last ``SetThrusterActuation`` of every thruster id the ASV sends
-(DUNE's Otter: id 0 port, 1 starboard, about 10 Hz each while its loops are on) and says
-whether the propeller runs, and where that answer comes from:
+(DUNE's Otter: id 0 port, 1 starboard, about 10 Hz each while its loops are on) and the last
+``SetServoPosition`` of every servo id, and says whether the propeller runs, and where that
+answer comes from:
 
 - ``thruster``: a thruster message not older than ``asv_stale_s``; on if any ``|value|``
   exceeds ``propeller_on_threshold`` (differential thrust drives one motor backwards);
@@ -10,6 +11,10 @@ whether the propeller runs, and where that answer comes from:
   and in standby (DUNE's loops are off: it sends one 0.0 per thruster and then nothing),
   propeller-off is *assumed* from our standby command; only while we command a transit is
   the silence a fault (``thruster_stale``).
+
+and what the actuators do (:meth:`Thrusters.actuators`: the model's thrust and steering,
+``Observation.actuators``, which an MPC plans from and its current observer reads), from the
+set-points of the vessel's actuation (:func:`dune_actuators`, the identification's mapping).
 
 :class:`SpeedWatch` compares the speed the ASV achieves, over ground (``|(vx, vy)|``) and
 through the water (``u``), with the commanded transit speed (docs: ``[speed]`` of the deploy
@@ -35,7 +40,34 @@ from dataclasses import dataclass, field
 
 from mpcasv.io.config import SpeedSpec
 
-__all__ = ["SpeedWatch", "Thrusters", "UsblFixes"]
+__all__ = ["SpeedWatch", "Thrusters", "UsblFixes", "dune_actuators", "dune_set_points"]
+
+
+def dune_actuators(vessel, a0, a1=0.0, servo=0.0):
+    """The model's ``(T, delta)`` (N, rad) from DUNE's set-points: SetThrusterActuation ids 0
+    and 1 (fractions ``a0``, ``a1``) and SetServoPosition id 0 (``servo``, rad). Steerable
+    drive: ``T = a0 T_max``, ``delta = servo``; two fixed thrusters (``vessel.actuation =
+    "differential"``, id 0 port, 1 starboard): ``T = (a0 + a1) T_max / 2``, ``delta =
+    delta_max (a0 - a1) / 2`` (so that ``T_port - T_stbd = T_max delta / delta_max``,
+    :func:`mpcasv.models.vessel.actuator_forces`). The thrust is taken as proportional to the
+    set-point (no thrust-speed map), as in the identification (:mod:`mpcasv.io.identlog`).
+    Numbers or arrays."""
+    if vessel.actuation == "differential":
+        return (a0 + a1) * vessel.T_max / 2, (a0 - a1) * vessel.delta_max / 2
+    return a0 * vessel.T_max, servo
+
+
+def dune_set_points(vessel, T: float, delta: float) -> tuple[dict[int, float], dict[int, float]]:
+    """Inverse of :func:`dune_actuators`: ``({thruster id: fraction}, {servo id: rad})`` that
+    DUNE would send for thrust ``T`` (N) and steering ``delta`` (rad), fractions clipped to
+    [-1, 1] (what ``mpcasv sitl``'s ASV sends)."""
+    def clip(a: float) -> float:
+        return float(min(1.0, max(-1.0, a)))
+
+    if vessel.actuation == "differential":
+        s, d = T / vessel.T_max, delta / vessel.delta_max
+        return {0: clip(s + d), 1: clip(s - d)}, {}
+    return {0: clip(T / vessel.T_max)}, {0: float(delta)}
 
 
 @dataclass
@@ -45,9 +77,38 @@ class Thrusters:
     stale_s: float
     threshold: float
     last: dict[int, tuple[float, float]] = field(default_factory=dict)  # id -> (value, recv)
+    servos: dict[int, tuple[float, float]] = field(default_factory=dict)  # id -> (rad, recv)
 
     def update(self, thruster_id: int, value: float, recv: float) -> None:
         self.last[int(thruster_id)] = (float(value), recv)
+
+    def update_servo(self, servo_id: int, value: float, recv: float) -> None:
+        self.servos[int(servo_id)] = (float(value), recv)
+
+    def actuators(self, now: float, vessel, transit_commanded: bool) -> tuple[float, float] | None:
+        """The model's ``(T, delta)`` (:func:`dune_actuators`) from the set-points the
+        vessel's actuation needs (steerable: thruster 0 and servo 0; differential: thrusters
+        0 and 1), each fresh (not older than ``stale_s``) or 0.0 (DUNE's last set-point when
+        its loops stop: it then sends none). One never heard counts as 0.0 unless a transit
+        is commanded (DUNE's loops have not run: assumed from our command, as the propeller
+        state is). None when one is stale at another value, or never heard in a transit
+        (unknown: the controller then does without)."""
+        diff = vessel.actuation == "differential"
+        need = [(self.last, 0), (self.last, 1)] if diff else [(self.last, 0), (self.servos, 0)]
+        values = []
+        for table, i in need:
+            if i not in table:
+                if transit_commanded:
+                    return None
+                values.append(0.0)
+                continue
+            v, t = table[i]
+            if now - t > self.stale_s and v != 0.0:
+                return None
+            values.append(v)
+        T, delta = (dune_actuators(vessel, values[0], values[1]) if diff
+                    else dune_actuators(vessel, values[0], servo=values[1]))  # fmt: skip
+        return float(T), float(delta)
 
     def propeller(self, now: float, transit_commanded: bool) -> tuple[bool, str, bool]:
         """(propeller on, source, stale fault): see the module docstring."""
@@ -61,12 +122,18 @@ class Thrusters:
         return {str(k): v for k, (v, _) in sorted(self.last.items())}
 
 
+#: distinct unmatched USBL targets kept by name (:class:`UsblFixes`)
+MAX_UNMATCHED = 20
+
+
 @dataclass
 class UsblFixes:
     """The ASV's last USBL fix time (s, ASV clock) of each of ``n`` AUVs.
 
-    ``times`` starts at ``-inf`` (no fix yet); ``counts`` the fixes per AUV; ``unmatched``
-    the fixes of targets that are none of the AUVs, by name.
+    ``times`` starts at ``-inf`` (no fix yet); ``counts`` the fixes per AUV that were newer
+    than the one held (a duplicate or reordered one is not counted); ``unmatched`` the fixes
+    of targets whose name is none of the AUVs', by name (at most :data:`MAX_UNMATCHED` names,
+    the rest under ``"(other)"``).
     """
 
     n: int
@@ -85,10 +152,13 @@ class UsblFixes:
         than the one held (reordered datagrams) leaves the time as it is."""
         k = names.index(target) if target and target in names else None
         if k is None:
+            if target not in self.unmatched and len(self.unmatched) >= MAX_UNMATCHED:
+                target = "(other)"
             self.unmatched[target] = self.unmatched.get(target, 0) + 1
             return None
-        self.counts[k] += 1
-        self.times[k] = max(self.times[k], float(t))
+        if t > self.times[k]:
+            self.counts[k] += 1
+            self.times[k] = float(t)
         return k
 
 

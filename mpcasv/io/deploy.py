@@ -54,7 +54,7 @@ from mpcasv.estimation import make_estimator
 from mpcasv.interface import ASVState, Command, Mode, Observation
 from mpcasv.io.asvwatch import SpeedWatch, Thrusters, UsblFixes
 from mpcasv.io.config import DeployConfig, build_controller, load_deploy_config
-from mpcasv.io.deploycontroller import known_plans
+from mpcasv.io.deploycontroller import deploy_boat, known_plans
 from mpcasv.io.deployend import Ending
 from mpcasv.io.deployfeedback import BoatFeedback, cap_command
 from mpcasv.io.deployphases import ASV_STALE, RUNNING, STARTING, WAITING, Phases
@@ -64,7 +64,7 @@ from mpcasv.io.deploystep import (
     guard_params,
     prepare_controller,
 )
-from mpcasv.io.imc import reference
+from mpcasv.io.imc import BadInput, reference
 from mpcasv.io.link import ImcLink, Peer
 from mpcasv.io.logs import JsonlWriter, LsfWriter
 from mpcasv.io.records import cmd_to_dict, obs_to_dict
@@ -130,6 +130,7 @@ class Deploy(Phases, BoatFeedback, FieldMode, Ending):
             wd = cfg.watchdog
             self.thrusters = Thrusters(wd.asv_stale_s, wd.propeller_on_threshold)
             self.usbl = UsblFixes(self.n_auv)  # the ASV's own USBL fixes (M2o reads them)
+            self.vessel = deploy_boat(cfg).vessel  # its actuation maps DUNE's set-points
             self.speed = SpeedWatch(cfg.speed)
             self.speed_cap: float | None = None  # applied to the controller (speed_feedback)
             self.closing = False  # shutdown begun: no more decisions
@@ -218,16 +219,30 @@ class Deploy(Phases, BoatFeedback, FieldMode, Ending):
                 self.event("followref_timeout", vehicle=p.label)
         elif isinstance(msg, imcpy.SetThrusterActuation):
             self.thrusters.update(msg.id, msg.value, now)
+        elif isinstance(msg, imcpy.SetServoPosition):
+            self.thrusters.update_servo(msg.id, msg.value, now)
         elif isinstance(msg, imcpy.UsblFixExtended):
             self._usbl_fix(p, msg)
 
     def _usbl_fix(self, p: Peer, msg) -> None:
         """The ASV's USBL fixed an AUV (``target``: its system name) at the message's time on
-        the ASV's clock (corrected as its states are); a target that is no configured AUV
-        is reported once (event ``usbl_fix_unknown``) and counted."""
-        names = [a.name or a.spec.name for a in self.link.auvs]
+        the ASV's clock (corrected as its states are). Rejected (``usbl_fix_time``): a fix
+        while a step of the ASV's clock is being checked (its time base is in doubt), or
+        stamped later than the ASV's clock can be now (its last state's time, plus the time
+        since that state arrived, plus ``clock_slack_s``): a future time would be held as
+        the latest fix and hide the real ones after it. A target that is no AUV known by
+        that name is reported once (event ``usbl_fix_unknown``) and counted."""
         t = msg.timestamp - p.track.offset
-        if self.usbl.fix(msg.target, t, names) is None and self.usbl.unmatched[msg.target] == 1:
+        nav = p.nav
+        latest = (-math.inf if nav is None
+                  else nav.t + (self.clock.now() - p.nav_recv) + self.cfg.watchdog.clock_slack_s)
+        if p.track.chain or t > latest:
+            raise BadInput("usbl_fix_time",
+                           f"UsblFixExtended for {msg.target!r} stamped {t:.3f} s: "
+                           + ("the ASV's clock is in a step check" if p.track.chain else
+                              f"later than the ASV's clock can be ({latest:.3f} s)"))  # fmt: skip
+        names = [a.name or a.spec.name for a in self.link.auvs]
+        if self.usbl.fix(msg.target, t, names) is None and self.usbl.unmatched.get(msg.target) == 1:
             self.event("usbl_fix_unknown", vehicle=p.label, target=msg.target, auvs=names)
 
     # --- the supervisory step ------------------------------------------------------------
@@ -252,8 +267,11 @@ class Deploy(Phases, BoatFeedback, FieldMode, Ending):
             ests.append(e if status[k] == OK else inflate(e, ages[k], self.gp.v_max))
         a = self.link.asv.nav
         on, self._propeller_source = self._propeller_on(now)
+        transit = self.last_cmd is not None and self.last_cmd.mode is Mode.TRANSIT
+        act = (self.thrusters.actuators(now, self.vessel, transit)
+               if self.cfg.watchdog.propeller == "thruster" else None)  # fmt: skip
         obs = Observation(ts, ASVState(a.N, a.E, a.psi, a.u, a.v, a.r), on, tuple(ests),
-                          usbl_fix_times=tuple(self.usbl.times))
+                          actuators=act, usbl_fix_times=tuple(self.usbl.times))
         return obs, status, ages
 
     def step(self, ts: float, now: float) -> Command | None:

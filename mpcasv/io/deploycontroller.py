@@ -142,8 +142,10 @@ def check_controller(cfg: DeployConfig, source: str | Path,
     """Validate the controller's name, preset, overrides, vessel, an MPC's field budget
     (:func:`check_field_budget`), the estimator and its scenario (read only by ``plan``),
     the AUV count (the controller itself is built by :func:`build_controller`, before any
-    vehicle is contacted), and that no ``[watchdog]`` field set explicitly (the names in
-    ``watchdog_set``) goes unread with this controller and mode (:func:`check_watchdog`)."""
+    vehicle is contacted), every AUV's system name when the controller reads the ASV's USBL
+    fixes (``fix_age_source = "observed"``: DUNE names their target by it), and that no
+    ``[watchdog]`` field set explicitly (the names in ``watchdog_set``) goes unread with this
+    controller and mode (:func:`check_watchdog`)."""
     from mpcasv.config import ConfigError, resolve
     from mpcasv.controllers import check_boat
     from mpcasv.controllers.registry import checked_preset
@@ -165,6 +167,11 @@ def check_controller(cfg: DeployConfig, source: str | Path,
     except ConfigError as exc:
         raise ConfigError(f"{source}: controller: {exc}") from None
     check_watchdog(cfg, params, watchdog_set, source)
+    unnamed = [k for k, v in enumerate(cfg.auvs) if not v.name]
+    if getattr(params, "needs_usbl_fixes", False) and unnamed:
+        raise ConfigError(f"{source}: controller: fix_age_source = 'observed' reads the ASV's "
+                          "UsblFixExtended, which names each AUV by its system name: give "
+                          f"AUV {unnamed[0]}'s [[vehicle]] a name")  # fmt: skip
     if c.speed_feedback and not hasattr(params, "speed"):
         raise ConfigError(f"{source}: controller.speed_feedback: {c.name!r} has no 'speed' "
                           "to cap")  # fmt: skip

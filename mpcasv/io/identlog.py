@@ -36,6 +36,7 @@ import numpy as np
 import pandas as pd
 
 from mpcasv.errors import LogError
+from mpcasv.io.asvwatch import dune_actuators
 from mpcasv.io.lsf import read_lsf, read_messages
 from mpcasv.models.ident_table import identification_table
 from mpcasv.models.identify import IDENTIFIED, identify
@@ -145,10 +146,11 @@ def _from_lsf(path: Path, prior: VesselParams, vehicle: str | None = None) -> pd
             raise LogError(f"{path}: missing messages: no {msg} (thrust/steering set-points)"
                            + hint)
     df = df.dropna(subset=["thrust_0", "fin_cmd_0"])
+    T, delta = dune_actuators(prior, df["thrust_0"].astype(float),
+                              servo=df["fin_cmd_0"].astype(float))  # fmt: skip
     return pd.DataFrame({
         "t": df["t"], "N": df["N"], "E": df["E"], "psi": df["psi"], "u": df["u"], "v": df["v"],
-        "r": df["r"], "T_cmd": df["thrust_0"].astype(float) * prior.T_max,
-        "delta_cmd": df["fin_cmd_0"].astype(float),
+        "r": df["r"], "T_cmd": T, "delta_cmd": delta,
     })  # fmt: skip
 
 
@@ -171,19 +173,17 @@ def _no_servo_hint(df: pd.DataFrame, prior: VesselParams) -> str:
 def _differential_inputs(df: pd.DataFrame, path, prior: VesselParams) -> pd.DataFrame:
     """Two fixed thrusters (prior ``actuation = "differential"``): SetThrusterActuation id 0
     (port) and id 1 (starboard), fractions ``a_0, a_1`` of each thruster's ``T_max / 2``:
-    ``T_cmd = (a_0 + a_1) T_max / 2`` and ``delta_cmd = delta_max (a_0 - a_1) / 2`` (so that
-    ``T_port - T_stbd = T_max delta / delta_max``, :func:`mpcasv.models.vessel.actuator_forces`).
-    The thrust is taken as proportional to the set-point (no thrust-speed map)."""
+    ``T_cmd = (a_0 + a_1) T_max / 2`` and ``delta_cmd = delta_max (a_0 - a_1) / 2``
+    (:func:`mpcasv.io.asvwatch.dune_actuators`, which the deploy reads its actuators with)."""
     for col, i in (("thrust_0", 0), ("thrust_1", 1)):
         if col not in df.columns or df[col].isna().all():
             raise LogError(f"{path}: missing messages: no SetThrusterActuation id {i} (a vessel "
                            "with two thrusters needs both)")  # fmt: skip
     df = df.dropna(subset=["thrust_0", "thrust_1"])
-    a0, a1 = df["thrust_0"].astype(float), df["thrust_1"].astype(float)
+    T, delta = dune_actuators(prior, df["thrust_0"].astype(float), df["thrust_1"].astype(float))
     return pd.DataFrame({
         "t": df["t"], "N": df["N"], "E": df["E"], "psi": df["psi"], "u": df["u"], "v": df["v"],
-        "r": df["r"], "T_cmd": (a0 + a1) * prior.T_max / 2,
-        "delta_cmd": (a0 - a1) * prior.delta_max / 2,
+        "r": df["r"], "T_cmd": T, "delta_cmd": delta,
     })  # fmt: skip
 
 

@@ -73,7 +73,7 @@ __all__ = ["USED", "ImcLink", "Peer"]
 Addr = tuple[str, int]
 _ACCEPTED = {
     "asv": {"EstimatedState", "Heartbeat", "PlanControl", "FollowRefState",
-            "SetThrusterActuation", "UsblFixExtended"},
+            "SetThrusterActuation", "SetServoPosition", "UsblFixExtended"},
     "auv": {"EstimatedState", "Heartbeat"},
 }  # fmt: skip
 #: IMC message ids the deploy decodes (imcpy's ids); every other id is handled on its header.

@@ -23,8 +23,9 @@ def _times(ts) -> list[float | None]:
 
 
 def obs_to_dict(obs: Observation) -> dict:
-    """An observation as the deploy log writes it; ``usbl_fix_times`` (the ASV's own USBL
-    fixes, ``fix_age_source = "observed"``) only when the observation has them."""
+    """An observation as the deploy log writes it; ``actuators`` (thrust N, steering rad, from
+    the ASV's set-points) and ``usbl_fix_times`` (the ASV's own USBL fixes, ``fix_age_source
+    = "observed"``) only when the observation has them."""
     a = obs.asv
     d = {
         "t": obs.t,
@@ -36,14 +37,16 @@ def obs_to_dict(obs: Observation) -> dict:
             for e in obs.auvs
         ],
     }  # fmt: skip
+    if obs.actuators is not None:
+        d["actuators"] = list(obs.actuators)
     if obs.usbl_fix_times is not None:
         d["usbl_fix_times"] = _times(obs.usbl_fix_times)
     return d
 
 
 def obs_from_dict(d: dict) -> Observation:
-    """Inverse of :func:`obs_to_dict` (a log written before the deploy read the USBL fixes:
-    ``usbl_fix_times`` None)."""
+    """Inverse of :func:`obs_to_dict` (a log written before the deploy read the actuators or
+    the USBL fixes: ``actuators`` / ``usbl_fix_times`` None)."""
     auvs = tuple(
         AUVEstimate(
             *(_f(e[k]) for k in ("N", "E", "depth", "v_N", "v_E")),
@@ -52,8 +55,9 @@ def obs_from_dict(d: dict) -> Observation:
         )
         for e in d["auvs"]
     )
-    fixes = d.get("usbl_fix_times")
+    fixes, act = d.get("usbl_fix_times"), d.get("actuators")
     return Observation(d["t"], ASVState(**d["asv"]), bool(d["propeller_on"]), auvs,
+                       actuators=None if act is None else (float(act[0]), float(act[1])),
                        usbl_fix_times=None if fixes is None
                        else tuple(_f(t, -math.inf) for t in fixes))  # fmt: skip
 

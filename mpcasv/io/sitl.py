@@ -9,9 +9,12 @@ Each vehicle has its own UDP socket (its ``imc+udp`` service) and IMC id. Like D
 - accept datagrams only from systems whose Announce they have heard, from the address it
   names, and stream only to systems that sent a Heartbeat in the last 30 s;
 - send EstimatedState at 2 Hz (reference point re-anchored every ``--reanchor`` metres, as
-  DUNE moves it), the ASV also SetThrusterActuation (thrust / T_max) while its control loops
-  run (a transit Reference), one 0.0 when they stop, and none while they are off (as DUNE's
-  Otter in HOVER or standby);
+  DUNE moves it), the ASV also its actuators' set-points while its control loops run (a
+  transit Reference), one 0.0 each when they stop, and none while they are off (as DUNE's
+  Otter in HOVER or standby): SetThrusterActuation (thrust / T_max) id 0 and SetServoPosition
+  id 0 (the steering angle, rad) for a steerable drive, SetThrusterActuation ids 0 (port) and
+  1 (starboard) for two fixed thrusters (:func:`mpcasv.io.asvwatch.dune_set_points`), and a
+  UsblFixExtended per USBL fix of the world (:mod:`mpcasv.io.sitlasv`);
 - announce from a socket of their own (not the ``imc+udp`` port) and relay Heartbeats and
   PlanControls back to the systems they stream to, our own included (as DUNE);
 - the ASV answers PlanControl START with a FollowReference argument (SUCCESS "plan loaded"
@@ -68,6 +71,7 @@ import imcpy
 import numpy as np
 
 from mpcasv.interface import Command, Mode, Reason
+from mpcasv.io.asvwatch import dune_set_points
 from mpcasv.io.dune import FollowRefManeuver
 from mpcasv.io.geo import Origin, to_local, to_wgs84
 from mpcasv.io.imc import BadInput, NavState, decode, estimated_state, udp_services
@@ -189,10 +193,15 @@ class Sitl(AsvDune):
         if self.asv.alive:
             loops = bool(self.command_vector()[0] > 0.5)
             if loops or self.loops_on:  # as DUNE: one 0.0 when the loops stop, then none
-                th = imcpy.SetThrusterActuation()
-                value = x[6] / w.model.params.T_max if loops else 0.0
-                th.id, th.value = 0, float(np.clip(value, -1.0, 1.0))
-                self.asv.publish(th)
+                thr, servos = dune_set_points(w.model.params, float(x[6]), float(x[7]))
+                for i, value in thr.items():
+                    th = imcpy.SetThrusterActuation()
+                    th.id, th.value = i, value if loops else 0.0
+                    self.asv.publish(th)
+                for i, value in servos.items():
+                    sp = imcpy.SetServoPosition()
+                    sp.id, sp.value = i, value if loops else 0.0
+                    self.asv.publish(sp)
             self.loops_on = loops
             self.asv.publish(self._es(self.asv, self._nav_asv(x)))
 

@@ -1,0 +1,99 @@
+"""The ASV's actuators in the field: ``mpcasv deploy`` turns DUNE's set-points
+(SetThrusterActuation ids 0 and 1, SetServoPosition id 0) into the model's thrust and steering
+(``Observation.actuators``) by the vessel's actuation, as the identification reads them; an
+MPC plans from them and its current observer reads them, as in ``mpcasv simulate``. Before
+session 41 the deploy passed none: an MPC's rehearsal then estimated another current from its
+first step on than its simulation did (Case 3, lockstep: 0.138 against 0.150 m/s)."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+
+import imcpy
+import pytest
+from test_io_dune_recording import EXCERPT, HDR, MANDONE_T, OTTER, capture
+
+from mpcasv.interface import ASVState, AUVEstimate, Observation
+from mpcasv.io.asvwatch import Thrusters, dune_actuators, dune_set_points
+from mpcasv.io.link import USED
+from mpcasv.io.records import obs_from_dict, obs_to_dict
+from mpcasv.models.params import load_vessel
+
+GRETHA, OTTER_VESSEL = load_vessel("gretha"), load_vessel("dune-otter")
+
+
+@pytest.mark.parametrize("vessel", [GRETHA, OTTER_VESSEL], ids=["steerable", "differential"])
+def test_set_points_and_actuators_are_inverse(vessel):
+    for T, delta in ((0.0, 0.0), (0.4 * vessel.T_max, 0.2), (0.3 * vessel.T_max, -0.3)):
+        thr, servos = dune_set_points(vessel, T, delta)
+        a0, a1, s0 = thr[0], thr.get(1, 0.0), servos.get(0, 0.0)
+        assert dune_actuators(vessel, a0, a1, s0) == pytest.approx((T, delta))
+    thr, _ = dune_set_points(vessel, 1.2 * vessel.T_max, -0.5)  # beyond what DUNE can send
+    assert all(-1.0 <= a <= 1.0 for a in thr.values()) and max(map(abs, thr.values())) == 1.0
+    assert set(dune_set_points(vessel, 1.0, 0.1)[0]) == ({0, 1} if vessel is OTTER_VESSEL
+                                                          else {0})  # fmt: skip
+
+
+def test_actuators_fresh_stopped_or_unknown():
+    th = Thrusters(stale_s=3.0, threshold=0.05)
+    # nothing heard: DUNE's loops have not run, unless we command a transit
+    assert th.actuators(0.0, GRETHA, transit_commanded=False) == (0.0, 0.0)
+    assert th.actuators(0.0, GRETHA, transit_commanded=True) is None
+    th.update(0, 0.5, 1.0)
+    assert th.actuators(1.0, GRETHA, True) is None  # the steering servo never heard
+    th.update_servo(0, -0.2, 1.0)
+    assert th.actuators(2.0, GRETHA, True) == (0.5 * GRETHA.T_max, -0.2)
+    assert th.actuators(9.0, GRETHA, True) is None  # stale, and not DUNE's final 0.0
+    th.update(0, 0.0, 9.0)
+    th.update_servo(0, 0.0, 9.0)
+    assert th.actuators(30.0, GRETHA, False) == (0.0, 0.0)  # loops off: none sent since
+    th.update(0, 0.6, 31.0)
+    th.update(1, 0.2, 31.0)
+    T, delta = th.actuators(31.5, OTTER_VESSEL, True)
+    assert T == pytest.approx(0.4 * OTTER_VESSEL.T_max)
+    assert delta == pytest.approx(0.2 * OTTER_VESSEL.delta_max)
+
+
+def test_records_keep_the_actuators():
+    auv = AUVEstimate(200.0, 50.0, 10.0, t_last_fix=0.0)
+    obs = Observation(3.0, ASVState(0.0, 0.0, 0.0), True, (auv,), actuators=(123.4, -0.25))
+    d = json.loads(json.dumps(obs_to_dict(obs)))
+    assert d["actuators"] == [123.4, -0.25] and obs_from_dict(d) == obs
+    bare = dataclasses.replace(obs, actuators=None)
+    assert "actuators" not in obs_to_dict(bare) and obs_from_dict(obs_to_dict(bare)) == bare
+
+
+def test_recorded_otter_actuators():
+    """DUNE's stock Otter (recorded): with the differential vessel every moment of its
+    transits has actuators, the mapping of its two thrusters' last set-points; in its standby
+    (loops off, none sent after the final 0.0s) they are zero; with a steerable vessel (no
+    steering servo on the Otter) none during the transits."""
+    th = Thrusters(3.0, 0.05)
+    transit, t_standby = False, None
+    during, standby, steerable = [], set(), set()
+    for t, sent, _peer, raw in capture(EXCERPT):
+        if not (sent or HDR.unpack_from(raw)[1] in USED):
+            continue
+        m = imcpy.Packet.deserialize(raw)
+        if sent and isinstance(m, imcpy.Reference) and m.dst == OTTER:
+            was = transit
+            transit = bool(m.flags & imcpy.Reference.FlagsBits.SPEED) and m.speed.value > 0
+            if was and not transit and t_standby is None:
+                t_standby = t
+        elif isinstance(m, imcpy.SetThrusterActuation) and m.src == OTTER:
+            th.update(m.id, m.value, t)
+        if not th.last or t >= MANDONE_T:
+            continue
+        act = th.actuators(t, OTTER_VESSEL, transit)
+        if transit and t_standby is None and {0, 1} <= set(th.last):
+            a0, a1 = th.last[0][0], th.last[1][0]
+            during.append((act, dune_actuators(OTTER_VESSEL, a0, a1)))
+            steerable.add(th.actuators(t, GRETHA, transit))
+        elif t_standby is not None and t > t_standby + 3.0:
+            standby.add(act)
+    assert len(during) > 100
+    assert all(a == pytest.approx(b) for a, b in during)
+    assert max(abs(a[1]) for a, _ in during) > 0.05  # it did steer
+    assert standby == {(0.0, 0.0)}
+    assert steerable == {None}
