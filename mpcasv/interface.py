@@ -80,8 +80,9 @@ class Observation:
 
     ``asv`` is the ASV's navigation state (body velocities ``u``, ``v`` over ground).
     ``actuators`` (optional): the thrust (N) and steering (rad) the execution level applies
-    now, as the boat knows them (simulation: the plant's actuator states; deploy: None so
-    far, the thruster feedback is not yet passed on, docs/mpc.md). ``current_oracle``
+    now, as the boat knows them (simulation: the plant's actuator states; deploy: DUNE's
+    set-points mapped by the vessel's actuation, :meth:`mpcasv.io.asvwatch.Thrusters.
+    actuators`, None where they are unknown). ``current_oracle``
     (optional): the TRUE current ``(V_N, V_E)`` (m/s) at the ASV, filled by the simulator
     only for a controller that asks for it (attribute ``needs_current_oracle = True``), for
     ablations; never in the field. ``usbl_fix_times`` (optional): per AUV, the time (s) of the
