@@ -3,20 +3,18 @@
 (``Observation.actuators``) by the vessel's actuation, as the identification reads them; an
 MPC plans from them and its current observer reads them, as in ``mpcasv simulate``. Before
 session 41 the deploy passed none: an MPC's rehearsal then estimated another current from its
-first step on than its simulation did (Case 3, lockstep: 0.138 against 0.150 m/s)."""
+first step on than its simulation did (Case 3, lockstep: 0.138 against 0.150 m/s). DUNE's
+recorded Otter: tests/test_io_dune_recording.py::test_recorded_otter_thrusters."""
 
 from __future__ import annotations
 
 import dataclasses
 import json
 
-import imcpy
 import pytest
-from test_io_dune_recording import EXCERPT, HDR, MANDONE_T, OTTER, capture
 
 from mpcasv.interface import ASVState, AUVEstimate, Observation
 from mpcasv.io.asvwatch import Thrusters, dune_actuators, dune_set_points
-from mpcasv.io.link import USED
 from mpcasv.io.records import obs_from_dict, obs_to_dict
 from mpcasv.models.params import load_vessel
 
@@ -62,38 +60,3 @@ def test_records_keep_the_actuators():
     assert d["actuators"] == [123.4, -0.25] and obs_from_dict(d) == obs
     bare = dataclasses.replace(obs, actuators=None)
     assert "actuators" not in obs_to_dict(bare) and obs_from_dict(obs_to_dict(bare)) == bare
-
-
-def test_recorded_otter_actuators():
-    """DUNE's stock Otter (recorded): with the differential vessel every moment of its
-    transits has actuators, the mapping of its two thrusters' last set-points; in its standby
-    (loops off, none sent after the final 0.0s) they are zero; with a steerable vessel (no
-    steering servo on the Otter) none during the transits."""
-    th = Thrusters(3.0, 0.05)
-    transit, t_standby = False, None
-    during, standby, steerable = [], set(), set()
-    for t, sent, _peer, raw in capture(EXCERPT):
-        if not (sent or HDR.unpack_from(raw)[1] in USED):
-            continue
-        m = imcpy.Packet.deserialize(raw)
-        if sent and isinstance(m, imcpy.Reference) and m.dst == OTTER:
-            was = transit
-            transit = bool(m.flags & imcpy.Reference.FlagsBits.SPEED) and m.speed.value > 0
-            if was and not transit and t_standby is None:
-                t_standby = t
-        elif isinstance(m, imcpy.SetThrusterActuation) and m.src == OTTER:
-            th.update(m.id, m.value, t)
-        if not th.last or t >= MANDONE_T:
-            continue
-        act = th.actuators(t, OTTER_VESSEL, transit)
-        if transit and t_standby is None and {0, 1} <= set(th.last):
-            a0, a1 = th.last[0][0], th.last[1][0]
-            during.append((act, dune_actuators(OTTER_VESSEL, a0, a1)))
-            steerable.add(th.actuators(t, GRETHA, transit))
-        elif t_standby is not None and t > t_standby + 3.0:
-            standby.add(act)
-    assert len(during) > 100
-    assert all(a == pytest.approx(b) for a, b in during)
-    assert max(abs(a[1]) for a, _ in during) > 0.05  # it did steer
-    assert standby == {(0.0, 0.0)}
-    assert steerable == {None}

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import asyncio
 
-from test_io_cases import _es, dry_deploy
+from test_io_cases import _es, dry_deploy, feed_states
 
 from mpcasv.io.deploy import ASV_STALE, RUNNING
 from mpcasv.io.logs import read_jsonl
@@ -25,10 +25,7 @@ def _running(tmp_path):
     dep, clock = dry_deploy(tmp_path, watchdog={"asv_stale_s": 3.0, "auv_stale_s": 3.0})
     t = clock.t
     for _ in range(20):
-        clock.t += 0.5
-        t += 0.5
-        dep.link.handle_datagram(_es(clock, 0x2811, t, 100.0), AUV)
-        dep.link.handle_datagram(_es(clock, 0x2801, t, 0.0), ASV)
+        t = feed_states(dep, clock, t, 1)
         dep.watch()
     assert dep.phase == RUNNING
     return dep, clock, t

@@ -14,7 +14,7 @@ import json
 import math
 
 import pytest
-from test_io_cases import _es, dry_deploy
+from test_io_cases import dry_deploy, feed_states
 
 from mpcasv.config import ConfigError
 from mpcasv.interface import ASVState, AUVEstimate, Observation
@@ -61,17 +61,7 @@ def test_the_deploy_puts_the_asvs_usbl_fixes_into_its_observations(tmp_path):
     stamped later than the ASV's clock can be is rejected (a review's finding, session 41:
     held as the latest, it hid every real fix after it)."""
     dep, clock = dry_deploy(tmp_path, vehicle=VEHICLES)
-    t = clock.t
-
-    def states(n: int) -> None:
-        nonlocal t
-        for _ in range(n):
-            clock.t += 0.5
-            t += 0.5
-            dep.link.handle_datagram(_es(clock, 0x2811, t, 100.0), AUV)
-            dep.link.handle_datagram(_es(clock, 0x2801, t, 0.0), ASV)
-
-    states(4)
+    t = feed_states(dep, clock, clock.t, 4)
     assert dep.steps > 0
     assert dep.observation(t, clock.t)[0].usbl_fix_times == (-math.inf,)
     t_fix = t + 0.2
@@ -81,7 +71,7 @@ def test_the_deploy_puts_the_asvs_usbl_fixes_into_its_observations(tmp_path):
         dep.link.handle_datagram(_fix(0x2801, "lauv-other", t + 0.3), ASV)
     assert dep.link.rejects == {}
     assert dep.link.ignored["UsblFixExtended"] == 1
-    states(4)
+    t = feed_states(dep, clock, t, 4)
     assert dep.observation(t, clock.t)[0].usbl_fix_times == (t_fix,)
     # a fix from the future (6 s past the last state: clock_slack_s is 5 s) is refused
     dep.link.handle_datagram(_fix(0x2801, "lauv-xplore-1", t + 6.0), ASV)
@@ -107,17 +97,9 @@ def test_fixes_follow_the_asvs_clock_step(tmp_path):
     (a review's finding, session 41: the first fixes after the step were held 100 s in the
     future and hid every real one)."""
     dep, clock = dry_deploy(tmp_path, vehicle=VEHICLES)
-    t = clock.t
-    for _ in range(6):
-        clock.t += 0.5
-        t += 0.5
-        dep.link.handle_datagram(_es(clock, 0x2811, t, 100.0), AUV)
-        dep.link.handle_datagram(_es(clock, 0x2801, t, 0.0), ASV)
+    t = feed_states(dep, clock, clock.t, 6)
     for k in range(5):  # the ASV's clock now reads 100 s ahead
-        clock.t += 0.5
-        t += 0.5
-        dep.link.handle_datagram(_es(clock, 0x2811, t, 100.0), AUV)
-        dep.link.handle_datagram(_es(clock, 0x2801, t + 100.0, 0.0), ASV)
+        t = feed_states(dep, clock, t, 1, asv_ahead=100.0)
         if k == 0:
             assert dep.link.asv.track.chain  # the step is being checked
             dep.link.handle_datagram(_fix(0x2801, "lauv-xplore-1", t + 100.2), ASV)

@@ -81,6 +81,19 @@ def _dune_announce(clock, name="usv-a", src=0x2801, services=DUNE_SERVICES):
     return a.serialize()
 
 
+def feed_states(dep, clock, t: float, n: int, asv_ahead: float = 0.0,
+                asv=("10.0.10.50", 6002), auv=("10.0.10.60", 6002)) -> float:  # fmt: skip
+    """``n`` periods of 0.5 s of the AUV's (0x2811, 100 m north) and the ASV's (0x2801, at the
+    origin; its clock ``asv_ahead`` s ahead) states into a :func:`dry_deploy`, deploy clock
+    and vehicle clocks advancing together from ``t``; returns the last state's time."""
+    for _ in range(n):
+        clock.t += 0.5
+        t += 0.5
+        dep.link.handle_datagram(_es(clock, 0x2811, t, 100.0), auv)
+        dep.link.handle_datagram(_es(clock, 0x2801, t + asv_ahead, 0.0), asv)
+    return t
+
+
 def _es(clock, src, t, N=0.0):
     o = Origin.from_degrees(41.18, -8.70)
     anchor = Origin(*to_wgs84(0.0, 0.0, o), 0.0)

@@ -336,11 +336,19 @@ def test_recorded_otter_speed_shortfall():
 def test_recorded_otter_thrusters():
     """All of the Otter's thrusters read (ids 0 and 1); while transits are commanded they
     are never stale; in the recorded standby DUNE sends none and the propeller is assumed
-    off from the command."""
+    off from the command. The actuators (session 41): with the differential vessel every
+    moment of its transits has them, the mapping of its two thrusters' last set-points; in
+    its standby (loops off, none sent after the final 0.0s) they are zero; with a steerable
+    vessel (no steering servo on the Otter) none during the transits."""
+    from mpcasv.io.asvwatch import dune_actuators
+    from mpcasv.models.params import load_vessel
+
+    otter, gretha = load_vessel("dune-otter"), load_vessel("gretha")
     data = capture(EXCERPT)
     th = Thrusters(3.0, 0.05)
     transit, seen, stale, standby_sources = False, set(), 0, set()
     t_standby = None
+    during, standby_act, steerable = [], set(), set()
     for t, sent, _peer, raw in data:
         if not (sent or HDR.unpack_from(raw)[1] in USED):
             continue
@@ -357,6 +365,14 @@ def test_recorded_otter_thrusters():
         stale += is_stale
         if t_standby is not None and t > t_standby + 3.0 and t < MANDONE_T:
             standby_sources.add((on, source))
+            standby_act.add(th.actuators(t, otter, transit))
+        elif transit and t_standby is None and {0, 1} <= set(th.last):
+            a0, a1 = th.last[0][0], th.last[1][0]
+            during.append((th.actuators(t, otter, transit), dune_actuators(otter, a0, a1)))
+            steerable.add(th.actuators(t, gretha, transit))
     assert seen == {0, 1}
     assert stale == 0
     assert standby_sources == {(False, "command")}
+    assert len(during) > 100 and all(a == pytest.approx(b) for a, b in during)
+    assert max(abs(a[1]) for a, _ in during) > 0.05  # it did steer
+    assert standby_act == {(0.0, 0.0)} and steerable == {None}
