@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 from mpcasv.io.imc import BROADCAST, announce, decode, stamp
+from mpcasv.io.logs import read_jsonl
 from mpcasv.io.sitl import Sitl, SitlOptions
 from mpcasv.io.transport import UdpEndpoint
 from mpcasv.sim.scenario import load_scenario
@@ -215,6 +216,21 @@ def test_the_sitl_runs_the_world_mpcasv_simulate_runs(tmp_path, nominal):
     assert drawn != nominal  # seed 3 draws a current the nominal scenario does not have
     run = json.loads((tmp_path / "run" / "run.json").read_text())
     assert run["realisation"] == real.as_dict()
+    # the world's acoustic channel for the deploy's [acoustics] (session 41: a rehearsal's MPC
+    # planned with the default channel where mpcasv simulate of the seed plans with the drawn
+    # one; a new user's finding): in acoustics.toml and in the ready information
+    import dataclasses
+
+    from mpcasv.config import load_toml
+    from mpcasv.io.rehearsal import deploy_config_for
+
+    channel = dataclasses.asdict(world.acoustics)
+    assert load_toml(tmp_path / "acoustics.toml")["acoustics"] == channel
+    ready = [r for r in read_jsonl(tmp_path / "sitl.jsonl", "event") if r["event"] == "ready"]
+    assert ready[0]["acoustics"] == channel
+    assert deploy_config_for(ready[0], {}, tmp_path, 1.0)["acoustics"] == channel
+    if not nominal:  # seed 3 draws another channel than the scenario's
+        assert channel != dataclasses.asdict(sc.acoustics)
 
 
 @pytest.mark.parametrize(("change", "match"), [

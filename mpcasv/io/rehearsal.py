@@ -169,7 +169,9 @@ def deploy_config_for(ready: dict, base: dict, log_dir: str | Path, speedup: flo
     (``link.transport = "tcp"`` in ``base``): ``bind`` set, and ``base``'s fields the TCP
     link never reads removed (refused at load, :func:`mpcasv.io.config.check_link`): the
     UDP-only ``[link]`` fields (:data:`mpcasv.io.config.UDP_ONLY`) and every vehicle's
-    ``address``."""
+    ``address``. Without an ``[acoustics]`` in ``base``, the SITL's world's channel (its
+    ready info's ``acoustics``): an MPC then plans its fixes as ``mpcasv simulate`` of the
+    same scenario and seed does."""
     from mpcasv.io.config import UDP_ONLY
 
     cfg = json.loads(json.dumps(base))
@@ -184,6 +186,8 @@ def deploy_config_for(ready: dict, base: dict, log_dir: str | Path, speedup: flo
             link["discovery_ports"] = []  # (unread, and refused, when all have one)
     cfg.setdefault("clock", {})["speedup"] = float(speedup)
     cfg.setdefault("log", {})["dir"] = str(log_dir)
+    if "acoustics" in ready and "acoustics" not in cfg:  # the channel the SITL's world drew
+        cfg["acoustics"] = dict(ready["acoustics"])
     return cfg
 
 

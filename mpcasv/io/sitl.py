@@ -59,6 +59,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import dataclasses
 import json
 import logging
 import math
@@ -205,6 +206,19 @@ class Sitl(AsvDune):
             self.loops_on = loops
             self.asv.publish(self._es(self.asv, self._nav_asv(x)))
 
+    def write_acoustics(self) -> None:
+        """``<out>/acoustics.toml``: the world's acoustic channel (the scenario's, drawn for
+        the seed) as the deploy configuration's ``[acoustics]`` table, which an MPC plans
+        its fixes with; ``mpcasv simulate`` of the same scenario and seed plans with it."""
+        import tomli_w
+
+        head = ("# the acoustic channel of this SITL's world (scenario "
+                f"{self.sc.name!r}, seed {self.opt.seed}): paste into the deploy "
+                "configuration\n# so that an MPC plans with it, as mpcasv simulate of the same "
+                "scenario and seed does\n")  # fmt: skip
+        text = tomli_w.dumps({"acoustics": dataclasses.asdict(self.sc.acoustics)})
+        (self.opt.out / "acoustics.toml").write_text(head + text)
+
     # --- outages -----------------------------------------------------------------------------
     def kill_asv(self) -> None:
         if self.asv.alive:
@@ -248,7 +262,9 @@ class Sitl(AsvDune):
                           "address": f"{o.bind}:{v.port}",
                           "tcp": f"{o.bind}:{v.tcp_port}" if o.tcp else None}
                          for v in self.vehicles],
+            "acoustics": dataclasses.asdict(self.sc.acoustics),
         }  # fmt: skip
+        self.write_acoustics()
         self.event("ready", **ready)
         if o.ready_file is not None:
             tmp = Path(f"{o.ready_file}.tmp")
