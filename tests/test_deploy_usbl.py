@@ -12,6 +12,7 @@ import asyncio
 import dataclasses
 import json
 import math
+from pathlib import Path
 
 import pytest
 from test_io_cases import dry_deploy, feed_states
@@ -179,6 +180,13 @@ def test_replay_replays_observed_fixes_from_a_log_that_has_them(tmp_path):
     assert ctl.diagnostics()["mpc_tau0"] < 2.0  # the fix reset the age (else about 3 s)
     rep = replay(log)
     assert rep.n_steps == 4 and rep.n_differ == 0
+    # the logged preset given by its path is the logged preset: its overrides kept (they
+    # were dropped, with a note, as for another preset: a new user's finding, session 41)
+    import mpcasv
+
+    shipped = Path(mpcasv.__file__).parent / "data" / "presets" / "mpc-single.toml"
+    rep = replay(log, preset=str(shipped))
+    assert rep.n_differ == 0 and not rep.notes, rep.notes
     old, _ = _log(tmp_path, fix_times=False)
     with pytest.raises(ConfigError, match="fix_age_source = 'observed'.*do not carry"):
         replay(old)
@@ -215,3 +223,28 @@ def test_the_sitl_asv_sends_a_fix_message_per_world_fix():
     AsvDune.publish_fixes(sitl)
     AsvDune.publish_fixes(sitl)
     assert len(sent) == 2 and sitl.fixes_sent == [3]
+
+
+@pytest.mark.parametrize("propeller", ["command", "thruster"])
+def test_observed_fixes_judged_by_our_own_command_are_said(tmp_path, monkeypatch, caplog,
+                                                           propeller):  # fmt: skip
+    """With ``watchdog.propeller = "command"`` M2o judges each fix by our own command, not by
+    the thrusters DUNE reports: accepted, and said at start in one warning (a new user's
+    finding, session 41: the run's energy changed 80 -> 47 kJ with it, silently)."""
+    import logging
+
+    import mpcasv.io.deploy as deploy_mod
+
+    built = deploy_mod.build_controller
+
+    def m2o(cfg, log=None):
+        ctl = built(cfg, log=log)
+        ctl.needs_usbl_fixes = True  # as an MPC with fix_age_source = "observed"
+        return ctl
+
+    monkeypatch.setattr(deploy_mod, "build_controller", m2o)
+    caplog.set_level(logging.WARNING, logger="mpcasv.deploy")
+    dep, _ = dry_deploy(tmp_path, vehicle=VEHICLES, watchdog={"propeller": propeller})
+    dep.close()
+    said = [r for r in caplog.records if "judges each USBL fix" in r.getMessage()]
+    assert len(said) == (propeller == "command")

@@ -11,7 +11,7 @@ import imcpy
 import pytest
 
 from mpcasv.interface import ASVState, AUVEstimate, Command, Mode, Observation
-from mpcasv.io.asvwatch import SpeedWatch, Thrusters
+from mpcasv.io.asvwatch import ClockRate, SpeedWatch, Thrusters
 from mpcasv.io.config import SpeedSpec, deploy_config_from_dict
 from mpcasv.io.deploy import Deploy
 from mpcasv.io.imc import NavState
@@ -179,3 +179,33 @@ def test_deploy_prepare_builds_and_contacts_nobody(tmp_path, capsys, caplog):
     said = [r.getMessage() for r in caplog.records if r.name == "mpcasv.deploy"]
     assert any("hybrid-single" in m and "nothing to compile" in m for m in said), said
     assert not any("MPC compiles" in m or "compiling" in m for m in said), said
+
+
+def test_clock_rate_reports_an_asv_clock_running_ahead():
+    """A SITL at --speedup 5 against a deploy left at [clock] speedup = 1 decided on time
+    stamps five times faster than its own clock and said nothing (a new user's finding,
+    session 41): the first 20-s window whose ASV clock runs more than twice as fast is
+    reported, once; a real-time or slower (a SITL waiting under --lockstep) clock is not."""
+    rate, t_asv, said = ClockRate(), 0.0, []
+    for now in range(300):  # real time, then slower (waiting), then 5 times as fast
+        t_asv += 1.0 if now < 100 else 0.4 if now < 200 else 5.0
+        r = rate.state(t_asv, float(now))
+        if r is not None:
+            said.append((now, r))
+    assert [r for _, r in said] == [pytest.approx(5.0)] and said[0][0] >= 220  # once
+
+
+def test_the_deploy_says_its_clock_and_the_asvs_disagree(tmp_path):
+    from test_io_cases import _es, dry_deploy
+
+    dep, clock = dry_deploy(tmp_path)
+    t = clock.t
+    for _ in range(60):  # 30 s of deploy clock, 150 s of the ASV's
+        clock.t += 0.5
+        t += 2.5
+        dep.link.handle_datagram(_es(clock, 0x2801, t, 0.0), ("10.0.10.50", 6002))
+    dep.jsonl.flush()
+    said = [e for e in read_jsonl(tmp_path / "deploy.jsonl", "event") if e["event"] == "clock_rate"]
+    assert len(said) == 1 and said[0]["rate"] == pytest.approx(5.0, rel=0.05)
+    assert said[0]["speedup"] == 1.0
+    dep.close()

@@ -290,7 +290,7 @@ def _deploy_stub(steps: int, heard: list[bool], state: list[bool],
     stub = SimpleNamespace(
         steps=steps, phase="waiting", cfg=SimpleNamespace(link=link),
         link=SimpleNamespace(peers=peers, endpoint=None if tcp else SimpleNamespace(
-            address=("127.0.0.1", 1)), tcp_error=None),  # fmt: skip
+            address=("127.0.0.1", 1)), tcp_error=None, strangers={}),  # fmt: skip
     )
     stub.heard = lambda: Phases.heard(stub)
     return stub
@@ -307,6 +307,28 @@ def test_no_decision_names_what_was_missing():
     assert "v0 127.0.0.1:6001, v1 127.0.0.1:6002" in why and "sitl --tcp" in why
     why = Phases.no_decision(_deploy_stub(0, [True, True], [True, False]), 5.0)
     assert "no state" in why and "from v1 " in why and "heard: v0, v1" in why
+    assert "announced but not configured" not in why
+
+
+def test_no_decision_names_the_systems_that_announced_but_are_not_configured():
+    """An AUV configured as 'auv' against the SITL's 'sitl-auv' (id 0x2811, the configured
+    one too): the run ended with "no state accepted from auv (heard: sitl-asv)", which says
+    something is wrong but not what (a new user's finding, session 41). The reject names the
+    vehicle configured with that id, and the line names who announced."""
+    from test_io_cases import _dune_announce, _link
+
+    link, clock, events = _link([{"role": "asv", "name": "usv-a"},
+                            {"role": "auv", "name": "auv", "id": 0x2811}])  # fmt: skip
+    services = "imc+udp://10.0.10.60:6002/"
+    link.handle_datagram(_dune_announce(clock, "sitl-auv", 0x2811, services),
+                         ("10.0.10.60", 47000))  # fmt: skip
+    assert link.rejects["unknown_sender"] == 1
+    assert "(0x2811 is configured as 'auv')" in events[-1]["detail"], events[-1]
+    assert link.strangers == {"sitl-auv": 0x2811}
+    stub = _deploy_stub(0, [True, False], [True, False])
+    stub.link.strangers = link.strangers
+    why = Phases.no_decision(stub, 60.0)
+    assert "announced but not configured: 'sitl-auv' 0x2811" in why, why
     why = Phases.no_decision(_deploy_stub(0, [True, True], [True, True]), 5.0)
     assert "'waiting'" in why
 

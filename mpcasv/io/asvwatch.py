@@ -40,7 +40,8 @@ from dataclasses import dataclass, field
 
 from mpcasv.io.config import SpeedSpec
 
-__all__ = ["SpeedWatch", "Thrusters", "UsblFixes", "dune_actuators", "dune_set_points"]
+__all__ = ["ClockRate", "SpeedWatch", "Thrusters", "UsblFixes", "dune_actuators",
+           "dune_set_points"]
 
 
 def dune_actuators(vessel, a0, a1=0.0, servo=0.0):
@@ -120,6 +121,38 @@ class Thrusters:
 
     def values(self) -> dict[str, float]:
         return {str(k): v for k, (v, _) in sorted(self.last.items())}
+
+
+@dataclass
+class ClockRate:
+    """How fast the ASV's clock runs against the deploy's, over windows of at least
+    ``window_s`` s of the deploy clock: the first window in which it runs more than ``ahead``
+    times as fast is reported (once). A SITL run with ``--speedup 5`` against a deploy whose
+    ``[clock] speedup`` was left at 1 decided on time stamps five times faster than its own
+    clock, its staleness limits and ``--duration`` in another unit, and said nothing (a new
+    user's finding, session 41). A slower ASV clock is not reported: a SITL under
+    ``--lockstep`` waits for a slow deploy, and a real vehicle's silence is ``asv_stale``."""
+
+    window_s: float = 20.0
+    ahead: float = 2.0
+    ref: tuple[float, float] | None = None  # (ASV state time, deploy clock) of the window
+    said: bool = False
+
+    def state(self, t: float, now: float) -> float | None:
+        """An ASV state stamped ``t`` read at deploy clock ``now``: the rate to report, or
+        None."""
+        if self.ref is None or t < self.ref[0]:
+            self.ref = (t, now)
+            return None
+        span = now - self.ref[1]
+        if self.said or span < self.window_s:
+            return None
+        rate = (t - self.ref[0]) / span
+        self.ref = (t, now)
+        if rate <= self.ahead:
+            return None
+        self.said = True
+        return rate
 
 
 #: distinct unmatched USBL targets kept by name (:class:`UsblFixes`)

@@ -52,7 +52,7 @@ import imcpy
 from mpcasv.config import ConfigError
 from mpcasv.estimation import make_estimator
 from mpcasv.interface import ASVState, Command, Mode, Observation
-from mpcasv.io.asvwatch import SpeedWatch, Thrusters, UsblFixes
+from mpcasv.io.asvwatch import ClockRate, SpeedWatch, Thrusters, UsblFixes
 from mpcasv.io.config import DeployConfig, build_controller, load_deploy_config
 from mpcasv.io.deploycontroller import deploy_boat, known_plans
 from mpcasv.io.deployend import Ending
@@ -64,7 +64,7 @@ from mpcasv.io.deploystep import (
     guard_params,
     prepare_controller,
 )
-from mpcasv.io.imc import BadInput, reference
+from mpcasv.io.imc import reference
 from mpcasv.io.link import ImcLink, Peer
 from mpcasv.io.logs import JsonlWriter, LsfWriter
 from mpcasv.io.records import cmd_to_dict, obs_to_dict
@@ -109,6 +109,11 @@ class Deploy(Phases, BoatFeedback, FieldMode, Ending):
             self.n_auv = len(cfg.auvs)
             self.controller = build_controller(cfg, log=log.info)
             self.controller.reset(self.n_auv)
+            if getattr(self.controller, "needs_usbl_fixes", False) and \
+                    cfg.watchdog.propeller == "command":
+                log.warning("fix_age_source = 'observed' judges each USBL fix by the propeller "
+                            "state, here our own command (watchdog.propeller = 'command'), "
+                            "not the thrusters DUNE reports")  # fmt: skip
             self.init_field_mode(solver_factory)  # before any socket is opened
             self.domain = getattr(self.controller, "domain", None)
             plans = known_plans(cfg)
@@ -130,6 +135,7 @@ class Deploy(Phases, BoatFeedback, FieldMode, Ending):
             wd = cfg.watchdog
             self.thrusters = Thrusters(wd.asv_stale_s, wd.propeller_on_threshold)
             self.usbl = UsblFixes(self.n_auv)  # the ASV's own USBL fixes (M2o reads them)
+            self.clock_rate = ClockRate()  # the ASV's clock against ours (clock.speedup)
             self.vessel = deploy_boat(cfg).vessel  # its actuation maps DUNE's set-points
             self.speed = SpeedWatch(cfg.speed)
             self.speed_cap: float | None = None  # applied to the controller (speed_feedback)
@@ -164,7 +170,8 @@ class Deploy(Phases, BoatFeedback, FieldMode, Ending):
                       "was sent; the next tick steps again)", rec.get("t"), rec.get("error"))
         elif rec.get("event") != "reject":  # a current above the tested one: also --quiet
             detail = {k: v for k, v in rec.items() if k not in ("kind", "event", "t")}
-            level = (logging.WARNING if rec["event"] in ("current_untested", "aborted")
+            level = (logging.WARNING if rec["event"] in ("current_untested", "aborted",
+                                                         "clock_rate")
                      else logging.INFO)  # fmt: skip
             log.log(level, "%s %s", rec["event"], detail)
 
@@ -176,6 +183,11 @@ class Deploy(Phases, BoatFeedback, FieldMode, Ending):
         if self.closing:
             return
         if p.role == "asv":
+            rate = self.clock_rate.state(nav.t, now)
+            if rate is not None:
+                self.event("clock_rate", rate=round(rate, 2), speedup=self.cfg.clock.speedup,
+                           note="the ASV's clock runs this many times as fast as the deploy's: "
+                           "is [clock] speedup the SITL's --speedup?")  # fmt: skip
             ev = self.speed.state(nav.t, math.hypot(nav.v_N, nav.v_E), nav.u)
             if ev is not None:
                 self.event(ev.pop("event"), **ev)
@@ -224,27 +236,6 @@ class Deploy(Phases, BoatFeedback, FieldMode, Ending):
         elif isinstance(msg, imcpy.UsblFixExtended):
             self._usbl_fix(p, msg)
 
-    def _usbl_fix(self, p: Peer, msg) -> None:
-        """The ASV's USBL fixed an AUV (``target``: its system name) at the message's time on
-        the ASV's clock (corrected as its states are). Rejected (``usbl_fix_time``): a fix
-        while a step of the ASV's clock is being checked (its time base is in doubt), or
-        stamped later than the ASV's clock can be now (its last state's time, plus the time
-        since that state arrived, plus ``clock_slack_s``): a future time would be held as
-        the latest fix and hide the real ones after it. A target that is no AUV known by
-        that name is reported once (event ``usbl_fix_unknown``) and counted."""
-        t = msg.timestamp - p.track.offset
-        nav = p.nav
-        latest = (-math.inf if nav is None
-                  else nav.t + (self.clock.now() - p.nav_recv) + self.cfg.watchdog.clock_slack_s)
-        if p.track.chain or t > latest:
-            raise BadInput("usbl_fix_time",
-                           f"UsblFixExtended for {msg.target!r} stamped {t:.3f} s: "
-                           + ("the ASV's clock is in a step check" if p.track.chain else
-                              f"later than the ASV's clock can be ({latest:.3f} s)"))  # fmt: skip
-        names = [a.name or a.spec.name for a in self.link.auvs]
-        if self.usbl.fix(msg.target, t, names) is None and self.usbl.unmatched.get(msg.target) == 1:
-            self.event("usbl_fix_unknown", vehicle=p.label, target=msg.target, auvs=names)
-
     # --- the supervisory step ------------------------------------------------------------
     def _maybe_step(self, ts: float, now: float) -> None:
         Tc = self.cfg.controller.control_period
@@ -267,9 +258,7 @@ class Deploy(Phases, BoatFeedback, FieldMode, Ending):
             ests.append(e if status[k] == OK else inflate(e, ages[k], self.gp.v_max))
         a = self.link.asv.nav
         on, self._propeller_source = self._propeller_on(now)
-        transit = self.last_cmd is not None and self.last_cmd.mode is Mode.TRANSIT
-        act = (self.thrusters.actuators(now, self.vessel, transit)
-               if self.cfg.watchdog.propeller == "thruster" else None)  # fmt: skip
+        act = self.actuators(now)
         obs = Observation(ts, ASVState(a.N, a.E, a.psi, a.u, a.v, a.r), on, tuple(ests),
                           actuators=act, usbl_fix_times=tuple(self.usbl.times))
         return obs, status, ages

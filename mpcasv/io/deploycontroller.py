@@ -102,8 +102,9 @@ def refuse_simulation_only(ctl, name: str, usbl_fixes: bool = True) -> None:
     if getattr(ctl, "needs_usbl_fixes", False) and not usbl_fixes:
         raise ConfigError(f"controller {name}: fix_age_source = 'observed' needs the ASV's "
                           "own USBL fix times, which this log's observations do not carry "
-                          "(written before mpcasv deploy read DUNE's UsblFixExtended); use "
-                          "'model'")  # fmt: skip
+                          "(written before mpcasv deploy read DUNE's UsblFixExtended): "
+                          "replay it with a preset whose fix_age_source is 'model' "
+                          "(--preset)")  # fmt: skip
 
 
 #: the least time (ms) a step's solves can work with in the field: a warm-started solve's

@@ -1,7 +1,8 @@
 """The deploy's view of the boat it drives, and of itself: propeller state from the
-thrusters (or assumed from the command), the speed actually achieved fed back into the
-controller, and the deploy's own CPU use (:class:`BoatFeedback`, a mixin of
-:class:`mpcasv.io.deploy.Deploy`; the watches themselves are :mod:`mpcasv.io.asvwatch`).
+thrusters (or assumed from the command), the actuators from DUNE's set-points, the ASV's USBL
+fixes, the speed actually achieved fed back into the controller, and the deploy's own CPU
+use (:class:`BoatFeedback`, a mixin of :class:`mpcasv.io.deploy.Deploy`; the watches
+themselves are :mod:`mpcasv.io.asvwatch`).
 """
 
 from __future__ import annotations
@@ -11,6 +12,7 @@ import math
 import time
 
 from mpcasv.interface import Mode
+from mpcasv.io.imc import BadInput
 
 __all__ = ["BoatFeedback", "cap_command", "cap_controller_speed"]
 
@@ -58,6 +60,36 @@ class BoatFeedback:
         n = self.link.datagrams - n0
         return {"cpu_s": cpu, "wall_s": wall, "cpu_fraction": cpu / wall if wall > 0 else None,
                 "datagrams": n, "datagrams_per_s": n / wall if wall > 0 else None}  # fmt: skip
+
+    def actuators(self, now: float) -> tuple[float, float] | None:
+        """The model's thrust and steering from DUNE's set-points (:meth:`mpcasv.io.asvwatch.
+        Thrusters.actuators`, by the deploy vessel's actuation); None with ``watchdog.
+        propeller = "command"`` (the thruster messages are not read)."""
+        if self.cfg.watchdog.propeller != "thruster":
+            return None
+        transit = self.last_cmd is not None and self.last_cmd.mode is Mode.TRANSIT
+        return self.thrusters.actuators(now, self.vessel, transit)
+
+    def _usbl_fix(self, p, msg) -> None:
+        """The ASV's USBL fixed an AUV (``target``: its system name) at the message's time on
+        the ASV's clock (corrected as its states are). Rejected (``usbl_fix_time``): a fix
+        while a step of the ASV's clock is being checked (its time base is in doubt), or
+        stamped later than the ASV's clock can be now (its last state's time, plus the time
+        since that state arrived, plus ``clock_slack_s``): a future time would be held as
+        the latest fix and hide the real ones after it. A target that is no AUV known by
+        that name is reported once (event ``usbl_fix_unknown``) and counted."""
+        t = msg.timestamp - p.track.offset
+        nav = p.nav
+        latest = (-math.inf if nav is None
+                  else nav.t + (self.clock.now() - p.nav_recv) + self.cfg.watchdog.clock_slack_s)
+        if p.track.chain or t > latest:
+            raise BadInput("usbl_fix_time",
+                           f"UsblFixExtended for {msg.target!r} stamped {t:.3f} s: "
+                           + ("the ASV's clock is in a step check" if p.track.chain else
+                              f"later than the ASV's clock can be ({latest:.3f} s)"))  # fmt: skip
+        names = [a.name or a.spec.name for a in self.link.auvs]
+        if self.usbl.fix(msg.target, t, names) is None and self.usbl.unmatched.get(msg.target) == 1:
+            self.event("usbl_fix_unknown", vehicle=p.label, target=msg.target, auvs=names)
 
     def _propeller_on(self, now: float) -> tuple[bool, str]:
         """(propeller on, source): :class:`mpcasv.io.asvwatch.Thrusters`; reported once per

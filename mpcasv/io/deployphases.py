@@ -180,8 +180,10 @@ class Phases:
                     f"(link.announce_to: {to}{where})?")  # fmt: skip
         silent = [p.label for p in peers if p.nav is None]
         if silent:
+            others = ", ".join(f"{n!r} 0x{i:04X}" for n, i in self.link.strangers.items())
+            seen = f"; announced but not configured: {others}" if others else ""
             return (f"no decision in {took}: no state (EstimatedState) accepted from "
-                    f"{', '.join(silent)} (heard: {', '.join(heard)}); see the 'reject' events "
-                    "and counters in deploy.jsonl")  # fmt: skip
+                    f"{', '.join(silent)} (heard: {', '.join(heard)}{seen}); see the 'reject' "
+                    "events and counters in deploy.jsonl")  # fmt: skip
         return (f"no decision in {took}: every vehicle was heard, the deploy stayed in phase "
                 f"{self.phase!r} (see its events in deploy.jsonl)")  # fmt: skip

@@ -122,6 +122,9 @@ class ImcLink(PeerDirectory):
         self.ignored: Counter[str] = Counter()
         self.relayed: Counter[str] = Counter()
         self.sent: Counter[str] = Counter()
+        #: systems that announced themselves and are no configured vehicle: name -> IMC id
+        #: (at most 20; for the run's "no decision" line: a misspelt name, say)
+        self.strangers: dict[str, int] = {}
         self.datagrams = 0  # received, all sockets
         #: TCP: the last failed connection, ``(vehicle label, error)``; None: none failed
         self.tcp_error: tuple[str, str] | None = None

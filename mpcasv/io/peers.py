@@ -137,7 +137,11 @@ class PeerDirectory:
         if p is None:
             p = self._peer_by_id(msg.src)
             if p is None or p.spec.name:  # unknown id, or a configured name that differs
-                raise BadInput("unknown_sender", f"Announce of {msg.sys_name!r} 0x{msg.src:04X}")
+                if len(self.strangers) < 20 or msg.sys_name in self.strangers:
+                    self.strangers[msg.sys_name] = msg.src
+                named = f" (0x{msg.src:04X} is configured as {p.spec.name!r})" if p else ""
+                raise BadInput("unknown_sender",
+                               f"Announce of {msg.sys_name!r} 0x{msg.src:04X}{named}")
         if p.spec.id is not None and msg.src != p.spec.id:
             raise BadInput("id_mismatch", f"{msg.sys_name!r} announces 0x{msg.src:04X}")
         if p.id is not None and msg.src != p.id and self._fresh(p):

@@ -25,7 +25,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from mpcasv.config import ConfigError, parse
+from mpcasv.config import ConfigError, parse, resolve
 from mpcasv.controllers import make_controller, preset_used
 from mpcasv.interface import Mode
 from mpcasv.io.config import WatchdogSpec
@@ -107,6 +107,19 @@ def _preset_named(name: str, preset: str | None) -> str:
         return f"preset {preset}" if preset else "its default preset"
 
 
+def _same_preset(name: str, a: str | None, b: str | None) -> bool:
+    """Whether presets ``a`` and ``b`` of controller ``name`` are the same file: a shipped
+    name and its path are (``replay --preset`` with the logged preset's path dropped the
+    logged overrides as if it were another: a new user's finding, session 41)."""
+    pa, pb = preset_used(name, a), preset_used(name, b)
+    if pa == pb:
+        return True
+    try:
+        return resolve("presets", pa).resolve() == resolve("presets", pb).resolve()
+    except ConfigError:  # one is no file this version can find: not the same
+        return False
+
+
 def _cap_of(event: dict) -> float:
     """The cap a ``controller_speed_cap`` event applied: the plan's, else the new speed (a
     cap is applied only below the controller's speed, so new = the cap)."""
@@ -151,7 +164,7 @@ def replay(log: str | Path, controller: str | None = None, preset: str | None = 
     preset = preset or (c["preset"] if name == c["name"] else None)
     # the logged controller and preset: the deploy's overrides and guard are theirs (the
     # logged preset is resolved only for a controller of that name: one this version knows)
-    same = name == c["name"] and preset_used(name, preset) == preset_used(name, c["preset"])
+    same = name == c["name"] and _same_preset(name, preset, c["preset"])
     notes = []
     if not same and c["overrides"]:
         notes.append(f"the logged controller.overrides {c['overrides']} are not applied: they "
