@@ -125,17 +125,19 @@ class Thrusters:
 
 @dataclass
 class ClockRate:
-    """How fast the ASV's clock runs against the deploy's, over windows of at least
-    ``window_s`` s of the deploy clock: the first window in which it runs more than ``ahead``
-    times as fast is reported (once). A SITL run with ``--speedup 5`` against a deploy whose
-    ``[clock] speedup`` was left at 1 decided on time stamps five times faster than its own
-    clock, its staleness limits and ``--duration`` in another unit, and said nothing (a new
-    user's finding, session 41). A slower ASV clock is not reported: a SITL under
-    ``--lockstep`` waits for a slow deploy, and a real vehicle's silence is ``asv_stale``."""
+    """How fast the ASV's clock has run against the deploy's since the first ASV state: once
+    ``window_s`` s of the deploy clock have passed, a rate above ``ahead`` is reported (once).
+    A SITL run with ``--speedup 5`` against a deploy whose ``[clock] speedup`` was left at 1
+    decided on time stamps five times faster than its own clock, its staleness limits and
+    ``--duration`` in another unit, and said nothing (a new user's finding, session 41). Taken
+    since the start, not per window: a SITL under ``--lockstep`` falls behind its clock while
+    it waits for a slow deploy and then catches up in a burst, faster than real time for a
+    while but never ahead of its clock. A slower ASV clock is not reported (that wait; a real
+    vehicle's silence is ``asv_stale``)."""
 
     window_s: float = 20.0
     ahead: float = 2.0
-    ref: tuple[float, float] | None = None  # (ASV state time, deploy clock) of the window
+    ref: tuple[float, float] | None = None  # (ASV state time, deploy clock) at the start
     said: bool = False
 
     def state(self, t: float, now: float) -> float | None:
@@ -148,7 +150,6 @@ class ClockRate:
         if self.said or span < self.window_s:
             return None
         rate = (t - self.ref[0]) / span
-        self.ref = (t, now)
         if rate <= self.ahead:
             return None
         self.said = True
