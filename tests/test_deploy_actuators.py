@@ -60,3 +60,58 @@ def test_records_keep_the_actuators():
     assert d["actuators"] == [123.4, -0.25] and obs_from_dict(d) == obs
     bare = dataclasses.replace(obs, actuators=None)
     assert "actuators" not in obs_to_dict(bare) and obs_from_dict(obs_to_dict(bare)) == bare
+
+
+def _set_point(kind: str, src: int, i: int, value: float, t: float) -> bytes:
+    import imcpy
+
+    from mpcasv.io.imc import stamp
+
+    msg = imcpy.SetThrusterActuation() if kind == "thruster" else imcpy.SetServoPosition()
+    msg.id, msg.value = i, value
+    return stamp(msg, src, 0xFFFF, t).serialize()
+
+
+@pytest.mark.parametrize("vessel", ["gretha", "dune-otter"])
+def test_the_deploy_observes_the_asvs_set_points(tmp_path, vessel):
+    """DUNE's set-points through the link into the decisions' observations: the vessel's
+    actuation decides which it needs; in a transit one never heard leaves the actuators
+    unknown (one event ``actuators_unknown`` with the ids heard); set-points beyond DUNE's
+    [-1, 1] are clipped; ``controller.actuator_feedback = false`` reads none (a review's
+    findings, session 41)."""
+    from test_io_cases import dry_deploy, feed_states
+
+    from mpcasv.interface import Command, Mode, Reason
+    from mpcasv.io.logs import read_jsonl
+
+    asv = ("10.0.10.50", 6002)
+    vp = load_vessel(vessel)
+    dep, clock = dry_deploy(tmp_path, controller={"name": "hybrid-single", "preset":
+                                                  "paper1-field", "vessel": vessel})  # fmt: skip
+    t = feed_states(dep, clock, clock.t, 2)
+    assert dep.observation(t, clock.t)[0].actuators == (0.0, 0.0)  # none heard, no transit
+    dep.last_cmd = Command(Mode.TRANSIT, (100.0, 0.0), 1.5, 0, Reason.NOMINAL)
+    dep.link.handle_datagram(_set_point("thruster", 0x2801, 0, 1.3, t), asv)  # beyond 1
+    assert dep.observation(t, clock.t)[0].actuators is None  # the second input never heard
+    dep.link.handle_datagram(_set_point("thruster", 0x2801, 0, 0.5, t), asv)
+    second = ("thruster", 1, 0.2) if vessel == "dune-otter" else ("servo", 0, -0.1)
+    dep.link.handle_datagram(_set_point(second[0], 0x2801, second[1], second[2], t), asv)
+    assert dep.link.rejects == {}
+    expected = (dune_actuators(vp, 0.5, 0.2) if vessel == "dune-otter"
+                else dune_actuators(vp, 0.5, servo=-0.1))  # fmt: skip
+    assert dep.observation(t, clock.t)[0].actuators == pytest.approx(expected, rel=1e-6)
+    dep.link.handle_datagram(_set_point("thruster", 0x2801, 0, 1.7, t), asv)
+    assert dep.observation(t, clock.t)[0].actuators[0] == pytest.approx(
+        dune_actuators(vp, 1.0, 0.2 if vessel == "dune-otter" else 0.0)[0])  # fmt: skip
+    dep.jsonl.flush()
+    unknown = [e for e in read_jsonl(tmp_path / "deploy.jsonl", "event")
+               if e["event"] == "actuators_unknown"]  # fmt: skip
+    assert len(unknown) == 1 and unknown[0]["thrusters"] == [0] and unknown[0]["servos"] == []
+    dep.close()
+    off, clock = dry_deploy(tmp_path / "off", controller={
+        "name": "hybrid-single", "preset": "paper1-field", "actuator_feedback": False})
+    t = feed_states(off, clock, clock.t, 2)
+    off.link.handle_datagram(_set_point("thruster", 0x2801, 0, 0.5, t), asv)
+    off.link.handle_datagram(_set_point("servo", 0x2801, 0, 0.1, t), asv)
+    assert off.observation(t, clock.t)[0].actuators is None
+    off.close()

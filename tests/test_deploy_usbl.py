@@ -248,3 +248,21 @@ def test_observed_fixes_judged_by_our_own_command_are_said(tmp_path, monkeypatch
     dep.close()
     said = [r for r in caplog.records if "judges each USBL fix" in r.getMessage()]
     assert len(said) == (propeller == "command")
+
+
+def test_a_repeated_asv_state_does_not_hide_a_fix(tmp_path):
+    """A repeated (or reordered) ASV state starts a clock-step chain behind the accepted time;
+    the fixes then were rejected as if the clock were stepping (a review's finding, session
+    41). A fix before the ASV's first state is rejected (its clock not known yet)."""
+    from test_io_cases import _es
+
+    dep, clock = dry_deploy(tmp_path, vehicle=VEHICLES)
+    dep.link.handle_datagram(_fix(0x2801, "lauv-xplore-1", clock.t), ASV)
+    assert dep.link.rejects == {"usbl_fix_time": 1}
+    t = feed_states(dep, clock, clock.t, 4)
+    dep.link.handle_datagram(_es(clock, 0x2801, t, 0.0), ASV)  # the same state again
+    assert dep.link.rejects["out_of_order"] == 1 and dep.link.asv.track.chain
+    dep.link.handle_datagram(_fix(0x2801, "lauv-xplore-1", t + 0.1), ASV)
+    assert dep.link.rejects["usbl_fix_time"] == 1
+    assert dep.usbl.times == [t + 0.1]
+    dep.close()

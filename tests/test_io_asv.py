@@ -184,7 +184,7 @@ def test_deploy_prepare_builds_and_contacts_nobody(tmp_path, capsys, caplog):
 def test_clock_rate_reports_an_asv_clock_running_ahead():
     """A SITL at --speedup 5 against a deploy left at [clock] speedup = 1 decided on time
     stamps five times faster than its own clock and said nothing (a new user's finding,
-    session 41): an ASV clock that has run more than twice as fast since the start (over at
+    session 41): an ASV clock that has run more than 1.5 times as fast since the start (over at
     least 20 s) is reported, once; one in real time, or behind and catching up (a SITL
     waiting for the deploy under --lockstep), is not."""
     rate, t_asv = ClockRate(), 0.0

@@ -106,7 +106,7 @@ class Thrusters:
             v, t = table[i]
             if now - t > self.stale_s and v != 0.0:
                 return None
-            values.append(v)
+            values.append(v if table is self.servos else min(1.0, max(-1.0, v)))
         T, delta = (dune_actuators(vessel, values[0], values[1]) if diff
                     else dune_actuators(vessel, values[0], servo=values[1]))  # fmt: skip
         return float(T), float(delta)
@@ -126,7 +126,9 @@ class Thrusters:
 @dataclass
 class ClockRate:
     """How fast the ASV's clock has run against the deploy's since the first ASV state: once
-    ``window_s`` s of the deploy clock have passed, a rate above ``ahead`` is reported (once).
+    ``window_s`` s of the deploy clock have passed, a rate above ``ahead`` is reported (once;
+    the most a real clock was seen to run ahead is 1.25, a DUNE clock step within
+    ``clock_slack_s``).
     A SITL run with ``--speedup 5`` against a deploy whose ``[clock] speedup`` was left at 1
     decided on time stamps five times faster than its own clock, its staleness limits and
     ``--duration`` in another unit, and said nothing (a new user's finding, session 41). Taken
@@ -136,7 +138,7 @@ class ClockRate:
     vehicle's silence is ``asv_stale``)."""
 
     window_s: float = 20.0
-    ahead: float = 2.0
+    ahead: float = 1.5
     ref: tuple[float, float] | None = None  # (ASV state time, deploy clock) at the start
     said: bool = False
 

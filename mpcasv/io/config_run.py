@@ -33,6 +33,10 @@ class ControllerSpec:
     vessel: str | None = None
     # feed the learned achievable speed back into the controller's 'speed' (config.SpeedSpec)
     speed_feedback: Flag = False
+    # the observation's actuators from DUNE's set-points, thrust proportional to them
+    # (asvwatch.dune_actuators); false for a boat whose thrust is not (a vessel identified
+    # through DUNE's thruster map, as dune-otter): the controller then does without
+    actuator_feedback: Flag = True
 
     @field_validator("control_period")
     @classmethod

@@ -143,6 +143,7 @@ class Deploy(Phases, BoatFeedback, FieldMode, Ending):
             self.plan_request: int | None = None  # request id of the running FollowReference
             self.plan_done = asyncio.Event()
             self._propeller_note: str | None = None
+            self._actuators_said = False  # actuators_unknown reported
             self._cpu0, self._wall0 = time.process_time(), time.monotonic()
             self._load_mark = (self._cpu0, self._wall0, 0)
             self.followref: dict | None = None

@@ -61,14 +61,28 @@ class BoatFeedback:
         return {"cpu_s": cpu, "wall_s": wall, "cpu_fraction": cpu / wall if wall > 0 else None,
                 "datagrams": n, "datagrams_per_s": n / wall if wall > 0 else None}  # fmt: skip
 
+    def _transit_commanded(self) -> bool:
+        return self.last_cmd is not None and self.last_cmd.mode is Mode.TRANSIT
+
     def actuators(self, now: float) -> tuple[float, float] | None:
         """The model's thrust and steering from DUNE's set-points (:meth:`mpcasv.io.asvwatch.
-        Thrusters.actuators`, by the deploy vessel's actuation); None with ``watchdog.
-        propeller = "command"`` (the thruster messages are not read)."""
-        if self.cfg.watchdog.propeller != "thruster":
+        Thrusters.actuators`, by the deploy vessel's actuation); None with ``controller.
+        actuator_feedback = false`` or ``watchdog.propeller = "command"`` (the thruster
+        messages are not read). The first transit decision without them is reported
+        (event ``actuators_unknown``, with the ids heard: a servo that is not id 0, a
+        differential boat's second thruster never heard, the wrong vessel actuation)."""
+        if not self.cfg.controller.actuator_feedback or self.cfg.watchdog.propeller != "thruster":
             return None
-        transit = self.last_cmd is not None and self.last_cmd.mode is Mode.TRANSIT
-        return self.thrusters.actuators(now, self.vessel, transit)
+        transit = self._transit_commanded()
+        act = self.thrusters.actuators(now, self.vessel, transit)
+        if act is None and transit and not self._actuators_said:
+            self._actuators_said = True
+            self.event("actuators_unknown", actuation=self.vessel.actuation,
+                       thrusters=sorted(self.thrusters.last), servos=sorted(self.thrusters.servos),
+                       note="no fresh set-points for the vessel's actuation (steerable: thruster "
+                       "0 and servo 0; differential: thrusters 0 and 1): the controller does "
+                       "without")  # fmt: skip
+        return act
 
     def _usbl_fix(self, p, msg) -> None:
         """The ASV's USBL fixed an AUV (``target``: its system name) at the message's time on
@@ -80,12 +94,17 @@ class BoatFeedback:
         that name is reported once (event ``usbl_fix_unknown``) and counted."""
         t = msg.timestamp - p.track.offset
         nav = p.nav
-        latest = (-math.inf if nav is None
-                  else nav.t + (self.clock.now() - p.nav_recv) + self.cfg.watchdog.clock_slack_s)
-        if p.track.chain or t > latest:
+        if nav is None:
+            raise BadInput("usbl_fix_time", f"UsblFixExtended for {msg.target!r} before the "
+                           "ASV's first state (its clock not known yet)")  # fmt: skip
+        latest = nav.t + (self.clock.now() - p.nav_recv) + self.cfg.watchdog.clock_slack_s
+        # a forward step being checked (a reordered or repeated state starts a chain too,
+        # behind the accepted time: that one leaves the time base as it is)
+        stepping = any(s.t > nav.t for s, _ in p.track.chain)
+        if stepping or t > latest:
             raise BadInput("usbl_fix_time",
                            f"UsblFixExtended for {msg.target!r} stamped {t:.3f} s: "
-                           + ("the ASV's clock is in a step check" if p.track.chain else
+                           + ("the ASV's clock is in a step check" if stepping else
                               f"later than the ASV's clock can be ({latest:.3f} s)"))  # fmt: skip
         names = [a.name or a.spec.name for a in self.link.auvs]
         if self.usbl.fix(msg.target, t, names) is None and self.usbl.unmatched.get(msg.target) == 1:
@@ -96,7 +115,7 @@ class BoatFeedback:
         stretch: ``thruster_stale`` (a transit commanded, the thrusters silent) and
         ``propeller_assumed`` (no thruster message: propeller-off assumed from our command,
         as in standby, when DUNE's loops are off and it sends none)."""
-        transit = self.last_cmd is not None and self.last_cmd.mode is Mode.TRANSIT
+        transit = self._transit_commanded()
         if self.cfg.watchdog.propeller == "command":
             return transit, "command"
         on, source, stale = self.thrusters.propeller(now, transit)

@@ -123,7 +123,7 @@ class ImcLink(PeerDirectory):
         self.relayed: Counter[str] = Counter()
         self.sent: Counter[str] = Counter()
         #: systems that announced themselves and are no configured vehicle: name -> IMC id
-        #: (at most 20; for the run's "no decision" line: a misspelt name, say)
+        #: (at most peers.MAX_STRANGERS; for the run's "no decision" line: a misspelt name)
         self.strangers: dict[str, int] = {}
         self.datagrams = 0  # received, all sockets
         #: TCP: the last failed connection, ``(vehicle label, error)``; None: none failed

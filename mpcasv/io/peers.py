@@ -20,6 +20,9 @@ from mpcasv.io.imc import BROADCAST, BadInput, NavState, udp_services
 from mpcasv.io.statecheck import StateTrack
 from mpcasv.io.transport import Clock, TcpStream
 
+#: systems that announced and are no configured vehicle, kept by name (``ImcLink.strangers``)
+MAX_STRANGERS = 20
+
 __all__ = ["Peer", "PeerDirectory"]
 
 Addr = tuple[str, int]
@@ -137,7 +140,7 @@ class PeerDirectory:
         if p is None:
             p = self._peer_by_id(msg.src)
             if p is None or p.spec.name:  # unknown id, or a configured name that differs
-                if len(self.strangers) < 20 or msg.sys_name in self.strangers:
+                if len(self.strangers) < MAX_STRANGERS or msg.sys_name in self.strangers:
                     self.strangers[msg.sys_name] = msg.src
                 named = f" (0x{msg.src:04X} is configured as {p.spec.name!r})" if p else ""
                 raise BadInput("unknown_sender",

@@ -206,18 +206,20 @@ class Sitl(AsvDune):
             self.loops_on = loops
             self.asv.publish(self._es(self.asv, self._nav_asv(x)))
 
-    def write_acoustics(self) -> None:
+    def write_acoustics(self) -> dict:
         """``<out>/acoustics.toml``: the world's acoustic channel (the scenario's, drawn for
         the seed) as the deploy configuration's ``[acoustics]`` table, which an MPC plans
-        its fixes with; ``mpcasv simulate`` of the same scenario and seed plans with it."""
+        its fixes with; ``mpcasv simulate`` of the same scenario and seed plans with it.
+        Returns the table (for the ready information)."""
         import tomli_w
 
         head = ("# the acoustic channel of this SITL's world (scenario "
                 f"{self.sc.name!r}, seed {self.opt.seed}): paste into the deploy "
                 "configuration\n# so that an MPC plans with it, as mpcasv simulate of the same "
                 "scenario and seed does\n")  # fmt: skip
-        text = tomli_w.dumps({"acoustics": dataclasses.asdict(self.sc.acoustics)})
-        (self.opt.out / "acoustics.toml").write_text(head + text)
+        channel = dataclasses.asdict(self.sc.acoustics)
+        (self.opt.out / "acoustics.toml").write_text(head + tomli_w.dumps({"acoustics": channel}))
+        return channel
 
     # --- outages -----------------------------------------------------------------------------
     def kill_asv(self) -> None:
@@ -262,9 +264,8 @@ class Sitl(AsvDune):
                           "address": f"{o.bind}:{v.port}",
                           "tcp": f"{o.bind}:{v.tcp_port}" if o.tcp else None}
                          for v in self.vehicles],
-            "acoustics": dataclasses.asdict(self.sc.acoustics),
+            "acoustics": self.write_acoustics(),
         }  # fmt: skip
-        self.write_acoustics()
         self.event("ready", **ready)
         if o.ready_file is not None:
             tmp = Path(f"{o.ready_file}.tmp")
