@@ -87,10 +87,11 @@ class BoatFeedback:
     def _usbl_fix(self, p, msg) -> None:
         """The ASV's USBL fixed an AUV (``target``: its system name) at the message's time on
         the ASV's clock (corrected as its states are). Rejected (``usbl_fix_time``): a fix
-        while a step of the ASV's clock is being checked (its time base is in doubt), or
-        stamped later than the ASV's clock can be now (its last state's time, plus the time
-        since that state arrived, plus ``clock_slack_s``): a future time would be held as
-        the latest fix and hide the real ones after it. A target that is no AUV known by
+        before the ASV's first state, one while a forward step of the ASV's clock is being
+        checked (its time base is in doubt), or one stamped later than the ASV's clock can be
+        now (its last state's time, plus the time since that state arrived, plus
+        ``clock_slack_s``): a future time would be held as the latest fix and hide the real
+        ones after it. A target that is no AUV known by
         that name is reported once (event ``usbl_fix_unknown``) and counted."""
         t = msg.timestamp - p.track.offset
         nav = p.nav
