@@ -342,3 +342,26 @@ def test_replay_refuses_an_impossible_option(option, value, tmp_path, capsys):
     out = tmp_path / "r.jsonl"
     _refused(["replay", tmp_path, option, value, "--json", out], capsys, option, value)
     assert not out.exists()
+
+
+def test_waiting_names_who_announced_but_is_not_configured(tmp_path):
+    """While the deploy waits for a misnamed AUV, its 'waiting' event (on the console) names
+    the system that announced instead, not only the run's last line (a new user's finding,
+    session 41: without --duration an operator waited blind)."""
+    from test_io_cases import _dune_announce, dry_deploy
+
+    from mpcasv.io.logs import read_jsonl
+
+    dep, clock = dry_deploy(tmp_path, vehicle=[
+        {"role": "asv", "id": 0x2801, "address": "10.0.10.50:6002"},
+        {"role": "auv", "name": "auv", "id": 0x2811}])  # fmt: skip
+    dep.watch()
+    dep.link.handle_datagram(_dune_announce(clock, "sitl-auv", 0x2811,
+                                            "imc+udp://10.0.10.60:6002/"), ("10.0.10.60", 47000))
+    dep.watch()
+    dep.jsonl.flush()
+    waiting = [e for e in read_jsonl(tmp_path / "deploy.jsonl", "event")
+               if e["event"] == "waiting"]  # fmt: skip
+    assert "announced_not_configured" not in waiting[0]
+    assert waiting[-1]["announced_not_configured"] == {"sitl-auv": "0x2811"}
+    dep.close()

@@ -69,9 +69,13 @@ class Phases:
             missing.append(self.link.asv.label)
         missing += [p.label for p in self.link.auvs if p.nav is None]
         if missing:
-            if tuple(missing) != self._waiting_for:
-                self._waiting_for = tuple(missing)
-                self.event("waiting", missing=missing)
+            strangers = {n: f"0x{i:04X}" for n, i in self.link.strangers.items()}
+            if (tuple(missing), tuple(strangers)) != self._waiting_for:
+                self._waiting_for = (tuple(missing), tuple(strangers))
+                # who announced but is no configured vehicle: a misspelt name, said while
+                # waiting, not only in the run's last line (a new user's finding, session 41)
+                self.event("waiting", missing=missing,
+                           **({"announced_not_configured": strangers} if strangers else {}))
             return
         if self.dry_run:
             self.phase, self.t_next = RUNNING, -math.inf
