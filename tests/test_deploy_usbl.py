@@ -198,7 +198,7 @@ def test_the_sitl_asv_sends_a_fix_message_per_world_fix():
     tick being published; none before the world starts and none while its DUNE is down."""
     from types import SimpleNamespace
 
-    from mpcasv.io.sitlasv import AsvDune
+    from mpcasv.io.sitlpublish import Publishing
     from mpcasv.models.acoustics import Fix
 
     sent = []
@@ -215,13 +215,13 @@ def test_the_sitl_asv_sends_a_fix_message_per_world_fix():
                            world=SimpleNamespace(fixes=[fixes]),
                            asv=Vehicle(alive=True), auvs=[Vehicle(index=0, name="sitl-auv")])
     sitl.now = lambda: sitl.tick
-    AsvDune.publish_fixes(sitl)  # the world has not started
+    Publishing.publish_fixes(sitl)  # the world has not started
     sitl.ts_offset, sitl.tick = 1000.0, 1005.0
-    AsvDune.publish_fixes(sitl)
+    Publishing.publish_fixes(sitl)
     assert sent == [("sitl-auv", 1001.0, 20.0), ("sitl-auv", 1005.0, 20.0)]
     sitl.asv.alive, sitl.tick = False, 1010.0  # its DUNE down: the fix is lost
-    AsvDune.publish_fixes(sitl)
-    AsvDune.publish_fixes(sitl)
+    Publishing.publish_fixes(sitl)
+    Publishing.publish_fixes(sitl)
     assert len(sent) == 2 and sitl.fixes_sent == [3]
 
 

@@ -14,7 +14,7 @@ Each vehicle has its own UDP socket (its ``imc+udp`` service) and IMC id. Like D
   Otter in HOVER or standby): SetThrusterActuation (thrust / T_max) id 0 and SetServoPosition
   id 0 (the steering angle, rad) for a steerable drive, SetThrusterActuation ids 0 (port) and
   1 (starboard) for two fixed thrusters (:func:`mpcasv.io.asvwatch.dune_set_points`), and a
-  UsblFixExtended per USBL fix of the world (:mod:`mpcasv.io.sitlasv`);
+  UsblFixExtended per USBL fix of the world (:mod:`mpcasv.io.sitlpublish`);
 - announce from a socket of their own (not the ``imc+udp`` port) and relay Heartbeats and
   PlanControls back to the systems they stream to, our own included (as DUNE);
 - the ASV answers PlanControl START with a FollowReference argument (SUCCESS "plan loaded"
@@ -72,16 +72,15 @@ import imcpy
 import numpy as np
 
 from mpcasv.interface import Command, Mode, Reason
-from mpcasv.io.asvwatch import dune_set_points
 from mpcasv.io.dune import FollowRefManeuver
-from mpcasv.io.geo import Origin, to_local, to_wgs84
-from mpcasv.io.imc import BadInput, NavState, decode, estimated_state, udp_services
+from mpcasv.io.geo import Origin
+from mpcasv.io.imc import BadInput, decode, udp_services
 from mpcasv.io.logs import JsonlWriter, LsfWriter
 from mpcasv.io.simvehicle import SimVehicle
 from mpcasv.io.sitlasv import AsvDune
 from mpcasv.io.sitloptions import SitlOptions
+from mpcasv.io.sitlpublish import Publishing
 from mpcasv.io.transport import Clock, UdpEndpoint
-from mpcasv.models.frames import body_to_ned
 from mpcasv.sim.scenario import Scenario
 
 __all__ = ["Sitl", "SitlOptions"]
@@ -91,7 +90,7 @@ Addr = tuple[str, int]
 ANNOUNCE_S = 10.0
 
 
-class Sitl(AsvDune):
+class Sitl(AsvDune, Publishing):
     """The SITL runner (see the module docstring)."""
 
     def __init__(self, scenario: Scenario, opt: SitlOptions) -> None:
@@ -149,62 +148,6 @@ class Sitl(AsvDune):
         self.jsonl.write({"kind": "event", "event": name, "t": self.now(),
                           "t_world": self.world.t} | info)  # fmt: skip
         log.info("%s %s", name, info)
-
-    def position(self, v: SimVehicle) -> tuple[float, float]:
-        if v.role == "asv":
-            return float(self.world.x[0]), float(self.world.x[1])
-        return float(self.world.S[0, v.index]), float(self.world.S[1, v.index])
-
-    # --- states ----------------------------------------------------------------------------
-    def _nav_asv(self, x: np.ndarray) -> NavState:
-        N, E, psi, u, v, r = (float(a) for a in x[:6])
-        vN, vE = body_to_ned(psi, u, v)
-        return NavState(self.now(), N, E, 0.0, psi, u, v, r, vN, vE, math.nan, math.nan)
-
-    def _nav_auv(self, S: np.ndarray, k: int) -> NavState:
-        N, E, d, psi, U = (float(a) for a in S[:, k])
-        return NavState(self.now(), N, E, d, psi, U, 0.0, 0.0, U * math.cos(psi),
-                        U * math.sin(psi), math.nan, math.nan)  # fmt: skip
-
-    def _es(self, v: SimVehicle, nav: NavState) -> imcpy.EstimatedState:
-        if v.anchor is None or math.hypot(*self._offset(v, nav)) > self.opt.reanchor_m:
-            lat, lon = to_wgs84(nav.N, nav.E, self.origin)
-            v.anchor = Origin(lat, lon, self.origin.height)
-        return estimated_state(nav, v.anchor, self.origin)
-
-    def _offset(self, v: SimVehicle, nav: NavState) -> tuple[float, float]:
-        lat, lon = to_wgs84(nav.N, nav.E, self.origin)
-        n, e, _ = to_local(lat, lon, v.anchor.height, v.anchor)
-        return n, e
-
-    def publish_states(self, mid: bool) -> None:
-        """AUVs first, then the ASV's thrust and state (a deploy loop that steps on the ASV's
-        state then has the AUVs' of the same instant)."""
-        w, P = self.world, self.period
-        if mid and P is not None:
-            j = w.n_sub // 2 - 1
-            x = P.X[:, j]
-            S = 0.5 * (self.prev_S + w.S)
-            S[3] = w.S[3]
-        else:
-            x, S = w.x, w.S
-        for v in self.auvs:
-            v.publish(self._es(v, self._nav_auv(S, v.index)))
-        self.publish_fixes()
-        if self.asv.alive:
-            loops = bool(self.command_vector()[0] > 0.5)
-            if loops or self.loops_on:  # as DUNE: one 0.0 when the loops stop, then none
-                thr, servos = dune_set_points(w.model.params, float(x[6]), float(x[7]))
-                for i, value in thr.items():
-                    th = imcpy.SetThrusterActuation()
-                    th.id, th.value = i, value if loops else 0.0
-                    self.asv.publish(th)
-                for i, value in servos.items():
-                    sp = imcpy.SetServoPosition()
-                    sp.id, sp.value = i, value if loops else 0.0
-                    self.asv.publish(sp)
-            self.loops_on = loops
-            self.asv.publish(self._es(self.asv, self._nav_asv(x)))
 
     def write_acoustics(self) -> dict:
         """``<out>/acoustics.toml``: the world's acoustic channel (the scenario's, drawn for

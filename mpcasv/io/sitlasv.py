@@ -1,19 +1,16 @@
 """The SITL ASV's side of DUNE (a mixin of :class:`mpcasv.io.sitl.Sitl`): PlanControl
 START FollowReference / STOP answered as recorded DUNE answers them, References fed to
-:class:`mpcasv.io.dune.FollowRefManeuver`, "plan completed" after MANDONE, the command
-vector the world advances with (zeros without a maneuver), and the UsblFixExtended of each
-USBL fix (DUNE's ``Transports/Evologics`` dispatches one per USBL position)."""
+:class:`mpcasv.io.dune.FollowRefManeuver`, "plan completed" after MANDONE, and the command
+vector the world advances with (zeros without a maneuver)."""
 
 from __future__ import annotations
 
-import math
 from typing import TYPE_CHECKING
 
 import imcpy
 import numpy as np
 
 from mpcasv.io.dune import FollowRefManeuver
-from mpcasv.io.imc import usbl_fix_extended
 
 if TYPE_CHECKING:
     from mpcasv.io.simvehicle import Node, SimVehicle
@@ -81,21 +78,3 @@ class AsvDune:
         if not self.asv.alive or self.maneuver is None:
             return np.zeros(4)
         return self.maneuver.command_vector()
-
-    def publish_fixes(self) -> None:
-        """The ASV's USBL fixes of the world up to this tick, each as the UsblFixExtended its
-        DUNE dispatches (``target`` the AUV's system name), stamped at the fix's own time:
-        what ``fix_age_source = "observed"`` reads in ``mpcasv deploy``. Fixes while the
-        ASV's DUNE is down are lost (none is sent)."""
-        if self.ts_offset is None:  # the world has not started
-            return
-        t_tick = self.now() - self.ts_offset
-        for v in self.auvs:
-            fixes = self.world.fixes[v.index]
-            while (self.fixes_sent[v.index] < len(fixes)
-                   and fixes[self.fixes_sent[v.index]].t <= t_tick + 1e-9):  # fmt: skip
-                f = fixes[self.fixes_sent[v.index]]
-                self.fixes_sent[v.index] += 1
-                self.asv.publish(usbl_fix_extended(v.name, f.N, f.E, f.depth,
-                                                   math.sqrt(f.cov[0] + f.cov[3]), self.origin),
-                                 t=self.ts_offset + f.t)  # fmt: skip

@@ -1,0 +1,99 @@
+"""What the SITL's vehicles send on their own, as DUNE's do (a mixin of
+:class:`mpcasv.io.sitl.Sitl`; its state lives there): the AUVs' and the ASV's EstimatedState
+(reference points re-anchored every ``--reanchor`` m), the ASV's actuator set-points while its
+loops run (:func:`mpcasv.io.asvwatch.dune_set_points`: SetThrusterActuation, SetServoPosition;
+one 0.0 each when they stop, then none) and a UsblFixExtended per USBL fix of the world
+(DUNE's ``Transports/Evologics`` dispatches one per USBL position)."""
+
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING
+
+import imcpy
+import numpy as np
+
+from mpcasv.io.asvwatch import dune_set_points
+from mpcasv.io.geo import Origin, to_local, to_wgs84
+from mpcasv.io.imc import NavState, estimated_state, usbl_fix_extended
+from mpcasv.models.frames import body_to_ned
+
+if TYPE_CHECKING:
+    from mpcasv.io.simvehicle import SimVehicle
+
+
+class Publishing:
+    """The vehicles' own messages, one tick at a time (:meth:`publish_states`)."""
+
+    def position(self, v: SimVehicle) -> tuple[float, float]:
+        if v.role == "asv":
+            return float(self.world.x[0]), float(self.world.x[1])
+        return float(self.world.S[0, v.index]), float(self.world.S[1, v.index])
+
+    def _nav_asv(self, x: np.ndarray) -> NavState:
+        N, E, psi, u, v, r = (float(a) for a in x[:6])
+        vN, vE = body_to_ned(psi, u, v)
+        return NavState(self.now(), N, E, 0.0, psi, u, v, r, vN, vE, math.nan, math.nan)
+
+    def _nav_auv(self, S: np.ndarray, k: int) -> NavState:
+        N, E, d, psi, U = (float(a) for a in S[:, k])
+        return NavState(self.now(), N, E, d, psi, U, 0.0, 0.0, U * math.cos(psi),
+                        U * math.sin(psi), math.nan, math.nan)  # fmt: skip
+
+    def _es(self, v: SimVehicle, nav: NavState) -> imcpy.EstimatedState:
+        if v.anchor is None or math.hypot(*self._offset(v, nav)) > self.opt.reanchor_m:
+            lat, lon = to_wgs84(nav.N, nav.E, self.origin)
+            v.anchor = Origin(lat, lon, self.origin.height)
+        return estimated_state(nav, v.anchor, self.origin)
+
+    def _offset(self, v: SimVehicle, nav: NavState) -> tuple[float, float]:
+        lat, lon = to_wgs84(nav.N, nav.E, self.origin)
+        n, e, _ = to_local(lat, lon, v.anchor.height, v.anchor)
+        return n, e
+
+    def publish_states(self, mid: bool) -> None:
+        """AUVs first, then the ASV's thrust and state (a deploy loop that steps on the ASV's
+        state then has the AUVs' of the same instant)."""
+        w, P = self.world, self.period
+        if mid and P is not None:
+            j = w.n_sub // 2 - 1
+            x = P.X[:, j]
+            S = 0.5 * (self.prev_S + w.S)
+            S[3] = w.S[3]
+        else:
+            x, S = w.x, w.S
+        for v in self.auvs:
+            v.publish(self._es(v, self._nav_auv(S, v.index)))
+        self.publish_fixes()
+        if self.asv.alive:
+            loops = bool(self.command_vector()[0] > 0.5)
+            if loops or self.loops_on:  # as DUNE: one 0.0 when the loops stop, then none
+                thr, servos = dune_set_points(w.model.params, float(x[6]), float(x[7]))
+                for i, value in thr.items():
+                    th = imcpy.SetThrusterActuation()
+                    th.id, th.value = i, value if loops else 0.0
+                    self.asv.publish(th)
+                for i, value in servos.items():
+                    sp = imcpy.SetServoPosition()
+                    sp.id, sp.value = i, value if loops else 0.0
+                    self.asv.publish(sp)
+            self.loops_on = loops
+            self.asv.publish(self._es(self.asv, self._nav_asv(x)))
+
+    def publish_fixes(self) -> None:
+        """The ASV's USBL fixes of the world up to this tick, each as the UsblFixExtended its
+        DUNE dispatches (``target`` the AUV's system name), stamped at the fix's own time:
+        what ``fix_age_source = "observed"`` reads in ``mpcasv deploy``. Fixes while the
+        ASV's DUNE is down are lost (none is sent)."""
+        if self.ts_offset is None:  # the world has not started
+            return
+        t_tick = self.now() - self.ts_offset
+        for v in self.auvs:
+            fixes = self.world.fixes[v.index]
+            while (self.fixes_sent[v.index] < len(fixes)
+                   and fixes[self.fixes_sent[v.index]].t <= t_tick + 1e-9):  # fmt: skip
+                f = fixes[self.fixes_sent[v.index]]
+                self.fixes_sent[v.index] += 1
+                self.asv.publish(usbl_fix_extended(v.name, f.N, f.E, f.depth,
+                                                   math.sqrt(f.cov[0] + f.cov[3]), self.origin),
+                                 t=self.ts_offset + f.t)  # fmt: skip
