@@ -148,12 +148,6 @@ class MPCController(WorldView, Safety, PlanOutput, Targeting, SpeedCap, Carry, S
         #: simulation's hang guard (:meth:`use_hang_guard`); None: in this process
         self.deadline: DeadlineSolver | None = None
         self._hang_guard = False
-        #: ``current = "oracle"``: the simulator puts the true current into the observations
-        self.needs_current_oracle = params.needs_current_oracle
-        #: the ASV's own USBL fix times in every observation (``fix_age_source =
-        #: "observed"``, M2o; the simulator's and, from DUNE's UsblFixExtended, the deploy's;
-        #: not an older deploy log's, which ``mpcasv replay`` then refuses)
-        self.needs_usbl_fixes = params.needs_usbl_fixes
         self._setup(n_auv)
         self.reset(n_auv)
         warn_course_unstable(self.ocp)
@@ -173,6 +167,19 @@ class MPCController(WorldView, Safety, PlanOutput, Targeting, SpeedCap, Carry, S
                                                         avoidance=P.avoidance))  # fmt: skip
         else:
             self.hybrid = HybridSingle(HybridSingleParams(P.domain, P.speed, P.avoidance))
+
+    @property
+    def needs_current_oracle(self) -> bool:
+        """``current = "oracle"``: the simulator puts the true current into the observations
+        (:attr:`MPCParams.needs_current_oracle`)."""
+        return self.params.needs_current_oracle
+
+    @property
+    def needs_usbl_fixes(self) -> bool:
+        """The ASV's own USBL fix times in every observation (``fix_age_source =
+        "observed"``, M2o; the simulator's and, from DUNE's UsblFixExtended, the deploy's;
+        not an older deploy log's, which ``mpcasv replay`` then refuses)."""
+        return self.params.needs_usbl_fixes
 
     def reset(self, n_auv: int) -> None:
         if not self.multi and n_auv != 1:

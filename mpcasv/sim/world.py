@@ -167,9 +167,9 @@ class World:
         self.last_fix = np.zeros(n)  # the AUVs start with a known position at t = 0
         self.last_reliable = np.zeros(n)
         self.stay = 0.0  # ongoing continuous stay inside a collision domain (s)
-        self.fix_times: list[list[float]] = [[] for _ in range(n)]
         self.reliable_times: list[list[float]] = [[] for _ in range(n)]
-        #: every USBL fix as measured (mpcasv sitl's ASV sends them as DUNE's UsblFixExtended)
+        #: every USBL fix as measured (its times: :attr:`fix_times`; mpcasv sitl's ASV sends
+        #: them as DUNE's UsblFixExtended)
         self.fixes: list[list[Fix]] = [[] for _ in range(n)]
         self.energy_J = 0.0
         self.min_range = self.min_slant = math.inf
@@ -191,6 +191,11 @@ class World:
         N, E, d, psi, U = self.S[:, k]
         c = self.C_auv[:, k]
         return N, E, d, U * math.cos(psi) + c[0], U * math.sin(psi) + c[1]
+
+    @property
+    def fix_times(self) -> list[list[float]]:
+        """The times (s) of every successful USBL fix, per AUV (of :attr:`fixes`)."""
+        return [[f.t for f in fk] for fk in self.fixes]
 
     def current_at_asv(self) -> tuple[float, float]:
         """The true current (V_N, V_E) at the ASV now (m/s): the field at this time and
@@ -296,7 +301,6 @@ class World:
                         self.nav.update(k, t1, v, np.reshape(fix.cov, (2, 2)))
                     fixes[k] += 1
                     self.fixes[k].append(fix)
-                    self.fix_times[k].append(t1)
                     self.last_fix[k] = t1
                     if visiting[k]:
                         reliable[k] += 1
