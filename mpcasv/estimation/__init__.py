@@ -7,6 +7,7 @@ from mpcasv.estimation.base import (
     StationaryEstimator,
     make_estimator,
 )
+from mpcasv.estimation.in_order import InOrder
 from mpcasv.estimation.kalman import KalmanEstimator, KalmanParams
 from mpcasv.estimation.plan import PlanEstimator, PlanParams
 from mpcasv.estimation.survey_plan import (
@@ -20,6 +21,7 @@ from mpcasv.estimation.survey_plan import (
 __all__ = [
     "ESTIMATORS",
     "AUVEstimator",
+    "InOrder",
     "KalmanEstimator",
     "KalmanParams",
     "KnownPlan",

@@ -160,6 +160,8 @@ class ClockRate:
 
 #: distinct unmatched USBL targets kept by name (:class:`UsblFixes`)
 MAX_UNMATCHED = 20
+#: fix times remembered per AUV to recognise a duplicated datagram (:class:`UsblFixes`)
+RECENT_FIXES = 32
 
 
 @dataclass
@@ -169,17 +171,37 @@ class UsblFixes:
     ``times`` starts at ``-inf`` (no fix yet); ``counts`` the fixes per AUV that were newer
     than the one held (a duplicate or reordered one is not counted); ``unmatched`` the fixes
     of targets whose name is none of the AUVs', by name (at most :data:`MAX_UNMATCHED` names,
-    the rest under ``"(other)"``).
+    the rest under ``"(other)"``). ``positions`` counts the fixes whose position went to the
+    AUV's estimator (:meth:`take_position`: every distinct fix, a reordered one too) and
+    ``recv`` is the deploy clock (s) when the last of them arrived (``-inf``: none), which
+    keeps the AUV seen for the watchdogs as its own states do.
     """
 
     n: int
     times: list[float] = field(default_factory=list)
     counts: list[int] = field(default_factory=list)
     unmatched: dict[str, int] = field(default_factory=dict)
+    positions: list[int] = field(default_factory=list)
+    recv: list[float] = field(default_factory=list)
+    _recent: list[deque] = field(default_factory=list)
 
     def __post_init__(self) -> None:
         self.times = self.times or [-math.inf] * self.n
         self.counts = self.counts or [0] * self.n
+        self.positions = self.positions or [0] * self.n
+        self.recv = self.recv or [-math.inf] * self.n
+        self._recent = [deque(maxlen=RECENT_FIXES) for _ in range(self.n)]
+
+    def take_position(self, k: int, t: float, now: float) -> bool:
+        """Whether AUV ``k``'s fix stamped ``t`` is one not taken yet (of the last
+        :data:`RECENT_FIXES`): then it is counted and ``recv[k] = now``. A datagram
+        delivered twice would otherwise update the estimator twice with one measurement."""
+        if t in self._recent[k]:
+            return False
+        self._recent[k].append(t)
+        self.positions[k] += 1
+        self.recv[k] = max(self.recv[k], now)
+        return True
 
     def fix(self, target: str, t: float, names: list[str | None]) -> int | None:
         """A fix of system ``target`` stamped ``t`` (s, the ASV's clock corrected), ``names``

@@ -116,6 +116,11 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="wait for the Reference answering each period's state however long it "
                    "takes (rehearsals compared with 'mpcasv simulate' on a loaded host; a real "
                    "DUNE does not wait)")  # fmt: skip
+    s.add_argument("--auv-states", choices=("radio", "acoustic"), default="radio",
+                   help="the AUVs' EstimatedStates: 'radio' at 2 Hz (default), or 'acoustic': "
+                   "the true state at t = 0, then only the world's status reports that got "
+                   "through (AUVs under water: a deploy then also needs the ASV's USBL fixes, "
+                   "estimator 'kalman')")  # fmt: skip
     s.add_argument("--reanchor", type=_positive, default=1000.0,
                    help="EstimatedState reference point moves every this many m")  # fmt: skip
     s.add_argument("--asv-name", default="sitl-asv")
@@ -178,7 +183,7 @@ def run_sitl_cli(args: argparse.Namespace) -> int:
         duration=args.duration, hold=args.hold, reaction=args.reaction, lockstep=args.lockstep,
         reanchor_m=args.reanchor, asv_name=args.asv_name, asv_id=args.asv_id,
         auv_id_base=args.auv_id_base, tcp=args.tcp, asv_outage=args.asv_outage,
-        out=args.out, plots=args.plots, ready_file=args.ready_file,
+        out=args.out, plots=args.plots, ready_file=args.ready_file, auv_states=args.auv_states,
     ).check(sc)  # fmt: skip
     check_output_folder(args.out)
     if args.ready_file is not None:

@@ -50,7 +50,7 @@ from pathlib import Path
 import imcpy
 
 from mpcasv.config import ConfigError
-from mpcasv.estimation import make_estimator
+from mpcasv.estimation import InOrder, make_estimator
 from mpcasv.interface import ASVState, Command, Mode, Observation
 from mpcasv.io.asvwatch import ClockRate, SpeedWatch, Thrusters, UsblFixes
 from mpcasv.io.config import DeployConfig, build_controller, load_deploy_config
@@ -117,7 +117,8 @@ class Deploy(Phases, BoatFeedback, FieldMode, Ending):
             self.init_field_mode(solver_factory)  # before any socket is opened
             self.domain = getattr(self.controller, "domain", None)
             plans = known_plans(cfg)
-            self.estimators = [make_estimator(c.estimator, initial=None, plan=plans[k])
+            # in time order: the ASV's USBL fixes arrive after AUV states stamped later
+            self.estimators = [InOrder(make_estimator(c.estimator, initial=None, plan=plans[k]))
                                for k in range(self.n_auv)]  # fmt: skip
             self.log_dir = Path(log_dir or cfg.log.dir)
             self.lsf = LsfWriter(self.log_dir / "imc.lsf")
@@ -144,6 +145,7 @@ class Deploy(Phases, BoatFeedback, FieldMode, Ending):
             self.plan_done = asyncio.Event()
             self._propeller_note: str | None = None
             self._actuators_said = False  # actuators_unknown reported
+            self._fix_depth_said = False  # usbl_fix_depth reported
             self._cpu0, self._wall0 = time.process_time(), time.monotonic()
             self._load_mark = (self._cpu0, self._wall0, 0)
             self.followref: dict | None = None
@@ -249,9 +251,16 @@ class Deploy(Phases, BoatFeedback, FieldMode, Ending):
         else:
             self.step(ts, now)
 
+    def auv_ages(self, now: float) -> list[float]:
+        """Each AUV's age (s, deploy clock) for the watchdogs: since its last accepted state
+        or, when the estimator takes them, the last USBL fix whose position it took
+        (:attr:`UsblFixes.recv`): an AUV out of radio contact under water is seen by the
+        ASV's USBL."""
+        return [now - max(p.nav_recv, self.usbl.recv[k]) for k, p in enumerate(self.link.auvs)]
+
     def observation(self, ts: float, now: float) -> tuple[Observation, list[str], list[float]]:
         """The Observation at ASV-state time ``ts`` with the watchdogs' verdicts."""
-        ages = [now - p.nav_recv for p in self.link.auvs]
+        ages = self.auv_ages(now)
         status = [auv_status(a, self.gp) for a in ages]
         ests = []
         for k, est in enumerate(self.estimators):

@@ -59,6 +59,9 @@ class Ending:
                    "plan_completed": self.plan_done.is_set(), "load": self.load(),
                    "heard": self.heard(), "usbl_fixes": list(self.usbl.counts),
                    "usbl_fixes_unmatched": dict(self.usbl.unmatched),
+                   "usbl_fix_positions": list(self.usbl.positions),
+                   "estimator_reordered": [e.reordered for e in self.estimators],
+                   "estimator_dropped": [e.dropped for e in self.estimators],
                    **self.link.counters()}  # fmt: skip
         why = self.no_decision(self.clock.now() - self.t_started)
         if why is not None:

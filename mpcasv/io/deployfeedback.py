@@ -11,8 +11,14 @@ import dataclasses
 import math
 import time
 
+import imcpy
+import numpy as np
+
 from mpcasv.interface import Mode
+from mpcasv.io.geo import to_local
 from mpcasv.io.imc import BadInput
+from mpcasv.io.watchdog import OK
+from mpcasv.models.acoustics import Fix, usbl_geometry
 
 __all__ = ["BoatFeedback", "cap_command", "cap_controller_speed"]
 
@@ -50,7 +56,8 @@ def cap_command(cmd, speed_cap: float | None, command_max: float | None):
 
 class BoatFeedback:
     """Mixin of :class:`mpcasv.io.deploy.Deploy` (uses its ``cfg``, ``link``, ``controller``,
-    ``thrusters``, ``speed``, ``last_cmd`` and ``event``)."""
+    ``thrusters``, ``speed``, ``usbl``, ``estimators``, ``status``, ``last_cmd`` and
+    ``event``)."""
 
     def load(self, since: tuple[float, float, int] | None = None) -> dict:
         """The deploy's own CPU use and input rate since ``since`` (default: the start):
@@ -108,8 +115,47 @@ class BoatFeedback:
                            + ("the ASV's clock is in a step check" if stepping else
                               f"later than the ASV's clock can be ({latest:.3f} s)"))  # fmt: skip
         names = [a.name or a.spec.name for a in self.link.auvs]
-        if self.usbl.fix(msg.target, t, names) is None and self.usbl.unmatched.get(msg.target) == 1:
-            self.event("usbl_fix_unknown", vehicle=p.label, target=msg.target, auvs=names)
+        k = self.usbl.fix(msg.target, t, names)
+        if k is None:
+            if self.usbl.unmatched.get(msg.target) == 1:
+                self.event("usbl_fix_unknown", vehicle=p.label, target=msg.target, auvs=names)
+            return
+        if self.cfg.controller.estimator != "perfect" and \
+                self.usbl.take_position(k, t, self.clock.now()):  # fmt: skip
+            self.estimators[k].on_fix(self._fix(k, msg, t, nav))
+            if self.status[k] not in (OK, "missing"):  # seen again, by the ASV's USBL
+                self.event("auv_fresh", vehicle=self.link.auvs[k].label, auv=k,
+                           was=self.status[k], by="usbl_fix")  # fmt: skip
+                self.status[k] = OK
+
+    def _fix(self, k: int, msg, t: float, asv) -> Fix:
+        """The :class:`~mpcasv.models.acoustics.Fix` of AUV ``k`` a UsblFixExtended ``msg``
+        (stamped ``t``, the ASV's corrected clock) gives, for its estimator as the
+        simulator's fixes are (:meth:`mpcasv.sim.world.World._acoustics`): ``lat``/``lon``
+        (rad) to N, E about the link's origin; the depth ``z`` if in DEPTH units (DUNE's
+        ``UsblTools::toFix``: the ASV's depth plus the USBL's down offset), else the AUV's
+        last reported depth (event ``usbl_fix_depth`` once); the covariance from
+        ``accuracy`` (m) taken as the horizontal RMS error, ``accuracy^2 / 2`` on each axis
+        (the SITL sends ``sqrt(trace R)``), or, where DUNE leaves it 0, thesis eq. 2.9 with
+        the deploy's ``[acoustics]`` seen from the ASV's last state ``asv``
+        (:func:`~mpcasv.models.acoustics.usbl_geometry`)."""
+        N, E, _ = to_local(msg.lat, msg.lon, self.link.origin.height, self.link.origin)
+        if msg.z_units == imcpy.ZUnits.DEPTH and math.isfinite(msg.z):
+            depth = float(msg.z)
+        else:
+            auv = self.link.auvs[k].nav
+            depth = auv.depth if auv is not None else 0.0
+            if not self._fix_depth_said:
+                self._fix_depth_said = True
+                self.event("usbl_fix_depth", target=msg.target, z_units=str(msg.z_units),
+                           depth=depth, note="not a depth: the AUV's last reported depth "
+                           "is used (0 before its first state)")  # fmt: skip
+        _, _, _, R, slant = usbl_geometry((asv.N, asv.E), (N, E, depth), self.cfg.acoustics)
+        acc = float(msg.accuracy)
+        if math.isfinite(acc) and acc > 0:
+            R = np.eye(2) * acc**2 / 2
+        cov = (float(R[0, 0]), float(R[0, 1]), float(R[1, 0]), float(R[1, 1]))
+        return Fix(t, k, N, E, depth, cov, slant)
 
     def _propeller_on(self, now: float) -> tuple[bool, str]:
         """(propeller on, source): :class:`mpcasv.io.asvwatch.Thrusters`; reported once per

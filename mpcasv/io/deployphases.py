@@ -55,7 +55,8 @@ class Phases:
         asv = self.link.asv
         if asv.nav is not None and self.phase != ASV_STALE and not self._asv_fresh(now):
             return True
-        return any(p.nav is not None and auv_status(now - p.nav_recv, self.gp) != self.status[k]
+        ages = self.auv_ages(now)
+        return any(p.nav is not None and auv_status(ages[k], self.gp) != self.status[k]
                    for k, p in enumerate(self.link.auvs))  # fmt: skip
 
     def _asv_fresh(self, now: float) -> bool:
@@ -137,13 +138,13 @@ class Phases:
             self.phase, self.pending = ASV_STALE, None
             self.stale_events += 1
             self.stale_mark = asv.nav.t + (now - asv.nav_recv)  # the ASV's clock, now
-        for k, p in enumerate(self.link.auvs):
+        for k, (p, age) in enumerate(zip(self.link.auvs, self.auv_ages(now), strict=True)):
             if p.nav is None:
                 continue
-            st = auv_status(now - p.nav_recv, self.gp)
+            st = auv_status(age, self.gp)
             if st != self.status[k]:
                 if st != OK:
-                    self.event(f"auv_{st}", vehicle=p.label, auv=k, age_s=now - p.nav_recv)
+                    self.event(f"auv_{st}", vehicle=p.label, auv=k, age_s=age)
                 self.status[k] = st
         if self.phase == STARTING and now - self.pending[1] > self.cfg.link.plan_start_timeout:
             self.event("plan_start_timeout", request_id=self.pending[0])

@@ -133,6 +133,7 @@ class Sitl(AsvDune, Publishing):
         self.held = opt.hold
         self.loops_on = False  # the ASV's control loops ran at the last published state
         self.fixes_sent = [0] * len(self.auvs)  # the world's USBL fixes sent, per AUV
+        self.reports_sent = [0] * len(self.auvs)  # its status reports (--auv-states acoustic)
         self.epoch = 0.0
         self.n = 0
 

@@ -38,6 +38,10 @@ REACTION = 0.9
 IMC_ID_MAX = 0xFFFE  # 0xFFFF is broadcast
 
 
+#: what the SITL's AUVs send as EstimatedState (:attr:`SitlOptions.auv_states`)
+AUV_STATES = ("radio", "acoustic")
+
+
 def check_speedup(speedup: float, what: str = "--speedup") -> float:
     """``speedup`` if it is a number in ``[SPEEDUP_MIN, SPEEDUP_MAX]``; else ConfigError."""
     if not SPEEDUP_MIN <= speedup <= SPEEDUP_MAX:  # nan fails too
@@ -70,6 +74,10 @@ class SitlOptions:
     out: Path = Path("runs/sitl")
     plots: bool = False
     ready_file: Path | None = None
+    #: the AUVs' EstimatedStates: ``radio`` at 2 Hz (at the surface, as DUNE over Wi-Fi), or
+    #: ``acoustic``: the true state at t = 0, then only the world's status reports that got
+    #: through (under water: position with the AUV's own navigation error), stamped at theirs
+    auv_states: str = "radio"
 
     @staticmethod
     def auv_name(name: str) -> str:
@@ -105,6 +113,8 @@ class SitlOptions:
         if not (-90 <= lat <= 90 and -180 <= lon <= 180):  # nan fails too
             raise ConfigError(f"--origin {lat:g},{lon:g}: 'lat,lon' in degrees, latitude in "
                               "[-90, 90] and longitude in [-180, 180]")  # fmt: skip
+        if self.auv_states not in AUV_STATES:
+            raise ConfigError(f"--auv-states {self.auv_states!r}: one of {', '.join(AUV_STATES)}")
         check_ipv4(self.bind, "--bind")
         check_port(self.discovery_port, "--discovery-port")
         n = len(auv_names)

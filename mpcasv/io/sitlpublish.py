@@ -62,8 +62,11 @@ class Publishing:
             S[3] = w.S[3]
         else:
             x, S = w.x, w.S
-        for v in self.auvs:
-            v.publish(self._es(v, self._nav_auv(S, v.index)))
+        if self.opt.auv_states == "radio" or w.t == 0:
+            for v in self.auvs:
+                v.publish(self._es(v, self._nav_auv(S, v.index)))
+        else:
+            self.publish_reports()
         self.publish_fixes()
         if self.asv.alive:
             loops = bool(self.command_vector()[0] > 0.5)
@@ -79,6 +82,23 @@ class Publishing:
                     self.asv.publish(sp)
             self.loops_on = loops
             self.asv.publish(self._es(self.asv, self._nav_asv(x)))
+
+    def publish_reports(self) -> None:
+        """``--auv-states acoustic``: each AUV's status reports of the world up to this tick
+        that got through, each as its EstimatedState stamped at the report's time (the AUV's
+        own navigation: the true position plus its navigation error; its heading and speed,
+        no current): what the deploy's estimators get in place of 2 Hz states."""
+        t_tick = self.now() - self.ts_offset
+        for v in self.auvs:
+            reports = self.world.reports[v.index]
+            while (self.reports_sent[v.index] < len(reports)
+                   and reports[self.reports_sent[v.index]].t <= t_tick + 1e-9):  # fmt: skip
+                r = reports[self.reports_sent[v.index]]
+                self.reports_sent[v.index] += 1
+                U = r.speed
+                nav = NavState(self.ts_offset + r.t, r.N, r.E, r.depth, r.psi, U, 0.0, 0.0,
+                               U * math.cos(r.psi), U * math.sin(r.psi), math.nan, math.nan)
+                v.publish(self._es(v, nav), t=nav.t)
 
     def publish_fixes(self) -> None:
         """The ASV's USBL fixes of the world up to this tick, each as the UsblFixExtended its

@@ -112,17 +112,28 @@ class Report:
     nav_sigma: float  # the AUV's own estimate of its position error, 1 sigma (m)
 
 
-def usbl_fix(t, auv, asv_NE, auv_NEd, p: AcousticParams, rng: np.random.Generator) -> Fix:
-    """Measure an AUV from the ASV: range noise along the line of sight, bearing error
-    across it (eq. 2.9: transverse error = bearing error x range)."""
+def usbl_geometry(asv_NE, auv_NEd, p: AcousticParams):
+    """The USBL's error geometry for an AUV at ``auv_NEd`` (N, E, depth; m) seen from the
+    ASV at ``asv_NE`` (m): ``(los, perp, s_t, R, slant)``, the horizontal unit vectors along
+    and across the line of sight, the transverse error's 1 sigma ``s_t`` (m; thesis eq. 2.9:
+    bearing error x slant range), the horizontal covariance ``R`` (2 x 2, m^2: range noise
+    along the line of sight, ``s_t`` across it) and the slant range (m). One definition for
+    the simulator's fixes (:func:`usbl_fix`) and the deploy's reading of DUNE's fixes."""
     rel = np.asarray(auv_NEd[:2], float) - np.asarray(asv_NE, float)
     r_h = float(np.hypot(*rel))
     slant = math.hypot(r_h, auv_NEd[2])
     los = rel / r_h if r_h > 1e-9 else np.array([1.0, 0.0])
     perp = np.array([-los[1], los[0]])
     s_t = math.radians(p.sigma_bearing_deg) * slant
-    e = los * p.sigma_range * rng.standard_normal() + perp * s_t * rng.standard_normal()
     R = p.sigma_range**2 * np.outer(los, los) + s_t**2 * np.outer(perp, perp)
+    return los, perp, s_t, R, slant
+
+
+def usbl_fix(t, auv, asv_NE, auv_NEd, p: AcousticParams, rng: np.random.Generator) -> Fix:
+    """Measure an AUV from the ASV: range noise along the line of sight, bearing error
+    across it (eq. 2.9: transverse error = bearing error x range)."""
+    los, perp, s_t, R, slant = usbl_geometry(asv_NE, auv_NEd, p)
+    e = los * p.sigma_range * rng.standard_normal() + perp * s_t * rng.standard_normal()
     return Fix(
         t, auv, float(auv_NEd[0] + e[0]), float(auv_NEd[1] + e[1]),
         float(auv_NEd[2] + p.sigma_range * rng.standard_normal()),

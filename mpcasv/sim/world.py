@@ -171,6 +171,9 @@ class World:
         #: every USBL fix as measured (its times: :attr:`fix_times`; mpcasv sitl's ASV sends
         #: them as DUNE's UsblFixExtended)
         self.fixes: list[list[Fix]] = [[] for _ in range(n)]
+        #: every status report that got through (``mpcasv sitl --auv-states acoustic`` sends
+        #: them as the AUVs' EstimatedStates)
+        self.reports: list[list[Report]] = [[] for _ in range(n)]
         self.energy_J = 0.0
         self.min_range = self.min_slant = math.inf
         #: put the true current into the observations (only for a controller that asks)
@@ -311,9 +314,10 @@ class World:
                 if rng.random() < p_ok:
                     e = self.nav.error(t1)[k]
                     sigma = max(float(self.nav.sigma(t1)[k]), REPORT_SIGMA_MIN)
-                    self.estimators[k].on_report(Report(
-                        t1, k, S[0, k] + e[0], S[1, k] + e[1], S[2, k], S[3, k], S[4, k], sigma,
-                    ))  # fmt: skip
+                    report = Report(t1, k, S[0, k] + e[0], S[1, k] + e[1], S[2, k], S[3, k],
+                                    S[4, k], sigma)  # fmt: skip
+                    self.estimators[k].on_report(report)
+                    self.reports[k].append(report)
         return fixes, reliable
 
     def visiting(self) -> np.ndarray:

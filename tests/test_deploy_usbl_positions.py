@@ -1,0 +1,234 @@
+"""The ASV's USBL fixes as positions in the field (session 42): ``mpcasv deploy`` hands each
+UsblFixExtended's position to the AUV's estimator, as the simulator hands its fixes, in the
+order of the measurements' own times (:class:`mpcasv.estimation.InOrder`: DUNE stamps a fix
+when it processed it, and it often arrives after an AUV state stamped later), and a fix keeps
+an AUV seen for the watchdogs: an AUV under water, out of radio contact, is not "lost" while
+the ASV's USBL fixes it. Before, the fixes gave their times only (M2o) and such an AUV was
+lost 30 s after its last state.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import math
+
+import numpy as np
+import pytest
+from test_estimation import _fix as _kf_fix
+from test_estimation import _report
+from test_io_cases import _es, dry_deploy, feed_states
+
+from mpcasv.estimation import InOrder, KalmanParams, make_estimator
+from mpcasv.estimation.survey_plan import KnownPlan
+from mpcasv.interface import AUVEstimate
+from mpcasv.io.geo import Origin
+from mpcasv.io.imc import nav_state, stamp, usbl_fix_extended
+from mpcasv.io.logs import read_jsonl
+
+ASV, AUV = ("10.0.10.50", 6002), ("10.0.10.60", 6002)
+VEHICLES = [{"role": "asv", "id": 0x2801, "name": "otter", "address": "10.0.10.50:6002"},
+            {"role": "auv", "id": 0x2811, "name": "lauv-xplore-1",
+             "address": "10.0.10.60:6002"}]  # fmt: skip
+ORIGIN = Origin.from_degrees(41.18, -8.70)
+
+
+def _stream(seed: int, delay: float, T: float = 120.0):
+    """A straight-running AUV's measurements as (arrival time, kind, measurement): reports
+    every 1 s, USBL fixes every 5 s arriving ``delay`` s after their own time."""
+    rng = np.random.default_rng(seed)
+    p, out = KalmanParams(), []
+    for i in range(1, int(T) + 1):
+        t = float(i)
+        pos = np.array([1.2 * t, 0.3 * t])
+        out.append((t, "report", _report(t, pos, math.atan2(0.3, 1.2), 1.24, rng, p)))
+        if i % 5 == 0:
+            out.append((t + delay, "fix", _kf_fix(t, pos, rng.uniform(50, 400), rng)))
+    return out
+
+
+def _feed(est, items) -> None:
+    for _, kind, m in items:
+        (est.on_fix if kind == "fix" else est.on_report)(m)
+
+
+@pytest.mark.parametrize("name", ["kalman", "plan", "acoustic"])
+@pytest.mark.parametrize("delay", [0.0, 1.5, 4.5])
+def test_in_order_is_the_estimator_fed_in_time_order(name, delay):
+    """Fed in arrival order (late fixes among newer reports), :class:`InOrder` gives at
+    every arrival exactly the estimate of the same estimator fed the measurements that had
+    arrived, sorted by their times; the plain estimator fed in arrival order does not."""
+    plan = KnownPlan(np.array([[60.0, 15.0], [150.0, 40.0]]), 1.2)
+
+    def make():
+        return make_estimator(name, initial=AUVEstimate(0, 0, 20, t_last_fix=0.0), plan=plan)
+
+    items = sorted(_stream(3, delay), key=lambda x: x[0])  # arrival order (stable)
+    wrapped, plain, differs = InOrder(make()), make(), 0
+    for i, item in enumerate(items):
+        _feed(wrapped, [item])
+        _feed(plain, [item])
+        ref = make()
+        _feed(ref, sorted(items[: i + 1], key=lambda x: x[2].t))  # stable: equal times kept
+        t = item[0] + 0.5
+        assert wrapped.estimate(t) == ref.estimate(t)
+        differs += plain.estimate(t) != ref.estimate(t)
+    # every fix but the last (no report after it) came after a newer report
+    assert wrapped.reordered == (0 if delay == 0 else 23) and wrapped.dropped == 0
+    assert (differs > 0) == (delay > 0)
+    assert wrapped.name == name
+
+
+def test_in_order_drops_what_is_older_than_its_window():
+    """A measurement older than ``window_s`` before the newest is not taken, and counted; one
+    just inside the window before every remembered one is placed exactly."""
+    est = InOrder(make_estimator("kalman"), window_s=10.0)
+    rng = np.random.default_rng(0)
+    ref = make_estimator("kalman")
+    taken = []
+    for t in (1.0, 20.0, 25.0):
+        m = _report(t, np.array([t, 0.0]), 0.0, 1.0, rng, KalmanParams())
+        est.on_report(m)
+        taken.append(m)
+    before = est.estimate(30.0)
+    est.on_fix(_kf_fix(14.0, np.array([14.0, 0.0]), 100.0, rng))  # 11 s before 25 s
+    assert est.dropped == 1 and est.estimate(30.0) == before
+    late = _kf_fix(16.0, np.array([16.0, 0.0]), 100.0, rng)  # inside: before 20 s, after 1 s
+    est.on_fix(late)
+    for m in sorted([*taken, late], key=lambda m: m.t):
+        (ref.on_fix if m is late else ref.on_report)(m)
+    assert est.estimate(30.0) == ref.estimate(30.0) and est.reordered == 1
+
+
+@pytest.mark.parametrize("window", [0.0, -1.0, math.inf, math.nan])
+def test_in_order_refuses_a_bad_window(window):
+    with pytest.raises(ValueError, match="window_s"):
+        InOrder(make_estimator("kalman"), window_s=window)
+
+
+def _usbl(t: float, N: float, E: float, depth: float = 20.0, accuracy: float = 1.5,
+          target: str = "lauv-xplore-1") -> bytes:  # fmt: skip
+    msg = usbl_fix_extended(target, N, E, depth, accuracy, ORIGIN)
+    return stamp(msg, 0x2801, 0xFFFF, t).serialize()
+
+
+def _submerged(tmp_path, estimator: str, fixes: bool):
+    """A deploy whose AUV (states until t = 2 s, then silent: under water) is fixed by the
+    ASV every 5 s (``fixes``) at (100 + 0.5 (t - t0), 10) m for 40 s; watchdog ``auv_stale_s`` 7 s
+    (longer than the USBL period), ``auv_lost_s`` 30 s. Returns (deploy, events, summary)."""
+    dep, clock = dry_deploy(
+        tmp_path, vehicle=VEHICLES, watchdog={"auv_stale_s": 7.0, "auv_lost_s": 30.0},
+        controller={"name": "hybrid-single", "preset": "paper1-field", "estimator": estimator})
+    t0 = t = feed_states(dep, clock, clock.t, 4)
+    for i in range(80):
+        clock.t += 0.5
+        t += 0.5
+        dep.link.handle_datagram(_es(clock, 0x2801, t, 0.0), ASV)
+        if fixes and i % 10 == 9:
+            dep.link.handle_datagram(_usbl(t - 0.3, 100.0 + 0.5 * (t - t0), 10.0), ASV)
+        dep.watch()
+    est = dep.estimators[0].estimate(t)
+    asyncio.run(dep.finish())
+    path = tmp_path / "deploy.jsonl"
+    return est, [e["event"] for e in read_jsonl(path, "event")], read_jsonl(path, "summary")[-1]
+
+
+def test_fixes_keep_a_submerged_auv_seen_and_estimated(tmp_path):
+    """With the Kalman filter the ASV's fixes keep the silent AUV ``ok`` (no ``auv_uncertain``
+    or ``auv_lost``) and its estimate follows them (the last fix at N = 119.85, E = 10, 0.3 s
+    before the estimate's time); without the fixes, or with the ``perfect`` estimator (the
+    AUVs' own states only, which takes no fix), the same AUV is lost."""
+    est, events, summary = _submerged(tmp_path / "kalman", "kalman", fixes=True)
+    assert "auv_uncertain" not in events and "auv_lost" not in events
+    assert summary["usbl_fix_positions"] == [8] and summary["usbl_fixes"] == [8]
+    assert summary["estimator_reordered"] == [0] and summary["estimator_dropped"] == [0]
+    assert abs(est.N - 120.0) < 2.0 and abs(est.E - 10.0) < 1.0
+    _, events, summary = _submerged(tmp_path / "none", "kalman", fixes=False)
+    assert "auv_lost" in events and summary["usbl_fix_positions"] == [0]
+    est, events, summary = _submerged(tmp_path / "perfect", "perfect", fixes=True)
+    assert "auv_lost" in events and summary["usbl_fix_positions"] == [0]
+    assert summary["usbl_fixes"] == [8]  # the times still count (M2o reads them)
+    assert est.N == pytest.approx(100.0, abs=1e-3)  # its own last state
+
+
+def test_a_fix_stamped_before_the_auvs_last_state_is_put_in_its_place(tmp_path):
+    """A fix stamped 1.2 s before the AUV's last state (DUNE processed it, the datagram came
+    later) is taken in its time's place: the summary counts it as reordered; the same
+    datagram twice is taken once."""
+    dep, clock = dry_deploy(
+        tmp_path, vehicle=VEHICLES,
+        controller={"name": "hybrid-single", "preset": "paper1-field", "estimator": "kalman"})
+    t = feed_states(dep, clock, clock.t, 6)
+    for _ in range(2):
+        dep.link.handle_datagram(_usbl(t - 1.2, 101.0, 2.0), ASV)
+    asyncio.run(dep.finish())
+    summary = read_jsonl(tmp_path / "deploy.jsonl", "summary")[-1]
+    assert summary["estimator_reordered"] == [1] and summary["usbl_fix_positions"] == [1]
+    assert dep.link.rejects == {}
+
+
+def test_the_fix_covariance_and_depth(tmp_path):
+    """``accuracy`` (m) is the horizontal RMS error: ``accuracy^2 / 2`` on each axis. DUNE's
+    drivers that leave it 0: thesis eq. 2.9 with the deploy's ``[acoustics]`` from the ASV's
+    last state (range noise along the line of sight, bearing error x slant range across).
+    A ``z`` that is no depth: the AUV's last reported depth, said once."""
+    dep, clock = dry_deploy(
+        tmp_path, vehicle=VEHICLES, acoustics={"sigma_range": 0.5, "sigma_bearing_deg": 2.0},
+        controller={"name": "hybrid-single", "preset": "paper1-field", "estimator": "kalman"})
+    t = feed_states(dep, clock, clock.t, 4)
+    asv = dep.link.asv.nav
+    msg = usbl_fix_extended("lauv-xplore-1", 100.0, 0.0, 20.0, 1.5, ORIGIN)
+    fix = dep._fix(0, msg, t, asv)
+    assert fix.N == pytest.approx(100.0, abs=1e-6) and fix.E == pytest.approx(0.0, abs=1e-6)
+    assert fix.depth == pytest.approx(20.0, abs=1e-4)
+    np.testing.assert_allclose(fix.cov, (1.125, 0.0, 0.0, 1.125))
+    fix = dep._fix(0, usbl_fix_extended("lauv-xplore-1", 100.0, 0.0, 20.0, 0.0, ORIGIN), t, asv)
+    slant = math.hypot(100.0, 20.0)
+    assert fix.slant == pytest.approx(slant, abs=1e-4)
+    np.testing.assert_allclose(fix.cov, (0.25, 0.0, 0.0, (math.radians(2.0) * slant) ** 2),
+                               atol=1e-6)  # fmt: skip
+    msg.z_units = type(msg.z_units).ALTITUDE
+    for _ in range(2):
+        assert dep._fix(0, msg, t, asv).depth == 0.0  # the AUV's last state: at the surface
+    asyncio.run(dep.finish())
+    said = [e for e in read_jsonl(tmp_path / "deploy.jsonl", "event")
+            if e["event"] == "usbl_fix_depth"]  # fmt: skip
+    assert len(said) == 1 and said[0]["target"] == "lauv-xplore-1"
+
+
+def test_the_sitl_auvs_send_their_reports_under_water():
+    """``mpcasv sitl --auv-states acoustic``: after the start, each AUV sends an
+    EstimatedState per status report of its world that got through (its navigation position,
+    heading and speed), once, stamped at the report's time; with ``radio`` none of them (the
+    true state at 2 Hz instead). A bad value is refused in one line."""
+    from types import SimpleNamespace
+
+    from mpcasv.config import ConfigError
+    from mpcasv.io.sitloptions import SitlOptions
+    from mpcasv.io.sitlpublish import Publishing
+    from mpcasv.models.acoustics import Report
+    from mpcasv.sim.scenario import load_scenario
+
+    sent = []
+
+    class Vehicle(SimpleNamespace):
+        def publish(self, msg, t=None):
+            sent.append((self.index, t, msg))
+
+    reports = [Report(30.0, 0, 120.0, 5.0, 18.0, 0.5, 1.4, 3.0),
+               Report(60.0, 0, 150.0, 20.0, 18.5, 0.6, 1.5, 4.0)]  # fmt: skip
+    sitl = SimpleNamespace(ts_offset=1000.0, tick=1045.0, reports_sent=[0], origin=ORIGIN,
+                           world=SimpleNamespace(reports=[reports]),
+                           auvs=[Vehicle(index=0, anchor=None)],
+                           opt=SimpleNamespace(reanchor_m=1000.0))  # fmt: skip
+    sitl.now = lambda: sitl.tick
+    sitl._es = lambda v, nav: Publishing._es(sitl, v, nav)
+    sitl._offset = lambda v, nav: Publishing._offset(sitl, v, nav)
+    Publishing.publish_reports(sitl)
+    Publishing.publish_reports(sitl)  # the same tick again: nothing new
+    assert [(k, t) for k, t, _ in sent] == [(0, 1030.0)] and sitl.reports_sent == [1]
+    nav = nav_state(sent[0][2], ORIGIN)
+    assert (nav.N, nav.E, nav.depth) == pytest.approx((120.0, 5.0, 18.0), abs=1e-3)
+    assert nav.psi == pytest.approx(0.5) and nav.u == pytest.approx(1.4)
+    sc = load_scenario("experiments/scenarios/case3.toml")
+    with pytest.raises(ConfigError, match="--auv-states 'sonar': one of radio, acoustic"):
+        SitlOptions(auv_states="sonar").check(sc)
