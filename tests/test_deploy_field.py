@@ -113,6 +113,10 @@ def test_prepare_starts_the_solver_worker_before_any_vehicle(tmp_path, capsys):
     assert main(["deploy", str(path), "--prepare"]) == 0
     out = json.loads(capsys.readouterr().out)["prepared"]
     assert out["controller"] == "mpc-single" and out["field_mode"] is True
+    # what the run will use, read at the quay (a new user's finding, session 41)
+    c = data["controller"]
+    assert (out["preset"], out["estimator"]) == (c["preset"], c.get("estimator", "perfect"))
+    assert out["actuator_feedback"] is c.get("actuator_feedback", True)
     assert not (tmp_path / "log").exists()  # nobody contacted, nothing logged
 
 

@@ -213,3 +213,29 @@ def test_the_deploy_says_its_clock_and_the_asvs_disagree(tmp_path):
     assert len(said) == 1 and said[0]["rate"] == pytest.approx(5.0, rel=0.05)
     assert said[0]["speedup"] == 1.0
     dep.close()
+
+
+def test_console_warnings_say_they_are_warnings():
+    """The deploy's and the SITL's console lines: ``name: message`` for information,
+    ``name: warning: message`` for a warning such as ``clock_rate`` (a new user's finding,
+    session 41: it looked like the info lines around it), a traceback kept for an error."""
+    import logging
+
+    from mpcasv.io.commands import _LevelFormatter
+
+    fmt = _LevelFormatter("%(name)s: %(message)s")
+
+    def line(level, msg, exc_info=None):
+        return fmt.format(logging.LogRecord("mpcasv.io.deploy", level, __file__, 1, msg, (),
+                                            exc_info))  # fmt: skip
+
+    assert line(logging.INFO, "bound x") == "mpcasv.io.deploy: bound x"
+    assert line(logging.WARNING, "clock_rate {}") == "mpcasv.io.deploy: warning: clock_rate {}"
+    try:
+        raise ValueError("boom")
+    except ValueError:
+        import sys
+
+        text = line(logging.ERROR, "step failed", sys.exc_info())
+    assert text.startswith("mpcasv.io.deploy: error: step failed\nTraceback")
+    assert text.endswith("ValueError: boom")

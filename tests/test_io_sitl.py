@@ -258,3 +258,23 @@ def test_a_scenario_whose_controller_cannot_run_is_refused_without_building_it(
     sitl = Sitl(mpc, opt)
     sitl.close()
     assert built == []
+
+
+def test_a_sitl_stopped_while_held_says_why_it_wrote_no_run(tmp_path):
+    """``--hold`` and no deploy: stopped (SIGTERM) while the world stands at t = 0, the SITL
+    writes no ``run/`` (no period to write) and says so, on stderr and in its ``finished``
+    event, and exits 1 (a new user's finding, session 41: it exited 0 and said nothing)."""
+    import signal
+
+    from mpcasv.io.rehearsal import start_sitl
+
+    out = tmp_path / "sitl"
+    proc, _ = start_sitl(CASE3, out, "--hold", "--quiet")
+    time.sleep(0.5)
+    proc.send_signal(signal.SIGTERM)
+    assert proc.wait(60) == 1
+    err = (out / "sitl.stderr").read_text()
+    assert "mpcasv sitl: no run written to" in err and "(--hold): no Reference came" in err
+    assert not (out / "run").exists()
+    finished = [e for e in read_jsonl(out / "sitl.jsonl", "event") if e["event"] == "finished"]
+    assert finished[0]["no_run"] == "the world stood at t = 0 (--hold): no Reference came"

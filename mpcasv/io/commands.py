@@ -153,9 +153,22 @@ def register(sub: argparse._SubParsersAction) -> None:
     r.set_defaults(func=run_replay_cli)
 
 
+class _LevelFormatter(logging.Formatter):
+    """``name: message``; a warning or an error says so: ``name: warning: message`` (a
+    warning such as ``clock_rate`` had looked like the info lines around it)."""
+
+    def format(self, record: logging.LogRecord) -> str:
+        text = super().format(record)  # "%(name)s: %(message)s", and a traceback if any
+        if record.levelno < logging.WARNING:
+            return text
+        head = f"{record.name}: "
+        return f"{head}{record.levelname.lower()}: {text[len(head):]}"
+
+
 def _logging(quiet: bool) -> None:
-    logging.basicConfig(level=logging.WARNING if quiet else logging.INFO, stream=sys.stderr,
-                        format="%(name)s: %(message)s")  # fmt: skip
+    handler = logging.StreamHandler(sys.stderr)
+    handler.setFormatter(_LevelFormatter("%(name)s: %(message)s"))
+    logging.basicConfig(level=logging.WARNING if quiet else logging.INFO, handlers=[handler])
 
 
 def run_deploy_cli(args: argparse.Namespace) -> int:
@@ -192,6 +205,10 @@ def run_sitl_cli(args: argparse.Namespace) -> int:
     info = run_sitl(sc, opt)
     print(json.dumps({"finished": {k: v for k, v in info.items() if k != "metrics"}}),
           flush=True)  # fmt: skip
+    if "no_run" in info:  # nothing to compare: exit 1, as a deploy that never decided
+        print(f"mpcasv sitl: no run written to {opt.out / 'run'}: {info['no_run']}",
+              file=sys.stderr)  # fmt: skip
+        return 1
     return 0
 
 

@@ -105,7 +105,10 @@ def prepare_controller(cfg: DeployConfig) -> dict:
     """``mpcasv deploy CONFIG --prepare``: build the controller (an MPC's library compiled if
     it is not cached) and, for an MPC, start its solver worker once (it loads the library in a
     fresh process) and stop it; nothing is bound, nobody contacted (:func:`check_local` has
-    tried the log folder and the address first)."""
+    tried the log folder and the address first). Returns what the run will use, to be read
+    at the quay: controller, preset, vessel, estimator, whether it takes the ASV's
+    actuators (``actuator_feedback``) and where the propeller state comes from, and the
+    seconds the build took."""
     t0 = time.perf_counter()
     ctl = build_controller(cfg, log=log.warning)
     field = hasattr(ctl, "use_deadline")
@@ -113,8 +116,11 @@ def prepare_controller(cfg: DeployConfig) -> dict:
         check_budget(cfg, ctl)
         start_field_mode(ctl, log=log.warning)
         ctl.close()
-    return {"controller": cfg.controller.name, "vessel": cfg.controller.vessel or "gretha",
-            "field_mode": field, "seconds": time.perf_counter() - t0}
+    c = cfg.controller
+    return {"controller": c.name, "preset": c.preset, "vessel": c.vessel or "gretha",
+            "estimator": c.estimator, "actuator_feedback": c.actuator_feedback,
+            "propeller": cfg.watchdog.propeller, "field_mode": field,
+            "seconds": time.perf_counter() - t0}
 
 
 class FieldMode:

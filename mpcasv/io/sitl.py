@@ -350,7 +350,9 @@ class Sitl(AsvDune, Publishing):
             self.lsf.close()
 
     def finish(self, wall_s: float, overruns: int) -> dict:
-        """Close the sockets and write the run folder; return the run info."""
+        """Close the sockets and write the run folder; return the run info. A world that
+        never completed a period writes none: the info then says why (``no_run``: held at
+        t = 0 by ``--hold``, no Reference having come, or stopped within the first period)."""
         import pandas as pd
 
         from mpcasv.experiments.metrics import compute_metrics
@@ -364,6 +366,9 @@ class Sitl(AsvDune, Publishing):
                 self.opt.speedup, "overruns": overruns, "counts": self.counts,
                 "sitl_wall_s": wall_s,
                 **({"lockstep": True} if self.opt.lockstep else {})}  # fmt: skip
+        if not self.rows:
+            info["no_run"] = ("the world stood at t = 0 (--hold): no Reference came" if self.held
+                              else "stopped before the world's first period ended")
         self.event("finished", **info)
         self.jsonl.close()
         self.lsf.close()
