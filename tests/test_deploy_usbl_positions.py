@@ -10,6 +10,7 @@ lost 30 s after its last state.
 from __future__ import annotations
 
 import asyncio
+import dataclasses
 import math
 
 import numpy as np
@@ -99,6 +100,15 @@ def test_in_order_drops_what_is_older_than_its_window():
     assert est.estimate(30.0) == ref.estimate(30.0) and est.reordered == 1
 
 
+def test_in_order_forgets_what_is_older_than_its_window():
+    """A long run keeps only the window's measurements (and their copies), not all of them."""
+    est, rng = InOrder(make_estimator("kalman"), window_s=10.0), np.random.default_rng(1)
+    for i in range(500):
+        est.on_report(_report(float(i), np.array([float(i), 0.0]), 0.0, 1.0, rng,
+                              KalmanParams()))  # fmt: skip
+    assert len(est._taken) == 11 and est._taken[0].t == 489.0
+
+
 @pytest.mark.parametrize("window", [0.0, -1.0, math.inf, math.nan])
 def test_in_order_refuses_a_bad_window(window):
     with pytest.raises(ValueError, match="window_s"):
@@ -175,17 +185,19 @@ def test_the_fix_covariance_and_depth(tmp_path):
         tmp_path, vehicle=VEHICLES, acoustics={"sigma_range": 0.5, "sigma_bearing_deg": 2.0},
         controller={"name": "hybrid-single", "preset": "paper1-field", "estimator": "kalman"})
     t = feed_states(dep, clock, clock.t, 4)
-    asv = dep.link.asv.nav
+    asv = dataclasses.replace(dep.link.asv.nav, N=30.0, E=40.0)  # the ASV off the origin
     msg = usbl_fix_extended("lauv-xplore-1", 100.0, 0.0, 20.0, 1.5, ORIGIN)
     fix = dep._fix(0, msg, t, asv)
     assert fix.N == pytest.approx(100.0, abs=1e-6) and fix.E == pytest.approx(0.0, abs=1e-6)
     assert fix.depth == pytest.approx(20.0, abs=1e-4)
     np.testing.assert_allclose(fix.cov, (1.125, 0.0, 0.0, 1.125))
     fix = dep._fix(0, usbl_fix_extended("lauv-xplore-1", 100.0, 0.0, 20.0, 0.0, ORIGIN), t, asv)
-    slant = math.hypot(100.0, 20.0)
+    los = np.array([70.0, -40.0]) / math.hypot(70.0, 40.0)  # from the ASV to the AUV
+    slant = math.hypot(math.hypot(70.0, 40.0), 20.0)
+    across = np.array([-los[1], los[0]])
+    R = 0.25 * np.outer(los, los) + (math.radians(2.0) * slant) ** 2 * np.outer(across, across)
     assert fix.slant == pytest.approx(slant, abs=1e-4)
-    np.testing.assert_allclose(fix.cov, (0.25, 0.0, 0.0, (math.radians(2.0) * slant) ** 2),
-                               atol=1e-6)  # fmt: skip
+    np.testing.assert_allclose(fix.cov, R.ravel(), atol=1e-6)
     msg.z_units = type(msg.z_units).ALTITUDE
     for _ in range(2):
         assert dep._fix(0, msg, t, asv).depth == 0.0  # the AUV's last state: at the surface
@@ -218,7 +230,7 @@ def test_the_sitl_auvs_send_their_reports_under_water():
                Report(60.0, 0, 150.0, 20.0, 18.5, 0.6, 1.5, 4.0)]  # fmt: skip
     sitl = SimpleNamespace(ts_offset=1000.0, tick=1045.0, reports_sent=[0], origin=ORIGIN,
                            world=SimpleNamespace(reports=[reports]),
-                           auvs=[Vehicle(index=0, anchor=None)],
+                           auvs=[Vehicle(index=0, anchor=None)], asv=SimpleNamespace(alive=True),
                            opt=SimpleNamespace(reanchor_m=1000.0))  # fmt: skip
     sitl.now = lambda: sitl.tick
     sitl._es = lambda v, nav: Publishing._es(sitl, v, nav)
@@ -229,6 +241,108 @@ def test_the_sitl_auvs_send_their_reports_under_water():
     nav = nav_state(sent[0][2], ORIGIN)
     assert (nav.N, nav.E, nav.depth) == pytest.approx((120.0, 5.0, 18.0), abs=1e-3)
     assert nav.psi == pytest.approx(0.5) and nav.u == pytest.approx(1.4)
+    sitl.asv.alive, sitl.tick = False, 1075.0  # the ASV's DUNE down: its modem hears nothing
+    Publishing.publish_reports(sitl)
+    assert len(sent) == 1 and sitl.reports_sent == [2]  # the 60-s report is lost
     sc = load_scenario("experiments/scenarios/case3.toml")
     with pytest.raises(ConfigError, match="--auv-states 'sonar': one of radio, acoustic"):
         SitlOptions(auv_states="sonar").check(sc)
+
+
+def test_the_sitl_auvs_dive_at_the_first_reference():
+    """``acoustic``: the AUVs' true states at 2 Hz until the ASV has taken a Reference (with or
+    without ``--hold``: the deploy must start), then only the reports made after that; the
+    dive stays when the ASV's DUNE restarts without a maneuver. ``radio``: never."""
+    from types import SimpleNamespace
+
+    from mpcasv.io.sitlpublish import Publishing
+    from mpcasv.models.acoustics import Report
+
+    def sitl(mode):
+        s = SimpleNamespace(opt=SimpleNamespace(auv_states=mode), dived=False, maneuver=None,
+                            period=None, reports_sent=[0], asv=SimpleNamespace(alive=False),
+                            auvs=[SimpleNamespace(index=0, publish=lambda m, t=None: out.append(
+                                ("radio", m)))],
+                            world=SimpleNamespace(x=np.zeros(8), S=np.zeros((5, 1)), reports=[[
+                                Report(30.0, 0, 1.0, 2.0, 3.0, 0.0, 1.0, 1.0)]]))  # fmt: skip
+        s._es = lambda v, nav: nav
+        s._nav_auv = lambda S, k: "state"
+        s.publish_fixes = lambda: None
+        s.publish_reports = lambda: out.append(("reports", tuple(s.reports_sent)))
+        return s
+
+    for mode in ("acoustic", "radio"):
+        out = []
+        s = sitl(mode)
+        Publishing.publish_states(s, mid=False)
+        s.maneuver = SimpleNamespace(got_reference=False)
+        Publishing.publish_states(s, mid=False)
+        s.maneuver.got_reference = True
+        Publishing.publish_states(s, mid=False)
+        s.maneuver = None  # the ASV's DUNE restarted: no maneuver
+        Publishing.publish_states(s, mid=False)
+        kinds = [k for k, _ in out]
+        if mode == "radio":
+            assert kinds == ["radio"] * 4 and not s.dived
+        else:  # the report made before the dive went by radio: skipped
+            assert kinds == ["radio", "radio", "reports", "reports"] and s.dived
+            assert out[2] == ("reports", (1,))
+
+
+def _deploy_with_silent_auv(tmp_path, **watchdog):
+    dep, clock = dry_deploy(
+        tmp_path, vehicle=VEHICLES, watchdog=watchdog,
+        controller={"name": "hybrid-single", "preset": "paper1-field", "estimator": "kalman"})
+    t = feed_states(dep, clock, clock.t, 4)
+    return dep, clock, t
+
+
+def test_implausible_fixes_are_not_taken(tmp_path):
+    """A fix 5 km from where the AUV was 0.3 s ago, or at lat/lon (0, 0) (540 km away, past
+    ``max_distance_m``), is refused: counted, one event, the estimate unchanged; its time still
+    counts (M2o). A plausible one 3 m off is taken."""
+    dep, clock, t = _deploy_with_silent_auv(tmp_path)
+    before = dep.estimators[0].estimate(t)
+    dep.link.handle_datagram(_usbl(t - 0.3, 100.0 + 5000.0, 0.0), ASV)
+    msg = usbl_fix_extended("lauv-xplore-1", 0.0, 0.0, 20.0, 1.5, ORIGIN)
+    msg.lat = msg.lon = 0.0
+    dep.link.handle_datagram(stamp(msg, 0x2801, 0xFFFF, t - 0.2).serialize(), ASV)
+    assert dep.estimators[0].estimate(t) == before
+    assert dep.usbl.outliers == [2] and dep.usbl.positions == [0] and dep.usbl.counts == [2]
+    dep.link.handle_datagram(_usbl(t - 0.1, 103.0, 0.0), ASV)
+    assert dep.usbl.outliers == [2] and dep.usbl.positions == [1]
+    asyncio.run(dep.finish())
+    events = [e for e in read_jsonl(tmp_path / "deploy.jsonl", "event")
+              if e["event"] == "usbl_fix_outlier"]  # fmt: skip
+    assert len(events) == 1 and "from the estimate" in events[0]["why"]
+    assert read_jsonl(tmp_path / "deploy.jsonl", "summary")[-1]["usbl_fix_outliers"] == [2]
+
+
+def test_a_fix_the_estimator_drops_does_not_keep_the_auv_seen(tmp_path):
+    """A fix stamped 70 s before the AUV's last state (its clock off the ASV's: older than the
+    60-s window) is dropped by the estimator: not counted as taken, the AUV's age not reset
+    (a review's finding: it had been), one event."""
+    dep, clock, t = _deploy_with_silent_auv(tmp_path)
+    dep.link.handle_datagram(_usbl(t - 70.0, 100.0, 0.0), ASV)
+    assert dep.estimators[0].dropped == 1 and dep.usbl.positions == [0]
+    assert dep.usbl.recv == [-math.inf]
+    asyncio.run(dep.finish())
+    names = [e["event"] for e in read_jsonl(tmp_path / "deploy.jsonl", "event")]
+    assert names.count("usbl_fix_dropped") == 1
+
+
+def test_a_fix_brings_an_uncertain_auv_back(tmp_path):
+    """The AUV silent past ``auv_stale_s`` is uncertain; the ASV's next fix of it makes it ok
+    again (``auv_fresh`` by ``usbl_fix``), and its age restarts from that fix's arrival."""
+    dep, clock, t = _deploy_with_silent_auv(tmp_path, auv_stale_s=3.0, auv_lost_s=30.0)
+    for _ in range(10):  # 5 s of ASV states only
+        clock.t += 0.5
+        t += 0.5
+        dep.link.handle_datagram(_es(clock, 0x2801, t, 0.0), ASV)
+        dep.watch()
+    assert dep.status == ["uncertain"]
+    dep.link.handle_datagram(_usbl(t - 0.2, 104.0, 1.0), ASV)
+    assert dep.status == ["ok"] and dep.auv_ages(clock.t) == [0.0]
+    asyncio.run(dep.finish())
+    fresh = [e for e in read_jsonl(tmp_path / "deploy.jsonl", "event") if e["event"] == "auv_fresh"]
+    assert len(fresh) == 1 and fresh[0]["by"] == "usbl_fix" and fresh[0]["was"] == "uncertain"

@@ -227,6 +227,7 @@ def test_case3_rehearsal_under_water(tmp_path):
     records = read_jsonl(deploy_dir / "deploy.jsonl")
     summary = records[-1]
     assert summary["usbl_fix_positions"][0] >= 30 and summary["estimator_dropped"] == [0]
+    assert summary["usbl_fix_outliers"] == [0]  # the simulated USBL has none: none refused
     assert not [r for r in records if r.get("event") in ("auv_uncertain", "auv_lost")]
     es = read_messages(deploy_dir / "imc.lsf", imcpy.EstimatedState)
     assert (es["src"] == 0x2811).sum() <= 300 / 30 + 3  # no 2-Hz radio states: the reports

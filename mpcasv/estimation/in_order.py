@@ -80,23 +80,25 @@ class InOrder:
     def on_truth(self, t, N, E, depth, v_N, v_E) -> None:
         self.inner.on_truth(t, N, E, depth, v_N, v_E)
 
-    def on_fix(self, fix: Fix) -> None:
-        self._take(fix)
+    def on_fix(self, fix: Fix) -> bool:
+        """Take ``fix`` in its time's place; False: older than the window, dropped."""
+        return self._take(fix)
 
-    def on_report(self, report: Report) -> None:
-        self._take(report)
+    def on_report(self, report: Report) -> bool:
+        """Take ``report`` in its time's place; False: older than the window, dropped."""
+        return self._take(report)
 
     def estimate(self, t: float) -> AUVEstimate:
         return self.inner.estimate(t)
 
-    def _take(self, m: Fix | Report) -> None:
+    def _take(self, m: Fix | Report) -> bool:
         taken = self._taken
         newest = taken[-1].t if taken else -math.inf
         # everything forgotten is older than newest - window_s (the newest only grows), so
         # a measurement after that is placed exactly, before taken[0] too
         if m.t < newest - self.window_s:
             self.dropped += 1
-            return
+            return False
         self._seq += 1
         if m.t >= newest:
             taken.append(_Taken(m.t, self._seq, m, copy.deepcopy(self.inner)))
@@ -112,6 +114,7 @@ class InOrder:
                 self._apply(x.measurement)
         while taken and taken[0].t < taken[-1].t - self.window_s:
             del taken[0]
+        return True
 
     def _apply(self, m: Fix | Report) -> None:
         (self.inner.on_fix if isinstance(m, Fix) else self.inner.on_report)(m)

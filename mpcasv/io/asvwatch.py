@@ -171,10 +171,11 @@ class UsblFixes:
     ``times`` starts at ``-inf`` (no fix yet); ``counts`` the fixes per AUV that were newer
     than the one held (a duplicate or reordered one is not counted); ``unmatched`` the fixes
     of targets whose name is none of the AUVs', by name (at most :data:`MAX_UNMATCHED` names,
-    the rest under ``"(other)"``). ``positions`` counts the fixes whose position went to the
-    AUV's estimator (:meth:`take_position`: every distinct fix, a reordered one too) and
-    ``recv`` is the deploy clock (s) when the last of them arrived (``-inf``: none), which
-    keeps the AUV seen for the watchdogs as its own states do.
+    the rest under ``"(other)"``). ``positions`` counts the fixes whose position the AUV's
+    estimator took (:meth:`taken`: a reordered one too) and ``recv`` is the deploy clock (s)
+    when the last of them arrived (``-inf``: none), which keeps the AUV seen for the
+    watchdogs as its own states do; ``outliers`` counts the fixes refused as implausible
+    (:meth:`mpcasv.io.deployfeedback.BoatFeedback._usbl_position`).
     """
 
     n: int
@@ -183,6 +184,7 @@ class UsblFixes:
     unmatched: dict[str, int] = field(default_factory=dict)
     positions: list[int] = field(default_factory=list)
     recv: list[float] = field(default_factory=list)
+    outliers: list[int] = field(default_factory=list)
     _recent: list[deque] = field(default_factory=list)
 
     def __post_init__(self) -> None:
@@ -190,18 +192,23 @@ class UsblFixes:
         self.counts = self.counts or [0] * self.n
         self.positions = self.positions or [0] * self.n
         self.recv = self.recv or [-math.inf] * self.n
+        self.outliers = self.outliers or [0] * self.n
         self._recent = [deque(maxlen=RECENT_FIXES) for _ in range(self.n)]
 
-    def take_position(self, k: int, t: float, now: float) -> bool:
-        """Whether AUV ``k``'s fix stamped ``t`` is one not taken yet (of the last
-        :data:`RECENT_FIXES`): then it is counted and ``recv[k] = now``. A datagram
-        delivered twice would otherwise update the estimator twice with one measurement."""
+    def first_time(self, k: int, t: float) -> bool:
+        """Whether AUV ``k``'s fix stamped ``t`` is new (not among the last
+        :data:`RECENT_FIXES` seen): a datagram delivered twice would otherwise update the
+        estimator twice with one measurement."""
         if t in self._recent[k]:
             return False
         self._recent[k].append(t)
+        return True
+
+    def taken(self, k: int, now: float) -> None:
+        """AUV ``k``'s estimator took a fix's position, which arrived at ``now`` (deploy
+        clock): counted, and the AUV seen."""
         self.positions[k] += 1
         self.recv[k] = max(self.recv[k], now)
-        return True
 
     def fix(self, target: str, t: float, names: list[str | None]) -> int | None:
         """A fix of system ``target`` stamped ``t`` (s, the ASV's clock corrected), ``names``

@@ -60,6 +60,7 @@ class Ending:
                    "heard": self.heard(), "usbl_fixes": list(self.usbl.counts),
                    "usbl_fixes_unmatched": dict(self.usbl.unmatched),
                    "usbl_fix_positions": list(self.usbl.positions),
+                   "usbl_fix_outliers": list(self.usbl.outliers),
                    "estimator_reordered": [e.reordered for e in self.estimators],
                    "estimator_dropped": [e.dropped for e in self.estimators],
                    **self.link.counters()}  # fmt: skip

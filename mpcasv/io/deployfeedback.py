@@ -13,6 +13,7 @@ import time
 
 import imcpy
 import numpy as np
+from scipy.stats import chi2
 
 from mpcasv.interface import Mode
 from mpcasv.io.geo import to_local
@@ -20,7 +21,11 @@ from mpcasv.io.imc import BadInput
 from mpcasv.io.watchdog import OK
 from mpcasv.models.acoustics import Fix, usbl_geometry
 
-__all__ = ["BoatFeedback", "cap_command", "cap_controller_speed"]
+__all__ = ["USBL_GATE", "BoatFeedback", "cap_command", "cap_controller_speed"]
+
+#: a USBL fix whose normalised innovation exceeds this is an outlier (chi-square, 2 degrees
+#: of freedom, 99.99 %: -2 ln(1e-4) = 18.42; :meth:`BoatFeedback._implausible`)
+USBL_GATE = float(chi2.ppf(0.9999, 2))
 
 
 def cap_controller_speed(controller, speed: float) -> tuple[float, float, float | None]:
@@ -120,13 +125,57 @@ class BoatFeedback:
             if self.usbl.unmatched.get(msg.target) == 1:
                 self.event("usbl_fix_unknown", vehicle=p.label, target=msg.target, auvs=names)
             return
-        if self.cfg.controller.estimator != "perfect" and \
-                self.usbl.take_position(k, t, self.clock.now()):  # fmt: skip
-            self.estimators[k].on_fix(self._fix(k, msg, t, nav))
-            if self.status[k] not in (OK, "missing"):  # seen again, by the ASV's USBL
-                self.event("auv_fresh", vehicle=self.link.auvs[k].label, auv=k,
-                           was=self.status[k], by="usbl_fix")  # fmt: skip
-                self.status[k] = OK
+        if self.cfg.controller.estimator != "perfect" and self.usbl.first_time(k, t):
+            self._usbl_position(k, self._fix(k, msg, t, nav))
+
+    def _usbl_position(self, k: int, fix: Fix) -> None:
+        """Hand AUV ``k``'s ``fix`` to its estimator, unless it is implausible
+        (:meth:`_implausible`: counted in ``usbl.outliers``, event ``usbl_fix_outlier`` for
+        an AUV's first) or older than the estimator's window (event ``usbl_fix_dropped`` for
+        an AUV's first). Only a fix the estimator took keeps the AUV seen for the watchdogs
+        and brings an uncertain or lost one back (``auv_fresh`` by ``usbl_fix``)."""
+        label = self.link.auvs[k].label
+        why = self._implausible(k, fix)
+        if why is not None:
+            self.usbl.outliers[k] += 1
+            if self.usbl.outliers[k] == 1:
+                self.event("usbl_fix_outlier", vehicle=label, auv=k, fix_t=fix.t,
+                           N=round(fix.N, 1), E=round(fix.E, 1), why=why)  # fmt: skip
+            return
+        est = self.estimators[k]
+        if not est.on_fix(fix):
+            if est.dropped == 1:
+                self.event("usbl_fix_dropped", vehicle=label, auv=k, fix_t=fix.t,
+                           window_s=est.window_s, note="older than the estimator's window "
+                           "before its newest measurement: an AUV's clock off the ASV's?")
+            return
+        self.usbl.taken(k, self.clock.now())
+        if self.status[k] not in (OK, "missing"):  # seen again, by the ASV's USBL
+            self.event("auv_fresh", vehicle=label, auv=k, was=self.status[k], by="usbl_fix")
+            self.status[k] = OK
+
+    def _implausible(self, k: int, fix: Fix) -> str | None:
+        """Why AUV ``k``'s ``fix`` cannot be right, or None: further from the origin than
+        ``watchdog.max_distance_m`` (as a state would be), or outside the USBL gate: its
+        normalised innovation against the estimate at the fix's time, with the estimate's
+        covariance grown by ``(auv_speed_max age)^2`` (``age``: since the estimate's last
+        measurement) and the fix's own, above :data:`USBL_GATE` (chi-square, 2 dof,
+        99.99 %). A real USBL has outliers (multipath); the simulator's have none."""
+        r, r_max = math.hypot(fix.N, fix.E), self.cfg.watchdog.max_distance_m
+        if r > r_max:
+            return f"{r:.0f} m from the origin (max_distance_m {r_max:g})"
+        e = self.estimators[k].estimate(fix.t)
+        if not (math.isfinite(e.N) and math.isfinite(e.E)):
+            return None  # nothing to compare with yet
+        age = max(fix.t - e.t_last_fix, 0.0) if math.isfinite(e.t_last_fix) else 0.0
+        S = (np.reshape(e.cov, (2, 2)) + np.reshape(fix.cov, (2, 2))
+             + np.eye(2) * (self.gp.v_max * age) ** 2)  # fmt: skip
+        d = np.array([fix.N - e.N, fix.E - e.E])
+        nis = float(d @ np.linalg.solve(S, d))
+        if nis > USBL_GATE:
+            return (f"{math.hypot(*d):.1f} m from the estimate (normalised innovation "
+                    f"{nis:.1f} > {USBL_GATE:.1f})")
+        return None
 
     def _fix(self, k: int, msg, t: float, asv) -> Fix:
         """The :class:`~mpcasv.models.acoustics.Fix` of AUV ``k`` a UsblFixExtended ``msg``

@@ -134,6 +134,7 @@ class Sitl(AsvDune, Publishing):
         self.loops_on = False  # the ASV's control loops ran at the last published state
         self.fixes_sent = [0] * len(self.auvs)  # the world's USBL fixes sent, per AUV
         self.reports_sent = [0] * len(self.auvs)  # its status reports (--auv-states acoustic)
+        self.dived = False  # --auv-states acoustic: the AUVs' states now come as reports
         self.epoch = 0.0
         self.n = 0
 

@@ -75,8 +75,9 @@ class SitlOptions:
     plots: bool = False
     ready_file: Path | None = None
     #: the AUVs' EstimatedStates: ``radio`` at 2 Hz (at the surface, as DUNE over Wi-Fi), or
-    #: ``acoustic``: the true state at t = 0, then only the world's status reports that got
-    #: through (under water: position with the AUV's own navigation error), stamped at theirs
+    #: ``acoustic``: so until the ASV's first Reference (the AUVs dive as the operation
+    #: starts), then only the world's status reports that got through (under water: position
+    #: with the AUV's own navigation error), stamped at theirs
     auv_states: str = "radio"
 
     @staticmethod

@@ -62,7 +62,11 @@ class Publishing:
             S[3] = w.S[3]
         else:
             x, S = w.x, w.S
-        if self.opt.auv_states == "radio" or w.t == 0:
+        if self.opt.auv_states == "acoustic" and not self.dived and self.maneuver is not None \
+                and self.maneuver.got_reference:  # fmt: skip
+            self.dived = True  # the reports made until now were on radio already
+            self.reports_sent = [len(r) for r in w.reports]
+        if not self.dived:
             for v in self.auvs:
                 v.publish(self._es(v, self._nav_auv(S, v.index)))
         else:
@@ -84,10 +88,12 @@ class Publishing:
             self.asv.publish(self._es(self.asv, self._nav_asv(x)))
 
     def publish_reports(self) -> None:
-        """``--auv-states acoustic``: each AUV's status reports of the world up to this tick
-        that got through, each as its EstimatedState stamped at the report's time (the AUV's
-        own navigation: the true position plus its navigation error; its heading and speed,
-        no current): what the deploy's estimators get in place of 2 Hz states."""
+        """``--auv-states acoustic``, once the AUVs dived (the ASV's first Reference): each
+        AUV's status reports of the world up to this tick that got through, each as its
+        EstimatedState stamped at the report's time (the AUV's own navigation: the true
+        position plus its navigation error; its heading and speed, no current): what the
+        deploy's estimators get in place of 2 Hz states. A report made while the ASV's DUNE
+        is down is lost (it would come through the ASV's modem)."""
         t_tick = self.now() - self.ts_offset
         for v in self.auvs:
             reports = self.world.reports[v.index]
@@ -95,6 +101,8 @@ class Publishing:
                    and reports[self.reports_sent[v.index]].t <= t_tick + 1e-9):  # fmt: skip
                 r = reports[self.reports_sent[v.index]]
                 self.reports_sent[v.index] += 1
+                if not self.asv.alive:
+                    continue
                 U = r.speed
                 nav = NavState(self.ts_offset + r.t, r.N, r.E, r.depth, r.psi, U, 0.0, 0.0,
                                U * math.cos(r.psi), U * math.sin(r.psi), math.nan, math.nan)
