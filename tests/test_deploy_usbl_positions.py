@@ -156,6 +156,8 @@ def test_fixes_keep_a_submerged_auv_seen_and_estimated(tmp_path):
     assert "auv_lost" in events and summary["usbl_fix_positions"] == [0]
     est, events, summary = _submerged(tmp_path / "perfect", "perfect", fixes=True)
     assert "auv_lost" in events and summary["usbl_fix_positions"] == [0]
+    # said once: the fixes come and 'perfect' takes none (a new user's finding, session 42)
+    assert events.count("usbl_fix_positions_unused") == 1
     assert summary["usbl_fixes"] == [8]  # the times still count (M2o reads them)
     assert est.N == pytest.approx(100.0, abs=1e-3)  # its own last state
 
@@ -343,6 +345,15 @@ def test_a_fix_brings_an_uncertain_auv_back(tmp_path):
     assert dep.status == ["uncertain"]
     dep.link.handle_datagram(_usbl(t - 0.2, 104.0, 1.0), ASV)
     assert dep.status == ["ok"] and dep.auv_ages(clock.t) == [0.0]
+    for _ in range(10):  # uncertain again, and again brought back
+        clock.t += 0.5
+        t += 0.5
+        dep.link.handle_datagram(_es(clock, 0x2801, t, 0.0), ASV)
+        dep.watch()
+    dep.link.handle_datagram(_usbl(t - 0.2, 106.0, 1.0), ASV)
     asyncio.run(dep.finish())
     fresh = [e for e in read_jsonl(tmp_path / "deploy.jsonl", "event") if e["event"] == "auv_fresh"]
-    assert len(fresh) == 1 and fresh[0]["by"] == "usbl_fix" and fresh[0]["was"] == "uncertain"
+    assert len(fresh) == 2 and all(e["by"] == "usbl_fix" and e["was"] == "uncertain"
+                                   for e in fresh)  # fmt: skip
+    # the first says what to do about it (a new user's finding, session 42), once
+    assert "auv_stale_s" in fresh[0]["note"] and "note" not in fresh[1]

@@ -279,7 +279,7 @@ def test_a_deploy_that_hears_no_vehicle_exits_1_saying_so(tmp_path, capsys):
 
 
 def _deploy_stub(steps: int, heard: list[bool], state: list[bool],
-                 transport: str = "udp") -> SimpleNamespace:  # fmt: skip
+                 transport: str = "udp", speedup: float = 1.0) -> SimpleNamespace:  # fmt: skip
     tcp = transport == "tcp"
     peers = [SimpleNamespace(label=f"v{k}", last_heard=0.0 if h else float("-inf"),
                              nav=object() if s else None,
@@ -288,7 +288,8 @@ def _deploy_stub(steps: int, heard: list[bool], state: list[bool],
     link = SimpleNamespace(announce_to=() if tcp else ("127.0.0.1:30100",), transport=transport,
                            bind="127.0.0.1")
     stub = SimpleNamespace(
-        steps=steps, phase="waiting", cfg=SimpleNamespace(link=link),
+        steps=steps, phase="waiting",
+        cfg=SimpleNamespace(link=link, clock=SimpleNamespace(speedup=speedup)),
         link=SimpleNamespace(peers=peers, endpoint=None if tcp else SimpleNamespace(
             address=("127.0.0.1", 1)), tcp_error=None, strangers={}),  # fmt: skip
     )
@@ -305,6 +306,10 @@ def test_no_decision_names_what_was_missing():
     why = Phases.no_decision(_deploy_stub(0, [False, False], [False, False], "tcp"), 5.0)
     assert why.startswith("no vehicle heard in 5 s") and "announce" not in why.lower()
     assert "v0 127.0.0.1:6001, v1 127.0.0.1:6002" in why and "sitl --tcp" in why
+    # at a speed-up the seconds are the deploy clock's (a new user's finding, session 42:
+    # "297 s" after a minute of wall time)
+    why = Phases.no_decision(_deploy_stub(0, [False, False], [False, False], speedup=5.0), 297)
+    assert why.startswith("no vehicle heard in 297 s of the deploy clock ([clock] speedup 5)")
     why = Phases.no_decision(_deploy_stub(0, [True, True], [True, False]), 5.0)
     assert "no state" in why and "from v1 " in why and "heard: v0, v1" in why
     assert "announced but not configured" not in why

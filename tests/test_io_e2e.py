@@ -231,6 +231,8 @@ def test_case3_rehearsal_under_water(tmp_path):
     assert not [r for r in records if r.get("event") in ("auv_uncertain", "auv_lost")]
     es = read_messages(deploy_dir / "imc.lsf", imcpy.EstimatedState)
     assert (es["src"] == 0x2811).sum() <= 300 / 30 + 3  # no 2-Hz radio states: the reports
+    run = json.loads((sitl_dir / "run" / "run.json").read_text())
+    assert run["sitl"]["auv_states"] == "acoustic"  # the run folder says how it ran
     world, _ = run_scenario(sc, SEED, False)
     res = simulate(scenario_with(world, duration=300.0),
                    make_controller(sc.controller, 1, sc.preset), SEED)  # fmt: skip

@@ -119,8 +119,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--auv-states", choices=("radio", "acoustic"), default="radio",
                    help="the AUVs' EstimatedStates: 'radio' at 2 Hz (default), or 'acoustic': "
                    "so until the ASV's first Reference, then only the world's status reports "
-                   "that got through (AUVs under water: a deploy then also needs the ASV's "
-                   "USBL fixes, estimator 'kalman')")  # fmt: skip
+                   "that got through (AUVs under water: the deploy then needs the positions of "
+                   "the ASV's USBL fixes, estimator 'kalman' or 'plan', and watchdog."
+                   "auv_stale_s above the gaps between fixes)")  # fmt: skip
     s.add_argument("--reanchor", type=_positive, default=1000.0,
                    help="EstimatedState reference point moves every this many m")  # fmt: skip
     s.add_argument("--asv-name", default="sitl-asv")

@@ -125,7 +125,14 @@ class BoatFeedback:
             if self.usbl.unmatched.get(msg.target) == 1:
                 self.event("usbl_fix_unknown", vehicle=p.label, target=msg.target, auvs=names)
             return
-        if self.cfg.controller.estimator != "perfect" and self.usbl.first_time(k, t):
+        if self.cfg.controller.estimator == "perfect":
+            if not self._unused_said:  # once per run
+                self._unused_said = True
+                self.event("usbl_fix_positions_unused", estimator="perfect",
+                           note="the ASV's USBL fixes arrive, and estimator 'perfect' takes "
+                           "none of their positions: an AUV is seen by its own states only "
+                           "(under water, out of radio contact: estimator 'kalman')")
+        elif self.usbl.first_time(k, t):
             self._usbl_position(k, self._fix(k, msg, t, nav))
 
     def _usbl_position(self, k: int, fix: Fix) -> None:
@@ -151,7 +158,14 @@ class BoatFeedback:
             return
         self.usbl.taken(k, self.clock.now())
         if self.status[k] not in (OK, "missing"):  # seen again, by the ASV's USBL
-            self.event("auv_fresh", vehicle=label, auv=k, was=self.status[k], by="usbl_fix")
+            note = {}
+            if not self._fresh_by_fix_said:  # the first time: the limit is below the gaps
+                self._fresh_by_fix_said = True
+                note = {"note": "uncertain between two USBL fixes: with the AUVs under water, "
+                        "watchdog.auv_stale_s should exceed the gaps between fixes (several "
+                        "[acoustics] T0: a fix fails often while the propeller runs)"}
+            self.event("auv_fresh", vehicle=label, auv=k, was=self.status[k], by="usbl_fix",
+                       **note)  # fmt: skip
             self.status[k] = OK
 
     def _implausible(self, k: int, fix: Fix) -> str | None:
@@ -228,8 +242,9 @@ class BoatFeedback:
                            "propeller_on taken from our command")  # fmt: skip
             elif note == "propeller_assumed":
                 self.event("propeller_assumed", on=on, thrusters=self.thrusters.values(),
-                           note="no thruster message (none yet, or DUNE's loops are off in "
-                           "standby): propeller state assumed from our command")  # fmt: skip
+                           note="no fresh thruster message (none yet, or DUNE's loops are "
+                           "off in standby; 'thrusters' are the last values heard): "
+                           "propeller state assumed from our command")  # fmt: skip
         return on, source
 
     def _speed_feedback(self) -> None:

@@ -167,7 +167,9 @@ class Phases:
         if self.steps:
             return None
         lk, peers = self.cfg.link, self.link.peers
-        took = f"{round(seconds, 1):g} s"
+        speedup = self.cfg.clock.speedup
+        took = f"{round(seconds, 1):g} s" + (f" of the deploy clock ([clock] speedup "
+                                             f"{speedup:g})" if speedup != 1 else "")
         heard = self.heard()
         if not heard:
             of = f"no vehicle heard in {took} (of {', '.join(p.label for p in peers)})"
