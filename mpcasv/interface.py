@@ -180,3 +180,17 @@ class Controller(Protocol):
 
     def step(self, obs: Observation) -> Command:
         """Decide the command for the next supervisory period."""
+
+
+def pushed_waypoint(waypoint, asv_NE, lead: float) -> tuple[float, float]:
+    """``waypoint`` (N, E; m) pushed ``lead`` m further along the line from ``asv_NE``: what
+    ``mpcasv deploy`` sends DUNE as the Reference's location (DUNE declares arrival within
+    15 m and switches its loops off), and what ``[sim] reference_lead_m`` makes the simulator
+    steer at. Unchanged for ``lead = 0`` or a waypoint on the ASV (no line). The heading
+    towards it is the same from ``asv_NE``, not from where the boat goes on to."""
+    N, E = float(waypoint[0]), float(waypoint[1])
+    dN, dE = N - float(asv_NE[0]), E - float(asv_NE[1])
+    d = math.hypot(dN, dE)
+    if lead > 0 and d > 1e-6:
+        N, E = N + lead * dN / d, E + lead * dE / d
+    return N, E

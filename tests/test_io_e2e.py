@@ -30,6 +30,7 @@ from mpcasv.io.rehearsal import (
     deploy_config_for,
     free_udp_port,
     rehearsal_metrics,
+    rehearsal_scenario,
     start_deploy,
     start_sitl,
     wait_ready,
@@ -109,7 +110,9 @@ def _compare(scenario, deploy_dir: Path, sitl_dir: Path,
     m_dep, joined = rehearsal_metrics(world, sitl_dir, deploy_dir)
     info = run["sitl"]
     print("SITL:", {k: info[k] for k in ("counts", "overruns", "sitl_wall_s")})
-    sc = scenario_with(world, duration=m_dep["duration_s"])
+    # the SITL's boat steered at the deploy's pushed References: simulate it so (session 42)
+    sc = rehearsal_scenario(world, deploy_dir, m_dep["duration_s"])
+    assert sc.sim.reference_lead_m == 20.0
     res = simulate(sc, make_controller(sc.controller, len(sc.auv), sc.preset), SEED)
     m_sim = compute_metrics(res)
     return m_sim, m_dep
@@ -234,7 +237,7 @@ def test_case3_rehearsal_under_water(tmp_path):
     run = json.loads((sitl_dir / "run" / "run.json").read_text())
     assert run["sitl"]["auv_states"] == "acoustic"  # the run folder says how it ran
     world, _ = run_scenario(sc, SEED, False)
-    res = simulate(scenario_with(world, duration=300.0),
+    res = simulate(rehearsal_scenario(world, deploy_dir, 300.0),
                    make_controller(sc.controller, 1, sc.preset), SEED)  # fmt: skip
     offset = json.loads((sitl_dir / "run" / "run.json").read_text())["sitl"]["ts_offset"]
     sim = res.timeseries.set_index(res.timeseries["t"].round(6))

@@ -166,17 +166,20 @@ def closed_loop(model: VesselModel, ep: ExecutionParams, dt: float, n_sub: int) 
     )  # fmt: skip
 
 
-def command_vector(command) -> np.ndarray:
+def command_vector(command, asv_NE=None, lead: float = 0.0) -> np.ndarray:
     """Turn a :class:`mpcasv.interface.Command` into the ``cmd`` vector of :func:`closed_loop`:
-    ``transit`` 1 for a transit, 0 for standby. Whether a transit is an escape (``transit`` =
-    2, the power turn's ``turn_scope = "avoidance"``) is decided from geometry by the world
-    that runs it (:func:`escape_vector`, called by :meth:`mpcasv.sim.world.World.advance`),
-    never from the controller's reason."""
-    from mpcasv.interface import Mode
+    ``transit`` 1 for a transit, 0 for standby; a transit's waypoint pushed ``lead`` m on
+    from the ASV at ``asv_NE`` (:func:`pushed_waypoint`; ``[sim] reference_lead_m``). Whether
+    a transit is an escape (``transit`` = 2, the power turn's ``turn_scope = "avoidance"``)
+    is decided from geometry by the world that runs it (:func:`escape_vector`, called by
+    :meth:`mpcasv.sim.world.World.advance`), never from the controller's reason."""
+    from mpcasv.interface import Mode, pushed_waypoint
 
     if command.mode is Mode.STANDBY:
         return np.zeros(NCMD)
-    return np.array([1.0, command.waypoint[0], command.waypoint[1], command.speed])
+    N, E = command.waypoint if asv_NE is None else pushed_waypoint(command.waypoint, asv_NE,
+                                                                     lead)  # fmt: skip
+    return np.array([1.0, N, E, command.speed])
 
 
 def escape_vector(cmd, escaping: bool) -> np.ndarray:

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import imcpy
 
-from mpcasv.interface import Command, Mode
+from mpcasv.interface import Command, Mode, pushed_waypoint
 from mpcasv.io.geo import Origin, absolute_latlon, to_local, to_wgs84
 
 __all__ = [
@@ -247,11 +247,7 @@ def reference(cmd: Command, asv_NE: tuple[float, float], origin: Origin, lead: f
     """
     r = imcpy.Reference()
     if cmd.mode is Mode.TRANSIT:
-        N, E = cmd.waypoint
-        dN, dE = N - asv_NE[0], E - asv_NE[1]
-        d = math.hypot(dN, dE)
-        if lead > 0 and d > 1e-6:
-            N, E = N + lead * dN / d, E + lead * dE / d
+        N, E = pushed_waypoint(cmd.waypoint, asv_NE, lead)
         speed = cmd.speed
     else:
         N, E = asv_NE

@@ -11,6 +11,7 @@ SITL's mode and get the reason ``"none"``.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from pathlib import Path
 
@@ -22,7 +23,7 @@ from mpcasv.io.logs import read_jsonl
 from mpcasv.sim.scenario import Scenario, scenario_with
 from mpcasv.sim.simulator import RunResult
 
-__all__ = ["COMPARABLE", "compare_metrics", "rehearsal_metrics"]
+__all__ = ["COMPARABLE", "compare_metrics", "rehearsal_metrics", "rehearsal_scenario"]
 
 #: Metrics a rehearsal and the in-process simulation of the same scenario, seed and duration
 #: should agree on: where the ASV went, how long it stood by / tracked / avoided, how close it
@@ -91,6 +92,30 @@ def rehearsal_metrics(scenario: Scenario, sitl_out: str | Path, deploy_log: str 
     metrics["decisions_joined"] = int(has.sum())
     metrics["mode_disagreements"] = int((~j["mode_agrees"]).sum())
     return metrics, j
+
+
+def rehearsal_scenario(world: Scenario, deploy_log: str | Path, duration: float) -> Scenario:
+    """The scenario ``mpcasv simulate`` runs for a comparison with a rehearsal: ``world``
+    (the scenario as the SITL realised it, :func:`mpcasv.sim.uncertainty.run_scenario`) for
+    ``duration`` s, its execution level steering at a transit waypoint pushed as far on as
+    the deploy pushed DUNE's References (``[sim] reference_lead_m`` = the logged
+    ``link.reference_lead_m``; :func:`mpcasv.interface.pushed_waypoint`), as the SITL's boat
+    steered. Without it an MPC's rehearsal parted from its simulation within a minute
+    (docs/deploy.md, "The ASV's actuators").
+
+    Raises
+    ------
+    ValueError
+        The log has no ``started`` event (not a deploy log, or cut before it).
+    """
+    log = Path(deploy_log)
+    started = [e for e in read_jsonl(log / "deploy.jsonl" if log.is_dir() else log, "event")
+               if e.get("event") == "started"]  # fmt: skip
+    if not started:
+        raise ValueError(f"{log}: no 'started' event: not a deploy log")
+    lead = float(started[0]["config"]["link"]["reference_lead_m"])
+    return scenario_with(world, duration=duration,
+                         sim=dataclasses.replace(world.sim, reference_lead_m=lead))
 
 
 def compare_metrics(a: dict, b: dict, rel: float = 0.10, period: float = 1.0,

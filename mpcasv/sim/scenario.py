@@ -108,6 +108,12 @@ class SimSpec:
     control_period: between(0, CONTROL_PERIOD_MAX, "s", "seconds, not hours",
                             lo_open=True) = 1.0  # fmt: skip
     log_every_step: Flag = False  # log at the plant step instead of the supervisory period
+    #: the execution level steers at a transit's waypoint pushed this far (m) further along
+    #: the line from the ASV at the decision, as ``mpcasv deploy`` sends DUNE its Reference
+    #: (``link.reference_lead_m``, 20 m: DUNE stops a boat within 15 m of its Reference);
+    #: 0, the default: at the waypoint itself (the thesis's execution level). To simulate a
+    #: rehearsal's world as its DUNE (or SITL) steered it (docs/deploy.md, section 2)
+    reference_lead_m: between(0, 1000.0, "m", "a lead beyond 1 km is no waypoint") = 0.0
 
     @model_validator(mode="after")
     def _multiple(self) -> SimSpec:

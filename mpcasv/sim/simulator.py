@@ -86,7 +86,8 @@ def simulate(
             next_plan_t = obs.t + plan_every
         # the power turn of an escape (turn_scope "avoidance"): World.advance's one rule for
         # every controller, the ASV inside a collision domain now (true ranges), not its labels
-        period = world.advance(command_vector(cmd))
+        period = world.advance(command_vector(cmd, obs.asv.position,
+                                              scenario.sim.reference_lead_m))  # fmt: skip
         obs = world.observation()  # at the end of the period: logged, and used next step
         row = timeseries_row(world, obs, cmd, period, step_ms[-1])
         diag = getattr(controller, "diagnostics", None)
