@@ -212,6 +212,7 @@ def test_the_sitl_asv_sends_a_fix_message_per_world_fix():
              Fix(5.0, 0, 101.0, 0.0, 20.0, (1.0, 0.0, 0.0, 1.0), 103.0),
              Fix(9.0, 0, 102.0, 0.0, 20.0, (1.0, 0.0, 0.0, 1.0), 104.0)]  # fmt: skip
     sitl = SimpleNamespace(ts_offset=None, tick=0.0, fixes_sent=[0], origin=ORIGIN,
+                           opt=SimpleNamespace(usbl_delay=0.0),
                            world=SimpleNamespace(fixes=[fixes]),
                            asv=Vehicle(alive=True), auvs=[Vehicle(index=0, name="sitl-auv")])
     sitl.now = lambda: sitl.tick

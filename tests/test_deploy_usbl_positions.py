@@ -357,3 +357,32 @@ def test_a_fix_brings_an_uncertain_auv_back(tmp_path):
                                    for e in fresh)  # fmt: skip
     # the first says what to do about it (a new user's finding, session 42), once
     assert "auv_stale_s" in fresh[0]["note"] and "note" not in fresh[1]
+
+
+def test_the_sitl_sends_its_fixes_late_with_usbl_delay(tmp_path):
+    """``--usbl-delay 1.5``: each fix goes out 1.5 s of world time after it, stamped at its own
+    time; a deploy fed the AUV's 2-Hz states meanwhile takes it in its place (reordered).
+    A delay outside [0, 60] s is refused in one line."""
+    from types import SimpleNamespace
+
+    from mpcasv.config import ConfigError
+    from mpcasv.io.sitloptions import SitlOptions
+    from mpcasv.io.sitlpublish import Publishing
+    from mpcasv.models.acoustics import Fix
+    from mpcasv.sim.scenario import load_scenario
+
+    sent = []
+    fixes = [Fix(5.0, 0, 100.0, 0.0, 20.0, (1.0, 0.0, 0.0, 1.0), 102.0)]
+    sitl = SimpleNamespace(ts_offset=1000.0, tick=1006.0, fixes_sent=[0], origin=ORIGIN,
+                           opt=SimpleNamespace(usbl_delay=1.5), world=SimpleNamespace(
+                               fixes=[fixes]), auvs=[SimpleNamespace(index=0, name="a")],
+                           asv=SimpleNamespace(publish=lambda m, t=None: sent.append(t)))
+    sitl.now = lambda: sitl.tick
+    Publishing.publish_fixes(sitl)  # 1 s after the fix: not yet
+    sitl.tick = 1006.5
+    Publishing.publish_fixes(sitl)
+    assert sent == [1005.0]  # sent 1.5 s late, stamped at the fix's time
+    sc = load_scenario("experiments/scenarios/case3.toml")
+    for bad in (-1.0, 61.0, math.nan):
+        with pytest.raises(ConfigError, match="--usbl-delay"):
+            SitlOptions(usbl_delay=bad).check(sc)

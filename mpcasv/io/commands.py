@@ -122,6 +122,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                    "that got through (AUVs under water: the deploy then needs the positions of "
                    "the ASV's USBL fixes, estimator 'kalman' or 'plan', and watchdog."
                    "auv_stale_s above the gaps between fixes)")  # fmt: skip
+    s.add_argument("--usbl-delay", type=float, default=0.0,
+                   help="seconds between a USBL fix and the ASV's sending of it, stamped at the "
+                   "fix's time (in [0, 60]; default 0): AUV states stamped later then come "
+                   "first, as from a real DUNE")  # fmt: skip
     s.add_argument("--reanchor", type=_positive, default=1000.0,
                    help="EstimatedState reference point moves every this many m")  # fmt: skip
     s.add_argument("--asv-name", default="sitl-asv")
@@ -198,6 +202,7 @@ def run_sitl_cli(args: argparse.Namespace) -> int:
         reanchor_m=args.reanchor, asv_name=args.asv_name, asv_id=args.asv_id,
         auv_id_base=args.auv_id_base, tcp=args.tcp, asv_outage=args.asv_outage,
         out=args.out, plots=args.plots, ready_file=args.ready_file, auv_states=args.auv_states,
+        usbl_delay=args.usbl_delay,
     ).check(sc)  # fmt: skip
     check_output_folder(args.out)
     if args.ready_file is not None:

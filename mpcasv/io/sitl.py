@@ -366,7 +366,7 @@ class Sitl(AsvDune, Publishing):
         info = {"ts_offset": self.ts_offset, "periods": len(self.rows), "speedup":
                 self.opt.speedup, "overruns": overruns, "counts": self.counts,
                 "sitl_wall_s": wall_s,
-                "auv_states": self.opt.auv_states,
+                "auv_states": self.opt.auv_states, "usbl_delay": self.opt.usbl_delay,
                 **({"lockstep": True} if self.opt.lockstep else {})}  # fmt: skip
         if not self.rows:
             info["no_run"] = ("the world stood at t = 0 (--hold): no Reference came" if self.held

@@ -40,6 +40,8 @@ IMC_ID_MAX = 0xFFFE  # 0xFFFF is broadcast
 
 #: what the SITL's AUVs send as EstimatedState (:attr:`SitlOptions.auv_states`)
 AUV_STATES = ("radio", "acoustic")
+#: the longest ``--usbl-delay`` (s)
+USBL_DELAY_MAX = 60.0
 
 
 def check_speedup(speedup: float, what: str = "--speedup") -> float:
@@ -79,6 +81,9 @@ class SitlOptions:
     #: starts), then only the world's status reports that got through (under water: position
     #: with the AUV's own navigation error), stamped at theirs
     auv_states: str = "radio"
+    #: world seconds between a USBL fix and the ASV's sending of it, stamped at the fix's own
+    #: time (DUNE's processing and the network: AUV states stamped later may come first)
+    usbl_delay: float = 0.0
 
     @staticmethod
     def auv_name(name: str) -> str:
@@ -114,6 +119,10 @@ class SitlOptions:
         if not (-90 <= lat <= 90 and -180 <= lon <= 180):  # nan fails too
             raise ConfigError(f"--origin {lat:g},{lon:g}: 'lat,lon' in degrees, latitude in "
                               "[-90, 90] and longitude in [-180, 180]")  # fmt: skip
+        if not 0 <= self.usbl_delay <= USBL_DELAY_MAX:  # nan fails too
+            raise ConfigError(f"--usbl-delay {self.usbl_delay:g}: seconds in [0, "
+                              f"{USBL_DELAY_MAX:g}] (a fix later than that is no fix to steer "
+                              "by)")  # fmt: skip
         if self.auv_states not in AUV_STATES:
             raise ConfigError(f"--auv-states {self.auv_states!r}: one of {', '.join(AUV_STATES)}")
         check_ipv4(self.bind, "--bind")

@@ -111,11 +111,13 @@ class Publishing:
     def publish_fixes(self) -> None:
         """The ASV's USBL fixes of the world up to this tick, each as the UsblFixExtended its
         DUNE dispatches (``target`` the AUV's system name), stamped at the fix's own time:
-        what ``fix_age_source = "observed"`` reads in ``mpcasv deploy``. Fixes while the
-        ASV's DUNE is down are lost (none is sent)."""
+        what ``fix_age_source = "observed"`` reads in ``mpcasv deploy``, sent ``--usbl-delay``
+        s after it (AUV states stamped later may then come first, as from a real DUNE: the
+        deploy's estimators take them in time order). Fixes while the ASV's DUNE is down are
+        lost (none is sent)."""
         if self.ts_offset is None:  # the world has not started
             return
-        t_tick = self.now() - self.ts_offset
+        t_tick = self.now() - self.ts_offset - self.opt.usbl_delay
         for v in self.auvs:
             fixes = self.world.fixes[v.index]
             while (self.fixes_sent[v.index] < len(fixes)
