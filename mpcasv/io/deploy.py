@@ -253,13 +253,6 @@ class Deploy(Phases, BoatFeedback, FieldMode, Ending):
         else:
             self.step(ts, now)
 
-    def auv_ages(self, now: float) -> list[float]:
-        """Each AUV's age (s, deploy clock) for the watchdogs: since its last accepted state
-        or, when the estimator takes them, the last USBL fix whose position it took
-        (:attr:`UsblFixes.recv`): an AUV out of radio contact under water is seen by the
-        ASV's USBL."""
-        return [now - max(p.nav_recv, self.usbl.recv[k]) for k, p in enumerate(self.link.auvs)]
-
     def observation(self, ts: float, now: float) -> tuple[Observation, list[str], list[float]]:
         """The Observation at ASV-state time ``ts`` with the watchdogs' verdicts."""
         ages = self.auv_ages(now)

@@ -50,6 +50,13 @@ class Phases:
             self.event("plan_start_failed", **info)
 
     # --- phases and watchdogs ------------------------------------------------------------
+    def auv_ages(self, now: float) -> list[float]:
+        """Each AUV's age (s, deploy clock) for the watchdogs: since its last accepted state
+        or, when the estimator takes them, the last USBL fix whose position it took
+        (:attr:`mpcasv.io.asvwatch.UsblFixes.recv`): an AUV out of radio contact under
+        water is seen by the ASV's USBL."""
+        return [now - max(p.nav_recv, self.usbl.recv[k]) for k, p in enumerate(self.link.auvs)]
+
     def _looks_stale(self, now: float) -> bool:
         """Whether a watchdog would fire at ``now`` on the states read so far."""
         asv = self.link.asv

@@ -96,11 +96,7 @@ class Publishing:
         is down is lost (it would come through the ASV's modem)."""
         t_tick = self.now() - self.ts_offset
         for v in self.auvs:
-            reports = self.world.reports[v.index]
-            while (self.reports_sent[v.index] < len(reports)
-                   and reports[self.reports_sent[v.index]].t <= t_tick + 1e-9):  # fmt: skip
-                r = reports[self.reports_sent[v.index]]
-                self.reports_sent[v.index] += 1
+            for r in _due(self.world.reports[v.index], self.reports_sent, v.index, t_tick):
                 if not self.asv.alive:
                     continue
                 U = r.speed
@@ -119,11 +115,15 @@ class Publishing:
             return
         t_tick = self.now() - self.ts_offset - self.opt.usbl_delay
         for v in self.auvs:
-            fixes = self.world.fixes[v.index]
-            while (self.fixes_sent[v.index] < len(fixes)
-                   and fixes[self.fixes_sent[v.index]].t <= t_tick + 1e-9):  # fmt: skip
-                f = fixes[self.fixes_sent[v.index]]
-                self.fixes_sent[v.index] += 1
+            for f in _due(self.world.fixes[v.index], self.fixes_sent, v.index, t_tick):
                 self.asv.publish(usbl_fix_extended(v.name, f.N, f.E, f.depth,
                                                    math.sqrt(f.cov[0] + f.cov[3]), self.origin),
                                  t=self.ts_offset + f.t)  # fmt: skip
+
+
+def _due(items: list, sent: list[int], k: int, t: float):
+    """The world's ``items`` of AUV ``k`` (fixes or reports, in time order) made up to world
+    time ``t`` and not yet handed out, each once: ``sent[k]`` counts those handed out."""
+    while sent[k] < len(items) and items[sent[k]].t <= t + 1e-9:
+        sent[k] += 1
+        yield items[sent[k] - 1]
