@@ -86,6 +86,10 @@ def test_the_deploy_puts_the_asvs_usbl_fixes_into_its_observations(tmp_path):
     unknown = [e for e in read_jsonl(tmp_path / "deploy.jsonl", "event")
                if e["event"] == "usbl_fix_unknown"]  # fmt: skip
     assert len(unknown) == 1 and unknown[0]["target"] == "lauv-other"
+    # 'perfect' takes no fix position, and needs none while the AUV's states come (a
+    # review's finding, session 42: the advice to switch had come on every such run)
+    assert not [e for e in read_jsonl(tmp_path / "deploy.jsonl", "event")
+                if e["event"] == "usbl_fix_positions_unused"]  # fmt: skip
     assert unknown[0]["auvs"] == ["lauv-xplore-1"]
     summary = read_jsonl(tmp_path / "deploy.jsonl", "summary")[-1]
     assert summary["usbl_fixes"] == [1] and summary["usbl_fixes_unmatched"] == {"lauv-other": 3}

@@ -149,6 +149,7 @@ def test_fixes_keep_a_submerged_auv_seen_and_estimated(tmp_path):
     AUVs' own states only, which takes no fix), the same AUV is lost."""
     est, events, summary = _submerged(tmp_path / "kalman", "kalman", fixes=True)
     assert "auv_uncertain" not in events and "auv_lost" not in events
+    assert "usbl_fix_positions_unused" not in events  # they are used
     assert summary["usbl_fix_positions"] == [8] and summary["usbl_fixes"] == [8]
     assert summary["estimator_reordered"] == [0] and summary["estimator_dropped"] == [0]
     assert abs(est.N - 120.0) < 2.0 and abs(est.E - 10.0) < 1.0

@@ -8,6 +8,8 @@ the waypoint (docs/deploy.md, "The ASV's actuators")."""
 from __future__ import annotations
 
 import dataclasses
+import hashlib
+import json
 import math
 from pathlib import Path
 
@@ -19,7 +21,9 @@ from mpcasv.controllers.goto import GoTo, GoToParams
 from mpcasv.interface import Command, Mode, Reason, pushed_waypoint
 from mpcasv.io.geo import Origin, to_local
 from mpcasv.io.imc import reference
-from mpcasv.sim.scenario import load_scenario, scenario_from_dict, scenario_with
+from mpcasv.io.rehearsal import rehearsal_scenario
+from mpcasv.sim.realisation import world_digest
+from mpcasv.sim.scenario import digest_plain, load_scenario, scenario_from_dict, scenario_with
 from mpcasv.sim.simulator import simulate
 from mpcasv.sim.world import World
 
@@ -32,6 +36,8 @@ def test_the_pushed_waypoint_keeps_the_bearing():
     assert (N, E) == pytest.approx((13.0 + 12.0, 14.0 + 16.0))
     assert pushed_waypoint((13.0, 14.0), (10.0, 10.0), 0.0) == (13.0, 14.0)
     assert pushed_waypoint((10.0, 10.0), (10.0, 10.0), 20.0) == (10.0, 10.0)  # no line
+    assert pushed_waypoint((10.0, 10.0 + 1e-7), (10.0, 10.0), 20.0) == (10.0, 10.0 + 1e-7)
+    assert pushed_waypoint((10.0, 10.001), (10.0, 10.0), 20.0) == pytest.approx((10.0, 30.001))
 
 
 def test_the_deploys_reference_is_the_same_point():
@@ -72,3 +78,43 @@ def test_a_bad_lead_is_refused(lead):
     data["sim"] = data.get("sim", {}) | {"reference_lead_m": lead}
     with pytest.raises(ConfigError, match="reference_lead_m"):
         scenario_from_dict(data)
+
+
+def _log(tmp_path, **link) -> Path:
+    path = tmp_path / "deploy.jsonl"
+    cfg = {"link": {"reference_lead_m": 20.0, "reference_radius_m": 0.0} | link}
+    path.write_text(json.dumps({"kind": "event", "event": "started", "t": 0.0, "config": cfg})
+                    + "\n")  # fmt: skip
+    return path
+
+
+def test_rehearsal_scenario_takes_the_logged_lead(tmp_path):
+    """The scenario to compare a rehearsal with: its duration, and the lead its deploy
+    pushed DUNE's References by; a log without its start, or a lead ``simulate`` cannot
+    follow (DUNE stops the boat within 15 m + |radius| of the Reference), is refused."""
+    world = load_scenario(CASE3)
+    sc = rehearsal_scenario(world, _log(tmp_path), 120.0)
+    assert sc.sim.reference_lead_m == 20.0 and sc.duration == 120.0
+    assert dataclasses.replace(sc.sim, reference_lead_m=0.0) == world.sim
+    for link, words in (({"reference_lead_m": 10.0}, "follows a lead of 15 m"),
+                        ({"reference_radius_m": -10.0}, "follows a lead of 25 m"),
+                        ({"reference_lead_m": 2000.0}, "to 1000 m")):  # fmt: skip
+        with pytest.raises(ValueError, match=words):
+            rehearsal_scenario(world, _log(tmp_path, **link), 120.0)
+    (tmp_path / "deploy.jsonl").write_text("")
+    with pytest.raises(ValueError, match="no 'started' event"):
+        rehearsal_scenario(world, tmp_path, 120.0)
+
+
+def test_a_zero_lead_leaves_the_digests_as_before():
+    """At 0 the field is left out of the scenario's digests, so that results written before
+    it existed keep their job and realisation ids (a review's finding, session 42: they had
+    all changed); any other lead is in them."""
+    sc = load_scenario(CASE3)
+    plain = digest_plain(sc)
+    assert "reference_lead_m" not in plain["sim"] and "dt" in plain["sim"]
+    old = json.dumps(plain, sort_keys=True, default=str)
+    assert world_digest(sc) == hashlib.sha256(old.encode()).hexdigest()[:16]
+    led = scenario_with(sc, sim=dataclasses.replace(sc.sim, reference_lead_m=5.0))
+    assert digest_plain(led)["sim"]["reference_lead_m"] == 5.0
+    assert world_digest(led) != world_digest(sc)

@@ -182,6 +182,7 @@ def expand(name_or_path: str | Path) -> Expansion:
         _scenario_domain,
         _usable_controllers,
     )
+    from mpcasv.sim.scenario import digest_plain
 
     suite, path = load_suite(name_or_path)
     _check_estimators(suite, path)
@@ -198,7 +199,7 @@ def expand(name_or_path: str | Path) -> Expansion:
                 if note not in skipped:
                     skipped.append(note)
                 continue
-            sc_digest = _digest(_plain(sc))
+            sc_digest = _digest(_plain(digest_plain(sc)))
             reals = realisations(sc, suite.seeds, f"{path}: scenario {file}")
             for i, entry in usable:
                 if entry.scenarios is not None and sc.name not in entry.scenarios:

@@ -126,7 +126,8 @@ class BoatFeedback:
                 self.event("usbl_fix_unknown", vehicle=p.label, target=msg.target, auvs=names)
             return
         if self.cfg.controller.estimator == "perfect":
-            if not self._unused_said:  # once per run
+            # once per run, and only when it matters: the AUV fixed is not seen by its states
+            if not self._unused_said and self.status[k] not in (OK, "missing"):
                 self._unused_said = True
                 self.event("usbl_fix_positions_unused", estimator="perfect",
                            note="the ASV's USBL fixes arrive, and estimator 'perfect' takes "

@@ -106,14 +106,27 @@ def rehearsal_scenario(world: Scenario, deploy_log: str | Path, duration: float)
     Raises
     ------
     ValueError
-        The log has no ``started`` event (not a deploy log, or cut before it).
+        The log has no ``started`` event (not a deploy log, or cut before it); or its lead
+        is one ``simulate`` cannot follow: shorter than DUNE's arrival tolerance,
+        ``HORIZONTAL_TOLERANCE + |link.reference_radius_m|`` (DUNE, and the SITL, then stop
+        a boat whose waypoint is near, which ``simulate`` does not model), or longer than
+        ``[sim] reference_lead_m`` allows.
     """
+    from mpcasv.io.dune import HORIZONTAL_TOLERANCE
+    from mpcasv.sim.scenario import REFERENCE_LEAD_MAX
+
     log = Path(deploy_log)
     started = [e for e in read_jsonl(log / "deploy.jsonl" if log.is_dir() else log, "event")
                if e.get("event") == "started"]  # fmt: skip
     if not started:
         raise ValueError(f"{log}: no 'started' event: not a deploy log")
-    lead = float(started[0]["config"]["link"]["reference_lead_m"])
+    link = started[0]["config"]["link"]
+    lead, radius = float(link["reference_lead_m"]), abs(float(link["reference_radius_m"]))
+    if not HORIZONTAL_TOLERANCE + radius <= lead <= REFERENCE_LEAD_MAX:
+        raise ValueError(f"{log}: link.reference_lead_m {lead:g} m: simulate follows a lead of "
+                         f"{HORIZONTAL_TOLERANCE + radius:g} m (DUNE's arrival tolerance, "
+                         f"{HORIZONTAL_TOLERANCE:g} m + |reference_radius_m|: a nearer "
+                         f"Reference stops the boat) to {REFERENCE_LEAD_MAX:g} m")
     return scenario_with(world, duration=duration,
                          sim=dataclasses.replace(world.sim, reference_lead_m=lead))
 

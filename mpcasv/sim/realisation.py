@@ -64,10 +64,11 @@ class Realisation:
 
 
 def world_digest(sc) -> str:
-    """A digest of a (realised) scenario's every value."""
-    from mpcasv.sim.scenario import _to_plain
+    """A digest of a (realised) scenario's every value (but a later field at its "as before"
+    value: :func:`mpcasv.sim.scenario.digest_plain`)."""
+    from mpcasv.sim.scenario import digest_plain
 
-    text = json.dumps(_to_plain(sc), sort_keys=True, default=str)
+    text = json.dumps(digest_plain(sc), sort_keys=True, default=str)
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 

@@ -96,6 +96,8 @@ DT_MIN, DT_MAX = 0.001, 0.2
 #: The longest supervisory period (s): seconds, not hours (the papers' is 1 s; the same bound
 #: as a deployment's ``controller.control_period``)
 CONTROL_PERIOD_MAX = 60.0
+#: The longest ``[sim] reference_lead_m`` (m)
+REFERENCE_LEAD_MAX = 1000.0
 #: The most plant steps per supervisory period: they are compiled into one CasADi function
 #: (1000 take about 8 s; ``dt = 1e-6`` hung building a million)
 N_SUB_MAX = 1000
@@ -113,7 +115,8 @@ class SimSpec:
     #: (``link.reference_lead_m``, 20 m: DUNE stops a boat within 15 m of its Reference);
     #: 0, the default: at the waypoint itself (the thesis's execution level). To simulate a
     #: rehearsal's world as its DUNE (or SITL) steered it (docs/deploy.md, section 2)
-    reference_lead_m: between(0, 1000.0, "m", "a lead beyond 1 km is no waypoint") = 0.0
+    reference_lead_m: between(0, REFERENCE_LEAD_MAX, "m", "a lead beyond 1 km is no waypoint"
+                              ) = 0.0  # fmt: skip
 
     @model_validator(mode="after")
     def _multiple(self) -> SimSpec:
@@ -281,4 +284,23 @@ def _to_plain(obj):
     return obj
 
 
-__all__ = ["Scenario", "load_scenario", "scenario_from_dict", "scenario_with", "load_toml"]
+#: Scenario fields added after results were first written, per table, with the value that
+#: means "as before": left out of the digests at that value (:func:`digest_plain`), so that a
+#: results folder written before keeps its job and realisation ids (resumed sweeps,
+#: ``--baseline``, ``tune compare``); any other value is in the digest.
+DIGEST_DEFAULTS = {"sim": {"reference_lead_m": 0.0}}
+
+
+def digest_plain(scenario: Scenario) -> dict:
+    """The scenario as plain data for a digest: every field, but those of
+    :data:`DIGEST_DEFAULTS` at their "as before" value."""
+    data = _to_plain(scenario)
+    for table, fields in DIGEST_DEFAULTS.items():
+        for name, before in fields.items():
+            if data[table].get(name) == before:
+                del data[table][name]
+    return data
+
+
+__all__ = ["DIGEST_DEFAULTS", "Scenario", "digest_plain", "load_scenario", "scenario_from_dict",
+           "scenario_with", "load_toml"]
