@@ -387,3 +387,30 @@ def test_the_sitl_sends_its_fixes_late_with_usbl_delay(tmp_path):
     for bad in (-1.0, 61.0, math.nan):
         with pytest.raises(ConfigError, match="--usbl-delay"):
             SitlOptions(usbl_delay=bad).check(sc)
+
+
+def test_fixes_that_agree_with_each_other_overrule_a_wrong_estimate(tmp_path):
+    """The AUV's own states put it at N = 100 m; the ASV's USBL finds it 200 m further on, fix
+    after fix. The first two are refused (outliers against the estimate); the third agrees
+    with them, so the AUV's estimator restarts from all three (event ``usbl_fixes_agree``):
+    the estimate was wrong, and would otherwise refuse every fix for good. Fixes that do not
+    agree with each other stay refused."""
+    from mpcasv.io.deployfeedback import USBL_AGREE, fixes_agree
+    from mpcasv.models.acoustics import Fix
+
+    dep, clock, t = _deploy_with_silent_auv(tmp_path)
+    for i in range(USBL_AGREE - 1):
+        dep.link.handle_datagram(_usbl(t - 0.3 + 0.1 * i, 300.0 + 0.1 * i, 0.0), ASV)
+    assert dep.usbl.outliers == [USBL_AGREE - 1] and dep.usbl.positions == [0]
+    assert abs(dep.estimators[0].estimate(t).N - 100.0) < 1.0
+    dep.link.handle_datagram(_usbl(t, 300.3, 0.0), ASV)
+    assert dep.usbl.outliers == [0] and dep.usbl.positions == [USBL_AGREE]
+    assert abs(dep.estimators[0].estimate(t).N - 300.3) < 1.0  # restarted from the fixes
+    asyncio.run(dep.finish())
+    agree = [e for e in read_jsonl(tmp_path / "deploy.jsonl", "event")
+             if e["event"] == "usbl_fixes_agree"]  # fmt: skip
+    assert len(agree) == 1 and agree[0]["fixes"] == USBL_AGREE
+    cov = (1.0, 0.0, 0.0, 1.0)
+    apart = [Fix(float(i), 0, 300.0 + 500.0 * (i % 2), 0.0, 20.0, cov, 300.0) for i in range(3)]
+    assert not fixes_agree(apart, 2.0)  # 500 m back and forth within a second each
+    assert fixes_agree([Fix(float(i), 0, 300.0 + i, 0.0, 20.0, cov, 300.0) for i in range(3)], 2.0)

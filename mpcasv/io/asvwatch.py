@@ -175,7 +175,8 @@ class UsblFixes:
     estimator took (:meth:`taken`: a reordered one too) and ``recv`` is the deploy clock (s)
     when the last of them arrived (``-inf``: none), which keeps the AUV seen for the
     watchdogs as its own states do; ``outliers`` counts the fixes refused as implausible
-    (:meth:`mpcasv.io.deployfeedback.BoatFeedback._usbl_position`).
+    (:meth:`mpcasv.io.deployfeedback.BoatFeedback._usbl_position`) and ``refused`` holds
+    each AUV's refused fixes since its last taken one.
     """
 
     n: int
@@ -185,6 +186,7 @@ class UsblFixes:
     positions: list[int] = field(default_factory=list)
     recv: list[float] = field(default_factory=list)
     outliers: list[int] = field(default_factory=list)
+    refused: list[list] = field(default_factory=list)
     _recent: list[deque] = field(default_factory=list)
 
     def __post_init__(self) -> None:
@@ -193,6 +195,7 @@ class UsblFixes:
         self.positions = self.positions or [0] * self.n
         self.recv = self.recv or [-math.inf] * self.n
         self.outliers = self.outliers or [0] * self.n
+        self.refused = self.refused or [[] for _ in range(self.n)]
         self._recent = [deque(maxlen=RECENT_FIXES) for _ in range(self.n)]
 
     def first_time(self, k: int, t: float) -> bool:

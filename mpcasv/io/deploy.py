@@ -118,8 +118,9 @@ class Deploy(Phases, BoatFeedback, FieldMode, Ending):
             self.domain = getattr(self.controller, "domain", None)
             plans = known_plans(cfg)
             # in time order: the ASV's USBL fixes arrive after AUV states stamped later
-            self.estimators = [InOrder(make_estimator(c.estimator, initial=None, plan=plans[k]))
-                               for k in range(self.n_auv)]  # fmt: skip
+            self.new_estimator = lambda k: InOrder(make_estimator(c.estimator, initial=None,
+                                                                  plan=plans[k]))  # fmt: skip
+            self.estimators = [self.new_estimator(k) for k in range(self.n_auv)]
             self.log_dir = Path(log_dir or cfg.log.dir)
             self.lsf = LsfWriter(self.log_dir / "imc.lsf")
             self.jsonl = JsonlWriter(self.log_dir / "deploy.jsonl")

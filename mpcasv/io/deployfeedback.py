@@ -21,11 +21,14 @@ from mpcasv.io.imc import BadInput
 from mpcasv.io.watchdog import OK
 from mpcasv.models.acoustics import Fix, usbl_geometry
 
-__all__ = ["USBL_GATE", "BoatFeedback", "cap_command", "cap_controller_speed"]
+__all__ = ["USBL_AGREE", "USBL_GATE", "BoatFeedback", "cap_command", "cap_controller_speed"]
 
 #: a USBL fix whose normalised innovation exceeds this is an outlier (chi-square, 2 degrees
 #: of freedom, 99.99 %: -2 ln(1e-4) = 18.42; :meth:`BoatFeedback._implausible`)
 USBL_GATE = float(chi2.ppf(0.9999, 2))
+#: this many refused fixes of an AUV in a row that agree with each other are taken: the
+#: estimate, not the USBL, was wrong (:meth:`BoatFeedback._usbl_position`)
+USBL_AGREE = 3
 
 
 def cap_controller_speed(controller, speed: float) -> tuple[float, float, float | None]:
@@ -57,6 +60,20 @@ def cap_command(cmd, speed_cap: float | None, command_max: float | None):
     caps = [c for c in (speed_cap, command_max) if c is not None]
     capped = bool(caps) and cmd.mode is Mode.TRANSIT and cmd.speed > min(caps)
     return (dataclasses.replace(cmd, speed=min(caps)) if capped else cmd), capped
+
+
+def fixes_agree(fixes: list[Fix], v_max: float) -> bool:
+    """Whether USBL ``fixes`` of one AUV agree with each other: each pair in time order
+    within :data:`USBL_GATE` of each other, with both covariances and ``(v_max dt)^2`` for
+    the AUV's motion between them (``v_max``: m/s, ``watchdog.auv_speed_max``)."""
+    fs = sorted(fixes, key=lambda f: f.t)
+    for a, b in zip(fs, fs[1:], strict=False):
+        S = (np.reshape(a.cov, (2, 2)) + np.reshape(b.cov, (2, 2))
+             + np.eye(2) * (v_max * (b.t - a.t)) ** 2)  # fmt: skip
+        d = np.array([b.N - a.N, b.E - a.E])
+        if float(d @ np.linalg.solve(S, d)) > USBL_GATE:
+            return False
+    return True
 
 
 class BoatFeedback:
@@ -139,17 +156,43 @@ class BoatFeedback:
     def _usbl_position(self, k: int, fix: Fix) -> None:
         """Hand AUV ``k``'s ``fix`` to its estimator, unless it is implausible
         (:meth:`_implausible`: counted in ``usbl.outliers``, event ``usbl_fix_outlier`` for
-        an AUV's first) or older than the estimator's window (event ``usbl_fix_dropped`` for
-        an AUV's first). Only a fix the estimator took keeps the AUV seen for the watchdogs
-        and brings an uncertain or lost one back (``auv_fresh`` by ``usbl_fix``)."""
-        label = self.link.auvs[k].label
+        an AUV's first). :data:`USBL_AGREE` refused fixes in a row that agree with each other
+        (:func:`fixes_agree`) restart the AUV's estimator from them, event
+        ``usbl_fixes_agree``: the estimate was wrong (a stale estimate, an AUV's own
+        navigation drifted), not the USBL, whose fixes it would otherwise refuse for good
+        (taken as measurements, they moved an estimate confident in the AUV's 1-m reports a
+        fraction of the way)."""
+        label, refused = self.link.auvs[k].label, self.usbl.refused[k]
         why = self._implausible(k, fix)
-        if why is not None:
-            self.usbl.outliers[k] += 1
-            if self.usbl.outliers[k] == 1:
-                self.event("usbl_fix_outlier", vehicle=label, auv=k, fix_t=fix.t,
-                           N=round(fix.N, 1), E=round(fix.E, 1), why=why)  # fmt: skip
+        if why is None:
+            refused.clear()
+            self._take_fix(k, fix)
             return
+        self.usbl.outliers[k] += 1
+        refused.append(fix)
+        del refused[:-USBL_AGREE]  # the last ones only
+        if len(refused) >= USBL_AGREE and fixes_agree(refused[-USBL_AGREE:], self.gp.v_max):
+            taken = refused[-USBL_AGREE:]
+            refused.clear()
+            self.usbl.outliers[k] -= len(taken)
+            self.event("usbl_fixes_agree", vehicle=label, auv=k, fixes=len(taken),
+                       fix_t=[f.t for f in taken], why=why,
+                       note="refused fixes in a row agree with each other: the estimator "
+                       "restarts from them, the estimate was wrong")  # fmt: skip
+            old, self.estimators[k] = self.estimators[k], self.new_estimator(k)
+            self.estimators[k].reordered, self.estimators[k].dropped = old.reordered, old.dropped
+            for f in taken:
+                self._take_fix(k, f)
+        elif self.usbl.outliers[k] == 1:
+            self.event("usbl_fix_outlier", vehicle=label, auv=k, fix_t=fix.t,
+                       N=round(fix.N, 1), E=round(fix.E, 1), why=why)  # fmt: skip
+
+    def _take_fix(self, k: int, fix: Fix) -> None:
+        """AUV ``k``'s estimator takes ``fix`` unless it is older than its window (event
+        ``usbl_fix_dropped`` for an AUV's first). Only a fix the estimator took keeps the AUV
+        seen for the watchdogs and brings an uncertain or lost one back (``auv_fresh`` by
+        ``usbl_fix``)."""
+        label = self.link.auvs[k].label
         est = self.estimators[k]
         if not est.on_fix(fix):
             if est.dropped == 1:
