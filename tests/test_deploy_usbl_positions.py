@@ -389,28 +389,90 @@ def test_the_sitl_sends_its_fixes_late_with_usbl_delay(tmp_path):
             SitlOptions(usbl_delay=bad).check(sc)
 
 
+def _fixes(dep, times_N, E=0.0):
+    for t, N in times_N:
+        dep.link.handle_datagram(_usbl(t, N, E), ASV)
+
+
 def test_fixes_that_agree_with_each_other_overrule_a_wrong_estimate(tmp_path):
-    """The AUV's own states put it at N = 100 m; the ASV's USBL finds it 200 m further on, fix
-    after fix. The first two are refused (outliers against the estimate); the third agrees
-    with them, so the AUV's estimator restarts from all three (event ``usbl_fixes_agree``):
-    the estimate was wrong, and would otherwise refuse every fix for good. Fixes that do not
-    agree with each other stay refused."""
-    from mpcasv.io.deployfeedback import USBL_AGREE, fixes_agree
-    from mpcasv.models.acoustics import Fix
+    """The AUV's own states put it at N = 100 m and then stop (under water); the ASV's USBL
+    finds it 200 m further on, fix after fix. The first two are refused (outliers against the
+    estimate); the third agrees with them, so the AUV's estimator restarts from all three,
+    in time order (event ``usbl_fixes_agree``): the estimate was wrong, and would otherwise
+    refuse every fix for good."""
+    from mpcasv.io.deployfeedback import USBL_AGREE
 
     dep, clock, t = _deploy_with_silent_auv(tmp_path)
-    for i in range(USBL_AGREE - 1):
-        dep.link.handle_datagram(_usbl(t - 0.3 + 0.1 * i, 300.0 + 0.1 * i, 0.0), ASV)
-    assert dep.usbl.outliers == [USBL_AGREE - 1] and dep.usbl.positions == [0]
+    _fixes(dep, [(t - 0.6, 100.2)])  # a good fix, older than the AUV's last state: reordered
+    assert dep.estimators[0].reordered == 1 and dep.usbl.positions == [1]
+    _fixes(dep, [(t - 0.2, 300.1), (t - 0.3, 300.0)])  # the second one out of order
+    assert dep.usbl.outliers == [USBL_AGREE - 1] and dep.usbl.positions == [1]
     assert abs(dep.estimators[0].estimate(t).N - 100.0) < 1.0
-    dep.link.handle_datagram(_usbl(t, 300.3, 0.0), ASV)
-    assert dep.usbl.outliers == [0] and dep.usbl.positions == [USBL_AGREE]
+    _fixes(dep, [(t, 300.3)])
+    assert dep.usbl.outliers == [USBL_AGREE] and dep.usbl.positions == [1 + USBL_AGREE]
     assert abs(dep.estimators[0].estimate(t).N - 300.3) < 1.0  # restarted from the fixes
+    assert dep.estimators[0].reordered == 1  # carried on; the three taken in time order
     asyncio.run(dep.finish())
-    agree = [e for e in read_jsonl(tmp_path / "deploy.jsonl", "event")
-             if e["event"] == "usbl_fixes_agree"]  # fmt: skip
-    assert len(agree) == 1 and agree[0]["fixes"] == USBL_AGREE
+    events = read_jsonl(tmp_path / "deploy.jsonl", "event")
+    agree = [e for e in events if e["event"] == "usbl_fixes_agree"]
+    assert len(agree) == 1 and agree[0]["fix_t"] == [t - 0.3, t - 0.2, t]
+    assert [e["event"] for e in events].count("usbl_fix_outlier") == 1
+
+
+@pytest.mark.parametrize("case", ["disagree", "accepted_between", "state_between", "off_map",
+                                  "span"])
+def test_refused_fixes_that_do_not_make_a_case_stay_refused(tmp_path, case):
+    """No restart: three refused fixes that do not agree with each other (500 m apart within
+    a second); a fix taken between them; a state of the AUV's own between them (a multipath
+    reflection that stays put while the AUV's states come: a review's finding, session 42,
+    four restarts a minute); fixes off the map (past ``max_distance_m``: never evidence);
+    three that agree but span more than ``USBL_AGREE_SPAN``."""
+    from mpcasv.io.deployfeedback import USBL_AGREE_SPAN
+
+    dep, clock, t = _deploy_with_silent_auv(tmp_path, auv_stale_s=600.0, auv_lost_s=900.0)
+    if case == "disagree":
+        _fixes(dep, [(t - 0.3, 300.0), (t - 0.2, 800.0), (t - 0.1, 300.0)])
+    elif case == "accepted_between":
+        _fixes(dep, [(t - 0.3, 300.0), (t - 0.2, 300.1), (t - 0.15, 100.5), (t - 0.1, 300.2)])
+    elif case == "state_between":
+        _fixes(dep, [(t - 0.3, 300.0), (t - 0.2, 300.1)])
+        t = feed_states(dep, clock, t, 1)  # the AUV's own word: at N = 100
+        _fixes(dep, [(t - 0.1, 300.2)])
+    elif case == "off_map":
+        msg = usbl_fix_extended("lauv-xplore-1", 0.0, 0.0, 20.0, 1.5, ORIGIN)
+        msg.lat = msg.lon = 0.0
+        for i in range(3):
+            dep.link.handle_datagram(stamp(msg, 0x2801, 0xFFFF, t - 0.3 + 0.1 * i).serialize(),
+                                     ASV)  # fmt: skip
+    else:  # one place 900 m off, the last one 40 s later (no state between: ASV states only)
+        _fixes(dep, [(t - 0.3, 1000.0), (t - 0.2, 1000.0)])
+        for _ in range(int(2 * (USBL_AGREE_SPAN + 10))):
+            clock.t += 0.5
+            t += 0.5
+            dep.link.handle_datagram(_es(clock, 0x2801, t, 0.0), ASV)
+        _fixes(dep, [(t, 1000.0)])
+        assert dep.usbl.outliers == [3]  # all three refused by the gate
+    N = dep.estimators[0].estimate(t).N  # 40 s on in "span": the AUV's last velocity, 1 m/s
+    assert abs(N - (140.0 if case == "span" else 100.0)) < 5.0, (case, N)
+    asyncio.run(dep.finish())
+    names = [e["event"] for e in read_jsonl(tmp_path / "deploy.jsonl", "event")]
+    assert "usbl_fixes_agree" not in names, case
+
+
+def test_fixes_agree_needs_each_pair_within_the_gate():
+    from mpcasv.io.deployfeedback import fixes_agree
+    from mpcasv.models.acoustics import Fix
+
     cov = (1.0, 0.0, 0.0, 1.0)
-    apart = [Fix(float(i), 0, 300.0 + 500.0 * (i % 2), 0.0, 20.0, cov, 300.0) for i in range(3)]
-    assert not fixes_agree(apart, 2.0)  # 500 m back and forth within a second each
-    assert fixes_agree([Fix(float(i), 0, 300.0 + i, 0.0, 20.0, cov, 300.0) for i in range(3)], 2.0)
+
+    def fixes(*tN):
+        return [Fix(t, 0, N, 0.0, 20.0, cov, 300.0) for t, N in tN]
+
+    assert fixes_agree(fixes((0.0, 300.0), (1.0, 301.0), (2.0, 302.0)), 2.0)
+    assert not fixes_agree(fixes((0.0, 300.0), (1.0, 800.0), (2.0, 300.0)), 2.0)
+    # 40 m in 2 s: too fast for an AUV of 2 m/s, not for one of 20 m/s
+    assert not fixes_agree(fixes((0.0, 300.0), (1.0, 320.0), (2.0, 340.0)), 2.0)
+    assert fixes_agree(fixes((0.0, 300.0), (1.0, 320.0), (2.0, 340.0)), 20.0)
+    # in time order, whatever the order given
+    assert fixes_agree(fixes((2.0, 302.0), (0.0, 300.0), (1.0, 301.0)), 2.0)
+    assert not fixes_agree(fixes((0.0, 300.0), (2.0, 301.0), (1.0, 340.0)), 2.0)

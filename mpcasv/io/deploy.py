@@ -205,6 +205,7 @@ class Deploy(Phases, BoatFeedback, FieldMode, Ending):
                 self._maybe_step(nav.t, now)
             return
         k = p.index
+        self.usbl.refused[k].clear()  # the AUV's own word: refused fixes no longer in a row
         est = self.estimators[k]
         est.on_truth(nav.t, nav.N, nav.E, nav.depth, nav.v_N, nav.v_E)
         est.on_report(

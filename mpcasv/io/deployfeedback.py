@@ -21,7 +21,8 @@ from mpcasv.io.imc import BadInput
 from mpcasv.io.watchdog import OK
 from mpcasv.models.acoustics import Fix, usbl_geometry
 
-__all__ = ["USBL_AGREE", "USBL_GATE", "BoatFeedback", "cap_command", "cap_controller_speed"]
+__all__ = ["USBL_AGREE", "USBL_AGREE_SPAN", "USBL_GATE", "BoatFeedback", "cap_command",
+           "cap_controller_speed"]
 
 #: a USBL fix whose normalised innovation exceeds this is an outlier (chi-square, 2 degrees
 #: of freedom, 99.99 %: -2 ln(1e-4) = 18.42; :meth:`BoatFeedback._implausible`)
@@ -29,6 +30,8 @@ USBL_GATE = float(chi2.ppf(0.9999, 2))
 #: this many refused fixes of an AUV in a row that agree with each other are taken: the
 #: estimate, not the USBL, was wrong (:meth:`BoatFeedback._usbl_position`)
 USBL_AGREE = 3
+#: ... within this many seconds of each other (a few USBL periods)
+USBL_AGREE_SPAN = 30.0
 
 
 def cap_controller_speed(controller, speed: float) -> tuple[float, float, float | None]:
@@ -156,25 +159,35 @@ class BoatFeedback:
     def _usbl_position(self, k: int, fix: Fix) -> None:
         """Hand AUV ``k``'s ``fix`` to its estimator, unless it is implausible
         (:meth:`_implausible`: counted in ``usbl.outliers``, event ``usbl_fix_outlier`` for
-        an AUV's first). :data:`USBL_AGREE` refused fixes in a row that agree with each other
-        (:func:`fixes_agree`) restart the AUV's estimator from them, event
-        ``usbl_fixes_agree``: the estimate was wrong (a stale estimate, an AUV's own
-        navigation drifted), not the USBL, whose fixes it would otherwise refuse for good
-        (taken as measurements, they moved an estimate confident in the AUV's 1-m reports a
-        fraction of the way)."""
+        an AUV's first). :data:`USBL_AGREE` fixes refused by the gate in a row, within
+        :data:`USBL_AGREE_SPAN` s, with no state of the AUV's own between them
+        (``usbl.refused`` is cleared by each: :meth:`mpcasv.io.deploy.Deploy._on_state`),
+        that agree with each other (:func:`fixes_agree`) restart the AUV's estimator from
+        them, event ``usbl_fixes_agree``: the estimate was wrong (a stale estimate; an AUV's
+        navigation drifted while under water), not the USBL, whose fixes it would otherwise
+        refuse for good (taken as measurements, they moved an estimate confident in the
+        AUV's 1-m reports a fraction of the way). While the AUV's own states come, they are
+        trusted over repeated fixes elsewhere (a multipath reflection that stays put). Each
+        refusal is counted in ``usbl.outliers``, those later taken too."""
         label, refused = self.link.auvs[k].label, self.usbl.refused[k]
-        why = self._implausible(k, fix)
+        why, gated = self._implausible(k, fix)
         if why is None:
             refused.clear()
             self._take_fix(k, fix)
             return
         self.usbl.outliers[k] += 1
+        if self.usbl.outliers[k] == 1:
+            self.event("usbl_fix_outlier", vehicle=label, auv=k, fix_t=fix.t,
+                       N=round(fix.N, 1), E=round(fix.E, 1), why=why)  # fmt: skip
+        if not gated:  # off the map: never evidence against the estimate
+            return
         refused.append(fix)
         del refused[:-USBL_AGREE]  # the last ones only
-        if len(refused) >= USBL_AGREE and fixes_agree(refused[-USBL_AGREE:], self.gp.v_max):
-            taken = refused[-USBL_AGREE:]
+        span = max(f.t for f in refused) - min(f.t for f in refused)
+        if (len(refused) == USBL_AGREE and span <= USBL_AGREE_SPAN
+                and fixes_agree(refused, self.gp.v_max)):  # fmt: skip
+            taken = sorted(refused, key=lambda f: f.t)
             refused.clear()
-            self.usbl.outliers[k] -= len(taken)
             self.event("usbl_fixes_agree", vehicle=label, auv=k, fixes=len(taken),
                        fix_t=[f.t for f in taken], why=why,
                        note="refused fixes in a row agree with each other: the estimator "
@@ -183,9 +196,6 @@ class BoatFeedback:
             self.estimators[k].reordered, self.estimators[k].dropped = old.reordered, old.dropped
             for f in taken:
                 self._take_fix(k, f)
-        elif self.usbl.outliers[k] == 1:
-            self.event("usbl_fix_outlier", vehicle=label, auv=k, fix_t=fix.t,
-                       N=round(fix.N, 1), E=round(fix.E, 1), why=why)  # fmt: skip
 
     def _take_fix(self, k: int, fix: Fix) -> None:
         """AUV ``k``'s estimator takes ``fix`` unless it is older than its window (event
@@ -212,8 +222,10 @@ class BoatFeedback:
                        **note)  # fmt: skip
             self.status[k] = OK
 
-    def _implausible(self, k: int, fix: Fix) -> str | None:
-        """Why AUV ``k``'s ``fix`` cannot be right, or None: further from the origin than
+    def _implausible(self, k: int, fix: Fix) -> tuple[str | None, bool]:
+        """``(why, gated)``: why AUV ``k``'s ``fix`` cannot be right (None: it can) and
+        whether the USBL gate said so (False: off the map). Refused: further from the origin
+        than
         ``watchdog.max_distance_m`` (as a state would be), or outside the USBL gate: its
         normalised innovation against the estimate at the fix's time, with the estimate's
         covariance grown by ``(auv_speed_max age)^2`` (``age``: since the estimate's last
@@ -221,10 +233,10 @@ class BoatFeedback:
         99.99 %). A real USBL has outliers (multipath); the simulator's have none."""
         r, r_max = math.hypot(fix.N, fix.E), self.cfg.watchdog.max_distance_m
         if r > r_max:
-            return f"{r:.0f} m from the origin (max_distance_m {r_max:g})"
+            return f"{r:.0f} m from the origin (max_distance_m {r_max:g})", False
         e = self.estimators[k].estimate(fix.t)
         if not (math.isfinite(e.N) and math.isfinite(e.E)):
-            return None  # nothing to compare with yet
+            return None, False  # nothing to compare with yet
         age = max(fix.t - e.t_last_fix, 0.0) if math.isfinite(e.t_last_fix) else 0.0
         S = (np.reshape(e.cov, (2, 2)) + np.reshape(fix.cov, (2, 2))
              + np.eye(2) * (self.gp.v_max * age) ** 2)  # fmt: skip
@@ -232,8 +244,8 @@ class BoatFeedback:
         nis = float(d @ np.linalg.solve(S, d))
         if nis > USBL_GATE:
             return (f"{math.hypot(*d):.1f} m from the estimate (normalised innovation "
-                    f"{nis:.1f} > {USBL_GATE:.1f})")
-        return None
+                    f"{nis:.1f} > {USBL_GATE:.1f})"), True
+        return None, False
 
     def _fix(self, k: int, msg, t: float, asv) -> Fix:
         """The :class:`~mpcasv.models.acoustics.Fix` of AUV ``k`` a UsblFixExtended ``msg``
