@@ -39,7 +39,6 @@ class _Taken:
     """One measurement taken, and the estimator as it was before it."""
 
     t: float
-    seq: int  # arrival order: equal times keep it
     measurement: Fix | Report
     before: object = field(repr=False)
 
@@ -69,8 +68,7 @@ class InOrder:
         self.window_s = float(window_s)
         self.dropped = 0  # late measurements older than the window, not taken
         self.reordered = 0  # late measurements put in their place
-        self._taken: list[_Taken] = []
-        self._seq = 0
+        self._taken: list[_Taken] = []  # in time order; equal times in arrival order
 
     @property
     def name(self) -> str:
@@ -99,9 +97,8 @@ class InOrder:
         if m.t < newest - self.window_s:
             self.dropped += 1
             return False
-        self._seq += 1
         if m.t >= newest:
-            taken.append(_Taken(m.t, self._seq, m, copy.deepcopy(self.inner)))
+            taken.append(_Taken(m.t, m, copy.deepcopy(self.inner)))
             self._apply(m)
         else:  # from the past: back to before the first later one, then all in time order
             i = bisect.bisect_right([x.t for x in taken], m.t)
@@ -109,8 +106,8 @@ class InOrder:
             later = taken[i:]
             del taken[i:]
             self.reordered += 1
-            for x in [_Taken(m.t, self._seq, m, None), *later]:
-                taken.append(_Taken(x.t, x.seq, x.measurement, copy.deepcopy(self.inner)))
+            for x in [_Taken(m.t, m, None), *later]:
+                taken.append(_Taken(x.t, x.measurement, copy.deepcopy(self.inner)))
                 self._apply(x.measurement)
         while taken and taken[0].t < taken[-1].t - self.window_s:
             del taken[0]
