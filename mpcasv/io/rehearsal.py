@@ -58,7 +58,9 @@ def rehearsal_metrics(scenario: Scenario, sitl_out: str | Path, deploy_log: str 
     Parameters
     ----------
     scenario : Scenario
-        The scenario the SITL ran.
+        The scenario the SITL ran, as it realised it: ``run_scenario(load_scenario(path),
+        seed, nominal)[0]`` (:mod:`mpcasv.sim.uncertainty`) for the SITL's ``--seed``
+        (``--nominal``).
     sitl_out : path
         The SITL's ``--out`` folder.
     deploy_log : path
@@ -133,8 +135,10 @@ def rehearsal_scenario(world: Scenario, deploy_log: str | Path, duration: float)
 
 def compare_metrics(a: dict, b: dict, rel: float = 0.10, period: float = 1.0,
                     names=COMPARABLE) -> dict[str, dict]:  # fmt: skip
-    """Per metric: both values, the relative difference and whether it is within ``rel`` of
-    the larger (or, for :data:`PERIOD_QUANTISED` metrics, within one ``period``)."""
+    """Per metric of ``names``: ``{"a": a's value, "b": b's, "rel_diff": the relative
+    difference, "ok": within rel of the larger (or, for PERIOD_QUANTISED metrics, within one
+    period)}``; ``a`` and ``b`` are metric dicts (:func:`compute_metrics`,
+    :func:`rehearsal_metrics`)."""
     out = {}
     for name in names:
         x, y = float(a[name]), float(b[name])
