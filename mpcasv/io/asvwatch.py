@@ -62,13 +62,15 @@ def dune_set_points(vessel, T: float, delta: float) -> tuple[dict[int, float], d
     """Inverse of :func:`dune_actuators`: ``({thruster id: fraction}, {servo id: rad})`` that
     DUNE would send for thrust ``T`` (N) and steering ``delta`` (rad), fractions clipped to
     [-1, 1] (what ``mpcasv sitl``'s ASV sends)."""
-    def clip(a: float) -> float:
-        return float(min(1.0, max(-1.0, a)))
-
     if vessel.actuation == "differential":
         s, d = T / vessel.T_max, delta / vessel.delta_max
-        return {0: clip(s + d), 1: clip(s - d)}, {}
-    return {0: clip(T / vessel.T_max)}, {0: float(delta)}
+        return {0: _unit(s + d), 1: _unit(s - d)}, {}
+    return {0: _unit(T / vessel.T_max)}, {0: float(delta)}
+
+
+def _unit(a: float) -> float:
+    """A set-point fraction clipped to [-1, 1] (DUNE's range)."""
+    return float(min(1.0, max(-1.0, a)))
 
 
 @dataclass
@@ -106,7 +108,7 @@ class Thrusters:
             v, t = table[i]
             if now - t > self.stale_s and v != 0.0:
                 return None
-            values.append(v if table is self.servos else min(1.0, max(-1.0, v)))
+            values.append(v if table is self.servos else _unit(v))
         T, delta = (dune_actuators(vessel, values[0], values[1]) if diff
                     else dune_actuators(vessel, values[0], servo=values[1]))  # fmt: skip
         return float(T), float(delta)

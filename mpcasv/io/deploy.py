@@ -145,10 +145,7 @@ class Deploy(Phases, BoatFeedback, FieldMode, Ending):
             self.plan_request: int | None = None  # request id of the running FollowReference
             self.plan_done = asyncio.Event()
             self._propeller_note: str | None = None
-            self._actuators_said = False  # actuators_unknown reported
-            self._fix_depth_said = False  # usbl_fix_depth reported
-            self._fresh_by_fix_said = False  # auv_fresh by usbl_fix has had its note
-            self._unused_said = False  # usbl_fix_positions_unused reported
+            self._said: set[str] = set()  # what is said once per run (BoatFeedback.first)
             self._cpu0, self._wall0 = time.process_time(), time.monotonic()
             self._load_mark = (self._cpu0, self._wall0, 0)
             self.followref: dict | None = None

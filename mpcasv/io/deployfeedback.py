@@ -93,6 +93,13 @@ class BoatFeedback:
         return {"cpu_s": cpu, "wall_s": wall, "cpu_fraction": cpu / wall if wall > 0 else None,
                 "datagrams": n, "datagrams_per_s": n / wall if wall > 0 else None}  # fmt: skip
 
+    def first(self, what: str) -> bool:
+        """Whether ``what`` (an event said once per run) is said now for the first time."""
+        if what in self._said:
+            return False
+        self._said.add(what)
+        return True
+
     def _transit_commanded(self) -> bool:
         return self.last_cmd is not None and self.last_cmd.mode is Mode.TRANSIT
 
@@ -107,8 +114,7 @@ class BoatFeedback:
             return None
         transit = self._transit_commanded()
         act = self.thrusters.actuators(now, self.vessel, transit)
-        if act is None and transit and not self._actuators_said:
-            self._actuators_said = True
+        if act is None and transit and self.first("actuators_unknown"):
             self.event("actuators_unknown", actuation=self.vessel.actuation,
                        thrusters=sorted(self.thrusters.last), servos=sorted(self.thrusters.servos),
                        note="no fresh set-points for the vessel's actuation (steerable: thruster "
@@ -147,8 +153,7 @@ class BoatFeedback:
             return
         if self.cfg.controller.estimator == "perfect":
             # once per run, and only when it matters: the AUV fixed is not seen by its states
-            if not self._unused_said and self.status[k] not in (OK, "missing"):
-                self._unused_said = True
+            if self.status[k] not in (OK, "missing") and self.first("positions_unused"):
                 self.event("usbl_fix_positions_unused", estimator="perfect",
                            note="the ASV's USBL fixes arrive, and estimator 'perfect' takes "
                            "none of their positions: an AUV is seen by its own states only "
@@ -213,8 +218,7 @@ class BoatFeedback:
         self.usbl.taken(k, self.clock.now())
         if self.status[k] not in (OK, "missing"):  # seen again, by the ASV's USBL
             note = {}
-            if not self._fresh_by_fix_said:  # the first time: the limit is below the gaps
-                self._fresh_by_fix_said = True
+            if self.first("fresh_by_fix"):  # the first time: the limit is below the gaps
                 note = {"note": "uncertain between two USBL fixes: with the AUVs under water, "
                         "watchdog.auv_stale_s should exceed the gaps between fixes (several "
                         "[acoustics] T0: a fix fails often while the propeller runs)"}
@@ -264,8 +268,7 @@ class BoatFeedback:
         else:
             auv = self.link.auvs[k].nav
             depth = auv.depth if auv is not None else 0.0
-            if not self._fix_depth_said:
-                self._fix_depth_said = True
+            if self.first("fix_depth"):
                 self.event("usbl_fix_depth", target=msg.target, z_units=str(msg.z_units),
                            depth=depth, note="not a depth: the AUV's last reported depth "
                            "is used (0 before its first state)")  # fmt: skip
