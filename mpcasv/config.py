@@ -73,6 +73,13 @@ DISTANCE_MAX = AUV_SPEED_MAX * DURATION_MAX
 #: 18 s to compile for one AUV, 28 s for three); a run's range figure has a panel per AUV.
 #: 500 AUVs loaded, and the run did not finish writing in 5 minutes.
 AUV_COUNT_MAX = 10
+#: The fastest transit speed a controller may hand the execution level (m/s): about 20 knots,
+#: three times the fastest shipped ASV (the Otter, 3.1 m/s). The execution level caps a speed
+#: at the vessel's ``u_max`` (docs/vessel.md); 25 m/s was accepted and ran as 2.5.
+TRANSIT_SPEED_MAX = 10.0
+#: A transit speed (m/s): in ``(0, TRANSIT_SPEED_MAX]``.
+TransitSpeed = between(0, TRANSIT_SPEED_MAX, "m/s", "about 20 knots; the execution level caps "
+                       "a speed at the vessel's u_max", lo_open=True)
 #: A depth (m): in ``[0, DEPTH_MAX]``.
 Depth = between(0, DEPTH_MAX, "m", "the deepest ocean is 10.9 km")
 #: A horizontal coordinate, N or E (m): within ``DISTANCE_MAX`` of the origin.

@@ -242,3 +242,14 @@ def test_params_refuse_empty_donut_and_overlapping_target_domain():
     with pytest.raises(ConfigError, match="collision domain"):
         parse(DomainParams, base | {"eps_minus": 20.5})
     assert parse(DomainParams, base | {"eps_minus": 20.0}).eps_minus == 20.0
+
+
+def test_params_refuse_a_target_domain_beyond_the_outer_boundary():
+    # a new user's preset (session 43): delta_r = 400 put r_t at 450 m with r_out = 200 m;
+    # the hybrid ran its propeller 299.7 of 300 s out there and got no reliable fix
+    base = dict(alpha_outer=17.5, alpha_inner=5, delta_r=20, eps_minus=10, eps_plus=10)
+    for bad in ({"delta_r": 400.0}, {"eps_plus": 500.0}, {"delta_r": 140.0}):  # 50+140+10
+        with pytest.raises(ConfigError, match="beyond the outer boundary"):
+            parse(DomainParams, base | bad)
+    ok = parse(DomainParams, base | {"delta_r": 139.9})  # r_t + eps_plus = 199.9 m < 200 m
+    assert ok.r_in + ok.delta_r + ok.eps_plus < ok.r_out

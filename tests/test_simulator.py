@@ -243,7 +243,7 @@ def test_a_preset_of_another_controller_is_named_as_such(tmp_path, capsys):
     bad = tmp_path / "bad.toml"
     bad.write_text("speed = -3\n")
     assert main(["simulate", scenario, "--params", str(bad), "--out", out, "--quiet"]) == 2
-    assert "greater than 0" in capsys.readouterr().err
+    assert "-3 m/s is outside the allowed range (0, 10] m/s" in capsys.readouterr().err
 
 
 def test_every_run_figure_is_titled_with_its_scenario_controller_and_seed():

@@ -37,7 +37,8 @@ def _write(tmp: Path, trials: int = 4, batch: int = 2, extra: str = "",
     ranges.write_text(
         f'controller = "hybrid-single"\nsuite = "train.toml"\nheldout_seeds = {heldout}\n'
         f"trials = {trials}\nbatch = {batch}\nseed = 3\n{extra}\n[params]\n"
-        '"domain.delta_r" = { low = 20.0, high = 140.0 }\n'
+        # Case 3's paper1-field: r_in 50 m + delta_r + eps_plus stays below r_out = 200 m
+        '"domain.delta_r" = { low = 20.0, high = 105.0 }\n'
         '"domain.eps_plus" = { low = 2.0, high = 40.0, log = true }\n'
         '"speed" = { low = 1.0, high = 2.5 }\n'
     )
@@ -57,9 +58,10 @@ def _trials(out: Path) -> pd.DataFrame:
 
 @pytest.fixture(scope="module")
 def tiny(tmp_path_factory):
-    """A finished tiny search with five held-out seeds (enough pairs for the statistics)."""
+    """A finished tiny search with six held-out seeds (enough pairs for the statistics:
+    stats.MIN_PAIRS)."""
     tmp = tmp_path_factory.mktemp("tiny")
-    ranges = _write(tmp, heldout="[7, 8, 9, 10, 11]")
+    ranges = _write(tmp, heldout="[7, 8, 9, 10, 11, 12]")
     out = tmp / "out"
     assert main(["tune", "controller", str(ranges), "--out", str(out), "--workers", "1",
                  "--quiet"]) == 0  # fmt: skip
@@ -84,7 +86,7 @@ def test_tiny_search_writes_front_presets_importance_and_report(tiny):
     # every front point ran on the held-out seeds, and its preset loads to its values
     assert front["heldout.energy_J"].notna().all()
     distinct_front = front[["domain.delta_r", "domain.eps_plus", "speed"]].drop_duplicates()
-    assert len(list((out / "heldout" / "parts").glob("*.parquet"))) == 5 * len(distinct_front)
+    assert len(list((out / "heldout" / "parts").glob("*.parquet"))) == 6 * len(distinct_front)
     for _, row in front.iterrows():
         params = load_preset("hybrid-single", out / "presets" / f"trial-{row.trial:04d}.toml")
         assert params.domain.delta_r == pytest.approx(row["domain.delta_r"], rel=1e-12)
@@ -102,7 +104,7 @@ def test_tiny_search_writes_front_presets_importance_and_report(tiny):
 
 
 def test_matched_comparison_pairs_held_out_runs_by_realisation(tiny, tmp_path):
-    """A tuning compared with itself: every point matches itself at equal energy, the five
+    """A tuning compared with itself: every point matches itself at equal energy, the six
     held-out runs pair up and every difference is zero; other held-out seeds are refused."""
     from mpcasv.config import ConfigError
     from mpcasv.experiments.tune_compare import matched_comparison
@@ -110,7 +112,7 @@ def test_matched_comparison_pairs_held_out_runs_by_realisation(tiny, tmp_path):
     df = matched_comparison(tiny, tiny, at="energy_J")
     front = pd.read_csv(tiny / "front.csv")
     assert len(df) == 2 * int(front["heldout_front"].sum())  # two other objectives each
-    assert (df["mismatch"] == 0).all() and (df["n"] == 5).all()
+    assert (df["mismatch"] == 0).all() and (df["n"] == 6).all()
     assert (df["median_diff"] == 0).all() and set(df["verdict"]) == {"no difference"}
     other = tmp_path / "other"
     other.mkdir()

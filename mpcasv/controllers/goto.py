@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 
-from mpcasv.config import Float, Pos, frozen
+from mpcasv.config import Float, Pos, TransitSpeed, frozen
 from mpcasv.controllers.registry import ControllerKind
 from mpcasv.interface import Command, Mode, Observation, Reason
 
@@ -12,7 +12,7 @@ from mpcasv.interface import Command, Mode, Observation, Reason
 @frozen
 class GoToParams:
     waypoint: tuple[Float, Float]  # (N, E), m
-    speed: Pos = 2.5  # m/s
+    speed: TransitSpeed = 2.5  # m/s
     radius: Pos = 10.0  # arrival radius (m)
 
 

@@ -118,20 +118,21 @@ def verdict(better: str, target: float, s: paired.PairedStat) -> str:
 
 def acceptance_table(results: pd.DataFrame, acc: Acceptance, reference: str, other: str,
                      no_fix_cases: list[str]) -> pd.DataFrame:  # fmt: skip
-    """One row per target: ``metric``, ``better``, ``target``, ``pairs`` (used), ``unpaired``
-    (runs of either variant without a partner: a failed job, a missing value), ``both_zero``
-    (pairs left out: both 0, which says nothing about more or less), ``cases`` (pooled),
-    ``median``, ``ci_low``, ``ci_high`` (relative change per pair, dimensionless), ``sums``
-    (relative change of the sums over the used pairs; +inf from a zero sum) and
-    ``verdict`` (with ", N runs unpaired" when some are). ``no_fix_cases``: the cases left
-    out for :data:`NEEDS_FIXES` metrics. A metric without a column: 0 pairs, "n/a: no
-    column"."""
+    """One row per target: ``metric``, ``better``, ``target``, ``pairs`` (used; one per world,
+    :func:`mpcasv.experiments.stats.per_world`), ``runs`` (the pairs of runs they hold),
+    ``unpaired`` (runs of either variant without a partner: a failed job, a missing value),
+    ``both_zero`` (pairs left out: both 0, which says nothing about more or less),
+    ``cases`` (pooled), ``median``, ``ci_low``, ``ci_high`` (relative change per pair,
+    dimensionless), ``sums`` (relative change of the sums over the used pairs; +inf from a
+    zero sum) and ``verdict`` (with ", N runs unpaired" when some are). ``no_fix_cases``:
+    the cases left out for :data:`NEEDS_FIXES` metrics. A metric without a column: 0 pairs,
+    "n/a: no column"."""
     rows = []
     for m, c in acc.targets.items():
         better = METRIC_INFO[m].better
         row = {"metric": m, "better": better, "target": float(c)}
         if m not in results:
-            rows.append(row | {"pairs": 0, "unpaired": 0, "both_zero": 0, "cases": "",
+            rows.append(row | {"pairs": 0, "runs": 0, "unpaired": 0, "both_zero": 0, "cases": "",
                                "median": math.nan, "ci_low": math.nan, "ci_high": math.nan,
                                "sums": math.nan, "verdict": "n/a: no column"})  # fmt: skip
             continue
@@ -139,6 +140,7 @@ def acceptance_table(results: pd.DataFrame, acc: Acceptance, reference: str, oth
         if m.startswith(NEEDS_FIXES):
             p = p[~p[paired.CASE].isin(no_fix_cases)]
             unpaired = unpaired.drop(no_fix_cases, errors="ignore")
+        p = paired.per_world(p)
         zero = (p["ref"] == 0) & (p["other"] == 0)
         if zero.all():  # both 0 in every pair: the change is 0 in each (not "no pairs")
             zero = zero & False
@@ -147,7 +149,8 @@ def acceptance_table(results: pd.DataFrame, acc: Acceptance, reference: str, oth
         s = paired.paired_stat(np.zeros(len(p)), relative_changes(ref, oth))
         n_unpaired = int(unpaired.sum())
         v = verdict(better, c, s) + (f", {n_unpaired} runs unpaired" if n_unpaired else "")
-        rows.append(row | {"pairs": len(p), "unpaired": n_unpaired, "both_zero": int(zero.sum()),
+        rows.append(row | {"pairs": len(p), "runs": int(p["runs"].sum()),
+                           "unpaired": n_unpaired, "both_zero": int(zero.sum()),
                            "cases": ", ".join(dict.fromkeys(p[paired.CASE])),
                            "median": s.median, "ci_low": s.ci_low, "ci_high": s.ci_high,
                            "sums": float(relative_changes(np.array([ref.sum()]),
@@ -169,10 +172,11 @@ def display_table(t: pd.DataFrame) -> pd.DataFrame:
         "required (other vs reference)": [("<= " if b == "lower" else ">= ") + _pct(c)
                                           for b, c in zip(t["better"], t["target"],
                                                           strict=True)],
-        "pairs": [f"{n}" + "".join(f" (+{k} {what})" for k, what in ((u, "unpaired"),
-                                                                     (z, "both 0 left out"))
-                                   if k)
-                  for n, u, z in zip(t["pairs"], t["unpaired"], t["both_zero"], strict=True)],
+        "pairs": [f"{n}" + (f" world{'s' * (n != 1)} ({r} runs)" if r > n else "")
+                  + "".join(f" (+{k} {what})" for k, what in ((u, "unpaired"),
+                                                              (z, "both 0 left out")) if k)
+                  for n, r, u, z in zip(t["pairs"], t["runs"], t["unpaired"], t["both_zero"],
+                                        strict=True)],
         f"relative change per pair: median [{paired.CONFIDENCE:.0%} CI]": [
             f"{_pct(m)} [{_pct(lo)}, {_pct(hi)}]"
             for m, lo, hi in zip(t["median"], t["ci_low"], t["ci_high"], strict=True)],
@@ -192,7 +196,8 @@ def report_parts(results: pd.DataFrame, acc: Acceptance, names: list[str],
     left_out = (f" ({', '.join(needs)} without {', '.join(no_fix_cases)}: no USBL fix arrived "
                 "there)") if no_fix_cases and needs else ""  # fmt: skip
     rule = (f"Per pair the relative change (other − reference) / |reference|, pooled over the "
-            f"cases{left_out}; pairs where both are 0 say nothing about more or less and are "
+            f"cases{left_out}, one pair per world (the runs of seeds that drew the same "
+            f"realisation averaged); pairs where both are 0 say nothing about more or less and are "
             f"left out, unless all are (then the change is 0 in every pair); median with its "
             f"{paired.CONFIDENCE:.0%} bootstrap CI. *met*: the whole "
             "CI is at or on the better side of the requirement; *not met*: the whole CI is on "
@@ -202,11 +207,16 @@ def report_parts(results: pd.DataFrame, acc: Acceptance, names: list[str],
     for other in names[1:]:
         t = acceptance_table(results, acc, names[0], other, no_fix_cases)
         met = int((t["verdict"] == "met").sum())
+        unjudged = int(t["verdict"].str.startswith("n/a").sum())
         if met == len(t):
             says = f"**All {len(t)} targets met.**"
+        elif unjudged == len(t):
+            says = f"**None of the {len(t)} targets judged** (each verdict says why)."
         else:
-            says = f"**{met} of {len(t)} targets met.**" + (
-                f" What stands in the way: {acc.explained_in}." if acc.explained_in else "")
+            says = (f"**{met} of {len(t)} targets met.**"
+                    + (f" {unjudged} not judged (n/a)." if unjudged else "") + (
+                        f" What stands in the way: {acc.explained_in}."
+                        if acc.explained_in else ""))  # fmt: skip
         parts.append((f"{other} vs {names[0]}", display_table(t), says))
     return head, rule, parts
 

@@ -100,6 +100,10 @@ td:first-child,th:first-child{text-align:left}img{max-width:100%}
 code{background:#f4f4f4;padding:1px 4px}"""
 
 
+def _worlds(n: int) -> str:
+    return "world" if n == 1 else "worlds"
+
+
 def headline_table(t: pd.DataFrame) -> pd.DataFrame:
     """Display form of one (reference, other) pair of :func:`stats.paired_table` for the
     headline: one row per metric and case; the metric named on its first row only."""
@@ -107,7 +111,9 @@ def headline_table(t: pd.DataFrame) -> pd.DataFrame:
     units = {h.name: h.unit for h in paired.HEADLINE}
     rows, last = [], None
     for _, r in t.iterrows():
-        n = f"{r['n']}" + (f" (+{r['n_unpaired']} unpaired)" if r["n_unpaired"] else "")
+        n = (f"{r['n']}" + (f" {_worlds(r['n'])} ({r['runs']} runs)"
+                            if r.get("runs", 0) > r["n"] else "")
+             + (f" (+{r['n_unpaired']} unpaired)" if r["n_unpaired"] else ""))
         if np.isfinite(r["ci_low"]):
             diff = f"{num(r['median'])} [{num(r['ci_low'])}, {num(r['ci_high'])}]"
         else:
@@ -231,7 +237,9 @@ def write_report(out: Path, exp, results: pd.DataFrame, stats=None) -> tuple[Pat
                 else f"compared with {names[1]}."
             ),
             f"Pairs: runs equal on ({', '.join(key)}), pooled over the conditions of a case; "
-            f"Δ = other − reference per pair. Median Δ with its {paired.CONFIDENCE:.0%} "
+            f"Δ = other − reference per pair; the runs of seeds that drew the same realisation "
+            f"are one world and averaged into one pair (the unit is the world, not the run). "
+            f"Median Δ with its {paired.CONFIDENCE:.0%} "
             f"bootstrap CI (scipy.stats.bootstrap, paired, percentile, "
             f"{paired.N_RESAMPLES} resamples, seed {paired.SEED}) and the two-sided Wilcoxon "
             f"signed-rank p (zero differences dropped). A variant is *better* only if the CI "
@@ -240,9 +248,20 @@ def write_report(out: Path, exp, results: pd.DataFrame, stats=None) -> tuple[Pat
             f"multiple comparisons in the verdicts: each table says how many tests it holds and "
             f"how many of its verdicts survive the Benjamini-Hochberg adjustment. "
             f"n/a: fewer than {paired.MIN_PAIRS} pairs "
-            f"(the Wilcoxon test cannot reach p < 0.05 below 6 non-zero differences), or all "
-            f"differences zero.",
+            f"(the two-sided Wilcoxon test cannot reach p < 0.05 below 6 non-zero "
+            f"differences), or all differences zero.",
         ]
+        shared = table.groupby("case", sort=False)[["n", "runs"]].max()
+        shared = shared[shared["runs"] > shared["n"]]
+        if len(shared):
+            lines.append(
+                "Seeds that drew the same world: " + "; ".join(
+                    f"{c} {int(r['runs'])} runs of {int(r['n'])} {_worlds(r['n'])}"
+                    for c, r in shared.iterrows()) + ". There the seed varies only the "
+                "sensor and acoustic draws (the scenario's `[uncertain]` table draws nothing "
+                "else), so the statistics count worlds, not runs: give the scenario an "
+                "`[uncertain]` table to compare over more worlds."
+            )  # fmt: skip
         no_fix = cases_without_fixes(ok)
         if no_fix:
             lines.append(

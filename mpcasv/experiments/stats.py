@@ -18,10 +18,15 @@ give:
   consequence). All differences zero: "no difference".
 
 Pairs are pooled over the conditions of a case (current, estimator): each pair is matched
-within its condition. With fewer than :data:`MIN_PAIRS` pairs, all differences zero, or no
-direction, the statistic is "n/a" with the reason (the Wilcoxon test cannot reach p < 0.05
-with fewer than 6 non-zero differences anyway). Rows of one variant without a partner in the
-other (failed job, missing value) are excluded and counted (``n_unpaired``).
+within its condition. The unit of the statistics is the *world*, not the run
+(:func:`per_world`): seeds that drew the same realisation (a scenario whose ``[uncertain]``
+table draws nothing, where the seed varies only the sensor and acoustic draws) are one world,
+and their pairs are averaged into one; six copies of one world's difference would otherwise
+give a zero-width interval and p = 0.03. With fewer than :data:`MIN_PAIRS` worlds, all
+differences zero, or no direction, the statistic is "n/a" with the reason (the two-sided
+Wilcoxon test cannot reach p < 0.05 with fewer than 6 non-zero differences: its smallest p
+is ``2 / 2^n``). Rows of one variant without a partner in the other (failed job, missing
+value) are excluded and counted (``n_unpaired``).
 """
 
 from __future__ import annotations
@@ -46,7 +51,9 @@ OPTIONAL_KEY = ("realisation",)
 CASE = "scenario"  # one line of the headline table and forest plot per case
 ALPHA = 0.05
 CONFIDENCE = 0.95
-MIN_PAIRS = 5
+#: fewest pairs (worlds) with a statistic: the two-sided exact Wilcoxon p is at least 2 / 2^n,
+#: 0.0625 for 5, so below 6 no verdict could be "better"
+MIN_PAIRS = 6
 NEGLIGIBLE = 1e-3  # relative to |reference median|: smaller differences are no verdict
 N_RESAMPLES = 9999
 SEED = 20240601
@@ -159,6 +166,25 @@ def pairs(results: pd.DataFrame, metric: str, reference: str, other: str
     paired = both[both["_merge"] == "both"].drop(columns="_merge")
     unpaired = both[both["_merge"] != "both"].groupby(CASE, sort=False).size()
     return paired.reset_index(drop=True), unpaired
+
+
+def per_world(p: pd.DataFrame) -> pd.DataFrame:
+    """The pairs of :func:`pairs` with one row per world: rows equal on every pairing column
+    but the seed and with the same non-empty ``realisation`` (seeds that drew the same
+    scenario realisation) averaged into one, ``ref`` and ``other`` the means of their runs
+    (an infinite value stays infinite). Column ``runs``: how many pairs each row stands for.
+    A table without a ``realisation`` column, or rows without one, keep one row per pair.
+    Row order: first appearance."""
+    p = p.assign(runs=1)
+    if "realisation" not in p or not len(p):
+        return p
+    real = p["realisation"].astype("string").fillna("")
+    alone = real.eq("").to_numpy()
+    key = [c for c in p.columns if c in PAIR_KEY and c != "seed"] + ["realisation"]
+    g = p[~alone].groupby(key, sort=False, dropna=False)
+    merged = g.agg(seed=("seed", "first"), ref=("ref", "mean"), other=("other", "mean"),
+                   runs=("runs", "size")).reset_index()  # fmt: skip
+    return pd.concat([merged, p[alone]], ignore_index=True)[p.columns]
 
 
 @dataclass(frozen=True)
@@ -276,8 +302,9 @@ def paired_table(results: pd.DataFrame, metrics: Sequence[str],
     """Long table, one row per (other variant, metric, case): every variant against
     ``reference`` (default: the first variant, :func:`variants`).
 
-    Columns: ``reference``, ``other``, ``metric``, ``better``, ``case``, ``n``,
-    ``n_unpaired``, ``ref_median`` (the reference's median over the paired runs),
+    Columns: ``reference``, ``other``, ``metric``, ``better``, ``case``, ``n`` (worlds,
+    :func:`per_world`), ``runs`` (the pairs they hold), ``n_unpaired``, ``ref_median`` (the
+    reference's median over the worlds),
     ``median``, ``ci_low``, ``ci_high``, ``p``, ``note``, ``verdict``. Metrics without a
     column in ``results`` are left out (see :func:`missing_metrics`).
     """
@@ -291,6 +318,7 @@ def paired_table(results: pd.DataFrame, metrics: Sequence[str],
     for other in (v for v in names if v != reference):
         for m in (m for m in metrics if m in results):
             p_, unpaired = pairs(results, m, reference, other)
+            p_ = per_world(p_)
             for case in cases:
                 g = p_[p_[CASE] == case]
                 s = paired_stat(g["ref"].to_numpy(), g["other"].to_numpy(), seed)
@@ -298,6 +326,7 @@ def paired_table(results: pd.DataFrame, metrics: Sequence[str],
                 rows.append({
                     "reference": reference, "other": other, "metric": m,
                     "better": better.get(m), "case": case, "n": s.n,
+                    "runs": int(g["runs"].sum()),
                     "n_unpaired": int(unpaired.get(case, 0)),
                     "ref_median": ref_median,
                     "median": s.median, "ci_low": s.ci_low, "ci_high": s.ci_high, "p": s.p,

@@ -262,7 +262,8 @@ class DomainParams:
         Margin from the inner boundary to the target circle (m, Paper 1 eq. 8).
     eps_minus, eps_plus : float
         Accepted deviation inside / outside the target circle (m, Paper 1 eq. 10);
-        ``eps_minus <= delta_r`` so the target domain never reaches into the collision domain.
+        ``eps_minus <= delta_r`` so the target domain never reaches into the collision domain,
+        and ``r_in + delta_r + eps_plus < r_out`` so it lies inside the outer boundary.
     r0 : float
         Rated USBL range (m).
     T0 : float
@@ -290,6 +291,13 @@ class DomainParams:
             raise ValueError(
                 f"eps_minus = {self.eps_minus:g} m > delta_r = {self.delta_r:g} m: the target "
                 "domain would reach into the collision domain"
+            )
+        reach = self.r_in + self.delta_r + self.eps_plus  # r_t + eps_plus at the surface
+        if reach >= self.r_out:
+            raise ValueError(
+                f"r_t + eps_plus = r_in + delta_r + eps_plus = {reach:g} m >= r_out = "
+                f"{self.r_out:g} m: the target domain would lie beyond the outer boundary "
+                "(lower delta_r or eps_plus, or alpha_outer)"
             )
 
     @property

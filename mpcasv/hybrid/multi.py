@@ -27,7 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from mpcasv.config import Flag, Pos, frozen
+from mpcasv.config import Flag, Pos, TransitSpeed, frozen
 from mpcasv.controllers import ControllerKind
 from mpcasv.hybrid.avoidance import AvoidanceParams, estimate_shape
 from mpcasv.hybrid.clearance import clear_waypoint, deepest_breach
@@ -46,7 +46,7 @@ class HybridMultiParams:
 
     domain: DomainParams
     T_standby: Pos = 10.0  # T: minimum standby time at an AUV (s)
-    speed: Pos = 2.5  # transit speed cap (m/s)
+    speed: TransitSpeed = 2.5  # transit speed cap (m/s)
     require_fix: Flag = False  # tau_k resets only if a fix was also observed (estimator)
     # anti-collision domain: the papers' r_avoid,i (kind "fixed") or an uncertainty-aware one
     avoidance: AvoidanceParams = AvoidanceParams()

@@ -24,7 +24,7 @@ import dataclasses
 import math
 from dataclasses import dataclass
 
-from mpcasv.config import Pos, frozen
+from mpcasv.config import TransitSpeed, frozen
 from mpcasv.controllers import ControllerKind
 from mpcasv.hybrid.avoidance import AvoidanceParams, avoidance_radii
 from mpcasv.hybrid.domains import DomainParams, point_on_circle, range_bearing
@@ -40,7 +40,7 @@ class HybridSingleParams:
     """Preset of the single-AUV controller (PAPER-FACTS §7)."""
 
     domain: DomainParams
-    speed: Pos = 2.5  # transit speed cap handed to the execution level (m/s)
+    speed: TransitSpeed = 2.5  # transit speed cap handed to the execution level (m/s)
     # inner boundary: the papers' r_inner (kind "fixed") or an uncertainty-aware domain
     avoidance: AvoidanceParams = AvoidanceParams()
 

@@ -12,7 +12,7 @@ from typing import Literal
 
 from pydantic import model_validator
 
-from mpcasv.config import Flag, NonNeg, NonNegInt, Pos, PosInt, frozen
+from mpcasv.config import Flag, NonNeg, NonNegInt, Pos, PosInt, TransitSpeed, frozen
 from mpcasv.estimation.current import CurrentObserverParams
 from mpcasv.hybrid.avoidance import AvoidanceParams
 from mpcasv.hybrid.domains import DomainParams
@@ -377,10 +377,10 @@ class MPCParams:
     lookahead: Pos = 15.0
     min_carrot: Pos = 25.0
     course_control: Flag = False
-    speed_min: Pos = 0.5
+    speed_min: TransitSpeed = 0.5
     speed_rule: Literal["max", "mean", "plan"] = "max"
     speed_lead: Pos = 1.0
-    speed: Pos = 2.5
+    speed: TransitSpeed = 2.5
     T_standby: Pos = 10.0
     tau_served: Pos = 10.0
     dwell_max: Pos = 45.0

@@ -106,14 +106,16 @@ def run(args: argparse.Namespace) -> int:
         prepare(needed_libraries([(name, len(scenario.auv), preset, None, boat)]), args.quiet)
         controller = make_controller(name, len(scenario.auv), preset, boat=boat)
     except ConfigError as exc:
-        # a name taken from the scenario file: say which file (it read "unknown controller
-        # 'x'" as if --controller had been given)
-        keys = ([] if args.controller else ["controller"]) + (
-            ["preset"] if not args.params and name == scenario.controller else [])
-        if not keys:  # both from the command line: its message as it is
-            raise
-        raise ConfigError(f"{args.scenario} ({' / '.join(keys)} from this scenario): "
-                          f"{exc}") from None  # fmt: skip
+        # a name taken from the scenario file: say which file and where each name came from
+        # (it read "unknown controller 'x'" as if --controller had been given, and blamed
+        # the scenario for a bad --params)
+        if args.controller and (args.params or name != scenario.controller):
+            raise  # both from the command line: its message as it is
+        said = [f"controller {name!r} from " + ("--controller" if args.controller
+                                                else "this scenario")]  # fmt: skip
+        if preset is not None:
+            said.append("preset from " + ("--params" if args.params else "this scenario"))
+        raise ConfigError(f"{args.scenario} ({', '.join(said)}): {exc}") from None
     result = simulate(scenario, controller, args.seed, args.estimator, progress=not args.quiet)
     extra = {"preset": preset_used(name, preset), "estimator": args.estimator or scenario.estimator,
              "realisation": real.as_dict(), "boat": boat.describe(),

@@ -67,9 +67,13 @@ def paths_figure(result):
     mk = _marks(len(ts))
     fig, ax = plt.subplots(figsize=(7, 7))
     ax.plot(ts["E"], ts["N"], color="tab:blue", lw=1.2, label="ASV", **mk)
-    sb = ts["mode"] == "standby"
-    ax.plot(ts["E"][sb], ts["N"][sb], ".", ms=2, color="tab:blue", alpha=0.4,
-            label="ASV in standby")  # fmt: skip
+    # standby stretches as a broad green band under the path (before: 2-pt dots in the
+    # path's own colour, which a new user could not see), each sample a marker too, so that
+    # a standby while drifting a metre still shows
+    sb = (ts["mode"] == "standby").to_numpy()
+    E_sb, N_sb = np.where(sb, ts["E"], np.nan), np.where(sb, ts["N"], np.nan)
+    ax.plot(E_sb, N_sb, "-o", color="tab:green", lw=6, ms=5, alpha=0.35, zorder=1,
+            solid_capstyle="round", label="ASV in standby (propeller off)")  # fmt: skip
     ax.plot(ts["E"].iloc[0], ts["N"].iloc[0], "o", color="tab:blue")
     for k in range(_n_auv(ts)):
         c = AUV_COLOURS[k % len(AUV_COLOURS)]
