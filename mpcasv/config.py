@@ -333,7 +333,8 @@ def resolve(kind: str, name_or_path: str | Path, base: str | Path | None = None)
     Raises
     ------
     ConfigError
-        The path does not exist, or the name is not a shipped file (the shipped names listed).
+        The path does not exist or is a file other than ``.toml``, or the name is not a
+        shipped file (the shipped names listed).
     """
     if base is not None:
         name_or_path = anchor(str(name_or_path), base)
@@ -345,6 +346,9 @@ def resolve(kind: str, name_or_path: str | Path, base: str | Path | None = None)
         return shipped
     known = sorted(f.stem for f in (DATA_DIR / kind).glob("*.toml"))
     what = kind.removesuffix("s")  # the folder's name less a plural s ("execution" keeps its n)
+    if is_path(name_or_path) and p.is_file():  # it exists: it said "no such file" (s43)
+        raise ConfigError(f"{str(name_or_path)!r}: not a {what} file (a {what} is a .toml file; "
+                          f"shipped names: {known})")  # fmt: skip
     if is_path(name_or_path):
         raise ConfigError(f"unknown {what} {str(name_or_path)!r}: no such file (looked at "
                           f"{p.resolve()}; shipped names: {known})")  # fmt: skip

@@ -171,6 +171,7 @@ def _log(tmp_path, fix_times: bool):
         records.append({"kind": "step", "t": float(t), "clock": float(t), "obs": d,
                         "cmd": cmd_to_dict(ctl.step(obs)), "override": None, "status": ["ok"],
                         "ages": [0.0]})  # fmt: skip
+    records.append({"kind": "summary", "t": 4.0})  # a deploy that ended normally
     log = tmp_path / "deploy.jsonl"
     log.write_text("".join(json.dumps(r) + "\n" for r in records))
     return log, ctl

@@ -303,7 +303,8 @@ def _ranges(tmp: Path, params: str) -> Path:
 
 
 @pytest.mark.parametrize("params, words", [
-    ('"speed" = { low = -1.0, high = 2.5 }', ["params.'speed'", "low = -1.0", "outside the allowed range (0, 10] m/s"]),
+    ('"speed" = { low = -1.0, high = 2.5 }', ["params.'speed'", "low = -1.0",
+                                              "outside the allowed range (0, 10] m/s"]),
     ('"domain.alpha_inner" = { low = 0.0, high = 5.0 }', ["params.'domain.alpha_inner'",
                                                          "low = 0.0"]),
     # refused by the preset's cross-field check whatever eps_minus in [2, 10] is

@@ -66,3 +66,52 @@ def test_standby_shows_in_the_paths_figure_in_its_own_colour():
         assert np.allclose(x[sb], res.timeseries["E"].to_numpy()[sb])
     finally:
         plt.close(fig)
+
+
+def test_a_steering_limit_in_degrees_is_refused_in_one_line(tmp_path, capsys):
+    # delta_max = 30 (degrees given as radians): `tune yaw` ended in a 37-line traceback and
+    # `deploy --prepare` accepted the file
+    gretha = (ROOT / "mpcasv" / "data" / "vessels" / "gretha.toml").read_text()
+    for field, value in (("delta_max", "30.0"), ("delta_rate_max", "30.0")):
+        bad = tmp_path / f"{field}.toml"
+        bad.write_text(gretha.replace(f"\n{field} = 0.523599\n", f"\n{field} = {value}\n"))
+        assert main(["tune", "yaw", "--vessel", str(bad), "--out", str(tmp_path / "o")]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and f"{field}: 30 rad" in err[0], err
+        assert "radians, not degrees" in err[0]
+
+
+def test_an_existing_file_that_is_not_toml_is_not_called_missing(tmp_path):
+    from mpcasv.config import resolve
+
+    png = tmp_path / "pic.png"
+    png.write_bytes(b"\x89PNG\r\n")
+    with pytest.raises(ConfigError, match=r"pic.png': not a vessel file \(a vessel is a "
+                                          r"\.toml file"):  # it said "no such file"
+        resolve("vessels", str(png))
+    with pytest.raises(ConfigError, match="no such file"):
+        resolve("vessels", str(tmp_path / "missing.png"))
+
+
+def test_tuning_another_vessel_on_gretha_s_base_says_so(tmp_path, capsys, monkeypatch):
+    # `tune speed --vessel dune-otter` wrote "Execution level of Gretha" with Gretha's yaw
+    # schedule and checked its turns with it, without a word
+    from mpcasv.control import tune_cli
+
+    def stop(*args, **kwargs):
+        raise RuntimeError("stopped after the set-up")
+
+    monkeypatch.setattr("mpcasv.control.tuning_yaw.tune_yaw", stop)
+    with pytest.raises(RuntimeError, match="stopped after the set-up"):
+        main(["tune", "yaw", "--vessel", "dune-otter", "--out", str(tmp_path / "o")])
+    err = capsys.readouterr().err
+    assert "warning: --base gretha (the default): the speed loop" in err
+    assert "not tuned for dune-otter" in err
+    with pytest.raises(RuntimeError):
+        main(["tune", "yaw", "--out", str(tmp_path / "g")])  # Gretha on her own base: quiet
+    assert "warning" not in capsys.readouterr().err
+    from mpcasv.control.params import load_execution
+
+    head = tune_cli._header(load_execution(), "dune-otter", tmp_path / "x.toml")
+    assert head[0].startswith("Execution level of dune-otter:")
+    assert any("--vessel dune-otter --base" in ln for ln in head)

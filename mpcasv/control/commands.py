@@ -14,7 +14,13 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from mpcasv.control.tune_cli import DEFAULT_SPEEDS, WN_PER_SPEED, run_tune_speed, run_tune_yaw
+from mpcasv.control.tune_cli import (
+    BASE_DEFAULT,
+    DEFAULT_SPEEDS,
+    WN_PER_SPEED,
+    run_tune_speed,
+    run_tune_yaw,
+)
 
 
 def _floats(text: str) -> list[float]:
@@ -148,14 +154,17 @@ def _common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--vessel", default="gretha", help="vessel parameters: name or TOML")
     p.add_argument(
         "--base",
-        default="gretha",
-        help="execution parameters to start from: name or TOML (default gretha)",
+        default=BASE_DEFAULT,
+        help=f"execution parameters to start from: name or TOML (default {BASE_DEFAULT}: "
+        "Gretha's; for another vessel the loop not tuned stays Gretha's, said in a warning)",
     )
     p.add_argument("--out", type=Path, required=True, help="output folder (figures, plots)")
     p.add_argument(
         "--toml", type=Path, help="where to write the execution TOML (default OUT/execution.toml)"
     )
-    p.add_argument("--dt", type=float, default=0.1, help="simulator step, s (default 0.1)")
+    p.add_argument("--dt", type=float, default=0.1,
+                   help="step of the sampled-loop analysis, s (default 0.1; the nonlinear "
+                   "checks run at the simulator's own 0.1 s)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
 
 

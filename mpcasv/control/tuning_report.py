@@ -248,7 +248,9 @@ def plot_pirouette(checks: dict, wp, out: Path, title: str) -> Path:
                 else f"on course after {f['turn_s']:.0f} s")  # fmt: skip
         label = f"{key} eq. 3.1: {what}, turned {f['total_turn_deg']:.0f} deg"
         reach = np.hypot(run.X[:, 0] - wp[0], run.X[:, 1] - wp[1]) < 5.0  # as turn() counts
-        n = int(np.argmax(reach)) + 1 if reach.any() and not f["pirouette"] else len(run.t)
+        # drawn as far as turn() counted the turn (a pirouette that reached the waypoint
+        # was drawn on past it: "turned 218 deg" beside four circles, a new user, s43)
+        n = int(np.argmax(reach)) + 1 if reach.any() else len(run.t)
         ax0.plot(run.X[:n, 1], run.X[:n, 0], color=color, label=label)
         ax1.plot(run.t[:n], run.X[:n, 3], color=color, label=f"u, {key} eq. 3.1")
         ax2.plot(run.t[:n], np.degrees(np.abs(run.psi_error[:n])), color=color, ls=":", lw=1)

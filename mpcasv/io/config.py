@@ -25,6 +25,7 @@ from mpcasv.config import (
     Float,
     NonNeg,
     Pos,
+    between,
     frozen,
     load_toml,
     parse,
@@ -150,7 +151,10 @@ class LinkSpec:
     )  # fmt: skip
     announce_period: Pos = 10.0
     heartbeat_period: Pos = 1.0
-    followref_timeout: Pos = 10.0  # FollowReference.timeout: DUNE ends the maneuver after it
+    # FollowReference.timeout: DUNE ends the maneuver after it without a Reference (its own
+    # stop if we go silent; 1e5 s switched it off)
+    followref_timeout: between(1, 300, "s", "DUNE's own stop when the deploy goes silent: "
+                               "minutes switch it off") = 10.0
     plan_id: str = "mpcasv-followref"
     plan_start_timeout: Pos = 5.0  # wait this long for PlanControl SUCCESS, then retry
     reference_lead_m: NonNeg = 20.0  # push the Reference past DUNE's arrival tolerance
@@ -195,9 +199,15 @@ class LinkSpec:
 class WatchdogSpec:
     """Limits (s of the deploy clock, m, m/s) and input plausibility checks."""
 
-    asv_stale_s: Pos = 3.0  # no ASV state for this long: stop commanding, report
-    auv_stale_s: Pos = 3.0  # AUV state older: uncertain (radius grows with its age)
-    auv_lost_s: Pos = 30.0  # AUV silent for longer: reported, ASV kept safe
+    # no ASV state for this long: stop commanding, report. DUNE's stock vehicles send their
+    # EstimatedState about twice a second (shared/data/dune-traffic): 0.001 s made every gap
+    # a verdict (298 plan starts in 15 s), 1e5 s switched the watchdog off
+    asv_stale_s: between(1, 60, "s", "DUNE sends its state about twice a second; a minute "
+                         "without it is no watchdog") = 3.0
+    # AUV state older: uncertain (radius grows with its age); under water, with acoustic
+    # status reports every 30 s or more, tens of seconds (docs/deploy.md)
+    auv_stale_s: between(0.5, 600, "s", "ten minutes without a word is no watchdog") = 3.0
+    auv_lost_s: between(1, 3600, "s", "an hour without a word is no watchdog") = 30.0
     auv_speed_max: Pos = 2.0  # how fast an AUV may move away from its last state
     auv_rise_rate: NonNeg = 0.5  # how fast it may rise (m/s) towards the surface
     asv_speed_max: Pos = 6.0  # faster apparent motion is rejected as a jump
@@ -256,6 +266,15 @@ class DeployConfig:
     # the acoustic channel of the operation (USBL and modem; a scenario's [acoustics] fields):
     # the MPC's fix-rate model plans with it (the run's Boat, as in simulation)
     acoustics: AcousticParams = AcousticParams()
+
+    @model_validator(mode="after")
+    def _timeout(self) -> DeployConfig:
+        if self.link.followref_timeout <= self.controller.control_period:
+            raise FieldError("link.followref_timeout", (
+                f"{self.link.followref_timeout:g} s is not longer than controller."
+                f"control_period = {self.controller.control_period:g} s: DUNE would end the "
+                "maneuver between two decisions"))  # fmt: skip
+        return self
 
     @model_validator(mode="after")
     def _vehicles(self) -> DeployConfig:

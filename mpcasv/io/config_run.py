@@ -16,6 +16,8 @@ __all__ = ["CONTROL_PERIOD_MAX", "ClockSpec", "ControllerSpec", "LogSpec"]
 
 #: The longest control period accepted (s): a supervisory period is seconds, not hours
 CONTROL_PERIOD_MAX = 60.0
+#: the shortest deploy control period (s): 0.001 s was accepted
+CONTROL_PERIOD_MIN = 0.1
 
 
 @frozen
@@ -25,7 +27,8 @@ class ControllerSpec:
     name: str
     preset: str | None = None  # shipped preset name or TOML path (default: the kind's)
     estimator: str = "perfect"
-    control_period: Pos = 1.0  # s between decisions (the papers' timers count seconds)
+    # s between decisions (the papers' timers count seconds); at least CONTROL_PERIOD_MIN
+    control_period: Pos = 1.0
     scenario: str | None = None  # scenario TOML: the AUVs' plans, for "plan" only (refused else)
     overrides: dict[str, Any] = Field(default_factory=dict)
     # the boat in the water (shipped vessel name or TOML path): controllers that plan with a
@@ -41,6 +44,10 @@ class ControllerSpec:
     @field_validator("control_period")
     @classmethod
     def _period(cls, v: float) -> float:
+        if v < CONTROL_PERIOD_MIN:
+            raise ValueError(f"{v:g} s: a control period is at least {CONTROL_PERIOD_MIN:g} s "
+                             "(DUNE's stock vehicles send their state about twice a second: "
+                             "faster decisions see the same state)")  # fmt: skip
         if v > CONTROL_PERIOD_MAX:
             raise ValueError(f"{v:g} s: a control period is at most {CONTROL_PERIOD_MAX:g} s "
                              "(the papers' is 1 s)")  # fmt: skip

@@ -17,7 +17,9 @@ import functools
 import logging
 import math
 import time
+from pathlib import Path
 
+from mpcasv.config import ConfigError
 from mpcasv.interface import Command
 from mpcasv.io.config import DeployConfig, WatchdogSpec, build_controller
 from mpcasv.io.watchdog import GuardParams, guard_sources
@@ -73,11 +75,17 @@ def guard_params(wd: WatchdogSpec, controller) -> GuardParams:
                        float(r_keep), wd.guard_margin_m, speed)  # fmt: skip
 
 
+#: the files a deploy writes in its log folder (:class:`~mpcasv.io.deploy.Deploy`)
+LOG_FILES = ("deploy.jsonl", "imc.lsf")
+
+
 def check_local(cfg: DeployConfig, config, log_dir=None, port: bool = False) -> None:
     """What the run needs of this host, tried before the controller is built or anything is
     written or bound for good: the log folder (``--log-dir`` or ``log.dir``) can be made and
-    written (``--prepare`` and the run); with ``port`` (the run, not ``--prepare``, which runs
-    at the quay with the boat's network still down: docs/deploy.md) ``link.bind`` (and
+    written and holds no earlier run's log (:data:`LOG_FILES`, not empty: a restarted deploy
+    wrote over the trial's record) (``--prepare`` and the run); with ``port`` (the run, not
+    ``--prepare``, which runs at the quay with the boat's network still down, so that the
+    address of ``bind`` may not exist yet: docs/deploy.md) ``link.bind`` (and
     ``link.discovery_bind``) is an address of this host (a UDP socket bound to it and closed
     at once) and ``link.port`` on it is free.
 
@@ -89,7 +97,14 @@ def check_local(cfg: DeployConfig, config, log_dir=None, port: bool = False) -> 
     from mpcasv.io.netcheck import check_bindable
     from mpcasv.outputs import check_output_folder
 
-    check_output_folder(log_dir or cfg.log.dir, "--log-dir" if log_dir else f"{config}: log.dir")
+    where = "--log-dir" if log_dir else f"{config}: log.dir"
+    check_output_folder(log_dir or cfg.log.dir, where)
+    folder = Path(log_dir or cfg.log.dir)
+    earlier = [f for f in LOG_FILES if (folder / f).is_file() and (folder / f).stat().st_size]
+    if earlier:  # a restart after a crash wrote over the trial's record (a new user, s43)
+        raise ConfigError(f"{where} = {folder}: holds an earlier run's {' and '.join(earlier)}; "
+                          "a deploy never writes over a field record: name a new folder "
+                          "(--log-dir) or move those files")  # fmt: skip
     if not port:
         return
     lk = cfg.link
@@ -110,11 +125,12 @@ def prepare_controller(cfg: DeployConfig) -> dict:
     actuators (``actuator_feedback``) and where the propeller state comes from, and the
     seconds the build took."""
     t0 = time.perf_counter()
-    ctl = build_controller(cfg, log=log.warning)
+    # progress lines at info (shown unless --quiet; they read "warning:" before session 43)
+    ctl = build_controller(cfg, log=log.info)
     field = hasattr(ctl, "use_deadline")
     if field:
-        check_budget(cfg, ctl)
-        start_field_mode(ctl, log=log.warning)
+        check_budget(cfg, ctl)  # a real warning
+        start_field_mode(ctl, log=log.info)
         ctl.close()
     c = cfg.controller
     return {"controller": c.name, "preset": c.preset, "vessel": c.vessel or "gretha",

@@ -285,8 +285,12 @@ def run_map_identification(args, prior: VesselParams, tmap) -> int:
     fit = identify_through_map(table, shaped, tmap, coeffs, validation=args.validation, say=say)
     name = args.out.stem
     P, data = written_vessel(fit, tmap, name, held, [str(log)], prior)
-    header = (f"# {name}: identified by `mpcasv identify {log} --vessel {args.vessel} "
-              f"--validation {args.validation:g}` through DUNE's thruster map "
+    pick = getattr(args, "vehicle_pick", None)
+    command = (f"mpcasv identify {log} --vessel {args.vessel}"
+               + (f" --vehicle {pick}" if pick is not None else "")
+               + (f" --coeffs {args.coeffs}" if args.coeffs else "")
+               + f" --validation {args.validation:g} --out {args.out}")  # the whole command
+    header = (f"# {name}: identified by `{command}` through DUNE's thruster map "
               f"({tmap.source}).\n# Hull from the log; held values and the thrust limit: see "
               "[provenance] and docs/deploy.md.\n"
               f"# 1-sigma: {fit.sigma_method}.\n")  # fmt: skip

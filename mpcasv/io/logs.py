@@ -96,6 +96,19 @@ class JsonlWriter(_LogFile):
             self.lines += 1
 
 
+def last_line_cut(path: str | Path) -> bool:
+    """Whether the last non-empty line of the JSON-lines log ``path`` is not JSON (cut by a
+    crash or a kill mid-write; :func:`read_jsonl` skips it)."""
+    lines = [ln for ln in Path(path).read_text(encoding="utf-8").splitlines() if ln.strip()]
+    if not lines:
+        return False
+    try:
+        json.loads(lines[-1])
+    except json.JSONDecodeError:
+        return True
+    return False
+
+
 def read_jsonl(path: str | Path, kind: str | None = None) -> list[dict]:
     """Records of a JSON-lines log (optionally only ``kind``); a last line cut by a crash is
     skipped, any other bad line raises :class:`~mpcasv.errors.LogError` (a ValueError) naming

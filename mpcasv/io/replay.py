@@ -32,7 +32,7 @@ from mpcasv.io.config import WatchdogSpec
 from mpcasv.io.deploycontroller import field_boat, refuse_simulation_only
 from mpcasv.io.deployfeedback import cap_command, cap_controller_speed
 from mpcasv.io.deploystep import guard_params
-from mpcasv.io.logs import read_jsonl
+from mpcasv.io.logs import last_line_cut, read_jsonl
 from mpcasv.io.records import cmd_from_dict, obs_from_dict, same_command
 from mpcasv.io.watchdog import GuardParams, guard
 from mpcasv.models.acoustics import AcousticParams
@@ -166,6 +166,12 @@ def replay(log: str | Path, controller: str | None = None, preset: str | None = 
     # logged preset is resolved only for a controller of that name: one this version knows)
     same = name == c["name"] and _same_preset(name, preset, c["preset"])
     notes = []
+    if last_line_cut(path):  # a cut log replayed without a word (a new user, session 43)
+        notes.append("the log's last line is cut (the deploy ended mid-write: killed, or the "
+                     "host lost power): replayed up to it")  # fmt: skip
+    if not any(r.get("kind") == "summary" for r in records):
+        notes.append("the log has no 'summary' record: the deploy did not end normally "
+                     "(killed or crashed), or it is still running")  # fmt: skip
     if not same and c["overrides"]:
         notes.append(f"the logged controller.overrides {c['overrides']} are not applied: they "
                      f"were written for {c['name']} with "

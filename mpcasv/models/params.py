@@ -10,13 +10,24 @@ negative. ``Y_uv`` etc. are the speed-proportional parts of the linear sway/yaw 
 from __future__ import annotations
 
 import dataclasses
+import math
 from pathlib import Path
 from typing import Annotated, Literal
 
 import numpy as np
 from pydantic import Field, Strict
 
-from mpcasv.config import ConfigError, Float, NonNeg, Pos, frozen, load_toml, parse, resolve
+from mpcasv.config import (
+    ConfigError,
+    Float,
+    NonNeg,
+    Pos,
+    between,
+    frozen,
+    load_toml,
+    parse,
+    resolve,
+)
 
 #: Coefficients that enter the equations of motion, in the order of the parameter vector
 #: handed to the symbolic model (identification estimates a subset of these).
@@ -69,8 +80,12 @@ class VesselParams:
     Y_uudelta: Float  # side force of the steered drive leg per |u|u delta (N s^2/m^2/rad), < 0
     T_max: Pos  # maximum propeller thrust (N)
     T_min: NonNeg  # minimum thrust when running (N); 0 = the propeller can stop
-    delta_max: Pos  # steering angle limit (rad)
-    delta_rate_max: Pos  # steering rate limit (rad/s)
+    # steering angle limit (rad; at most 90 deg: 30 given in degrees crashed `tune yaw` with
+    # a traceback and passed `deploy --prepare`)
+    delta_max: between(0, math.pi / 2, "rad", "90 deg; radians, not degrees", lo_open=True)
+    # steering rate limit (rad/s; at most 2 pi: a turn of the drive a second)
+    delta_rate_max: between(0, 2 * math.pi, "rad/s", "a full turn a second; radians, not "
+                            "degrees", lo_open=True)
     T_thrust: Pos  # thrust first-order lag (s)
     T_delta: Pos  # steering first-order lag (s)
     eps_abs: Pos  # smoothing of |.|: sabs(x) = sqrt(x^2 + eps^2) - eps (m/s or rad/s)
