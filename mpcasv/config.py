@@ -346,7 +346,7 @@ def resolve(kind: str, name_or_path: str | Path, base: str | Path | None = None)
         return shipped
     known = sorted(f.stem for f in (DATA_DIR / kind).glob("*.toml"))
     what = kind.removesuffix("s")  # the folder's name less a plural s ("execution" keeps its n)
-    if is_path(name_or_path) and p.is_file():  # it exists: it said "no such file" (s43)
+    if p.is_file():  # it exists (a path or a bare name): it said "no such file" (s43)
         raise ConfigError(f"{str(name_or_path)!r}: not a {what} file (a {what} is a .toml file; "
                           f"shipped names: {known})")  # fmt: skip
     if is_path(name_or_path):

@@ -82,3 +82,20 @@ def test_the_acceptance_counts_worlds_and_says_when_nothing_was_judged():
     (_, _, [(_, _, says)]) = report_parts(table([f"w{i}" for i in range(6)]), acc,
                                           ["hybrid", "mpc"], [])  # fmt: skip
     assert says == "**All 1 targets met.**"
+
+
+def test_conditions_on_one_world_are_one_world_and_the_order_is_kept():
+    # a review (session 43): the estimators of one realisation counted as separate worlds,
+    # and rows without a realisation id were put after the merged ones
+    df = table(["w0", "", "w1", "w0", ""])
+    df.loc[df["seed"] == 3, "estimator"] = "kalman"  # w0 again, under another estimator
+    p, _ = stats.pairs(df, "collision_domain_s", "hybrid", "mpc")
+    w = per_world(p)
+    # each world where its first pair was in the pairs' order
+    first = {}
+    for i, (real, seed) in enumerate(zip(p["realisation"], p["seed"], strict=True)):
+        first.setdefault(real or f"row {i}", (i, seed))
+    expected = sorted(first.values())
+    assert w["seed"].tolist() == [s for _, s in expected]
+    assert sorted(w["runs"].tolist()) == [1, 1, 1, 2] and len(w) == 4
+    assert w.loc[w["realisation"] == "w0", "runs"].tolist() == [2]

@@ -51,7 +51,7 @@ def _candidates(folder: Path) -> pd.DataFrame:
     return front[front["heldout_front"].astype(bool)]
 
 
-def _suite(tmp: Path, entries: str, seeds: str = "[20, 21, 22, 23, 24]") -> Path:
+def _suite(tmp: Path, entries: str, seeds: str = "[20, 21, 22, 23, 24, 25]") -> Path:
     path = tmp / "matched.toml"
     path.write_text(
         f'name = "matched"\nscenarios = ["case1", "case3"]\nduration = {DUR}\nseeds = {seeds}\n'
@@ -90,7 +90,7 @@ def test_front_entries_run_the_point_nearest_the_level_with_paired_statistics(fr
     out = tmp_path / "out"
     assert main(["compare", str(suite), "--out", str(out), "--workers", "1", "--quiet"]) == 0
     res = pd.read_parquet(out / "results.parquet")
-    assert len(res) == 2 * 2 * 5 and (res["status"] == "ok").all()
+    assert len(res) == 2 * 2 * 6 and (res["status"] == "ok").all()
     for label, folder in (("a", a), ("b", b)):  # the runs used the chosen trial's values
         row = pd.read_csv(folder / "front.csv").set_index("trial").loc[want[label]]
         for preset in res.loc[res["label"] == label, "preset"].unique():
@@ -104,8 +104,10 @@ def test_front_entries_run_the_point_nearest_the_level_with_paired_statistics(fr
         achieved = res.loc[res["label"] == label, "energy_J"].mean()
         line = next(ln for ln in sec.splitlines() if ln.startswith(f"| {label} |"))
         assert f"| {want[label]} |" in line and f"{float(f'{achieved:.5g}')}" in line, line
-    # the paired statistics of the fair comparison: b against a, 5 pairs per case
+    # the paired statistics of the fair comparison: b against a, 6 pairs per case (enough
+    # for a statistic: stats.MIN_PAIRS; with 5 every row had become n/a, session 43)
     assert "Δ = b − a" in report
+    assert "| case1 | 6 |" in report and "| case3 | 6 |" in report
 
 
 def test_training_means_are_used_without_held_out_runs(fronts, tmp_path):

@@ -21,7 +21,7 @@ every pair is 0 against 0: then the change is 0 in each pair, and a target of "n
 is met (before, no pair was left to judge and the target, e.g. no time in a collision domain
 for either controller, counted as not met). The rule has a step: 29 pairs at 0 against 0 and
 one where the variant did better leave one pair that says something, too few for an
-interval (``n/a: 1 pairs < 5``, not counted as met), while 30 pairs at 0 meet "no more".
+interval (``n/a: 1 pairs < 6``, not counted as met), while 30 pairs at 0 meet "no more".
 Judging on all 30 with the zeros as 0 would remove the step but also meet "no more" with one
 pair worse (a median of 0); too few pairs that say anything is reported as such instead. The
 median and 95 % bootstrap CI come from :func:`mpcasv.experiments.stats.paired_stat`.

@@ -101,6 +101,7 @@ code{background:#f4f4f4;padding:1px 4px}"""
 
 
 def _worlds(n: int) -> str:
+    """ "world" or "worlds" for ``n``."""
     return "world" if n == 1 else "worlds"
 
 
@@ -251,16 +252,18 @@ def write_report(out: Path, exp, results: pd.DataFrame, stats=None) -> tuple[Pat
             f"(the two-sided Wilcoxon test cannot reach p < 0.05 below 6 non-zero "
             f"differences), or all differences zero.",
         ]
-        shared = table.groupby("case", sort=False)[["n", "runs"]].max()
-        shared = shared[shared["runs"] > shared["n"]]
+        # worlds and runs of one row per case (the first variant's first metric)
+        one = table[(table["other"] == table["other"].iloc[0])
+                    & (table["metric"] == table["metric"].iloc[0])]  # fmt: skip
+        shared = one[one["runs"] > one["n"]]
         if len(shared):
             lines.append(
-                "Seeds that drew the same world: " + "; ".join(
-                    f"{c} {int(r['runs'])} runs of {int(r['n'])} {_worlds(r['n'])}"
-                    for c, r in shared.iterrows()) + ". There the seed varies only the "
-                "sensor and acoustic draws (the scenario's `[uncertain]` table draws nothing "
-                "else), so the statistics count worlds, not runs: give the scenario an "
-                "`[uncertain]` table to compare over more worlds."
+                "Runs that met the same world: " + "; ".join(
+                    f"{r['case']} {int(r['runs'])} runs of {int(r['n'])} {_worlds(r['n'])}"
+                    for _, r in shared.iterrows()) + ". Their draws gave the same realisation "
+                "(a scenario without an `[uncertain]` table, a suite current that replaced its "
+                "only drawn value, a discrete draw that repeated, or conditions such as the "
+                "estimators on one world), so the statistics count worlds, not runs."
             )  # fmt: skip
         no_fix = cases_without_fixes(ok)
         if no_fix:

@@ -19,14 +19,15 @@ give:
 
 Pairs are pooled over the conditions of a case (current, estimator): each pair is matched
 within its condition. The unit of the statistics is the *world*, not the run
-(:func:`per_world`): seeds that drew the same realisation (a scenario whose ``[uncertain]``
-table draws nothing, where the seed varies only the sensor and acoustic draws) are one world,
-and their pairs are averaged into one; six copies of one world's difference would otherwise
-give a zero-width interval and p = 0.03. With fewer than :data:`MIN_PAIRS` worlds, all
-differences zero, or no direction, the statistic is "n/a" with the reason (the two-sided
-Wilcoxon test cannot reach p < 0.05 with fewer than 6 non-zero differences: its smallest p
-is ``2 / 2^n``). Rows of one variant without a partner in the other (failed job, missing
-value) are excluded and counted (``n_unpaired``).
+(:func:`per_world`): the pairs of a case on the same realisation (seeds whose draws give the
+same scenario, e.g. one whose ``[uncertain]`` table draws nothing, where the seed varies
+only the sensor and acoustic draws; or conditions that leave the world as it is, such as the
+estimators) are one world, and their pairs are averaged into one; six copies of one world's
+difference would otherwise give a zero-width interval and p = 0.03. With fewer than
+:data:`MIN_PAIRS` worlds, all differences zero, or no direction, the statistic is "n/a" with
+the reason (the two-sided Wilcoxon test cannot reach p < 0.05 with fewer than 6 non-zero
+differences: its smallest p is ``2 / 2^n``). Rows of one variant without a partner in the
+other (failed job, missing value) are excluded and counted (``n_unpaired``).
 """
 
 from __future__ import annotations
@@ -169,22 +170,25 @@ def pairs(results: pd.DataFrame, metric: str, reference: str, other: str
 
 
 def per_world(p: pd.DataFrame) -> pd.DataFrame:
-    """The pairs of :func:`pairs` with one row per world: rows equal on every pairing column
-    but the seed and with the same non-empty ``realisation`` (seeds that drew the same
-    scenario realisation) averaged into one, ``ref`` and ``other`` the means of their runs
-    (an infinite value stays infinite). Column ``runs``: how many pairs each row stands for.
-    A table without a ``realisation`` column, or rows without one, keep one row per pair.
-    Row order: first appearance."""
+    """The pairs of :func:`pairs` with one row per world: the pairs of a case with the same
+    non-empty ``realisation`` (the same drawn scenario: seeds whose draws repeat, or a
+    scenario that draws nothing; and the conditions that leave the world as it is, e.g. the
+    estimators of one realisation) averaged into one, ``ref`` and ``other`` the means of
+    their runs. An infinite value makes its world's mean infinite (both infinite: no
+    difference, as for one pair); metrics never negative cannot mix +inf and -inf. Column
+    ``runs``: how many pairs each row stands for. A table without a ``realisation`` column,
+    or rows without one, keep one row per pair. Row order: each world where its first pair
+    was (the seeded bootstrap depends on it)."""
     p = p.assign(runs=1)
     if "realisation" not in p or not len(p):
         return p
     real = p["realisation"].astype("string").fillna("")
-    alone = real.eq("").to_numpy()
-    key = [c for c in p.columns if c in PAIR_KEY and c != "seed"] + ["realisation"]
-    g = p[~alone].groupby(key, sort=False, dropna=False)
-    merged = g.agg(seed=("seed", "first"), ref=("ref", "mean"), other=("other", "mean"),
-                   runs=("runs", "size")).reset_index()  # fmt: skip
-    return pd.concat([merged, p[alone]], ignore_index=True)[p.columns]
+    world = np.where(real.eq("").to_numpy(), "row " + p.index.astype(str), real.to_numpy())
+    g = p.assign(_world=world, _first=np.arange(len(p))).groupby([CASE, "_world"], sort=False)
+    agg = {c: (c, "first") for c in p.columns if c not in ("ref", "other", "runs")}
+    merged = g.agg(**agg, ref=("ref", "mean"), other=("other", "mean"), runs=("runs", "size"),
+                   _first=("_first", "min"))  # fmt: skip
+    return merged.sort_values("_first").reset_index(drop=True)[p.columns]
 
 
 @dataclass(frozen=True)

@@ -269,11 +269,12 @@ class DeployConfig:
 
     @model_validator(mode="after")
     def _timeout(self) -> DeployConfig:
-        if self.link.followref_timeout <= self.controller.control_period:
+        Tc = self.controller.control_period
+        if self.link.followref_timeout < 2 * Tc:  # one late or skipped tick must not end it
             raise FieldError("link.followref_timeout", (
-                f"{self.link.followref_timeout:g} s is not longer than controller."
-                f"control_period = {self.controller.control_period:g} s: DUNE would end the "
-                "maneuver between two decisions"))  # fmt: skip
+                f"{self.link.followref_timeout:g} s is shorter than two controller."
+                f"control_period = {Tc:g} s: DUNE would end the maneuver after one late or "
+                "skipped decision"))  # fmt: skip
         return self
 
     @model_validator(mode="after")

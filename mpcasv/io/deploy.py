@@ -66,7 +66,7 @@ from mpcasv.io.deploystep import (
 )
 from mpcasv.io.imc import reference
 from mpcasv.io.link import ImcLink, Peer
-from mpcasv.io.logs import JsonlWriter, LsfWriter
+from mpcasv.io.logs import JsonlWriter, LsfWriter, keep_earlier
 from mpcasv.io.records import cmd_to_dict, obs_to_dict
 from mpcasv.io.transport import Clock
 from mpcasv.io.watchdog import OK, auv_status, guard, inflate
@@ -122,6 +122,11 @@ class Deploy(Phases, BoatFeedback, FieldMode, Ending):
                                                                   plan=plans[k]))  # fmt: skip
             self.estimators = [self.new_estimator(k) for k in range(self.n_auv)]
             self.log_dir = Path(log_dir or cfg.log.dir)
+            # an earlier run's log renamed, not written over (its names in 'started')
+            self.kept = keep_earlier(self.log_dir)
+            if self.kept:
+                log.info("kept the earlier run's log in %s: %s", self.log_dir,
+                         ", ".join(f"{a} -> {b}" for a, b in self.kept.items()))  # fmt: skip
             self.lsf = LsfWriter(self.log_dir / "imc.lsf")
             self.jsonl = JsonlWriter(self.log_dir / "deploy.jsonl")
             self.link = ImcLink(cfg, self.clock, self.lsf, self._on_state, self._on_message,
@@ -331,6 +336,7 @@ class Deploy(Phases, BoatFeedback, FieldMode, Ending):
             dry_run=self.dry_run,
             speedup=self.cfg.clock.speedup,
             log_dir=str(self.log_dir),
+            earlier_log_kept=self.kept,
             config=dataclasses.asdict(self.cfg),
             guard=dataclasses.asdict(self.gp),
         )

@@ -17,9 +17,7 @@ import functools
 import logging
 import math
 import time
-from pathlib import Path
 
-from mpcasv.config import ConfigError
 from mpcasv.interface import Command
 from mpcasv.io.config import DeployConfig, WatchdogSpec, build_controller
 from mpcasv.io.watchdog import GuardParams, guard_sources
@@ -75,15 +73,11 @@ def guard_params(wd: WatchdogSpec, controller) -> GuardParams:
                        float(r_keep), wd.guard_margin_m, speed)  # fmt: skip
 
 
-#: the files a deploy writes in its log folder (:class:`~mpcasv.io.deploy.Deploy`)
-LOG_FILES = ("deploy.jsonl", "imc.lsf")
-
-
 def check_local(cfg: DeployConfig, config, log_dir=None, port: bool = False) -> None:
     """What the run needs of this host, tried before the controller is built or anything is
     written or bound for good: the log folder (``--log-dir`` or ``log.dir``) can be made and
-    written and holds no earlier run's log (:data:`LOG_FILES`, not empty: a restarted deploy
-    wrote over the trial's record) (``--prepare`` and the run); with ``port`` (the run, not
+    written (``--prepare`` and the run; an earlier run's log there is kept by the run:
+    :func:`~mpcasv.io.logs.keep_earlier`); with ``port`` (the run, not
     ``--prepare``, which runs at the quay with the boat's network still down, so that the
     address of ``bind`` may not exist yet: docs/deploy.md) ``link.bind`` (and
     ``link.discovery_bind``) is an address of this host (a UDP socket bound to it and closed
@@ -97,14 +91,7 @@ def check_local(cfg: DeployConfig, config, log_dir=None, port: bool = False) -> 
     from mpcasv.io.netcheck import check_bindable
     from mpcasv.outputs import check_output_folder
 
-    where = "--log-dir" if log_dir else f"{config}: log.dir"
-    check_output_folder(log_dir or cfg.log.dir, where)
-    folder = Path(log_dir or cfg.log.dir)
-    earlier = [f for f in LOG_FILES if (folder / f).is_file() and (folder / f).stat().st_size]
-    if earlier:  # a restart after a crash wrote over the trial's record (a new user, s43)
-        raise ConfigError(f"{where} = {folder}: holds an earlier run's {' and '.join(earlier)}; "
-                          "a deploy never writes over a field record: name a new folder "
-                          "(--log-dir) or move those files")  # fmt: skip
+    check_output_folder(log_dir or cfg.log.dir, "--log-dir" if log_dir else f"{config}: log.dir")
     if not port:
         return
     lk = cfg.link

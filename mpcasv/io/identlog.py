@@ -30,6 +30,7 @@ evidence: :data:`mpcasv.models.ident_thrust.ACTUATION_ADVANCE`).
 from __future__ import annotations
 
 import json
+import shlex
 from pathlib import Path
 
 import numpy as np
@@ -286,10 +287,11 @@ def run_map_identification(args, prior: VesselParams, tmap) -> int:
     name = args.out.stem
     P, data = written_vessel(fit, tmap, name, held, [str(log)], prior)
     pick = getattr(args, "vehicle_pick", None)
-    command = (f"mpcasv identify {log} --vessel {args.vessel}"
-               + (f" --vehicle {pick}" if pick is not None else "")
-               + (f" --coeffs {args.coeffs}" if args.coeffs else "")
-               + f" --validation {args.validation:g} --out {args.out}")  # the whole command
+    q = shlex.quote
+    command = (f"mpcasv identify {q(str(log))} --vessel {q(str(args.vessel))}"
+               + (f" --vehicle {q(str(pick))}" if pick is not None else "")
+               + (f" --coeffs {q(args.coeffs)}" if args.coeffs else "")
+               + f" --validation {args.validation:g} --out {q(str(args.out))}")  # as typed
     header = (f"# {name}: identified by `{command}` through DUNE's thruster map "
               f"({tmap.source}).\n# Hull from the log; held values and the thrust limit: see "
               "[provenance] and docs/deploy.md.\n"

@@ -96,6 +96,34 @@ class JsonlWriter(_LogFile):
             self.lines += 1
 
 
+#: the files a deploy writes in its log folder (:class:`~mpcasv.io.deploy.Deploy`)
+DEPLOY_LOG_FILES = ("deploy.jsonl", "imc.lsf")
+
+
+def keep_earlier(folder: str | Path, names: tuple[str, ...] = DEPLOY_LOG_FILES) -> dict:
+    """Keep an earlier run's log in ``folder`` before a new run writes there: each of
+    ``names`` that is a non-empty file is renamed ``stem.K.suffix`` (``deploy.1.jsonl``,
+    ``imc.1.lsf``), ``K`` the smallest number free for all of them, so one run's files share
+    it. Returns ``{old name: new name}`` (empty: nothing to keep). A restarted deploy wrote
+    over the trial's record until session 43; refusing the folder instead broke the dry run
+    then run of one configuration that docs/deploy.md describes."""
+    folder = Path(folder)
+    found = [n for n in names if (folder / n).is_file() and (folder / n).stat().st_size]
+    if not found:
+        return {}
+
+    def numbered(name: str, k: int) -> str:
+        stem, _, suffix = name.partition(".")
+        return f"{stem}.{k}.{suffix}"
+
+    k = 1
+    while any((folder / numbered(n, k)).exists() for n in names):
+        k += 1
+    for n in found:
+        (folder / n).rename(folder / numbered(n, k))
+    return {n: numbered(n, k) for n in found}
+
+
 def last_line_cut(path: str | Path) -> bool:
     """Whether the last non-empty line of the JSON-lines log ``path`` is not JSON (cut by a
     crash or a kill mid-write; :func:`read_jsonl` skips it)."""

@@ -20,8 +20,10 @@ non-determinism or a changed controller.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
+from types import SimpleNamespace
 
 import pandas as pd
 
@@ -188,7 +190,7 @@ def replay(log: str | Path, controller: str | None = None, preset: str | None = 
         if not isinstance(cfg.get("watchdog"), dict):
             raise ConfigError(f"{path}: no logged [watchdog] values (the guard of another "
                               "controller or preset is built from them)")  # fmt: skip
-        gp = guard_params(parse(WatchdogSpec, cfg["watchdog"], f"{path}: watchdog"), ctl)
+        gp = guard_params(_logged_watchdog(cfg["watchdog"], path, notes), ctl)
     command_max = (cfg.get("speed") or {}).get("command_max")
     t0 = steps[0]["clock"]
     cmd_cap = ctl_cap = None  # the cap on the commands, the cap applied to the controller
@@ -237,6 +239,22 @@ def replay(log: str | Path, controller: str | None = None, preset: str | None = 
                                   *([f"speed.command_max {command_max:g} m/s"]
                                     if command_max is not None else [])]))  # fmt: skip
     return ReplayReport(path, name, preset_used(name, preset), pd.DataFrame(rows), tuple(notes))
+
+
+def _logged_watchdog(logged: dict, path: Path, notes: list[str]):
+    """The logged ``[watchdog]`` values as :class:`~mpcasv.io.config.WatchdogSpec` would hold
+    them; values this version bounds tighter than the deploy that wrote them did (session
+    43: ``asv_stale_s`` in [1, 60] s) are taken as logged, with a note, not refused: the log
+    is what happened."""
+    try:
+        return parse(WatchdogSpec, logged, f"{path}: watchdog")
+    except ConfigError as exc:
+        defaults = {f.name: getattr(WatchdogSpec(), f.name)
+                    for f in dataclasses.fields(WatchdogSpec)}  # fmt: skip
+        why = " ".join(str(exc).split())  # one line
+        notes.append(f"the logged [watchdog] is outside this version's bounds ({why}); "
+                     "replayed with the logged values")  # fmt: skip
+        return SimpleNamespace(**(defaults | logged))
 
 
 def _speed(cmd) -> float:
