@@ -158,6 +158,7 @@ def test_deploy_prepare_builds_and_contacts_nobody(tmp_path, capsys, caplog):
     nothing is bound, no log is written, exit 0. A hybrid controller has nothing to compile,
     and the progress line says so (it said "an MPC compiles its library now")."""
     import json
+    import logging
 
     import tomli_w
 
@@ -172,7 +173,8 @@ def test_deploy_prepare_builds_and_contacts_nobody(tmp_path, capsys, caplog):
     }  # fmt: skip
     path = tmp_path / "deploy.toml"
     path.write_text(tomli_w.dumps(cfg))
-    assert main(["deploy", str(path), "--prepare"]) == 0
+    with caplog.at_level(logging.INFO, logger="mpcasv.deploy"):  # progress lines: info
+        assert main(["deploy", str(path), "--prepare"]) == 0
     out = capsys.readouterr()
     assert json.loads(out.out)["prepared"]["controller"] == "hybrid-single"
     assert not (tmp_path / "log").exists()

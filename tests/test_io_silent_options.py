@@ -62,7 +62,7 @@ def _deploy_refused(data: dict, tmp_path: Path, capsys, *words: str) -> None:
 
 def _deploy_log(folder: Path, controller: dict, acoustics: dict | None = None) -> Path:
     """A deploy log of one decision whose configuration has ``controller`` (and
-    ``acoustics``)."""
+    ``acoustics``), ended normally (its ``summary`` record)."""
     from mpcasv.controllers import make_controller
 
     obs = Observation(0.0, ASVState(0.0, 0.0, 0.0), True,
@@ -79,8 +79,9 @@ def _deploy_log(folder: Path, controller: dict, acoustics: dict | None = None) -
     step = {"kind": "step", "t": 0.0, "clock": 0.0, "obs": obs_to_dict(obs),
             "cmd": cmd_to_dict(ctl.step(obs)), "override": None, "status": ["ok"],
             "ages": [0.0]}  # fmt: skip
+    summary = {"kind": "summary", "t": 1.0}  # a deploy that ended normally
     log = folder / "deploy.jsonl"
-    log.write_text("".join(json.dumps(r) + "\n" for r in (started, step)))
+    log.write_text("".join(json.dumps(r) + "\n" for r in (started, step, summary)))
     return log
 
 

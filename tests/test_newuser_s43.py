@@ -6,6 +6,7 @@ the report's unit, the world: tests/test_report_worlds.py.)"""
 from __future__ import annotations
 
 from pathlib import Path
+from types import SimpleNamespace
 
 import matplotlib.colors as mcolors
 import numpy as np
@@ -98,18 +99,25 @@ def test_tuning_another_vessel_on_gretha_s_base_says_so(tmp_path, capsys, monkey
     # schedule and checked its turns with it, without a word
     from mpcasv.control import tune_cli
 
-    def stop(*args, **kwargs):
-        raise RuntimeError("stopped after the set-up")
+    def write(*args, **kwargs):  # the design's end: the warning comes after it
+        raise RuntimeError("stopped at the writing")
 
-    monkeypatch.setattr("mpcasv.control.tuning_yaw.tune_yaw", stop)
-    with pytest.raises(RuntimeError, match="stopped after the set-up"):
-        main(["tune", "yaw", "--vessel", "dune-otter", "--out", str(tmp_path / "o")])
+    monkeypatch.setattr(tune_cli, "_write_if_pass", write)
+    with pytest.raises(RuntimeError, match="stopped at the writing"):
+        main(["tune", "yaw", "--vessel", "dune-otter", "--speeds", "1", "--quiet", "--out",
+              str(tmp_path / "o")])  # fmt: skip
+    assert capsys.readouterr().err == ""  # not before the design (nor before a refusal)
+    monkeypatch.undo()
+    args = SimpleNamespace(base="gretha", vessel="dune-otter")
+    tune_cli._warn_base(args, SimpleNamespace(params=SimpleNamespace(name="dune-otter")),
+                        "yaw", tmp_path / "x.toml")  # fmt: skip
     err = capsys.readouterr().err
     assert "warning: --base gretha (the default): the speed loop" in err
-    assert "not tuned for dune-otter" in err
-    with pytest.raises(RuntimeError):
-        main(["tune", "yaw", "--out", str(tmp_path / "g")])  # Gretha on her own base: quiet
-    assert "warning" not in capsys.readouterr().err
+    assert "not tuned for dune-otter" in err and "mpcasv tune speed --vessel dune-otter" in err
+    tune_cli._warn_base(SimpleNamespace(base="gretha", vessel="gretha"),
+                        SimpleNamespace(params=SimpleNamespace(name="gretha")), "yaw",
+                        tmp_path / "x.toml")  # Gretha on her own base: quiet  # fmt: skip
+    assert capsys.readouterr().err == ""
     from mpcasv.control.params import load_execution
 
     head = tune_cli._header(load_execution(), "dune-otter", tmp_path / "x.toml")

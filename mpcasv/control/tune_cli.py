@@ -70,15 +70,22 @@ def _setup(args, what: str):
     check_output_folder(args.out)
     toml = check_output_file(args.toml or args.out / "execution.toml", "--toml", (".toml",),
                              parents=True)  # fmt: skip
-    name = model.params.name
-    if args.base == BASE_DEFAULT and name != BASE_DEFAULT:  # a new user's dune-otter, s43
-        other, nxt = ("speed loop", "speed") if what == "yaw" else ("yaw gain schedule", "yaw")
-        print(f"mpcasv tune: warning: --base {BASE_DEFAULT} (the default): the {other} used "
-              f"in the checks and written beside the {what} design is Gretha's, not tuned for "
-              f"{name}; tune it next (once this design passes and is written): mpcasv tune "
-              f"{nxt} --vessel {shlex.quote(str(args.vessel))} --base "
-              f"{shlex.quote(str(toml))}", file=sys.stderr)  # fmt: skip
     return model, ep, toml
+
+
+def _warn_base(args, model, what: str, toml: Path) -> None:
+    """Say (stderr, after the design, not before a refusal) when ``--base`` defaulted to
+    Gretha's execution level for another vessel: the loop not tuned here is hers (a new
+    user's dune-otter, session 43: written as "Execution level of Gretha", no word)."""
+    name = model.params.name
+    if args.base != BASE_DEFAULT or name == BASE_DEFAULT:
+        return
+    other, nxt = ("speed loop", "speed") if what == "yaw" else ("yaw gain schedule", "yaw")
+    print(f"mpcasv tune: warning: --base {BASE_DEFAULT} (the default): the {other} used in "
+          f"the checks and written beside the {what} design is Gretha's, not tuned for {name}; "
+          f"tune it next (once this design passes and is written): mpcasv tune {nxt} --vessel "
+          f"{shlex.quote(str(args.vessel))} --base {shlex.quote(str(toml))}",
+          file=sys.stderr)  # fmt: skip
 
 
 def _write_if_pass(ok: bool, toml: Path, ep, what: str, args) -> str:
@@ -140,6 +147,7 @@ def run_tune_yaw(args: argparse.Namespace) -> int:
             f"incl.); nonlinear 45 deg step settles to 2 deg within {ts_max:.1f} s")  # fmt: skip
     ep_new = replace(ep_new, provenance=_provenance(ep.provenance, "yaw", text))
     wrote = _write_if_pass(ok, toml, ep_new, "yaw", args)
+    _warn_base(args, model, "yaw", toml)
     (args.out / "yaw.md").write_text(table + "\n")
     (args.out / "yaw.json").write_text(json.dumps([_design_dict(d) for d in designs], indent=1))
     print(table)
@@ -231,6 +239,7 @@ def run_tune_speed(args: argparse.Namespace) -> int:
         )
     ep_new = replace(ep_new, provenance=prov)
     wrote = _write_if_pass(ok_loop, toml, ep_new, "speed", args)
+    _warn_base(args, model, "speed", toml)
     plot_speed(model, g, grids, field, best, args.out)
     from mpcasv.control.tuning_report import plot_pirouette
     from mpcasv.control.tuning_speed import PIROUETTE_CASE, pirouette_check
