@@ -13,7 +13,8 @@ import pytest
 from test_deploy_usbl import _log
 from test_io_bad_input import _deploy_config, _exit_code, _refused
 
-from mpcasv.io.logs import keep_earlier, read_jsonl
+from mpcasv.config import ConfigError
+from mpcasv.io.logs import FolderLock, keep_earlier, read_jsonl
 from mpcasv.io.replay import replay
 
 # (lines replaced, words the one line must hold: the field and the value)
@@ -61,7 +62,8 @@ def test_a_deploy_keeps_an_earlier_runs_log_instead_of_writing_over_it(tmp_path,
                                               "imc.lsf": "imc.1.lsf"}  # fmt: skip
     assert _exit_code(run) == 1  # and the next run keeps this one as .2
     assert {p.name for p in log.iterdir()} == {"deploy.jsonl", "imc.lsf", "deploy.1.jsonl",
-                                               "imc.1.lsf", "deploy.2.jsonl", "imc.2.lsf"}
+                                               "imc.1.lsf", "deploy.2.jsonl", "imc.2.lsf",
+                                               "deploy.lock"}  # fmt: skip
     first = [r for r in read_jsonl(log / "deploy.2.jsonl", "event") if r["event"] == "started"]
     assert first[0]["earlier_log_kept"] == started[0]["earlier_log_kept"]  # the first run's
 
@@ -110,3 +112,22 @@ def test_replay_takes_a_logged_watchdog_this_version_bounds_tighter(tmp_path):
     (note,) = [n for n in rep.notes if "[watchdog]" in n]
     assert "asv_stale_s" in note and "replayed with the logged values" in note
     assert "\n" not in note
+    recs[0]["config"]["watchdog"]["asv_stale_s"] = "3"  # a wrong type is no bound: refused
+    log.write_text("".join(json.dumps(r) + "\n" for r in recs))
+    with pytest.raises(ConfigError, match="asv_stale_s"):
+        replay(log, controller="hybrid-single")
+
+
+def test_a_second_deploy_on_a_folder_in_use_is_refused(tmp_path, capsys):
+    # a review: two deploys on one folder renamed and interleaved each other's logs
+    path = _deploy_config(tmp_path)
+    log = tmp_path / "log"
+    held = FolderLock(log)  # as a running deploy holds it
+    try:
+        _refused(["deploy", path, "--quiet", "--dry-run", "--duration", "1"], capsys,
+                 "log.dir", str(log), "in use by another running deploy")  # fmt: skip
+        assert sorted(p.name for p in log.iterdir()) == ["deploy.lock"]
+    finally:
+        held.close()
+    assert _exit_code(["deploy", path, "--quiet", "--dry-run", "--duration", "1"]) == 1
+    FolderLock(log).close()  # the run released it

@@ -84,7 +84,8 @@ def _warn_base(args, model, what: str, toml: Path) -> None:
     print(f"mpcasv tune: warning: --base {BASE_DEFAULT} (the default): the {other} used in "
           f"the checks and written beside the {what} design is Gretha's, not tuned for {name}; "
           f"tune it next (once this design passes and is written): mpcasv tune {nxt} --vessel "
-          f"{shlex.quote(str(args.vessel))} --base {shlex.quote(str(toml))}",
+          f"{shlex.quote(str(args.vessel))} --base {shlex.quote(str(toml))} --out "
+          f"runs/tune-{nxt} --toml {shlex.quote(str(toml))}",
           file=sys.stderr)  # fmt: skip
 
 

@@ -196,7 +196,7 @@ def report_parts(results: pd.DataFrame, acc: Acceptance, names: list[str],
     left_out = (f" ({', '.join(needs)} without {', '.join(no_fix_cases)}: no USBL fix arrived "
                 "there)") if no_fix_cases and needs else ""  # fmt: skip
     rule = (f"Per pair the relative change (other − reference) / |reference|, pooled over the "
-            f"cases{left_out}, one pair per world (the runs of seeds that drew the same "
+            f"cases{left_out}, one pair per world (the pairs of a case on the same "
             f"realisation averaged); pairs where both are 0 say nothing about more or less and are "
             f"left out, unless all are (then the change is 0 in every pair); median with its "
             f"{paired.CONFIDENCE:.0%} bootstrap CI. *met*: the whole "

@@ -238,8 +238,9 @@ def write_report(out: Path, exp, results: pd.DataFrame, stats=None) -> tuple[Pat
                 else f"compared with {names[1]}."
             ),
             f"Pairs: runs equal on ({', '.join(key)}), pooled over the conditions of a case; "
-            f"Δ = other − reference per pair; the runs of seeds that drew the same realisation "
-            f"are one world and averaged into one pair (the unit is the world, not the run). "
+            f"Δ = other − reference per pair; the pairs of a case on the same realisation "
+            f"(seeds whose draws repeat, conditions such as estimators on one world) are one "
+            f"world and averaged into one pair (the unit is the world, not the run). "
             f"Median Δ with its {paired.CONFIDENCE:.0%} "
             f"bootstrap CI (scipy.stats.bootstrap, paired, percentile, "
             f"{paired.N_RESAMPLES} resamples, seed {paired.SEED}) and the two-sided Wilcoxon "

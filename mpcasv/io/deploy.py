@@ -66,7 +66,7 @@ from mpcasv.io.deploystep import (
 )
 from mpcasv.io.imc import reference
 from mpcasv.io.link import ImcLink, Peer
-from mpcasv.io.logs import JsonlWriter, LsfWriter, keep_earlier
+from mpcasv.io.logs import FolderLock, JsonlWriter, LsfWriter, keep_earlier
 from mpcasv.io.records import cmd_to_dict, obs_to_dict
 from mpcasv.io.transport import Clock
 from mpcasv.io.watchdog import OK, auv_status, guard, inflate
@@ -99,6 +99,7 @@ class Deploy(Phases, BoatFeedback, FieldMode, Ending):
         # what close() releases; None until opened (a constructor that fails closes them)
         self.lsf: LsfWriter | None = None
         self.jsonl: JsonlWriter | None = None
+        self.lock: FolderLock | None = None
         self.link: ImcLink | None = None
         self.field_mode = False
         self._summary_written = False
@@ -122,7 +123,9 @@ class Deploy(Phases, BoatFeedback, FieldMode, Ending):
                                                                   plan=plans[k]))  # fmt: skip
             self.estimators = [self.new_estimator(k) for k in range(self.n_auv)]
             self.log_dir = Path(log_dir or cfg.log.dir)
-            # an earlier run's log renamed, not written over (its names in 'started')
+            # one deploy per folder (a second one renamed and interleaved the first's logs),
+            # and an earlier run's log renamed, not written over (its names in 'started')
+            self.lock = FolderLock(self.log_dir, "--log-dir" if log_dir else "log.dir")
             self.kept = keep_earlier(self.log_dir)
             if self.kept:
                 log.info("kept the earlier run's log in %s: %s", self.log_dir,

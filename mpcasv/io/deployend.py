@@ -106,7 +106,7 @@ class Ending:
                 self.link.close()
             self.close_field_mode()
         finally:
-            for f in (self.jsonl, self.lsf):
+            for f in (self.jsonl, self.lsf, getattr(self, "lock", None)):
                 if f is not None:
                     f.close()
 

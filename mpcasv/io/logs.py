@@ -9,6 +9,7 @@ on close), so a crash loses at most the last second.
 
 from __future__ import annotations
 
+import fcntl
 import json
 import math
 import time
@@ -17,9 +18,11 @@ from typing import IO, Any
 
 import numpy as np
 
+from mpcasv.config import ConfigError
 from mpcasv.errors import LogError
 
-__all__ = ["JsonlWriter", "LsfWriter", "jsonable", "read_jsonl"]
+__all__ = ["FolderLock", "JsonlWriter", "LsfWriter", "jsonable", "keep_earlier",
+           "last_line_cut", "read_jsonl"]
 
 
 class _LogFile:
@@ -98,6 +101,40 @@ class JsonlWriter(_LogFile):
 
 #: the files a deploy writes in its log folder (:class:`~mpcasv.io.deploy.Deploy`)
 DEPLOY_LOG_FILES = ("deploy.jsonl", "imc.lsf")
+#: the lock a running deploy holds on its log folder (:class:`FolderLock`)
+LOCK_FILE = "deploy.lock"
+
+
+class FolderLock:
+    """An exclusive lock of one process on a log folder: ``fcntl.flock`` on
+    ``folder/deploy.lock`` (made with the folder if need be). The operating system releases it
+    when the process ends, however it ends, so a crashed deploy leaves no stale lock; the file
+    itself stays, empty. A review (session 43): two deploys started on one folder renamed and
+    interleaved each other's logs.
+
+    Raises
+    ------
+    ConfigError
+        The folder is locked by another running process (``what`` names the setting).
+    """
+
+    def __init__(self, folder: str | Path, what: str = "log.dir"):
+        folder = Path(folder)
+        folder.mkdir(parents=True, exist_ok=True)
+        self._fh = open(folder / LOCK_FILE, "a")  # held until close()
+        try:
+            fcntl.flock(self._fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            self._fh.close()
+            self._fh = None
+            raise ConfigError(f"{what} = {folder}: in use by another running deploy (it holds "
+                              f"{LOCK_FILE}): give this one its own --log-dir") from None
+
+    def close(self) -> None:
+        """Release the lock (again: nothing)."""
+        if self._fh is not None:
+            self._fh.close()
+            self._fh = None
 
 
 def keep_earlier(folder: str | Path, names: tuple[str, ...] = DEPLOY_LOG_FILES) -> dict:

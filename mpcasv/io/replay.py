@@ -249,6 +249,8 @@ def _logged_watchdog(logged: dict, path: Path, notes: list[str]):
     try:
         return parse(WatchdogSpec, logged, f"{path}: watchdog")
     except ConfigError as exc:
+        if "outside the allowed range" not in str(exc):  # an unknown key, a wrong type: no
+            raise
         defaults = {f.name: getattr(WatchdogSpec(), f.name)
                     for f in dataclasses.fields(WatchdogSpec)}  # fmt: skip
         why = " ".join(str(exc).split())  # one line

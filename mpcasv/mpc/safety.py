@@ -200,9 +200,11 @@ class Safety:
                 # there: each exploration stopped at its limit far cheaper, each warm solve
                 # converged back to rest (session 17)
                 self._alt_start = alt.w
-                esc = escape_guess(self.ocp, p_s, self.params.margin, self.T_cap)
-                if esc is not None and self._inside_now(p):
-                    # and inside an anti-collision radius now: the escape manoeuvre this step
+                esc = (escape_guess(self.ocp, p_s, self.params.margin, self.T_cap)
+                       if reason is None and self._inside_now(p) else None)  # fmt: skip
+                if esc is not None:
+                    # and inside an anti-collision radius now, the plan at rest checked (a
+                    # refused one goes to the rescue below): the escape manoeuvre this step
                     # (its rollout warm-starts the next), not a standby at rest for a step (a
                     # new user's ASV 5 m from a surfaced AUV stood by while the hybrid left,
                     # session 43; the exploration solved on from its iterate did not converge
