@@ -200,18 +200,6 @@ class Safety:
                 # there: each exploration stopped at its limit far cheaper, each warm solve
                 # converged back to rest (session 17)
                 self._alt_start = alt.w
-                esc = (escape_guess(self.ocp, p_s, self.params.margin, self.T_cap)
-                       if reason is None and self._inside_now(p) else None)  # fmt: skip
-                if esc is not None:
-                    # and inside an anti-collision radius now, the plan at rest checked (a
-                    # refused one goes to the rescue below): the escape manoeuvre this step
-                    # (its rollout warm-starts the next), not a standby at rest for a step (a
-                    # new user's ASV 5 m from a surfaced AUV stood by while the hybrid left,
-                    # session 43; the exploration solved on from its iterate did not converge
-                    # within max_iter either)
-                    return (SolveResult(esc, None, None, math.nan, False, "escape",
-                                        res.iters + alt.iters, res.ms + alt.ms),
-                            None, "escape")  # fmt: skip
             res = self._cheaper(res, alt)
             reason = self._check(res, p)
         else:
@@ -222,12 +210,6 @@ class Safety:
         if reason is not None and (res.status != "deadline" or self._hang_guard):
             res, reason, source = self._rescue(obs, p_s, p, res, reason, hybrid_cmd)
         return res, reason, source
-
-    def _inside_now(self, p: np.ndarray) -> bool:
-        """Whether the ASV is inside an AUV's anti-collision radius (the plan's ``r_lo``,
-        margin included) now."""
-        par = self.ocp.unpack_par(p)
-        return bool(np.any(ranges(par["z0"][0:2], par["pa"][0]) < par["r_lo"][0]))
 
     def _violation_now(self, p: np.ndarray) -> float:
         """How far (m) the ASV is outside the plan's range bounds now (0 inside)."""
