@@ -45,7 +45,7 @@ def test_a_bad_params_is_blamed_on_params_not_on_the_scenario(capsys, tmp_path):
 def test_standby_shows_in_the_paths_figure_in_its_own_colour():
     import matplotlib.pyplot as plt
 
-    from mpcasv.sim.plots import paths_figure
+    from mpcasv.sim.plots import AUV_COLOURS, paths_figure
 
     sc = scenario_from_dict({
         "name": "sb", "duration": 120.0, "estimator": "perfect",
@@ -59,7 +59,9 @@ def test_standby_shows_in_the_paths_figure_in_its_own_colour():
     try:
         lines = {ln.get_label(): ln for ln in fig.axes[0].get_lines()}
         asv, stand = lines["ASV"], lines["ASV in standby (propeller off)"]
-        assert mcolors.to_hex(stand.get_color()) != mcolors.to_hex(asv.get_color())
+        # its own colour: not the ASV's, nor any AUV's (green, first tried, was AUV 2's)
+        taken = {mcolors.to_hex(c) for c in (asv.get_color(), *AUV_COLOURS)}
+        assert mcolors.to_hex(stand.get_color()) not in taken
         assert stand.get_markersize() >= 4 and stand.get_linewidth() >= 4
         # drawn exactly where (and only where) the ASV stood by
         x = np.asarray(stand.get_xdata(), float)

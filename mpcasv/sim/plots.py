@@ -12,6 +12,8 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 AUV_COLOURS = ("tab:orange", "tab:green", "tab:purple", "tab:brown", "tab:pink")
+#: standby (propeller off) in every run figure: none of the AUVs', the ASV's or the plans'
+STANDBY_COLOUR = "grey"
 
 #: a series with fewer samples than this is drawn with markers (a one-sample line, e.g. of a
 #: one-second run, drew nothing) and its bands as bars at the samples (a fill has no width)
@@ -67,12 +69,12 @@ def paths_figure(result):
     mk = _marks(len(ts))
     fig, ax = plt.subplots(figsize=(7, 7))
     ax.plot(ts["E"], ts["N"], color="tab:blue", lw=1.2, label="ASV", **mk)
-    # standby stretches as a broad green band under the path (before: 2-pt dots in the
-    # path's own colour, which a new user could not see), each sample a marker too, so that
-    # a standby while drifting a metre still shows
+    # standby stretches as a broad grey band under the path (before: 2-pt dots in the
+    # path's own colour, which a new user could not see; green, first tried, is AUV 2's),
+    # each sample a marker too, so that a standby while drifting a metre still shows
     sb = (ts["mode"] == "standby").to_numpy()
     E_sb, N_sb = np.where(sb, ts["E"], np.nan), np.where(sb, ts["N"], np.nan)
-    ax.plot(E_sb, N_sb, "-o", color="tab:green", lw=6, ms=5, alpha=0.35, zorder=1,
+    ax.plot(E_sb, N_sb, "-o", color=STANDBY_COLOUR, lw=6, ms=5, alpha=0.45, zorder=1,
             solid_capstyle="round", label="ASV in standby (propeller off)")  # fmt: skip
     ax.plot(ts["E"].iloc[0], ts["N"].iloc[0], "o", color="tab:blue")
     for k in range(_n_auv(ts)):
@@ -126,7 +128,8 @@ def range_figure(result):
         ax.plot(t, ts[f"range{k}"], color="tab:blue", lw=1.2, label="range (true)", **mk)
         ax.plot(t, ts[f"est_range{k}"], color="k", lw=0.8, ls="--", alpha=0.7,
                 label="range (believed)", **(mk and {"marker": "x", "ms": 6}))  # fmt: skip
-        _band(ax, t, 0, top, where=sb, color="grey", alpha=0.12, step="mid", label="standby")
+        _band(ax, t, 0, top, where=sb, color=STANDBY_COLOUR, alpha=0.12, step="mid",
+              label="standby")  # fmt: skip
         _time_axis(ax, t)
         ax.set_ylim(0, top)
         ax.set_ylabel(f"range to {result.scenario.auv[k].name} (m)")
