@@ -106,7 +106,7 @@ class Ending:
                 self.link.close()
             self.close_field_mode()
         finally:
-            for f in (self.jsonl, self.lsf, getattr(self, "lock", None)):
+            for f in (self.jsonl, self.lsf, self.lock):
                 if f is not None:
                     f.close()
 

@@ -22,7 +22,7 @@ from mpcasv.config import ConfigError
 from mpcasv.errors import LogError
 
 __all__ = ["FolderLock", "JsonlWriter", "LsfWriter", "jsonable", "keep_earlier",
-           "last_line_cut", "read_jsonl"]
+           "read_jsonl", "read_jsonl_cut"]
 
 
 class _LogFile:
@@ -161,23 +161,16 @@ def keep_earlier(folder: str | Path, names: tuple[str, ...] = DEPLOY_LOG_FILES) 
     return {n: numbered(n, k) for n in found}
 
 
-def last_line_cut(path: str | Path) -> bool:
-    """Whether the last non-empty line of the JSON-lines log ``path`` is not JSON (cut by a
-    crash or a kill mid-write; :func:`read_jsonl` skips it)."""
-    lines = [ln for ln in Path(path).read_text(encoding="utf-8").splitlines() if ln.strip()]
-    if not lines:
-        return False
-    try:
-        json.loads(lines[-1])
-    except json.JSONDecodeError:
-        return True
-    return False
-
-
 def read_jsonl(path: str | Path, kind: str | None = None) -> list[dict]:
     """Records of a JSON-lines log (optionally only ``kind``); a last line cut by a crash is
     skipped, any other bad line raises :class:`~mpcasv.errors.LogError` (a ValueError) naming
     the file and line."""
+    return read_jsonl_cut(path, kind)[0]
+
+
+def read_jsonl_cut(path: str | Path, kind: str | None = None) -> tuple[list[dict], bool]:
+    """:func:`read_jsonl`'s records and whether the log's last line was cut (not JSON: a crash
+    or a kill mid-write) and skipped; ``mpcasv replay`` says so."""
     path = Path(path)
     lines = path.read_text(encoding="utf-8").splitlines()
     out = []
@@ -188,9 +181,9 @@ def read_jsonl(path: str | Path, kind: str | None = None) -> list[dict]:
             rec = json.loads(line)
         except json.JSONDecodeError as exc:
             if i == len(lines):
-                break
+                return out, True
             raise LogError(f"{path}:{i}: not JSON ({exc}); a deploy log (deploy.jsonl) is JSON "
                            "lines") from None  # fmt: skip
         if kind is None or rec.get("kind") == kind:
             out.append(rec)
-    return out
+    return out, False

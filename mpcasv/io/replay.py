@@ -34,7 +34,7 @@ from mpcasv.io.config import WatchdogSpec
 from mpcasv.io.deploycontroller import field_boat, refuse_simulation_only
 from mpcasv.io.deployfeedback import cap_command, cap_controller_speed
 from mpcasv.io.deploystep import guard_params
-from mpcasv.io.logs import last_line_cut, read_jsonl
+from mpcasv.io.logs import read_jsonl_cut
 from mpcasv.io.records import cmd_from_dict, obs_from_dict, same_command
 from mpcasv.io.watchdog import GuardParams, guard
 from mpcasv.models.acoustics import AcousticParams
@@ -153,7 +153,7 @@ def replay(log: str | Path, controller: str | None = None, preset: str | None = 
     command with the cap in force when it was sent).
     """
     path = _log_path(log)
-    records = read_jsonl(path)
+    records, cut = read_jsonl_cut(path)  # one reading: the records and a cut last line
     started = [r for r in records if r.get("kind") == "event" and r.get("event") == "started"]
     steps = [r for r in records if r.get("kind") == "step"]
     if not started or "config" not in started[0]:
@@ -168,7 +168,7 @@ def replay(log: str | Path, controller: str | None = None, preset: str | None = 
     # logged preset is resolved only for a controller of that name: one this version knows)
     same = name == c["name"] and _same_preset(name, preset, c["preset"])
     notes = []
-    if last_line_cut(path):  # a cut log replayed without a word (a new user, session 43)
+    if cut:  # a cut log replayed without a word (a new user, session 43)
         notes.append("the log's last line is cut (the deploy ended mid-write: killed, or the "
                      "host lost power): replayed up to it")  # fmt: skip
     if not any(r.get("kind") == "summary" for r in records):
