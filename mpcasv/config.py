@@ -80,6 +80,9 @@ TRANSIT_SPEED_MAX = 10.0
 #: A transit speed (m/s): in ``(0, TRANSIT_SPEED_MAX]``.
 TransitSpeed = between(0, TRANSIT_SPEED_MAX, "m/s", "about 20 knots; the execution level caps "
                        "a speed at the vessel's u_max", lo_open=True)
+#: The longest supervisory period (s): seconds, not hours (the papers' is 1 s). One bound for a
+#: scenario's ``[sim] control_period`` and a deployment's ``controller.control_period``.
+CONTROL_PERIOD_MAX = 60.0
 #: A depth (m): in ``[0, DEPTH_MAX]``.
 Depth = between(0, DEPTH_MAX, "m", "the deepest ocean is 10.9 km")
 #: A horizontal coordinate, N or E (m): within ``DISTANCE_MAX`` of the origin.

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
 import re
 import warnings
@@ -174,6 +175,25 @@ def test_cli_tune_yaw_writes_loadable_schedule(tmp_path, shipped):
         0.2,
     )
     assert again.yaw == ep.yaw
+
+
+def test_default_yaw_design_of_a_differential_thrust_boat_passes_at_every_speed(tmp_path):
+    """A differential-thrust boat's yaw dynamics do not change with speed (dune-otter's Nomoto
+    K and T are the same from 0.7 to 3.5 m/s), so its default wn is one value,
+    WN_LAG_FRACTION / T_delta, not proportional to speed: with 0.3 u0 the default design
+    failed (phase margin 21 deg at 3.5 m/s; 0.21 rad/s at 0.7 m/s, sluggish)."""
+    from mpcasv.control.tune_cli import WN_LAG_FRACTION
+
+    otter = load_vessel("dune-otter")
+    toml = tmp_path / "exec.toml"
+    rc = main(["tune", "yaw", "--vessel", "dune-otter", "--speeds", "0.7,3.4", "--out",
+               str(tmp_path), "--toml", str(toml), "--quiet"])  # fmt: skip
+    assert rc == 0, "the default design failed its acceptance"
+    wn = [d["wn"] for d in json.loads((tmp_path / "yaw.json").read_text())]
+    assert wn == [pytest.approx(WN_LAG_FRACTION / otter.T_delta)] * 2
+    ep = load_execution(toml)
+    assert ep.yaw.Kp[0] == pytest.approx(ep.yaw.Kp[1])  # the same loop at both speeds
+    assert "--wn 0.6" in ep.provenance
 
 
 def test_cli_refuses_mismatched_wn(tmp_path, capsys):

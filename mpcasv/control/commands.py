@@ -17,6 +17,7 @@ from pathlib import Path
 from mpcasv.control.tune_cli import (
     BASE_DEFAULT,
     DEFAULT_SPEEDS,
+    WN_LAG_FRACTION,
     WN_PER_SPEED,
     run_tune_speed,
     run_tune_yaw,
@@ -51,14 +52,16 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--wn",
         type=_floats,
         help="closed-loop natural frequency, rad/s: one value for all speeds or one "
-        "per speed (default: --wn-per-speed times the speed)",
+        "per speed (default: --wn-per-speed times the speed; for a differential-thrust "
+        f"vessel, whose yaw dynamics do not change with speed, {WN_LAG_FRACTION}/T_delta at "
+        "every speed)",
     )
     y.add_argument(
         "--wn-per-speed",
         type=float,
         default=None,
-        help=f"wn = this * u0, rad/m, instead of --wn (not with it; default {WN_PER_SPEED}: "
-        "about the same Kp at every speed and the same turn length scale)",
+        help=f"wn = this * u0, rad/m, instead of --wn (not with it; default {WN_PER_SPEED} for a "
+        "steered drive: about the same Kp at every speed and the same turn length scale)",
     )
     y.add_argument("--zeta", type=float, default=1.0, help="damping ratio (default 1.0)")
     y.add_argument(

@@ -17,7 +17,15 @@ from mpcasv.config import ConfigError
 DEFAULT_SPEEDS = "0.5,1,1.5,2,2.5"  # Gretha's: 0.2 ... 1.0 u_max (the default for any vessel)
 SPEED_FRACTIONS = (0.2, 0.4, 0.6, 0.8, 1.0)
 DESIGN_FRACTION = 0.4  # default --design-speed / top speed: Gretha's 1 m/s
-WN_PER_SPEED = 0.3  # default --wn-per-speed, rad/m
+WN_PER_SPEED = 0.3  # default --wn-per-speed, rad/m (a steered propeller: rudder-like)
+#: default yaw wn of a differential-thrust vessel, as a fraction of its steering lag's corner
+#: 1/T_delta (rad/s), the same at every speed: its turning moment is the thrusters' difference
+#: times their spacing, which does not grow with speed as a rudder's or a steered drive's does,
+#: so its Nomoto K and T are the same at every speed (dune-otter: K 2.25 1/s, T 1.19 s from
+#: 0.7 to 3.5 m/s) and a wn proportional to speed left it sluggish when slow (0.21 rad/s at
+#: 0.7 m/s: a 5 deg disturbance moment turned it 78 deg) and short of phase margin when fast
+#: (21 deg at 3.5 m/s): the default design failed. 0.3/T_delta = 0.6 rad/s passes (docs/tuning.md)
+WN_LAG_FRACTION = 0.3
 BASE_DEFAULT = "gretha"  # default --base (and --vessel): the execution level tuned for Gretha
 
 
@@ -114,9 +122,13 @@ def run_tune_yaw(args: argparse.Namespace) -> int:
                           f"{','.join(f'{w:g}' for w in args.wn)}"
                           ": --wn sets the natural frequencies itself, so --wn-per-speed would "
                           "be unused: give one of them")  # fmt: skip
-    if args.wn is None and args.wn_per_speed is None:
-        args.wn_per_speed = WN_PER_SPEED  # (in the provenance's command line, as given)
     model, ep, toml = _setup(args, "yaw")
+    if args.wn is None and args.wn_per_speed is None:
+        # (the default in the provenance's command line, as if given)
+        if model.params.actuation == "differential":
+            args.wn = [WN_LAG_FRACTION / model.params.T_delta]
+        else:
+            args.wn_per_speed = WN_PER_SPEED
     speeds = args.speeds
     if args.wn is None:
         wn = [args.wn_per_speed * u for u in speeds]

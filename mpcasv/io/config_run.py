@@ -10,12 +10,10 @@ from typing import Annotated, Any, Literal
 
 from pydantic import Field, Strict, field_validator
 
-from mpcasv.config import Flag, Pos, frozen
+from mpcasv.config import CONTROL_PERIOD_MAX, Flag, Pos, frozen
 
-__all__ = ["CONTROL_PERIOD_MAX", "ClockSpec", "ControllerSpec", "LogSpec"]
+__all__ = ["ClockSpec", "ControllerSpec", "LogSpec"]
 
-#: The longest control period accepted (s): a supervisory period is seconds, not hours
-CONTROL_PERIOD_MAX = 60.0
 #: the shortest deploy control period (s): 0.001 s was accepted
 CONTROL_PERIOD_MIN = 0.1
 

@@ -15,6 +15,7 @@ from pydantic import field_validator, model_validator
 
 from mpcasv.config import (
     AUV_COUNT_MAX,
+    CONTROL_PERIOD_MAX,
     ConfigError,
     Duration,
     FieldError,
@@ -93,9 +94,6 @@ def _loads(load, name: str):
 #: vessel's RK4 itself is sub-stepped to its fastest pole (models/envelope.py) at any dt.
 #: Below 1 ms (no autopilot samples faster) a run is millions of steps.
 DT_MIN, DT_MAX = 0.001, 0.2
-#: The longest supervisory period (s): seconds, not hours (the papers' is 1 s; the same bound
-#: as a deployment's ``controller.control_period``)
-CONTROL_PERIOD_MAX = 60.0
 #: The longest ``[sim] reference_lead_m`` (m)
 REFERENCE_LEAD_MAX = 1000.0
 #: The most plant steps per supervisory period: they are compiled into one CasADi function
