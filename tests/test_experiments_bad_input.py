@@ -210,6 +210,17 @@ def test_a_controller_without_safety_domain_needs_separation_before_any_trial(tm
     assert not out.exists()
 
 
+def test_a_controller_for_fewer_auvs_than_the_family_is_refused_before_any_trial(tmp_path,
+                                                                                capsys):
+    """It ran its whole budget of one-line errors, exited 1 and left a study in --out."""
+    out = tmp_path / "out"
+    family = ROOT / "experiments" / "falsify" / "crossing-multi.toml"
+    assert main(["falsify", str(family), "--controller", "mpc-single", "--budget", "8",
+                 "--out", str(out)]) == 2  # fmt: skip
+    _one_error_line(capsys, "'mpc-single' handles one AUV", "crossing-multi", "has 3")
+    assert not out.exists()
+
+
 def test_a_range_end_giving_an_invalid_scenario_is_refused(tmp_path, capsys):
     text = FAMILY.read_text()
     start = text.index('name = "p_good"')

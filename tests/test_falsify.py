@@ -180,6 +180,17 @@ def test_killed_search_resumes_without_losing_a_finished_run(tmp_path):
     assert len(table) == 12 and (table["state"] == "complete").all()
     summary = json.loads((out / "summary.json").read_text())
     assert summary["worst_margin_m"] == pytest.approx(min(v for _, v in after.values()))
+    # the killed and resumed search is the search run at once: the interrupted trials are
+    # run again under their numbers with their parameters, and each batch's sampler is
+    # seeded from the search's seed and the trials before it (until session 44 they were
+    # dropped for new ones and the resumed search missed the uninterrupted one's worst case)
+    whole = tmp_path / "whole"
+    done = subprocess.run(_falsify_cmd(family, whole, 12), env=env, capture_output=True,
+                          text=True, timeout=300)  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    assert _finished(whole / "study.db") == after
+    once = pd.read_csv(whole / "trials.csv")
+    pd.testing.assert_frame_equal(table.drop(columns="state"), once.drop(columns="state"))
 
 
 def test_cli_writes_worst_cases_that_load_and_reproduce_their_margin(tmp_path):
@@ -198,6 +209,51 @@ def test_cli_writes_worst_cases_that_load_and_reproduce_their_margin(tmp_path):
         assert (out / "worst" / name / "range.png").is_file()
         assert (out / "worst" / name / "paths.png").is_file()
     assert "| trial |" in (out / "trials.md").read_text()
+
+
+def test_simulate_of_a_written_worst_case_is_the_searched_run(tmp_path):
+    """The trials run the scenario the worst case is written as (with the preset, whose
+    [domain] the world judges by: the escape power turn, the domain metrics), so `mpcasv
+    simulate FILE` gives the searched margin. Until session 44 the trials ran the family's
+    template without a preset (no domain: no power turn, domain metrics null) and simulate
+    of the written file ran another world (-36.72 m searched, -34.28 m simulated)."""
+    out = tmp_path / "f"
+    assert main(["falsify", str(short_family(tmp_path, 150.0)), "--controller", "hybrid-single",
+                 "--params", "paper1-field", "--budget", "4", "--out", str(out), "--worst", "1",
+                 "--quiet"]) == 0  # fmt: skip
+    summary = json.loads((out / "summary.json").read_text())
+    (name,) = summary["worst_cases"]
+    run = tmp_path / "sim"
+    assert main(["simulate", str(out / "worst" / f"{name}.toml"), "--out", str(run)]) == 0
+    rob = robustness(pd.read_parquet(run / "timeseries.parquet"), 1, 50.0, 1.0)
+    assert rob.margin_m == pytest.approx(summary["worst_margin_m"], abs=1e-9)
+    searched = json.loads((out / "worst" / name / "metrics.json").read_text())
+    assert searched["collision_domain_s"] is not None  # judged by paper1-field's domain
+    from mpcasv.experiments.metric_info import WALL_CLOCK
+
+    simulated = json.loads((run / "metrics.json").read_text())
+    for wall in WALL_CLOCK:  # measured, not simulated
+        searched.pop(wall, None), simulated.pop(wall, None)
+    assert searched == simulated
+
+
+def test_a_worst_case_names_a_relative_preset_path_from_its_own_folder(tmp_path, monkeypatch):
+    """`--params presets/my.toml` (relative to where the command ran) is written as an
+    absolute path: the worst case loads from its own folder (it said "no such file
+    .../worst/presets/my.toml")."""
+    (tmp_path / "presets").mkdir()
+    shipped = ROOT / "mpcasv" / "data" / "presets" / "paper1-field.toml"
+    (tmp_path / "presets" / "my.toml").write_text(shipped.read_text())
+    monkeypatch.chdir(tmp_path)
+    assert main(["falsify", str(short_family(tmp_path, 40.0)), "--controller", "hybrid-single",
+                 "--params", "presets/my.toml", "--budget", "1", "--out", "f", "--worst", "1",
+                 "--quiet"]) == 0  # fmt: skip
+    from mpcasv.sim.scenario import load_scenario
+
+    (written,) = (tmp_path / "f" / "worst").glob("*.toml")
+    monkeypatch.chdir(ROOT)
+    sc = load_scenario(written)
+    assert sc.preset == str(tmp_path / "presets" / "my.toml")
 
 
 # --- committed worst cases (regression scenarios) ---------------------------------------------

@@ -136,7 +136,14 @@ def objective_value(measures: dict, objective: Objective) -> float:
 
 @dataclass
 class SearchSetup:
-    """What one search runs: family, controller, preset, seed, required separation."""
+    """What one search runs: family, controller, preset, seed, required separation.
+
+    ``preset``: the controller's preset (a shipped name, or an absolute path), which is also
+    the scenario's ``preset`` in every run, so the world judges by its ``[domain]`` (the
+    escape power turn, the domain metrics): a run is the scenario :meth:`scenario` gives,
+    the one written as a worst case, which ``mpcasv simulate`` reproduces. None: the
+    controller's defaults and no evaluation domain (no power turn; domain metrics null).
+    """
 
     family: LoadedFamily
     controller: str
@@ -145,8 +152,22 @@ class SearchSetup:
     r_sep: float | None = None
     objective: Objective = "margin"
 
+    def scenario(self, params: dict, label: str):
+        """``(Scenario, dict)`` of one candidate as it is run and written: the family's
+        template with ``params``, this controller and this preset. Until session 44 the runs
+        took the family's template as it was (no preset: no domain, no power turn) and the
+        written worst case named the preset: ``simulate`` of it ran another world (the
+        hybrid's worst margin -36.72 m in the search, -34.28 m in the file)."""
+        from mpcasv.sim.scenario import scenario_from_dict
+
+        data = {**substitute(self.family, params), "controller": self.controller}
+        data.pop("preset", None)
+        if self.preset is not None:
+            data["preset"] = self.preset
+        return scenario_from_dict(data, f"{self.family.source} ({label})"), data
+
     def trial_args(self, params: dict, number: int) -> tuple:
-        _, data = candidate(self.family, params, f"trial {number}")
+        _, data = self.scenario(params, f"trial {number}")
         return (data, f"{self.family.source} (trial {number})", self.controller, self.preset,
                 self.seed, self.r_sep)  # fmt: skip
 
@@ -160,9 +181,14 @@ def search(setup: SearchSetup, storage_path: Path, budget: int, workers: int = 1
     recorded as failed with a ``timeout`` error (see :mod:`mpcasv.experiments.falsify_pool`).
     ``workers``: at most ``min(BATCH, budget)`` processes start (no more runs go at once).
 
-    The study lives in the SQLite file ``storage_path`` (Optuna RDB storage). Trials left
-    running by a killed search are marked failed (``interrupted``) and not counted; finished
-    ones (complete, or failed with their ``error``) are kept and counted.
+    The study lives in the SQLite file ``storage_path`` (Optuna RDB storage). Finished trials
+    (complete, or failed with their ``error``) are kept and counted. Trials a killed search
+    left running are run again first, with their parameters and under their numbers, and
+    each batch's sampler is seeded from the search's seed and the number of trials asked
+    before it (:func:`batch_seed`), so a killed and resumed search asks and runs what the
+    search run at once does. (Until session 44 the interrupted trials were marked failed and
+    others asked in their place, and the sampler's generator ran on from its seed in each
+    process: a resumed search was another search, and its worst case could be missed.)
     """
     import optuna
 
@@ -171,33 +197,46 @@ def search(setup: SearchSetup, storage_path: Path, budget: int, workers: int = 1
 
     optuna.logging.set_verbosity(optuna.logging.WARNING)
     storage = optuna.storages.RDBStorage(f"sqlite:///{storage_path}")
-    sampler = optuna.samplers.CmaEsSampler(seed=setup.seed, warn_independent_sampling=False)
     name = f"{setup.family.name}-{setup.controller}-{setup.preset or 'default'}-{setup.objective}"
-    study = optuna.create_study(study_name=name, storage=storage, sampler=sampler,
-                                direction="minimize", load_if_exists=True)  # fmt: skip
-    for ft in study.get_trials(deepcopy=False, states=(optuna.trial.TrialState.RUNNING,)):
-        study.tell(ft.number, state=optuna.trial.TrialState.FAIL)  # interrupted: not counted
+    study = optuna.create_study(study_name=name, storage=storage, direction="minimize",
+                                load_if_exists=True)  # fmt: skip
+    study_id = storage.get_study_id_from_name(name)
     dists = {p.name: (optuna.distributions.IntDistribution(int(p.low), int(p.high))
                       if p.integer else optuna.distributions.FloatDistribution(p.low, p.high))
              for p in setup.family.spec.param}  # fmt: skip
 
     def tell(trial, measures, error):
+        tid = storage.get_trial_id_from_study_id_trial_number(study_id, trial.number)
         if error is not None:
-            trial.set_user_attr("error", error)
-            study.tell(trial, state=optuna.trial.TrialState.FAIL)
+            storage.set_trial_user_attr(tid, "error", error)
+            study.tell(trial.number, state=optuna.trial.TrialState.FAIL)
         else:
             for k, v in measures.items():
-                trial.set_user_attr(k, v)
-            study.tell(trial, objective_value(measures, setup.objective))
+                storage.set_trial_user_attr(tid, k, v)
+            study.tell(trial.number, objective_value(measures, setup.objective))
         if progress is not None:
             progress(trial.number, measures if error is None else {"error": error})
 
+    def items(trials):
+        return [(t, (lambda t=t: setup.trial_args(t.params, t.number))) for t in trials]
+
     with WorkerPool(pool_size(workers, min(BATCH, budget)), timeout) as pool:
+        left = study.get_trials(deepcopy=False, states=(optuna.trial.TrialState.RUNNING,))
+        if left:  # a killed search's unfinished batch, as it was asked
+            run_batch(items(left), pool, tell)
         while (done := n_finished(study)) < budget:
-            trials = [study.ask(dists) for _ in range(min(BATCH, budget - done))]
-            items = [(t, (lambda t=t: setup.trial_args(t.params, t.number))) for t in trials]
-            run_batch(items, pool, tell)
+            study.sampler = optuna.samplers.CmaEsSampler(
+                seed=batch_seed(setup.seed, len(study.get_trials(deepcopy=False))),
+                warn_independent_sampling=False)  # fmt: skip
+            run_batch(items([study.ask(dists) for _ in range(min(BATCH, budget - done))]),
+                      pool, tell)  # fmt: skip
     return study
+
+
+def batch_seed(seed: int, asked: int) -> int:
+    """The sampler's seed for a batch asked after ``asked`` trials of a search seeded
+    ``seed`` (a 32-bit integer, as numpy takes)."""
+    return int(np.random.SeedSequence([seed, asked]).generate_state(1)[0])
 
 
 def n_finished(study) -> int:

@@ -60,6 +60,11 @@ def run(args: argparse.Namespace) -> int:
     for r in time_ranges(setup.family):  # partly past the duration: said, the search goes on
         if r.past:  # (after the refusals: a refused command prints its one line only)
             print(r.warning(args.family), file=sys.stderr)
+    if setup.preset is None:
+        print(f"warning: no preset (--params, or the family's 'preset'): the runs have no "
+              f"evaluation domain, so no escape power turn and null domain metrics; the "
+              f"margin is measured against {args.controller}'s default r_in",
+              file=sys.stderr)  # fmt: skip
     record_study(out, identity)
     used = pool_size(args.workers, min(BATCH, args.budget))  # runs going at once
     if used < args.workers and not args.quiet:
@@ -120,10 +125,10 @@ def check_inputs(args: argparse.Namespace):
         folder of another command or holding another search
         (:func:`~mpcasv.experiments.falsify_folder.check_study_folder`).
     """
-    from mpcasv.config import ConfigError, check_path_name, check_seed
-    from mpcasv.controllers import load_preset
-    from mpcasv.controllers.registry import check_controller_flag
-    from mpcasv.experiments.falsify import SearchSetup, load_family
+    from mpcasv.config import ConfigError, anchor, check_path_name, check_seed
+    from mpcasv.controllers import Boat
+    from mpcasv.controllers.registry import check_boat, check_controller_flag, checked_preset
+    from mpcasv.experiments.falsify import SearchSetup, candidate, load_family
     from mpcasv.experiments.falsify_folder import check_study_folder, study_identity
     from mpcasv.experiments.workers import check_workers
     from mpcasv.outputs import check_not_other_output, check_output_folder
@@ -144,7 +149,17 @@ def check_inputs(args: argparse.Namespace):
     if args.timeout is not None and not (math.isfinite(args.timeout) and args.timeout > 0):
         raise ConfigError(f"--timeout must be > 0, got {args.timeout}")
     family = load_family(args.family)  # ranges checked at their ends and corners
-    params = load_preset(args.controller, args.params)  # unknown controller / bad preset
+    # the preset the controller runs and the world judges by (SearchSetup): --params, else
+    # the family's own; a path is made absolute, so the worst cases name it from anywhere
+    preset = args.params if args.params is not None else family.template.get("preset")
+    preset = None if preset in (None, "default") else anchor(preset, Path.cwd())
+    mid = {p.name: 0.5 * (p.low + p.high) for p in family.spec.param}
+    scenario, _ = candidate(family, mid, "midpoint")
+    # unknown controller, bad preset, AUVs it cannot serve, another vessel: every trial
+    # failed on these (a budget of one-line errors, exit 1, and a study in the folder)
+    _, params = checked_preset(args.controller, len(scenario.auv), preset,
+                               holder=f"the family {family.name!r}")  # fmt: skip
+    check_boat(params, Boat.of_scenario(scenario), preset or "default")
     if args.separation is None and getattr(params, "domain", None) is None:
         # every trial failed on it ("has no safety domain"), the search exited 1 with a study
         raise ConfigError(f"--controller {args.controller}: has no safety domain (no collision "
@@ -158,7 +173,7 @@ def check_inputs(args: argparse.Namespace):
     out = args.out or Path("results") / "falsify" / f"{family.name}-{args.controller}"
     check_output_folder(out)
     check_not_other_output(out, "mpcasv falsify")  # a compare or tune folder: refused
-    setup = SearchSetup(family, args.controller, args.params, args.seed, args.separation,
+    setup = SearchSetup(family, args.controller, preset, args.seed, args.separation,
                         args.objective)  # fmt: skip
     identity = study_identity(family, args.controller, args.params, params, args.seed,
                               args.objective, args.separation)  # fmt: skip
@@ -190,7 +205,7 @@ def write_worst(setup, row, rank: int, folder: Path) -> str:
     import tomli_w
 
     from mpcasv.controllers import Boat, make_controller
-    from mpcasv.experiments.falsify import candidate, robustness
+    from mpcasv.experiments.falsify import robustness
     from mpcasv.experiments.metrics import compute_metrics
     from mpcasv.sim.record import write_run
     from mpcasv.sim.simulator import simulate
@@ -198,13 +213,10 @@ def write_worst(setup, row, rank: int, folder: Path) -> str:
     fam = setup.family
     params = {p.name: float(row[p.name]) for p in fam.spec.param}
     name = f"falsified-{fam.name}-{setup.controller}-{rank}"
-    scenario, data = candidate(fam, params, name)
-    data = {**data, "name": name, "controller": setup.controller,
-            "preset": setup.preset or "default",
+    scenario, data = setup.scenario(params, name)  # what the trial ran
+    data = {**data, "name": name,
             "description": f"worst case {rank} of mpcasv falsify {fam.source.name} for "
                            f"{setup.controller} (trial {int(row['trial'])})"}  # fmt: skip
-    if setup.preset is None:
-        data.pop("preset")
     prov = dict(data.get("provenance", {}))
     prov["falsify"] = (f"family {fam.source.name}, controller {setup.controller}, preset "
                        f"{setup.preset or 'default'}, seed {setup.seed}, trial "

@@ -102,14 +102,19 @@ def load_family(path: str | Path) -> LoadedFamily:
         range end (or corner) giving an invalid scenario (the message names the file and the
         parameter).
     """
+    from mpcasv.sim.scenario import anchor_refs
+
     path = Path(path)
     fam = parse(Family, load_toml(path, "falsification family"), path)
     if (fam.template is None) == (fam.scenario is None):
         raise ConfigError(f"{path}: give exactly one of 'template' (a path) or [scenario]")
     if fam.template is not None:
-        template = load_toml(path.parent / fam.template, "scenario")
+        template_path = path.parent / fam.template
+        template = load_toml(template_path, "scenario")
+        anchor_refs(template, template_path.resolve().parent, template_path)
     else:
         template = copy.deepcopy(fam.scenario)
+        anchor_refs(template, path.resolve().parent, path)
     if fam.duration is not None:
         template["duration"] = fam.duration
     names = [p.name for p in fam.param]

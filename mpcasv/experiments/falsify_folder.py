@@ -19,6 +19,8 @@ from pathlib import Path
 
 from mpcasv.config import ConfigError
 
+#: what a search's runs are (:func:`study_identity`); 2 since session 44
+SEARCH_FORMAT = 2
 #: the file recording the search a folder holds
 IDENTITY_FILE = "falsify.json"
 #: files a search writes into its folder (a folder with any of them and no IDENTITY_FILE was
@@ -40,6 +42,10 @@ def study_identity(family, controller: str, preset: str | None, params, seed: in
     another search).
     """
     return {
+        # 2 (session 44): every run carries the search's preset, whose [domain] the world
+        # judges by (the power turn); a search of format 1 (none: runs without it) is another
+        # search and is refused, not extended
+        "format": SEARCH_FORMAT,
         "family": family.name,
         # its description and the template's name and description say nothing of the search:
         # editing them keeps the study (a review)

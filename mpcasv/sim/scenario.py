@@ -228,6 +228,30 @@ class Scenario:
         return int(math.ceil(self.duration / self.sim.control_period - 1e-9))
 
 
+def anchor_refs(data: dict, base: Path, source: str | Path) -> None:
+    """Make the file references of scenario dict ``data`` (``preset``, ``asv.vessel``,
+    ``asv.execution``) that are relative paths absolute, against ``base`` (the folder of the
+    file that names them), in place: a scenario written elsewhere (``mpcasv falsify``'s worst
+    cases) then names the same files.
+
+    Raises
+    ------
+    ConfigError
+        A path that names no file (``source`` and the field named).
+    """
+    refs = [(data, "preset")]
+    if isinstance(data.get("asv"), dict):
+        refs += [(data["asv"], "vessel"), (data["asv"], "execution")]
+    for table, key in refs:
+        value = table.get(key)
+        if isinstance(value, str) and is_path(value):
+            table[key] = anchor(value, base)
+            if not Path(table[key]).is_file():
+                where = f"asv.{key}" if table is not data else key
+                raise ConfigError(f"{source}: {where}: no such file {value!r} (looked at "
+                                  f"{table[key]}, relative to the scenario's folder)")  # fmt: skip
+
+
 def load_scenario(path: str | Path) -> Scenario:
     """Load and validate a scenario TOML file.
 
@@ -240,18 +264,7 @@ def load_scenario(path: str | Path) -> Scenario:
         One line per problem, naming the file and the field.
     """
     data = load_toml(path, "scenario")
-    base = Path(path).resolve().parent
-    refs = [(data, "preset")]
-    if isinstance(data.get("asv"), dict):
-        refs += [(data["asv"], "vessel"), (data["asv"], "execution")]
-    for table, key in refs:
-        value = table.get(key)
-        if isinstance(value, str) and is_path(value):
-            table[key] = anchor(value, base)
-            if not Path(table[key]).is_file():
-                where = f"asv.{key}" if table is not data else key
-                raise ConfigError(f"{path}: {where}: no such file {value!r} (looked at "
-                                  f"{table[key]}, relative to the scenario's folder)")  # fmt: skip
+    anchor_refs(data, Path(path).resolve().parent, path)
     preset = data.get("preset")
     if isinstance(preset, str) and preset != "default" and not is_path(preset):
         try:  # the run judges by this preset's domain whatever controller runs: name it now
