@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import textwrap
+from pathlib import Path
 
 import pytest
 
@@ -12,6 +13,7 @@ from mpcasv.controllers import registry as controllers
 from mpcasv.experiments.suite import expand
 from mpcasv.experiments.suite_file import SCENARIOS_DIR, SUITES_DIR
 
+ROOT = Path(__file__).resolve().parents[1]
 GOOD = """
 name = "t"
 scenarios = ["case3", "case8"]
@@ -127,6 +129,39 @@ def test_optional_controller_that_is_not_available_is_skipped_and_said(tmp_path,
     assert len(exp.skipped) == 1 and "ghost" in exp.skipped[0]
     with pytest.raises(ConfigError, match="not available"):
         expand(write(tmp_path, text.replace("optional = true", ""), "strict.toml"))
+
+
+def test_a_job_id_holds_the_content_of_the_vessel_and_execution_files(tmp_path):
+    """Editing a vessel or execution file a scenario names reruns its jobs (its id hashed the
+    file's name only: a resumed sweep served the old boat's results, a new user's finding);
+    a shipped boat's content as of session 44 leaves the ids of earlier results folders."""
+    data = ROOT / "mpcasv" / "data"
+    (tmp_path / "v.toml").write_text((data / "vessels" / "gretha.toml").read_text())
+    (tmp_path / "e.toml").write_text((data / "execution" / "gretha.toml").read_text())
+    text = (SCENARIOS_DIR / "case3.toml").read_text().replace(
+        "[asv.start]", '[asv]\nvessel = "v.toml"\nexecution = "e.toml"\n\n[asv.start]', 1)
+    assert 'vessel = "v.toml"' in text
+    (tmp_path / "mine.toml").write_text(text)
+    suite = GOOD.replace('["case3", "case8"]', '["mine.toml"]')
+
+    def ids():
+        return [j.job_id for j in expand(write(tmp_path, suite)).jobs]
+
+    first = ids()
+    assert ids() == first  # the same content: the same ids
+    for name, old, new in (("v.toml", "m = 910.0", "m = 1500.0"),
+                           ("e.toml", "Kp = 509.347", "Kp = 100.0")):  # fmt: skip
+        path = tmp_path / name
+        before = path.read_text()
+        assert old in before
+        path.write_text(before.replace(old, new, 1))
+        assert not set(ids()) & set(first), name
+        path.write_text(before)
+    assert ids() == first
+    # the shipped paper suite's ids as before (its results folders resume): measured on
+    # e7ed1a5, before the boat's content was in the id
+    paper = expand("paper").jobs
+    assert (paper[0].job_id, paper[-1].job_id) == ("0ecfafa19291ad7f", "9552c8e364c962fe")
 
 
 def test_scenario_paths_are_relative_to_the_suite_file(tmp_path):

@@ -124,6 +124,37 @@ def _digest(obj) -> str:
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
+#: The vessels' and execution levels' parameter hashes (:func:`~mpcasv.controllers.registry.
+#: parameter_hash`) that leave a job id as it was before the boat's content was in it: the
+#: shipped files' as of session 44 (frozen: a shipped file edited since has another hash, and
+#: its jobs other ids). Until then a job id hashed the scenario's ``asv.vessel`` and
+#: ``asv.execution`` as named, not their content: a resumed sweep served the results of a
+#: vessel file as it was before an edit (m 910 -> 1500 kg, a new user's finding).
+BOAT_AS_BEFORE = {
+    "vessel": frozenset({"218eea6e38a6bb98", "73e7e76be2487952", "f93134a3933d5309"}),
+    "execution": frozenset({"91e3a909697bdb5e"}),
+}
+
+
+def boat_digest(sc) -> list[str]:
+    """What a job id holds of scenario ``sc``'s boat: ``[]`` for a vessel and an execution
+    level whose content is a shipped file's as of session 44 (:data:`BOAT_AS_BEFORE`: the
+    ids of earlier results folders stay), else both parameter hashes.
+
+    Raises
+    ------
+    ConfigError
+        A vessel or execution file that no longer loads.
+    """
+    from mpcasv.controllers.registry import Boat, parameter_hash
+
+    boat = Boat.load(sc.asv.vessel, sc.asv.execution)
+    hashes = {"vessel": parameter_hash(boat.vessel), "execution": parameter_hash(boat.execution)}
+    if all(h in BOAT_AS_BEFORE[k] for k, h in hashes.items()):
+        return []
+    return [f"{k}={h}" for k, h in sorted(hashes.items())]
+
+
 def _plain(obj):
     if dataclasses.is_dataclass(obj):
         return {f.name: _plain(getattr(obj, f.name)) for f in dataclasses.fields(obj)}
@@ -200,6 +231,7 @@ def expand(name_or_path: str | Path) -> Expansion:
                     skipped.append(note)
                 continue
             sc_digest = _digest(_plain(digest_plain(sc)))
+            boat = boat_digest(sc)  # the files' content, not only their names
             reals = realisations(sc, suite.seeds, f"{path}: scenario {file}")
             for i, entry in usable:
                 if entry.scenarios is not None and sc.name not in entry.scenarios:
@@ -220,7 +252,8 @@ def expand(name_or_path: str | Path) -> Expansion:
                     p_digest = _digest(_plain(params))
                     for seed in suite.seeds:
                         real, current_realised = reals[seed][0].id, reals[seed][1]
-                        jid = _digest([sc_digest, cname, p_digest, seed, estimator, variant, real])
+                        jid = _digest([sc_digest, cname, p_digest, seed, estimator, variant,
+                                       real, *boat])  # fmt: skip
                         if jid in seen:
                             raise ConfigError(f"{where}: job duplicates job #{seen[jid]} "
                                               "(same scenario, parameters, seed)")  # fmt: skip
