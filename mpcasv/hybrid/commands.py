@@ -14,9 +14,11 @@ def register(sub: argparse._SubParsersAction) -> None:
         description="Run the papers' Cases 1-8 (experiments/scenarios/caseN.toml) with their own "
         "controller and preset, write each run folder and paper_table.md into --out.",
     )  # fmt: skip
-    p.add_argument("--out", type=Path, default=Path("runs/paper-table"), help="output folder")
-    p.add_argument("--scenarios", type=Path, default=Path("experiments/scenarios"),
-                   help="folder with case1.toml ... case8.toml")  # fmt: skip
+    p.add_argument("--out", type=Path, default=Path("runs/paper-table"),
+                   help="output folder (default runs/paper-table)")
+    p.add_argument("--scenarios", type=Path, default=None,
+                   help="folder with all eight of case1.toml ... case8.toml (default: the "
+                   "shipped experiments/scenarios, from any working folder)")  # fmt: skip
     p.add_argument("--seed", type=int, default=0,
                    help="random seed of the world's acoustic draws (default 0)")
     p.set_defaults(func=run)
@@ -36,11 +38,14 @@ def run(args: argparse.Namespace) -> int:
     from mpcasv.sim.simulator import simulate
 
     check_seed(args.seed)  # -1 was a numpy traceback
-    paths = [args.scenarios / f"{c}.toml" for c in CASES]
-    missing = [str(p) for p in paths if not p.exists()]
-    if missing:
-        raise ConfigError(f"scenario files not found: {missing} (run from the repository root "
-                          "or pass --scenarios)")  # fmt: skip
+    from mpcasv.experiments.suite_file import SCENARIOS_DIR
+
+    folder = SCENARIOS_DIR if args.scenarios is None else args.scenarios
+    paths = [folder / f"{c}.toml" for c in CASES]
+    missing = [p.name for p in paths if not p.exists()]
+    if missing:  # it said "run from the repository root" though --scenarios was given
+        raise ConfigError(f"--scenarios {folder}: no {', '.join(missing)} there (the table "
+                          "needs all eight, case1.toml ... case8.toml)")  # fmt: skip
     scenarios = [load_scenario(p) for p in paths]  # validate all before running any
     check_output_folder(args.out)
     results = {}
