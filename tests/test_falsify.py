@@ -227,6 +227,7 @@ def test_simulate_of_a_written_worst_case_is_the_searched_run(tmp_path):
     assert main(["simulate", str(out / "worst" / f"{name}.toml"), "--out", str(run)]) == 0
     rob = robustness(pd.read_parquet(run / "timeseries.parquet"), 1, 50.0, 1.0)
     assert rob.margin_m == pytest.approx(summary["worst_margin_m"], abs=1e-9)
+    assert json.loads((out / "worst" / name / "run.json").read_text())["scenario"] == name
     searched = json.loads((out / "worst" / name / "metrics.json").read_text())
     assert searched["collision_domain_s"] is not None  # judged by paper1-field's domain
     from mpcasv.experiments.metric_info import WALL_CLOCK

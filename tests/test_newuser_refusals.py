@@ -113,6 +113,7 @@ def test_replay_of_a_text_file_that_is_not_json_lines_is_refused_in_one_line(tmp
         ("--require-margin", "nan"),  # the check always passed, exit 0
         ("--seed", "-1"),  # a numpy traceback, exit 1
         ("--timeout", "nan"),
+        ("--timeout", "inf"),  # said "must be > 0, got inf"
     ],
 )
 def test_bad_falsify_options_are_refused_in_one_line(tmp_path, capsys, option, value):
@@ -124,6 +125,8 @@ def test_bad_falsify_options_are_refused_in_one_line(tmp_path, capsys, option, v
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "Traceback" not in err[0], err
     assert option in err[0], err
+    if option == "--timeout":
+        assert "finite" in err[0], err
     assert not out.exists()
 
 

@@ -147,7 +147,8 @@ def check_inputs(args: argparse.Namespace):
     if args.require_margin is not None and not math.isfinite(args.require_margin):
         raise ConfigError(f"--require-margin {args.require_margin:g}: a finite margin (m)")
     if args.timeout is not None and not (math.isfinite(args.timeout) and args.timeout > 0):
-        raise ConfigError(f"--timeout must be > 0, got {args.timeout}")
+        raise ConfigError(f"--timeout {args.timeout:g}: a finite number of seconds > 0 "
+                          "(leave it out for no limit)")  # fmt: skip
     family = load_family(args.family)  # ranges checked at their ends and corners
     # the preset the controller runs and the world judges by (SearchSetup): --params, else
     # the family's own; a path is made absolute, so the worst cases name it from anywhere
@@ -208,12 +209,13 @@ def write_worst(setup, row, rank: int, folder: Path) -> str:
     from mpcasv.experiments.falsify import robustness
     from mpcasv.experiments.metrics import compute_metrics
     from mpcasv.sim.record import write_run
+    from mpcasv.sim.scenario import scenario_from_dict
     from mpcasv.sim.simulator import simulate
 
     fam = setup.family
     params = {p.name: float(row[p.name]) for p in fam.spec.param}
     name = f"falsified-{fam.name}-{setup.controller}-{rank}"
-    scenario, data = setup.scenario(params, name)  # what the trial ran
+    _, data = setup.scenario(params, name)  # what the trial ran
     data = {**data, "name": name,
             "description": f"worst case {rank} of mpcasv falsify {fam.source.name} for "
                            f"{setup.controller} (trial {int(row['trial'])})"}  # fmt: skip
@@ -225,6 +227,8 @@ def write_worst(setup, row, rank: int, folder: Path) -> str:
                        "parameters "
                        + ", ".join(f"{k} = {v:.4g}" for k, v in params.items()))  # fmt: skip
     data["provenance"] = prov
+    # the run under the worst case's own name (its run.json and figures named the family)
+    scenario = scenario_from_dict(data, f"{fam.source} ({name})")
     folder.mkdir(parents=True, exist_ok=True)
     header = f"# {data['description']}\n# {prov['falsify']}\n"
     (folder / f"{name}.toml").write_text(header + tomli_w.dumps(data))
