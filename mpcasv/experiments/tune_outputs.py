@@ -194,14 +194,15 @@ def front_figure(spec: TuneSpec, trials: pd.DataFrame, front: pd.DataFrame):
     import matplotlib.pyplot as plt
     from matplotlib.ticker import MaxNLocator
 
-    from mpcasv.experiments.metrics import METRIC_INFO
+    from mpcasv.experiments.metric_info import axis_label
 
     # one objective: against the trial number (it was drawn against itself, a diagonal)
     pairs = list(itertools.combinations(spec.objectives, 2)) or [("trial", spec.objectives[0])]
     # at most three panels a row: four objectives (six pairs) made a strip too wide to read
     ncols = min(3, len(pairs))
     nrows = math.ceil(len(pairs) / ncols)
-    fig, grid = plt.subplots(nrows, ncols, figsize=(5.2 * ncols, 4.4 * nrows), squeeze=False)
+    fig, grid = plt.subplots(nrows, ncols, figsize=(5.2 * ncols, 4.4 * nrows + 0.6),
+                             squeeze=False, layout="constrained")  # fmt: skip
     for ax in grid.ravel()[len(pairs):]:
         ax.set_visible(False)
     axes = [grid.ravel()[: len(pairs)]]
@@ -224,17 +225,18 @@ def front_figure(spec: TuneSpec, trials: pd.DataFrame, front: pd.DataFrame):
             for _, r in front.iterrows():
                 ax.annotate(str(int(r["trial"])), (r[f"train.{a}"], r[f"train.{b}"]),
                             fontsize=7, xytext=(3, 3), textcoords="offset points")  # fmt: skip
-        ax.set_xlabel("trial" if a == "trial" else
-                      f"{a} ({METRIC_INFO[a].unit}, {METRIC_INFO[a].better} is better)")
-        ax.set_ylabel(f"{b} ({METRIC_INFO[b].unit}, {METRIC_INFO[b].better} is better)")
+        ax.set_xlabel("trial" if a == "trial" else axis_label(a))
+        ax.set_ylabel(axis_label(b))
         # at most 5 x ticks: 7-digit labels (0.00722, 0.00724, ...) ran into each other
         ax.xaxis.set_major_locator(MaxNLocator(nbins=5, integer=a == "trial"))
         ax.grid(alpha=0.3)
-    axes[0][0].legend(fontsize=7)
+    handles, labels = axes[0][0].get_legend_handles_labels()
+    # below the panels: inside the first one ("best" place) it covered a point
+    fig.legend(handles, labels, loc="outside lower center", fontsize=7,
+               ncol=2 if ncols == 1 else len(labels))  # fmt: skip
     # two lines: on one panel (two objectives, 5.2 in wide) one line was cut at both edges
     fig.suptitle(f"{spec.controller}: {len(done)} complete trials\ntraining means vs held-out "
                  "means of the training front", fontsize=10)  # fmt: skip
-    fig.tight_layout()
     return fig
 
 
