@@ -26,6 +26,7 @@ import pandas as pd
 from mpcasv.experiments.tune_controller import front_trials
 from mpcasv.experiments.tune_jobs import heldout_jobs, training_jobs, trial_jobs
 from mpcasv.experiments.tune_space import TuneSpec
+from mpcasv.wording import count
 
 
 def trials_table(spec: TuneSpec, study) -> pd.DataFrame:
@@ -322,17 +323,18 @@ def _report(spec: TuneSpec, s: dict, front: pd.DataFrame, imp: pd.DataFrame) -> 
         f"- objectives (means over the training runs): {', '.join(s['objectives'])}; "
         f"constraint: {s['constraint'] or 'none'} = 0 on every training run (Optuna "
         "`Trial.set_constraint`, read by the sampler; no penalty)",
-        f"- sampler {spec.sampler}, batches of {spec.batch} trials, seed {spec.seed}",
-        f"- **budget: {spec.trials} trials**; states {s['trials']}; feasible "
-        f"{s['feasible_trials']}; {s['runs']['training']} training runs "
+        f"- sampler {spec.sampler}, batches of {count(spec.batch, 'trial')}, seed {spec.seed}",
+        f"- **budget: {count(spec.trials, 'trial')}**; states {s['trials']}; feasible "
+        f"{s['feasible_trials']}; {count(s['runs']['training'], 'training run')} "
         f"({tr['runs_per_trial']} per trial; none for a trial the preset refuses)",
         *([f"- **no feasible trial**: the smallest summed {spec.constraint} is "
            f"{s['least_violation'][1]:.4g} (trial {s['least_violation'][0]}); no front"]
           if spec.constraint and not s["feasible_trials"] and s["least_violation"] else []),
         f"- training: scenarios {tr['scenarios']}, seeds {tr['seeds']}, duration "
         f"{tr['duration_s']} s; realisations {tr['realisations']}",
-        f"- held-out: the {ho['front_trials_run']} front trials x {ho['runs_per_trial']} runs "
-        f"(seeds {ho['seeds']}; realisations {ho['realisations']}); {s['runs']['heldout']} runs",
+        f"- held-out: the {count(ho['front_trials_run'], 'front trial')} x "
+        f"{count(ho['runs_per_trial'], 'run')} (seeds {ho['seeds']}; realisations "
+        f"{ho['realisations']}); {count(s['runs']['heldout'], 'run')}",
         f"- wall time: search {w['search']:.0f} s over {w['sessions']} session(s), held-out "
         f"{w['heldout']:.0f} s", "",
         "## Training front and held-out values", "",
