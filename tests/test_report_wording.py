@@ -64,3 +64,25 @@ def test_tune_report_counts_one_front_trial():
     assert "batches of 1 trial," in text and "**budget: 1 trial**" in text
     assert "1 training run " in text
     assert "the 1 front trial x 1 run (seeds" in text and "; 1 run\n" in text
+
+
+def test_a_table_of_n_a_comparisons_says_none_was_tested(tmp_path):
+    """The methods say "each table says how many tests it holds", but with every comparison
+    n/a (4 worlds a case, fewer than stats.MIN_PAIRS) the table said nothing about tests."""
+    from types import SimpleNamespace
+
+    from mpcasv.experiments.report import write_report
+
+    rows = [{"index": i, "suite": "s", "scenario": "c1", "variant": v, "current": "off",
+             "estimator": "perfect", "seed": seed, "status": "ok", "auv_names": "auv1",
+             "run_dir": f"runs/{v}-{seed}", "min_range_m": 100.0 + seed + (v == "mpc")}
+            for i, (seed, v) in enumerate((s, v) for s in range(4) for v in ("hybrid", "mpc"))]
+    df = pd.DataFrame(rows)
+    exp = SimpleNamespace(suite=SimpleNamespace(name="s", description="", seeds=list(range(4))),
+                          jobs=list(range(len(df))), skipped=[])  # fmt: skip
+    md = write_report(tmp_path, exp, df)[0].read_text()
+    assert "each table says how many tests it holds" in md
+    section = md.split("### mpc vs hybrid")[1].split("\n## ")[0]
+    line = next((ln for ln in section.splitlines() if "Multiple comparisons" in ln), None)
+    assert line is not None and "none tested in this table" in line, section
+    assert "n/a: 4 pairs < 6" in section

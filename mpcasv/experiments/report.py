@@ -279,7 +279,7 @@ def write_report(out: Path, exp, results: pd.DataFrame, stats=None) -> tuple[Pat
             both(f"\n### {sub}\n", f"<h3>{html.escape(sub)}</h3>")
             if len(th):
                 mu = paired.multiplicity(th)
-                if mu.tests:  # every comparison n/a: nothing to correct
+                if mu.tests:
                     bullet(
                         f"Multiple comparisons: {count(mu.tests, 'test')} in this table at α = "
                         f"{paired.ALPHA} (about {mu.expected_false:.1f} 'better' verdicts "
@@ -287,7 +287,13 @@ def write_report(out: Path, exp, results: pd.DataFrame, stats=None) -> tuple[Pat
                         f"'better', {mu.better_bh} of them with Benjamini-Hochberg adjusted "
                         f"p < {paired.ALPHA} (scipy.stats.false_discovery_control)."
                     )
-                    md.append("")
+                else:  # the methods say every table says how many tests it holds: this too
+                    bullet(
+                        "Multiple comparisons: none tested in this table (no comparison has a "
+                        f"p-value: fewer than {paired.MIN_PAIRS} pairs, or all differences "
+                        "zero); no 'better' verdict, nothing to adjust."
+                    )
+                md.append("")
                 d = headline_table(th)
                 both(_md_table(d) + "\n", d.to_html())
                 figure(
