@@ -143,7 +143,7 @@ def test_every_pair_both_zero_is_a_change_of_zero_not_no_pairs(target, better_si
 
     (_, _, [(_, _, says)]) = report_parts(df, Acceptance({"collision_domain_s": target}),
                                          ["hybrid", "mpc"], [])  # fmt: skip
-    assert says.startswith("**All 1 targets met" if better_side else "**0 of 1 targets met")
+    assert says.startswith("**The target is met" if better_side else "**0 of 1 target met")
 
 
 def test_a_target_without_pairs_is_not_applicable_and_has_no_sums():
@@ -165,10 +165,10 @@ def test_a_target_with_unpaired_runs_is_said_and_not_counted_as_met(tmp_path):
     from mpcasv.experiments.acceptance import report_parts
 
     (_, _, [(_, d, says)]) = report_parts(df, acc, ["hybrid", "mpc"], ["c0"])
-    assert says == "**0 of 1 targets met.**"
+    assert says == "**0 of 1 target met.**"
     assert d["pairs"].tolist() == ["10 (+10 unpaired)"]
     (_, _, [(_, _, says)]) = report_parts(_results(), acc, ["hybrid", "mpc"], ["c0"])
-    assert says == "**All 1 targets met.**"
+    assert says == "**The target is met.**"
 
 
 def test_the_report_says_which_targets_are_not_met_and_where_to_read_why(tmp_path):

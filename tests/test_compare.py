@@ -171,7 +171,9 @@ def test_report_of_a_sweep_whose_jobs_all_failed_lists_the_errors(tmp_path):
                           "error": "Traceback ...\nRuntimeError: solver exploded\n"}])  # fmt: skip
     md, page = write_report(tmp_path, QUICK, rows)
     text = md.read_text()
-    assert "1 errors" in text and "RuntimeError: solver exploded" in text
+    # one failed job: "1 errors" (a hard plural)
+    assert "**1 error**" in text and "1 errors" not in text
+    assert "RuntimeError: solver exploded" in text
     assert f"**Incomplete**: {len(QUICK.jobs) - 1} jobs have not run" in text
     assert "solver exploded" in page.read_text()
 

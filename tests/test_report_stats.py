@@ -240,7 +240,8 @@ def test_report_says_why_when_the_table_cannot_be_paired(tmp_path):
     df = pd.concat([df, df.iloc[[0]].assign(index=999)])  # e.g. an axis not in PAIR_KEY
     md, _ = write_report(tmp_path, _exp(df), df)
     text = md.read_text()
-    assert "**No paired comparison**: ref: 1 rows share a pairing key" in text
+    # both rows of the shared key counted (it said "1 rows share a pairing key")
+    assert "**No paired comparison**: ref: 2 rows share a pairing key" in text
     assert "## c1" in text  # the rest of the report is still written
 
 

@@ -77,11 +77,11 @@ def test_the_acceptance_counts_worlds_and_says_when_nothing_was_judged():
     assert (t["pairs"].iloc[0], t["runs"].iloc[0]) == (1, 6)
     assert t["verdict"].iloc[0].startswith("n/a")
     (_, _, [(_, d, says)]) = report_parts(table(["w0"] * 6), acc, ["hybrid", "mpc"], [])
-    assert says == "**None of the 1 targets judged** (each verdict says why)."
+    assert says == "**The target is not judged** (its verdict says why)."
     assert d["pairs"].tolist() == ["1 world (6 runs)"]
     (_, _, [(_, _, says)]) = report_parts(table([f"w{i}" for i in range(6)]), acc,
                                           ["hybrid", "mpc"], [])  # fmt: skip
-    assert says == "**All 1 targets met.**"
+    assert says == "**The target is met.**"
 
 
 def test_conditions_on_one_world_are_one_world_and_the_order_is_kept():

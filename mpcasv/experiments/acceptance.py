@@ -21,7 +21,7 @@ every pair is 0 against 0: then the change is 0 in each pair, and a target of "n
 is met (before, no pair was left to judge and the target, e.g. no time in a collision domain
 for either controller, counted as not met). The rule has a step: 29 pairs at 0 against 0 and
 one where the variant did better leave one pair that says something, too few for an
-interval (``n/a: 1 pairs < 6``, not counted as met), while 30 pairs at 0 meet "no more".
+interval (``n/a: 1 pair < 6``, not counted as met), while 30 pairs at 0 meet "no more".
 Judging on all 30 with the zeros as 0 would remove the step but also meet "no more" with one
 pair worse (a median of 0); too few pairs that say anything is reported as such instead. The
 median and 95 % bootstrap CI come from :func:`mpcasv.experiments.stats.paired_stat`.
@@ -40,6 +40,7 @@ import pandas as pd
 from mpcasv.config import Float, frozen
 from mpcasv.experiments import stats as paired
 from mpcasv.experiments.metric_info import METRIC_INFO
+from mpcasv.wording import count, noun
 
 #: metrics that compare nothing in a case without any USBL fix (name prefixes)
 NEEDS_FIXES = ("reliable_fix_age", "fix_age", "nav_error", "fixes", "reliable_fixes")
@@ -148,7 +149,7 @@ def acceptance_table(results: pd.DataFrame, acc: Acceptance, reference: str, oth
         ref, oth = p["ref"].to_numpy(float), p["other"].to_numpy(float)
         s = paired.paired_stat(np.zeros(len(p)), relative_changes(ref, oth))
         n_unpaired = int(unpaired.sum())
-        v = verdict(better, c, s) + (f", {n_unpaired} runs unpaired" if n_unpaired else "")
+        v = verdict(better, c, s) + (f", {count(n_unpaired, 'run')} unpaired" if n_unpaired else "")
         rows.append(row | {"pairs": len(p), "runs": int(p["runs"].sum()),
                            "unpaired": n_unpaired, "both_zero": int(zero.sum()),
                            "cases": ", ".join(dict.fromkeys(p[paired.CASE])),
@@ -172,7 +173,7 @@ def display_table(t: pd.DataFrame) -> pd.DataFrame:
         "required (other vs reference)": [("<= " if b == "lower" else ">= ") + _pct(c)
                                           for b, c in zip(t["better"], t["target"],
                                                           strict=True)],
-        "pairs": [f"{n}" + (f" world{'s' * (n != 1)} ({r} runs)" if r > n else "")
+        "pairs": [f"{n}" + (f" {noun(n, 'world')} ({r} runs)" if r > n else "")
                   + "".join(f" (+{k} {what})" for k, what in ((u, "unpaired"),
                                                               (z, "both 0 left out")) if k)
                   for n, r, u, z in zip(t["pairs"], t["runs"], t["unpaired"], t["both_zero"],
@@ -209,11 +210,12 @@ def report_parts(results: pd.DataFrame, acc: Acceptance, names: list[str],
         met = int((t["verdict"] == "met").sum())
         unjudged = int(t["verdict"].str.startswith("n/a").sum())
         if met == len(t):
-            says = f"**All {len(t)} targets met.**"
+            says = "**The target is met.**" if met == 1 else f"**All {met} targets met.**"
         elif unjudged == len(t):
-            says = f"**None of the {len(t)} targets judged** (each verdict says why)."
+            says = ("**The target is not judged** (its verdict says why)." if unjudged == 1
+                    else f"**None of the {unjudged} targets judged** (each verdict says why).")
         else:
-            says = (f"**{met} of {len(t)} targets met.**"
+            says = (f"**{met} of {count(len(t), 'target')} met.**"
                     + (f" {unjudged} not judged (n/a)." if unjudged else "") + (
                         f" What stands in the way: {acc.explained_in}."
                         if acc.explained_in else ""))  # fmt: skip

@@ -7,6 +7,7 @@ import math
 from pathlib import Path
 
 from mpcasv.experiments.workers import cpu_count
+from mpcasv.wording import count, noun
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -89,9 +90,10 @@ def run(args: argparse.Namespace) -> int:
                                     runs_dir=args.runs_dir, job_timeout=limit)  # fmt: skip
     out = out.resolve()
     ok = int((results["status"] == "ok").sum()) if len(results) else 0
-    print(f"{stats.ran} jobs run in {stats.jobs_wall_s:.1f} s on {stats.backend or 'nothing'} "
-          f"({stats.already_done} were done before); results: {ok} ok, {len(results) - ok} "
-          f"errors, of {len(exp.jobs)} jobs")  # fmt: skip
+    print(f"{count(stats.ran, 'job')} run in {stats.jobs_wall_s:.1f} s on "
+          f"{stats.backend or 'nothing'} ({stats.already_done} "
+          f"{noun(stats.already_done, 'was', 'were')} done before); results: {ok} ok, "
+          f"{count(len(results) - ok, 'error')}, of {count(len(exp.jobs), 'job')}")  # fmt: skip
     for c in exp.fronts:  # entries naming a tuned front (mpcasv.experiments.tune_match)
         print(f"{c.label}: {c.controller} front point trial {c.trial} of {c.folder} "
               f"({c.at} {c.front_level:.5g}, {c.source} mean; asked {c.level:.5g})")  # fmt: skip
@@ -100,7 +102,8 @@ def run(args: argparse.Namespace) -> int:
     for name, err in stats.error_jobs:
         print(f"  error in {name}: {err}")
     if stats.lost:
-        print(f"  {stats.lost} jobs lost with their worker: rerun the same command to resume")
+        print(f"  {count(stats.lost, 'job')} lost with their worker: rerun the same command to "
+              "resume")  # fmt: skip
     if not args.no_report:
         print(f"report: {out / 'report.html'} (and report.md)")
     elif suite.acceptance is not None:  # judged only in the report: say it was not

@@ -9,6 +9,8 @@ import math
 import sys
 from pathlib import Path
 
+from mpcasv.wording import count
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
@@ -102,7 +104,8 @@ def run(args: argparse.Namespace) -> int:
                "r_sep_m": float(ok["r_sep_m"].iloc[0]), "worst_cases": written,
                "rerun_margin_m": reruns}  # fmt: skip
     (out / "summary.json").write_text(json.dumps(summary, indent=1) + "\n")
-    print(f"{len(table)} runs ({summary['errors']} errors); worst margin {worst:.2f} m "
+    print(f"{count(len(table), 'run')} ({count(summary['errors'], 'error')}); worst margin "
+          f"{worst:.2f} m "
           f"(r_sep {summary['r_sep_m']:g} m), longest stay {summary['longest_stay_s']:.0f} s; "
           f"worst cases: {', '.join(written)}; table: {out / 'trials.md'}")  # fmt: skip
     if args.require_margin is not None and worst < args.require_margin:
@@ -184,7 +187,8 @@ def check_inputs(args: argparse.Namespace):
 
 def _markdown(table, setup, budget: int) -> str:
     head = (f"# Falsification: {setup.family.name} with {setup.controller} "
-            f"(preset {setup.preset or 'default'})\n\nbudget {budget} runs, seed {setup.seed}, "
+            f"(preset {setup.preset or 'default'})\n\nbudget {count(budget, 'run')}, seed "
+            f"{setup.seed}, "
             f"objective {setup.objective}; sorted by margin (m). A search finds "
             "counterexamples; it does not prove safety.\n")  # fmt: skip
     if not len(table):

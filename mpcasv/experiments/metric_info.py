@@ -199,6 +199,15 @@ HEADLINE: tuple[str, ...] = (
 METRIC_NAMES: tuple[str, ...] = tuple(METRIC_INFO)
 
 
+def axis_label(name: str) -> str:
+    """A figure's axis label of metric ``name``: its unit and which way is better
+    (``"energy_J (J, lower is better)"``; the unit only for a descriptive metric)."""
+    info = METRIC_INFO[name]
+    if info.better is None:
+        return f"{name} ({info.unit})"
+    return f"{name} ({info.unit}, {info.better} is better)"
+
+
 def auv_column(name: str, k: int) -> str:
     """Results-table column of AUV ``k``'s value of the per-AUV list metric ``name``
     (``fixes_auv`` -> ``fixes_auv0``; a list name without the ``_auv`` suffix gets it)."""

@@ -42,6 +42,7 @@ from mpcasv.experiments.report_tables import (  # noqa: F401 (re-exported)
     summary_table,
     with_list_summaries,
 )
+from mpcasv.wording import count, noun
 
 #: which way is better, per metric: "higher", "lower", or None (defined once, in
 #: :data:`mpcasv.experiments.metrics.METRIC_INFO`)
@@ -100,11 +101,6 @@ td:first-child,th:first-child{text-align:left}img{max-width:100%}
 code{background:#f4f4f4;padding:1px 4px}"""
 
 
-def _worlds(n: int) -> str:
-    """ "world" or "worlds" for ``n``."""
-    return "world" if n == 1 else "worlds"
-
-
 def headline_table(t: pd.DataFrame) -> pd.DataFrame:
     """Display form of one (reference, other) pair of :func:`stats.paired_table` for the
     headline: one row per metric and case; the metric named on its first row only."""
@@ -112,7 +108,7 @@ def headline_table(t: pd.DataFrame) -> pd.DataFrame:
     units = {h.name: h.unit for h in paired.HEADLINE}
     rows, last = [], None
     for _, r in t.iterrows():
-        n = (f"{r['n']}" + (f" {_worlds(r['n'])} ({r['runs']} runs)"
+        n = (f"{r['n']}" + (f" {noun(r['n'], 'world')} ({r['runs']} runs)"
                             if r.get("runs", 0) > r["n"] else "")
              + (f" (+{r['n_unpaired']} unpaired)" if r["n_unpaired"] else ""))
         if np.isfinite(r["ci_low"]):
@@ -192,10 +188,11 @@ def write_report(out: Path, exp, results: pd.DataFrame, stats=None) -> tuple[Pat
     title = f"Comparison: suite {suite.name}"
     both(f"# {title}\n", f"<h1>{html.escape(title)}</h1>")
     if len(results) < len(exp.jobs):
-        bullet(f"**Incomplete**: {len(exp.jobs) - len(results)} jobs have not run "
+        left = len(exp.jobs) - len(results)
+        bullet(f"**Incomplete**: {count(left, 'job')} {noun(left, 'has', 'have')} not run "
                "(rerun the same command to resume).")  # fmt: skip
     if len(errors):
-        bullet(f"**{len(errors)} errors** (listed below): their pairs are left out.")
+        bullet(f"**{count(len(errors), 'error')}** (listed below): their pairs are left out.")
     missing = paired.missing_metrics(results, headline) if len(ok) else []
     if missing:
         bullet("**Missing headline metrics** (no column in this results table, e.g. written by "
@@ -260,7 +257,7 @@ def write_report(out: Path, exp, results: pd.DataFrame, stats=None) -> tuple[Pat
         if len(shared):
             lines.append(
                 "Runs that met the same world: " + "; ".join(
-                    f"{r['case']} {int(r['runs'])} runs of {int(r['n'])} {_worlds(r['n'])}"
+                    f"{r['case']} {int(r['runs'])} runs of {count(int(r['n']), 'world')}"
                     for _, r in shared.iterrows()) + ". Their draws gave the same realisation "
                 "(a scenario without an `[uncertain]` table, a suite current that replaced its "
                 "only drawn value, a discrete draw that repeated, or conditions such as the "
@@ -282,15 +279,21 @@ def write_report(out: Path, exp, results: pd.DataFrame, stats=None) -> tuple[Pat
             both(f"\n### {sub}\n", f"<h3>{html.escape(sub)}</h3>")
             if len(th):
                 mu = paired.multiplicity(th)
-                if mu.tests:  # every comparison n/a: nothing to correct
+                if mu.tests:
                     bullet(
-                        f"Multiple comparisons: {mu.tests} tests in this table at α = "
+                        f"Multiple comparisons: {count(mu.tests, 'test')} in this table at α = "
                         f"{paired.ALPHA} (about {mu.expected_false:.1f} 'better' verdicts "
-                        f"expected by chance if nothing differed); {mu.better} verdicts "
+                        f"expected by chance if nothing differed); {count(mu.better, 'verdict')} "
                         f"'better', {mu.better_bh} of them with Benjamini-Hochberg adjusted "
                         f"p < {paired.ALPHA} (scipy.stats.false_discovery_control)."
                     )
-                    md.append("")
+                else:  # the methods say every table says how many tests it holds: this too
+                    bullet(
+                        "Multiple comparisons: none tested in this table (no comparison has a "
+                        f"p-value: fewer than {paired.MIN_PAIRS} pairs, or all differences "
+                        "zero); no 'better' verdict, nothing to adjust."
+                    )
+                md.append("")
                 d = headline_table(th)
                 both(_md_table(d) + "\n", d.to_html())
                 figure(
@@ -326,8 +329,8 @@ def write_report(out: Path, exp, results: pd.DataFrame, stats=None) -> tuple[Pat
     facts = [
         f"{suite.description}".strip(),
         f"Jobs: {len(exp.jobs)} in the suite, {len(results)} with results "
-        f"({len(ok)} ok, {len(errors)} errors); seeds {list(suite.seeds)}; the per-scenario "
-        "tables give means ± sd over seeds.",
+        f"({len(ok)} ok, {count(len(errors), 'error')}); seeds {list(suite.seeds)}; the "
+        "per-scenario tables give means ± sd over seeds.",
         f"Whole results table: `{READ_LINE.format(out=out)}` (one row per job).",
     ]
     facts += [f"Skipped: {s}" for s in exp.skipped]

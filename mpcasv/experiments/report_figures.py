@@ -24,6 +24,11 @@ from mpcasv.experiments.stats import ALPHA, COMPARE, HeadlineMetric
 
 CONDITION = ["current", "estimator"]
 SYMLOG_RATIO = 100.0  # forest panels whose nonzero |median| span more than this: symlog x
+#: differences within this fraction of the metric's size (its values in the case) are
+#: floating-point noise, drawn at 0: a min range difference of -3.23e-11 m (of ~100 m) gave
+#: an axis in units of 1e-11 m, which looked like a real difference. Far above the noise of
+#: sums over a run (~1e-16 relative per operation), far below any physical difference
+FLOAT_NOISE = 1e-9
 VERDICT_COLOURS = {"other": "tab:green", "reference": "tab:red", "none": "0.35"}
 
 
@@ -53,13 +58,24 @@ def group_label(r, conditions: Sequence[str]) -> str:
 # ----------------------------------------------------------------------------- forest
 
 
+def float_noise(g: pd.DataFrame) -> pd.Series:
+    """Rows of :func:`stats.paired_table` whose median and CI bounds are all zero to
+    floating-point precision (within :data:`FLOAT_NOISE` of the larger of the reference's
+    and the other's median) but not all exactly zero: no difference, drawn at 0."""
+    size = np.maximum(np.abs(g["ref_median"]), np.abs(g["ref_median"] + g["median"]))
+    cols = [g[c].where(np.isfinite(g[c]), 0.0) for c in ("median", "ci_low", "ci_high")]
+    tiny = np.logical_and.reduce([np.abs(v) <= FLOAT_NOISE * size for v in cols])
+    return pd.Series(tiny & (np.abs(g["median"]) > 0), index=g.index)
+
+
 def forest_figure(table: pd.DataFrame, metrics: Sequence[HeadlineMetric], path: Path) -> Path:
     """Paired-difference plot of one (reference, other) pair of :func:`stats.paired_table`.
 
     One panel per metric of ``metrics`` present in ``table``; y: the cases; a dot at the
     median difference (other - reference), the 95 % bootstrap CI as a bar; green where
     ``other`` is significantly better, red where the reference is, grey otherwise; hollow
-    grey dots where the CI is n/a (the reason on the right).
+    grey dots where the CI is n/a (the reason on the right); a difference zero to
+    floating-point precision (:func:`float_noise`) at 0, its value on the right.
     """
     ref, other = table["reference"].iloc[0], table["other"].iloc[0]
     specs = [h for h in metrics if h.name in set(table["metric"])]
@@ -73,6 +89,7 @@ def forest_figure(table: pd.DataFrame, metrics: Sequence[HeadlineMetric], path: 
     y = np.arange(len(cases))[::-1]  # first case on top
     for ax, h in zip(axes.flat, specs, strict=False):
         g = table[table["metric"] == h.name].set_index("case").reindex(cases)
+        noise = float_noise(g)
         right = []
         for yi, (_, r) in zip(y, g.iterrows(), strict=True):
             if r["verdict"] == f"{other} better":
@@ -84,6 +101,9 @@ def forest_figure(table: pd.DataFrame, metrics: Sequence[HeadlineMetric], path: 
             if r["verdict"] == "no difference":
                 ax.plot(0.0, yi, "o", color=c, ms=5)
                 right.append(f"no difference (all {r['n']} zero)")
+            elif noise[r.name]:  # zero but for rounding: at 0, its value on the right
+                ax.plot(0.0, yi, "o", color=c, ms=5)
+                right.append(f"0 to float precision ({num(r['median'])}) n={r['n']}")
             elif np.isfinite(r["ci_low"]):
                 ax.errorbar(r["median"], yi, xerr=[[r["median"] - r["ci_low"]],
                             [r["ci_high"] - r["median"]]], fmt="o", color=c, ms=5,
@@ -109,7 +129,7 @@ def forest_figure(table: pd.DataFrame, metrics: Sequence[HeadlineMetric], path: 
         span = max(abs(lo), abs(hi))
         ax.set_xlim(-span * 1.05, span * 1.05)  # zero in the middle: both sides labelled
         scale = ""
-        med = np.abs(g["median"].to_numpy(float))
+        med = np.abs(g.loc[~noise, "median"].to_numpy(float))
         med = med[np.isfinite(med) & (med > 0)]
         if len(med) and med.max() > SYMLOG_RATIO * med.min():  # cases of very different size
             # linear within the smallest case (at most 3 decades below the largest)

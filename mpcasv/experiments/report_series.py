@@ -27,6 +27,7 @@ import pyarrow.parquet as pq
 
 from mpcasv.experiments.report_figures import _save, num
 from mpcasv.experiments.stats import COMPARE
+from mpcasv.wording import count, noun
 
 # ----------------------------------------------------------------------------- ECDF
 
@@ -79,7 +80,8 @@ def ecdf_panels(out: Path, ok: pd.DataFrame, scenario: str,
         f = run_path(out, r["run_dir"]) / "timeseries.parquet"
         have = set(pq.read_schema(f).names)
         found[r[COMPARE]].append(pd.read_parquet(f, columns=[c for c in wanted if c in have]))
-    notes = [f"{n_missing} of {len(g)} runs have no time series here"] if n_missing else []
+    notes = ([f"{n_missing} of {count(len(g), 'run')} {noun(n_missing, 'has', 'have')} no time "
+              "series here"] if n_missing else [])  # fmt: skip
     panels = []  # (title, ylabel, series, {variant: sorted values}) of the series with data
     for s in series:
         cols = [f"{s.prefix}{k}" for k in range(n_auv)]

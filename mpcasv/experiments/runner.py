@@ -51,6 +51,7 @@ from mpcasv.experiments.sweep_folder import (
     runs_location,
 )
 from mpcasv.experiments.workers import pool_size, reduced_note
+from mpcasv.wording import count
 
 #: default time limit of one job on a local pool (s): generous (a 1500 s MPC run with three
 #: AUVs takes a few minutes on a busy 2-core machine)
@@ -269,15 +270,16 @@ def run_suite(suite: str | Path, out: str | Path, workers: int = 1, dask: str | 
                   f"{pool_size(workers, len(todo))} local worker processes"
                   + reduced_note(workers, pool_size(workers, len(todo))))
         )  # fmt: skip
-        print(f"suite {exp.suite.name}: {len(exp.jobs)} jobs, {stats.already_done} already done, "
-              f"{len(todo)} to run on {where}; output {out}; runs: {stats.runs}")  # fmt: skip
+        print(f"suite {exp.suite.name}: {count(len(exp.jobs), 'job')}, {stats.already_done} "
+              f"already done, {len(todo)} to run on {where}; output {out}; runs: "
+              f"{stats.runs}")  # fmt: skip
     try:
         if todo:
             prepare_controllers(todo, quiet, dask)
             run_jobs(todo, out, stats, workers, dask, quiet, runs, job_timeout)
     except KeyboardInterrupt:
-        print(f"interrupted after {stats.ran} of {len(todo)} jobs; rerun the same command to "
-              "resume (finished jobs are kept)")  # fmt: skip
+        print(f"interrupted after {stats.ran} of {count(len(todo), 'job')}; rerun the same "
+              "command to resume (finished jobs are kept)")  # fmt: skip
         raise
     finally:
         results = write_results(out, exp.jobs)
@@ -307,6 +309,7 @@ def say_untested_current(results) -> None:
 
     where = ", ".join(sorted({f"{s} ({c})" for s, c in zip(runs["scenario"], runs["current"],
                                                            strict=True)}))  # fmt: skip
-    print(f"mpcasv: warning: {len(runs)} of {len(results)} runs planned with a current above "
-          f"the {CURRENT_TESTED:g} m/s the MPC has been tested in (current_untested_s > 0; "
-          f"docs/mpc.md, \"Known problems\": strong currents): {where}", file=sys.stderr)
+    print(f"mpcasv: warning: {len(runs)} of {count(len(results), 'run')} planned with a "
+          f"current above the {CURRENT_TESTED:g} m/s the MPC has been tested in "
+          f"(current_untested_s > 0; docs/mpc.md, \"Known problems\": strong currents): "
+          f"{where}", file=sys.stderr)  # fmt: skip

@@ -42,6 +42,7 @@ from scipy import stats as sps
 
 from mpcasv.experiments.metrics import HEADLINE as METRIC_HEADLINE
 from mpcasv.experiments.metrics import METRIC_INFO
+from mpcasv.wording import count
 
 #: column naming the compared controller (label plus grid values, e.g. "hybrid[dT=0.2]")
 COMPARE = "variant"
@@ -127,7 +128,7 @@ def comparison_problem(results: pd.DataFrame) -> str | None:
         return str(exc)
     ok = results[results["status"] == "ok"]
     for v in names:
-        dup = ok[ok[COMPARE] == v].duplicated(key)
+        dup = ok[ok[COMPARE] == v].duplicated(key, keep=False)  # every row of a shared key
         if dup.any():
             return (f"{v}: {int(dup.sum())} rows share a pairing key {key}; the key does not "
                     "identify the job")  # fmt: skip
@@ -158,7 +159,7 @@ def pairs(results: pd.DataFrame, metric: str, reference: str, other: str
     sides = {}
     for name, v in (("ref", reference), ("other", other)):
         side = ok[ok[COMPARE] == v].drop(columns=COMPARE).rename(columns={metric: name})
-        dup = side.duplicated(key)
+        dup = side.duplicated(key, keep=False)  # every row of a shared key (at least 2)
         if dup.any():
             raise PairingError(f"{v}: {int(dup.sum())} rows share a pairing key {key}; "
                              "the key does not identify the job")  # fmt: skip
@@ -242,7 +243,7 @@ def paired_stat(ref: np.ndarray, other: np.ndarray, seed: int = SEED) -> PairedS
     med = back(float(np.median(d)))
     if n < MIN_PAIRS:
         return PairedStat(n, med, math.nan, math.nan, math.nan,
-                          f"n/a: {n} pairs < {MIN_PAIRS}")  # fmt: skip
+                          f"n/a: {count(n, 'pair')} < {MIN_PAIRS}")  # fmt: skip
     if np.all(d == d[0]):  # every resample has the same median: the interval is that point
         if d[0] == 0:
             return PairedStat(n, 0.0, 0.0, 0.0, math.nan,

@@ -165,46 +165,67 @@ def plot_fronts(dirs: list[str | Path], path: str | Path,
     """The held-out values of several tunings' fronts (one colour per folder; filled: still
     feasible and non-dominated on the held-out realisations), objectives pairwise; with
     ``baseline`` (an ``mpcasv compare`` results.parquet on the same realisations), each of
-    its variants as a star."""
+    its variants as a star. Drawn by :func:`fronts_figure`."""
+    import matplotlib.pyplot as plt
+
+    searches = [(*_load(Path(d))[:2], Path(d).name) for d in dirs]
+    objectives = [m for m in searches[0][0]["objectives"]  # those of every search
+                  if all(m in s["objectives"] for s, _, _ in searches)]  # fmt: skip
+    if len(objectives) < 2:
+        raise ConfigError(f"--plot: the searches in {[str(d) for d in dirs]} share the "
+                          f"objectives {objectives} only: nothing to draw pairwise")  # fmt: skip
+    base = baseline_points(baseline, objectives) if baseline is not None else None
+    fig = fronts_figure(searches, objectives, base)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return Path(path)
+
+
+def fronts_figure(searches: list[tuple[dict, pd.DataFrame, str]], objectives: list[str],
+                  base: pd.DataFrame | None = None):  # fmt: skip
+    """The figure of :func:`plot_fronts` (a matplotlib Figure, not yet saved): ``searches``
+    are (tune.json, front.csv, folder name) of each tuning, ``base`` the
+    :func:`baseline_points` (or None). Each axis says which way is better (objectives of
+    both directions: ``reliable_fixes`` is higher-is-better); the legend is below the panels,
+    never on a data point."""
     import itertools
 
     import matplotlib.pyplot as plt
 
-    from mpcasv.experiments.metrics import METRIC_INFO
+    from mpcasv.experiments.metric_info import axis_label
 
-    loaded = [(_load(Path(d))[:2], Path(d)) for d in dirs]
-    objectives = [m for m in loaded[0][0][0]["objectives"]  # those of every search
-                  if all(m in s["objectives"] for (s, _), _ in loaded)]  # fmt: skip
-    if len(objectives) < 2:
-        raise ConfigError(f"--plot: the searches in {[str(d) for d in dirs]} share the "
-                          f"objectives {objectives} only: nothing to draw pairwise")  # fmt: skip
     pairs = list(itertools.combinations(objectives, 2))
-    fig, axes = plt.subplots(1, len(pairs), figsize=(5.2 * len(pairs), 4.4), squeeze=False)
-    for ((summary, front), d), colour in zip(loaded, plt.cm.tab10.colors, strict=False):
+    fig, axes = plt.subplots(1, len(pairs), figsize=(5.2 * len(pairs), 4.4 + 0.3 * len(searches)),
+                             squeeze=False, layout="constrained")  # fmt: skip
+    for (summary, front, name), colour in zip(searches, plt.cm.tab10.colors, strict=False):
         nd = front["heldout_front"].astype(bool)
         for ax, (a, b) in zip(axes[0], pairs, strict=True):
             x, y = front[f"heldout.{a}"], front[f"heldout.{b}"]
-            ax.scatter(x[nd], y[nd], c=[colour], s=34, label=f"{summary['controller']} "
-                       f"({d.name}): held-out front")  # fmt: skip
-            ax.scatter(x[~nd], y[~nd], facecolors="none", edgecolors=[colour], s=34,
-                       label="dominated or infeasible on held-out")  # fmt: skip
-            ax.set_xlabel(f"{a} ({METRIC_INFO[a].unit})")
-            ax.set_ylabel(f"{b} ({METRIC_INFO[b].unit})")
-            ax.grid(alpha=0.3)
-    if baseline is not None:
-        base = baseline_points(baseline, objectives)
+            ax.scatter(x[nd], y[nd], c=[colour], s=34,
+                       label=f"{summary['controller']} ({name}): held-out front")  # fmt: skip
+            if (~nd).any():  # a legend entry only for what is drawn
+                ax.scatter(x[~nd], y[~nd], facecolors="none", edgecolors=[colour], s=34,
+                           label=f"{summary['controller']} ({name}): dominated or infeasible "
+                           "on held-out")  # fmt: skip
+    if base is not None:
         for (variant, row), marker in zip(base.iterrows(), "*P^v", strict=False):
             for ax, (a, b) in zip(axes[0], pairs, strict=True):
                 ax.scatter(row[a], row[b], marker=marker, s=140, c="k",
                            label=f"{variant} (published preset): "
                            f"{row['collision_domain_s']:g} s in a collision domain")  # fmt: skip
-    axes[0][0].legend(fontsize=7)
-    fig.suptitle("Tuned fronts re-run on the held-out realisations (means over the runs; "
-                 "lower is better)", fontsize=10)  # fmt: skip
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return Path(path)
+    for ax, (a, b) in zip(axes[0], pairs, strict=True):
+        ax.set_xlabel(axis_label(a))
+        ax.set_ylabel(axis_label(b))
+        ax.grid(alpha=0.3)
+    handles, labels = axes[0][0].get_legend_handles_labels()
+    # below the panels: inside a panel ("best" place) it covered a data point
+    fig.legend(handles, labels, loc="outside lower center", fontsize=7,
+               ncol=1 if len(pairs) == 1 else 2)  # fmt: skip
+    # two lines: on one panel (5.2 in wide) one line was cut at both ends; which way is
+    # better is on each axis (it was "lower is better" for all, reliable_fixes too)
+    fig.suptitle("Tuned fronts re-run on the held-out realisations\n(means over the runs; "
+                 "each axis says which way is better)", fontsize=10)  # fmt: skip
+    return fig
 
 
 def register_compare(tsub) -> None:

@@ -52,6 +52,7 @@ from mpcasv.experiments.tune_jobs import (
     trial_jobs,
 )
 from mpcasv.experiments.tune_space import TuneSpec
+from mpcasv.wording import count
 
 STUDY_NAME = "tune-controller"
 
@@ -253,7 +254,8 @@ def search(spec: TuneSpec, out: str | Path, workers: int = 1, dask: str | None =
                     if invalid[t.number] is None}  # fmt: skip
             first, last = batch[0].number, batch[-1].number
             if not quiet:
-                print(f"trials {first}-{last} of {spec.trials}: {len(jobs)} x {len(train)} runs "
+                print(f"trials {first}-{last} of {spec.trials}: {len(jobs)} x "
+                      f"{count(len(train), 'run')} "
                       f"({len(batch) - len(jobs)} refused by the preset)")  # fmt: skip
             rows = run_batch([j for js in jobs.values() for j in js], out / "train", workers,
                              dask, quiet, f"trials {first}-{last}")  # fmt: skip
@@ -296,7 +298,7 @@ def evaluate_heldout(spec: TuneSpec, study, out: str | Path, workers: int = 1,
     (out / "heldout").mkdir(parents=True, exist_ok=True)  # checked by open_study
     (out / "heldout" / "seeds.json").write_text(json.dumps(list(spec.heldout_seeds)) + "\n")
     if not quiet:
-        print(f"held-out: {len(front)} front trials x {len(base)} runs (seeds "
+        print(f"held-out: {count(len(front), 'front trial')} x {count(len(base), 'run')} (seeds "
               f"{list(spec.heldout_seeds)})")  # fmt: skip
     t0 = time.perf_counter()
     rows = run_batch([j for js in jobs.values() for j in js], out / "heldout", workers, dask,

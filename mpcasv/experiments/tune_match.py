@@ -38,6 +38,7 @@ from pathlib import Path
 import pandas as pd
 
 from mpcasv.config import ConfigError
+from mpcasv.wording import count
 
 
 @dataclass(frozen=True)
@@ -150,8 +151,8 @@ def choose_front(label: str, front: str, at: str, level: float, base: Path, wher
         unit = METRIC_INFO[at].unit
         # full precision: a bound shown rounded (20689.6) could not be typed back as a level
         raise ConfigError(f"{where}: level = {level!r} {unit} is outside the front's {at} "
-                          f"range [{low!r}, {high!r}] ({source} means of {len(rows)} points in "
-                          f"{folder})")  # fmt: skip
+                          f"range [{low!r}, {high!r}] ({source} means of "
+                          f"{count(len(rows), 'point')} in {folder})")  # fmt: skip
     dist = (rows[col] - level).abs()
     best = rows.assign(_d=dist).sort_values(["_d", "trial"]).iloc[0]
     trial = int(best["trial"])
@@ -186,7 +187,7 @@ def matched_table(fronts: list[FrontChoice], results: pd.DataFrame) -> pd.DataFr
         rows.append({"label": c.label, "controller": c.controller, "front": str(c.folder),
                      "at": c.at, "level": c.level, "trial": c.trial,
                      "front level": _g(c.front_level), "from": f"{c.source} means",
-                     "front range": f"[{c.low:.5g}, {c.high:.5g}] ({c.candidates} points)",
+                     "front range": f"[{c.low:.5g}, {c.high:.5g}] ({count(c.candidates, 'point')})",
                      "achieved": _g(achieved), "runs": len(ok),
                      "achieved / level - 1": _g(rel)})  # fmt: skip
     return pd.DataFrame(rows).set_index("label")

@@ -26,6 +26,7 @@ import pandas as pd
 from mpcasv.experiments.tune_controller import front_trials
 from mpcasv.experiments.tune_jobs import heldout_jobs, training_jobs, trial_jobs
 from mpcasv.experiments.tune_space import TuneSpec
+from mpcasv.wording import count
 
 
 def trials_table(spec: TuneSpec, study) -> pd.DataFrame:
@@ -194,14 +195,15 @@ def front_figure(spec: TuneSpec, trials: pd.DataFrame, front: pd.DataFrame):
     import matplotlib.pyplot as plt
     from matplotlib.ticker import MaxNLocator
 
-    from mpcasv.experiments.metrics import METRIC_INFO
+    from mpcasv.experiments.metric_info import axis_label
 
     # one objective: against the trial number (it was drawn against itself, a diagonal)
     pairs = list(itertools.combinations(spec.objectives, 2)) or [("trial", spec.objectives[0])]
     # at most three panels a row: four objectives (six pairs) made a strip too wide to read
     ncols = min(3, len(pairs))
     nrows = math.ceil(len(pairs) / ncols)
-    fig, grid = plt.subplots(nrows, ncols, figsize=(5.2 * ncols, 4.4 * nrows), squeeze=False)
+    fig, grid = plt.subplots(nrows, ncols, figsize=(5.2 * ncols, 4.4 * nrows + 0.6),
+                             squeeze=False, layout="constrained")  # fmt: skip
     for ax in grid.ravel()[len(pairs):]:
         ax.set_visible(False)
     axes = [grid.ravel()[: len(pairs)]]
@@ -224,17 +226,18 @@ def front_figure(spec: TuneSpec, trials: pd.DataFrame, front: pd.DataFrame):
             for _, r in front.iterrows():
                 ax.annotate(str(int(r["trial"])), (r[f"train.{a}"], r[f"train.{b}"]),
                             fontsize=7, xytext=(3, 3), textcoords="offset points")  # fmt: skip
-        ax.set_xlabel("trial" if a == "trial" else
-                      f"{a} ({METRIC_INFO[a].unit}, {METRIC_INFO[a].better} is better)")
-        ax.set_ylabel(f"{b} ({METRIC_INFO[b].unit}, {METRIC_INFO[b].better} is better)")
+        ax.set_xlabel("trial" if a == "trial" else axis_label(a))
+        ax.set_ylabel(axis_label(b))
         # at most 5 x ticks: 7-digit labels (0.00722, 0.00724, ...) ran into each other
         ax.xaxis.set_major_locator(MaxNLocator(nbins=5, integer=a == "trial"))
         ax.grid(alpha=0.3)
-    axes[0][0].legend(fontsize=7)
+    handles, labels = axes[0][0].get_legend_handles_labels()
+    # below the panels: inside the first one ("best" place) it covered a point
+    fig.legend(handles, labels, loc="outside lower center", fontsize=7,
+               ncol=2 if ncols == 1 else len(labels))  # fmt: skip
     # two lines: on one panel (two objectives, 5.2 in wide) one line was cut at both edges
     fig.suptitle(f"{spec.controller}: {len(done)} complete trials\ntraining means vs held-out "
                  "means of the training front", fontsize=10)  # fmt: skip
-    fig.tight_layout()
     return fig
 
 
@@ -320,17 +323,18 @@ def _report(spec: TuneSpec, s: dict, front: pd.DataFrame, imp: pd.DataFrame) -> 
         f"- objectives (means over the training runs): {', '.join(s['objectives'])}; "
         f"constraint: {s['constraint'] or 'none'} = 0 on every training run (Optuna "
         "`Trial.set_constraint`, read by the sampler; no penalty)",
-        f"- sampler {spec.sampler}, batches of {spec.batch} trials, seed {spec.seed}",
-        f"- **budget: {spec.trials} trials**; states {s['trials']}; feasible "
-        f"{s['feasible_trials']}; {s['runs']['training']} training runs "
+        f"- sampler {spec.sampler}, batches of {count(spec.batch, 'trial')}, seed {spec.seed}",
+        f"- **budget: {count(spec.trials, 'trial')}**; states {s['trials']}; feasible "
+        f"{s['feasible_trials']}; {count(s['runs']['training'], 'training run')} "
         f"({tr['runs_per_trial']} per trial; none for a trial the preset refuses)",
         *([f"- **no feasible trial**: the smallest summed {spec.constraint} is "
            f"{s['least_violation'][1]:.4g} (trial {s['least_violation'][0]}); no front"]
           if spec.constraint and not s["feasible_trials"] and s["least_violation"] else []),
         f"- training: scenarios {tr['scenarios']}, seeds {tr['seeds']}, duration "
         f"{tr['duration_s']} s; realisations {tr['realisations']}",
-        f"- held-out: the {ho['front_trials_run']} front trials x {ho['runs_per_trial']} runs "
-        f"(seeds {ho['seeds']}; realisations {ho['realisations']}); {s['runs']['heldout']} runs",
+        f"- held-out: the {count(ho['front_trials_run'], 'front trial')} x "
+        f"{count(ho['runs_per_trial'], 'run')} (seeds {ho['seeds']}; realisations "
+        f"{ho['realisations']}); {count(s['runs']['heldout'], 'run')}",
         f"- wall time: search {w['search']:.0f} s over {w['sessions']} session(s), held-out "
         f"{w['heldout']:.0f} s", "",
         "## Training front and held-out values", "",
