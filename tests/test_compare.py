@@ -191,3 +191,37 @@ def test_an_unwritable_runs_dir_is_refused_before_any_job(tmp_path, capsys):
     assert not out.exists()
     check_runs_location(f"file://{tmp_path / 'remote'}", None)  # no exception
     assert (tmp_path / "remote").is_dir() and not any((tmp_path / "remote").iterdir())
+
+
+def test_a_second_compare_on_a_busy_folder_is_refused(tmp_path, capsys):
+    """Two sweeps in one folder ran the same jobs side by side and both rewrote
+    results.parquet and the report; the second is refused at once, exit 2, one line."""
+    from mpcasv.experiments.sweep_folder import LOCK_FILE
+    from mpcasv.outputs import folder_lock
+
+    out = tmp_path / "out"
+    with folder_lock(out, "mpcasv compare", LOCK_FILE):  # a first compare at work
+        assert main(["compare", "quick", "--out", str(out), "--quiet"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "another 'mpcasv compare' is working in this folder" in err[0], err
+    assert not (out / "parts").exists()
+
+
+def test_a_resumed_sweep_removes_what_a_killed_one_left_half_written(serial, tmp_path):
+    """A kill -9 left hidden temporary copies (runs/.<run name>.*, parts/.*.tmp) that no
+    resume removed; the next sweep in the folder removes those of its jobs."""
+    import shutil
+
+    _, done, _ = serial
+    out = tmp_path / "out"
+    shutil.copytree(done, out)
+    job = QUICK.jobs[0]
+    (out / "parts" / f"{job.job_id}.parquet").unlink()  # the job the kill interrupted
+    stale_run = out / "runs" / f".{job.run_name}.k1ll3d"
+    stale_run.mkdir()
+    (stale_run / "timeseries.parquet").write_bytes(b"half")
+    stale_part = out / "parts" / f".{job.job_id}.999.abcdef12.tmp"
+    stale_part.write_bytes(b"half")
+    assert main(["compare", "quick", "--out", str(out), "--quiet", "--no-report"]) == 0
+    assert not stale_run.exists() and not stale_part.exists()
+    assert (out / "runs" / job.run_name / "metrics.json").is_file()

@@ -45,12 +45,15 @@ from mpcasv.experiments.job_worker import run_job, timeout_row
 from mpcasv.experiments.store import done_ids, write_part, write_results
 from mpcasv.experiments.suite import Expansion, Job, expand
 from mpcasv.experiments.sweep_folder import (
+    LOCK_FILE,
     check_runs_location,
     check_suite_folder,
     is_url,
+    remove_leftovers,
     runs_location,
 )
 from mpcasv.experiments.workers import pool_size, reduced_note
+from mpcasv.outputs import folder_lock
 from mpcasv.wording import count
 
 #: default time limit of one job on a local pool (s): generous (a 1500 s MPC run with three
@@ -256,7 +259,16 @@ def run_suite(suite: str | Path, out: str | Path, workers: int = 1, dask: str | 
         from mpcasv.experiments.dask_runner import check_dask_cluster
 
         check_dask_cluster(dask, todo)
-    out.mkdir(parents=True, exist_ok=True)
+    # a second compare on this folder is refused (it ran the same jobs beside the first and
+    # both rewrote results.parquet and the report); a crashed one leaves no stale lock
+    with folder_lock(out, "mpcasv compare", LOCK_FILE):
+        remove_leftovers(out, runs, [] if dask else todo)
+        return _run_locked(exp, out, runs, runs_dir, todo, workers, dask, quiet, report,
+                           job_timeout)  # fmt: skip
+
+
+def _run_locked(exp, out, runs, runs_dir, todo, workers, dask, quiet, report, job_timeout):
+    """:func:`run_suite` once the folder is locked: run ``todo``, write the table and report."""
     (out / "suite.toml").write_bytes(exp.path.read_bytes())
     stats = SweepStats(exp.suite.name, len(exp.jobs), len(exp.jobs) - len(todo), workers=workers)
     stats.runs = runs if (runs_dir or not dask) else f"{runs} in each Dask worker's directory"

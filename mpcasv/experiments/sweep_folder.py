@@ -80,3 +80,30 @@ def check_runs_location(runs: str, dask: str | None) -> None:
         raise ConfigError(f"--runs-dir {runs}: cannot write run folders there ({cause})") from None
 
 
+
+
+#: the lock file a running ``mpcasv compare`` holds in its output folder
+LOCK_FILE = "compare.lock"
+
+
+def remove_leftovers(out: Path, runs: str, jobs) -> int:
+    """Remove what killed sweeps left half-written in ``out`` (the run folders' and parts'
+    temporary copies: ``runs/.<run name>.*``, ``parts/.*.tmp``) for the jobs about to run;
+    return how many. Only under the folder's lock (:data:`LOCK_FILE`): no other sweep writes
+    there then. A ``kill -9`` left them, and resuming never removed them. Run folders at an
+    fsspec URL or on Dask workers' own disks are left alone."""
+    import shutil
+
+    n = 0
+    if not is_url(runs) and Path(runs).is_dir():
+        for job in jobs:
+            for tmp in Path(runs).glob(f".{job.run_name}.*"):
+                if tmp.is_dir():
+                    shutil.rmtree(tmp, ignore_errors=True)
+                    n += 1
+    parts = out / "parts"
+    if parts.is_dir():
+        for tmp in parts.glob(".*.tmp"):
+            tmp.unlink(missing_ok=True)
+            n += 1
+    return n
