@@ -3,7 +3,9 @@
 Each sub-command lives beside the code it drives (``mpcasv/<package>/commands.py``) and
 registers itself through ``register(subparsers)``; this module only assembles them and turns
 every expected failure (bad configuration, bad or unsupported input files) into one line
-naming the file and the cause, with exit code 2 (:func:`input_error`).
+naming the file and the cause, with exit code 2 (:func:`input_error`), and a stdout closed
+by its reader (``mpcasv ... | head -1``) into a quiet end with :data:`SIGPIPE_STATUS`
+(:func:`main`).
 """
 
 from __future__ import annotations
@@ -12,6 +14,7 @@ import argparse
 import importlib
 import json
 import os
+import select
 import sys
 import tomllib
 
@@ -30,6 +33,11 @@ COMMAND_MODULES = (
     "mpcasv.bench",  # bench
     "mpcasv.mpc.hung_cli",  # replay-solve
 )
+
+#: exit status of a command whose stdout was closed by its reader before the command had
+#: written all of it: 128 + SIGPIPE (13), what a shell reports for a tool such a pipe ends
+#: (``yes | head -1``); Python ignores SIGPIPE, so the write fails with BrokenPipeError instead
+SIGPIPE_STATUS = 141
 
 
 class OneLineParser(argparse.ArgumentParser):
@@ -98,6 +106,21 @@ def _file_being_read(exc: BaseException) -> str:
     return "input file"
 
 
+def stdout_closed() -> bool:
+    """Whether stdout is a pipe (or socket) whose reader has gone, so that writing to it fails
+    with EPIPE: ``poll`` reports an error on it (Linux). False when stdout has no file
+    descriptor (replaced, as under pytest's capture); True where ``poll`` is missing."""
+    try:
+        fd = sys.stdout.fileno()
+    except (AttributeError, OSError, ValueError):
+        return False
+    if not hasattr(select, "poll"):
+        return True
+    poller = select.poll()
+    poller.register(fd, select.POLLOUT)
+    return any(events & (select.POLLERR | select.POLLHUP) for _, events in poller.poll(0))
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run ``mpcasv``: 0 success, 1 ran and a check of the command failed, said on the
     output (``compare``: a job failed or was lost; ``tune yaw``/``tune speed``: a design
@@ -105,7 +128,36 @@ def main(argv: list[str] | None = None) -> int:
     ``--require-margin`` the worst margin is below it; ``deploy``: the run made no decision;
     ``identify``: the held-out validation FAILs; a suite's ``[acceptance]`` verdict is a
     result in the report, not such a check), 2 bad input (one line on stderr naming the file
-    and the cause), 130 interrupted. An unexpected exception (a bug) keeps its traceback."""
+    and the cause), 130 interrupted, :data:`SIGPIPE_STATUS` (141) stdout closed by its reader
+    (``mpcasv compare ... | head -1``). An unexpected exception (a bug) keeps its traceback.
+
+    A closed stdout ends the command at its first write after the reader went, as SIGPIPE
+    ends a Unix tool: quietly (no message: the reader left on purpose), its work up to then
+    kept (``compare``: the finished jobs, and resuming runs the others), exit 141 whatever
+    the work's own status would have been (the command was cut short, or its summary was).
+    Before, the BrokenPipeError was taken for bad input: "error: Broken pipe", exit 2, after
+    a sweep had run. An EPIPE of another pipe or socket stays such an error
+    (:func:`stdout_closed`). argparse's own output (``--help``, a usage error) ignores a
+    closed stdout by itself.
+    """
+    try:
+        status = _main(argv)
+        if sys.stdout is not None:  # a closed stdout shows here at the latest, not at exit
+            sys.stdout.flush()
+        return status
+    except BrokenPipeError:
+        if not stdout_closed():
+            raise
+        # the Python docs' recipe ("Note on SIGPIPE"): stdout to devnull, so that Python's
+        # own flush at exit does not fail again on what is still buffered
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        return SIGPIPE_STATUS
+
+
+def _main(argv: list[str] | None) -> int:
+    """:func:`main` but for a closed stdout: a BrokenPipeError on it is raised, not taken
+    for bad input."""
     try:  # building the parser imports the commands' modules: a Ctrl-C may come there too
         args = build_parser().parse_args(argv)
     except KeyboardInterrupt:
@@ -118,7 +170,7 @@ def main(argv: list[str] | None = None) -> int:
         return 130
     except Exception as exc:
         message = input_error(exc)
-        if message is None:
+        if message is None or (isinstance(exc, BrokenPipeError) and stdout_closed()):
             raise
         print(f"mpcasv {args.command}: error: {message}", file=sys.stderr)
         return 2
