@@ -81,3 +81,19 @@ def test_a_broken_pipe_that_is_not_stdout_stays_an_error(monkeypatch, tmp_path, 
     monkeypatch.setattr(commands, "run", broken)
     assert main(["compare", "--out", str(tmp_path / "out")]) == 2
     assert capsys.readouterr().err == "mpcasv compare: error: Broken pipe\n"
+
+
+def test_stdout_closed_tells_an_open_pipe_from_one_whose_reader_left(monkeypatch):
+    """What decides between the quiet 141 and the one-line error: ``poll`` on stdout's
+    descriptor (the test above passes through a stdout without one)."""
+    import os
+
+    from mpcasv.cli import stdout_closed
+
+    r, w = os.pipe()
+    with os.fdopen(w, "w") as writer:
+        monkeypatch.setattr("sys.stdout", writer)
+        assert not stdout_closed()  # a reader is there
+        os.close(r)
+        assert stdout_closed()  # it left
+        monkeypatch.undo()

@@ -158,6 +158,10 @@ def test_a_job_id_holds_the_content_of_the_vessel_and_execution_files(tmp_path):
         assert not set(ids()) & set(first), name
         path.write_text(before)
     assert ids() == first
+    # a copy of another shipped vessel under the same file name is another boat (the ids
+    # held only "is it some shipped vessel's content": gretha's results for an Otter)
+    (tmp_path / "v.toml").write_text((data / "vessels" / "otter.toml").read_text())
+    assert not set(ids()) & set(first)
     # the shipped paper suite's ids as before (its results folders resume): measured on
     # e7ed1a5, before the boat's content was in the id
     paper = expand("paper").jobs

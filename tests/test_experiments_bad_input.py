@@ -221,6 +221,18 @@ def test_a_controller_for_fewer_auvs_than_the_family_is_refused_before_any_trial
     assert not out.exists()
 
 
+def test_a_second_falsify_on_a_busy_folder_is_refused(tmp_path, capsys):
+    """A second search in a folder took the first one's running trials for a killed search's
+    and ran them again (Optuna then raised UpdateFinishedTrialError in one of them)."""
+    from mpcasv.outputs import folder_lock
+
+    out = tmp_path / "out"
+    with folder_lock(out, "mpcasv falsify", "falsify.lock"):  # a first search at work
+        assert _falsify(FAMILY, out, "--params", "paper1-field") == 2
+    _one_error_line(capsys, "another 'mpcasv falsify' is working in this folder")
+    assert not (out / "study.db").exists()
+
+
 def test_a_range_end_giving_an_invalid_scenario_is_refused(tmp_path, capsys):
     text = FAMILY.read_text()
     start = text.index('name = "p_good"')

@@ -23,6 +23,7 @@ from mpcasv.config import ConfigError
 from mpcasv.experiments.job_worker import run_job
 from mpcasv.experiments.runner import SweepStats, finish_job, record_row
 from mpcasv.experiments.suite import Job
+from mpcasv.wording import count
 
 __all__ = ["WORKER_WAIT_S", "check_dask_cluster", "check_dask_workers", "connect",
            "hang_guarded", "run_dask", "wait_for_a_worker", "worker_count"]  # fmt: skip
@@ -66,7 +67,7 @@ def worker_count(client) -> int:
     answer (it is gone: no worker of it will run a job either)."""
     try:
         return len(client.nthreads())
-    except (OSError, TimeoutError):
+    except (OSError, TimeoutError, RuntimeError):  # (a closed pool: "ConnectionPool is closed")
         return 0
 
 
@@ -112,6 +113,8 @@ def check_dask_workers(client, jobs: list[Job], address: str) -> None:
     """
     from mpcasv.mpc.deadline import DAEMON_FIX
 
+    if not jobs:  # a finished sweep rerun for its report: no worker needed (a review)
+        return
     wait_for_a_worker(client, address)
     guarded = hang_guarded(jobs)
     if not guarded:
@@ -205,7 +208,7 @@ def run_dask(jobs: list[Job], out: Path, runs: str, stats: SweepStats, address: 
             elif now - no_worker_since >= WORKER_WAIT_S:  # give up: the jobs left are lost
                 client.cancel(list(left))
                 stats.lost += len(left)
-                bar.write(f"lost {len(left)} jobs not finished: no Dask worker for "
+                bar.write(f"lost {count(len(left), 'job')} not finished: no Dask worker for "
                           f"{WORKER_WAIT_S:g} s at {address}; rerun the same command to "
                           "resume")  # fmt: skip
                 bar.update(len(left))

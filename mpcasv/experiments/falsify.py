@@ -151,13 +151,22 @@ class SearchSetup:
     seed: int = 0
     r_sep: float | None = None
     objective: Objective = "margin"
+    #: the preset as the user named it (``--params``; None: the family's or none), in the
+    #: study's name: the same command resumes its study from any working folder
+    named: str | None = None
 
     def scenario(self, params: dict, label: str):
         """``(Scenario, dict)`` of one candidate as it is run and written: the family's
         template with ``params``, this controller and this preset. Until session 44 the runs
         took the family's template as it was (no preset: no domain, no power turn) and the
         written worst case named the preset: ``simulate`` of it ran another world (the
-        hybrid's worst margin -36.72 m in the search, -34.28 m in the file)."""
+        hybrid's worst margin -36.72 m in the search, -34.28 m in the file).
+
+        Raises
+        ------
+        ConfigError
+            ``params`` give an invalid scenario (``label`` names the candidate).
+        """
         from mpcasv.sim.scenario import scenario_from_dict
 
         data = {**substitute(self.family, params), "controller": self.controller}
@@ -185,8 +194,11 @@ def search(setup: SearchSetup, storage_path: Path, budget: int, workers: int = 1
     (complete, or failed with their ``error``) are kept and counted. Trials a killed search
     left running are run again first, with their parameters and under their numbers, and
     each batch's sampler is seeded from the search's seed and the number of trials asked
-    before it (:func:`batch_seed`), so a killed and resumed search asks and runs what the
-    search run at once does. (Until session 44 the interrupted trials were marked failed and
+    before it (:func:`batch_seed`), so a search killed while its runs go and resumed asks and
+    runs what the search run at once does. Not if it was stopped while a batch was being asked
+    (milliseconds between runs): the batches after it start from other trial counts; nor when
+    a finished search's budget, not a multiple of :data:`BATCH`, is raised (its last batch was
+    short). (Until session 44 the interrupted trials were marked failed and
     others asked in their place, and the sampler's generator ran on from its seed in each
     process: a resumed search was another search, and its worst case could be missed.)
     """
@@ -197,7 +209,8 @@ def search(setup: SearchSetup, storage_path: Path, budget: int, workers: int = 1
 
     optuna.logging.set_verbosity(optuna.logging.WARNING)
     storage = optuna.storages.RDBStorage(f"sqlite:///{storage_path}")
-    name = f"{setup.family.name}-{setup.controller}-{setup.preset or 'default'}-{setup.objective}"
+    named = setup.named or (Path(setup.preset).stem if setup.preset else "default")
+    name = f"{setup.family.name}-{setup.controller}-{named}-{setup.objective}"
     study = optuna.create_study(study_name=name, storage=storage, direction="minimize",
                                 load_if_exists=True)  # fmt: skip
     study_id = storage.get_study_id_from_name(name)

@@ -50,10 +50,10 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from mpcasv.experiments.falsify import BATCH, search, time_ranges, trials_table
+    from mpcasv.experiments.falsify import time_ranges
     from mpcasv.experiments.falsify_family import corner_warning
     from mpcasv.experiments.falsify_folder import record_study
-    from mpcasv.experiments.workers import pool_size, reduced_note
+    from mpcasv.outputs import folder_lock
 
     setup, out, identity = check_inputs(args)  # every refusal: before any trial or file
     corners = corner_warning(setup.family)
@@ -67,7 +67,18 @@ def run(args: argparse.Namespace) -> int:
               f"evaluation domain, so no escape power turn and null domain metrics; the "
               f"margin is measured against {args.controller}'s default r_in",
               file=sys.stderr)  # fmt: skip
-    record_study(out, identity)
+    # a second search in the folder took the first one's running trials for a killed
+    # search's and ran them again: Optuna's UpdateFinishedTrialError (a review)
+    with folder_lock(out, "mpcasv falsify", "falsify.lock"):
+        record_study(out, identity)
+        return _search_and_write(args, setup, out)
+
+
+def _search_and_write(args: argparse.Namespace, setup, out: Path) -> int:
+    """:func:`run` once the folder is locked: the search, its table and the worst cases."""
+    from mpcasv.experiments.falsify import BATCH, search, trials_table
+    from mpcasv.experiments.workers import pool_size, reduced_note
+
     used = pool_size(args.workers, min(BATCH, args.budget))  # runs going at once
     if used < args.workers and not args.quiet:
         print(f"{used} worker processes" + reduced_note(args.workers, used, "the most runs that "
@@ -178,7 +189,7 @@ def check_inputs(args: argparse.Namespace):
     check_output_folder(out)
     check_not_other_output(out, "mpcasv falsify")  # a compare or tune folder: refused
     setup = SearchSetup(family, args.controller, preset, args.seed, args.separation,
-                        args.objective)  # fmt: skip
+                        args.objective, named=args.params)  # fmt: skip
     identity = study_identity(family, args.controller, args.params, params, args.seed,
                               args.objective, args.separation)  # fmt: skip
     check_study_folder(out, identity)  # another search there: refused, not mixed

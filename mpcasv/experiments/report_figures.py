@@ -103,7 +103,8 @@ def forest_figure(table: pd.DataFrame, metrics: Sequence[HeadlineMetric], path: 
                 right.append(f"no difference (all {r['n']} zero)")
             elif noise[r.name]:  # zero but for rounding: at 0, its value on the right
                 ax.plot(0.0, yi, "o", color=c, ms=5)
-                right.append(f"0 to float precision ({num(r['median'])}) n={r['n']}")
+                why = f" ({r['note']})" if not np.isfinite(r["ci_low"]) and r["note"] else ""
+                right.append(f"0 to float precision ({num(r['median'])}) n={r['n']}{why}")
             elif np.isfinite(r["ci_low"]):
                 ax.errorbar(r["median"], yi, xerr=[[r["median"] - r["ci_low"]],
                             [r["ci_high"] - r["median"]]], fmt="o", color=c, ms=5,

@@ -262,7 +262,11 @@ def run_suite(suite: str | Path, out: str | Path, workers: int = 1, dask: str | 
     # a second compare on this folder is refused (it ran the same jobs beside the first and
     # both rewrote results.parquet and the report); a crashed one leaves no stale lock
     with folder_lock(out, "mpcasv compare", LOCK_FILE):
-        remove_leftovers(out, runs, [] if dask else todo)
+        # again under the lock: a sweep that ended while this one waited (the Dask check)
+        # ran jobs this one would otherwise run again (a review)
+        todo = pending_jobs(exp, out, retry_errors)
+        # temporaries of the default run folder only: a --runs-dir may be another sweep's too
+        remove_leftovers(out, runs if not (dask or runs_dir) else None, todo)
         return _run_locked(exp, out, runs, runs_dir, todo, workers, dask, quiet, report,
                            job_timeout)  # fmt: skip
 

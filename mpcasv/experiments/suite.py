@@ -124,22 +124,27 @@ def _digest(obj) -> str:
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
-#: The vessels' and execution levels' parameter hashes (:func:`~mpcasv.controllers.registry.
-#: parameter_hash`) that leave a job id as it was before the boat's content was in it: the
-#: shipped files' as of session 44 (frozen: a shipped file edited since has another hash, and
-#: its jobs other ids). Until then a job id hashed the scenario's ``asv.vessel`` and
+#: The shipped vessel and execution files, by name, whose content as of session 44 (their
+#: :func:`~mpcasv.controllers.registry.parameter_hash`) leaves a job id as it was before the
+#: boat's content was in it (frozen: a shipped file edited since has another hash, and its
+#: jobs other ids). Until then a job id hashed the scenario's ``asv.vessel`` and
 #: ``asv.execution`` as named, not their content: a resumed sweep served the results of a
-#: vessel file as it was before an edit (m 910 -> 1500 kg, a new user's finding).
+#: vessel file as it was before an edit (m 910 -> 1500 kg, a new user's finding). A folder
+#: written before a shipped file last changed (dune-otter.toml: 2e408ce) is still served as it
+#: was: the id held no content then.
 BOAT_AS_BEFORE = {
-    "vessel": frozenset({"218eea6e38a6bb98", "73e7e76be2487952", "f93134a3933d5309"}),
-    "execution": frozenset({"91e3a909697bdb5e"}),
+    ("vessel", "gretha"): "218eea6e38a6bb98",
+    ("vessel", "dune-otter"): "73e7e76be2487952",
+    ("vessel", "otter"): "f93134a3933d5309",
+    ("execution", "gretha"): "91e3a909697bdb5e",
 }
 
 
 def boat_digest(sc) -> list[str]:
-    """What a job id holds of scenario ``sc``'s boat: ``[]`` for a vessel and an execution
-    level whose content is a shipped file's as of session 44 (:data:`BOAT_AS_BEFORE`: the
-    ids of earlier results folders stay), else both parameter hashes.
+    """What a job id holds of scenario ``sc``'s boat: ``[]`` when it names shipped files (by
+    name, not path) whose content is still session 44's (:data:`BOAT_AS_BEFORE`: the ids of
+    earlier results folders stay), else both parameter hashes (any file given as a path, so
+    a user's copy swapped between two shipped vessels' contents changes the id too).
 
     Raises
     ------
@@ -150,7 +155,8 @@ def boat_digest(sc) -> list[str]:
 
     boat = Boat.load(sc.asv.vessel, sc.asv.execution)
     hashes = {"vessel": parameter_hash(boat.vessel), "execution": parameter_hash(boat.execution)}
-    if all(h in BOAT_AS_BEFORE[k] for k, h in hashes.items()):
+    named = {"vessel": str(sc.asv.vessel), "execution": str(sc.asv.execution)}
+    if all(BOAT_AS_BEFORE.get((k, named[k])) == h for k, h in hashes.items()):
         return []
     return [f"{k}={h}" for k, h in sorted(hashes.items())]
 

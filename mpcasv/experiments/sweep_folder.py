@@ -86,16 +86,17 @@ def check_runs_location(runs: str, dask: str | None) -> None:
 LOCK_FILE = "compare.lock"
 
 
-def remove_leftovers(out: Path, runs: str, jobs) -> int:
+def remove_leftovers(out: Path, runs: str | None, jobs) -> int:
     """Remove what killed sweeps left half-written in ``out`` (the run folders' and parts'
     temporary copies: ``runs/.<run name>.*``, ``parts/.*.tmp``) for the jobs about to run;
     return how many. Only under the folder's lock (:data:`LOCK_FILE`): no other sweep writes
-    there then. A ``kill -9`` left them, and resuming never removed them. Run folders at an
-    fsspec URL or on Dask workers' own disks are left alone."""
+    there then. A ``kill -9`` left them, and resuming never removed them. ``runs`` None:
+    the run folders are not this folder's alone (a ``--runs-dir``, which another sweep may
+    share, or Dask workers' own disks) and are left alone."""
     import shutil
 
     n = 0
-    if not is_url(runs) and Path(runs).is_dir():
+    if runs is not None and not is_url(runs) and Path(runs).is_dir():
         for job in jobs:
             for tmp in Path(runs).glob(f".{job.run_name}.*"):
                 if tmp.is_dir():
