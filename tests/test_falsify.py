@@ -300,6 +300,13 @@ PINNED: dict[str, tuple[float, float]] = {
     # m, 0 s (ungated: -12.270 m, 24 s; docs/mpc.md "Closed loop ... session 39")
     "falsified-pursuer-single-mpc-single-1": (8.394, 0),  # 6.109/0 8.664/0 3.473/0 -2.063/4
     # {0.443, 0}
+    # session 44's searches (docs/safety.md "Session 44"), the first whose runs are the
+    # written scenarios (the preset's domain and the power turn in every trial): their worst
+    # cases as found, the searches' margins exactly. The MPC's is an estimation failure (the
+    # Kalman estimate of the pursuer 55-109 m off while it closes to 0.55 m; p_good 0.36):
+    # a change that keeps the ASV off the AUV here moves this pin, which is the point
+    "falsified-pursuer-single-hybrid-single-s44": (-43.003, 57),
+    "falsified-pursuer-single-mpc-single-s44": (-49.155, 199),
 }
 #: chaotic cases: bounds (margin at least, longest stay at most) around the spread of the run
 #: over the last bits of the floating point. The mpc-multi case's last bits depend on the CPU
