@@ -210,6 +210,7 @@ def test_the_estimator_harness_leaves_plan_out_where_no_auv_has_one(tmp_path, ca
     assert evaluate([str(short)]) == 0
     out = capsys.readouterr().out
     assert "plan left out" in out
+    assert "means over seeds 0 of" in out  # which seeds (0 alone unless --seeds says)
     rows = re.findall(r"(?m)^(\w+)\s+[-\d.]+\s", out)  # the table's rows: estimator, figures
     assert rows == ["acoustic", "kalman"], out
 

@@ -247,7 +247,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("--estimators", nargs="+",
                     help=f"default: {' '.join(DEFAULT_ESTIMATORS)} ('plan' left out, and said, "
                     "where no AUV has a plan)")  # fmt: skip
-    ap.add_argument("--seeds", nargs="+", type=int, default=[0])
+    ap.add_argument("--seeds", nargs="+", type=int, default=[0],
+                    help="world seeds the table averages over (default: 0 only; "
+                    "docs/estimation.md's table uses 0 1 2 3 4)")  # fmt: skip
     ap.add_argument("--controller")
     ap.add_argument("--preset")
     ap.add_argument("--plot", type=Path,
@@ -287,6 +289,10 @@ def _run(args: argparse.Namespace, load_scenario) -> int:
         check_plan_estimator(sc, est, f"--estimators {est}", "--estimators without plan")
     table = compare_estimators(sc, args.estimators, args.seeds, args.controller, args.preset,
                                progress=True)  # fmt: skip
+    # which seeds the means are over (with none given, seed 0 alone: a new user compared it
+    # with the docs' five-seed table and found other numbers)
+    print(f"means over seeds {' '.join(map(str, args.seeds))} of {sc.name}"
+          + ("" if len(args.seeds) > 1 else " (--seeds S1 S2 ... for more)"))
     with pd.option_context("display.width", 200, "display.max_columns", 20, "display.precision", 2):
         print(table.groupby("estimator", sort=False).mean(numeric_only=True).drop(columns="seed"))
     if "kalman" in args.estimators and "acoustic" in args.estimators:
