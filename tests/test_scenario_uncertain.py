@@ -309,3 +309,14 @@ def test_scenarios_without_uncertainty_draw_the_empty_realisation(scenarios_dir)
         "name": "a", "behaviour": {"transit": {"heading_deg": 0.0, "speed": 1.0}}}]})
     done, real = realise(sc, 7)
     assert real.values == {} and done == sc
+
+
+@pytest.mark.parametrize(("name", "word"), [("lauv.v2", "no '.' or ','"),
+                                            ("lauv, roald", "no '.' or ','"),
+                                            ("all", "every AUV")])  # fmt: skip
+def test_an_auv_name_that_cannot_be_a_key_is_refused(tmp_path, capsys, name, word):
+    """A '.' left every value drawn for ``lauv.v2`` unapplied (run.json listed them), a ','
+    crashed compare's report (the results' comma-joined AUV list read three AUVs for two), and
+    an AUV called ``all`` took [uncertain.auv.all] for its own (a new user, session 44)."""
+    path = write(tmp_path, BASE.replace('name = "a"', f'name = "{name}"', 1))
+    assert_refused_in_one_line(path, word, tmp_path / "o", capsys)

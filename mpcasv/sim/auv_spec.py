@@ -12,9 +12,9 @@ Behaviours: ``plan``, ``pursuer``, ``transit``, ``loiter`` (exactly one). Events
 from __future__ import annotations
 
 import math
-from typing import Literal
+from typing import Annotated, Literal
 
-from pydantic import model_validator
+from pydantic import AfterValidator, model_validator
 
 from mpcasv.config import (
     AUV_SPEED_MAX,
@@ -280,9 +280,27 @@ class Event:
         ))  # fmt: skip
 
 
+def _auv_name(name: str) -> str:
+    """An AUV's name is a key in ``[uncertain.auv.NAME]``, in realisation values
+    (``auv.NAME.offset_N``) and in the results table's comma-joined ``auv_names``: a ``.``
+    left every drawn value of ``lauv.v2`` unapplied while run.json listed them, a ``,``
+    crashed compare's report (two names read as three), and ``all`` is the table of every
+    AUV (a new user's findings, session 44)."""
+    if "." in name or "," in name:
+        raise ValueError(f"{name!r}: an AUV's name has no '.' or ',' (it is a key in "
+                         "[uncertain.auv.NAME] and in the results' AUV list)")  # fmt: skip
+    if name == "all":
+        raise ValueError("'all': [uncertain.auv.all] means every AUV; name the AUV otherwise")
+    return name
+
+
+#: An AUV's name: a :data:`~mpcasv.config.Label` without '.' or ',', and not ``all``
+AUVName = Annotated[Label, AfterValidator(_auv_name)]
+
+
 @frozen
 class AUVSpec:
-    name: Label
+    name: AUVName
     behaviour: Behaviour
     start: Start = Start()
     limits: AUVLimits = AUVLimits()
