@@ -137,6 +137,18 @@ def test_surface_interval_brings_the_auv_up():
     assert S[2, int(190 / 0.1)] > 29
 
 
+def test_a_finished_plan_stays_stopped_through_a_surface_interval():
+    """The plan "stops at the last" waypoint; a surface interval after that rose it and then
+    drove it at surface_speed round the waypoint it had reached (38 m of circles in 40 s: a
+    new user's scenario, session 44)."""
+    plan = Plan([[30, 0, 20]], speed=1.5, surface=((60.0, 200.0),), surface_speed=1.0)
+    S = drive(plan, [0, 0, 20, 0, 0], 200)
+    during = slice(int(150 / 0.1), int(200 / 0.1))  # (risen by then)
+    assert S[2, during].max() < 0.5  # at the surface
+    assert np.abs(S[4, during]).max() < 0.05  # not moving
+    assert np.hypot(*np.ptp(S[0:2, during], axis=1)) < 1.0
+
+
 def test_transit_goes_straight():
     S = drive(Transit(heading_deg=60.0, speed=1.0, depth=5.0), [0, 0, 0, math.radians(60), 0], 200)
     bearing = math.degrees(math.atan2(S[1, -1], S[0, -1]))

@@ -345,3 +345,26 @@ def test_the_ground_truth_velocity_includes_the_drift_from_the_start():
     assert w.auv_truth(0)[3:] == pytest.approx((1.5, 0.15), abs=1e-4)
     plain = World(scenario_from_dict(dict(data, current_field=None)), seed=0)
     assert plain.auv_truth(0)[3:] == pytest.approx((1.5, 0.0))
+
+
+def test_simulate_says_what_is_scheduled_after_the_run_ends(tmp_path, capsys):
+    """An abort at 500 s of a 60-s run and a surface interval from 100 s were accepted and
+    never happened, unsaid (a new user's scenario); now each is a warning line. The run
+    goes on (a suite's duration may cut a scenario short on purpose)."""
+    from mpcasv.cli import main
+
+    path = tmp_path / "ev.toml"
+    path.write_text(
+        'name = "ev"\nduration = 60.0\ncontroller = "hybrid-single"\npreset = "paper1-field"\n'
+        '[[auv]]\nname = "a"\nstart = { N = 100.0, E = 0.0, depth = 10.0 }\n'
+        '[auv.behaviour.plan]\nspeed = 1.0\nsurface = [[100.0, 200.0]]\n'
+        'route = [ { waypoints = [[200.0, 0.0, 10.0]] } ]\n'
+        '[[auv.events]]\nt = 500.0\nkind = "abort"\n')  # fmt: skip
+    assert main(["simulate", str(path), "--out", str(tmp_path / "r"), "--quiet",
+                 "--no-plots"]) == 0  # fmt: skip
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [
+        f"warning: {path}: AUV 'a' events[0] (abort) at t = 500 s: at or after the run's end "
+        "(60 s), it never happens",
+        f"warning: {path}: AUV 'a' behaviour.plan.surface from t = 100 s: at or after the "
+        "run's end (60 s), it never happens"], err

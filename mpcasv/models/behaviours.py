@@ -103,8 +103,8 @@ class Plan:
             elif not self._yoyo_down and d <= d_min + 0.5:
                 self._yoyo_down = True
             depth = d_max if self._yoyo_down else d_min
-        if any(a <= t < b for a, b in self.surface):
-            depth, speed = 0.0, self.surface_speed
+        if any(a <= t < b for a, b in self.surface):  # (a plan done stays stopped: it
+            depth, speed = 0.0, 0.0 if self.finished else self.surface_speed  # circled)
         return wp[0], wp[1], speed, depth
 
 

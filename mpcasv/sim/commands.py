@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import sys
 from pathlib import Path
 
 from mpcasv.config import ConfigError, check_seed
@@ -73,7 +74,7 @@ def run(args: argparse.Namespace) -> int:
     from mpcasv.experiments.metrics import compute_metrics
     from mpcasv.outputs import check_output_folder
     from mpcasv.sim.record import check_run_dir, params_record, write_run
-    from mpcasv.sim.scenario import load_scenario
+    from mpcasv.sim.scenario import load_scenario, past_the_end
     from mpcasv.sim.simulator import simulate
     from mpcasv.sim.uncertainty import run_scenario
 
@@ -95,6 +96,9 @@ def run(args: argparse.Namespace) -> int:
                               f"{scenario.duration:g} s")  # fmt: skip
     check_seed(args.seed)
     scenario, real = run_scenario(scenario, args.seed, args.nominal, args.duration)
+    # (drawn event times included; not after --duration, which cuts the run short on purpose)
+    for line in past_the_end(scenario) if args.duration is None else ():
+        print(f"warning: {args.scenario}: {line}", file=sys.stderr)
     name = args.controller or scenario.controller
     # the scenario's preset runs with its own controller ("default", a file without a preset:
     # that controller's default preset, controllers.preset_used)

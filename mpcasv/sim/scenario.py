@@ -252,6 +252,25 @@ def anchor_refs(data: dict, base: Path, source: str | Path) -> None:
                                   f"{table[key]}, relative to the scenario's folder)")  # fmt: skip
 
 
+def past_the_end(scenario: Scenario) -> list[str]:
+    """What a (realised) scenario schedules at or after its duration, which never happens:
+    each AUV's events and plan surface intervals (the plan's own and a switch event's), one
+    line each. Not refused (a suite's ``duration`` or ``--duration`` cuts a run short on
+    purpose); ``mpcasv simulate`` says them (an abort at 500 s of a 60-s run went unsaid)."""
+    T, out = scenario.duration, []
+    for a in scenario.auv:
+        plans = [(a.behaviour.plan, "behaviour.plan")] + [
+            (e.plan, f"events[{i}].plan") for i, e in enumerate(a.events) if e.plan is not None]
+        for i, e in enumerate(a.events):
+            if e.t >= T:
+                out.append(f"AUV {a.name!r} events[{i}] ({e.kind}) at t = {e.t:g} s")
+        for plan, where in plans:
+            for t0, _ in plan.surface if plan is not None else ():
+                if t0 >= T:
+                    out.append(f"AUV {a.name!r} {where}.surface from t = {t0:g} s")
+    return [f"{w}: at or after the run's end ({T:g} s), it never happens" for w in out]
+
+
 def load_scenario(path: str | Path) -> Scenario:
     """Load and validate a scenario TOML file.
 
