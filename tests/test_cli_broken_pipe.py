@@ -17,25 +17,13 @@ import sys
 from pathlib import Path
 
 import pandas as pd
+from tiny_suite import tiny_suite
 
 from mpcasv.cli import main
 from mpcasv.experiments.suite_file import SCENARIOS_DIR
 
 ROOT = Path(__file__).resolve().parents[1]
-SUITE = f"""
-name = "tiny"
-scenarios = ["{SCENARIOS_DIR / "case3.toml"}"]
-duration = 15.0
-seeds = [0, 1]
-current = ["off"]
-estimator = ["scenario"]
-plots = "none"
-
-[[controllers]]
-label = "hybrid"
-name = "hybrid-single"
-preset = "scenario"
-"""
+SUITE = tiny_suite((0, 1))
 
 
 def _stdout_closed(*args: str) -> subprocess.CompletedProcess:

@@ -17,6 +17,7 @@ from pathlib import Path
 
 import pandas as pd
 import pytest
+from tiny_suite import tiny_suite
 
 from mpcasv.controllers import load_preset
 from mpcasv.experiments.runner import run_suite
@@ -25,20 +26,7 @@ from mpcasv.experiments.suite_file import SCENARIOS_DIR
 distributed = pytest.importorskip("distributed")
 
 CASE3 = SCENARIOS_DIR / "case3.toml"
-SUITE = f"""
-name = "tiny"
-scenarios = ["{CASE3}"]
-duration = 15.0
-seeds = [0, 1, 2]
-current = ["off"]
-estimator = ["scenario"]
-plots = "none"
-
-[[controllers]]
-label = "hybrid"
-name = "hybrid-single"
-preset = "scenario"
-"""
+SUITE = tiny_suite()
 
 PRELOAD = """
 import os

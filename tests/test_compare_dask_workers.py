@@ -21,27 +21,13 @@ from pathlib import Path
 
 import pandas as pd
 import pytest
-
-from mpcasv.experiments.suite_file import SCENARIOS_DIR
+from tiny_suite import tiny_suite
 
 distributed = pytest.importorskip("distributed")
 
 ROOT = Path(__file__).resolve().parents[1]
 WAIT_S = 2.0
-SUITE = f"""
-name = "tiny"
-scenarios = ["{SCENARIOS_DIR / "case3.toml"}"]
-duration = 15.0
-seeds = [0, 1, 2]
-current = ["off"]
-estimator = ["scenario"]
-plots = "none"
-
-[[controllers]]
-label = "hybrid"
-name = "hybrid-single"
-preset = "scenario"
-"""
+SUITE = tiny_suite()
 # mpcasv with the worker wait cut to WAIT_S
 MPCASV = (f"import sys, mpcasv.experiments.dask_runner as d; d.WORKER_WAIT_S = {WAIT_S}; "
           "from mpcasv.cli import main; sys.exit(main(sys.argv[1:]))")
