@@ -287,8 +287,24 @@ def test_one_nonzero_difference_is_no_crash_and_no_verdict():
     other = ref.copy()
     other[0] = 7.439086
     s = paired_stat(ref, other)
-    assert s.n == 10 and s.p == 1.0 and s.note == ""
-    assert stats.verdict(s, "higher", "a", "b", 20.0) == "no significant difference"
+    # one non-zero difference: no test (it said p = 1, "no significant difference")
+    assert s.n == 10 and np.isnan(s.p) and s.note == "n/a: 1 non-zero difference < 6"
+    assert stats.verdict(s, "higher", "a", "b", 20.0) == "n/a"
+
+
+@pytest.mark.parametrize(("nonzero", "tested"), [(5, False), (6, True)])
+def test_a_case_with_fewer_than_six_nonzero_differences_is_not_tested(nonzero, tested):
+    """The Wilcoxon test drops zero differences: with 5 non-zero its smallest p is 2/2^5 =
+    0.0625, so Case 5's collision time (10 worlds, 5 non-zero) could never be "better" and
+    read "no significant difference, p = 1" (a statistician's review, session 44). Its median
+    and interval stay."""
+    ref = np.zeros(10)
+    other = np.zeros(10)
+    other[:nonzero] = np.arange(1.0, nonzero + 1)
+    s = paired_stat(ref, other)
+    assert s.n == 10 and np.isfinite(s.median) and np.isfinite(s.ci_high)
+    assert np.isfinite(s.p) == tested
+    assert (s.note == "") == tested
 
 
 def test_multiplicity_counts_tests_and_the_verdicts_that_survive_benjamini_hochberg():

@@ -33,6 +33,7 @@ from mpcasv.experiments import acceptance
 from mpcasv.experiments import report_figures as rf
 from mpcasv.experiments import report_series as rs
 from mpcasv.experiments import stats as paired
+from mpcasv.experiments.metric_info import WALL_CLOCK
 from mpcasv.experiments.metrics import METRIC_INFO
 from mpcasv.experiments.report_figures import CONDITION, num
 from mpcasv.experiments.report_tables import (  # noqa: F401 (re-exported)
@@ -202,11 +203,14 @@ def write_report(out: Path, exp, results: pd.DataFrame, stats=None) -> tuple[Pat
     runs = with_list_summaries(results) if len(ok) else results
     table, why = pd.DataFrame(), paired.comparison_problem(results)
     if why is None:
+        # lists of a scalar once; not the wall-clock metrics (machine and load: never
+        # compared; the wins table gave the hybrids 8 "better" on controller step time)
         rest = [
             m
             for m in better
-            if better[m] and m not in headline and not (m.endswith("_auv") and m[:-4] in better)
-        ]  # lists of a scalar: once
+            if better[m] and m not in headline and m not in WALL_CLOCK
+            and not (m.endswith("_auv") and m[:-4] in better)
+        ]  # fmt: skip
         table = paired.paired_table(runs, [*headline, *rest], better)
         why = "no metric with a direction in this results table"  # if the table is empty
     fronts = getattr(exp, "fronts", None)  # entries naming a tuned front (tune_match)
