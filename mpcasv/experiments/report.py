@@ -250,9 +250,9 @@ def write_report(out: Path, exp, results: pd.DataFrame, stats=None) -> tuple[Pat
             f"of the reference's median (else: negligible difference). No correction for "
             f"multiple comparisons in the verdicts: each table says how many tests it holds and "
             f"how many of its verdicts survive the Benjamini-Hochberg adjustment. "
-            f"n/a: fewer than {paired.MIN_PAIRS} pairs "
-            f"(the two-sided Wilcoxon test cannot reach p < 0.05 below 6 non-zero "
-            f"differences), or all differences zero.",
+            f"n/a: fewer than {paired.MIN_PAIRS} pairs or non-zero differences "
+            f"(the two-sided Wilcoxon test drops zeros and cannot reach p < 0.05 below 6 "
+            f"non-zero differences), or all differences zero.",
         ]
         # worlds and runs of one row per case (the first variant's first metric)
         one = table[(table["other"] == table["other"].iloc[0])
