@@ -294,8 +294,9 @@ def write_report(out: Path, exp, results: pd.DataFrame, stats=None) -> tuple[Pat
                 else:  # the methods say every table says how many tests it holds: this too
                     bullet(
                         "Multiple comparisons: none tested in this table (no comparison has a "
-                        f"p-value: fewer than {paired.MIN_PAIRS} pairs, or all differences "
-                        "zero); no 'better' verdict, nothing to adjust."
+                        f"p-value: fewer than {paired.MIN_PAIRS} pairs or non-zero "
+                        "differences, or all differences zero); no 'better' verdict, nothing "
+                        "to adjust."
                     )
                 md.append("")
                 d = headline_table(th)

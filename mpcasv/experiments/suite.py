@@ -229,6 +229,8 @@ def expand(name_or_path: str | Path) -> Expansion:
     jobs: list[Job] = []
     seen: dict[str, int] = {}
     for sc0, file in scenarios:
+        boat = boat_digest(sc0)  # the files' content, not only their names (one per file:
+        # the conditions change the current, duration and estimator, never the boat)
         for sc, current, axis, estimator in conditions(suite, sc0, path, file):
             if estimator == "plan" and not has_plan(sc0):  # it would be the Kalman filter
                 note = (f"estimator 'plan' on scenario {sc.name!r}: no AUV of it has a plan "
@@ -237,7 +239,6 @@ def expand(name_or_path: str | Path) -> Expansion:
                     skipped.append(note)
                 continue
             sc_digest = _digest(_plain(digest_plain(sc)))
-            boat = boat_digest(sc)  # the files' content, not only their names
             reals = realisations(sc, suite.seeds, f"{path}: scenario {file}")
             for i, entry in usable:
                 if entry.scenarios is not None and sc.name not in entry.scenarios:
