@@ -14,6 +14,7 @@ from mpcasv.experiments import stats
 from mpcasv.experiments.acceptance import (
     Acceptance,
     acceptance_table,
+    per_case_table,
     relative_changes,
     verdict,
 )
@@ -144,6 +145,37 @@ def test_every_pair_both_zero_is_a_change_of_zero_not_no_pairs(target, better_si
     (_, _, [(_, _, says)]) = report_parts(df, Acceptance({"collision_domain_s": target}),
                                          ["hybrid", "mpc"], [])  # fmt: skip
     assert says.startswith("**The target is met" if better_side else "**0 of 1 target met")
+
+
+def test_the_cases_a_pooled_verdict_sits_between_are_shown_one_by_one(tmp_path):
+    """The MPC spends 50 % more propeller time in c1 and 50 % less in c2: pooled, the
+    verdict on "no more" is undecided; per case it is not met in c1 and met in c2 (issue 16,
+    session 44: Cases 1-4 +43-126 %, Cases 5-8 -5 to -10 %, pooled "undecided")."""
+    df = _results()
+    mpc = df.variant == "mpc"
+    for case, factor in (("c1", 1.5), ("c2", 0.5)):
+        h = df[(df.scenario == case) & ~mpc].set_index("seed")["propeller_on_s"]
+        rows = (df.scenario == case) & mpc
+        df.loc[rows, "propeller_on_s"] = factor * h.loc[df.loc[rows, "seed"]].to_numpy()
+    acc = Acceptance({"propeller_on_s": 0.0, "reliable_fix_age_p95_s": -0.3})
+    pooled = acceptance_table(df[df.scenario != "c0"], acc, "hybrid", "mpc", ["c0"])
+    assert pooled.set_index("metric").loc["propeller_on_s", "verdict"] == "undecided"
+    t = per_case_table(df, acc, "hybrid", "mpc", ["c0"])
+    assert t.index.tolist() == ["c0", "c1", "c2"]
+    assert t.loc["c1", "propeller_on_s"] == "+50.0 % [+50.0, +50.0] (10): not met"
+    assert t.loc["c2", "propeller_on_s"] == "-50.0 % [-50.0, -50.0] (10): met"
+    assert t.loc["c0", "reliable_fix_age_p95_s"] == "no fix"  # as the pooled row leaves out
+    assert t.loc["c1", "reliable_fix_age_p95_s"] == "-50.0 % [-50.0, -50.0] (10): met"
+    few = per_case_table(df[df.seed < 3], acc, "hybrid", "mpc", ["c0"])
+    assert few.loc["c1", "propeller_on_s"] == "+50.0 % (3): n/a: 3 pairs < 6"
+    suite = SimpleNamespace(name="t", description="per case", seeds=list(range(10)),
+                            acceptance=acc)  # fmt: skip
+    md = write_report(tmp_path, SimpleNamespace(suite=suite, jobs=list(range(len(df))),
+                                                skipped=[]), df)[0].read_text()  # fmt: skip
+    section = md.split("## Acceptance")[1].split("\n## ")[0]
+    assert "Per case, the same rule on each case's pairs alone" in section
+    assert "| c2 | -50.0 % [-50.0, -50.0] (10): met | -50.0 % [-50.0, -50.0] (10): met |" in (
+        section)
 
 
 def test_a_target_without_pairs_is_not_applicable_and_has_no_sums():

@@ -186,6 +186,36 @@ def display_table(t: pd.DataFrame) -> pd.DataFrame:
     }, index=pd.Index(t["metric"], name="metric"))  # fmt: skip
 
 
+def per_case_table(results: pd.DataFrame, acc: Acceptance, reference: str, other: str,
+                   no_fix_cases: list[str]) -> pd.DataFrame:  # fmt: skip
+    """The targets judged on each case alone (the same rule as :func:`acceptance_table`, on
+    one case's pairs): rows are the cases in the order of ``results``, columns the targets'
+    metrics; each cell reads ``"+126 % [+80, +160] (10): not met"`` (median relative change
+    per pair, its 95 % CI, the pairs used; dimensionless, in %) or ``"no fix"`` for a
+    :data:`NEEDS_FIXES` metric in one of ``no_fix_cases``. A pooled verdict can sit between
+    cases that go opposite ways (issue 16, session 44: propeller +43-126 % in Cases 1-4,
+    -5 to -10 % in Cases 5-8, pooled "undecided"); this table shows them."""
+    cells: dict[str, dict[str, str]] = {}
+    for case in dict.fromkeys(results[paired.CASE]):
+        t = acceptance_table(results[results[paired.CASE] == case], acc, reference, other,
+                             no_fix_cases).set_index("metric")  # fmt: skip
+        cells[case] = {m: "no fix" if m.startswith(NEEDS_FIXES) and case in no_fix_cases
+                       else _cell(t.loc[m]) for m in acc.targets}  # fmt: skip
+    return pd.DataFrame.from_dict(cells, orient="index").rename_axis(paired.CASE)
+
+
+def _cell(row: pd.Series) -> str:
+    """One :func:`per_case_table` cell from an :func:`acceptance_table` row."""
+    def short(v: float) -> str:
+        return _pct(v).removesuffix(" %") if math.isfinite(v) else _pct(v)
+
+    if row["pairs"] == 0:
+        return row["verdict"]
+    ci = ("" if math.isnan(row["ci_low"])
+          else f" [{short(row['ci_low'])}, {short(row['ci_high'])}]")  # fmt: skip
+    return f"{_pct(row['median'])}{ci} ({row['pairs']}): {row['verdict']}"
+
+
 def report_parts(results: pd.DataFrame, acc: Acceptance, names: list[str],
                  no_fix_cases: list[str]) -> tuple[str, str, list[tuple[str, pd.DataFrame, str]]]:
     """What the report's "Acceptance" section says: its heading, the rule, and for each

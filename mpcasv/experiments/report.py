@@ -53,6 +53,9 @@ BETTER: dict[str, str | None] = {name: info.better for name, info in METRIC_INFO
 BOX_METRICS = ("min_range_m", "reliable_fix_age_max_s", "reliable_fix_age_p95_s",
                "nav_error_rms_m", "propeller_on_s", "energy_J")  # fmt: skip
 
+PER_CASE = ("Per case, the same rule on each case's pairs alone (median relative change per "
+            "pair [95 % CI] (pairs): verdict; fewer than 6 pairs have no interval). A pooled "
+            "verdict can sit between cases that go opposite ways.")
 READ_LINE = 'pd.read_parquet("{out}/results.parquet")'
 
 
@@ -310,10 +313,13 @@ def write_report(out: Path, exp, results: pd.DataFrame, stats=None) -> tuple[Pat
             head, rule, parts = acceptance.report_parts(results, acc, names, no_fix)
             both(f"\n## {head}\n", f"<h2>{html.escape(head)}</h2>")
             bullet(rule)
-            for sub, d, says in parts:
+            for other, (sub, d, says) in zip(names[1:], parts, strict=True):
                 both(f"\n### {sub}\n\n{_md_table(d)}\n", f"<h3>{html.escape(sub)}</h3>"
                      f"{d.to_html()}")  # fmt: skip
                 bullet(says)
+                d = acceptance.per_case_table(results, acc, names[0], other, no_fix)
+                both(f"\n{PER_CASE}\n\n{_md_table(d)}\n",
+                     f"<p>{html.escape(PER_CASE)}</p>{d.to_html()}")  # fmt: skip
             md.append("")
         wl = paired.significant_win_loss(table)
         note = (
