@@ -69,12 +69,15 @@ def directions() -> dict[str, str | None]:
 
 
 def scenario_table(summ: pd.DataFrame, scenario: str, auv_names: list[str]) -> pd.DataFrame:
-    """Rows: metrics (per AUV expanded); columns: variant (| condition); cells mean ± sd."""
+    """Rows: metrics (per AUV expanded); columns: variant (| condition); cells mean ± sd
+    over the runs with a value, followed by "(n of N runs)" when some runs have none (a
+    metric undefined there: the mean of the others is not the mean of the group)."""
     s = summ[summ["scenario"] == scenario].copy()
     multi = [c for c in CONDITION if s[c].nunique() > 1]
     s["group"] = [rf.group_label(r, multi) for _, r in s.iterrows()]
-    s["cell"] = ["—" if n == 0 else num(m) if not np.isfinite(sd) else f"{num(m)} ± {num(sd)}"
-                 for m, sd, n in zip(s["mean"], s["sd"], s["n"], strict=True)]  # fmt: skip
+    s["cell"] = ["—" if n == 0 else (num(m) if not np.isfinite(sd) else f"{num(m)} ± {num(sd)}")
+                 + (f" ({n} of {runs} runs)" if n < runs else "")
+                 for m, sd, n, runs in zip(s["mean"], s["sd"], s["n"], s["runs"], strict=True)]
     s["row"] = [m if pd.isna(k) else f"{m} [{auv_names[int(k)]}]"
                 for m, k in zip(s["metric"], s["auv"], strict=True)]  # fmt: skip
     rows = list(dict.fromkeys(s["row"]))

@@ -54,7 +54,9 @@ def with_list_summaries(df: pd.DataFrame) -> pd.DataFrame:
 
 
 def summary_table(df: pd.DataFrame) -> pd.DataFrame:
-    """Long table: scenario, condition, variant, column, metric, auv, mean, sd, n (seeds)."""
+    """Long table: scenario, condition, variant, column, metric, auv, mean, sd, n (the runs
+    with a value), runs (the ok runs of the group: n < runs where a metric is undefined in
+    some runs, e.g. ``revisit_interval_max_s`` of an AUV reliably fixed fewer than twice)."""
     rows = []
     ok = df[df["status"] == "ok"]
     keys = ["scenario", *CONDITION, "variant"]
@@ -65,11 +67,12 @@ def summary_table(df: pd.DataFrame) -> pd.DataFrame:
                 if k is None:  # metric not defined for these runs (null): a row saying so
                     rows.append(dict(zip(keys, key, strict=True)) | {
                         "column": col, "metric": m, "auv": k, "mean": math.nan,
-                        "sd": math.nan, "n": 0})  # fmt: skip
+                        "sd": math.nan, "n": 0, "runs": len(g)})  # fmt: skip
                 continue
             rows.append(dict(zip(keys, key, strict=True)) | {
                 "column": col, "metric": m, "auv": k, "mean": float(v.mean()),
                 "sd": float(v.std(ddof=1)) if len(v) > 1 else math.nan, "n": len(v),
+                "runs": len(g),
             })  # fmt: skip
     return pd.DataFrame(rows)
 
