@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import textwrap
 from pathlib import Path
 
@@ -254,3 +255,20 @@ def test_every_shipped_suite_expands(path):
     """A shipped suite that no longer validates (renamed preset key, bad label) fails here."""
     exp = expand(path)
     assert exp.jobs and len({j.job_id for j in exp.jobs}) == len(exp.jobs)
+
+
+def test_a_run_folder_names_the_current_simulated():
+    """The paper suite draws its currents ([uncertain]): Case 4's 0.2 m/s current was in a
+    folder named ``nocur`` and Case 7's drawn (-0.157, -0.077) m/s under its nominal
+    ``cur0.106_0.106`` (session 44's results). The name now says what was simulated."""
+    jobs = [j for j in expand("paper").jobs if j.seed == 0 and j.label == "hybrid"]
+    for job in jobs:
+        v_n, v_e = job.current_realised
+        name = job.run_name
+        if (v_n, v_e) == (0.0, 0.0):
+            assert "-nocur-" in name, name
+        else:
+            assert f"-cur{v_n:.3g}_{v_e:.3g}-" in name, name
+    by_case = {j.scenario: j for j in jobs}
+    assert math.hypot(*by_case["case4"].current_realised) > 0.1
+    assert "-nocur-" not in by_case["case4"].run_name

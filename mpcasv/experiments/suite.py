@@ -59,8 +59,12 @@ class Job:
 
     @property
     def run_name(self) -> str:
-        """Folder name of the run under ``DIR/runs``."""
-        cur = "nocur" if self.current == (0.0, 0.0) else "cur{:g}_{:g}".format(*self.current)
+        """Folder name of the run under ``DIR/runs``: scenario, variant, the current simulated
+        (``cur{V_N}_{V_E}`` in m/s, 3 significant digits, the drawn one where the scenario
+        draws it; ``nocur`` for none), seed and the job id's first 8 characters. Until
+        session 45 it named the nominal current: a drawn 0.2 m/s current read ``nocur``."""
+        v = self.current_realised if self.current_realised is not None else self.current
+        cur = "nocur" if tuple(v) == (0.0, 0.0) else "cur{:.3g}_{:.3g}".format(*v)
         name = f"{self.scenario}-{self.variant}-{cur}-s{self.seed}-{self.job_id[:8]}"
         return re.sub(r"[^A-Za-z0-9_.+-]", "_", name.replace("]", ""))
 
