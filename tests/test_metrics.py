@@ -252,9 +252,9 @@ def test_nothing_in_the_geometry_module_imports_upward():
 
 
 def test_revisit_interval_is_between_real_reliable_fixes_with_several_auvs():
-    """Paper 2's 'time between consecutive visits' (Cases 6-7): gaps between reliable fixes
-    only, not from t = 0 nor to the end; an AUV with fewer than two reliable fixes has no
-    finite interval (null)."""
+    """Paper 2's 'time between consecutive visits' (Cases 6-7): the gaps between reliable
+    fixes and the wait from the last one to the end (censored), not the wait from t = 0 for
+    the first visit; an AUV without a reliable fix has no finite interval (null)."""
     sc = scenario_from_dict({
         "name": "two", "duration": 60.0, "controller": "hybrid-multi", "preset": "paper2-field",
         "auv": [{"name": n, "start": {"N": N}, "behaviour": {"transit": {
@@ -267,8 +267,15 @@ def test_revisit_interval_is_between_real_reliable_fixes_with_several_auvs():
     assert m["reliable_fix_age_max_s_auv"] == [25.0, 35.0]  # a: 0-10, 40-60 (end) count too
     hand = dataclasses.replace(res, reliable_fix_times=[[10.0, 15.0, 50.0], [5.0]])
     m = compute_metrics(hand)
-    assert m["revisit_interval_max_s"] == math.inf  # written as null in metrics.json
-    assert m["reliable_fix_age_max_s"] == 55.0  # b: 5 -> 60 (the end) without a fix
+    assert m["revisit_interval_max_s"] == 55.0  # b: 5 -> 60 (the end) without a revisit
+    assert m["reliable_fix_age_max_s"] == 55.0
+    # one visit each, two fixes 5 s apart in it, then none (a new user's suite, session 45:
+    # it scored 5 s, the best value, for never revisiting either AUV)
+    hand = dataclasses.replace(res, reliable_fix_times=[[12.0, 17.0], [30.0, 35.0]])
+    assert compute_metrics(hand)["revisit_interval_max_s"] == 43.0  # a: 17 -> 60
+    hand = dataclasses.replace(res, reliable_fix_times=[[10.0, 15.0, 50.0], []])
+    m = compute_metrics(hand)
+    assert m["revisit_interval_max_s"] == math.inf  # b never visited; null in metrics.json
 
 
 def test_between_steps_ms_max_is_null_when_no_solve_ran_between_steps(tmp_path):

@@ -59,6 +59,22 @@ def age_stats(event_times, t_end: float) -> tuple[float, float, float]:
     return float(g.max()), _sawtooth_quantile(g, t_end, 0.95), float(np.sum(g**2) / (2 * t_end))
 
 
+def revisit_wait(fix_times, t_end: float) -> float:
+    """The longest time (s) one AUV waited for its next visit once it had been visited:
+    the gaps between its consecutive reliable fixes ``fix_times`` (s, in ``(0, t_end]``) and
+    the wait from the last one to the run's end ``t_end`` (censored: the next visit came
+    later, if at all); infinite without any reliable fix (never visited). The wait for the
+    first visit is not a revisit (it is in ``reliable_fix_age_max_s``). Paper 2's "time
+    between consecutive visits" (thesis §4.2, Cases 6-7). Until session 45 the wait at the end
+    was left out: an AUV whose only visit gave fixes at 120 and 125 s of a 480-s run scored
+    5 s, the best value, for never being revisited (a new user's suite)."""
+    t = np.unique(np.asarray(fix_times, float))
+    t = t[(t > 0) & (t <= t_end)]
+    if not t.size:
+        return math.inf
+    return float(np.diff(np.append(t, t_end)).max())
+
+
 def _sawtooth_quantile(gaps: np.ndarray, total: float, q: float) -> float:
     """Smallest ``x`` with ``sum min(x, g_i) >= q total`` (time fraction of a saw-tooth)."""
     g = np.sort(gaps)
@@ -210,9 +226,7 @@ def compute_metrics(result) -> dict:
 
     revisit = None
     if n_auv > 1 and has_domain:
-        gaps = [np.diff(np.unique(f)) if len(f) >= 2 else np.array([math.inf])
-                for f in result.reliable_fix_times]  # fmt: skip
-        revisit = float(max(g.max() if g.size else math.inf for g in gaps))
+        revisit = max(revisit_wait(f, t_end) for f in result.reliable_fix_times)
 
     nav = np.stack([ts[f"nav_err{k}"].to_numpy() for k in range(n_auv)])
     belief_err = np.stack(

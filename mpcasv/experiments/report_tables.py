@@ -56,7 +56,7 @@ def with_list_summaries(df: pd.DataFrame) -> pd.DataFrame:
 def summary_table(df: pd.DataFrame) -> pd.DataFrame:
     """Long table: scenario, condition, variant, column, metric, auv, mean, sd, n (the runs
     with a value), runs (the ok runs of the group: n < runs where a metric is undefined in
-    some runs, e.g. ``revisit_interval_max_s`` of an AUV reliably fixed fewer than twice)."""
+    some runs, e.g. ``revisit_interval_max_s`` of an AUV never reliably fixed)."""
     rows = []
     ok = df[df["status"] == "ok"]
     keys = ["scenario", *CONDITION, "variant"]
