@@ -6,6 +6,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 import pytest
 
@@ -86,3 +87,33 @@ def test_a_table_of_n_a_comparisons_says_none_was_tested(tmp_path):
     line = next((ln for ln in section.splitlines() if "Multiple comparisons" in ln), None)
     assert line is not None and "none tested in this table" in line, section
     assert "n/a: 4 pairs < 6" in section
+
+
+@pytest.mark.parametrize("n_auv, inner", [(1, "inside r_inner"), (2, "inside r_avoid")])
+def test_the_compare_figure_names_the_domain_as_the_runs_range_figure(tmp_path, monkeypatch,
+                                                                      n_auv, inner):
+    """A new user's two-AUV report (session 45): the compare figure's range panel read
+    "inside r_inner" and listed an r_outer line that Paper 2's domain (r_outer 3500 m) never
+    drew; the run's own range figure says r_avoid and leaves r_outer out."""
+    from mpcasv.experiments import report_series
+
+    t = np.arange(0.0, 100.0, 1.0)
+    r_outer = 3500.0 if n_auv > 1 else 300.0
+    ts = {"t": t, "N": 0 * t, "E": 0 * t}
+    for k in range(n_auv):
+        ts |= {f"auv{k}_N": 100.0 + t, f"auv{k}_E": 0 * t, f"range{k}": 100.0 + t,
+               f"r_inner{k}": 0 * t + 50.0, f"r_t{k}": 0 * t + 90.0,
+               f"r_outer{k}": 0 * t + r_outer, f"rfix_age{k}": t % 20}  # fmt: skip
+    for v in ("A", "B"):
+        (tmp_path / "runs" / v).mkdir(parents=True)
+        pd.DataFrame(ts).to_parquet(tmp_path / "runs" / v / "timeseries.parquet")
+    reps = pd.DataFrame({"variant": ["A", "B"], "run_dir": ["runs/A", "runs/B"],
+                         "auv_names": [",".join(f"a{k}" for k in range(n_auv))] * 2,
+                         "seed": [0, 0], "current": ["off"] * 2,
+                         "estimator": ["perfect"] * 2})  # fmt: skip
+    figs = []
+    monkeypatch.setattr(report_series, "_save", lambda fig, path: figs.append(fig) or path)
+    report_series.compare_figure(tmp_path, reps, "s", tmp_path / "c.png")
+    labels = [t.get_text() for t in figs[0].axes[1].get_legend().get_texts()]
+    assert inner in labels and ("r_outer" in labels) == (n_auv == 1), labels
+    assert figs[0].axes[1].get_ylim()[1] >= (1.1 * r_outer if n_auv == 1 else 199.0 * 1.1)

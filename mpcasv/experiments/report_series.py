@@ -218,11 +218,17 @@ def compare_figure(out: Path, reps: pd.DataFrame, scenario: str, path: Path) -> 
     for k in range(n):
         axr, axf = fig.add_subplot(gs[k, 1]), fig.add_subplot(gs[k, 2])
         t0 = ts0["t"].to_numpy()
-        if f"r_inner{k}" in ts0:
+        top = max(float(ts[f"range{k}"].max()) for _, ts in series) * 1.1
+        if f"r_inner{k}" in ts0:  # the names and the outer rule of the run's range figure
+            inner = "r_avoid" if n > 1 else "r_inner"  # Paper 2's name with several AUVs
             axr.fill_between(t0, 0, ts0[f"r_inner{k}"], color="tab:red", alpha=0.12,
-                             label="inside r_inner")  # fmt: skip
+                             label=f"inside {inner}")  # fmt: skip
             axr.plot(t0, ts0[f"r_t{k}"], color="tab:green", lw=0.8, ls="--", label="r_t")
-            axr.plot(t0, ts0[f"r_outer{k}"], color="tab:red", lw=0.8, ls=":", label="r_outer")
+            top = max(top, 1.1 * float(ts0[f"r_t{k}"].max()))
+            if ts0[f"r_outer{k}"].min() < 2 * top:  # Paper 2 has no outer boundary (3.5 km)
+                axr.plot(t0, ts0[f"r_outer{k}"], color="tab:red", lw=0.8, ls=":",
+                         label="r_outer")  # fmt: skip
+                top = max(top, 1.1 * float(ts0[f"r_outer{k}"].max()))
         # one representation for every variant of the panel (and its label says which)
         envelope = any(needs_envelope(ts["t"].to_numpy(float), ts[f"{age}{k}"].to_numpy(float))
                        for _, ts in series)  # fmt: skip
@@ -236,7 +242,6 @@ def compare_figure(out: Path, reps: pd.DataFrame, scenario: str, path: Path) -> 
             axf.plot(
                 tf, af, color=c, lw=1, label=v, drawstyle="steps-post" if s_ else "default"
             )
-        top = max(float(ts[f"range{k}"].max()) for _, ts in series) * 1.1
         axr.set_ylim(0, top)
         axr.set_ylabel(f"range {names[k]} (m)", fontsize=8)
         axf.set_ylabel(f"{age_name} {names[k]} (s{suffix})", fontsize=8)
