@@ -69,7 +69,7 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError(f"--duration {args.duration:g}: a duration is a number of seconds > 0")
     from mpcasv.controllers import Boat, make_controller, preset_used
     from mpcasv.controllers.prepare import needed_libraries, prepare
-    from mpcasv.controllers.registry import check_controller_flag
+    from mpcasv.controllers.registry import DEFAULT_PRESET, check_controller_flag
     from mpcasv.estimation import ESTIMATORS, check_plan_estimator
     from mpcasv.experiments.metrics import compute_metrics
     from mpcasv.outputs import check_output_folder
@@ -131,6 +131,10 @@ def run(args: argparse.Namespace) -> int:
             "nav_error_p95_m", "propeller_on_s", "energy_J", "fallbacks")  # fmt: skip
     files = "timeseries.parquet, metrics.json" + ("" if args.no_plots else ", plots")
     print(f"wrote {out}/ ({files}) in {result.wall_s:.2f} s")
+    print(f"  controller {name}, preset {extra['preset']}" + (
+        f" (its default: the scenario's preset {scenario.preset!r} is for its controller "
+        f"{scenario.controller!r})" if preset is None and name != scenario.controller
+        and scenario.preset != DEFAULT_PRESET else ""))  # fmt: skip
     print(f"  realisation {real.id}: {len(real.values)} drawn values (run.json)")
     for k in keys:
         v = metrics[k]
