@@ -237,6 +237,26 @@ def test_a_search_killed_while_a_batch_is_asked_resumes_as_if_never_stopped(
     pd.testing.assert_frame_equal(_trials(out)[cols], _trials(tiny)[cols])
 
 
+def test_a_search_begun_with_the_old_draws_is_not_extended(tiny, tmp_path, capsys):
+    """A study begun before session 45 drew a trial's values in another way (one sampler for
+    all): extended or resumed now, its new trials would be neither search's. It is refused in
+    one line; finished, with nothing to draw, it is read as before."""
+    import optuna
+
+    out = tmp_path / "out"
+    shutil.copytree(tiny, out)
+    study = optuna.load_study(study_name="tune-controller", storage=f"sqlite:///{out}/study.db")
+    spec = dict(study.user_attrs["spec"])
+    assert spec.pop("draw") == 2
+    study.set_user_attr("spec", spec)  # as a search of before session 45 left it
+    ranges = _write(tmp_path, heldout="[7, 8, 9, 10, 11, 12]")
+    args = ["tune", "controller", str(ranges), "--out", str(out), "--workers", "1", "--quiet"]
+    assert main(args) == 0  # the budget reached: nothing to draw
+    assert main([*args, "--trials", "6"]) == 2
+    err = capsys.readouterr().err
+    assert "a search begun before session 45" in err and len(err.strip().splitlines()) == 1
+
+
 BAD = {
     "unknown field": ('"domain.delta_rr" = { low = 1.0, high = 2.0 }', "no such field"),
     "low above high": ('"domain.delta_r" = { low = 50.0, high = 20.0 }', "must be below"),

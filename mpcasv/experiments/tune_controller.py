@@ -59,6 +59,10 @@ from mpcasv.experiments.tune_space import TuneSpec
 from mpcasv.wording import count
 
 STUDY_NAME = "tune-controller"
+#: how a trial's values are drawn (:func:`draw`): 2 since session 45, each value drawn alone
+#: from a sampler of its own. A study begun with another way cannot ask or redraw trials
+#: that are the same search's (:func:`open_study` refuses it unless it has nothing to draw)
+DRAW = 2
 
 
 def spec_fingerprint(spec: TuneSpec, train: list[Job]) -> dict:
@@ -66,7 +70,7 @@ def spec_fingerprint(spec: TuneSpec, train: list[Job]) -> dict:
     return {"controller": spec.controller, "objectives": list(spec.objectives),
             "constraint": spec.constraint, "sampler": spec.sampler, "batch": spec.batch,
             "seed": spec.seed, "params": [dataclasses.asdict(p) for p in spec.params],
-            "train_jobs": [j.job_id for j in train]}  # fmt: skip
+            "train_jobs": [j.job_id for j in train], "draw": DRAW}  # fmt: skip
 
 
 def _trial_seed(seed: int, number: int, field: int | None = None) -> int:
@@ -149,7 +153,15 @@ def open_study(spec: TuneSpec, out: Path, train: list[Job]):
                                 sampler=make_sampler(spec, 0))  # fmt: skip
     fp = spec_fingerprint(spec, train)
     old = study.user_attrs.get("spec")
-    if old is None:
+    n = len(study.get_trials(deepcopy=False))
+    if old is not None and old.get("draw") != DRAW and {**old, "draw": DRAW} == fp:
+        done = n >= spec.trials and not study.get_trials(
+            deepcopy=False, states=(optuna.trial.TrialState.RUNNING,))  # fmt: skip
+        if not done:  # it would ask or redraw trials: they would be neither search's
+            raise ConfigError(f"{out / 'study.db'}: a search begun before session 45, which "
+                              "drew a trial's values in another way: resumed or extended now "
+                              "it would be neither search; use another --out")  # fmt: skip
+    elif old is None:
         study.set_user_attr("spec", fp)
     elif old != fp:
         changed = sorted(k for k in fp if fp[k] != old.get(k))
@@ -159,7 +171,6 @@ def open_study(spec: TuneSpec, out: Path, train: list[Job]):
         what = "; ".join(said.get(k, f"{k} {old.get(k)!r} -> {fp[k]!r}") for k in changed)
         raise ConfigError(f"{out / 'study.db'}: holds a search with other {what} than "
                           f"{spec.path}; use another --out")  # fmt: skip
-    n = len(study.get_trials(deepcopy=False))
     if n > spec.trials:  # a smaller budget cannot be honoured: the trials are there
         raise ConfigError(f"{out / 'study.db'}: holds {n} trials already, more than the budget "
                           f"{spec.trials} (trials or --trials); give at least {n}")  # fmt: skip
