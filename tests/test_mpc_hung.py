@@ -112,6 +112,29 @@ def test_a_replay_solves_the_very_problem_that_hung(hung_run):
     assert (r.f, r.iters, r.ok, r.status) == (here.f, here.iters, here.ok, here.status)
 
 
+def test_fatrop_makes_one_iteration_more_than_its_limit_and_says_so(hung_run):
+    """``replay-solve --max-iter 3`` says "4 iterations": that is fatrop's own count, not ours
+    (docs/mpc.md "Solvers and speed"). fatrop (1.1.8, CasADi 3.8) tests its limit against the
+    count before the step it has just made, so it stops after K + 1 steps and reports K + 1
+    (its log's rows 1..K + 1); IPOPT, on the same problem, stops after K. We pass the
+    solver's ``iter_count`` through unchanged."""
+    import dataclasses as dc
+
+    from mpcasv.mpc.solvers import NLPSolver
+
+    c, res, _ = hung_run
+    (s,) = res.hung_solves
+    cap = {} if s.T_cap is None else {"T_cap": s.T_cap}
+    for k in (1, 2, 3):  # this problem needs more: each solve stops at its limit (status 1)
+        r = c.solver.solve(s.p, s.w0, s.lam_x, s.lam_g, k, **cap)
+        assert (r.ok, r.status, r.iters) == (False, "1", k + 1), k
+        assert c.solver.last_stats["iter_count"] == k + 1
+    ipopt = NLPSolver(c.ocp, dc.replace(c.params.solver, solver="ipopt", compiled=False),
+                      log=lambda *a: None)  # fmt: skip
+    r = ipopt.solve(s.p, s.w0, s.lam_x, s.lam_g, 3, **cap)
+    assert (r.ok, r.status, r.iters) == (False, "Maximum_Iterations_Exceeded", 3)
+
+
 def test_a_replay_that_hangs_again_is_abandoned_on_its_cpu_time(hung_run):
     (s,) = hung_run[1].hung_solves
     r = hung.replay(s, cpu_s=0.5, factory=spins)

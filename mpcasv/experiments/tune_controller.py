@@ -21,8 +21,11 @@ Reproducible and resumable:
 * the trials are asked in fixed-size **batches** (``batch``, the NSGA-II population) and all
   of a batch's runs are done before the next batch is asked, so the sampler sees the same
   history whatever the number of workers or the order in which runs finish;
-* the sampler is rebuilt before each ask with a seed derived from (``seed``, trial number):
-  a resumed search asks the same trials as one that was never interrupted;
+* the sampler is rebuilt before each draw with a seed derived from (``seed``, trial number;
+  and the field, for a field drawn alone: :func:`draw`), and NSGA-II's parents are in trial
+  order however they were obtained (:func:`_nsga2_class`): a resumed search asks the same
+  trials as one that was never interrupted, even when it was killed between two of a
+  trial's values (until session 45 it did not: see :func:`draw`);
 * the study lives in ``DIR/study.db`` (Optuna's RDB storage, SQLite); every finished run is
   written at once as a part (``DIR/train/parts``, ``DIR/heldout/parts``: the runner's store),
   keyed by a job id that is a hash of the base job and the trial's values. Killing the
@@ -36,6 +39,7 @@ in this process, on a local process pool, or on Dask.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import json
 import time
 from pathlib import Path
@@ -55,6 +59,10 @@ from mpcasv.experiments.tune_space import TuneSpec
 from mpcasv.wording import count
 
 STUDY_NAME = "tune-controller"
+#: how a trial's values are drawn (:func:`draw`): 2 since session 45, each value drawn alone
+#: from a sampler of its own. A study begun with another way cannot ask or redraw trials
+#: that are the same search's (:func:`open_study` refuses it unless it has nothing to draw)
+DRAW = 2
 
 
 def spec_fingerprint(spec: TuneSpec, train: list[Job]) -> dict:
@@ -62,22 +70,48 @@ def spec_fingerprint(spec: TuneSpec, train: list[Job]) -> dict:
     return {"controller": spec.controller, "objectives": list(spec.objectives),
             "constraint": spec.constraint, "sampler": spec.sampler, "batch": spec.batch,
             "seed": spec.seed, "params": [dataclasses.asdict(p) for p in spec.params],
-            "train_jobs": [j.job_id for j in train]}  # fmt: skip
+            "train_jobs": [j.job_id for j in train], "draw": DRAW}  # fmt: skip
 
 
-def _trial_seed(seed: int, number: int) -> int:
-    return int(np.random.SeedSequence([seed, number]).generate_state(1)[0])
+def _trial_seed(seed: int, number: int, field: int | None = None) -> int:
+    key = [seed, number] if field is None else [seed, number, field]
+    return int(np.random.SeedSequence(key).generate_state(1)[0])
 
 
-def make_sampler(spec: TuneSpec, number: int):
-    """The sampler that asks trial ``number`` (seeded by ``spec.seed`` and ``number``)."""
+@functools.cache
+def _nsga2_class():
     import optuna
 
-    seed = _trial_seed(spec.seed, number)
+    class NSGAIISampler(optuna.samplers.NSGAIISampler):
+        """Optuna's NSGA-II, its parent population in trial order however it is obtained.
+
+        Optuna (5.1) caches a generation's parents in the study as trial ids and reads them
+        back in trial order, but the ask that first selects them gets them in the elite
+        selection's order (rank, then crowding distance): the child crossed from them then
+        differs with the order (the parents are picked by index). A search killed after the
+        parents were cached and before that trial's values were all written drew it again
+        from the cached order: another trial (trial 2's ``eps_plus`` from the other parent,
+        tests/test_tune_controller.py). Named as Optuna's class on purpose: its GA base
+        class keys the generation and parent-cache attributes by the class name
+        (``NSGAIISampler:generation``), so studies stay readable both ways.
+        """
+
+        def select_parent(self, study, generation):
+            return sorted(super().select_parent(study, generation), key=lambda t: t.number)
+
+    return NSGAIISampler
+
+
+def make_sampler(spec: TuneSpec, number: int, field: int | None = None):
+    """The sampler that asks trial ``number`` (seeded by ``spec.seed`` and ``number``), or,
+    with ``field`` (index in ``spec.params``), that draws that field alone (:func:`draw`)."""
+    import optuna
+
+    seed = _trial_seed(spec.seed, number, field)
     if spec.sampler == "tpe":
         return optuna.samplers.TPESampler(seed=seed, multivariate=True,
                                           n_startup_trials=spec.batch)  # fmt: skip
-    return optuna.samplers.NSGAIISampler(population_size=spec.batch, seed=seed)
+    return _nsga2_class()(population_size=spec.batch, seed=seed)
 
 
 def directions(spec: TuneSpec) -> list[str]:
@@ -119,7 +153,15 @@ def open_study(spec: TuneSpec, out: Path, train: list[Job]):
                                 sampler=make_sampler(spec, 0))  # fmt: skip
     fp = spec_fingerprint(spec, train)
     old = study.user_attrs.get("spec")
-    if old is None:
+    n = len(study.get_trials(deepcopy=False))
+    if old is not None and old.get("draw") != DRAW and {**old, "draw": DRAW} == fp:
+        done = n >= spec.trials and not study.get_trials(
+            deepcopy=False, states=(optuna.trial.TrialState.RUNNING,))  # fmt: skip
+        if not done:  # it would ask or redraw trials: they would be neither search's
+            raise ConfigError(f"{out / 'study.db'}: a search begun before session 45, which "
+                              "drew a trial's values in another way: resumed or extended now "
+                              "it would be neither search; use another --out")  # fmt: skip
+    elif old is None:
         study.set_user_attr("spec", fp)
     elif old != fp:
         changed = sorted(k for k in fp if fp[k] != old.get(k))
@@ -129,7 +171,6 @@ def open_study(spec: TuneSpec, out: Path, train: list[Job]):
         what = "; ".join(said.get(k, f"{k} {old.get(k)!r} -> {fp[k]!r}") for k in changed)
         raise ConfigError(f"{out / 'study.db'}: holds a search with other {what} than "
                           f"{spec.path}; use another --out")  # fmt: skip
-    n = len(study.get_trials(deepcopy=False))
     if n > spec.trials:  # a smaller budget cannot be honoured: the trials are there
         raise ConfigError(f"{out / 'study.db'}: holds {n} trials already, more than the budget "
                           f"{spec.trials} (trials or --trials); give at least {n}")  # fmt: skip
@@ -143,9 +184,26 @@ def open_study(spec: TuneSpec, out: Path, train: list[Job]):
     return study
 
 
-def _suggest(trial, spec: TuneSpec) -> dict:
+def draw(study, spec: TuneSpec, trial_id: int, number: int) -> dict:
+    """Draw trial ``number``'s values (``trial_id`` its storage id), or those a killed search
+    left undrawn: the same values either way.
+
+    The values the sampler draws together (NSGA-II's child of two parents, multivariate
+    TPE's) come from the trial's sampler (:func:`make_sampler` with ``number``), which draws
+    them again alike from the same history. A value drawn alone (NSGA-II's first generation
+    and its mutated fields, TPE's start-up trials) comes from a sampler of its own
+    (``number`` and the field's index). Until session 45 one sampler drew them one after
+    another, so a search killed after a trial's first value drew the next with the first
+    one's random number: another trial than the uninterrupted search's.
+    """
+    import optuna
+
+    trial = optuna.trial.Trial(study, trial_id)
+    study.sampler = make_sampler(spec, number)
+    _ = trial.relative_params  # the joint draw, now, by this sampler (the Trial keeps it)
     values = {}
-    for p in spec.params:
+    for i, p in enumerate(spec.params):
+        study.sampler = make_sampler(spec, number, i)
         if p.int:
             values[p.name] = trial.suggest_int(p.name, p.low, p.high, log=p.log)
         else:
@@ -202,7 +260,6 @@ def aggregate(spec: TuneSpec, rows) -> tuple[list[float] | None, float, str | No
 
 def _ask_batch(study, spec: TuneSpec) -> list:
     """Trials of the current batch still to evaluate (RUNNING), asking the missing ones."""
-    import optuna
     from optuna.trial import TrialState
 
     trials = study.get_trials(deepcopy=False)
@@ -211,15 +268,14 @@ def _ask_batch(study, spec: TuneSpec) -> list:
     names = {p.name for p in spec.params}
     for t in running:  # killed between asking a trial and drawing all its values: draw them
         if not names <= set(t.params):  # first, as they were drawn before the later trials
-            study.sampler = make_sampler(spec, t.number)  # the sampler that asked it
-            _suggest(optuna.trial.Trial(study, t._trial_id), spec)
+            draw(study, spec, t._trial_id, t.number)
     # a batch left running (killed) is finished first, else a new batch starts at trial n
     start = (min(t.number for t in running) // spec.batch) * spec.batch if running else n
     end = min(start + spec.batch, spec.trials)
     while n < end:
         study.sampler = make_sampler(spec, n)
         trial = study.ask()
-        _suggest(trial, spec)
+        draw(study, spec, trial._trial_id, trial.number)
         n += 1
     return [t for t in study.get_trials(deepcopy=False) if t.state == TrialState.RUNNING]
 
