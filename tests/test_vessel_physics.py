@@ -19,6 +19,7 @@ from shared_data import CASES, needs_shared
 
 from mpcasv.cli import main
 from mpcasv.config import DATA_DIR, ConfigError, load_toml, parse, resolve
+from mpcasv.control.tuning_yaw import CourseUnstable, nomoto
 from mpcasv.models.params import VesselParams, load_vessel
 from mpcasv.models.vessel import IX, NX, VesselModel, mass_matrices
 
@@ -163,3 +164,13 @@ def test_every_command_refuses_the_file_before_running(flipped, capsys, argv):
     assert "flipped.toml: X_udot: X_udot = +91" in err[0] and "did you mean" in err[0], err[0]
     assert not (flipped / "out").exists()
 
+
+def test_complex_sway_yaw_poles_name_the_block_and_the_mass_terms():
+    """Mass in tonnes (m = 1.4): no load-time range on m (a 2-kg model ship is legitimate), but
+    tune yaw says why its poles are complex instead of only that they are."""
+    model = VesselModel(load_vessel("gretha").with_coeffs(m=1.4, I_z=2366.0))
+    with pytest.raises(CourseUnstable) as exc:
+        nomoto(model, 1.0)
+    msg = str(exc.value)
+    assert "complex or zero poles" in msg and "the coupling a_vr a_rv" in msg, msg
+    assert "mass terms: m = 1.4 kg, added -X_udot = 91 kg, -Y_vdot = 753.511 kg" in msg, msg
