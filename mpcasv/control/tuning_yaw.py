@@ -131,7 +131,8 @@ def nomoto(model: VesselModel, u0: float) -> Nomoto:
     pol = ", ".join(f"{complex(p).real:+.3g}{complex(p).imag:+.3g}j" for p in poles)
     if np.any(np.abs(poles.imag) > 1e-9) or np.any(np.abs(poles.real) < 1e-9):
         raise CourseUnstable(f"sway-yaw poles {pol} 1/s at u0={u0:g} m/s: no real first-order "
-                             "Nomoto model (complex or zero poles)")  # fmt: skip
+                             "Nomoto model (complex or zero poles); "
+                             + _sway_yaw_why(A[np.ix_(i2, i2)], model.params))  # fmt: skip
     T1, T2 = sorted((-1.0 / poles.real).tolist(), reverse=True)
     T3 = float(-1.0 / zeros.real[0]) if len(zeros) else 0.0
     K = float(np.real(ct.dcgain(sys2)))
@@ -140,6 +141,26 @@ def nomoto(model: VesselModel, u0: float) -> Nomoto:
         raise CourseUnstable(f"at u0={u0:g} m/s the steering has no first-order effect on the "
                              f"yaw rate (K = {K:.3g}, T = {T:.3g} s; sway-yaw poles {pol} 1/s)")
     return Nomoto(u0=u0, K=K, T=T, T1=T1, T2=T2, T3=T3)
+
+
+def _sway_yaw_why(a: np.ndarray, P) -> str:
+    """Why the linearised sway-yaw block ``a`` (``[[a_vv, a_vr], [a_rv, a_rr]]``) has complex or
+    zero poles, in its own entries (true for any 2x2 block: the poles are
+    ``(a_vv + a_rr)/2 +- sqrt(((a_vv - a_rr)/2)^2 + a_vr a_rv)``, complex when the coupling
+    product is below ``-((a_vv - a_rr)/2)^2``, zero when the determinant is), with the vessel
+    file's mass terms that set it (``M = M_RB + M_A``, Fossen 2021 §6.3)."""
+    (a_vv, a_vr), (a_rv, a_rr) = a
+    half = ((a_vv - a_rr) / 2) ** 2
+    if a_vr * a_rv < -half:
+        why = (f"the coupling a_vr a_rv = {a_vr:.3g} m/s x {a_rv:.3g} 1/(m s) = "
+               f"{a_vr * a_rv:.3g} 1/s^2 is below -((a_vv - a_rr)/2)^2 = {-half:.3g} 1/s^2 "
+               f"(a_vv = {a_vv:.3g}, a_rr = {a_rr:.3g} 1/s)")
+    else:
+        why = (f"the block's determinant a_vv a_rr - a_vr a_rv = {a_vv * a_rr - a_vr * a_rv:.3g} "
+               "1/s^2 is zero")
+    return (f"{why}; mass terms: m = {P.m:g} kg, added -X_udot = {-P.X_udot:g} kg, -Y_vdot = "
+            f"{-P.Y_vdot:g} kg, I_z = {P.I_z:g} kg m^2, -N_rdot = {-P.N_rdot:g} kg m^2, "
+            f"x_g = {P.x_g:g} m")
 
 
 def place_pid(nm: Nomoto, wn: float, zeta: float, integral_ratio: float) -> PIDGains:

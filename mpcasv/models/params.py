@@ -19,6 +19,7 @@ from pydantic import Field, Strict
 
 from mpcasv.config import (
     ConfigError,
+    FieldError,
     Float,
     NonNeg,
     Pos,
@@ -114,6 +115,7 @@ class VesselParams:
             raise ValueError("actuation = 'differential' needs y_thr > 0 (thruster offset, m)")
         if self.X_uu_idle != 0.0 and self.T_idle is None:
             raise ValueError("X_uu_idle given without T_idle (the thrust that blends it out, N)")
+        check_physics(self)
         numeric = [f.name for f in dataclasses.fields(self) if f.name not in ("name", "provenance")]
         if self.X_uu_idle == 0.0 and self.T_idle is None:  # optional pair, absent: the default
             numeric = [k for k in numeric if k not in ("X_uu_idle", "T_idle")]
@@ -155,6 +157,85 @@ class VesselParams:
         data.update(values)
         data["provenance"] = {}
         return parse(VesselParams, data, f"{self.name} override")
+
+
+#: diagonal added-mass derivatives (kg, kg, kg m^2): each <= 0 in Fossen's convention
+ADDED_MASS_DIAGONAL = ("X_udot", "Y_vdot", "N_rdot")
+#: damping derivatives of surge, sway and yaw each alone from rest (linear N s/m, N m s/rad;
+#: quadratic N s^2/m^2, N m s^2/rad^2): each <= 0 in Fossen's convention
+DAMPING_AT_REST = ("X_u", "Y_v", "N_r", "X_uu", "Y_vv", "N_rr")
+
+
+def check_physics(p: VesselParams) -> None:
+    """Refuse parameters that no hull has, whatever its size (run on every
+    :class:`VesselParams`, so at every load: ``load_vessel``, scenarios, suites, ``--vessel``).
+
+    1. Added mass: ``X_udot, Y_vdot, N_rdot <= 0``. The added mass of a body in an ideal fluid
+       is ``M_A = M_A^T >= 0`` (Fossen 2021 §6.3; its diagonal is the fluid's kinetic energy
+       per unit velocity squared), and ``M_A = -[[X_udot, ...]]`` in Fossen's convention: a
+       positive derivative is the added mass entered with the other sign.
+    2. Rigid body: ``I_z > m x_g^2``. ``I_z`` is about the body origin CO, ``I_z = I_g + m
+       x_g^2`` (parallel-axis theorem), so ``M_RB = M_RB^T > 0`` (Fossen 2021 §3.3).
+    3. The model's mass matrix ``M = M_RB + M_A`` (:func:`~mpcasv.models.vessel.mass_matrices`,
+       the one definition) is positive definite: ``nu^T M nu > 0`` for every ``nu != 0``
+       (kinetic energy; ``M`` invertible). After 1 and 2 only the off-diagonal ``Y_rdot,
+       N_vdot`` can break it. ``M`` need not be symmetric (``Y_rdot != N_vdot`` in empirical
+       fits, e.g. Clarke et al. 1982): its symmetric part is what is checked.
+    4. Damping from rest: ``X_u, Y_v, N_r, X_uu, Y_vv, N_rr <= 0``. Surging, swaying or yawing
+       alone from rest (no speed-proportional terms: ``U = 0``) the damping must take energy
+       out, at every amplitude (Fossen 2021 §6.4). The cross terms ``Y_r, N_v`` are not
+       checked: published models (CyberShip II) have a non-symmetric linear damping whose
+       symmetric part is indefinite.
+
+    No range is imposed on ``m`` or ``I_z`` themselves (a 2-kg model ship is legitimate).
+
+    Raises
+    ------
+    FieldError
+        One line naming the field(s), their values and the rule.
+    """
+    import numpy as np
+
+    from mpcasv.models.vessel import mass_matrices
+
+    bad = [k for k in ADDED_MASS_DIAGONAL if getattr(p, k) > 0]
+    if bad:
+        vals = ", ".join(f"{k} = {getattr(p, k):+.6g}" for k in bad)
+        fix = ", ".join(f"{k} = {-getattr(p, k):.6g}" for k in bad)
+        total = {"X_udot": ("m - X_udot", p.m, "kg"), "Y_vdot": ("m - Y_vdot", p.m, "kg"),
+                 "N_rdot": ("I_z - N_rdot", p.I_z, "kg m^2")}
+        lost = [f"{total[k][0]} = {total[k][1] - getattr(p, k):.6g} {total[k][2]} <= 0"
+                for k in bad if total[k][1] - getattr(p, k) <= 0]
+        raise FieldError(bad[0], f"{vals}: added-mass derivatives are <= 0 in Fossen's "
+                         "convention (the added masses -X_udot, -Y_vdot, -N_rdot are >= 0; a "
+                         "positive value is usually the added mass itself, entered without "
+                         "the minus)" + (f", and {', '.join(lost)} leaves the mass matrix "
+                                         "not positive definite" if lost else "")
+                         + f": did you mean {fix}?")
+    if p.I_z <= p.m * p.x_g**2:
+        raise FieldError("I_z", f"I_z = {p.I_z:g} kg m^2 is not above m x_g^2 = "
+                         f"{p.m * p.x_g**2:.6g} kg m^2 (m = {p.m:g} kg, x_g = {p.x_g:g} m): "
+                         "I_z is the yaw inertia about the body origin, I_g + m x_g^2 "
+                         "(parallel-axis theorem), so the rigid-body mass matrix would not be "
+                         "positive definite; check I_z (kg m^2), m (kg) and x_g (m)")
+    M_RB, M_A = mass_matrices({k: float(getattr(p, k)) for k in
+                               ("m", "I_z", "x_g", *ADDED_MASS_DIAGONAL, "Y_rdot", "N_vdot")})
+    M = np.array(M_RB + M_A, dtype=float)
+    lam = float(np.linalg.eigvalsh(0.5 * (M + M.T)).min())
+    if not lam > 0:
+        off = [k for k in ("Y_rdot", "N_vdot") if getattr(p, k) != 0] or ["x_g"]
+        raise FieldError(off[0], "mass matrix M = M_RB + M_A is not positive definite "
+                         f"(smallest eigenvalue of its symmetric part {lam:.4g}): the sway-yaw "
+                         f"coupling m x_g - Y_rdot = {M[1, 2]:.6g}, m x_g - N_vdot = "
+                         f"{M[2, 1]:.6g} is too large for m - Y_vdot = {M[1, 1]:.6g} kg and "
+                         f"I_z - N_rdot = {M[2, 2]:.6g} kg m^2; check Y_rdot, N_vdot (kg m, "
+                         "<= 0 sign as the diagonal ones) and x_g")
+    bad = [k for k in DAMPING_AT_REST if getattr(p, k) > 0]
+    if bad:
+        vals = ", ".join(f"{k} = {getattr(p, k):+.6g}" for k in bad)
+        raise FieldError(bad[0], f"{vals}: damping derivatives X_u, Y_v, N_r, X_uu, Y_vv, "
+                         "N_rr are <= 0 in Fossen's convention (with a positive one the hull "
+                         "gains energy surging, swaying or yawing from rest)")
 
 
 def load_vessel(name_or_path: str | Path = "gretha") -> VesselParams:

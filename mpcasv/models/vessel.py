@@ -89,6 +89,26 @@ def actuator_forces(T, delta, u_r, P):
     )
 
 
+def mass_matrices(P):
+    """Rigid-body and added mass matrices ``(M_RB, M_A)`` of the 3-DOF model (kg, kg m,
+    kg m^2 entries), ``M = M_RB + M_A`` multiplying ``[u_dot, v_dot, r_dot]`` in (2.6).
+
+    ``M_RB = [[m, 0, 0], [0, m, m x_g], [0, m x_g, I_z]]`` with ``I_z`` about the body origin
+    CO and the centre of gravity at ``(x_g, 0)`` (Fossen 2021 §3.3 reduced to surge, sway and
+    yaw); ``M_A = -[[X_udot, 0, 0], [0, Y_vdot, Y_rdot], [0, N_vdot, N_rdot]]`` (Fossen 2021
+    §6.3; the derivatives are <= 0 on the diagonal in this convention). ``P`` maps the names
+    of :data:`~mpcasv.models.params.MODEL_COEFFS` to CasADi symbols or to numbers (then the
+    matrices are ``casadi.DM``). The one definition: the equations of motion
+    (:func:`xdot_expr`) and the load-time check (:func:`~mpcasv.models.params.check_physics`)
+    both use it.
+    """
+    m, I_z, x_g = P["m"], P["I_z"], P["x_g"]
+    Xud, Yvd, Yrd, Nvd, Nrd = P["X_udot"], P["Y_vdot"], P["Y_rdot"], P["N_vdot"], P["N_rdot"]
+    M_RB = ca.vertcat(ca.horzcat(m, 0, 0), ca.horzcat(0, m, m * x_g), ca.horzcat(0, m * x_g, I_z))
+    M_A = -ca.vertcat(ca.horzcat(Xud, 0, 0), ca.horzcat(0, Yvd, Yrd), ca.horzcat(0, Nvd, Nrd))
+    return M_RB, M_A
+
+
 def xdot_expr(x, u, c, p):
     """Right-hand side of the model as a CasADi expression (SX or MX).
 
@@ -105,12 +125,10 @@ def xdot_expr(x, u, c, p):
     u_r, v_r = uu - u_c, v - v_c
     nu = ca.vertcat(uu, v, r)
 
-    m, I_z, x_g = P["m"], P["I_z"], P["x_g"]
-    Xud, Yvd, Yrd, Nvd, Nrd = P["X_udot"], P["Y_vdot"], P["Y_rdot"], P["N_vdot"], P["N_rdot"]
+    m, x_g = P["m"], P["x_g"]
+    Xud, Yvd, Yrd = P["X_udot"], P["Y_vdot"], P["Y_rdot"]
     eps = P["eps_abs"]
-
-    M_RB = ca.vertcat(ca.horzcat(m, 0, 0), ca.horzcat(0, m, m * x_g), ca.horzcat(0, m * x_g, I_z))
-    M_A = -ca.vertcat(ca.horzcat(Xud, 0, 0), ca.horzcat(0, Yvd, Yrd), ca.horzcat(0, Nvd, Nrd))
+    M_RB, M_A = mass_matrices(P)
 
     # Coriolis-centripetal forces (Fossen 2021 eqs. 6.43 and 6.52 in 3 DOF)
     C_RB_nu = ca.vertcat(-m * (x_g * r + v) * r, m * uu * r, m * x_g * uu * r)
