@@ -232,13 +232,15 @@ class WatchdogSpec:
 
 @frozen
 class SpeedSpec:
-    """Achieved vs commanded speed of the ASV (:mod:`mpcasv.io.speedwatch`).
+    """Achieved vs commanded speed of the ASV (:class:`mpcasv.io.asvwatch.SpeedWatch`).
 
     While the same transit speed has been commanded for ``window_s``, the achieved speed is
     the mean over that window of the speed over ground (``|(vx, vy)|``) and through the
     water (``u``); a shortfall is ``achieved < ratio x commanded``. ``persist_s`` of shortfall
     in a row make it persistent (event ``speed_shortfall``); the achievable speed is then the
-    achieved one, and ``controller.speed_feedback`` caps the controller's speed with it.
+    achieved one, and ``controller.speed_feedback`` caps the controller's speed with it
+    (unless the boat makes no way, event ``speed_no_way``: :class:`mpcasv.io.asvwatch.
+    SpeedWatch`). A dry run commands no speed: nothing is judged.
     """
 
     window_s: Pos = 10.0

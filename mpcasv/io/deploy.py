@@ -179,10 +179,15 @@ class Deploy(Phases, BoatFeedback, FieldMode, Ending):
         elif rec.get("event") == "between_error":
             log.error("controller's work after the step at t = %.3f failed: %s (the command "
                       "was sent; the next tick steps again)", rec.get("t"), rec.get("error"))
+        elif rec.get("event") == "reject" and rec.get("reason") == "internal_error":
+            # a bug in our own handling, not the input's fault: the message was dropped
+            log.error("internal error while handling %s from %s: %s (the message was dropped; "
+                      "counted in rejects 'internal_error'; a bug: please report it with "
+                      "deploy.jsonl)", rec.get("msg"), rec.get("addr"), rec.get("detail"))
         elif rec.get("event") != "reject":  # a current above the tested one: also --quiet
             detail = {k: v for k, v in rec.items() if k not in ("kind", "event", "t")}
             level = (logging.WARNING if rec["event"] in ("current_untested", "aborted",
-                                                         "clock_rate")
+                                                         "clock_rate", "speed_no_way")
                      else logging.INFO)  # fmt: skip
             log.log(level, "%s %s", rec["event"], detail)
 
@@ -301,7 +306,10 @@ class Deploy(Phases, BoatFeedback, FieldMode, Ending):
                             lk.reference_radius_m)  # fmt: skip
             sent = self.link.send(self.link.asv, ref)
         self.last_cmd = cmd
-        self.speed.command(ts, cmd.speed if cmd.mode is Mode.TRANSIT else None)
+        # the speed watch judges a commanded speed: a dry run commands none (the boat drifts
+        # or runs on someone else's commands, never ours)
+        transit = cmd.mode is Mode.TRANSIT and not self.dry_run
+        self.speed.command(ts, cmd.speed if transit else None)
         self.steps += 1
         self.overrides += override is not None
         diag = getattr(self.controller, "diagnostics", None)
