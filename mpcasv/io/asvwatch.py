@@ -128,16 +128,22 @@ class Thrusters:
 @dataclass
 class ClockRate:
     """How fast the ASV's clock has run against the deploy's since the first ASV state: once
-    ``window_s`` s of the deploy clock have passed, a rate above ``ahead`` is reported (once;
-    the most a real clock was seen to run ahead is 1.25, a DUNE clock step within
-    ``clock_slack_s``).
-    A SITL run with ``--speedup 5`` against a deploy whose ``[clock] speedup`` was left at 1
-    decided on time stamps five times faster than its own clock, its staleness limits and
-    ``--duration`` in another unit, and said nothing (a new user's finding, session 41). Taken
-    since the start, not per window: a SITL under ``--lockstep`` falls behind its clock while
-    it waits for a slow deploy and then catches up in a burst, faster than real time for a
-    while but never ahead of its clock. A slower ASV clock is not reported (that wait; a real
-    vehicle's silence is ``asv_stale``)."""
+    ``window_s`` s of the deploy clock have passed, a rate above ``ahead`` or below
+    ``1 / ahead`` is reported (once per run; the most a real clock was seen to run ahead is
+    1.25, a DUNE clock step within ``clock_slack_s``).
+
+    Ahead: a SITL run with ``--speedup 5`` against a deploy whose ``[clock] speedup`` was left
+    at 1 decided on time stamps five times faster than its own clock, its staleness limits and
+    ``--duration`` in another unit, and said nothing (a new user's finding, session 41).
+    Behind: a deploy with ``speedup = 20`` left over from a rehearsal, against a real-time
+    vehicle, made 4 decisions in 24 periods, called the ASV stale and back again and
+    heart-beat 20 times a second, and said nothing, exit 0 (a field engineer's trial, session
+    45); a SITL under ``--lockstep`` that waits for a deploy too slow for its factor runs
+    behind too, and that deploy cannot keep up either.
+    Taken since the start, not per window: a SITL under ``--lockstep`` falls behind its clock
+    while it waits for a slow deploy and then catches up in a burst, faster than real time for
+    a while but never ahead of its clock; a short wait is diluted by the time around it. A
+    vehicle's silence is not measured (only states that come are): that is ``asv_stale``."""
 
     window_s: float = 20.0
     ahead: float = 1.5
@@ -145,8 +151,8 @@ class ClockRate:
     said: bool = False
 
     def state(self, t: float, now: float) -> float | None:
-        """An ASV state stamped ``t`` read at deploy clock ``now``: the rate to report, or
-        None."""
+        """An ASV state stamped ``t`` (s, the ASV's clock) read at deploy clock ``now`` (s):
+        the rate (ASV seconds per deploy second) to report, or None."""
         if self.ref is None or t < self.ref[0]:
             self.ref = (t, now)
             return None
@@ -154,7 +160,7 @@ class ClockRate:
         if self.said or span < self.window_s:
             return None
         rate = (t - self.ref[0]) / span
-        if rate <= self.ahead:
+        if 1.0 / self.ahead <= rate <= self.ahead:
             return None
         self.said = True
         return rate

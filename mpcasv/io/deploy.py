@@ -78,6 +78,19 @@ __all__ = ["ASV_STALE", "RUNNING", "STARTING", "WAITING", "Deploy", "guard_param
 log = logging.getLogger("mpcasv.deploy")
 
 
+def clock_rate_note(rate: float, speedup: float) -> str:
+    """What a ``clock_rate`` event says: the ASV's clock ran ``rate`` times as fast as the
+    deploy's, whose ``[clock] speedup`` is ``speedup``."""
+    if rate > 1.0:
+        return ("the ASV's clock runs this many times as fast as the deploy's: is [clock] "
+                "speedup the SITL's --speedup?")
+    return (f"the ASV's clock runs this many times as fast as the deploy's, whose [clock] "
+            f"speedup is {speedup:g}: against a real vehicle it must be 1 (a rehearsal's "
+            f"factor left in the file?), against a SITL its --speedup (a SITL under "
+            f"--lockstep this far behind waits for a deploy too slow for the factor); its "
+            f"staleness limits and --duration run {1 / max(rate, 1e-9):.3g} times too fast")
+
+
 class Deploy(Phases, BoatFeedback, FieldMode, Ending):
     """The deploy loop (see the module docstring).
 
@@ -202,8 +215,7 @@ class Deploy(Phases, BoatFeedback, FieldMode, Ending):
             rate = self.clock_rate.state(nav.t, now)
             if rate is not None:
                 self.event("clock_rate", rate=round(rate, 2), speedup=self.cfg.clock.speedup,
-                           note="the ASV's clock runs this many times as fast as the deploy's: "
-                           "is [clock] speedup the SITL's --speedup?")  # fmt: skip
+                           note=clock_rate_note(rate, self.cfg.clock.speedup))
             ev = self.speed.state(nav.t, math.hypot(nav.v_N, nav.v_E), nav.u)
             if ev is not None:
                 self.event(ev.pop("event"), **ev)
