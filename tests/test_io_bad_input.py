@@ -211,6 +211,35 @@ def test_deploy_refuses_an_impossible_clock_factor(speedup, tmp_path, capsys):
              speedup, "[0.01, 1000]")  # fmt: skip
 
 
+# a field engineer's trial (session 45): both accepted; with a 60-s heartbeat DUNE stops
+# streaming 30 s after each Heartbeat (its UDP transport's Contact Timeout), and the deploy
+# said only asv_stale
+LINK_PERIODS = {
+    "heartbeat_period = 3600.0": ["link.heartbeat_period", "3600 s", "[0.1, 10] s", "30 s"],
+    "heartbeat_period = 60": ["link.heartbeat_period", "60 s", "Contact Timeout"],
+    "heartbeat_period = 0.0001": ["link.heartbeat_period", "0.0001 s", "[0.1, 10] s"],
+    "announce_period = 0.0001": ["link.announce_period", "0.0001 s", "[1, 60] s"],
+    "announce_period = 3600.0": ["link.announce_period", "3600 s", "restarted DUNE"],
+}
+
+
+@pytest.mark.parametrize("line", sorted(LINK_PERIODS))
+@pytest.mark.parametrize("mode", [["--prepare"], ["--dry-run", "--duration", "1"]])
+def test_deploy_refuses_a_link_period_dune_cannot_work_with(line, mode, tmp_path, capsys):
+    path = _deploy_config(tmp_path)
+    path.write_text(path.read_text().replace("[link]\n", f"[link]\n{line}\n", 1))
+    _refused(["deploy", path, "--quiet", *mode], capsys, str(path), *LINK_PERIODS[line])
+    assert not (tmp_path / "log").exists()
+
+
+def test_deploy_takes_the_link_periods_at_their_bounds(tmp_path, capsys):
+    path = _deploy_config(tmp_path)
+    text = path.read_text().replace("[link]\n", "[link]\nheartbeat_period = 10.0\n"
+                                    "announce_period = 1.0\n", 1)  # fmt: skip
+    path.write_text(text)
+    assert _exit_code(["deploy", path, "--quiet", "--prepare"]) == 0, capsys.readouterr().err
+
+
 # --- mpcasv deploy: what the run needs of this host --------------------------------------
 
 
