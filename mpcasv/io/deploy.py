@@ -154,6 +154,8 @@ class Deploy(Phases, BoatFeedback, FieldMode, Ending):
             self.pending: tuple[int, float] | None = None  # (request id, sent at)
             self.retry_at = -math.inf
             self.started = False  # FollowReference has been started at least once
+            self.plan_starts = 0  # PlanControl START requests sent (no_decision)
+            self.plan_failures = 0  # ... answered FAILURE
             self.status = ["missing"] * self.n_auv
             wd = cfg.watchdog
             self.thrusters = Thrusters(wd.asv_stale_s, wd.propeller_on_threshold)
@@ -360,7 +362,9 @@ class Deploy(Phases, BoatFeedback, FieldMode, Ending):
             speedup=self.cfg.clock.speedup,
             log_dir=str(self.log_dir),
             earlier_log_kept=self.kept,
-            config=dataclasses.asdict(self.cfg),
+            # the configuration as run: log.dir the folder used (--log-dir overrides it)
+            config=dataclasses.asdict(dataclasses.replace(
+                self.cfg, log=dataclasses.replace(self.cfg.log, dir=str(self.log_dir)))),
             guard=dataclasses.asdict(self.gp),
         )
         tasks = [asyncio.create_task(self._every_clock(0.25, self.watch)),
