@@ -217,6 +217,45 @@ def test_the_deploy_says_its_clock_and_the_asvs_disagree(tmp_path):
     dep.close()
 
 
+def test_clock_rate_reports_an_asv_clock_running_behind():
+    """The other direction (a field engineer's trial, session 45): a deploy left at
+    ``[clock] speedup = 20`` against a real-time vehicle sees the ASV's clock run 0.05 times
+    as fast as its own; reported once, after 20 s of the deploy clock; a clock 1.25 times
+    slower (within the factor 1.5 either way) is not."""
+    rate = ClockRate()
+    for now in range(300):
+        assert rate.state(now / 1.25, float(now)) is None
+    rate, said = ClockRate(), []
+    for k in range(100):  # states at 2 Hz of the ASV's clock, 10 s apart on the deploy's
+        r = rate.state(0.5 * k, 10.0 * k)
+        if r is not None:
+            said.append((10.0 * k, r))
+    assert said == [(20.0, pytest.approx(0.05))]
+
+
+def test_the_deploy_says_its_clock_runs_faster_than_the_asvs(tmp_path, caplog):
+    """A deploy at 20 times the ASV's rate: event ``clock_rate`` (rate 0.05, speedup 20) and
+    a warning on the console that names ``[clock] speedup``; before session 45, nothing."""
+    import logging
+
+    from test_io_cases import _es, dry_deploy
+
+    caplog.set_level(logging.INFO, logger="mpcasv.deploy")
+    dep, clock = dry_deploy(tmp_path, clock={"speedup": 20.0})
+    t = clock.t
+    for _ in range(60):  # 600 s of deploy clock, 30 s of the ASV's
+        clock.t += 10.0
+        t += 0.5
+        dep.link.handle_datagram(_es(clock, 0x2801, t, 0.0), ("10.0.10.50", 6002))
+    dep.jsonl.flush()
+    said = [e for e in read_jsonl(tmp_path / "deploy.jsonl", "event") if e["event"] == "clock_rate"]
+    assert len(said) == 1 and said[0]["rate"] == pytest.approx(0.05, rel=0.05)
+    assert said[0]["speedup"] == 20.0 and "[clock] speedup is 20" in said[0]["note"]
+    warned = [r for r in caplog.records if r.getMessage().startswith("clock_rate")]
+    assert [r.levelno for r in warned] == [logging.WARNING]
+    dep.close()
+
+
 def test_console_warnings_say_they_are_warnings():
     """The deploy's and the SITL's console lines: ``name: message`` for information,
     ``name: warning: message`` for a warning such as ``clock_rate`` (a new user's finding,

@@ -211,6 +211,35 @@ def test_deploy_refuses_an_impossible_clock_factor(speedup, tmp_path, capsys):
              speedup, "[0.01, 1000]")  # fmt: skip
 
 
+# a field engineer's trial (session 45): both accepted; with a 60-s heartbeat DUNE stops
+# streaming 30 s after each Heartbeat (its UDP transport's Contact Timeout), and the deploy
+# said only asv_stale
+LINK_PERIODS = {
+    "heartbeat_period = 3600.0": ["link.heartbeat_period", "3600 s", "[0.1, 10] s", "30 s"],
+    "heartbeat_period = 60": ["link.heartbeat_period", "60 s", "Contact Timeout"],
+    "heartbeat_period = 0.0001": ["link.heartbeat_period", "0.0001 s", "[0.1, 10] s"],
+    "announce_period = 0.0001": ["link.announce_period", "0.0001 s", "[1, 60] s"],
+    "announce_period = 3600.0": ["link.announce_period", "3600 s", "restarted DUNE"],
+}
+
+
+@pytest.mark.parametrize("line", sorted(LINK_PERIODS))
+@pytest.mark.parametrize("mode", [["--prepare"], ["--dry-run", "--duration", "1"]])
+def test_deploy_refuses_a_link_period_dune_cannot_work_with(line, mode, tmp_path, capsys):
+    path = _deploy_config(tmp_path)
+    path.write_text(path.read_text().replace("[link]\n", f"[link]\n{line}\n", 1))
+    _refused(["deploy", path, "--quiet", *mode], capsys, str(path), *LINK_PERIODS[line])
+    assert not (tmp_path / "log").exists()
+
+
+def test_deploy_takes_the_link_periods_at_their_bounds(tmp_path, capsys):
+    path = _deploy_config(tmp_path)
+    text = path.read_text().replace("[link]\n", "[link]\nheartbeat_period = 10.0\n"
+                                    "announce_period = 1.0\n", 1)  # fmt: skip
+    path.write_text(text)
+    assert _exit_code(["deploy", path, "--quiet", "--prepare"]) == 0, capsys.readouterr().err
+
+
 # --- mpcasv deploy: what the run needs of this host --------------------------------------
 
 
@@ -278,6 +307,22 @@ def test_a_deploy_that_hears_no_vehicle_exits_1_saying_so(tmp_path, capsys):
     assert json.loads(last)["no_decision"] == summary["no_decision"]  # the log says why too
 
 
+def test_the_started_event_names_the_log_folder_used(tmp_path, capsys):
+    """``--log-dir`` overrides ``log.dir``: the ``started`` event's ``config.log.dir`` is the
+    folder used, as its ``log_dir`` is (it showed the file's folder; a field engineer's
+    trial, session 45)."""
+    nobody = f"127.0.0.1:{_free_port()}"
+    path = _deploy_config(tmp_path, announce_to=f'["{nobody}"]', speedup="20.0")
+    used = tmp_path / "elsewhere"
+    code = _exit_code(["deploy", path, "--dry-run", "--duration", "2", "--quiet",
+                       "--log-dir", used])  # fmt: skip
+    assert code == 1, capsys.readouterr().err
+    assert not (tmp_path / "log").exists()
+    started = next(json.loads(line) for line in (used / "deploy.jsonl").read_text().splitlines()
+                   if json.loads(line).get("event") == "started")  # fmt: skip
+    assert started["log_dir"] == str(used) == started["config"]["log"]["dir"]
+
+
 def _deploy_stub(steps: int, heard: list[bool], state: list[bool],
                  transport: str = "udp", speedup: float = 1.0) -> SimpleNamespace:  # fmt: skip
     tcp = transport == "tcp"
@@ -288,7 +333,7 @@ def _deploy_stub(steps: int, heard: list[bool], state: list[bool],
     link = SimpleNamespace(announce_to=() if tcp else ("127.0.0.1:30100",), transport=transport,
                            bind="127.0.0.1")
     stub = SimpleNamespace(
-        steps=steps, phase="waiting",
+        steps=steps, phase="waiting", plan_starts=0, plan_failures=0, started=False,
         cfg=SimpleNamespace(link=link, clock=SimpleNamespace(speedup=speedup)),
         link=SimpleNamespace(peers=peers, endpoint=None if tcp else SimpleNamespace(
             address=("127.0.0.1", 1)), tcp_error=None, strangers={}),  # fmt: skip
@@ -336,6 +381,47 @@ def test_no_decision_names_the_systems_that_announced_but_are_not_configured():
     assert "announced but not configured: 'sitl-auv' 0x2811" in why, why
     why = Phases.no_decision(_deploy_stub(0, [True, True], [True, True]), 5.0)
     assert "'waiting'" in why
+
+
+def test_no_decision_names_the_asv_that_never_answered_plan_control(tmp_path):
+    """The roles swapped (a field engineer's trial, session 45): every vehicle heard and in
+    state, PlanControl START sent to the configured 'ASV' again and again, never answered.
+    The line said only "every vehicle was heard, the deploy stayed in phase 'starting'"; it
+    names the configured ASV and the PlanControl it never answered. A vehicle that answers
+    FAILURE is named as refusing. Lockstep on a hand-advanced clock; the watchdog pass run by
+    hand."""
+    import imcpy
+    from test_deploy_speed_watch import _state
+    from test_io_cases import dry_deploy
+
+    from mpcasv.io.imc import stamp
+
+    PC = imcpy.PlanControl
+
+    for failure in (False, True):
+        dep, clock = dry_deploy(tmp_path / str(failure))
+        dep.dry_run = False
+        dep.link._send_raw = lambda data, addr, p=None: True  # sent nowhere
+        t0 = clock.t
+        for k in range(1, 61):  # 30 s at 2 Hz
+            clock.t = t0 + 0.5 * k
+            dep.link.handle_datagram(_state(0x2811, clock.t, 1000.0, 0.0), ("10.0.10.60", 6002))
+            dep.link.handle_datagram(_state(0x2801, clock.t, 0.0, 0.0), ("10.0.10.50", 6002))
+            if failure and dep.pending is not None:
+                pc = PC()
+                pc.type, pc.op = PC.TypeEnum.FAILURE, PC.OperationEnum.START
+                pc.request_id, pc.plan_id, pc.info = dep.pending[0], "mpcasv-followref", "no"
+                raw = stamp(pc, 0x2801, dep.link.id, clock.t).serialize()
+                dep.link.handle_datagram(raw, ("10.0.10.50", 6002))
+            dep.watch()
+        why = dep.no_decision(30.0)
+        assert "the configured ASV" in why and "0x2801" in why, why
+        assert dep.plan_starts >= 3 and not dep.started
+        if failure:
+            assert "refused FollowReference" in why and "plan_start_failed" in why, why
+        else:
+            assert "never answered PlanControl START" in why and "roles swapped" in why, why
+        dep.close()
 
 
 # --- mpcasv replay --------------------------------------------------------------------------

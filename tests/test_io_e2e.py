@@ -416,6 +416,8 @@ def test_tcp_backseat(tmp_path, transport):
         code = _stop(deploy)
         _stop(sitl)
     assert code == 0, (tmp_path / "deploy.stderr").read_text()
+    # a normal end with the deploy connected: no asyncio traceback (session 45: two)
+    assert "Traceback" not in (tmp_path / "sitl" / "sitl.stderr").read_text()
     steps = read_jsonl(tmp_path / "deploy" / "deploy.jsonl", "step")
     info = json.loads((tmp_path / "sitl" / "run" / "run.json").read_text())["sitl"]
     assert info["periods"] == 60 and len(steps) == 60

@@ -278,3 +278,32 @@ def test_a_sitl_stopped_while_held_says_why_it_wrote_no_run(tmp_path):
     assert not (out / "run").exists()
     finished = [e for e in read_jsonl(out / "sitl.jsonl", "event") if e["event"] == "finished"]
     assert finished[0]["no_run"] == "the world stood at t = 0 (--hold): no Reference came"
+
+
+def test_a_tcp_client_connected_at_the_end_ends_quietly():
+    """``mpcasv sitl --tcp`` ending with the deploy still connected (a normal end): its
+    sockets closed as the SITL closes them, the client's handler is cancelled by
+    ``asyncio.run`` and ends without an error for the loop (before session 45: one
+    ``CancelledError`` traceback per connected vehicle on stderr, from Python 3.11's
+    ``StreamReaderProtocol``; a field engineer's trial)."""
+    from mpcasv.io.simvehicle import SimVehicle
+
+    errors = []
+
+    async def main():
+        asyncio.get_running_loop().set_exception_handler(lambda loop, ctx: errors.append(ctx))
+        v = SimVehicle(sitl=None, name="sitl-asv", id=0x2801, role="asv", index=0)
+        await v.serve_tcp("127.0.0.1")
+        _, writer = await asyncio.open_connection("127.0.0.1", v.tcp_port)
+        for _ in range(10_000):  # the server's handler has started (loop turns, no clock)
+            if v.tcp_clients:
+                break
+            await asyncio.sleep(0)
+        assert v.tcp_clients
+        v.tcp_server.close()  # as Sitl.close_sockets
+        for stream in list(v.tcp_clients):
+            stream.close()
+        return writer  # the client side still open
+
+    asyncio.run(main())
+    assert [e.get("message") for e in errors] == []

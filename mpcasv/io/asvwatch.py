@@ -40,7 +40,7 @@ from dataclasses import dataclass, field
 
 from mpcasv.io.config import SpeedSpec
 
-__all__ = ["ClockRate", "SpeedWatch", "Thrusters", "UsblFixes", "dune_actuators",
+__all__ = ["NO_WAY_MS", "ClockRate", "SpeedWatch", "Thrusters", "UsblFixes", "dune_actuators",
            "dune_set_points"]
 
 
@@ -128,16 +128,22 @@ class Thrusters:
 @dataclass
 class ClockRate:
     """How fast the ASV's clock has run against the deploy's since the first ASV state: once
-    ``window_s`` s of the deploy clock have passed, a rate above ``ahead`` is reported (once;
-    the most a real clock was seen to run ahead is 1.25, a DUNE clock step within
-    ``clock_slack_s``).
-    A SITL run with ``--speedup 5`` against a deploy whose ``[clock] speedup`` was left at 1
-    decided on time stamps five times faster than its own clock, its staleness limits and
-    ``--duration`` in another unit, and said nothing (a new user's finding, session 41). Taken
-    since the start, not per window: a SITL under ``--lockstep`` falls behind its clock while
-    it waits for a slow deploy and then catches up in a burst, faster than real time for a
-    while but never ahead of its clock. A slower ASV clock is not reported (that wait; a real
-    vehicle's silence is ``asv_stale``)."""
+    ``window_s`` s of the deploy clock have passed, a rate above ``ahead`` or below
+    ``1 / ahead`` is reported (once per run; the most a real clock was seen to run ahead is
+    1.25, a DUNE clock step within ``clock_slack_s``).
+
+    Ahead: a SITL run with ``--speedup 5`` against a deploy whose ``[clock] speedup`` was left
+    at 1 decided on time stamps five times faster than its own clock, its staleness limits and
+    ``--duration`` in another unit, and said nothing (a new user's finding, session 41).
+    Behind: a deploy with ``speedup = 20`` left over from a rehearsal, against a real-time
+    vehicle, made 4 decisions in 24 periods, called the ASV stale and back again and
+    heart-beat 20 times a second, and said nothing, exit 0 (a field engineer's trial, session
+    45); a SITL under ``--lockstep`` that waits for a deploy too slow for its factor runs
+    behind too, and that deploy cannot keep up either.
+    Taken since the start, not per window: a SITL under ``--lockstep`` falls behind its clock
+    while it waits for a slow deploy and then catches up in a burst, faster than real time for
+    a while but never ahead of its clock; a short wait is diluted by the time around it. A
+    vehicle's silence is not measured (only states that come are): that is ``asv_stale``."""
 
     window_s: float = 20.0
     ahead: float = 1.5
@@ -145,8 +151,8 @@ class ClockRate:
     said: bool = False
 
     def state(self, t: float, now: float) -> float | None:
-        """An ASV state stamped ``t`` read at deploy clock ``now``: the rate to report, or
-        None."""
+        """An ASV state stamped ``t`` (s, the ASV's clock) read at deploy clock ``now`` (s):
+        the rate (ASV seconds per deploy second) to report, or None."""
         if self.ref is None or t < self.ref[0]:
             self.ref = (t, now)
             return None
@@ -154,11 +160,18 @@ class ClockRate:
         if self.said or span < self.window_s:
             return None
         rate = (t - self.ref[0]) / span
-        if rate <= self.ahead:
+        if 1.0 / self.ahead <= rate <= self.ahead:
             return None
         self.said = True
         return rate
 
+
+#: below this mean speed through the water (m/s) a transit makes no way (drift, a stalled or
+#: disengaged propulsion): no achievable speed is learnt from it (:class:`SpeedWatch`). Far
+#: below the lowest speed any propulsion makes when it runs: DUNE's Otter makes 0.7 m/s at its
+#: 250-RPM floor (docs/deploy.md, "Speeds, commanded against achieved"), the MPCs'
+#: ``speed_min`` is 0.5 m/s; a boat drifting backwards measured -0.05 m/s.
+NO_WAY_MS = 0.1
 
 #: distinct unmatched USBL targets kept by name (:class:`UsblFixes`)
 MAX_UNMATCHED = 20
@@ -234,28 +247,43 @@ class UsblFixes:
 
 @dataclass
 class SpeedWatch:
-    """Achieved vs commanded speed (see the module docstring)."""
+    """Achieved vs commanded speed (see the module docstring).
+
+    A persistent shortfall is one of two verdicts: ``speed_shortfall`` (the boat makes way,
+    less than commanded: its mean speed through the water, m/s, is the *achievable* speed)
+    or ``speed_no_way`` (its mean speed through the water is below :data:`NO_WAY_MS`: it
+    drifts, the propulsion does not drive it; nothing is learnt, the achievable speed stays
+    what it was). A speed that small (or negative: a boat drifting backwards measured -0.05
+    m/s) is no speed to plan transits with, and a controller refuses a speed cap that is not
+    positive."""
 
     spec: SpeedSpec
     commanded: float | None = None  # m/s of the transit being commanded, None in standby
     since: float = -math.inf  # ASV-state time the commanded speed was first sent
     samples: deque = field(default_factory=deque)  # (t, sog, stw)
     short_since: float | None = None
-    persistent: bool = False
-    achievable: float | None = None  # learned (m/s), None until a persistent shortfall
+    verdict: str | None = None  # "speed_shortfall" / "speed_no_way" while persistent
+    achievable: float | None = None  # learned (m/s, >= NO_WAY_MS), None until a shortfall
     _mean: tuple[float, float] | None = None
 
+    @property
+    def persistent(self) -> bool:
+        """Whether a shortfall (either verdict) persists."""
+        return self.verdict is not None
+
     def command(self, t: float, speed: float | None) -> None:
-        """The command just sent at ASV-state time ``t`` (None / 0: standby)."""
+        """The command just sent at ASV-state time ``t`` (s; ``speed`` m/s, None / 0:
+        standby or nothing sent, as in a dry run)."""
         speed = speed if speed and speed > 0 else None
         if speed != self.commanded:  # a new commanded speed gets a verdict of its own
             self.commanded, self.since = speed, t
-            self.short_since, self.persistent = None, False
+            self.short_since, self.verdict = None, None
             self.samples.clear()
 
     def state(self, t: float, sog: float, stw: float) -> dict | None:
-        """One ASV state; returns an event dict (``speed_shortfall`` / ``speed_recovered``)
-        when the verdict changes."""
+        """One ASV state at ``t`` (s), its speed over ground ``sog`` and through the water
+        ``stw`` (m/s); returns an event dict (``speed_shortfall`` / ``speed_no_way`` /
+        ``speed_recovered``) when the verdict changes."""
         s = self.spec
         self.samples.append((t, sog, stw))
         while self.samples and self.samples[0][0] < t - s.window_s:
@@ -269,19 +297,27 @@ class SpeedWatch:
         if stw_m < s.ratio * self.commanded:
             if self.short_since is None:
                 self.short_since = t
-            if t - self.short_since >= s.persist_s:
+            if t - self.short_since < s.persist_s:
+                return None
+            verdict = "speed_shortfall" if stw_m >= NO_WAY_MS else "speed_no_way"
+            if verdict == "speed_shortfall":
                 self.achievable = stw_m
-                if not self.persistent:
-                    self.persistent = True
-                    return {"event": "speed_shortfall", "commanded": self.commanded,
-                            "sog": sog_m, "stw": stw_m, "achievable": stw_m,
-                            "for_s": t - self.short_since}  # fmt: skip
-            return None
+            if verdict == self.verdict:
+                return None
+            self.verdict = verdict
+            ev = {"event": verdict, "commanded": self.commanded, "sog": sog_m, "stw": stw_m,
+                  "for_s": t - self.short_since}  # fmt: skip
+            if verdict == "speed_shortfall":
+                return ev | {"achievable": stw_m}
+            return ev | {"achievable": self.achievable, "no_way_ms": NO_WAY_MS,
+                         "note": "the boat makes no way through the water at the commanded "
+                         "speed (drifting; propulsion stalled, off or fouled?): no speed cap "
+                         "is learnt from it"}  # fmt: skip
         self.short_since = None
         if self.achievable is not None and stw_m > self.achievable:
             self.achievable = stw_m  # it made more than we thought: raise the cap
-        if self.persistent:
-            self.persistent = False
+        if self.verdict is not None:
+            self.verdict = None
             return {"event": "speed_recovered", "commanded": self.commanded, "sog": sog_m,
                     "stw": stw_m}  # fmt: skip
         return None

@@ -149,8 +149,18 @@ class LinkSpec:
         "224.0.75.69:30100", "224.0.75.69:30101", "224.0.75.69:30102",
         "224.0.75.69:30103", "224.0.75.69:30104",
     )  # fmt: skip
-    announce_period: Pos = 10.0
-    heartbeat_period: Pos = 1.0
+    # DUNE's UDP transport streams to a system only while it has heard from it within its
+    # contact timeout (Transports.UDP "Contact Timeout", 30 s, checked every 5 s); while the
+    # deploy waits or the ASV is stale, the Heartbeat is all it sends: 60 s stopped the
+    # streaming 30 s after each one. At most 10 s: three per timeout, two may be lost. At
+    # least 0.1 s: DUNE's own is 1 Hz; faster floods the link (0.0001 s was accepted)
+    heartbeat_period: between(0.1, 10, "s", "DUNE's UDP transport stops streaming to a "
+                              "system not heard from for 30 s (its Contact Timeout): keep three "
+                              "Heartbeats within it; DUNE's own is 1 s") = 1.0
+    # DUNE takes datagrams only from systems whose Announce it has heard; a restarted DUNE
+    # knows nobody until our next one. DUNE announces every 10 s (Transports.Announce)
+    announce_period: between(1, 60, "s", "a restarted DUNE takes nothing from us until our "
+                             "next Announce: a minute at most; DUNE's own is 10 s") = 10.0
     # FollowReference.timeout: DUNE ends the maneuver after it without a Reference (its own
     # stop if we go silent; 1e5 s switched it off)
     followref_timeout: between(1, 300, "s", "DUNE's own stop when the deploy goes silent: "
@@ -232,13 +242,15 @@ class WatchdogSpec:
 
 @frozen
 class SpeedSpec:
-    """Achieved vs commanded speed of the ASV (:mod:`mpcasv.io.speedwatch`).
+    """Achieved vs commanded speed of the ASV (:class:`mpcasv.io.asvwatch.SpeedWatch`).
 
     While the same transit speed has been commanded for ``window_s``, the achieved speed is
     the mean over that window of the speed over ground (``|(vx, vy)|``) and through the
     water (``u``); a shortfall is ``achieved < ratio x commanded``. ``persist_s`` of shortfall
     in a row make it persistent (event ``speed_shortfall``); the achievable speed is then the
-    achieved one, and ``controller.speed_feedback`` caps the controller's speed with it.
+    achieved one, and ``controller.speed_feedback`` caps the controller's speed with it
+    (unless the boat makes no way, event ``speed_no_way``: :class:`mpcasv.io.asvwatch.
+    SpeedWatch`). A dry run commands no speed: nothing is judged.
     """
 
     window_s: Pos = 10.0

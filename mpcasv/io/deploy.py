@@ -78,6 +78,19 @@ __all__ = ["ASV_STALE", "RUNNING", "STARTING", "WAITING", "Deploy", "guard_param
 log = logging.getLogger("mpcasv.deploy")
 
 
+def clock_rate_note(rate: float, speedup: float) -> str:
+    """What a ``clock_rate`` event says: the ASV's clock ran ``rate`` times as fast as the
+    deploy's, whose ``[clock] speedup`` is ``speedup``."""
+    if rate > 1.0:
+        return ("the ASV's clock runs this many times as fast as the deploy's: is [clock] "
+                "speedup the SITL's --speedup?")
+    return (f"the ASV's clock runs this many times as fast as the deploy's, whose [clock] "
+            f"speedup is {speedup:g}: against a real vehicle it must be 1 (a rehearsal's "
+            f"factor left in the file?), against a SITL its --speedup (a SITL under "
+            f"--lockstep this far behind waits for a deploy too slow for the factor); its "
+            f"staleness limits and --duration run {1 / max(rate, 1e-9):.3g} times too fast")
+
+
 class Deploy(Phases, BoatFeedback, FieldMode, Ending):
     """The deploy loop (see the module docstring).
 
@@ -141,6 +154,8 @@ class Deploy(Phases, BoatFeedback, FieldMode, Ending):
             self.pending: tuple[int, float] | None = None  # (request id, sent at)
             self.retry_at = -math.inf
             self.started = False  # FollowReference has been started at least once
+            self.plan_starts = 0  # PlanControl START requests sent (no_decision)
+            self.plan_failures = 0  # ... answered FAILURE
             self.status = ["missing"] * self.n_auv
             wd = cfg.watchdog
             self.thrusters = Thrusters(wd.asv_stale_s, wd.propeller_on_threshold)
@@ -179,10 +194,15 @@ class Deploy(Phases, BoatFeedback, FieldMode, Ending):
         elif rec.get("event") == "between_error":
             log.error("controller's work after the step at t = %.3f failed: %s (the command "
                       "was sent; the next tick steps again)", rec.get("t"), rec.get("error"))
+        elif rec.get("event") == "reject" and rec.get("reason") == "internal_error":
+            # a bug in our own handling, not the input's fault: the message was dropped
+            log.error("internal error while handling %s from %s: %s (the message was dropped; "
+                      "counted in rejects 'internal_error'; a bug: please report it with "
+                      "deploy.jsonl)", rec.get("msg"), rec.get("addr"), rec.get("detail"))
         elif rec.get("event") != "reject":  # a current above the tested one: also --quiet
             detail = {k: v for k, v in rec.items() if k not in ("kind", "event", "t")}
             level = (logging.WARNING if rec["event"] in ("current_untested", "aborted",
-                                                         "clock_rate")
+                                                         "clock_rate", "speed_no_way")
                      else logging.INFO)  # fmt: skip
             log.log(level, "%s %s", rec["event"], detail)
 
@@ -197,8 +217,7 @@ class Deploy(Phases, BoatFeedback, FieldMode, Ending):
             rate = self.clock_rate.state(nav.t, now)
             if rate is not None:
                 self.event("clock_rate", rate=round(rate, 2), speedup=self.cfg.clock.speedup,
-                           note="the ASV's clock runs this many times as fast as the deploy's: "
-                           "is [clock] speedup the SITL's --speedup?")  # fmt: skip
+                           note=clock_rate_note(rate, self.cfg.clock.speedup))
             ev = self.speed.state(nav.t, math.hypot(nav.v_N, nav.v_E), nav.u)
             if ev is not None:
                 self.event(ev.pop("event"), **ev)
@@ -301,7 +320,10 @@ class Deploy(Phases, BoatFeedback, FieldMode, Ending):
                             lk.reference_radius_m)  # fmt: skip
             sent = self.link.send(self.link.asv, ref)
         self.last_cmd = cmd
-        self.speed.command(ts, cmd.speed if cmd.mode is Mode.TRANSIT else None)
+        # the speed watch judges a commanded speed: a dry run commands none (the boat drifts
+        # or runs on someone else's commands, never ours)
+        transit = cmd.mode is Mode.TRANSIT and not self.dry_run
+        self.speed.command(ts, cmd.speed if transit else None)
         self.steps += 1
         self.overrides += override is not None
         diag = getattr(self.controller, "diagnostics", None)
@@ -340,7 +362,9 @@ class Deploy(Phases, BoatFeedback, FieldMode, Ending):
             speedup=self.cfg.clock.speedup,
             log_dir=str(self.log_dir),
             earlier_log_kept=self.kept,
-            config=dataclasses.asdict(self.cfg),
+            # the configuration as run: log.dir the folder used (--log-dir overrides it)
+            config=dataclasses.asdict(dataclasses.replace(
+                self.cfg, log=dataclasses.replace(self.cfg.log, dir=str(self.log_dir)))),
             guard=dataclasses.asdict(self.gp),
         )
         tasks = [asyncio.create_task(self._every_clock(0.25, self.watch)),

@@ -45,6 +45,7 @@ class Phases:
             self.t_next = -math.inf
             self.event("plan_started", **info)
         elif msg.type == _PC.TypeEnum.FAILURE:
+            self.plan_failures += 1
             self.pending, self.phase = None, WAITING
             self.retry_at = now + self.cfg.link.plan_start_timeout
             self.event("plan_start_failed", **info)
@@ -99,6 +100,7 @@ class Phases:
         pc.arg = fr
         self.link.send(self.link.asv, pc)
         self.pending, self.phase = (self.request_id, now), STARTING
+        self.plan_starts += 1
         self.event("plan_start_sent", request_id=self.request_id)
 
     def asv_back(self, p, nav, now: float) -> bool:
@@ -199,5 +201,17 @@ class Phases:
             return (f"no decision in {took}: no state (EstimatedState) accepted from "
                     f"{', '.join(silent)} (heard: {', '.join(heard)}{seen}); see the 'reject' "
                     "events and counters in deploy.jsonl")  # fmt: skip
+        if self.plan_starts and not self.started:  # FollowReference never ran
+            asv = self.link.asv
+            who = f"the configured ASV {asv.label!r}" + (f" (0x{asv.id:04X})" if asv.id is not None
+                                                         else "")  # fmt: skip
+            if self.plan_failures:
+                return (f"no decision in {took}: {who} refused FollowReference (PlanControl "
+                        f"FAILURE {self.plan_failures} of {self.plan_starts} times; its 'info' "
+                        "in the 'plan_start_failed' events of deploy.jsonl)")  # fmt: skip
+            return (f"no decision in {took}: {who} never answered PlanControl START "
+                    f"({self.plan_starts} sent, each given link.plan_start_timeout "
+                    f"{self.cfg.link.plan_start_timeout:g} s): is it the vehicle that runs "
+                    "DUNE's maneuvers, the boat? (the [[vehicle]] roles swapped?)")  # fmt: skip
         return (f"no decision in {took}: every vehicle was heard, the deploy stayed in phase "
                 f"{self.phase!r} (see its events in deploy.jsonl)")  # fmt: skip

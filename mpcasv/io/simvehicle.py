@@ -186,11 +186,24 @@ class SimVehicle:
             self.sitl.asv_message(self, msg, node, stream)
 
     async def serve_tcp(self, host: str) -> None:
+        """Serve DUNE's TCP backseat port on ``host`` (``tcp_port``; 0: any free port).
+
+        A client still connected when the SITL ends has its handler cancelled by
+        ``asyncio.run``; the handler then ends quietly, its connection closed: Python 3.11's
+        ``StreamReaderProtocol`` calls ``exception()`` on the cancelled handler and logged a
+        ``CancelledError`` traceback per client on every normal end of ``mpcasv sitl --tcp``
+        (a field engineer's trial, session 45)."""
+
         async def client(reader, writer):
             stream = TcpStream(reader, writer, lambda m, raw: self._on_tcp(m, raw, stream))
             self.tcp_clients.append(stream)
-            await stream.run()
-            self.tcp_clients.remove(stream)
+            try:
+                await stream.run()
+            except asyncio.CancelledError:  # the SITL's end: nothing awaits this handler
+                stream.close()
+            finally:
+                if stream in self.tcp_clients:
+                    self.tcp_clients.remove(stream)
 
         self.tcp_server = await asyncio.start_server(client, host, self.tcp_port)
         self.tcp_port = self.tcp_server.sockets[0].getsockname()[1]

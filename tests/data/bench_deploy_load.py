@@ -48,7 +48,7 @@ def _config(log_dir: str, lsf: str | None, port: int, otter: int, auv: int):
         "identity": {"id": 0x4001, "name": "mpcasv-capture"},
         "origin": {"lat_deg": 41.1850, "lon_deg": -8.7062},
         "link": {"bind": "127.0.0.1", "port": port, "announce_to": [],
-                 "heartbeat_period": 1000.0},
+                 "heartbeat_period": 10.0},
         "vehicle": [{"role": "asv", "id": 0x0803, "address": f"127.0.0.1:{otter}"},
                     {"role": "auv", "id": 0x00D1, "address": f"127.0.0.1:{auv}"}],
         "controller": {"name": "hybrid-single", "preset": "paper1-field"},
