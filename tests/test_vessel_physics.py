@@ -73,6 +73,18 @@ def test_yaw_inertia_below_m_xg2_is_refused():
              x_g=-2.0)
 
 
+def test_a_yaw_inertia_no_hull_of_its_size_has_is_refused():
+    """A mass entered in tonnes (m = 1.4 beside I_z = 1537.9, a new user's file, session 45)
+    loaded and simulated: the radius of gyration about the CG, 33 m, is more than any mass
+    inside a 5.2 m x 2.15 m hull can have (Popoviciu: sqrt(L^2 + B^2) / 2 = 2.81 m)."""
+    _refused("I_z", "radius of gyration about the centre of gravity", "= 33.14 m",
+             "above sqrt(L^2 + B^2) / 2 = 2.813 m", "not tonnes", m=1.4)
+    # at the bound itself: loads (gretha's own radius is 1.28 m)
+    L, B, m = 5.2, 2.15, 910.0
+    I_z = m * (L**2 + B**2) / 4 * (1 - 1e-9) + m * 0.21978**2
+    assert parse(VesselParams, _gretha(I_z=I_z), "v.toml").I_z == I_z
+
+
 def test_mass_matrix_not_positive_definite_through_the_coupling_is_refused():
     _refused("Y_rdot", "mass matrix M = M_RB + M_A is not positive definite",
              "m x_g - Y_rdot = 2800", Y_rdot=-3000.0, N_vdot=-3000.0)
@@ -166,11 +178,14 @@ def test_every_command_refuses_the_file_before_running(flipped, capsys, argv):
 
 
 def test_complex_sway_yaw_poles_name_the_block_and_the_mass_terms():
-    """Mass in tonnes (m = 1.4): no load-time range on m (a 2-kg model ship is legitimate), but
-    tune yaw says why its poles are complex instead of only that they are."""
-    model = VesselModel(load_vessel("gretha").with_coeffs(m=1.4, I_z=2366.0))
+    """Complex sway-yaw poles (here a strong destabilising N_v = +3000 N s, which the load
+    does not refuse: published models have such cross terms): tune yaw says why its poles
+    are complex instead of only that they are. (A mass in tonnes, which gave such poles too,
+    is refused at load since session 45: the radius-of-gyration bound above.)"""
+    model = VesselModel(load_vessel("gretha").with_coeffs(N_v=3000.0))
     with pytest.raises(CourseUnstable) as exc:
         nomoto(model, 1.0)
     msg = str(exc.value)
-    assert "complex or zero poles" in msg and "the coupling a_vr a_rv" in msg, msg
-    assert "mass terms: m = 1.4 kg, added -X_udot = 91 kg, -Y_vdot = 753.511 kg" in msg, msg
+    assert "complex or zero poles" in msg and "the coupling a_vr a_rv = -0.407 m/s" in msg, msg
+    assert "is below -((a_vv - a_rr)/2)^2 = -0.0565 1/s^2" in msg, msg
+    assert "mass terms: m = 910 kg, added -X_udot = 91 kg, -Y_vdot = 753.511 kg" in msg, msg
