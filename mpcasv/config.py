@@ -169,6 +169,18 @@ class FieldError(ValueError):
         self.field = field
 
 
+#: the heading of :func:`parse`'s refusal (its problems follow, one per line)
+INVALID = "invalid configuration"
+
+
+def problems(exc: ConfigError) -> str:
+    """``exc``'s problems in one line ("; "-joined), without :func:`parse`'s heading
+    :data:`INVALID`: for a file refused inside another (a scenario's ``asv.vessel``; a
+    falsification trial's scenario), which said "invalid configuration" twice."""
+    lines = (ln.strip() for ln in str(exc).splitlines())
+    return "; ".join(ln for ln in lines if ln and ln != INVALID)
+
+
 def check_seed(seed: int, what: str = "--seed") -> int:
     """``seed`` if it is an integer in ``[0, SEED_MAX]``.
 
@@ -203,7 +215,7 @@ def parse(cls: type[T], data: Mapping[str, Any], source: str | Path = "<mapping>
         lines = [f"{source}: {_where(e)}: {_message(e)}" for e in exc.errors()]
         if len(lines) > MAX_PROBLEMS:  # an empty vessel file listed ~40 missing fields
             lines = [*lines[:MAX_PROBLEMS], f"... and {len(lines) - MAX_PROBLEMS} more"]
-        raise ConfigError("invalid configuration\n  " + "\n  ".join(lines)) from None
+        raise ConfigError(f"{INVALID}\n  " + "\n  ".join(lines)) from None
 
 
 #: the problems of one file listed at most (the rest counted)

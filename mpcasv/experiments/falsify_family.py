@@ -28,7 +28,17 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from mpcasv.config import ConfigError, FinitePos, Flag, Float, PathName, frozen, load_toml, parse
+from mpcasv.config import (
+    ConfigError,
+    FinitePos,
+    Flag,
+    Float,
+    PathName,
+    frozen,
+    load_toml,
+    parse,
+    problems,
+)
 
 #: scenario fields that are instants of the run (s from its start; fnmatch patterns): a
 #: searched value past the run's duration changes nothing
@@ -153,8 +163,7 @@ def _ends(p: ParamSpec) -> tuple[float, float]:
 
 def _cause(exc: ConfigError) -> str:
     """A scenario loader's refusal in one line, without its 'invalid configuration' head."""
-    lines = [ln.strip() for ln in str(exc).splitlines() if ln.strip()]
-    return "; ".join(ln for ln in lines if ln != "invalid configuration")
+    return problems(exc)
 
 
 def check_range_ends(family: LoadedFamily) -> None:

@@ -28,6 +28,7 @@ from mpcasv.config import (
     is_path,
     load_toml,
     parse,
+    problems,
     resolve,
 )
 from mpcasv.models.acoustics import AcousticParams, NavParams
@@ -82,8 +83,7 @@ def _loads(load, name: str):
     try:
         return load(name)
     except ConfigError as exc:
-        lines = (ln.strip() for ln in str(exc).splitlines())
-        raise ValueError("; ".join(ln for ln in lines if ln)) from None
+        raise ValueError(problems(exc)) from None
 
 
 #: The plant step's bounds (s). The execution level (guidance, yaw PID, speed loop) samples at
