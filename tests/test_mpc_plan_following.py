@@ -120,15 +120,21 @@ def transit_command(rule: str, speed_of_t, **overrides):
     return ctrl._command(obs, ctrl.ocp.join(Z, V), p)
 
 
-@pytest.mark.parametrize("rule", ["max", "mean", "plan"])
+@pytest.mark.parametrize("rule", ["max", "ahead", "mean", "plan"])
 def test_the_transit_speed_follows_the_speed_rule(rule):
-    """``speed_rule``: the largest planned speed within the lookahead (presets), its time
-    average, or the planned speed ``speed_lead`` = 1 s ahead (the plan slowing from 2 to
-    1 m/s over the first 15 s)."""
+    """``speed_rule``: the largest planned speed within the lookahead (presets), the same from
+    the first stage (4 s) on, its time average, or the planned speed ``speed_lead`` = 1 s
+    ahead (the plan slowing from 2 to 1 m/s over the first 15 s). ``max`` holds the speed of
+    now (2 m/s) whatever the plan does after it; ``ahead`` takes the plan's 4-s speed."""
     cmd = transit_command(rule, lambda ts: 2.0 - ts / 15.0)
     assert cmd.mode is Mode.TRANSIT
-    expected = {"max": 2.0, "mean": 1.5, "plan": 2.0 - 1.0 / 15.0}[rule]
+    expected = {"max": 2.0, "ahead": 2.0 - 4.0 / 15.0, "mean": 1.5,
+                "plan": 2.0 - 1.0 / 15.0}[rule]  # fmt: skip
     assert cmd.speed == pytest.approx(expected, abs=1e-3)
+    accelerating = transit_command(rule, lambda ts: 0.5 + ts / 15.0)  # from rest: no lower
+    if rule in ("max", "ahead"):
+        assert accelerating.speed == pytest.approx(1.3, abs=1e-3)  # at 12 s: the last stage
+        # within the 15-s lookahead, for both: an acceleration is not held back
 
 
 def test_the_plan_speed_rule_reads_the_plan_at_speed_lead_and_keeps_a_transit_moving():

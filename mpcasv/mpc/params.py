@@ -276,14 +276,16 @@ class MPCParams:
         in a simulation is the crab-blind waypoint of before session 28 (an ablation).
     speed_min : float
         Lowest speed cap handed to the execution level (m/s).
-    speed_rule : {"max", "mean", "plan"}
+    speed_rule : {"max", "ahead", "mean", "plan"}
         The TRANSIT speed: the largest planned surge speed within ``lookahead`` (``max``,
-        the presets) or its time average over ``lookahead`` (``mean``), both caps over the
-        lookahead; or ``plan``: the planned surge speed ``speed_lead`` seconds ahead (linear
-        between stages), a reference that follows the plan's speed profile because the MPC
-        re-issues it every control period. With ``max`` the execution level holds the
-        speed the plan is about to give up (the plan glides at low thrust while the boat
-        keeps its speed): docs/mpc.md, "Plan following". Every rule is clipped to
+        the presets), the same from the plan's first stage on (``ahead``: without the
+        measured speed of now, which ``max`` always includes) or its time average over
+        ``lookahead`` (``mean``), caps over the lookahead; or ``plan``: the planned surge
+        speed ``speed_lead`` seconds ahead (linear between stages), a reference that follows
+        the plan's speed profile because the MPC re-issues it every control period. With
+        ``max`` the execution level holds the speed the plan is about to give up (the plan
+        glides at low thrust while the boat keeps its speed; the cap is never below the
+        speed of now, so a TRANSIT never slows the boat): docs/mpc.md, "Plan following". Every rule is clipped to
         ``[speed_min, u_max]``; the execution level's eq. 3.1 still slows turns below it.
     speed_lead : float
         How far ahead (s) the planned speed (``speed_rule = "plan"``) and, with M1h
@@ -378,7 +380,7 @@ class MPCParams:
     min_carrot: Pos = 25.0
     course_control: Flag = False
     speed_min: TransitSpeed = 0.5
-    speed_rule: Literal["max", "mean", "plan"] = "max"
+    speed_rule: Literal["max", "ahead", "mean", "plan"] = "max"
     speed_lead: Pos = 1.0
     speed: TransitSpeed = 2.5
     T_standby: Pos = 10.0

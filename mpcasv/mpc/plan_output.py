@@ -103,6 +103,8 @@ class PlanOutput:
         wp = here + delta / dn * max(dn, P.min_carrot)
         if P.speed_rule == "max":
             u_cap = np.max(Z[ts <= look + 1e-9, 3])
+        elif P.speed_rule == "ahead":  # the same from the first stage on: not the measured now
+            u_cap = np.max(Z[(ts > 1e-9) & (ts <= max(look, ts[1]) + 1e-9), 3])
         elif P.speed_rule == "mean":  # the time average of the planned speed over the lookahead
             u_cap = np.mean(np.interp(np.linspace(0.0, look, 31), ts, Z[:, 3]))
         else:  # "plan": the planned speed at the end of the coming control period
