@@ -252,9 +252,11 @@ def test_nothing_in_the_geometry_module_imports_upward():
 
 
 def test_revisit_interval_is_between_real_reliable_fixes_with_several_auvs():
-    """Paper 2's 'time between consecutive visits' (Cases 6-7): the gaps between reliable
-    fixes and the wait from the last one to the end (censored), not the wait from t = 0 for
-    the first visit; an AUV without a reliable fix has no finite interval (null)."""
+    """Paper 2's 'time between consecutive visits' (Cases 6-7): once the ASV has begun its
+    visits (the first reliable fix of any AUV), the wait for each AUV's first fix, the gaps
+    between reliable fixes and the wait from the last one to the end (censored); not the
+    ASV's first approach from t = 0; an AUV without a reliable fix has no finite interval
+    (null)."""
     sc = scenario_from_dict({
         "name": "two", "duration": 60.0, "controller": "hybrid-multi", "preset": "paper2-field",
         "auv": [{"name": n, "start": {"N": N}, "behaviour": {"transit": {
@@ -273,6 +275,10 @@ def test_revisit_interval_is_between_real_reliable_fixes_with_several_auvs():
     # it scored 5 s, the best value, for never revisiting either AUV)
     hand = dataclasses.replace(res, reliable_fix_times=[[12.0, 17.0], [30.0, 35.0]])
     assert compute_metrics(hand)["revisit_interval_max_s"] == 43.0  # a: 17 -> 60
+    # b left unvisited until near the end, once (a review, session 45: it scored 2 s, the
+    # time that remained, where it had waited from the ASV's first visit at 10 s to 58 s)
+    hand = dataclasses.replace(res, reliable_fix_times=[[10.0, 25.0, 40.0, 55.0], [58.0]])
+    assert compute_metrics(hand)["revisit_interval_max_s"] == 48.0
     hand = dataclasses.replace(res, reliable_fix_times=[[10.0, 15.0, 50.0], []])
     m = compute_metrics(hand)
     assert m["revisit_interval_max_s"] == math.inf  # b never visited; null in metrics.json

@@ -91,11 +91,12 @@ _BASE: dict[str, MetricInfo] = {
                          "true range and depth, plant-step resolution; the AUV with least "
                          "(descriptive: what the fix ages come from; inside the collision "
                          "domain counts too, eq. 9 has no lower limit)", "Paper 2 eq. 9"),
-    "revisit_interval_max_s": _i("s", "lower", "longest time one AUV waited for its next "
-                                 "visit once visited: the gaps between its consecutive "
-                                 "reliable fixes and the wait from the last one to the end "
-                                 "(censored), worst AUV; several AUVs only (null with one "
-                                 "AUV; infinite/null if an AUV had no reliable fix)",
+    "revisit_interval_max_s": _i("s", "lower", "longest time one AUV waited for a visit "
+                                 "once the ASV had begun its visits (the first reliable fix "
+                                 "of any AUV): the wait for its first reliable fix, the gaps "
+                                 "between its consecutive ones and the wait from the last one "
+                                 "to the end (censored), worst AUV; several AUVs only (null "
+                                 "with one AUV; infinite/null if an AUV had no reliable fix)",
                                  "thesis §4.2 Cases 6-7 ('time between consecutive visits')"),
     "fix_age_max_s": _i("s", "lower", "time since the last USBL fix that actually arrived "
                         "(any range, propeller on or off): largest value, worst AUV",

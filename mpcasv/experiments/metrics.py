@@ -59,20 +59,22 @@ def age_stats(event_times, t_end: float) -> tuple[float, float, float]:
     return float(g.max()), _sawtooth_quantile(g, t_end, 0.95), float(np.sum(g**2) / (2 * t_end))
 
 
-def revisit_wait(fix_times, t_end: float) -> float:
-    """The longest time (s) one AUV waited for its next visit once it had been visited:
-    the gaps between its consecutive reliable fixes ``fix_times`` (s, in ``(0, t_end]``) and
-    the wait from the last one to the run's end ``t_end`` (censored: the next visit came
-    later, if at all); infinite without any reliable fix (never visited). The wait for the
-    first visit is not a revisit (it is in ``reliable_fix_age_max_s``). Paper 2's "time
-    between consecutive visits" (thesis §4.2, Cases 6-7). Until session 45 the wait at the end
-    was left out: an AUV whose only visit gave fixes at 120 and 125 s of a 480-s run scored
-    5 s, the best value, for never being revisited (a new user's suite)."""
+def revisit_wait(fix_times, t_end: float, t_start: float) -> float:
+    """The longest time (s) one AUV waited for a visit once the ASV had begun its visits at
+    ``t_start`` (s: the first reliable fix of any AUV): the wait from ``t_start`` to its first
+    reliable fix, the gaps between its consecutive reliable fixes ``fix_times`` (s, in
+    ``(0, t_end]``) and the wait from the last one to the run's end ``t_end`` (censored: the
+    next visit came later, if at all); infinite without any reliable fix (never visited).
+    The ASV's first approach, before ``t_start``, is no one's wait. Paper 2's "time between
+    consecutive visits" (thesis §4.2, Cases 6-7). Until session 45 only the gaps between
+    fixes counted: an AUV whose only visit gave fixes at 120 and 125 s of a 480-s run scored
+    5 s, the best value, for never being revisited (a new user's suite), and one left unvisited
+    until the end scored the little time that remained (a review)."""
     t = np.unique(np.asarray(fix_times, float))
     t = t[(t > 0) & (t <= t_end)]
     if not t.size:
         return math.inf
-    return float(np.diff(np.append(t, t_end)).max())
+    return float(np.diff(np.concatenate([[min(t_start, t[0])], t, [t_end]])).max())
 
 
 def _sawtooth_quantile(gaps: np.ndarray, total: float, q: float) -> float:
@@ -226,7 +228,9 @@ def compute_metrics(result) -> dict:
 
     revisit = None
     if n_auv > 1 and has_domain:
-        revisit = max(revisit_wait(f, t_end) for f in result.reliable_fix_times)
+        first = [min(f) for f in result.reliable_fix_times if len(f)]
+        t_start = min(first) if first else t_end  # the ASV's first visit of any AUV
+        revisit = max(revisit_wait(f, t_end, t_start) for f in result.reliable_fix_times)
 
     nav = np.stack([ts[f"nav_err{k}"].to_numpy() for k in range(n_auv)])
     belief_err = np.stack(

@@ -27,6 +27,7 @@ import pyarrow.parquet as pq
 
 from mpcasv.experiments.report_figures import _save, num
 from mpcasv.experiments.stats import COMPARE
+from mpcasv.sim.plots import inner_label, outer_in_reach
 from mpcasv.wording import count, noun
 
 # ----------------------------------------------------------------------------- ECDF
@@ -220,12 +221,11 @@ def compare_figure(out: Path, reps: pd.DataFrame, scenario: str, path: Path) -> 
         t0 = ts0["t"].to_numpy()
         top = max(float(ts[f"range{k}"].max()) for _, ts in series) * 1.1
         if f"r_inner{k}" in ts0:  # the names and the outer rule of the run's range figure
-            inner = "r_avoid" if n > 1 else "r_inner"  # Paper 2's name with several AUVs
             axr.fill_between(t0, 0, ts0[f"r_inner{k}"], color="tab:red", alpha=0.12,
-                             label=f"inside {inner}")  # fmt: skip
+                             label=f"inside {inner_label(n)}")  # fmt: skip
             axr.plot(t0, ts0[f"r_t{k}"], color="tab:green", lw=0.8, ls="--", label="r_t")
             top = max(top, 1.1 * float(ts0[f"r_t{k}"].max()))
-            if ts0[f"r_outer{k}"].min() < 2 * top:  # Paper 2 has no outer boundary (3.5 km)
+            if outer_in_reach(ts0[f"r_outer{k}"], top):
                 axr.plot(t0, ts0[f"r_outer{k}"], color="tab:red", lw=0.8, ls=":",
                          label="r_outer")  # fmt: skip
                 top = max(top, 1.1 * float(ts0[f"r_outer{k}"].max()))

@@ -219,13 +219,13 @@ def check_physics(p: VesselParams) -> None:
                          "the minus)" + (f", and {', '.join(lost)} leaves the mass matrix "
                                          "not positive definite" if lost else "")
                          + f": did you mean {fix}?")
-    if p.I_z <= p.m * p.x_g**2:
+    if p.I_z <= p.m * p.x_g * p.x_g:
         raise FieldError("I_z", f"I_z = {p.I_z:g} kg m^2 is not above m x_g^2 = "
-                         f"{p.m * p.x_g**2:.6g} kg m^2 (m = {p.m:g} kg, x_g = {p.x_g:g} m): "
+                         f"{p.m * p.x_g * p.x_g:.6g} kg m^2 (m = {p.m:g} kg, x_g = {p.x_g:g} m): "
                          "I_z is the yaw inertia about the body origin, I_g + m x_g^2 "
                          "(parallel-axis theorem), so the rigid-body mass matrix would not be "
                          "positive definite; check I_z (kg m^2), m (kg) and x_g (m)")
-    k_g = math.sqrt((p.I_z - p.m * p.x_g**2) / p.m)  # radius of gyration about CG (m)
+    k_g = math.sqrt((p.I_z - p.m * p.x_g * p.x_g) / p.m)  # radius of gyration about CG (m)
     if k_g > math.hypot(p.L, p.B) / 2:
         raise FieldError("I_z", f"I_z = {p.I_z:g} kg m^2 with m = {p.m:g} kg gives a yaw radius "
                          f"of gyration about the centre of gravity sqrt((I_z - m x_g^2) / m) = "
@@ -243,8 +243,8 @@ def check_physics(p: VesselParams) -> None:
                          f"(smallest eigenvalue of its symmetric part {lam:.4g}): the sway-yaw "
                          f"coupling m x_g - Y_rdot = {M[1, 2]:.6g}, m x_g - N_vdot = "
                          f"{M[2, 1]:.6g} is too large for m - Y_vdot = {M[1, 1]:.6g} kg and "
-                         f"I_z - N_rdot = {M[2, 2]:.6g} kg m^2; check Y_rdot, N_vdot (kg m, "
-                         "<= 0 sign as the diagonal ones) and x_g")
+                         f"I_z - N_rdot = {M[2, 2]:.6g} kg m^2; check Y_rdot, N_vdot (kg m) and "
+                         "x_g")
     bad = [k for k in DAMPING_AT_REST if getattr(p, k) > 0]
     if bad:
         vals = ", ".join(f"{k} = {getattr(p, k):+.6g}" for k in bad)

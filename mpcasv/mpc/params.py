@@ -285,8 +285,9 @@ class MPCParams:
         the plan's speed profile because the MPC re-issues it every control period. With
         ``max`` the execution level holds the speed the plan is about to give up (the plan
         glides at low thrust while the boat keeps its speed; the cap is never below the
-        speed of now, so a TRANSIT never slows the boat): docs/mpc.md, "Plan following". Every rule is clipped to
-        ``[speed_min, u_max]``; the execution level's eq. 3.1 still slows turns below it.
+        speed of now, so a TRANSIT never slows the boat): docs/mpc.md, "Plan following".
+        Every rule is clipped to ``[speed_min, u_max]``; the execution level's eq. 3.1 still
+        slows turns below it.
     speed_lead : float
         How far ahead (s) the planned speed (``speed_rule = "plan"``) and, with M1h
         (``horizon.steering``), the planned heading reference are read for the command: the

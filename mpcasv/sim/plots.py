@@ -99,6 +99,18 @@ def plot_ranges(result, path: str | Path) -> Path:
     return _save(range_figure(result), path, tight=False)
 
 
+def inner_label(n_auv: int) -> str:
+    """The collision domain's radius as the range figures name it: Paper 2's ``r_avoid``
+    with several AUVs, Paper 1's ``r_inner`` with one."""
+    return "r_avoid" if n_auv > 1 else "r_inner"
+
+
+def outer_in_reach(r_outer, top: float) -> bool:
+    """Whether a range axis reaching ``top`` (m) draws ``r_outer`` (m, array): not Paper 2's
+    (3500 m: no outer boundary)."""
+    return float(np.min(r_outer)) < 2 * top
+
+
 def range_figure(result):
     """ASV-AUV horizontal range per AUV with r_inner, r_t +- eps and r_outer when known;
     the believed (estimated) range dashed; standby shaded. Returns the figure."""
@@ -113,15 +125,14 @@ def range_figure(result):
         top = 1.15 * float(np.nanmax([ts[f"range{k}"].max(), ts[f"est_range{k}"].max()]))
         if f"r_inner{k}" in ts:
             top = max(top, 1.15 * float(ts[f"r_t{k}"].max() + (eps or 0)))
-            inner = "r_avoid" if n > 1 else "r_inner"  # Paper 2's name with several AUVs
             _band(ax, t, 0, ts[f"r_inner{k}"].to_numpy(), color="tab:red", alpha=0.15,
-                  label=f"inside {inner}")  # fmt: skip
+                  label=f"inside {inner_label(n)}")  # fmt: skip
             ax.plot(t, ts[f"r_t{k}"], color="tab:green", lw=1, label="r_t", **mk)
             if eps is not None:
                 r_t = ts[f"r_t{k}"].to_numpy()
                 _band(ax, t, r_t - eps, r_t + eps, color="tab:green", alpha=0.15,
                       label="target domain")  # fmt: skip
-            if ts[f"r_outer{k}"].min() < 2 * top:  # Paper 2 has no outer boundary
+            if outer_in_reach(ts[f"r_outer{k}"], top):
                 ax.plot(t, ts[f"r_outer{k}"], color="tab:red", lw=1, ls=":", label="r_outer",
                         **mk)  # fmt: skip
                 top = max(top, 1.1 * float(ts[f"r_outer{k}"].max()))
