@@ -253,6 +253,12 @@ def test_a_resumed_sweep_removes_what_a_killed_one_left_half_written(serial, tmp
     (stale_run / "timeseries.parquet").write_bytes(b"half")
     stale_part = out / "parts" / f".{job.job_id}.999.abcdef12.tmp"
     stale_part.write_bytes(b"half")
+    # one a sweep of before session 45 left, its run name with another current in it
+    old_name = out / "runs" / f".{job.scenario}-{job.variant}-cur9_9-s{job.seed}-{job.job_id[:8]}.x"
+    old_name.mkdir()
+    other = out / "runs" / f".{QUICK.jobs[1].run_name}.k1ll3d"  # a job that is done: kept
+    other.mkdir()
     assert main(["compare", "quick", "--out", str(out), "--quiet", "--no-report"]) == 0
-    assert not stale_run.exists() and not stale_part.exists()
+    assert not stale_run.exists() and not stale_part.exists() and not old_name.exists()
+    assert other.exists()
     assert (out / "runs" / job.run_name / "metrics.json").is_file()

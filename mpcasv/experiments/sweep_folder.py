@@ -88,7 +88,8 @@ LOCK_FILE = "compare.lock"
 
 def remove_leftovers(out: Path, runs: str | None, jobs) -> int:
     """Remove what killed sweeps left half-written in ``out`` (the run folders' and parts'
-    temporary copies: ``runs/.<run name>.*``, ``parts/.*.tmp``) for the jobs about to run;
+    temporary copies: ``runs/.<run name>.*``, found by the name's seed and job id, and
+    ``parts/.*.tmp``) for the jobs about to run;
     return how many. Only under the folder's lock (:data:`LOCK_FILE`): no other sweep writes
     there then. A ``kill -9`` left them, and resuming never removed them. ``runs`` None:
     the run folders are not this folder's alone (a ``--runs-dir``, which another sweep may
@@ -98,7 +99,9 @@ def remove_leftovers(out: Path, runs: str | None, jobs) -> int:
     n = 0
     if runs is not None and not is_url(runs) and Path(runs).is_dir():
         for job in jobs:
-            for tmp in Path(runs).glob(f".{job.run_name}.*"):
+            # by the name's end, "-s<seed>-<job id[:8]>": a run name made before session 45
+            # said the nominal current where it now says the drawn one
+            for tmp in Path(runs).glob(f".*-s{job.seed}-{job.job_id[:8]}.*"):
                 if tmp.is_dir():
                     shutil.rmtree(tmp, ignore_errors=True)
                     n += 1
