@@ -262,3 +262,18 @@ def test_a_resumed_sweep_removes_what_a_killed_one_left_half_written(serial, tmp
     assert not stale_run.exists() and not stale_part.exists() and not old_name.exists()
     assert other.exists()
     assert (out / "runs" / job.run_name / "metrics.json").is_file()
+
+
+def test_an_infinite_metric_reaches_the_results_table_as_infinite(tmp_path):
+    """``revisit_interval_max_s`` of a run where an AUV was never reliably fixed is infinite,
+    the worst a run can do (the paired statistics keep it: ``stats.pairs``). metrics.json has
+    null there (JSON); the results row took that null until session 45, and such runs
+    dropped out of the pairs as missing (a review)."""
+    from mpcasv.experiments.job_worker import run_job
+
+    job = next(j for j in QUICK.jobs if j.scenario == "case8")  # 90 s: not every AUV is fixed
+    row = run_job(job, str(tmp_path))
+    written = json.loads((tmp_path / job.run_name / "metrics.json").read_text())
+    assert row["status"] == "ok", row["error"]
+    assert row["revisit_interval_max_s"] == np.inf and written["revisit_interval_max_s"] is None
+    assert 0 in written["reliable_fixes_auv"]

@@ -52,7 +52,11 @@ def _metric_columns(metrics: dict) -> dict:
 
 
 def simulate_job(job: Job, run_dir: Path) -> dict:
-    """Simulate one job and write its run folder; return its metrics."""
+    """Simulate one job and write its run folder; return its metrics as computed (an
+    infinite value stays infinite: ``revisit_interval_max_s`` of an AUV never reliably fixed,
+    the worst a run can do, which the paired statistics keep; metrics.json, JSON, has null
+    there, and until session 45 the results table took that null, so such runs dropped out
+    of the pairs as missing)."""
     from mpcasv.controllers import Boat, make_controller
     from mpcasv.experiments.metrics import compute_metrics
     from mpcasv.sim.record import params_record, write_run
@@ -70,7 +74,9 @@ def simulate_job(job: Job, run_dir: Path) -> dict:
              "estimator": job.estimator, "current": job.current,
              "realisation": realisation.as_dict(), "boat": boat.describe(),
              "params": params_record(controller)}  # fmt: skip
-    return write_run(result, run_dir, compute_metrics(result), plots=job.plots, extra=extra)
+    metrics = compute_metrics(result)
+    write_run(result, run_dir, metrics, plots=job.plots, extra=extra)
+    return metrics
 
 
 def _run_into(job: Job, runs: str) -> tuple[dict, str]:
