@@ -169,11 +169,10 @@ def test_summary_table_gives_mean_sd_and_n_over_seeds():
 
 
 def test_a_mean_over_fewer_runs_than_the_group_says_how_many():
-    """``revisit_interval_max_s`` is undefined (null) in a run where an AUV was never
-    reliably fixed (before session 45: fixed fewer than twice): the mean of the others is not
-    the group's. In the paper suite's Case 8 (session 43) the hybrid's four worst worlds
-    dropped out silently ("363.3 ± 75.48" over 6 of 10 runs, beside the MPC's over 10; a
-    statistician's review, session 44)."""
+    """A metric undefined (null) in some runs of a group: the mean of the others is not the
+    group's. In the paper suite's Case 8 (session 43) the hybrid's four worst worlds, whose
+    ``revisit_interval_max_s`` was null then, dropped out silently ("363.3 ± 75.48" over 6 of
+    10 runs, beside the MPC's over 10; a statistician's review, session 44)."""
     from mpcasv.experiments.report import scenario_table
 
     rows = [{"scenario": "s", "variant": v, "current": "off", "estimator": "perfect",

@@ -55,8 +55,10 @@ def with_list_summaries(df: pd.DataFrame) -> pd.DataFrame:
 
 def summary_table(df: pd.DataFrame) -> pd.DataFrame:
     """Long table: scenario, condition, variant, column, metric, auv, mean, sd, n (the runs
-    with a value), runs (the ok runs of the group: n < runs where a metric is undefined in
-    some runs, e.g. ``revisit_interval_max_s`` of an AUV never reliably fixed)."""
+    with a value), runs (the ok runs of the group: n < runs where a metric is undefined,
+    null, in some runs, e.g. ``between_steps_ms_max`` of a run without a solve between steps;
+    an infinite value is a value: ``revisit_interval_max_s`` of an AUV never reliably fixed
+    makes the mean inf)."""
     rows = []
     ok = df[df["status"] == "ok"]
     keys = ["scenario", *CONDITION, "variant"]
