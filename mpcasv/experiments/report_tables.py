@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import pandas as pd
 
 from mpcasv.experiments.metrics import METRIC_NAMES, auv_column
@@ -71,10 +72,11 @@ def summary_table(df: pd.DataFrame) -> pd.DataFrame:
                         "column": col, "metric": m, "auv": k, "mean": math.nan,
                         "sd": math.nan, "n": 0, "runs": len(g)})  # fmt: skip
                 continue
+            with np.errstate(invalid="ignore"):  # an infinite value: mean inf, sd nan (quietly)
+                sd = float(v.std(ddof=1)) if len(v) > 1 else math.nan
             rows.append(dict(zip(keys, key, strict=True)) | {
-                "column": col, "metric": m, "auv": k, "mean": float(v.mean()),
-                "sd": float(v.std(ddof=1)) if len(v) > 1 else math.nan, "n": len(v),
-                "runs": len(g),
+                "column": col, "metric": m, "auv": k, "mean": float(v.mean()), "sd": sd,
+                "n": len(v), "runs": len(g),
             })  # fmt: skip
     return pd.DataFrame(rows)
 
