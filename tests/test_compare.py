@@ -188,15 +188,19 @@ def test_a_mean_over_fewer_runs_than_the_group_says_how_many():
     assert got.loc[("B", "revisit_interval_max_s"), ["n", "runs"]].tolist() == [5, 5]
     t = scenario_table(summ, "s", ["auv1"])
     assert t.loc["revisit_interval_max_s", "A"] == "101 ± 1 (3 of 5 runs)"
+    assert t.loc["revisit_interval_max_s", "B"] == "102 ± 1.581"
+    assert t.loc["min_range_m", "A"] == "12 ± 1.581"
     # an infinite value (an AUV never reliably fixed) is a value: the mean is inf, quietly
     # (pandas' sd of it warned "invalid value encountered in subtract" in the main job)
     df.loc[(df.variant == "B") & (df.seed == 0), "revisit_interval_max_s"] = np.inf
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         summ = summary_table(df)
-    assert scenario_table(summ, "s", ["auv1"]).loc["revisit_interval_max_s", "B"] == "inf"
-    assert t.loc["revisit_interval_max_s", "B"] == "102 ± 1.581"
-    assert t.loc["min_range_m", "A"] == "12 ± 1.581"
+    t = scenario_table(summ, "s", ["auv1"])
+    assert t.loc["revisit_interval_max_s", "B"] == "102.5 ± 1.291, inf in 1"  # seeds 1-4
+    df.loc[df.variant == "B", "revisit_interval_max_s"] = np.inf
+    t = scenario_table(summary_table(df), "s", ["auv1"])
+    assert t.loc["revisit_interval_max_s", "B"] == "inf in 5"
 
 
 def test_report_of_a_sweep_whose_jobs_all_failed_lists_the_errors(tmp_path):

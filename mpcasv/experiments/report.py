@@ -35,11 +35,12 @@ from mpcasv.experiments import report_series as rs
 from mpcasv.experiments import stats as paired
 from mpcasv.experiments.metric_info import WALL_CLOCK
 from mpcasv.experiments.metrics import METRIC_INFO
-from mpcasv.experiments.report_figures import CONDITION, num
+from mpcasv.experiments.report_figures import num
 from mpcasv.experiments.report_tables import (  # noqa: F401 (re-exported)
     LIST_SUMMARY,
     cases_without_fixes,
     metric_columns,
+    scenario_table,
     summary_table,
     with_list_summaries,
 )
@@ -66,26 +67,6 @@ def directions() -> dict[str, str | None]:
 
 
 # ----------------------------------------------------------------------------- text
-
-
-def scenario_table(summ: pd.DataFrame, scenario: str, auv_names: list[str]) -> pd.DataFrame:
-    """Rows: metrics (per AUV expanded); columns: variant (| condition); cells mean ± sd
-    over the runs with a value, followed by "(n of N runs)" when some runs have none (a
-    metric undefined there: the mean of the others is not the mean of the group)."""
-    s = summ[summ["scenario"] == scenario].copy()
-    multi = [c for c in CONDITION if s[c].nunique() > 1]
-    s["group"] = [rf.group_label(r, multi) for _, r in s.iterrows()]
-    s["cell"] = ["—" if n == 0 else (num(m) if not np.isfinite(sd) else f"{num(m)} ± {num(sd)}")
-                 + (f" ({n} of {runs} runs)" if n < runs else "")
-                 for m, sd, n, runs in zip(s["mean"], s["sd"], s["n"], s["runs"], strict=True)]
-    s["row"] = [m if pd.isna(k) else f"{m} [{auv_names[int(k)]}]"
-                for m, k in zip(s["metric"], s["auv"], strict=True)]  # fmt: skip
-    rows = list(dict.fromkeys(s["row"]))
-    table = s.pivot(index="row", columns="group", values="cell").reindex(rows)
-    table = table[list(dict.fromkeys(s["group"]))]
-    table.index.name = "metric"
-    table.columns.name = None
-    return table
 
 
 def _md_table(df: pd.DataFrame) -> str:

@@ -10,7 +10,7 @@ import numpy as np
 import pandas as pd
 
 from mpcasv.experiments.metrics import METRIC_NAMES, auv_column
-from mpcasv.experiments.report_figures import CONDITION
+from mpcasv.experiments.report_figures import CONDITION, group_label, num
 
 #: how a per-AUV list metric is summarised per run for wins and losses
 LIST_SUMMARY = {"fixes_auv": "sum", "reliable_fixes_auv": "sum",
@@ -59,7 +59,8 @@ def summary_table(df: pd.DataFrame) -> pd.DataFrame:
     with a value), runs (the ok runs of the group: n < runs where a metric is undefined,
     null, in some runs, e.g. ``between_steps_ms_max`` of a run without a solve between steps;
     an infinite value is a value: ``revisit_interval_max_s`` of an AUV never reliably fixed
-    makes the mean inf)."""
+    makes the mean inf), n_inf (the runs with an infinite value), finite_mean, finite_sd
+    (over the others)."""
     rows = []
     ok = df[df["status"] == "ok"]
     keys = ["scenario", *CONDITION, "variant"]
@@ -70,13 +71,17 @@ def summary_table(df: pd.DataFrame) -> pd.DataFrame:
                 if k is None:  # metric not defined for these runs (null): a row saying so
                     rows.append(dict(zip(keys, key, strict=True)) | {
                         "column": col, "metric": m, "auv": k, "mean": math.nan,
-                        "sd": math.nan, "n": 0, "runs": len(g)})  # fmt: skip
+                        "sd": math.nan, "n": 0, "runs": len(g), "n_inf": 0,
+                        "finite_mean": math.nan, "finite_sd": math.nan})  # fmt: skip
                 continue
             with np.errstate(invalid="ignore"):  # an infinite value: mean inf, sd nan (quietly)
                 sd = float(v.std(ddof=1)) if len(v) > 1 else math.nan
+            fin = v[np.isfinite(v)]
             rows.append(dict(zip(keys, key, strict=True)) | {
                 "column": col, "metric": m, "auv": k, "mean": float(v.mean()), "sd": sd,
-                "n": len(v), "runs": len(g),
+                "n": len(v), "runs": len(g), "n_inf": len(v) - len(fin),
+                "finite_mean": float(fin.mean()) if len(fin) else math.nan,
+                "finite_sd": float(fin.std(ddof=1)) if len(fin) > 1 else math.nan,
             })  # fmt: skip
     return pd.DataFrame(rows)
 
@@ -90,3 +95,34 @@ def cases_without_fixes(ok: pd.DataFrame) -> list[str]:
     n = pd.to_numeric(ok["fixes"], errors="coerce")
     return [c for c, g in n.groupby(ok["scenario"], sort=False) if g.notna().all() and
             (g == 0).all()]  # fmt: skip
+
+
+def scenario_table(summ: pd.DataFrame, scenario: str, auv_names: list[str]) -> pd.DataFrame:
+    """Rows: metrics (per AUV expanded); columns: variant (| condition); cells mean ± sd
+    over the runs with a value (:func:`_cell`), followed by "(n of N runs)" when some runs
+    have none (a metric undefined there: the mean of the others is not the mean of the
+    group); infinite values are counted, not averaged ("400 ± 52.8, inf in 2")."""
+    s = summ[summ["scenario"] == scenario].copy()
+    multi = [c for c in CONDITION if s[c].nunique() > 1]
+    s["group"] = [group_label(r, multi) for _, r in s.iterrows()]
+    s["cell"] = [_cell(r) for _, r in s.iterrows()]
+    s["row"] = [m if pd.isna(k) else f"{m} [{auv_names[int(k)]}]"
+                for m, k in zip(s["metric"], s["auv"], strict=True)]  # fmt: skip
+    rows = list(dict.fromkeys(s["row"]))
+    table = s.pivot(index="row", columns="group", values="cell").reindex(rows)
+    table = table[list(dict.fromkeys(s["group"]))]
+    table.index.name = "metric"
+    table.columns.name = None
+    return table
+
+
+def _cell(r: pd.Series) -> str:
+    """A summary cell: mean ± sd, "(n of N runs)" when some runs have no value, and with
+    infinite values the others' mean and how many were infinite ("400 ± 52.8, inf in 2")."""
+    if r["n"] == 0:
+        return "—"
+    m, sd = (r["finite_mean"], r["finite_sd"]) if r["n_inf"] else (r["mean"], r["sd"])
+    text = "" if np.isnan(m) else num(m) if not np.isfinite(sd) else f"{num(m)} ± {num(sd)}"
+    if r["n_inf"]:
+        text = f"{text}, inf in {r['n_inf']}" if text else f"inf in {r['n_inf']}"
+    return text + (f" ({r['n']} of {r['runs']} runs)" if r["n"] < r["runs"] else "")
