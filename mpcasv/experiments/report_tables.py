@@ -121,7 +121,7 @@ def _cell(r: pd.Series) -> str:
     infinite values the others' mean and how many were infinite ("400 ± 52.8, inf in 2")."""
     if r["n"] == 0:
         return "—"
-    m, sd = (r["finite_mean"], r["finite_sd"]) if r["n_inf"] else (r["mean"], r["sd"])
+    m, sd = r["finite_mean"], r["finite_sd"]  # the mean and sd when no value is infinite
     text = "" if np.isnan(m) else num(m) if not np.isfinite(sd) else f"{num(m)} ± {num(sd)}"
     if r["n_inf"]:
         text = f"{text}, inf in {r['n_inf']}" if text else f"inf in {r['n_inf']}"

@@ -80,8 +80,6 @@ def check_runs_location(runs: str, dask: str | None) -> None:
         raise ConfigError(f"--runs-dir {runs}: cannot write run folders there ({cause})") from None
 
 
-
-
 #: the lock file a running ``mpcasv compare`` holds in its output folder
 LOCK_FILE = "compare.lock"
 
