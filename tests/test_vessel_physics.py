@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 import tomli_w
 from shared_data import CASES, needs_shared
+from test_experiments_bad_input import SCENARIO as DEMO
 
 from mpcasv.cli import main
 from mpcasv.config import DATA_DIR, ConfigError, load_toml, parse, resolve
@@ -120,22 +121,8 @@ def test_the_model_integrates_with_the_checked_mass_matrix():
 
 # --- every place a vessel is loaded, through the CLI --------------------------------------------
 
-SCENARIO = """
-name = "demo"
-duration = 20.0
-controller = "goto"
-preset = "goto"
-[asv]
-vessel = "flipped.toml"
-[asv.start]
-N = -50.0
-E = -50.0
-psi_deg = 45.0
-[[auv]]
-name = "auv"
-start = { N = 0.0, E = 0.0, depth = 20.0, psi_deg = 0.0 }
-behaviour = { transit = { heading_deg = 0.0, speed = 1.0, depth = 20.0 } }
-"""
+# the 20-s go-to scenario, on the flipped vessel
+SCENARIO = DEMO.replace("[asv.start]", '[asv]\nvessel = "flipped.toml"\n[asv.start]', 1)
 
 
 @pytest.fixture
