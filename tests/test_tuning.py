@@ -324,3 +324,45 @@ def test_the_yaw_bode_plot_names_its_loop_and_gives_the_gain_margin_in_db(model)
         assert fig.axes[0].get_ylabel() == "Magnitude [dB]"
     finally:
         plt.close(fig)
+
+
+def test_speed_steps_flag_thrust_saturation_and_speeds_beyond_the_boat(model, shipped):
+    """`tune speed`'s steps on the nonlinear loop: a step to beyond the straight-course top
+    speed is flagged unreachable (not run); a step whose first command, feed-forward plus
+    Kp times the step, is beyond T_max (or below T_min) starts saturated, and is slower than
+    the linear loop that has no limit; a step whose first command is within the limits never
+    reaches one and matches the linear loop (with the feed-forward) it was designed on."""
+    from mpcasv.control.tuning_report import speed_tables
+    from mpcasv.control.tuning_speed import feed_forward_gain, speed_step
+
+    P, g = model.params, shipped.speed
+    top = min(model.top_speed, P.u_max)
+    beyond = speed_step(model, shipped, top, top + 0.5)
+    assert not beyond["reachable"] and beyond["why"].startswith("UNREACHABLE")
+
+    def first(u0, u1):  # the speed loop's first thrust command (N), integrator at 0
+        return model.thrust_for_speed(u1) + g.Kp * (u1 - u0)
+
+    def linear(u0, u1):
+        return speed_figures(surge_plant(model, u0), g, 0.1, step=u1 - u0,
+                             ff=feed_forward_gain(model, u0))  # fmt: skip
+
+    up, down, small = (2.0, 2.5), (1.0, 0.5), (1.5, 1.6)
+    assert first(*up) > P.T_max and first(*down) < P.T_min
+    assert P.T_min < first(*small) < P.T_max and P.T_min < first(1.5, 1.4) < P.T_max
+    s_up, s_down, s_small = (speed_step(model, shipped, *s) for s in (up, down, small))
+    assert s_up["at_T_max"] > 0 and s_up["rise_s"] > linear(*up)["rise_s"]
+    assert s_down["at_T_min"] > 0 and s_down["rise_s"] > linear(*down)["rise_s"]
+    assert s_small["at_T_max"] == 0 and s_small["at_T_min"] == 0
+    lin = linear(*small)
+    assert s_small["rise_s"] == pytest.approx(lin["rise_s"], abs=0.2)
+    assert s_small["overshoot_pct"] == pytest.approx(lin["overshoot_pct"], abs=2.0)
+    # the report says the direction, the flag and the unreachable step
+    f = speed_figures(surge_plant(model, top), g, 0.1)
+    text = speed_tables(g, {top: (f, f), 1.5: (f, f)}, {}, None,
+                        {top: [beyond], 1.5: [s_small]}, "limits")  # fmt: skip
+    row_top = next(r for r in text.splitlines() if r.startswith(f"| {top:g} | up to"))
+    row_small = next(r for r in text.splitlines() if r.startswith("| 1.5 | up to 1.6"))
+    assert "UNREACHABLE" in row_top and row_small.endswith("| none |")
+    text = speed_tables(g, {2.0: (f, f)}, {}, None, {2.0: [s_up]}, "limits")
+    assert "SATURATED: T_max" in next(r for r in text.splitlines() if "| 2 | up to 2.5" in r)

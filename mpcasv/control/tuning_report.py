@@ -170,18 +170,21 @@ def plot_yaw(model, designs, runs, T_f: float, out: Path) -> list[Path]:
     return [*paths, p]
 
 
-def speed_tables(g, loop, grids, best) -> str:
-    """Markdown: speed loop margins per speed; turn grid per distance."""
+def speed_tables(g, loop, grids, best, steps=None, limits=None) -> str:
+    """Markdown: speed loop margins per speed; speed steps, linear beside nonlinear
+    (``steps``: :func:`~mpcasv.control.tuning_speed.speed_step` figures per speed, ``limits``
+    the words on the thrust limits and the straight-course top speed); turn grid per
+    distance."""
     out = [f"Speed loop: Kp = {g.Kp:.1f} N/(m/s), Ki = {g.Ki:.1f} N/(m/s s)", "",
-           "| u0 (m/s) | GM dB (cont / sampled) | PM deg (cont / sampled) | disk margin (sampled) "
-           "| 0.5 m/s step: rise / settle (s), overshoot % |", "|" + "---|" * 5]  # fmt: skip
+           "| u0 (m/s) | GM dB (cont / sampled) | PM deg (cont / sampled) | disk margin "
+           "(sampled) |", "|" + "---|" * 4]  # fmt: skip
     for u, (c, s) in loop.items():
         out.append(f"| {u:g} | {_f(c['gain_margin_db'])} / {_f(s['gain_margin_db'])} "
                    f"| {_f(c['phase_margin_deg'], 0)} / {_f(s['phase_margin_deg'], 0)} "
-                   f"| {s['disk_margin']:.2f} | {_t(s['rise_s'])} / {_t(s['settling_s'])}, "
-                   f"{s['overshoot_pct']:.0f} |")  # fmt: skip
+                   f"| {s['disk_margin']:.2f} |")  # fmt: skip
     out += _margin_notes((u, kind, f) for u, (c, s) in loop.items()
                          for kind, f in (("continuous", c), ("sampled", s)))
+    out += _step_table(loop, steps or {}, limits)
     for d, (rows, _) in grids.items():
         angles = list(rows[0].figures)
         out += ["", f"Turns from full speed, waypoint {d:g} m away (time s / path m to stay within "
@@ -197,6 +200,35 @@ def speed_tables(g, loop, grids, best) -> str:
             f"k_u = {best.k_u}" if best else "Recommended: none (every pair of the grid "
             "pirouetted)"]  # fmt: skip
     return "\n".join(out)
+
+
+def _step_table(loop, steps: dict, limits: str | None) -> list[str]:
+    """The speed steps: the sampled linear loop's (no thrust limits, so the same up and
+    down) beside the nonlinear ones, with the time at a thrust limit and the unreachable."""
+    from mpcasv.control.tuning_speed import SPEED_STEP, STEP_T_END
+
+    out = ["", f"Speed steps of {SPEED_STEP:g} m/s from each speed u0: rise (10-90 %) / "
+           "settle (2 %) in s, overshoot in % of the step. Linear: the sampled loop "
+           "linearised at u0 with the feed-forward of u_ref, without thrust limits (the same "
+           "up and down). Nonlinear: the "
+           "execution level and vessel model as simulated, thrust limits included "
+           f"({limits}); thrust at a limit: time at it in the {STEP_T_END:g}-s run (the "
+           "linear figures hold only where it is none).", "",
+           "| u0 (m/s) | step | linear: rise / settle (s), overshoot % | nonlinear: rise / "
+           "settle (s), overshoot % | thrust at a limit: s (% of run) |", "|" + "---|" * 5]
+    for u, (_, s) in loop.items():
+        lin = f"{_t(s['rise_s'])} / {_t(s['settling_s'])}, {s['overshoot_pct']:.0f}"
+        for st in steps.get(u, []):
+            step = f"{st['direction']} to {st['u1']:g} m/s"
+            if not st["reachable"]:
+                out.append(f"| {u:g} | {step} | {lin} | {st['why']} | - |")
+                continue
+            sat = [f"{k} {st[f'at_{k}'] * st['t_end']:.1f} s ({100 * st[f'at_{k}']:.1f} %)"
+                   for k in ("T_max", "T_min") if st[f"at_{k}"] > 0]  # fmt: skip
+            out.append(f"| {u:g} | {step} | {lin} | {_t(st['rise_s'])} / "
+                       f"{_t(st['settling_s'])}, {st['overshoot_pct']:.0f} | "
+                       + (f"SATURATED: {', '.join(sat)}" if sat else "none") + " |")
+    return out
 
 
 def plot_speed(model, g, grids, field, best, out: Path) -> list[Path]:

@@ -30,6 +30,8 @@ from mpcasv.models.vessel import IX, VesselModel
 TURN_BAND = math.radians(10.0)
 #: total heading change beyond the commanded turn that counts as a pirouette (rad)
 PIROUETTE_EXCESS = math.radians(270.0)
+#: size of the speed steps of ``mpcasv tune speed`` (m/s) and length of their nonlinear runs (s)
+SPEED_STEP, STEP_T_END = 0.5, 120.0
 
 
 def surge_plant(model: VesselModel, u0: float) -> ct.StateSpace:
@@ -57,12 +59,30 @@ def pi_tf(g: SpeedLoop, dt: float | None = None) -> ct.TransferFunction:
     return ct.tf(np.trim_zeros([g.Kp, g.Ki * dt - g.Kp], "f"), [1.0, -1.0], dt)
 
 
+def feed_forward_gain(model: VesselModel, u0: float) -> float:
+    """Slope at ``u0`` (N/(m/s)) of the speed loop's feed-forward, the trim thrust
+    ``T_ff(u_ref) = -(X_u u_ref + X_uu |u_ref| u_ref)`` of
+    :func:`mpcasv.control.execution.execution_law` (``|.|`` smoothed by ``sabs``)."""
+    from mpcasv.models.vessel import sabs
+
+    P = model.params
+
+    def T_ff(u: float) -> float:
+        return -(P.X_u * u + P.X_uu * float(sabs(u, P.eps_abs)) * u)
+
+    h = 1e-4
+    return (T_ff(u0 + h) - T_ff(u0 - h)) / (2 * h)
+
+
 def speed_figures(P: ct.StateSpace, g: SpeedLoop, dt: float | None = None,
-                  step: float = 0.5) -> dict[str, float]:  # fmt: skip
+                  step: float = 0.5, ff: float = 0.0) -> dict[str, float]:  # fmt: skip
     """Margins (``stability_margins``, balanced ``disk_margins``) and ``step`` m/s step figures.
 
     With ``dt`` the plant is sampled (ZOH) and the integrator is forward Euler, as in
-    :func:`mpcasv.control.execution.execution_law`.
+    :func:`mpcasv.control.execution.execution_law`. ``ff`` (N/(m/s), :func:`feed_forward_gain`)
+    is the execution level's feed-forward of the speed reference, outside the loop: it
+    changes the step (``u/u_ref = P (C + ff) / (1 + P C)``), not the margins; 0 gives the
+    feedback loop's own step.
     """
     C = pi_tf(g, dt)
     if dt is not None:
@@ -72,11 +92,65 @@ def speed_figures(P: ct.StateSpace, g: SpeedLoop, dt: float | None = None,
     L = ct.ss(C) * P
     t = np.arange(0.0, 120.0, dt or 0.05)
     cl = ct.feedback(L, 1)
+    ref = cl + ct.feedback(P, ct.ss(C)) * ff if ff else cl
     with np.errstate(over="ignore", invalid="ignore"):  # an unstable loop diverges: "inf"
-        y = ct.step_response(cl, t).outputs * step
+        y = ct.step_response(ref, t).outputs * step
     poles = ct.poles(cl)
     stable = bool(np.all(np.abs(poles) < 1) if dt else np.all(poles.real < 0))
     return loop_margins(L) | step_figures(y, t, step) | {"stable": stable}
+
+
+def straight_speed_limit(model: VesselModel, ep: ExecutionParams) -> tuple[float, str]:
+    """The fastest speed the execution level can hold on a straight course (m/s) and what
+    sets it: the vessel's top speed at ``T_max`` (:attr:`VesselModel.top_speed`), its speed
+    cap ``u_max``, or eq. 3.1 at zero heading error, ``u_ff + k_u pi/2``."""
+    P, ref = model.params, ep.reference
+    limits = {f"top speed at T_max = {P.T_max:.4g} N": model.top_speed,
+              "speed cap u_max": P.u_max,
+              "eq. 3.1's u_ff + k_u pi/2": ref.u_ff + ref.k_u * math.pi / 2}  # fmt: skip
+    why = min(limits, key=limits.get)
+    return float(limits[why]), why
+
+
+def speed_step(model: VesselModel, ep: ExecutionParams, u0: float, u1: float,
+               t_end: float = STEP_T_END) -> dict:  # fmt: skip
+    """Nonlinear speed step ``u0 -> u1`` (m/s) on a straight course, thrust limits included.
+
+    As :func:`mpcasv.control.tuning_yaw.heading_step`: the vessel starts in trim at ``u0``
+    heading north, the waypoint is :data:`~mpcasv.control.tuning.FAR` ahead and the command's
+    speed is ``u1``, through :func:`~mpcasv.control.tuning.run_closed_loop` (the simulator's
+    compiled execution level and vessel model; thrust clipped to ``[T_min, T_max]``).
+
+    Returns ``u0``, ``u1``, ``direction`` ("up"/"down"), ``reachable`` and, if not, ``why``
+    (``u1 <= 0``, or above :func:`straight_speed_limit`: no run); else ``rise_s`` (10-90 %),
+    ``settling_s`` (2 %), ``overshoot_pct`` (of the step, as :func:`speed_figures`) and
+    ``at_T_max``, ``at_T_min``: the fractions of the ``t_end`` s run with the thrust at that
+    limit (the linear loop's figures hold only while they are 0), ``t_end`` (s) and ``u_end``
+    (m/s). ``why`` starts "UNREACHABLE" for a target above the straight-course limit.
+    """
+    from mpcasv.control.tuning import FAR, step_figures
+
+    out = {"u0": float(u0), "u1": float(u1), "direction": "up" if u1 > u0 else "down"}
+    limit, why = straight_speed_limit(model, ep)
+    if u1 <= 0:
+        return out | {"reachable": False, "why": f"not run: target {u1:g} m/s is a stop, not "
+                      "a forward speed"}  # fmt: skip
+    if u1 > limit * (1 + 1e-6):
+        return out | {"reachable": False, "why": f"UNREACHABLE: target {u1:g} m/s above the "
+                      f"{why} ({limit:.3g} m/s)"}  # fmt: skip
+    x0, _ = model.trim(u0)
+    run = run_closed_loop(model, ep, x0, (FAR, 0.0), u1, t_end)
+    sign = 1.0 if u1 > u0 else -1.0
+    y = (run.X[:, IX["u"]] - u0) * sign
+    T = run.U[1:, 0]  # thrust applied over each step
+    P = model.params
+    tol = 1e-6 * P.T_max
+    return out | {"reachable": True} | step_figures(y, run.t, abs(u1 - u0)) | {
+        "at_T_max": float(np.mean(T >= P.T_max - tol)),
+        "at_T_min": float(np.mean(T <= P.T_min + tol)),
+        "u_end": float(run.X[-1, IX["u"]]),
+        "t_end": float(run.t[-1]),
+    }  # fmt: skip
 
 
 def turn(model: VesselModel, ep: ExecutionParams, angle: float, distance: float,
