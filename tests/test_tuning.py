@@ -366,3 +366,27 @@ def test_speed_steps_flag_thrust_saturation_and_speeds_beyond_the_boat(model, sh
     assert "UNREACHABLE" in row_top and row_small.endswith("| none |")
     text = speed_tables(g, {2.0: (f, f)}, {}, None, {2.0: [s_up]}, "limits")
     assert "SATURATED: T_max" in next(r for r in text.splitlines() if "| 2 | up to 2.5" in r)
+
+
+def test_the_nonlinear_heading_step_says_it_is_also_a_speed_change(model, shipped):
+    """Eq. 3.1 cuts the speed reference of the 45 deg step to u_ff + k_u (pi/2 - pi/4) where
+    that is below u0 (and the boat slows); below it the command's cap u0 holds. yaw.md says
+    both causes of the slower rise, and the overshoot columns carry their units."""
+    from mpcasv.control.tuning_report import yaw_table
+    from mpcasv.control.tuning_yaw import tune_yaw
+
+    ref = shipped.reference
+    cut = ref.u_ff + ref.k_u * math.pi / 4
+    _, fast = heading_step(model, shipped, 2.5)
+    _, slow = heading_step(model, shipped, 0.5)
+    assert fast["min_u_ref"] == pytest.approx(cut, abs=1e-3) and cut < 2.5
+    assert fast["min_u"] < 2.5 - 0.25  # the boat follows it down (measured 2.00 m/s)
+    assert slow["min_u_ref"] == pytest.approx(0.5, abs=1e-9)
+    _, designs, _ = tune_yaw(model, shipped, [0.5, 2.5], [0.15, 0.75])
+    text = yaw_table(designs)
+    row = [r for r in text.splitlines() if r.startswith("| 2.5 |")][-1]  # the steps' table
+    assert re.search(r"\d %", row) and re.search(r"\d deg, \d+ deg, \d\.\d\d \|$", row), row
+    assert "overshoot (% of step)" in text and "overshoot (deg)" in text
+    note = next(r for r in text.splitlines() if r.startswith("Nonlinear step"))
+    assert "speed change" in note and f"to {cut:.2f} (boat down to" in note
+    assert "at u0 = 2.5 m/s" in note and "0.5" not in note.split("speed change")[1]

@@ -275,7 +275,11 @@ def heading_step(model: VesselModel, ep: ExecutionParams, u0: float,
     The vessel starts in trim heading north; the waypoint is :data:`FAR` away at bearing
     ``step``, so the execution level (guidance, eq. 3.1, PID, speed loop) sees a heading
     step. Returns the :class:`mpcasv.control.tuning.Run` and its figures: ``settling_s``
-    (±2 deg), ``overshoot_deg``, ``rise_s`` (10-90 %), ``max_delta_deg``.
+    (±2 deg), ``overshoot_deg``, ``rise_s`` (10-90 %), ``max_delta_deg`` (of the vessel's
+    ``delta_max_deg``), and ``min_u``,
+    ``min_u_ref`` (m/s): the least surge speed and speed reference during the run. The step is
+    also a speed change: eq. 3.1 cuts the speed reference to ``u_ff + k_u (pi/2 - |psi_e|)``
+    (1.85 m/s at 45 deg with the field tuning), below ``u0`` at the faster speeds.
     """
     from mpcasv.control.tuning import FAR, run_closed_loop, settling_time
 
@@ -290,6 +294,9 @@ def heading_step(model: VesselModel, ep: ExecutionParams, u0: float,
         "overshoot_deg": float(np.degrees(max(0.0, -err.min()))),
         "rise_s": float(run.t[i90] - run.t[i10]) if turned.max() >= 0.9 * step else math.inf,
         "max_delta_deg": float(np.degrees(np.abs(run.X[:, 7]).max())),
+        "min_u": float(run.X[:, IX["u"]].min()),
+        "min_u_ref": float(run.Y[:, 1].min()),
+        "delta_max_deg": math.degrees(model.params.delta_max),
     }
 
 
