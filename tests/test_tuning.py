@@ -390,3 +390,43 @@ def test_the_nonlinear_heading_step_says_it_is_also_a_speed_change(model, shippe
     note = next(r for r in text.splitlines() if r.startswith("Nonlinear step"))
     assert "speed change" in note and f"to {cut:.2f} (boat down to" in note
     assert "at u0 = 2.5 m/s" in note and "0.5" not in note.split("speed change")[1]
+
+
+def test_a_clipped_kd_and_the_margins_off_the_schedule_are_reported(model, shipped, tmp_path,
+                                                                    capsys):  # fmt: skip
+    """Gretha at 0.5 m/s: the pole placement's Kd is negative, clipped to 0, and the poles
+    achieved are those of the loop with Kd = 0 (not the requested ones); at 1.5 m/s nothing
+    is clipped. Below the lowest schedule speed the gains are held and the hull's steering
+    authority falls (K ~ u^2): the phase margin falls with the speed and fails the bar at
+    0.2 m/s; every row's verdict is its margins' against the bar. stdout says both."""
+    from mpcasv.control.tuning_schedule import GM_MIN, PM_MIN, kd_clip, off_schedule
+
+    nm = nomoto(model, 0.5)
+    g = place_pid(nm, 0.15, 1.0, 0.5)
+    clip = kd_clip(nm, g, 0.15, 1.0, 0.5)
+    assert g.Kd == 0 and clip["Kd_formula"] == pytest.approx(
+        (nm.T * (2 * 0.15 + 0.075) - 1) / nm.K) and clip["Kd_formula"] < 0
+    s = ct.tf("s")
+    cl = ct.feedback(nm.first_order() / s, g.Kp + g.Ki / s)  # the PI that is left
+    got = np.sort_complex([complex(*p) for p in clip["poles_achieved"]])
+    assert np.allclose(got, np.sort_complex(ct.poles(cl)), atol=1e-9)
+    want = np.sort_complex([complex(*p) for p in clip["poles_requested"]])
+    assert not np.allclose(got, want, atol=1e-3)
+    assert kd_clip(nomoto(model, 1.5), place_pid(nomoto(model, 1.5), 0.45, 1.0, 0.5), 0.45,
+                   1.0, 0.5) is None  # fmt: skip
+    rows = off_schedule(model, shipped, 0.1)
+    below = [r for r in rows if r["where"].startswith("below")]
+    assert [r["u0"] for r in below] == [0.2, 0.3, 0.4]
+    first = (shipped.yaw.Kp[0], shipped.yaw.Ki[0], shipped.yaw.Kd[0])
+    assert all(r["gains"] == pytest.approx(first) for r in below)
+    pms = [min(r["pm"]) for r in below]
+    assert pms == sorted(pms) and not below[0]["ok"] and pms[0] < PM_MIN
+    for r in rows:
+        assert r["ok"] == (r["stable"] and min(r["pm"]) >= PM_MIN and min(r["gm"]) >= GM_MIN)
+    between = [r["u0"] for r in rows if r["where"].startswith("between")]
+    assert between == [0.75, 1.25, 1.75, 2.25]
+    rc = main(["tune", "yaw", "--speeds", "0.5,1", "--out", str(tmp_path), "--quiet"])
+    out = capsys.readouterr().out
+    assert rc == 0 and "pole placement not achieved at 0.5 m/s: Kd = -2.05 s clipped to 0" in out
+    assert "off the schedule: FAIL at 0.2 m/s (PM 38." in out
+    assert "| 0.2 | below (gains held) |" in (tmp_path / "yaw.md").read_text()

@@ -115,6 +115,12 @@ def run_tune_yaw(args: argparse.Namespace) -> int:
     from mpcasv.config import replace
     from mpcasv.control.tuning_checks import check_yaw_limits
     from mpcasv.control.tuning_report import plot_yaw, yaw_table
+    from mpcasv.control.tuning_schedule import (
+        off_schedule,
+        off_schedule_summary,
+        poles_text,
+        schedule_notes,
+    )  # fmt: skip
     from mpcasv.control.tuning_yaw import CourseUnstable, tune_yaw
 
     if args.wn is not None and args.wn_per_speed is not None:  # was silently ignored
@@ -144,7 +150,8 @@ def run_tune_yaw(args: argparse.Namespace) -> int:
     except CourseUnstable as exc:
         raise ConfigError(f"{args.vessel}: {exc}") from None
     plot_yaw(model, designs, runs, args.T_f, args.out)
-    table = yaw_table(designs)
+    off = off_schedule(model, ep_new, args.dt)  # gains held below, interpolated between
+    table = "\n".join([yaw_table(designs), *schedule_notes(designs, off)])
     # nan (a margin neither python-control nor the sweep could compute) fails every >= test
     ok = all(d.sampled["phase_margin_deg"] >= 45 and d.sampled["gain_margin_db"] >= 6
              and d.linear["phase_margin_deg"] >= 45 and d.linear["gain_margin_db"] >= 6
@@ -166,8 +173,15 @@ def run_tune_yaw(args: argparse.Namespace) -> int:
     print(table)
     print(
         f"{wrote}; wrote {args.out}/yaw.md, yaw.json and plots; acceptance "
-        f"(PM >= 45 deg, GM >= 6 dB, nonlinear step settles): {'PASS' if ok else 'FAIL'}"
+        f"(PM >= 45 deg, GM >= 6 dB, nonlinear step settles) at the schedule speeds: "
+        f"{'PASS' if ok else 'FAIL'}; {off_schedule_summary(off)} (yaw.md)"
     )
+    for d in designs:
+        if d.kd_clip:
+            print(f"pole placement not achieved at {d.u0:g} m/s: Kd = "
+                  f"{d.kd_clip['Kd_formula']:.2f} s clipped to 0; poles "
+                  f"{poles_text(d.kd_clip['poles_achieved'])} 1/s instead of "
+                  f"{poles_text(d.kd_clip['poles_requested'])} 1/s (yaw.md)")  # fmt: skip
     return 0 if ok else 1
 
 

@@ -167,7 +167,8 @@ def place_pid(nm: Nomoto, wn: float, zeta: float, integral_ratio: float) -> PIDG
     """Pole placement of the PID on the first-order Nomoto model (see module docstring).
 
     ``Kd`` is clipped at 0 (a negative derivative gain would mean the hull alone is faster
-    than the requested poles; the execution level takes ``Kd >= 0``).
+    than the requested poles; the execution level takes ``Kd >= 0``): the poles are then not
+    the requested ones; :func:`mpcasv.control.tuning_schedule.kd_clip` says which they are.
     """
     K, T, a = nm.K, nm.T, integral_ratio * wn
     Kp = T * (wn**2 + 2 * zeta * wn * a) / K
@@ -312,6 +313,7 @@ class YawDesign:
     linear: dict  # continuous loop figures (loop_figures)
     sampled: dict  # sampled loop figures at the simulator's step
     nonlinear: dict  # 45 deg heading step with the whole schedule (heading_step)
+    kd_clip: dict | None = None  # Kd clipped to 0: the poles achieved (tuning_schedule.kd_clip)
 
 
 def tune_yaw(model: VesselModel, ep: ExecutionParams, speeds, wn, zeta: float = 1.0,
@@ -340,6 +342,8 @@ def tune_yaw(model: VesselModel, ep: ExecutionParams, speeds, wn, zeta: float = 
     """
     from tqdm import tqdm
 
+    from mpcasv.control.tuning_schedule import kd_clip
+
     speeds = [float(s) for s in speeds]
     check_speeds(model, speeds)
     noms = [nomoto(model, u) for u in speeds]
@@ -361,7 +365,8 @@ def tune_yaw(model: VesselModel, ep: ExecutionParams, speeds, wn, zeta: float = 
         run, nl = heading_step(model, ep_new, u)
         runs[u] = run
         designs.append(YawDesign(u0=u, wn=float(w), zeta=zeta, nomoto=nm, gains=g,
-                                 linear=linear, sampled=sampled, nonlinear=nl))  # fmt: skip
+                                 linear=linear, sampled=sampled, nonlinear=nl,
+                                 kd_clip=kd_clip(nm, g, w, zeta, integral_ratio)))  # fmt: skip
     return ep_new, designs, runs
 
 
