@@ -430,3 +430,23 @@ def test_a_clipped_kd_and_the_margins_off_the_schedule_are_reported(model, shipp
     assert rc == 0 and "pole placement not achieved at 0.5 m/s: Kd = -2.05 s clipped to 0" in out
     assert "off the schedule: FAIL at 0.2 m/s (PM 38." in out
     assert "| 0.2 | below (gains held) |" in (tmp_path / "yaw.md").read_text()
+
+
+def test_fossens_otter_refusal_names_the_zero_turn_gain_not_a_missing_steering_effect(
+        tmp_path, capsys):  # fmt: skip
+    """Fossen's Otter (shipped `otter`): the steering does act on the yaw acceleration (the
+    Jacobian's dr_dot/d delta, 4.44 rad/s^2 per rad), but r/delta has a zero at s = 0 (its
+    steady turn gain is zero) and a sway-yaw pole in the right half-plane. The refusal says
+    that, in one line, exit 2 (it said "no first-order effect on the yaw rate")."""
+    m = VesselModel(load_vessel("otter"))
+    rc = main(["tune", "yaw", "--vessel", "otter", "--out", str(tmp_path), "--quiet"])
+    err = [line for line in capsys.readouterr().err.splitlines() if line.strip()]
+    assert rc == 2 and len(err) == 1 and "no first-order effect" not in err[0]
+    u0 = float(re.search(r"at u0=([0-9.]+) m/s", err[0]).group(1))
+    A, _ = m.linearize(*m.trim(u0))
+    b_r = A[IX["r"], IX["delta"]]
+    assert abs(b_r) > 1.0 and f"yaw acceleration ({b_r:.3g} rad/s^2 per rad)" in err[0]
+    assert "steady turn gain r/delta(s=0) is zero" in err[0]
+    p_max = np.linalg.eigvals(A[np.ix_([IX["v"], IX["r"]], [IX["v"], IX["r"]])]).real.max()
+    assert p_max > 0 and f"{p_max:+.3g}" in err[0] and "right half-plane" in err[0]
+    assert "Y_v = 0 in the vessel file" in err[0] and not (tmp_path / "execution.toml").exists()

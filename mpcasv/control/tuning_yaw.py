@@ -121,9 +121,13 @@ def nomoto(model: VesselModel, u0: float) -> Nomoto:
     Raises
     ------
     CourseUnstable
-        Complex or zero sway-yaw poles, or no steering effect on the yaw rate: no first-order
-        Nomoto model (the message names the speed and the poles).
+        Complex or zero sway-yaw poles, or a zero steady turn gain ``K`` (``r/delta`` with a
+        zero at ``s = 0``: Fossen's Otter) or ``T = 0``: no first-order Nomoto model (the
+        message names the speed, the poles and the cause,
+        :mod:`mpcasv.control.tuning_refusals`).
     """
+    from mpcasv.control.tuning_refusals import no_first_order, sway_yaw_why
+
     A, _ = model.linearize(*model.trim(u0))
     i2 = [IX["v"], IX["r"]]
     sys2 = ct.ss(A[np.ix_(i2, i2)], A[np.ix_(i2, [IX["delta"]])], [[0.0, 1.0]], [[0.0]])
@@ -132,35 +136,14 @@ def nomoto(model: VesselModel, u0: float) -> Nomoto:
     if np.any(np.abs(poles.imag) > 1e-9) or np.any(np.abs(poles.real) < 1e-9):
         raise CourseUnstable(f"sway-yaw poles {pol} 1/s at u0={u0:g} m/s: no real first-order "
                              "Nomoto model (complex or zero poles); "
-                             + _sway_yaw_why(A[np.ix_(i2, i2)], model.params))  # fmt: skip
+                             + sway_yaw_why(A[np.ix_(i2, i2)], model.params))  # fmt: skip
     T1, T2 = sorted((-1.0 / poles.real).tolist(), reverse=True)
     T3 = float(-1.0 / zeros.real[0]) if len(zeros) else 0.0
     K = float(np.real(ct.dcgain(sys2)))
     T = T1 + T2 - T3
     if abs(K) < 1e-12 or abs(T) < 1e-9:
-        raise CourseUnstable(f"at u0={u0:g} m/s the steering has no first-order effect on the "
-                             f"yaw rate (K = {K:.3g}, T = {T:.3g} s; sway-yaw poles {pol} 1/s)")
+        raise CourseUnstable(no_first_order(A, u0, K, T, pol, poles, model.params))
     return Nomoto(u0=u0, K=K, T=T, T1=T1, T2=T2, T3=T3)
-
-
-def _sway_yaw_why(a: np.ndarray, P) -> str:
-    """Why the linearised sway-yaw block ``a`` (``[[a_vv, a_vr], [a_rv, a_rr]]``) has complex or
-    zero poles, in its own entries (true for any 2x2 block: the poles are
-    ``(a_vv + a_rr)/2 +- sqrt(((a_vv - a_rr)/2)^2 + a_vr a_rv)``, complex when the coupling
-    product is below ``-((a_vv - a_rr)/2)^2``, zero when the determinant is), with the vessel
-    file's mass terms that set it (``M = M_RB + M_A``, Fossen 2021 §6.3)."""
-    (a_vv, a_vr), (a_rv, a_rr) = a
-    half = ((a_vv - a_rr) / 2) ** 2
-    if a_vr * a_rv < -half:
-        why = (f"the coupling a_vr a_rv = {a_vr:.3g} m/s x {a_rv:.3g} 1/(m s) = "
-               f"{a_vr * a_rv:.3g} 1/s^2 is below -((a_vv - a_rr)/2)^2 = {-half:.3g} 1/s^2 "
-               f"(a_vv = {a_vv:.3g}, a_rr = {a_rr:.3g} 1/s)")
-    else:
-        why = (f"the block's determinant a_vv a_rr - a_vr a_rv = {a_vv * a_rr - a_vr * a_rv:.3g} "
-               "1/s^2 is zero")
-    return (f"{why}; mass terms: m = {P.m:g} kg, added -X_udot = {-P.X_udot:g} kg, -Y_vdot = "
-            f"{-P.Y_vdot:g} kg, I_z = {P.I_z:g} kg m^2, -N_rdot = {-P.N_rdot:g} kg m^2, "
-            f"x_g = {P.x_g:g} m")
 
 
 def place_pid(nm: Nomoto, wn: float, zeta: float, integral_ratio: float) -> PIDGains:
