@@ -450,3 +450,39 @@ def test_fossens_otter_refusal_names_the_zero_turn_gain_not_a_missing_steering_e
     p_max = np.linalg.eigvals(A[np.ix_([IX["v"], IX["r"]], [IX["v"], IX["r"]])]).real.max()
     assert p_max > 0 and f"{p_max:+.3g}" in err[0] and "right half-plane" in err[0]
     assert "Y_v = 0 in the vessel file" in err[0] and not (tmp_path / "execution.toml").exists()
+
+
+def test_the_pirouette_and_turn_plots_show_what_the_runs_do(model, shipped, tmp_path,
+                                                            monkeypatch):  # fmt: skip
+    """pirouette.png: the pirouette's label says what its whole run does (it passes within
+    5 m of the waypoint, then circles it to the end; the rest is drawn), the legend is
+    outside the paths' axes. turns_10m.png: one panel per angle, so the "no ref. model" 90
+    deg run is not under the 180 deg one."""
+    from mpcasv.control import tuning_report as tr
+    from mpcasv.control.tuning_speed import PIROUETTE_CASE, pirouette_check, turn_grid
+
+    figs = []
+    monkeypatch.setattr(tr.plt, "close", figs.append)
+    ep = dataclasses.replace(shipped, turn_thrust=0.0)
+    a, d, u0 = PIROUETTE_CASE
+    checks = pirouette_check(model, ep, a, d, u0)
+    wp = (d * math.cos(math.radians(a)), d * math.sin(math.radians(a)))
+    tr.plot_pirouette(checks, wp, tmp_path, "t")
+    run, f = checks["without"]
+    total = np.degrees(np.sum(np.abs(np.diff(np.unwrap(run.X[:, 2])))))
+    assert f["pirouette"] and total > 720  # it circles the waypoint: more than two turns
+    fig = figs[-1]
+    labels = [t.get_text() for lg in fig.legends for t in lg.get_texts()]
+    assert not fig.axes[0].get_legend()  # not over the start and the waypoint
+    label = next(t for t in labels if t.startswith("without"))
+    assert "then (dashed)" in label and f"turned {total:.0f} deg" in label
+    assert any(len(ln.get_xdata()) == len(run.t) - int(np.argmax(np.hypot(
+        run.X[:, 0] - wp[0], run.X[:, 1] - wp[1]) < 5.0)) for ln in fig.axes[0].lines)
+    rows, runs = turn_grid(model, ep, [(0.6, 1.59), (model.params.u_max, 0.0)], distance=10.0)
+    tr.plot_speed(model, ep.speed, {10.0: (rows, runs)}, (0.6, 1.59), None, tmp_path)
+    fig = figs[-1]
+    for ax, angle in zip(fig.axes, (90, 180), strict=True):
+        assert ax.get_title() == f"{angle} deg turn"
+        assert sum(ln.get_label().startswith("no ref. model") for ln in ax.lines) == 1
+    no_ref_90 = next(ln for ln in fig.axes[0].lines if ln.get_label().startswith("no ref"))
+    assert "PIROUETTE" in no_ref_90.get_label()  # as the grid's table says (P)

@@ -266,27 +266,37 @@ def plot_speed(model, g, grids, field, best, out: Path) -> list[Path]:
     paths = [out / "bode_speed.png"]
     fig.savefig(paths[0], dpi=100)
     plt.close(fig)
-    for d, (_rows, runs) in grids.items():
-        fig, ax = plt.subplots(1, 1, figsize=(7, 7))
-        for (u_ff, k_u, a), r in runs.items():
-            if (u_ff, k_u) not in (field, (best.u_ff, best.k_u) if best else field) and k_u != 0.0:
-                continue
-            label = "no ref. model" if k_u == 0 else f"u_ff={u_ff}, k_u={k_u}"
+    for d, (rows, runs) in grids.items():
+        pir = {(r.u_ff, r.k_u, a) for r in rows for a, f in r.figures.items() if f["pirouette"]}
+        # one panel per turn angle: in one, the "no ref. model" 90 deg circle lay under the
+        # 180 deg run's first half (a new user, session 46)
+        angles = sorted({a for (_, _, a) in runs})
+        fig, axes = plt.subplots(1, len(angles), figsize=(5.5 * len(angles), 6.2), squeeze=False)
+        for ax, a in zip(axes[0], angles, strict=True):
             wp = (d * math.cos(math.radians(a)), d * math.sin(math.radians(a)))
-            near = np.hypot(r.X[:, 0] - wp[0], r.X[:, 1] - wp[1]) < 5.0
-            n = int(np.argmax(near)) + 1 if near.any() else len(r.t)
-            ax.plot(r.X[:n, 1], r.X[:n, 0], label=f"{label}, {a:g} deg")
-            ax.plot(wp[1], wp[0], "kx")
-        ax.set_aspect("equal")
-        ax.set_xlabel("East (m)")
-        ax.set_ylabel("North (m)")
-        ax.set_title(
-            f"turns from full speed, heading north at (0, 0), to waypoints (x) {d:g} m away"
-            "\n(paths until 5 m from the waypoint)",
-            fontsize=10,
-        )
-        ax.legend(fontsize=7)
-        ax.grid(True, alpha=0.3)
+            for (u_ff, k_u, a_run), r in runs.items():
+                if a_run != a or ((u_ff, k_u) not in (field, (best.u_ff, best.k_u) if best
+                                                       else field) and k_u != 0.0):  # fmt: skip
+                    continue
+                label = ("no ref. model" if k_u == 0 else f"u_ff={u_ff}, k_u={k_u}") + (
+                    ": PIROUETTE (never on course)" if (u_ff, k_u, a) in pir else "")
+                near = np.hypot(r.X[:, 0] - wp[0], r.X[:, 1] - wp[1]) < 5.0
+                n = int(np.argmax(near)) + 1 if near.any() else len(r.t)
+                ax.plot(r.X[:n, 1], r.X[:n, 0], ls="--" if k_u == 0 else "-",
+                        lw=1.0 if k_u == 0 else 1.6, zorder=3 if k_u == 0 else 2,
+                        label=label + ("" if near.any() else f" (never within 5 m, "
+                                       f"{r.t[-1]:.0f} s)"))  # fmt: skip
+            ax.plot(wp[1], wp[0], "kx", ms=9, zorder=4, label="waypoint")
+            ax.plot(0, 0, "ko", ms=5, zorder=4, label="start (heading north)")
+            ax.set_aspect("equal")
+            ax.set_xlabel("East (m)")
+            ax.set_ylabel("North (m)")
+            ax.set_title(f"{a:g} deg turn", fontsize=10)
+            ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.12))
+            ax.grid(True, alpha=0.3)
+        fig.set_layout_engine("constrained")
+        fig.suptitle(f"turns from full speed, heading north at (0, 0), to a waypoint (x) {d:g} "
+                     "m away (paths until 5 m from it)", fontsize=10)  # fmt: skip
         p = out / f"turns_{d:g}m.png"
         fig.savefig(p, dpi=100)
         plt.close(fig)
@@ -296,35 +306,54 @@ def plot_speed(model, g, grids, field, best, out: Path) -> list[Path]:
 
 def plot_pirouette(checks: dict, wp, out: Path, title: str) -> Path:
     """Paths, speeds and heading errors of :func:`mpcasv.control.tuning_speed.pirouette_check`
-    (hard turn while accelerating, with and without eq. 3.1)."""
-    fig, (ax0, ax1) = plt.subplots(1, 2, figsize=(11, 4.8))
+    (hard turn while accelerating, with and without eq. 3.1).
+
+    Each run is drawn solid as far as :func:`~mpcasv.control.tuning_speed.turn` counted it
+    (until it got on course, or came within 5 m of the waypoint); a pirouette's rest of the
+    run is drawn dashed, and its label says what the whole run does (a new user, session 46:
+    "circles it, never on course" beside a trace that ended at 21 s, where it passed 5 m from
+    the waypoint)."""
+    fig, (ax0, ax1) = plt.subplots(1, 2, figsize=(11, 6.2))
     ax2 = ax1.twinx()
     for key, color in (("with", "C0"), ("without", "C3")):
         run, f = checks[key]
-        what = ("PIROUETTE (circles it, never on course)" if f["pirouette"]
-                else f"on course after {f['turn_s']:.0f} s")  # fmt: skip
-        label = f"{key} eq. 3.1: {what}, turned {f['total_turn_deg']:.0f} deg"
         reach = np.hypot(run.X[:, 0] - wp[0], run.X[:, 1] - wp[1]) < 5.0  # as turn() counts
-        # drawn as far as turn() counted the turn (a pirouette that reached the waypoint
-        # was drawn on past it: "turned 218 deg" beside four circles, a new user, s43)
         n = int(np.argmax(reach)) + 1 if reach.any() else len(run.t)
+        if f["pirouette"]:
+            total = float(np.degrees(np.sum(np.abs(np.diff(np.unwrap(run.X[:, 2]))))))
+            dist = np.hypot(run.X[n - 1:, 0] - wp[0], run.X[n - 1:, 1] - wp[1])
+            what = ("PIROUETTE, never on course:\n" + (
+                f"within 5 m of the waypoint at {run.t[n - 1]:.0f} s, heading error "
+                f"{abs(math.degrees(run.psi_error[n - 1])):.0f} deg, then (dashed)\n"
+                if reach.any() else "") + f"{dist.min():.0f}-{dist.max():.0f} m from it to "
+                f"{run.t[-1]:.0f} s, turned {total:.0f} deg")  # fmt: skip
+        else:
+            what = (f"on course after {f['turn_s']:.0f} s, turned {f['total_turn_deg']:.0f} "
+                    "deg" + (f", within 5 m of the waypoint at {run.t[n - 1]:.0f} s"
+                             if reach.any() else ""))  # fmt: skip
+        label = f"{key} eq. 3.1: {what}"
         ax0.plot(run.X[:n, 1], run.X[:n, 0], color=color, label=label)
         ax1.plot(run.t[:n], run.X[:n, 3], color=color, label=f"u, {key} eq. 3.1")
         ax2.plot(run.t[:n], np.degrees(np.abs(run.psi_error[:n])), color=color, ls=":", lw=1)
-    ax0.plot(wp[1], wp[0], "k*", ms=12, label="waypoint (reached: within 5 m)")
-    ax0.plot(0, 0, "ko", label="start (heading north)")
+        if f["pirouette"] and n < len(run.t):
+            ax0.plot(run.X[n - 1:, 1], run.X[n - 1:, 0], color=color, ls="--", lw=0.8, alpha=0.6)
+            ax1.plot(run.t[n - 1:], run.X[n - 1:, 3], color=color, ls="--", lw=0.8, alpha=0.6)
+    ax0.plot(wp[1], wp[0], "k*", ms=12, zorder=5, label="waypoint (reached: within 5 m)")
+    ax0.plot(0, 0, "ko", zorder=5, label="start (heading north)")
     ax0.set_aspect("equal")
     ax0.set_xlabel("E (m)")
     ax0.set_ylabel("N (m)")
-    ax0.legend(fontsize=7, loc="lower left")
+    # below both panels: inside, it covered the start and the waypoint
+    fig.legend(*ax0.get_legend_handles_labels(), fontsize=8, loc="lower left", ncol=2,
+               bbox_to_anchor=(0.02, 0.0), frameon=False)
     ax0.grid(True, alpha=0.3)
     ax0.set_title(title, fontsize=9)
     ax1.set_xlabel("time (s)")
-    ax1.set_ylabel("surge u (m/s), solid")
+    ax1.set_ylabel("surge u (m/s), solid (dashed: after 5 m)")
     ax2.set_ylabel("|heading error| (deg), dotted")
     ax1.legend(fontsize=8, loc="upper right")
     ax1.grid(True, alpha=0.3)
-    fig.tight_layout()
+    fig.tight_layout(rect=(0, 0.17, 1, 1))
     out.mkdir(parents=True, exist_ok=True)
     p = out / "pirouette.png"
     fig.savefig(p, dpi=100)
