@@ -192,3 +192,16 @@ def test_a_negative_validation_fit_exits_1_and_marks_the_toml(tmp_path, capsys, 
     assert "validation FAIL: held-out fit below 0 % for u -20.0 %" in text, text
     assert "Validation (held-out fit >= 0 % on every channel): FAIL: u -20.0 %" in text
     assert "# VALIDATION FAILED: held-out fit below 0 % for u" in out.read_text()
+
+
+@pytest.mark.parametrize("name", ["zigzag", "turning-circle", "speed-steps"])
+def test_a_manoeuvre_that_never_steers_is_refused(tmp_path, capsys, name):
+    """`simulate --manoeuvre zigzag --delta 0` wrote a straight line with exit 0: every
+    manoeuvre steers by +-delta, so 0 is refused in one line, nothing written; 20 is not."""
+    out = tmp_path / "m.csv"
+    _refused(capsys, ["simulate", "--manoeuvre", name, "--delta", "0", "--out", str(out)],
+             "--delta 0", name, "never steers")  # fmt: skip
+    assert not out.exists()
+    df = simulate_manoeuvre(VesselModel(load_vessel("gretha")), name, delta_deg=20.0,
+                            duration=40.0)  # fmt: skip
+    assert df["delta_cmd"].abs().max() > 0

@@ -56,7 +56,8 @@ def simulate_manoeuvre(model: VesselModel, name: str, u0: float = 1.5, delta_deg
     Raises
     ------
     mpcasv.config.ConfigError (a ValueError)
-        Unknown manoeuvre name; ``|delta_deg|`` beyond ``delta_max``; ``u0`` beyond the speed
+        Unknown manoeuvre name; ``delta_deg`` 0 (no steering) or ``|delta_deg|`` beyond
+        ``delta_max``; ``u0`` beyond the speed
         the vessel holds at ``T_max`` (its trim thrust would exceed ``T_max``); ``u0 <= 0``.
     """
     from mpcasv.config import ConfigError
@@ -64,6 +65,10 @@ def simulate_manoeuvre(model: VesselModel, name: str, u0: float = 1.5, delta_deg
     if name not in MANOEUVRES:
         raise ConfigError(f"unknown manoeuvre {name!r}; known: {', '.join(MANOEUVRES)}")
     P = model.params
+    if delta_deg == 0:  # every manoeuvre steers by +-delta: 0 wrote a straight line, exit 0
+        raise ConfigError(f"--delta 0: the {name} steers by +-delta, so 0 deg never steers "
+                          "(a straight line: nothing to identify the steering from); give an "
+                          "angle, e.g. --delta 20")  # fmt: skip
     if abs(math.radians(delta_deg)) > P.delta_max * (1 + 1e-9):
         raise ConfigError(f"--delta {delta_deg:g} deg beyond {P.name}'s steering limit delta_max "
                           f"= {math.degrees(P.delta_max):.1f} deg")  # fmt: skip
