@@ -8,6 +8,7 @@ import math
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 import pytest
 
 from mpcasv.controllers import make_controller
@@ -17,6 +18,7 @@ from mpcasv.experiments.metrics import (
     METRIC_NAMES,
     age_stats,
     compute_metrics,
+    served_switches,
 )
 from mpcasv.hybrid.domains import (
     DomainParams,
@@ -364,3 +366,44 @@ def test_step_counts_count_controller_steps_whatever_the_log(every_step):
     m = compute_metrics(res)
     assert m["carried_steps"] == m["solver_hangs"] == m["over_budget_steps"] == 10
     assert m["current_untested_s"] == 10.0
+
+
+def test_a_run_gives_the_same_metrics_however_it_was_logged():
+    """A hybrid multi-AUV run of two moving AUVs logged once per period and once per plant
+    step: every metric but the wall-clock ones is the same (the path lengths counted every
+    plant step's before session 46: 0.03-0.06 % longer, an auditor's finding), and a plant
+    step's row holds that step's AUV truth, range and propeller (they stayed the period
+    end's)."""
+    def run(every: bool):
+        sc = scenario_from_dict({
+            "name": "two", "duration": 120.0, "controller": "hybrid-multi",
+            "preset": "paper2-field", "estimator": "perfect", "sim": {"log_every_step": every},
+            "auv": [{"name": n, "start": {"N": N, "E": E, "depth": 10.0},
+                     "behaviour": {"transit": {"heading_deg": h, "speed": 1.5, "depth": 10.0}}}
+                    for n, N, E, h in (("a", 150.0, 0.0, 90.0), ("b", -100.0, 200.0, 0.0))],
+        })  # fmt: skip
+        return simulate(sc, make_controller("hybrid-multi", 2, "paper2-field"), seed=3)
+
+    per_period, per_step = run(False), run(True)
+    a, b = compute_metrics(per_period), compute_metrics(per_step)
+    assert a["asv_distance_m"] > 50.0 and a["propeller_toggles"] > 0  # it moved, it switched
+    for name in METRIC_NAMES:
+        if name not in {"controller_step_ms_median", "controller_step_ms_p99"}:
+            same = b[name] if b[name] is None else pytest.approx(b[name], rel=1e-12)  # sums
+            assert a[name] == same, name
+    ts = per_step.timeseries
+    for k in range(2):
+        np.testing.assert_allclose(ts[f"range{k}"], np.hypot(ts["N"] - ts[f"auv{k}_N"],
+                                                             ts["E"] - ts[f"auv{k}_E"]))
+    assert ts["auv0_E"].diff().iloc[601:610].gt(0.1).all()  # moving within a period
+    np.testing.assert_array_equal(ts["propeller_on"], ts["prop_on_s"] > 0)
+
+
+def test_target_switches_count_the_changes_of_the_auv_served_for_every_controller():
+    """The commands' AUV (``auv_served``, -1: none) changes twice here: 2 -> 0 -> 1; the
+    first AUV served is no change, nor are the steps that serve none. Before session 46 the
+    metric was the MPC's own counter: 0 for a hybrid controller whatever it served, and the
+    MPC's first choice counted when it was not AUV 0."""
+    steps = pd.DataFrame({"auv_served": [-1, 2, 2, -1, 2, 0, 0, -1, 1, 1]})
+    assert served_switches(steps) == 2
+    assert served_switches(pd.DataFrame({"auv_served": [0] * 5})) == 0

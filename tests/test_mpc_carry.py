@@ -128,6 +128,9 @@ def test_a_slow_solve_carries_the_previous_plan(carried):
     assert checked >= 2
     switched = ts["mpc_target_switches"].diff().fillna(0).to_numpy() > 0
     assert not np.any(switched & (ts["mpc_source"] == "carried").to_numpy())
+    # the commands serve the target (the AUV the metric target_switches follows); before
+    # session 46 they named the AUV whose target circle the plan's end was nearest
+    np.testing.assert_array_equal(ts["auv_served"], ts["mpc_target"])
 
 
 def test_the_work_after_a_carried_step_is_the_step_without_a_budget(carried):

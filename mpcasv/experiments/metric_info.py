@@ -76,7 +76,7 @@ _BASE: dict[str, MetricInfo] = {
                               "after the previous change (standbys or transits of 1-4 s; "
                               "the run's first change not counted)"),
     "propeller_toggles": _i("1", "lower", "changes of the propeller between on and off "
-                            "(true state, sampled once per time-series row)"),
+                            "(true state, sampled at the control periods' ends)"),
     # --- liveness (Paper 2 eq. 9-10) ----------------------------------------------------
     "reliable_fix_age_max_s": _i("s", "lower", "tau_k = time since AUV k's last reliable fix "
                                  "(a fix that arrived while r_k < r_t,k + eps_plus with the "
@@ -139,8 +139,9 @@ _BASE: dict[str, MetricInfo] = {
     "carried_steps": _i("1", "lower", "MPC steps that followed the previous plan while their "
                         "solve, past solver.step_iter iterations, finished after the command "
                         "(decided by iteration counts, never by wall time)", "issue 16 item 8"),
-    "target_switches": _i("1", "lower", "changes of the AUV an MPC targets (0 for the other "
-                          "controllers; chattering shows here)", "issue 16 item 6"),
+    "target_switches": _i("1", "lower", "changes of the AUV the commands serve (auv_served: "
+                          "the hybrid's selected AUV, the MPC's target; the first is no "
+                          "change; chattering shows here)", "issue 16 item 6"),
     "solver_hangs": _i("1", "lower", "MPC solves abandoned as hung by the simulation's hang "
                        "guard (no answer within solver.hang_s s of the solver's CPU time; the "
                        "step then rescued or fell back); each cost that CPU time and is kept "

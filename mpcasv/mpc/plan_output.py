@@ -69,8 +69,11 @@ class PlanOutput:
         Z, _ = ocp.split(w)
         ts = ocp.t_stage
         par = ocp.unpack_par(p)
-        dist = ranges(Z[:, 0:2], par["pa"])
-        served = int(np.argmin(dist[-1] - par["r_t"]))
+        # the AUV served: the target, whose visit the terminal cost asks for (the AUV whose
+        # target circle the plan ended nearest, before session 46, changed 20 times in a
+        # main-job run whose target changed 3 times: the commands' AUV is what the
+        # target_switches metric counts, for every controller)
+        served = int(self.target)
         self._log_plan(obs.t)
         here = obs.asv.position
         reason = self._transit_reason(here, par)

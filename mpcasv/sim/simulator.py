@@ -159,9 +159,14 @@ def timeseries_row(world: World, obs, cmd, period, step_ms: float) -> dict:
 
 
 def _substep_rows(row: dict, period) -> list[dict]:
-    """Expand one period's row into one row per plant step (identification data); the
-    account's seconds become each plant step's own."""
-    X, U = period.X, period.U
+    """Expand one period's row into one row per plant step (identification data): the ASV's
+    state, its actuators, the propeller, each AUV's truth (position, depth, heading, speed),
+    range and slant range at each plant step, and the account's seconds as each plant
+    step's own; the command, the belief, the fixes and the fix ages stay the period's (at
+    its end: decided and evaluated once per period). Before session 46 the AUVs' columns,
+    the ranges and the propeller also stayed the period end's (an auditor recomputing the
+    time inside the collision domain from them got 70.0 s where the plant steps gave 70.1)."""
+    X, U, S = period.X, period.U, period.auvs
     dt = (period.t1 - period.t0) / X.shape[1]
     out = []
     for j in range(X.shape[1]):
@@ -172,7 +177,13 @@ def _substep_rows(row: dict, period) -> list[dict]:
         r.update(
             t=period.t0 + (j + 1) * dt, N=X[0, j], E=X[1, j], psi=X[2, j], u=X[3, j],
             v=X[4, j], r=X[5, j], thrust=X[6, j], delta=X[7, j], T_cmd=U[0, j],
-            delta_cmd=U[1, j],
+            delta_cmd=U[1, j], propeller_on=bool(period.prop[j]),
         )  # fmt: skip
+        for k in range(period.ranges.shape[0]):
+            r[f"range{k}"], r[f"slant{k}"] = period.ranges[k, j], period.slants[k, j]
+            if S is not None:
+                r |= {f"auv{k}_N": S[0, k, j], f"auv{k}_E": S[1, k, j],
+                      f"auv{k}_depth": S[2, k, j], f"auv{k}_psi": S[3, k, j],
+                      f"auv{k}_U": S[4, k, j]}  # fmt: skip
         out.append(r)
     return out

@@ -88,6 +88,7 @@ class Period:
     visiting: np.ndarray  # per AUV at the period's end: a fix arriving now would be reliable
     prop: np.ndarray  # propeller on at each plant step (n_sub,)
     account: StepAccount | None  # ground-truth classes per plant step (None: no domain)
+    auvs: np.ndarray | None = None  # AUV states after each plant step (NA x n_auv x n_sub)
 
 
 class World:
@@ -271,7 +272,7 @@ class World:
         visiting = self.visiting()  # at the period's end, when its pings are evaluated
         fixes, reliable = self._acoustics(visiting)
         return Period(t0, self.t, X, Uin, Y, ranges, slants, fixes, reliable, visiting, prop,
-                      account)  # fmt: skip
+                      account, ST)  # fmt: skip
 
     def _acoustics(self, visiting: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """USBL pings and status reports due in the period just ended (evaluated at its end).
