@@ -14,6 +14,7 @@ from mpcasv.experiments import stats
 from mpcasv.experiments.acceptance import (
     Acceptance,
     acceptance_table,
+    display_table,
     per_case_table,
     relative_changes,
     verdict,
@@ -162,20 +163,38 @@ def test_the_cases_a_pooled_verdict_sits_between_are_shown_one_by_one(tmp_path):
     assert pooled.set_index("metric").loc["propeller_on_s", "verdict"] == "undecided"
     t = per_case_table(df, acc, "hybrid", "mpc", ["c0"])
     assert t.index.tolist() == ["c0", "c1", "c2"]
-    assert t.loc["c1", "propeller_on_s"] == "+50.0 % [+50.0, +50.0] (10): not met"
-    assert t.loc["c2", "propeller_on_s"] == "-50.0 % [-50.0, -50.0] (10): met"
+    assert t.loc["c1", "propeller_on_s"] == "+50.0 % [+50.0, +50.0] (10, 10 worse): not met"
+    assert t.loc["c2", "propeller_on_s"] == "-50.0 % [-50.0, -50.0] (10, 0 worse): met"
     assert t.loc["c0", "reliable_fix_age_p95_s"] == "no fix"  # as the pooled row leaves out
-    assert t.loc["c1", "reliable_fix_age_p95_s"] == "-50.0 % [-50.0, -50.0] (10): met"
+    assert t.loc["c1", "reliable_fix_age_p95_s"] == "-50.0 % [-50.0, -50.0] (10, 0 worse): met"
     few = per_case_table(df[df.seed < 3], acc, "hybrid", "mpc", ["c0"])
-    assert few.loc["c1", "propeller_on_s"] == "+50.0 % (3): n/a: 3 pairs < 6"
+    assert few.loc["c1", "propeller_on_s"] == "+50.0 % (3, 3 worse): n/a: 3 pairs < 6"
     suite = SimpleNamespace(name="t", description="per case", seeds=list(range(10)),
                             acceptance=acc)  # fmt: skip
     md = write_report(tmp_path, SimpleNamespace(suite=suite, jobs=list(range(len(df))),
                                                 skipped=[]), df)[0].read_text()  # fmt: skip
     section = md.split("## Acceptance")[1].split("\n## ")[0]
     assert "Per case, the same rule on each case's pairs alone" in section
-    assert "| c2 | -50.0 % [-50.0, -50.0] (10): met | -50.0 % [-50.0, -50.0] (10): met |" in (
-        section)
+    cell = "-50.0 % [-50.0, -50.0] (10, 0 worse): met"
+    assert f"| c2 | {cell} | {cell} |" in section
+
+
+def test_a_median_that_meets_no_more_says_how_many_worlds_were_worse():
+    """Collision time: the MPC 0 s where the hybrid had 10-19 s in 9 worlds, 5 s more in
+    the tenth. The median meets "no more", and the table says one world was worse (a
+    statistician's review, session 46: the main job's "met" held 6 worse worlds of 80)."""
+    df = _results()
+    rows = df.scenario == "c1"
+    h = (df.variant == "hybrid") & rows
+    m = (df.variant == "mpc") & rows
+    df.loc[h, "collision_domain_s"] = 10.0 + df.loc[h, "seed"]
+    df.loc[m, "collision_domain_s"] = np.where(df.loc[m, "seed"] == 0, 15.0, 0.0)
+    t = acceptance_table(df[rows], Acceptance({"collision_domain_s": 0.0}), "hybrid", "mpc",
+                         []).set_index("metric")  # fmt: skip
+    assert t.loc["collision_domain_s", "verdict"] == "met"
+    assert t.loc["collision_domain_s", "worse"] == 1
+    d = display_table(t.reset_index())
+    assert d.loc["collision_domain_s", "worse in"] == "1 of 10"
 
 
 def test_a_target_without_pairs_is_not_applicable_and_has_no_sums():

@@ -135,9 +135,12 @@ def _recording(name: str):
 
 def estimator_figures(result) -> dict:
     """The comparison figures of one run (see the module docstring)."""
-    from mpcasv.experiments.metrics import compute_metrics
+    from mpcasv.experiments.metrics import compute_metrics, period_rows
 
-    ts, sc = result.timeseries, result.scenario
+    sc = result.scenario
+    # the belief at the period ends, beside the truth there (with log_every_step the other
+    # rows hold their plant step's truth beside the period end's belief)
+    ts = period_rows(result.timeseries, sc.sim)
     err, linked = [], []
     for k, auv in enumerate(sc.auv):
         err.append(np.hypot(ts[f"est{k}_N"] - ts[f"auv{k}_N"], ts[f"est{k}_E"] - ts[f"auv{k}_E"]))
@@ -213,8 +216,10 @@ def plot_estimators(runs: dict, path: str | Path, auv: int = 0) -> Path:
 
     fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(10, 7), sharex=True)
     first = next(iter(runs.values()))
+    from mpcasv.experiments.metrics import period_rows
+
     for name, res in runs.items():
-        ts = res.timeseries
+        ts = period_rows(res.timeseries, res.scenario.sim)  # belief and truth at period ends
         err = np.hypot(ts[f"est{auv}_N"] - ts[f"auv{auv}_N"], ts[f"est{auv}_E"] - ts[f"auv{auv}_E"])
         ax1.plot(ts["t"], err, label=name)
         ax2.plot(ts["t"], ts[f"est_range{auv}"] - ts[f"range{auv}"], lw=1, label=name)

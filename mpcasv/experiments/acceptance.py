@@ -125,7 +125,9 @@ def acceptance_table(results: pd.DataFrame, acc: Acceptance, reference: str, oth
     ``both_zero`` (pairs left out: both 0, which says nothing about more or less),
     ``cases`` (pooled), ``median``, ``ci_low``, ``ci_high`` (relative change per pair,
     dimensionless), ``sums`` (relative change of the sums over the used pairs; +inf from a
-    zero sum) and ``verdict`` (with ", N runs unpaired" when some are). ``no_fix_cases``:
+    zero sum), ``worse`` (used pairs where ``other`` is on the worse side of ``reference``:
+    a median can meet "no more" with some worlds worse, a statistician's review, session
+    46) and ``verdict`` (with ", N runs unpaired" when some are). ``no_fix_cases``:
     the cases left out for :data:`NEEDS_FIXES` metrics. A metric without a column: 0 pairs,
     "n/a: no column"."""
     rows = []
@@ -135,7 +137,8 @@ def acceptance_table(results: pd.DataFrame, acc: Acceptance, reference: str, oth
         if m not in results:
             rows.append(row | {"pairs": 0, "runs": 0, "unpaired": 0, "both_zero": 0, "cases": "",
                                "median": math.nan, "ci_low": math.nan, "ci_high": math.nan,
-                               "sums": math.nan, "verdict": "n/a: no column"})  # fmt: skip
+                               "sums": math.nan, "worse": 0,
+                               "verdict": "n/a: no column"})  # fmt: skip
             continue
         p, unpaired = paired.pairs(results, m, reference, other)
         if m.startswith(NEEDS_FIXES):
@@ -157,6 +160,8 @@ def acceptance_table(results: pd.DataFrame, acc: Acceptance, reference: str, oth
                            "sums": float(relative_changes(np.array([ref.sum()]),
                                                           np.array([oth.sum()]))[0])
                            if len(p) else math.nan,  # no pair: no sums to compare
+                           "worse": int(np.sum(oth > ref) if better == "lower"
+                                        else np.sum(oth < ref)),
                            "verdict": v})  # fmt: skip
     return pd.DataFrame(rows)
 
@@ -182,6 +187,7 @@ def display_table(t: pd.DataFrame) -> pd.DataFrame:
             f"{_pct(m)} [{_pct(lo)}, {_pct(hi)}]"
             for m, lo, hi in zip(t["median"], t["ci_low"], t["ci_high"], strict=True)],
         "change of the sums": [_pct(v) for v in t["sums"]],
+        "worse in": [f"{w} of {n}" for w, n in zip(t["worse"], t["pairs"], strict=True)],
         "verdict": t["verdict"].to_list(),
     }, index=pd.Index(t["metric"], name="metric"))  # fmt: skip
 
@@ -190,8 +196,9 @@ def per_case_table(results: pd.DataFrame, acc: Acceptance, reference: str, other
                    no_fix_cases: list[str]) -> pd.DataFrame:  # fmt: skip
     """The targets judged on each case alone (the same rule as :func:`acceptance_table`, on
     one case's pairs): rows are the cases in the order of ``results``, columns the targets'
-    metrics; each cell reads ``"+126 % [+80, +160] (10): not met"`` (median relative change
-    per pair, its 95 % CI, the pairs used; dimensionless, in %) or ``"no fix"`` for a
+    metrics; each cell reads ``"+126 % [+80, +160] (10, 9 worse): not met"`` (median
+    relative change per pair, its 95 % CI, the pairs used and how many of them the other
+    variant did worse in; dimensionless, in %) or ``"no fix"`` for a
     :data:`NEEDS_FIXES` metric in one of ``no_fix_cases``. A pooled verdict can sit between
     cases that go opposite ways (issue 16, session 44: propeller +43-126 % in Cases 1-4,
     -5 to -10 % in Cases 5-8, pooled "undecided"); this table shows them."""
@@ -213,7 +220,7 @@ def _cell(row: pd.Series) -> str:
         return row["verdict"]
     ci = ("" if math.isnan(row["ci_low"])
           else f" [{short(row['ci_low'])}, {short(row['ci_high'])}]")  # fmt: skip
-    return f"{_pct(row['median'])}{ci} ({row['pairs']}): {row['verdict']}"
+    return f"{_pct(row['median'])}{ci} ({row['pairs']}, {row['worse']} worse): {row['verdict']}"
 
 
 def report_parts(results: pd.DataFrame, acc: Acceptance, names: list[str],

@@ -133,15 +133,24 @@ def _sum(ts: pd.DataFrame, col: str) -> float | None:
     return None if np.isnan(v).any() else float(v.sum())
 
 
-def served_switches(steps: pd.DataFrame) -> int:
+def period_rows(ts: pd.DataFrame, sim) -> pd.DataFrame:
+    """The time series' rows at the control periods' ends, one per controller step, however
+    the run was logged: with ``sim.log_every_step`` (one row per plant step) each period's
+    last, which holds the period's diagnostics, belief and fixes (the rows before it hold
+    their own plant step's ASV and AUV truth beside the period end's belief)."""
+    n_sub = sim.n_sub if sim.log_every_step else 1
+    return ts.iloc[n_sub - 1 :: n_sub]
+
+
+def served_switches(steps: pd.DataFrame) -> int | None:
     """Changes of the AUV the commands serve (column ``auv_served``, one row per control
     period; -1, none served, left out): the hybrid multi-AUV controller's selected AUV, the
     MPC's target (its fallback steps the hybrid's), 0 for a single-AUV run. The first AUV
     served is no change. One definition for every controller: before session 46 the metric
     was the MPC's own counter, 0 for the hybrid controllers whatever they did, and it counted
-    the MPC's first choice when that was not AUV 0."""
-    if "auv_served" not in steps:
-        return 0
+    the MPC's first choice when that was not AUV 0. None without the column."""
+    if "auv_served" not in steps:  # a time series without the commands' AUV: unknown
+        return None
     a = steps["auv_served"].to_numpy()
     a = a[a >= 0]
     return int(np.count_nonzero(a[1:] != a[:-1]))
@@ -210,10 +219,7 @@ def compute_metrics(result) -> dict:
     n_auv = len(result.scenario.auv)
     Tc = result.scenario.sim.row_period  # a row's weight (the plant step with log_every_step)
     t_end = float(ts["t"].iloc[-1])
-    # one row per controller step (the diagnostics' counts): with one row per plant step the
-    # period's last (each holds its period's diagnostics)
-    n_sub = result.scenario.sim.n_sub if result.scenario.sim.log_every_step else 1
-    steps = ts.iloc[n_sub - 1 :: n_sub]
+    steps = period_rows(ts, result.scenario.sim)
     mode, reason = ts["mode"].to_numpy(), ts["reason"].to_numpy()
     standby = mode == "standby"
     transit = ~standby

@@ -180,10 +180,8 @@ def _substep_rows(row: dict, period) -> list[dict]:
             delta_cmd=U[1, j], propeller_on=bool(period.prop[j]),
         )  # fmt: skip
         for k in range(period.ranges.shape[0]):
-            r[f"range{k}"], r[f"slant{k}"] = period.ranges[k, j], period.slants[k, j]
-            if S is not None:
-                r |= {f"auv{k}_N": S[0, k, j], f"auv{k}_E": S[1, k, j],
-                      f"auv{k}_depth": S[2, k, j], f"auv{k}_psi": S[3, k, j],
-                      f"auv{k}_U": S[4, k, j]}  # fmt: skip
+            r |= {f"range{k}": period.ranges[k, j], f"slant{k}": period.slants[k, j],
+                  f"auv{k}_N": S[0, k, j], f"auv{k}_E": S[1, k, j], f"auv{k}_depth": S[2, k, j],
+                  f"auv{k}_psi": S[3, k, j], f"auv{k}_U": S[4, k, j]}  # fmt: skip
         out.append(r)
     return out

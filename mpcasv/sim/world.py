@@ -88,7 +88,7 @@ class Period:
     visiting: np.ndarray  # per AUV at the period's end: a fix arriving now would be reliable
     prop: np.ndarray  # propeller on at each plant step (n_sub,)
     account: StepAccount | None  # ground-truth classes per plant step (None: no domain)
-    auvs: np.ndarray | None = None  # AUV states after each plant step (NA x n_auv x n_sub)
+    auvs: np.ndarray  # AUV states after each plant step (NA x n_auv x n_sub)
 
 
 class World:
