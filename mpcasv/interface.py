@@ -82,7 +82,12 @@ class Observation:
     ``actuators`` (optional): the thrust (N) and steering (rad) the execution level applies
     now, as the boat knows them (simulation: the plant's actuator states; deploy: DUNE's
     set-points mapped by the vessel's actuation, :meth:`mpcasv.io.asvwatch.Thrusters.
-    actuators`, None where they are unknown). ``current_oracle``
+    actuators`, None where they are unknown). ``actuator_samples`` (optional): their values
+    through the interval since the previous observation, ``((t, T, delta), ...)`` in time
+    order from its start to ``t`` (simulation: the plant's actuator states at each plant step;
+    None at the first observation and where unknown): an execution level that steers hard
+    within a period (Fossen's Otter flips its steering by +-0.44 rad from one 1-s period to
+    the next) is not described by the values at the interval's two ends. ``current_oracle``
     (optional): the TRUE current ``(V_N, V_E)`` (m/s) at the ASV, filled by the simulator
     only for a controller that asks for it (attribute ``needs_current_oracle = True``), for
     ablations; never in the field. ``usbl_fix_times`` (optional): per AUV, the time (s) of the
@@ -101,6 +106,7 @@ class Observation:
     actuators: tuple[float, float] | None = None
     current_oracle: tuple[float, float] | None = None
     usbl_fix_times: tuple[float, ...] | None = None
+    actuator_samples: tuple[tuple[float, float, float], ...] | None = None
 
 
 class Mode(StrEnum):

@@ -43,12 +43,14 @@ def held_world(data: dict) -> World:
     return w
 
 
-def drive(data: dict, noise: float = 0.0, seed: int = 0, period: float = 150.0):
+def drive(data: dict, noise: float = 0.0, seed: int = 0, period: float = 150.0,
+          samples: bool = True):
     """Run the World for the scenario's duration, transit (2 m/s to the next leg's waypoint)
     and standby alternating every ``period`` s; the observer takes every observation (with
-    white noise of ``noise`` m/s on the measured velocities, seeded), from the ASV held at
-    rest over ground (:func:`held_world`). Returns (t, estimate
-    (n x 2), true current at the ASV (n x 2), propeller on (n,))."""
+    white noise of ``noise`` m/s on the measured velocities, seeded; without the actuators'
+    samples through the period unless ``samples``), from the ASV held at rest over ground
+    (:func:`held_world`). Returns (t, estimate (n x 2), true current at the ASV (n x 2),
+    propeller on (n,))."""
     w = held_world(data)
     ob = CurrentObserver(w.model)
     rng = np.random.default_rng(seed)
@@ -56,10 +58,10 @@ def drive(data: dict, noise: float = 0.0, seed: int = 0, period: float = 150.0):
     leg = 0
     for k in range(int(data["duration"])):
         m = measurement(w.observation())
-        if noise:
-            du, dv = noise * rng.standard_normal(2)
+        if noise or not samples:
+            du, dv = noise * rng.standard_normal(2) if noise else (0.0, 0.0)
             m = MotionMeasurement(m.t, m.psi, m.u + du, m.v + dv, m.r, m.propeller_on,
-                                  m.actuators)  # fmt: skip
+                                  m.actuators, m.actuator_samples if samples else None)
         out_t.append(m.t)
         est.append(ob.update(m))
         truth.append(w.current_at_asv())
@@ -110,10 +112,27 @@ def test_zero_mean_in_still_water(noise):
     assert np.all(truth == 0.0)
     late = est[t >= 120.0]
     assert np.abs(late.mean(axis=0)).max() < 0.005
-    # noise-free: the model is the plant's; what is left are transients of up to 7 mm/s when
-    # the thrust changes within a period (the observer holds the mean of its two ends)
-    tol = 0.01 if noise == 0.0 else 0.03
+    # noise-free: the model is the plant's and the actuators' samples are the plant steps'
+    # (0.1 mm/s; from the period's two ends alone, transients of up to 7 mm/s when the thrust
+    # changed within a period)
+    tol = 0.001 if noise == 0.0 else 0.03
     assert np.abs(late).max() < tol
+
+
+@pytest.mark.parametrize("current", [(0.0, 0.0), (0.12, -0.1)])
+def test_an_otter_steering_hard_within_its_periods_is_not_read_as_a_current(current):
+    """Fossen's Otter (course-unstable) flips its steering between about +-0.44 rad from one
+    1-s period to the next in a transit: the observer given the actuators at the period's two
+    ends only held their mean, near 0, and read the turns as a current of up to 0.52 m/s
+    (a tester's pursuer scenario, session 45: 0.49 m/s in still water); through the plant
+    steps' samples it is within 3 mm/s (session 46)."""
+    data = scenario(600.0, current=list(current))
+    data["asv"]["vessel"] = "otter"
+    for samples, lo, hi in ((True, 0.0, 0.005), (False, 0.3, math.inf)):
+        t, est, truth, prop = drive(data, samples=samples)
+        assert prop.any() and (~prop).any()
+        err = np.hypot(*(est - truth).T)[t >= 120.0]
+        assert lo < err.max() < hi, (samples, err.max())
 
 
 def test_deterministic_and_refuses_bad_input():
@@ -127,6 +146,14 @@ def test_deterministic_and_refuses_bad_input():
         ob.update(MotionMeasurement(9.0, 0.0, 1.0, 0.0, 0.0, False))
     with pytest.raises(ValueError, match="non-finite"):
         ob.update(MotionMeasurement(11.0, 0.0, math.nan, 0.0, 0.0, False))
+    ob.update(MotionMeasurement(11.0, 0.0, 1.0, 0.0, 0.0, True, (10.0, 0.0),
+                                ((10.0, 10.0, 0.0), (11.0, 10.0, 0.0))))  # fmt: skip
+    gap = ((11.5, 10.0, 0.0), (12.0, 10.0, 0.0))  # an observation the observer did not get
+    with pytest.raises(ValueError, match="do not run from the previous measurement"):
+        ob.update(MotionMeasurement(12.0, 0.0, 1.0, 0.0, 0.0, True, (10.0, 0.0), gap))
+    with pytest.raises(ValueError, match="non-finite actuator samples"):
+        ob.update(MotionMeasurement(12.0, 0.0, 1.0, 0.0, 0.0, True, (10.0, 0.0),
+                                    ((11.0, 10.0, 0.0), (12.0, math.inf, 0.0))))  # fmt: skip
 
 
 def test_drifting_without_actuator_feedback_still_finds_the_current():

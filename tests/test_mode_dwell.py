@@ -93,7 +93,7 @@ def test_short_switches_and_propeller_toggles_counted_by_hand():
 _SUITE = """
 name = "dwell"
 scenarios = ["case6"]
-seeds = [5]
+seeds = [3]
 duration = 480.0
 plots = "none"
 
@@ -115,9 +115,12 @@ domain_from = "scenario"
 
 
 def test_in_closed_loop_no_mode_is_shorter_than_the_dwell_unless_an_auv_must_be_left(tmp_path):
-    """Case 6 (three AUVs), realisation 5, its first 480 s, as the paper suite runs it: the
+    """Case 6 (three AUVs), realisation 3, its first 480 s, as the paper suite runs it: the
     MPC without the rule (``min_dwell = 0``) switches mode less than 5 s after the previous
-    switch 11 times (measured; from 325 s a 2-s transit, a 1-s standby), with the default
+    switch 10 times (measured, session 46; realisation 5, this test's until then, had 11, and
+    has 1 since the current observer takes the actuators through each period: it had read
+    each start of a transit as a current of a few cm/s, after which, in the Case 3 run of
+    ``tests/test_mpc_between_steps.py``, the plan stood by again), with the default
     ``min_dwell = 5`` every such switch is a TRANSIT for AVOIDANCE, the escape manoeuvre or
     a fallback step, and there are fewer of them."""
     from mpcasv.experiments.runner import run_suite

@@ -80,11 +80,14 @@ def _instrument(ctrl) -> dict:
 
 def test_the_exploration_runs_between_steps_and_its_plan_starts_the_next_step(runs):
     """Case 3 from rest: the ASV stands by, so every ``explore_every`` = 5 s an exploration
-    solve heads for the AUV (measured: 5 in 40 s, the one at t = 21 s cheaper). The first,
-    at the run's first step (as after a target change), runs inside the step; the periodic
-    ones while the plan stands still ran after their step's command (no step here needed a
-    rescue: one solve each), and the cheaper one, only it, became the next step's warm
-    start."""
+    solve heads for the AUV (measured: 3 in 40 s, none cheaper; the ASV sets off at 13 s).
+    The first, at the run's first step (as after a target change), runs inside the step;
+    the periodic ones while the plan stands still ran after their step's command (no step
+    here needed a rescue: one solve each). An exploration's plan becomes the next step's
+    warm start only when cheaper (the preset's run below has one). Until session 46 this run
+    had 5 explorations, one cheaper: the current observer, given the actuators at the ends of
+    a period only, read the first transit period (thrust from 0 to 223 N) as a current of
+    up to 0.038 m/s, and the plan stood by again (38 s of the 40 against 13 s now)."""
     hooked, ts, _, _, log = runs
     assert (ts["mpc_source"] == "plan").all()
     assert log["step"] == [2] + [1] * (len(ts) - 1)  # then the warm-started solve alone
@@ -92,12 +95,18 @@ def test_the_exploration_runs_between_steps_and_its_plan_starts_the_next_step(ru
     assert sum(log["between"]) == n_between >= 2
     assert int((ts["mpc_explore_iter"] > 0).sum()) == n_between
     assert ts["mpc_explore_ms"].notna().sum() == n_between
-    assert hooked.explore_adopted == int(ts["mpc_explore_adopted"].sum()) >= 1
+    assert hooked.explore_adopted == int(ts["mpc_explore_adopted"].sum())
+    _adopted_only_when_cheaper(ts, log)
+    assert hooked.explore_adopted < n_between  # not every exploration wins
+
+
+def _adopted_only_when_cheaper(ts, log) -> int:
+    """An exploration's plan became the next step's warm start exactly when it was adopted,
+    and only when cheaper than the plan the step used (the same problem); returns how many."""
     assert all(adopted == replaced for adopted, replaced in log["warm"])
-    # adopted only when cheaper than the plan the step used (the same problem)
     adopted = ts[ts["mpc_explore_adopted"] == 1]
     assert (adopted["mpc_explore_cost"] < adopted["mpc_cost"]).all()
-    assert len(adopted) < n_between  # not every exploration wins
+    return len(adopted)
 
 
 def _same_decisions(hooked, ts_hooked, lazy, ts_lazy):
@@ -115,13 +124,16 @@ def test_the_decisions_are_the_same_whether_or_not_the_caller_runs_between_steps
 def test_the_same_with_the_presets_standing_time_term(scenarios_dir):
     """As above with the shipped preset (``stand = 20``, the integral terminal M7i): the ASV
     sets off at once and first stands by after about 100 s; Case 3, 300 s (2 explorations, 1
-    after its step; 80 s, as before M7i, had only the first)."""
+    after its step, cheaper: its plan started the next step; 80 s, as before M7i, had only
+    the first)."""
     sc = scenario_with(load_scenario(scenarios_dir / "case3.toml"), duration=300.0)
     hooked = make_controller("mpc-single", 1, "mpc-single")
+    log = _instrument(hooked)
     ts_hooked = simulate(sc, hooked, seed=0).timeseries
     lazy = make_controller("mpc-single", 1, "mpc-single")
     ts_lazy = simulate(sc, _NoHook(lazy), seed=0).timeseries
     assert hooked.explored >= 2 and hooked.params.weights.stand > 0
+    assert _adopted_only_when_cheaper(ts_hooked, log) == hooked.explore_adopted >= 1
     _same_decisions(hooked, ts_hooked, lazy, ts_lazy)
 
 

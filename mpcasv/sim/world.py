@@ -126,6 +126,7 @@ class World:
         if self.domain is not None:  # the spheres' radii, once (Paper 1 eqs. 3-4)
             self._r_in, self._r_out = self.domain.r_in, self.domain.r_out
         self.t = 0.0
+        self.actuator_samples: tuple[tuple[float, float, float], ...] | None = None
 
         s0 = scenario.asv.start
         self.x = np.zeros(NX)
@@ -212,7 +213,8 @@ class World:
     def observation(self) -> Observation:
         """What a controller sees now (estimators fed with the truth for ``perfect``): the
         ASV's state and its actuators' (thrust, steering) as the boat knows them (exact:
-        the simulator has no navigation or actuator sensor noise); the true current only
+        the simulator has no navigation or actuator sensor noise), now and through the last
+        period (:attr:`actuator_samples`, None before the first); the true current only
         when :attr:`oracle_current` is set (a controller that asked for it, ablations); the
         ASV's own USBL fix times (the last per AUV)."""
         for k, est in enumerate(self.estimators):
@@ -221,7 +223,8 @@ class World:
         oracle = self.current_at_asv() if self.oracle_current else None
         return Observation(self.t, self.asv_state(), self.propeller_on, ests,
                            (float(self.x[6]), float(self.x[7])), oracle,
-                           tuple(float(t) for t in self.last_fix))  # fmt: skip
+                           tuple(float(t) for t in self.last_fix),
+                           self.actuator_samples)  # fmt: skip
 
     def advance(self, cmd: np.ndarray) -> Period:
         """Move everything one supervisory period under execution-level command ``cmd``
@@ -241,6 +244,9 @@ class World:
         x_next, z = v[:NX], v[NX : NX + NZ]
         i = NX + NZ
         X = v[i : i + NX * n].reshape(NX, n, order="F")
+        ts = t0 + self.dt * np.arange(n + 1)  # the actuators at the plant steps' ends
+        A = np.column_stack([x0[6:8], X[6:8]])
+        self.actuator_samples = tuple(zip(ts.tolist(), A[0].tolist(), A[1].tolist(), strict=True))
         Uin = v[i + NX * n : i + (NX + 2) * n].reshape(2, n, order="F")
         Y = v[i + (NX + 2) * n :].reshape(2, n, order="F")
         SP = np.array([b.setpoint(t0, self.S[:, k], x0[:2]) for k, b in enumerate(self.behaviours)])
