@@ -148,12 +148,34 @@ def test_deterministic_and_refuses_bad_input():
         ob.update(MotionMeasurement(11.0, 0.0, math.nan, 0.0, 0.0, False))
     ob.update(MotionMeasurement(11.0, 0.0, 1.0, 0.0, 0.0, True, (10.0, 0.0),
                                 ((10.0, 10.0, 0.0), (11.0, 10.0, 0.0))))  # fmt: skip
-    gap = ((11.5, 10.0, 0.0), (12.0, 10.0, 0.0))  # an observation the observer did not get
-    with pytest.raises(ValueError, match="do not run from the previous measurement"):
-        ob.update(MotionMeasurement(12.0, 0.0, 1.0, 0.0, 0.0, True, (10.0, 0.0), gap))
+    early = ((10.5, 10.0, 0.0), (12.0, 10.0, 0.0))  # from before the previous measurement
+    with pytest.raises(ValueError, match="do not lie in time order between"):
+        ob.update(MotionMeasurement(12.0, 0.0, 1.0, 0.0, 0.0, True, (10.0, 0.0), early))
+    backwards = ((11.8, 10.0, 0.0), (11.2, 10.0, 0.0))
+    with pytest.raises(ValueError, match="do not lie in time order between"):
+        ob.update(MotionMeasurement(12.0, 0.0, 1.0, 0.0, 0.0, True, (10.0, 0.0), backwards))
     with pytest.raises(ValueError, match="non-finite actuator samples"):
         ob.update(MotionMeasurement(12.0, 0.0, 1.0, 0.0, 0.0, True, (10.0, 0.0),
                                     ((11.0, 10.0, 0.0), (12.0, math.inf, 0.0))))  # fmt: skip
+
+
+def test_samples_inside_the_interval_are_held_to_its_ends():
+    """Set-points that arrive between two measurements (a deploy: DUNE's thruster messages
+    at its own times): the previous measurement's actuators are held up to the first sample
+    and the last sample to the measurement; the same prediction as the samples written out
+    to both ends, and another than the ends' mean alone."""
+    model = World(scenario_from_dict(scenario(10.0))).model
+
+    def predicted(samples, ends=(0.0, 0.0)):
+        ob = CurrentObserver(model)
+        ob.update(MotionMeasurement(0.0, 0.0, 1.0, 0.0, 0.0, True, (50.0, 0.0)))
+        ob.update(MotionMeasurement(1.0, 0.0, 1.0, 0.0, 0.0, True, ends, samples))
+        return ob.s.copy()
+
+    inside = ((0.3, 200.0, 0.2), (0.6, 200.0, 0.2))
+    full = ((0.0, 50.0, 0.0), *inside, (1.0, 200.0, 0.2))
+    np.testing.assert_array_equal(predicted(inside), predicted(full))
+    assert not np.allclose(predicted(inside), predicted(None, (200.0, 0.2)))
 
 
 def test_drifting_without_actuator_feedback_still_finds_the_current():
@@ -270,3 +292,17 @@ def test_the_start_does_not_overshoot_the_current(c):
         t, est = observe(c, cmd, 60)
         over = np.hypot(*est.T)[t >= 2.0] - np.hypot(*c)
         assert over.max() <= 0.35, f"{over.max():.2f} m/s above the current's speed"
+
+
+def test_a_scenario_can_give_the_actuators_at_the_period_ends_only():
+    """``[sim] actuator_samples = false``: the observation carries the actuators at the
+    period's ends only, as ``mpcasv deploy`` gives them (the field's path, to simulate)."""
+    for flag in (True, False):
+        w = World(scenario_from_dict(scenario(5.0, sim={"actuator_samples": flag})))
+        assert w.observation().actuator_samples is None  # none before the first period
+        w.advance(np.array([1.0, 400.0, 0.0, 2.0]))
+        smp = w.observation().actuator_samples
+        assert (smp is None) is (not flag)
+        if flag:
+            assert len(smp) == w.n_sub + 1 and smp[0][0] == 0.0 and smp[-1][0] == w.t
+            assert smp[-1][1:] == w.observation().actuators

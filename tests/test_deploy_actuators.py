@@ -60,6 +60,10 @@ def test_records_keep_the_actuators():
     assert d["actuators"] == [123.4, -0.25] and obs_from_dict(d) == obs
     bare = dataclasses.replace(obs, actuators=None)
     assert "actuators" not in obs_to_dict(bare) and obs_from_dict(obs_to_dict(bare)) == bare
+    through = dataclasses.replace(obs, actuator_samples=((2.0, 100.0, 0.1), (3.0, 123.4, -0.25)))
+    d = json.loads(json.dumps(obs_to_dict(through)))  # the samples too, bit for bit
+    assert d["actuator_samples"] == [[2.0, 100.0, 0.1], [3.0, 123.4, -0.25]]
+    assert obs_from_dict(d) == through and "actuator_samples" not in obs_to_dict(obs)
 
 
 def _set_point(kind: str, src: int, i: int, value: float, t: float) -> bytes:

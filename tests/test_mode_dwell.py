@@ -120,7 +120,8 @@ def test_in_closed_loop_no_mode_is_shorter_than_the_dwell_unless_an_auv_must_be_
     switch 10 times (measured, session 46; realisation 5, this test's until then, had 11, and
     has 1 since the current observer takes the actuators through each period: it had read
     each start of a transit as a current of a few cm/s, after which, in the Case 3 run of
-    ``tests/test_mpc_between_steps.py``, the plan stood by again), with the default
+    ``tests/test_mpc_between_steps.py``, the plan stood by again; the Case 6 runs were not
+    analysed), with the default
     ``min_dwell = 5`` every such switch is a TRANSIT for AVOIDANCE, the escape manoeuvre or
     a fallback step, and there are fewer of them."""
     from mpcasv.experiments.runner import run_suite

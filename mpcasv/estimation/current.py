@@ -142,8 +142,8 @@ class MotionMeasurement:
     body axes ``u``, ``v`` (m/s), yaw rate ``r`` (rad/s), and the actuators' thrust ``T`` (N)
     and steering ``delta`` (rad), or None when not known; ``propeller_on``;
     ``actuator_samples``: ``((t, T, delta), ...)`` through the interval since the previous
-    measurement, in time order from its start to ``t``, or None when not known (then the two
-    ends' ``actuators``)."""
+    measurement, in time order within it (held before the first and after the last), or
+    None when not known (then the two ends' ``actuators``)."""
 
     t: float
     psi: float
@@ -175,25 +175,32 @@ def measurement_from_estimated_state(t: float, psi: float, vx: float, vy: float,
     return MotionMeasurement(t, psi, *ned_to_body(psi, vx, vy), r, propeller_on, act)
 
 
-def _segments(t0: float, b: MotionMeasurement) -> list[tuple[float, np.ndarray]] | None:
-    """``[(length (s), (T, delta) held), ...]`` through ``b.actuator_samples`` (each two
-    samples' mean between them); None without samples.
+def _segments(a: MotionMeasurement, b: MotionMeasurement) -> list[tuple[float, np.ndarray]] | None:
+    """``[(length (s), (T, delta) held), ...]`` from ``a.t`` to ``b.t`` through
+    ``b.actuator_samples`` (each two samples' mean between them); before the first sample
+    the previous measurement's ``actuators`` (else the first sample's), after the last the
+    last sample's. None without samples.
 
     Raises
     ------
     ValueError
-        Samples that do not run in time order from ``t0`` (the previous measurement) to
-        ``b.t`` (an observer not given every observation), or not finite.
+        Samples out of time order or outside ``[a.t, b.t]`` (an observer not given every
+        observation), or not finite.
     """
-    if b.actuator_samples is None:
+    if not b.actuator_samples:
         return None
     S = np.asarray(b.actuator_samples, float).reshape(-1, 3)
-    if (len(S) < 2 or abs(S[0, 0] - t0) > 1e-6 or abs(S[-1, 0] - b.t) > 1e-6
-            or np.any(np.diff(S[:, 0]) < 0)):  # fmt: skip
-        raise ValueError(f"current observer: actuator samples at t = {b.t} do not run from the "
-                         f"previous measurement ({t0}) to this one")
     if not np.all(np.isfinite(S)):
         raise ValueError(f"current observer: non-finite actuator samples at t = {b.t}")
+    tol = 1e-6 + 1e-12 * abs(b.t)  # a few ulps of a UNIX time
+    if S[0, 0] < a.t - tol or S[-1, 0] > b.t + tol or np.any(np.diff(S[:, 0]) < 0):
+        raise ValueError(f"current observer: actuator samples at t = {b.t} do not lie in time "
+                         f"order between the previous measurement ({a.t}) and this one")
+    if S[0, 0] > a.t + tol:  # hold the actuators of the previous measurement up to the first
+        first = S[0, 1:] if a.actuators is None else np.asarray(a.actuators, float)
+        S = np.vstack([[a.t, *first], S])
+    if S[-1, 0] < b.t - tol:  # and the last sample's from it on
+        S = np.vstack([S, [b.t, *S[-1, 1:]]])
     return [(t1 - ta, 0.5 * (S[i, 1:] + S[i + 1, 1:]))
             for i, (ta, t1) in enumerate(zip(S[:-1, 0], S[1:, 0], strict=True)) if t1 > ta]
 
@@ -268,7 +275,8 @@ class CurrentObserver:
         Raises
         ------
         ValueError
-            ``m.t`` before the previous measurement's time, or a non-finite measurement.
+            ``m.t`` before the previous measurement's time, a non-finite measurement, or
+            actuator samples out of time order, outside the interval or not finite.
         """
         z = np.array([m.u, m.v, m.r], float)
         if not (np.all(np.isfinite(z)) and math.isfinite(m.psi)):
@@ -303,7 +311,7 @@ class CurrentObserver:
     def _predict(self, dt: float, a: MotionMeasurement, b: MotionMeasurement) -> None:
         P = self.params
         known = a.actuators is not None and b.actuators is not None
-        segments = _segments(a.t, b)
+        segments = _segments(a, b)
         if segments is not None:  # (C1) through the interval's samples
             q_nu = P.q_nu
         elif known:  # (C1) with the mean of the interval's two ends
@@ -338,6 +346,8 @@ class CurrentObserver:
         stiff (a turn of Fossen's Otter)."""
         key = round(length, 9)
         if key not in self._n_sub:
+            if len(self._n_sub) > 256:  # irregular intervals (a deploy): keep it bounded
+                self._n_sub.clear()
             self._n_sub[key] = max(math.ceil(length / self.params.h_max - 1e-9),
                                    rk4_sub_steps(self.model, length, lags=False))  # fmt: skip
         return self._n_sub[key]

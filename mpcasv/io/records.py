@@ -24,8 +24,9 @@ def _times(ts) -> list[float | None]:
 
 def obs_to_dict(obs: Observation) -> dict:
     """An observation as the deploy log writes it; ``actuators`` (thrust N, steering rad, from
-    the ASV's set-points) and ``usbl_fix_times`` (the ASV's own USBL fixes, ``fix_age_source
-    = "observed"``) only when the observation has them."""
+    the ASV's set-points), ``actuator_samples`` (``[[t, T, delta], ...]`` through the period)
+    and ``usbl_fix_times`` (the ASV's own USBL fixes, ``fix_age_source = "observed"``) only
+    when the observation has them."""
     a = obs.asv
     d = {
         "t": obs.t,
@@ -41,6 +42,8 @@ def obs_to_dict(obs: Observation) -> dict:
         d["actuators"] = list(obs.actuators)
     if obs.usbl_fix_times is not None:
         d["usbl_fix_times"] = _times(obs.usbl_fix_times)
+    if obs.actuator_samples is not None:
+        d["actuator_samples"] = [list(x) for x in obs.actuator_samples]
     return d
 
 
@@ -55,11 +58,13 @@ def obs_from_dict(d: dict) -> Observation:
         )
         for e in d["auvs"]
     )
-    fixes, act = d.get("usbl_fix_times"), d.get("actuators")
+    fixes, act, smp = d.get("usbl_fix_times"), d.get("actuators"), d.get("actuator_samples")
     return Observation(d["t"], ASVState(**d["asv"]), bool(d["propeller_on"]), auvs,
                        actuators=None if act is None else (float(act[0]), float(act[1])),
                        usbl_fix_times=None if fixes is None
-                       else tuple(_f(t, -math.inf) for t in fixes))  # fmt: skip
+                       else tuple(_f(t, -math.inf) for t in fixes),
+                       actuator_samples=None if smp is None
+                       else tuple(tuple(float(v) for v in x) for x in smp))  # fmt: skip
 
 
 def cmd_to_dict(cmd: Command) -> dict:

@@ -108,6 +108,11 @@ class SimSpec:
     control_period: between(0, CONTROL_PERIOD_MAX, "s", "seconds, not hours",
                             lo_open=True) = 1.0  # fmt: skip
     log_every_step: Flag = False  # log at the plant step instead of the supervisory period
+    #: the observation carries the ASV's actuators at every plant step of the period
+    #: (``Observation.actuator_samples``, which the MPC's current observer integrates); false:
+    #: at the period's ends only, as ``mpcasv deploy`` gives them (docs/mpc.md, "Known
+    #: problems", the current estimate with Fossen's Otter)
+    actuator_samples: Flag = True
     #: the execution level steers at a transit's waypoint pushed this far (m) further along
     #: the line from the ASV at the decision, as ``mpcasv deploy`` sends DUNE its Reference
     #: (``link.reference_lead_m``, 20 m: DUNE stops a boat within 15 m of its Reference);

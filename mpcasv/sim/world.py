@@ -244,9 +244,11 @@ class World:
         x_next, z = v[:NX], v[NX : NX + NZ]
         i = NX + NZ
         X = v[i : i + NX * n].reshape(NX, n, order="F")
-        ts = t0 + self.dt * np.arange(n + 1)  # the actuators at the plant steps' ends
-        A = np.column_stack([x0[6:8], X[6:8]])
-        self.actuator_samples = tuple(zip(ts.tolist(), A[0].tolist(), A[1].tolist(), strict=True))
+        if self.sc.sim.actuator_samples:  # the actuators at the plant steps' ends
+            ts = t0 + self.dt * np.arange(n + 1)
+            A = np.column_stack([x0[6:8], X[6:8]])
+            self.actuator_samples = tuple(zip(ts.tolist(), A[0].tolist(), A[1].tolist(),
+                                              strict=True))  # fmt: skip
         Uin = v[i + NX * n : i + (NX + 2) * n].reshape(2, n, order="F")
         Y = v[i + (NX + 2) * n :].reshape(2, n, order="F")
         SP = np.array([b.setpoint(t0, self.S[:, k], x0[:2]) for k, b in enumerate(self.behaviours)])
