@@ -60,18 +60,12 @@ def pi_tf(g: SpeedLoop, dt: float | None = None) -> ct.TransferFunction:
 
 
 def feed_forward_gain(model: VesselModel, u0: float) -> float:
-    """Slope at ``u0`` (N/(m/s)) of the speed loop's feed-forward, the trim thrust
-    ``T_ff(u_ref) = -(X_u u_ref + X_uu |u_ref| u_ref)`` of
-    :func:`mpcasv.control.execution.execution_law` (``|.|`` smoothed by ``sabs``)."""
-    from mpcasv.models.vessel import sabs
+    """Slope at ``u0`` (N/(m/s)) of the speed loop's feed-forward
+    :func:`mpcasv.control.execution.feed_forward_thrust` (central difference)."""
+    from mpcasv.control.execution import feed_forward_thrust
 
-    P = model.params
-
-    def T_ff(u: float) -> float:
-        return -(P.X_u * u + P.X_uu * float(sabs(u, P.eps_abs)) * u)
-
-    h = 1e-4
-    return (T_ff(u0 + h) - T_ff(u0 - h)) / (2 * h)
+    P, h = model.params, 1e-4
+    return float(feed_forward_thrust(u0 + h, P) - feed_forward_thrust(u0 - h, P)) / (2 * h)
 
 
 def speed_figures(P: ct.StateSpace, g: SpeedLoop, dt: float | None = None,
