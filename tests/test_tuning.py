@@ -340,7 +340,7 @@ def test_speed_steps_flag_thrust_saturation_and_speeds_beyond_the_boat(model, sh
     beyond = speed_step(model, shipped, top, top + 0.5)
     assert not beyond["reachable"] and beyond["why"].startswith("UNREACHABLE")
 
-    def first(u0, u1):  # the speed loop's first thrust command (N), integrator at 0
+    def first(u0, u1):  # the first thrust command (N); integrator's trim ~0 from 1 m/s
         return model.thrust_for_speed(u1) + g.Kp * (u1 - u0)
 
     def linear(u0, u1):
@@ -366,6 +366,38 @@ def test_speed_steps_flag_thrust_saturation_and_speeds_beyond_the_boat(model, sh
     assert "UNREACHABLE" in row_top and row_small.endswith("| none |")
     text = speed_tables(g, {2.0: (f, f)}, {}, None, {2.0: [s_up]}, "limits")
     assert "SATURATED: T_max" in next(r for r in text.splitlines() if "| 2 | up to 2.5" in r)
+
+
+@pytest.mark.parametrize("u1", [0.505, 0.495])
+def test_a_speed_step_starts_the_speed_integrator_in_trim(model, shipped, monkeypatch, u1):
+    """`speed_step` starts the boat in trim at u0, and the speed loop too: the integrator holds
+    what the feed-forward T_ff leaves out of the trim thrust (the idle-drive drag, +1.24 N at
+    0.5 m/s on Gretha). Its first thrust command is then trim + T_ff(u1) - T_ff(u0) + Kp
+    (u1 - u0), and a step small enough for the model to stay linear (5 mm/s, no thrust limit)
+    matches the linear loop's: rise within 0.2 s, overshoot within 2 % of the step, settling
+    within 1 s. With the integrator started at 0 it did not (0.5 -> 0.505 m/s: rise 4.5 s, no
+    overshoot; 0.5 -> 0.495 m/s: rise 1.2 s, overshoot 56 %; linear 1.7 s and 21 %)."""
+    from mpcasv.control import tuning_speed as ts
+    from mpcasv.control.execution import feed_forward_thrust
+
+    runs = []
+
+    def capture(*args, **kw):
+        runs.append(run_closed_loop(*args, **kw))
+        return runs[-1]
+
+    monkeypatch.setattr(ts, "run_closed_loop", capture)
+    u0, g, P = 0.5, shipped.speed, model.params
+    T0, ff = model.thrust_for_speed(u0), lambda u: float(feed_forward_thrust(u, P))
+    assert T0 - ff(u0) > 1.0  # the trim of the integrator is not 0 at this speed
+    s = ts.speed_step(model, shipped, u0, u1)
+    assert runs[0].U[1, 0] == pytest.approx(T0 + ff(u1) - ff(u0) + g.Kp * (u1 - u0), abs=1e-6)
+    lin = speed_figures(surge_plant(model, u0), g, 0.1, step=u1 - u0,
+                        ff=ts.feed_forward_gain(model, u0))  # fmt: skip
+    assert s["at_T_max"] == 0 and s["at_T_min"] == 0
+    assert s["rise_s"] == pytest.approx(lin["rise_s"], abs=0.2)
+    assert s["overshoot_pct"] == pytest.approx(lin["overshoot_pct"], abs=2.0)
+    assert s["settling_s"] == pytest.approx(lin["settling_s"], abs=1.0)
 
 
 def test_the_nonlinear_heading_step_says_it_is_also_a_speed_change(model, shipped):
