@@ -219,3 +219,16 @@ def test_speed_steps_may_run_straight(tmp_path, capsys):
     df = pd.read_csv(out)
     assert (df["delta_cmd"] == 0).all() and df["T_cmd"].nunique() >= 2
     assert df["psi"].abs().max() < 1e-9 and df["u"].max() > df["u"].iloc[0] + 0.3
+
+
+@pytest.mark.parametrize("loop", ["yaw", "speed"])
+def test_speeds_that_start_with_a_minus_say_how_to_give_them(tmp_path, capsys, loop):
+    """`--speeds -1,1` was argparse's bare "expected one argument" (a value starting with '-'
+    that is not one number reads as an option): the one line says to join it, and the
+    joined form reaches the speeds' own check (exit 2 either way, nothing written)."""
+    out = tmp_path / "o"
+    _refused(capsys, ["tune", loop, "--speeds", "-1,1", "--out", str(out), "--quiet"],
+             "--speeds", "comma-separated", "--speeds=-1,1")  # fmt: skip
+    _refused(capsys, ["tune", loop, "--speeds=-1,1", "--out", str(out), "--quiet"],
+             "--speeds [-1.0] m/s outside (0, 2.5] m/s")  # fmt: skip
+    assert not out.exists()
