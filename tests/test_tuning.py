@@ -508,6 +508,9 @@ def test_the_pirouette_and_turn_plots_show_what_the_runs_do(model, shipped, tmp_
     assert not fig.axes[0].get_legend()  # not over the start and the waypoint
     label = next(t for t in labels if t.startswith("without"))
     assert "then (dashed)" in label and f"turned {total:.0f} deg" in label
+    dist = np.hypot(run.X[:, 0] - wp[0], run.X[:, 1] - wp[1])
+    out = int(np.argmax((dist >= 5.0) & (np.cumsum(dist < 5.0) > 0)))  # leaves 5 m again
+    assert f"circles it {dist[out:].min():.1f}-{dist[out:].max():.1f} m away" in label
     assert any(len(ln.get_xdata()) == len(run.t) - int(np.argmax(np.hypot(
         run.X[:, 0] - wp[0], run.X[:, 1] - wp[1]) < 5.0)) for ln in fig.axes[0].lines)
     rows, runs = turn_grid(model, ep, [(0.6, 1.59), (model.params.u_max, 0.0)], distance=10.0)
@@ -518,3 +521,28 @@ def test_the_pirouette_and_turn_plots_show_what_the_runs_do(model, shipped, tmp_
         assert sum(ln.get_label().startswith("no ref. model") for ln in ax.lines) == 1
     no_ref_90 = next(ln for ln in fig.axes[0].lines if ln.get_label().startswith("no ref"))
     assert "PIROUETTE" in no_ref_90.get_label()  # as the grid's table says (P)
+
+
+def test_the_pirouette_label_gives_the_circling_after_the_pass(tmp_path, monkeypatch):
+    """The label's distance range is the circling's after the pass: it read "5-11 m" with the
+    minimum taken over the samples from the first one already inside 5 m. A made-up run that
+    passes 1 m from the waypoint and then circles it 6-11 m away says 6.0-11.0 m."""
+    from mpcasv.control import tuning_report as tr
+    from mpcasv.control.tuning import Run
+
+    figs = []
+    monkeypatch.setattr(tr.plt, "close", figs.append)
+    t = np.arange(0.0, 60.05, 0.1)
+    X = np.zeros((len(t), 8))
+    k = t < 14.85  # the pass: east along N = 1 m, closest at E = 0, ends inside 5 m
+    X[k, 0], X[k, 1] = 1.0, t[k] - 10.0
+    a = 2 * math.pi * (t[~k] - 15.0) / 20.0  # then a circle of 8.5 m radius around (2.5, 0)
+    X[~k, 0], X[~k, 1] = 2.5 + 8.5 * np.cos(a), 8.5 * np.sin(a)
+    X[:, 2] = np.linspace(0.0, 10.0, len(t))
+    run = Run(t=t, X=X, U=np.zeros((len(t), 2)), Y=np.zeros((len(t), 2)))
+    f = {"pirouette": True, "turn_s": math.inf, "total_turn_deg": 573.0}
+    tr.plot_pirouette({"with": (run, f), "without": (run, f)}, (0.0, 0.0), tmp_path, "t")
+    label = next(t.get_text() for lg in figs[-1].legends for t in lg.get_texts()
+                 if t.get_text().startswith("without"))  # fmt: skip
+    assert "within 5 m of the waypoint at 5 s" in label, label
+    assert "circles it 6.0-11.0 m away to 60 s" in label, label
