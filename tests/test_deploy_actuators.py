@@ -92,6 +92,7 @@ def test_the_deploy_observes_the_asvs_set_points(tmp_path, vessel):
     vp = load_vessel(vessel)
     dep, clock = dry_deploy(tmp_path, controller={"name": "hybrid-single", "preset":
                                                   "paper1-field", "vessel": vessel})  # fmt: skip
+    dep.dry_run = False  # a real run (a dry run commands no transit): its sends go nowhere
     t = feed_states(dep, clock, clock.t, 2)
     assert dep.observation(t, clock.t)[0].actuators == (0.0, 0.0)  # none heard, no transit
     dep.last_cmd = Command(Mode.TRANSIT, (100.0, 0.0), 1.5, 0, Reason.NOMINAL)

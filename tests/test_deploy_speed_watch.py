@@ -77,6 +77,12 @@ def test_a_dry_run_commands_no_speed_to_judge(tmp_path):
     assert not names & {"speed_shortfall", "speed_no_way", "controller_speed_cap"}, names
     assert dict(dep.link.rejects) == {} and dep.speed_cap is None
     assert dep.speed.status()["commanded"] is None
+    # nor a propeller: with no thruster message the drifting boat's propeller is off, as in
+    # standby (it was taken as on from the transits never sent), and nothing is stale
+    dep.jsonl.flush()
+    steps = read_jsonl(tmp_path / "deploy.jsonl", "step")
+    assert len(steps) > 50 and not any(s["obs"]["propeller_on"] for s in steps)
+    assert "thruster_stale" not in names
     dep.close()
 
 

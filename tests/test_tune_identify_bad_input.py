@@ -10,6 +10,7 @@ import shutil
 import warnings
 
 import numpy as np
+import pandas as pd
 import pytest
 
 from mpcasv.cli import main
@@ -194,10 +195,11 @@ def test_a_negative_validation_fit_exits_1_and_marks_the_toml(tmp_path, capsys, 
     assert "# VALIDATION FAILED: held-out fit below 0 % for u" in out.read_text()
 
 
-@pytest.mark.parametrize("name", ["zigzag", "turning-circle", "speed-steps"])
-def test_a_manoeuvre_that_never_steers_is_refused(tmp_path, capsys, name):
-    """`simulate --manoeuvre zigzag --delta 0` wrote a straight line with exit 0: every
-    manoeuvre steers by +-delta, so 0 is refused in one line, nothing written; 20 is not."""
+@pytest.mark.parametrize("name", ["zigzag", "turning-circle"])
+def test_a_steering_manoeuvre_that_never_steers_is_refused(tmp_path, capsys, name):
+    """`simulate --manoeuvre zigzag --delta 0` wrote a straight line with exit 0: the zigzag
+    and the turning circle identify the steering by +-delta, so 0 is refused in one line,
+    nothing written; 20 is not."""
     out = tmp_path / "m.csv"
     _refused(capsys, ["simulate", "--manoeuvre", name, "--delta", "0", "--out", str(out)],
              "--delta 0", name, "never steers")  # fmt: skip
@@ -205,3 +207,28 @@ def test_a_manoeuvre_that_never_steers_is_refused(tmp_path, capsys, name):
     df = simulate_manoeuvre(VesselModel(load_vessel("gretha")), name, delta_deg=20.0,
                             duration=40.0)  # fmt: skip
     assert df["delta_cmd"].abs().max() > 0
+
+
+def test_speed_steps_may_run_straight(tmp_path, capsys):
+    """speed-steps identifies the surge (it steers only by doublets of 0.3 delta): `--delta 0`
+    is a legitimate straight run, exit 0, the thrust stepped and the steering never set."""
+    out = tmp_path / "s.csv"
+    rc = main(["simulate", "--manoeuvre", "speed-steps", "--delta", "0", "--duration", "60",
+               "--out", str(out)])  # fmt: skip
+    assert rc == 0 and out.exists(), capsys.readouterr().err
+    df = pd.read_csv(out)
+    assert (df["delta_cmd"] == 0).all() and df["T_cmd"].nunique() >= 2
+    assert df["psi"].abs().max() < 1e-9 and df["u"].max() > df["u"].iloc[0] + 0.3
+
+
+@pytest.mark.parametrize("loop", ["yaw", "speed"])
+def test_speeds_that_start_with_a_minus_say_how_to_give_them(tmp_path, capsys, loop):
+    """`--speeds -1,1` was argparse's bare "expected one argument" (a value starting with '-'
+    that is not one number reads as an option): the one line says to join it, and the
+    joined form reaches the speeds' own check (exit 2 either way, nothing written)."""
+    out = tmp_path / "o"
+    _refused(capsys, ["tune", loop, "--speeds", "-1,1", "--out", str(out), "--quiet"],
+             "--speeds", "comma-separated", "--speeds=-1,1")  # fmt: skip
+    _refused(capsys, ["tune", loop, "--speeds=-1,1", "--out", str(out), "--quiet"],
+             "--speeds [-1.0] m/s outside (0, 2.5] m/s")  # fmt: skip
+    assert not out.exists()

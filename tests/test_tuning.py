@@ -1,4 +1,6 @@
-"""Tests of the yaw / speed tuning tools (mpcasv.control.tuning*) and the shipped schedule."""
+"""Tests of the yaw tuning (mpcasv.control.tuning_yaw, tuning_schedule), the shared margin and
+step tools (mpcasv.control.tuning) and the shipped schedule; the speed loop, its steps and the
+reference model are in test_tuning_speed.py."""
 
 from __future__ import annotations
 
@@ -15,7 +17,7 @@ import pytest
 from mpcasv.cli import main
 from mpcasv.control.params import load_execution
 from mpcasv.control.tuning import FAR, run_closed_loop
-from mpcasv.control.tuning_speed import place_speed_pi, speed_figures, surge_plant, turn
+from mpcasv.control.tuning_speed import speed_figures
 from mpcasv.control.tuning_yaw import (
     PIDGains,
     heading_step,
@@ -113,48 +115,6 @@ def test_shipped_schedule_is_the_tune_yaw_design(model, shipped):
         g = place_pid(nomoto(model, u0), w, 1.0, 0.5)
         got = (shipped.yaw.Kp[i], shipped.yaw.Ki[i], shipped.yaw.Kd[i])
         assert got == pytest.approx((g.Kp, g.Ki, g.Kd), rel=1e-4, abs=1e-5)
-
-
-def test_speed_loop_design(model, shipped):
-    g = place_speed_pi(model, 1.0, 0.3, 1.0)
-    assert (shipped.speed.Kp, shipped.speed.Ki) == pytest.approx((g.Kp, g.Ki), rel=1e-4)
-    for u0 in (0.5, 2.5):
-        f = speed_figures(surge_plant(model, u0), g, dt=0.1)
-        assert f["phase_margin_deg"] >= 45 and f["gain_margin_db"] >= 6
-        assert f["settling_s"] < 30
-
-
-def test_turn_detects_pirouettes(model, shipped):
-    """A waypoint inside the full-power turning circle is circled (pirouette) without eq. 3.1;
-    with eq. 3.1 (slowing towards u_ff in the turn) the boat gets on course; one far enough is
-    reached either way. (Before issue 13 the 'power turn' thrust floor made the shipped
-    execution level circle the 10 m waypoint too.)"""
-    from mpcasv.control.tuning_speed import without_reference
-
-    shipped = dataclasses.replace(shipped, turn_thrust=0.0)  # eq. 3.1 without the power turn
-    _, near_none = turn(model, without_reference(shipped, model), math.radians(90.0), 10.0)
-    _, near = turn(model, shipped, math.radians(90.0), 10.0)
-    _, far = turn(model, shipped, math.radians(90.0), 50.0)
-    assert near_none["pirouette"] and not math.isfinite(near_none["turn_s"])
-    # with eq. 3.1 the boat slows from full speed (2.5 m/s) in the turn; the steering floor
-    # gets it on course before it is down to u_ff (measured min 0.70 m/s)
-    assert not near["pirouette"] and near["min_u"] < 0.4 * model.params.u_max
-    assert not far["pirouette"] and 0 < far["turn_s"] < 60 and far["total_turn_deg"] < 180
-
-
-def test_turn_grid_close_waypoint_picks_the_field_u_ff(model, shipped):
-    """The turn grid with its close waypoint (10 m at 90 deg, inside the full-power turning
-    circle): u_ff = 0.8 pirouettes there, the field value 0.6 does not, so the grid recommends
-    0.6 (docs/tuning.md). At 20 m and 50 m neither pirouettes, which made the old 20,50 grid
-    recommend 0.8."""
-    from mpcasv.control.tuning_speed import recommend, turn_grid
-
-    ep = dataclasses.replace(shipped, turn_thrust=0.0)
-    rows, _ = turn_grid(model, ep, [(0.6, 1.59), (0.8, 1.59)], angles_deg=(90.0,), distance=10.0)
-    assert [r.ok for r in rows] == [True, False]
-    assert recommend(rows).u_ff == 0.6
-    far, _ = turn_grid(model, ep, [(0.6, 1.59), (0.8, 1.59)], angles_deg=(90.0,), distance=20.0)
-    assert all(r.ok for r in far) and recommend(far).u_ff == 0.8
 
 
 def test_cli_tune_yaw_writes_loadable_schedule(tmp_path, shipped):
@@ -285,19 +245,6 @@ def test_a_response_that_does_not_settle_reads_not_reached():
     assert f["settling_s"] == math.inf
 
 
-@needs_cases
-@pytest.mark.parametrize("vessel", ["otter.toml", "cybership2.toml"])
-def test_tune_speed_runs_on_third_party_hulls(tmp_path, capsys, vessel):
-    """Acceptance of issue 13: `mpcasv tune speed` on the Otter and CyberShip II files, no
-    traceback, honest margins (exit 0 = pass, 1 = acceptance FAIL; never an exception)."""
-    rc = main(["tune", "speed", "--vessel", str(CASES / "vessels" / vessel), "--out",
-               str(tmp_path), "--u-ff", "0.6", "--k-u", "1.59", "--distance", "50",
-               "--quiet"])  # fmt: skip
-    out = capsys.readouterr().out
-    assert rc in (0, 1) and "loop margins" in out
-    assert not re.search(r"\| -?\d+ / inf \|", out)  # no 'inf' sampled phase margin
-
-
 def test_the_yaw_bode_plot_names_its_loop_and_gives_the_gain_margin_in_db(model):
     """`tune yaw`'s Bode plot read "sys[372]: Gm = 25.76 (at ...)": python-control's name of
     an unnamed system and the gain margin as a ratio. It names the loop (a speed with a
@@ -324,48 +271,6 @@ def test_the_yaw_bode_plot_names_its_loop_and_gives_the_gain_margin_in_db(model)
         assert fig.axes[0].get_ylabel() == "Magnitude [dB]"
     finally:
         plt.close(fig)
-
-
-def test_speed_steps_flag_thrust_saturation_and_speeds_beyond_the_boat(model, shipped):
-    """`tune speed`'s steps on the nonlinear loop: a step to beyond the straight-course top
-    speed is flagged unreachable (not run); a step whose first command, feed-forward plus
-    Kp times the step, is beyond T_max (or below T_min) starts saturated, and is slower than
-    the linear loop that has no limit; a step whose first command is within the limits never
-    reaches one and matches the linear loop (with the feed-forward) it was designed on."""
-    from mpcasv.control.tuning_report import speed_tables
-    from mpcasv.control.tuning_speed import feed_forward_gain, speed_step
-
-    P, g = model.params, shipped.speed
-    top = min(model.top_speed, P.u_max)
-    beyond = speed_step(model, shipped, top, top + 0.5)
-    assert not beyond["reachable"] and beyond["why"].startswith("UNREACHABLE")
-
-    def first(u0, u1):  # the speed loop's first thrust command (N), integrator at 0
-        return model.thrust_for_speed(u1) + g.Kp * (u1 - u0)
-
-    def linear(u0, u1):
-        return speed_figures(surge_plant(model, u0), g, 0.1, step=u1 - u0,
-                             ff=feed_forward_gain(model, u0))  # fmt: skip
-
-    up, down, small = (2.0, 2.5), (1.0, 0.5), (1.5, 1.6)
-    assert first(*up) > P.T_max and first(*down) < P.T_min
-    assert P.T_min < first(*small) < P.T_max and P.T_min < first(1.5, 1.4) < P.T_max
-    s_up, s_down, s_small = (speed_step(model, shipped, *s) for s in (up, down, small))
-    assert s_up["at_T_max"] > 0 and s_up["rise_s"] > linear(*up)["rise_s"]
-    assert s_down["at_T_min"] > 0 and s_down["rise_s"] > linear(*down)["rise_s"]
-    assert s_small["at_T_max"] == 0 and s_small["at_T_min"] == 0
-    lin = linear(*small)
-    assert s_small["rise_s"] == pytest.approx(lin["rise_s"], abs=0.2)
-    assert s_small["overshoot_pct"] == pytest.approx(lin["overshoot_pct"], abs=2.0)
-    # the report says the direction, the flag and the unreachable step
-    f = speed_figures(surge_plant(model, top), g, 0.1)
-    text = speed_tables(g, {top: (f, f), 1.5: (f, f)}, {}, None,
-                        {top: [beyond], 1.5: [s_small]}, "limits")  # fmt: skip
-    row_top = next(r for r in text.splitlines() if r.startswith(f"| {top:g} | up to"))
-    row_small = next(r for r in text.splitlines() if r.startswith("| 1.5 | up to 1.6"))
-    assert "UNREACHABLE" in row_top and row_small.endswith("| none |")
-    text = speed_tables(g, {2.0: (f, f)}, {}, None, {2.0: [s_up]}, "limits")
-    assert "SATURATED: T_max" in next(r for r in text.splitlines() if "| 2 | up to 2.5" in r)
 
 
 def test_the_nonlinear_heading_step_says_it_is_also_a_speed_change(model, shipped):
@@ -452,37 +357,3 @@ def test_fossens_otter_refusal_names_the_zero_turn_gain_not_a_missing_steering_e
     assert "Y_v = 0 in the vessel file" in err[0] and not (tmp_path / "execution.toml").exists()
 
 
-def test_the_pirouette_and_turn_plots_show_what_the_runs_do(model, shipped, tmp_path,
-                                                            monkeypatch):  # fmt: skip
-    """pirouette.png: the pirouette's label says what its whole run does (it passes within
-    5 m of the waypoint, then circles it to the end; the rest is drawn), the legend is
-    outside the paths' axes. turns_10m.png: one panel per angle, so the "no ref. model" 90
-    deg run is not under the 180 deg one."""
-    from mpcasv.control import tuning_report as tr
-    from mpcasv.control.tuning_speed import PIROUETTE_CASE, pirouette_check, turn_grid
-
-    figs = []
-    monkeypatch.setattr(tr.plt, "close", figs.append)
-    ep = dataclasses.replace(shipped, turn_thrust=0.0)
-    a, d, u0 = PIROUETTE_CASE
-    checks = pirouette_check(model, ep, a, d, u0)
-    wp = (d * math.cos(math.radians(a)), d * math.sin(math.radians(a)))
-    tr.plot_pirouette(checks, wp, tmp_path, "t")
-    run, f = checks["without"]
-    total = np.degrees(np.sum(np.abs(np.diff(np.unwrap(run.X[:, 2])))))
-    assert f["pirouette"] and total > 720  # it circles the waypoint: more than two turns
-    fig = figs[-1]
-    labels = [t.get_text() for lg in fig.legends for t in lg.get_texts()]
-    assert not fig.axes[0].get_legend()  # not over the start and the waypoint
-    label = next(t for t in labels if t.startswith("without"))
-    assert "then (dashed)" in label and f"turned {total:.0f} deg" in label
-    assert any(len(ln.get_xdata()) == len(run.t) - int(np.argmax(np.hypot(
-        run.X[:, 0] - wp[0], run.X[:, 1] - wp[1]) < 5.0)) for ln in fig.axes[0].lines)
-    rows, runs = turn_grid(model, ep, [(0.6, 1.59), (model.params.u_max, 0.0)], distance=10.0)
-    tr.plot_speed(model, ep.speed, {10.0: (rows, runs)}, (0.6, 1.59), None, tmp_path)
-    fig = figs[-1]
-    for ax, angle in zip(fig.axes, (90, 180), strict=True):
-        assert ax.get_title() == f"{angle} deg turn"
-        assert sum(ln.get_label().startswith("no ref. model") for ln in ax.lines) == 1
-    no_ref_90 = next(ln for ln in fig.axes[0].lines if ln.get_label().startswith("no ref"))
-    assert "PIROUETTE" in no_ref_90.get_label()  # as the grid's table says (P)

@@ -35,6 +35,20 @@ def _floats(text: str) -> list[float]:
     return values
 
 
+class _Speeds(argparse.Action):
+    """``--speeds``: a comma-separated list of m/s (:func:`_floats`). argparse reads a value
+    that starts with '-' and is not one plain number (``-1,1``) as an option and said only
+    "expected one argument"; the value is optional to argparse (``nargs="?"``) so that this
+    says, in one line, how to give it: joined, ``--speeds=-1,1``."""
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        if values is None:
+            parser.error(f"argument {option_string}: expected a comma-separated list of m/s "
+                         "(one that starts with '-' is read as an option: join it, "
+                         f"{option_string}=-1,1)")  # fmt: skip
+        setattr(namespace, self.dest, values)
+
+
 def register(sub: argparse._SubParsersAction) -> None:
     tune = sub.add_parser("tune", help="tune the execution level (yaw PID, speed loop)",
                           description="Linearise the shared vessel model and tune the execution "
@@ -45,6 +59,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     y.add_argument(
         "--speeds",
         type=_floats,
+        nargs="?",
+        action=_Speeds,
+        metavar="U,...",
         help="surge speeds of the schedule, m/s (default 0.2, 0.4, ... 1.0 times the vessel's "
         f"u_max: {DEFAULT_SPEEDS} for Gretha)",
     )
@@ -91,6 +108,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     s.add_argument(
         "--speeds",
         type=_floats,
+        nargs="?",
+        action=_Speeds,
+        metavar="U,...",
         help="speeds where the margins are checked, m/s (default 0.2 ... 1.0 u_max)",
     )
     s.add_argument(

@@ -70,6 +70,15 @@ def speed_reference(psi_e, u_ff, k_u):
     return u_ff + k_u * ca.fmax(math.pi / 2 - ca.fabs(psi_e), 0)
 
 
+def feed_forward_thrust(u_ref, P):
+    """The speed loop's feed-forward (N): the trim thrust of eq. 2.6 without the idle-drive
+    drag, ``T_ff(u_ref) = -(X_u u_ref + X_uu |u_ref| u_ref)`` (``|.|`` smoothed by
+    :func:`~mpcasv.models.vessel.sabs`; ``u_ref`` in m/s, ``P`` the vessel's parameters).
+    The idle-drive drag is left to the integrator: below 3 % of the trim thrust at
+    ``u_ref >= u_ff``. Works on numbers and CasADi expressions."""
+    return -(P.X_u * u_ref + P.X_uu * sabs(u_ref, P.eps_abs) * u_ref)
+
+
 def steering_floor(u_ref, delta, model: VesselModel, ep: ExecutionParams):
     """Least thrust in transit (N): what a helmsman gives a steerable drive at full lock.
 
@@ -118,9 +127,8 @@ def execution_law(x, z, cmd, model: VesselModel, ep: ExecutionParams, dt: float)
     d_sat = ca.fmin(ca.fmax(d_unsat, -P.delta_max), P.delta_max)
     I_psi_next = _integrate(I_psi, dt * Ki * e_psi, d_unsat, P.delta_max)
 
-    # surge speed loop with model-based feed-forward (trim thrust of eq. 2.6; the idle-drive
-    # drag is left to the integrator: below 3 % of the trim thrust at u_ref >= u_ff)
-    T_ff = -(P.X_u * u_ref + P.X_uu * sabs(u_ref, P.eps_abs) * u_ref)
+    # surge speed loop with model-based feed-forward
+    T_ff = feed_forward_thrust(u_ref, P)
     e_u = u_ref - u_s
     T_unsat = T_ff + ep.speed.Kp * e_u + I_u
     T_floor = steering_floor(u_ref, x[7], model, ep)  # actual steering angle (lagged)

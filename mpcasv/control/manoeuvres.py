@@ -11,7 +11,8 @@ Gaussian measurement noise (seeded) on the measured columns and a constant curre
 - ``turning-circle``: steady approach, then ``delta_deg`` to starboard, then to port; thrust at
   trim. Excites the steady-turn balance (Coriolis, speed loss, drift angle).
 - ``speed-steps``: steps of thrust through fractions of ``T_max`` with small steering
-  doublets; excites surge mass and the resistance curve.
+  doublets (``0.3 delta_deg``; ``delta_deg`` 0 runs it straight); excites surge mass and the
+  resistance curve.
 """
 
 from __future__ import annotations
@@ -27,6 +28,9 @@ from mpcasv.models.current import V_MAX
 from mpcasv.models.vessel import IX, VesselModel
 
 MANOEUVRES = ("zigzag", "turning-circle", "speed-steps")
+#: the manoeuvres that identify the steering: they need ``delta_deg`` != 0 (speed-steps, which
+#: identifies the surge, may run straight)
+STEERING = ("zigzag", "turning-circle")
 #: columns of an identification log (see mpcasv.models.identify)
 COLUMNS = ("t", "N", "E", "psi", "u", "v", "r", "T_cmd", "delta_cmd")
 
@@ -56,8 +60,8 @@ def simulate_manoeuvre(model: VesselModel, name: str, u0: float = 1.5, delta_deg
     Raises
     ------
     mpcasv.config.ConfigError (a ValueError)
-        Unknown manoeuvre name; ``delta_deg`` 0 (no steering) or ``|delta_deg|`` beyond
-        ``delta_max``; ``u0`` beyond the speed
+        Unknown manoeuvre name; ``delta_deg`` 0 for a :data:`STEERING` manoeuvre (no
+        steering to identify) or ``|delta_deg|`` beyond ``delta_max``; ``u0`` beyond the speed
         the vessel holds at ``T_max`` (its trim thrust would exceed ``T_max``); ``u0 <= 0``.
     """
     from mpcasv.config import ConfigError
@@ -65,7 +69,7 @@ def simulate_manoeuvre(model: VesselModel, name: str, u0: float = 1.5, delta_deg
     if name not in MANOEUVRES:
         raise ConfigError(f"unknown manoeuvre {name!r}; known: {', '.join(MANOEUVRES)}")
     P = model.params
-    if delta_deg == 0:  # every manoeuvre steers by +-delta: 0 wrote a straight line, exit 0
+    if delta_deg == 0 and name in STEERING:  # 0 wrote a straight line with exit 0
         raise ConfigError(f"--delta 0: the {name} steers by +-delta, so 0 deg never steers "
                           "(a straight line: nothing to identify the steering from); give an "
                           "angle, e.g. --delta 20")  # fmt: skip

@@ -53,12 +53,13 @@ _CL_CACHE: dict = {}
 
 def run_closed_loop(model: VesselModel, ep: ExecutionParams, x0, wp, u_cap: float,
                     t_end: float, current=(0.0, 0.0), dt: float = DT,
-                    transit: float = 1.0) -> Run:  # fmt: skip
+                    transit: float = 1.0, I_u: float = 0.0) -> Run:  # fmt: skip
     """Run the execution level + vessel model from ``x0`` towards waypoint ``wp``
     (``transit``: the command's first entry, 2 for a collision-avoidance transit).
 
-    The compiled closed loop is cached per (model, params, dt). Integrators start at zero
-    (the speed loop has the trim thrust as feed-forward) and ``r_f`` at the initial yaw rate.
+    The compiled closed loop is cached per (model, params, dt). The yaw integrator starts at
+    zero, the speed integrator at ``I_u`` (N; :func:`mpcasv.control.tuning_speed.trim_integrator`
+    is its trim value, which the feed-forward leaves to it) and ``r_f`` at the initial yaw rate.
     """
     key = (model.p.tobytes(), ep, dt)  # by value: an id() can be reused after GC
     if key not in _CL_CACHE:
@@ -66,7 +67,7 @@ def run_closed_loop(model: VesselModel, ep: ExecutionParams, x0, wp, u_cap: floa
     CL = _CL_CACHE[key]
     x = np.asarray(x0, float)
     z = np.zeros(NZ)
-    z[2] = x[5]
+    z[1], z[2] = I_u, x[5]
     cmd = np.array([transit, wp[0], wp[1], u_cap])
     c = np.asarray(current, float)
     Xs, Us, Ys = [x[None, :]], [np.zeros((1, 2))], [np.full((1, 2), np.nan)]

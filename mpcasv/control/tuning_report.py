@@ -304,6 +304,17 @@ def plot_speed(model, g, grids, field, best, out: Path) -> list[Path]:
     return paths
 
 
+def _circling(dist: np.ndarray, n: int | None) -> np.ndarray:
+    """The distances (m) from the waypoint of a pirouette's circling: after the pass (the
+    first ``n`` samples reach 5 m), from the sample where it is 5 m or more away again, so
+    that the pass's own samples inside 5 m are not counted; the whole run if it never came
+    within 5 m (``n`` None); empty if it stayed inside to the end."""
+    if n is None:
+        return dist
+    again = np.nonzero(dist[n - 1:] >= 5.0)[0]
+    return dist[n - 1 + again[0]:] if len(again) else dist[:0]
+
+
 def plot_pirouette(checks: dict, wp, out: Path, title: str) -> Path:
     """Paths, speeds and heading errors of :func:`mpcasv.control.tuning_speed.pirouette_check`
     (hard turn while accelerating, with and without eq. 3.1).
@@ -321,12 +332,14 @@ def plot_pirouette(checks: dict, wp, out: Path, title: str) -> Path:
         n = int(np.argmax(reach)) + 1 if reach.any() else len(run.t)
         if f["pirouette"]:
             total = float(np.degrees(np.sum(np.abs(np.diff(np.unwrap(run.X[:, 2]))))))
-            dist = np.hypot(run.X[n - 1:, 0] - wp[0], run.X[n - 1:, 1] - wp[1])
+            c = _circling(np.hypot(run.X[:, 0] - wp[0], run.X[:, 1] - wp[1]), n if
+                          reach.any() else None)  # fmt: skip
             what = ("PIROUETTE, never on course:\n" + (
                 f"within 5 m of the waypoint at {run.t[n - 1]:.0f} s, heading error "
                 f"{abs(math.degrees(run.psi_error[n - 1])):.0f} deg, then (dashed)\n"
-                if reach.any() else "") + f"{dist.min():.0f}-{dist.max():.0f} m from it to "
-                f"{run.t[-1]:.0f} s, turned {total:.0f} deg")  # fmt: skip
+                if reach.any() else "") + (f"circles it {c.min():.1f}-{c.max():.1f} m away"
+                if len(c) else "stays within 5 m of it") + f" to {run.t[-1]:.0f} s, turned "
+                f"{total:.0f} deg")  # fmt: skip
         else:
             what = (f"on course after {f['turn_s']:.0f} s, turned {f['total_turn_deg']:.0f} "
                     "deg" + (f", within 5 m of the waypoint at {run.t[n - 1]:.0f} s"

@@ -28,12 +28,13 @@ def kd_clip(nm, g, wn: float, zeta: float, integral_ratio: float) -> dict | None
     """``None`` if the placed ``Kd`` is the formula's; else the formula's ``Kd`` (s) and the
     requested and achieved closed-loop poles (1/s, as ``[real, imag]`` pairs: JSON) on the
     first-order Nomoto model ``nm`` with the gains ``g`` as clipped (module docstring)."""
-    K, T, a = nm.K, nm.T, integral_ratio * wn
-    kd = (T * (2 * zeta * wn + a) - 1.0) / K
+    from mpcasv.control.tuning_yaw import closed_loop_polynomial, pid_formula, target_polynomial
+
+    kd = pid_formula(nm, wn, zeta, integral_ratio).Kd
     if kd >= 0:
         return None
-    want = np.roots(np.polymul([1.0, 2 * zeta * wn, wn * wn], [1.0, a]))
-    got = np.roots([T, 1.0 + K * g.Kd, K * g.Kp, K * g.Ki])
+    want = np.roots(target_polynomial(wn, zeta, integral_ratio))
+    got = np.roots(closed_loop_polynomial(nm, g))
     return {"Kd_formula": float(kd),
             "poles_requested": [[float(p.real), float(p.imag)] for p in want + 0j],
             "poles_achieved": [[float(p.real), float(p.imag)] for p in got + 0j]}  # fmt: skip

@@ -60,18 +60,22 @@ def pi_tf(g: SpeedLoop, dt: float | None = None) -> ct.TransferFunction:
 
 
 def feed_forward_gain(model: VesselModel, u0: float) -> float:
-    """Slope at ``u0`` (N/(m/s)) of the speed loop's feed-forward, the trim thrust
-    ``T_ff(u_ref) = -(X_u u_ref + X_uu |u_ref| u_ref)`` of
-    :func:`mpcasv.control.execution.execution_law` (``|.|`` smoothed by ``sabs``)."""
-    from mpcasv.models.vessel import sabs
+    """Slope at ``u0`` (N/(m/s)) of the speed loop's feed-forward
+    :func:`mpcasv.control.execution.feed_forward_thrust` (central difference)."""
+    from mpcasv.control.execution import feed_forward_thrust
 
-    P = model.params
+    P, h = model.params, 1e-4
+    return float(feed_forward_thrust(u0 + h, P) - feed_forward_thrust(u0 - h, P)) / (2 * h)
 
-    def T_ff(u: float) -> float:
-        return -(P.X_u * u + P.X_uu * float(sabs(u, P.eps_abs)) * u)
 
-    h = 1e-4
-    return (T_ff(u0 + h) - T_ff(u0 - h)) / (2 * h)
+def trim_integrator(model: VesselModel, u0: float) -> float:
+    """The speed integrator's value in trim at ``u0`` (N): the trim thrust
+    (:meth:`VesselModel.thrust_for_speed`, idle-drive drag included) less the feed-forward
+    :func:`mpcasv.control.execution.feed_forward_thrust`, which leaves that drag out (Gretha:
+    +1.24 N at 0.5 m/s, below 1e-4 N from 1 m/s, where the thrust blends the drag out)."""
+    from mpcasv.control.execution import feed_forward_thrust
+
+    return model.thrust_for_speed(u0) - float(feed_forward_thrust(u0, model.params))
 
 
 def speed_figures(P: ct.StateSpace, g: SpeedLoop, dt: float | None = None,
@@ -117,7 +121,8 @@ def speed_step(model: VesselModel, ep: ExecutionParams, u0: float, u1: float,
     """Nonlinear speed step ``u0 -> u1`` (m/s) on a straight course, thrust limits included.
 
     As :func:`mpcasv.control.tuning_yaw.heading_step`: the vessel starts in trim at ``u0``
-    heading north, the waypoint is :data:`~mpcasv.control.tuning.FAR` ahead and the command's
+    heading north (the speed integrator too: :func:`trim_integrator`, so a step to ``u0``
+    would hold it), the waypoint is :data:`~mpcasv.control.tuning.FAR` ahead and the command's
     speed is ``u1``, through :func:`~mpcasv.control.tuning.run_closed_loop` (the simulator's
     compiled execution level and vessel model; thrust clipped to ``[T_min, T_max]``).
 
@@ -139,7 +144,7 @@ def speed_step(model: VesselModel, ep: ExecutionParams, u0: float, u1: float,
         return out | {"reachable": False, "why": f"UNREACHABLE: target {u1:g} m/s above the "
                       f"{why} ({limit:.3g} m/s)"}  # fmt: skip
     x0, _ = model.trim(u0)
-    run = run_closed_loop(model, ep, x0, (FAR, 0.0), u1, t_end)
+    run = run_closed_loop(model, ep, x0, (FAR, 0.0), u1, t_end, I_u=trim_integrator(model, u0))
     sign = 1.0 if u1 > u0 else -1.0
     y = (run.X[:, IX["u"]] - u0) * sign
     T = run.U[1:, 0]  # thrust applied over each step

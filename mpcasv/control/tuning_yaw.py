@@ -146,22 +146,39 @@ def nomoto(model: VesselModel, u0: float) -> Nomoto:
     return Nomoto(u0=u0, K=K, T=T, T1=T1, T2=T2, T3=T3)
 
 
+def target_polynomial(wn: float, zeta: float, integral_ratio: float) -> np.ndarray:
+    """The requested closed-loop polynomial ``(s^2 + 2 zeta wn s + wn^2)(s + a)``,
+    ``a = integral_ratio wn`` (1/s), coefficients from ``s^3`` down (module docstring)."""
+    return np.polymul([1.0, 2 * zeta * wn, wn * wn], [1.0, integral_ratio * wn])
+
+
+def closed_loop_polynomial(nm: Nomoto, g: PIDGains) -> np.ndarray:
+    """The PID on the first-order Nomoto model: ``T s^3 + (1 + K Kd) s^2 + K Kp s + K Ki``."""
+    return np.array([nm.T, 1.0 + nm.K * g.Kd, nm.K * g.Kp, nm.K * g.Ki])
+
+
+def pid_formula(nm: Nomoto, wn: float, zeta: float, integral_ratio: float) -> PIDGains:
+    """The gains that make :func:`closed_loop_polynomial` ``T`` times
+    :func:`target_polynomial`, coefficient by coefficient, before any clipping."""
+    K, T = nm.K, nm.T
+    _, c2, c1, c0 = target_polynomial(wn, zeta, integral_ratio)
+    return PIDGains(Kp=T * c1 / K, Ki=T * c0 / K, Kd=(T * c2 - 1.0) / K)
+
+
 def place_pid(nm: Nomoto, wn: float, zeta: float, integral_ratio: float) -> PIDGains:
-    """Pole placement of the PID on the first-order Nomoto model (see module docstring).
+    """Pole placement of the PID on the first-order Nomoto model (:func:`pid_formula`).
 
     ``Kd`` is clipped at 0 (a negative derivative gain would mean the hull alone is faster
     than the requested poles; the execution level takes ``Kd >= 0``): the poles are then not
     the requested ones; :func:`mpcasv.control.tuning_schedule.kd_clip` says which they are.
     """
-    K, T, a = nm.K, nm.T, integral_ratio * wn
-    Kp = T * (wn**2 + 2 * zeta * wn * a) / K
-    Ki = T * wn**2 * a / K
-    Kd = (T * (2 * zeta * wn + a) - 1.0) / K
-    if min(Kp, Ki) <= 0 or K / T <= 0:
+    K, T = nm.K, nm.T
+    g = pid_formula(nm, wn, zeta, integral_ratio)
+    if min(g.Kp, g.Ki) <= 0 or K / T <= 0:
         raise CourseUnstable(f"at u0={nm.u0:g} m/s the Nomoto model (K = {K:.3g} 1/s, T = "
                              f"{T:.3g} s) turns the bow against the steering (K/T <= 0): no PID "
                              "by pole placement")  # fmt: skip
-    return PIDGains(Kp=Kp, Ki=Ki, Kd=max(Kd, 0.0))
+    return dataclasses.replace(g, Kd=max(g.Kd, 0.0))
 
 
 @dataclasses.dataclass(frozen=True)

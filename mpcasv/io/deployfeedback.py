@@ -101,7 +101,11 @@ class BoatFeedback:
         return True
 
     def _transit_commanded(self) -> bool:
-        return self.last_cmd is not None and self.last_cmd.mode is Mode.TRANSIT
+        """Whether the ASV was sent a transit (its last command; never in a dry run, which
+        sends nothing: the boat's propeller was taken as on from a transit never sent, and a
+        silent thruster as stale, before session 46)."""
+        return (not self.dry_run and self.last_cmd is not None
+                and self.last_cmd.mode is Mode.TRANSIT)  # fmt: skip
 
     def actuators(self, now: float) -> tuple[float, float] | None:
         """The model's thrust and steering from DUNE's set-points (:meth:`mpcasv.io.asvwatch.
