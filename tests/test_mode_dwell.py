@@ -24,6 +24,7 @@ def _out(min_dwell: float) -> PlanOutput:
     out = PlanOutput()
     out.params = load_preset("mpc-single", "mpc-single", {"min_dwell": min_dwell})
     out._diag = {}
+    out.target = 0  # the controller's target (one AUV): the commands name it
     out._reset_dwell()
     return out
 

@@ -232,6 +232,7 @@ def test_the_transit_waypoint_hands_the_execution_level_the_planned_reference(st
     out = PlanOutput()
     out.params, out.ocp, out.domain, out.u_plan, out._diag = P, ocp, P.domain, None, {}
     out.current = np.zeros(2)
+    out.target = 0  # the controller's target (one AUV): the commands name it
     out._reset_dwell()
     N = ocp.dims.N
     x0, p, w = _turn_east(ocp)

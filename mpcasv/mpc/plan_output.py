@@ -17,7 +17,8 @@ from mpcasv.mpc.worldview import ranges
 
 
 class PlanOutput:
-    """The command from the plan (mixin; state in the controller)."""
+    """The command from the plan (mixin; state in the controller: ``params``, ``ocp``,
+    ``domain``, ``target``, ...)."""
 
     def _reset_dwell(self) -> None:
         """A run's start for the dwell rule (called by the controller's ``reset``)."""
