@@ -55,8 +55,9 @@ BOX_METRICS = ("min_range_m", "reliable_fix_age_max_s", "reliable_fix_age_p95_s"
                "nav_error_rms_m", "propeller_on_s", "energy_J")  # fmt: skip
 
 PER_CASE = ("Per case, the same rule on each case's pairs alone (median relative change per "
-            f"pair [95 % CI] (pairs): verdict; fewer than {paired.MIN_PAIRS} pairs have no "
-            "interval). A pooled verdict can sit between cases that go opposite ways.")
+            f"pair [95 % CI] (pairs, of which the other variant did worse in): verdict; fewer "
+            f"than {paired.MIN_PAIRS} pairs have no interval). A pooled verdict can sit between "
+            "cases that go opposite ways.")
 READ_LINE = 'pd.read_parquet("{out}/results.parquet")'
 
 
