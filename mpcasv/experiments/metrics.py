@@ -156,11 +156,6 @@ def served_switches(steps: pd.DataFrame) -> int | None:
     return int(np.count_nonzero(a[1:] != a[:-1]))
 
 
-def _last_int(ts: pd.DataFrame, col: str) -> int:
-    """The last value of a cumulative counter column (0 if the controller logs none)."""
-    return int(ts[col].iloc[-1]) if col in ts and len(ts) else 0
-
-
 def _at(t: np.ndarray, query: np.ndarray, tol: float = 1e-6) -> np.ndarray:
     """Row index of each time in ``query`` in the sorted times ``t`` (-1: no row there)."""
     i = np.clip(np.searchsorted(t, query - tol), 0, len(t) - 1)
