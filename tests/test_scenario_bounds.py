@@ -325,12 +325,13 @@ def test_a_models_own_refusal_is_named_at_load_whatever_the_checks_miss(tmp_path
     assert "auv[0].behaviour: refused by the AUV model: a plan needs waypoints" in str(err.value)
 
 
-def _goto_suite(tmp_path, extra: str = ""):
-    """A suite file running ``goto`` on ``bad.toml`` (seed 0, no plots), ``extra`` lines added."""
+def _goto_suite(tmp_path, extra: str = "", scenario: str = "bad.toml"):
+    """A suite file ``s.toml`` running ``goto`` on ``scenario`` (seed 0, no plots), ``extra``
+    lines added."""
     suite = tmp_path / "s.toml"
-    suite.write_text(textwrap.dedent("""
+    suite.write_text(textwrap.dedent(f"""
         name = "s"
-        scenarios = ["bad.toml"]
+        scenarios = ["{scenario}"]
         seeds = [0]
         plots = "none"
     """) + extra + textwrap.dedent("""

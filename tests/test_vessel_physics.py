@@ -9,7 +9,6 @@ model (``K/T <= 0``)."""
 
 from __future__ import annotations
 
-import textwrap
 from pathlib import Path
 
 import numpy as np
@@ -17,6 +16,7 @@ import pytest
 import tomli_w
 from shared_data import CASES, needs_shared
 from test_experiments_bad_input import SCENARIO as DEMO
+from test_scenario_bounds import _goto_suite
 
 from mpcasv.cli import main
 from mpcasv.config import DATA_DIR, ConfigError, load_toml, parse, resolve
@@ -130,16 +130,7 @@ def flipped(tmp_path) -> Path:
     data = _gretha(**FLIPPED)
     (tmp_path / "flipped.toml").write_text(tomli_w.dumps(data))
     (tmp_path / "demo.toml").write_text(SCENARIO)
-    (tmp_path / "suite.toml").write_text(textwrap.dedent("""
-        name = "one"
-        scenarios = ["demo.toml"]
-        seeds = [0]
-        plots = "none"
-        [[controllers]]
-        label = "goto"
-        name = "goto"
-        preset = "goto"
-    """))  # fmt: skip
+    _goto_suite(tmp_path, scenario="demo.toml")
     return tmp_path
 
 
@@ -147,7 +138,7 @@ def flipped(tmp_path) -> Path:
     "argv",
     [
         ["simulate", "{d}/demo.toml", "--out", "{d}/out"],
-        ["compare", "{d}/suite.toml", "--out", "{d}/out", "--workers", "1"],
+        ["compare", "{d}/s.toml", "--out", "{d}/out", "--workers", "1"],
         ["tune", "yaw", "--vessel", "{d}/flipped.toml", "--out", "{d}/out", "--quiet"],
     ],
     ids=["simulate", "compare", "tune-yaw"],
