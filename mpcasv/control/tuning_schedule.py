@@ -73,12 +73,13 @@ def off_schedule(model, ep, dt: float) -> list[dict]:
     Returns one dict per speed: ``u0``, ``where``, ``gains`` (Kp, Ki, Kd), the continuous and
     sampled ``phase_margin_deg``, ``gain_margin_db``, ``stable``, and ``ok`` (both loops stable
     and at or above :data:`PM_MIN`, :data:`GM_MIN`)."""
+    from mpcasv.control.execution import pwlinear
     from mpcasv.control.tuning_yaw import PIDGains, loop_figures, yaw_loop, yaw_plant
 
     ys = ep.yaw
     rows = []
-    for u, where in off_speeds(ys.speeds):
-        g = PIDGains(*(float(np.interp(u, ys.speeds, k)) for k in (ys.Kp, ys.Ki, ys.Kd)))
+    for u, where in off_speeds(ys.speeds):  # the execution level's own schedule lookup
+        g = PIDGains(*(float(pwlinear(u, ys.speeds, k)) for k in (ys.Kp, ys.Ki, ys.Kd)))
         P = yaw_plant(model, u)
         c, s = loop_figures(yaw_loop(P, g, ys.T_f)), loop_figures(yaw_loop(P, g, ys.T_f, dt))
         ok = all(f["stable"] and f["phase_margin_deg"] >= PM_MIN
