@@ -297,6 +297,15 @@ def test_the_nonlinear_heading_step_says_it_is_also_a_speed_change(model, shippe
     assert "at u0 = 2.5 m/s" in note and "0.5" not in note.split("speed change")[1]
 
 
+@pytest.mark.parametrize("u0", [0.5, 1.5])
+def test_the_heading_step_starts_in_trim_with_the_speed_integrator(model, shipped, u0):
+    """A heading step of 0 from trim at ``u0`` holds ``u0``: the speed integrator starts at its
+    trim value, as in the speed steps (it started at 0: 1.9 mm/s of sag at 0.5 m/s, where the
+    feed-forward leaves the idle drive's drag to the integrator; ``turn`` starts it there too)."""
+    run, _ = heading_step(model, shipped, u0, step=0.0, t_end=60.0)
+    assert np.abs(run.X[:, IX["u"]] - u0).max() < 1e-6
+
+
 def test_a_clipped_kd_and_the_margins_off_the_schedule_are_reported(model, shipped, tmp_path,
                                                                     capsys):  # fmt: skip
     """Gretha at 0.5 m/s: the pole placement's Kd is negative, clipped to 0, and the poles

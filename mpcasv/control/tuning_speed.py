@@ -160,8 +160,8 @@ def speed_step(model: VesselModel, ep: ExecutionParams, u0: float, u1: float,
 
 def turn(model: VesselModel, ep: ExecutionParams, angle: float, distance: float,
          t_end: float = 150.0, u0: float | None = None):  # fmt: skip
-    """Turn by ``angle`` (rad) from full speed (or trim at ``u0``) towards a waypoint
-    ``distance`` m away.
+    """Turn by ``angle`` (rad) from full speed (or trim at ``u0``; the speed integrator at its
+    trim value, :func:`trim_integrator`) towards a waypoint ``distance`` m away.
 
     Returns the run and ``{"turn_s", "turn_m", "pirouette", "total_turn_deg", "min_u"}``:
     time and path length until the heading error stays within 10 deg (until the run ends or
@@ -172,7 +172,8 @@ def turn(model: VesselModel, ep: ExecutionParams, angle: float, distance: float,
         u0 = min(model.top_speed, model.params.u_max)
     x0, _ = model.trim(u0)
     wp = (distance * math.cos(angle), distance * math.sin(angle))
-    run = run_closed_loop(model, ep, x0, wp, model.params.u_max, t_end)
+    run = run_closed_loop(model, ep, x0, wp, model.params.u_max, t_end,
+                          I_u=trim_integrator(model, u0))
     reach = np.hypot(run.X[:, 0] - wp[0], run.X[:, 1] - wp[1]) < 5.0
     n = int(np.argmax(reach)) if reach.any() else len(run.t)
     err = run.psi_error[:n]

@@ -273,8 +273,9 @@ def heading_step(model: VesselModel, ep: ExecutionParams, u0: float,
                  step: float = math.radians(45.0), t_end: float = 120.0):  # fmt: skip
     """Nonlinear ``step`` heading change at straight-line speed ``u0`` (speed cap ``u0``).
 
-    The vessel starts in trim heading north; the waypoint is :data:`FAR` away at bearing
-    ``step``, so the execution level (guidance, eq. 3.1, PID, speed loop) sees a heading
+    The vessel starts in trim heading north (the speed integrator too:
+    :func:`mpcasv.control.tuning_speed.trim_integrator`); the waypoint is :data:`FAR` away at
+    bearing ``step``, so the execution level (guidance, eq. 3.1, PID, speed loop) sees a heading
     step. Returns the :class:`mpcasv.control.tuning.Run` and its figures: ``settling_s``
     (±2 deg), ``overshoot_deg``, ``rise_s`` (10-90 %), ``max_delta_deg`` (of the vessel's
     ``delta_max_deg``), and ``min_u``,
@@ -283,9 +284,11 @@ def heading_step(model: VesselModel, ep: ExecutionParams, u0: float,
     (1.85 m/s at 45 deg with the field tuning), below ``u0`` at the faster speeds.
     """
     from mpcasv.control.tuning import FAR, run_closed_loop, settling_time
+    from mpcasv.control.tuning_speed import trim_integrator
 
     x0, _ = model.trim(u0)
-    run = run_closed_loop(model, ep, x0, (FAR * math.cos(step), FAR * math.sin(step)), u0, t_end)
+    run = run_closed_loop(model, ep, x0, (FAR * math.cos(step), FAR * math.sin(step)), u0, t_end,
+                          I_u=trim_integrator(model, u0))  # fmt: skip
     err = run.psi_error
     turned = step - err  # heading change achieved
     i10 = int(np.argmax(turned >= 0.1 * step))
