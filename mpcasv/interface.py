@@ -84,9 +84,10 @@ class Observation:
     set-points mapped by the vessel's actuation, :meth:`mpcasv.io.asvwatch.Thrusters.
     actuators`, None where they are unknown). ``actuator_samples`` (optional): their values
     through the interval since the previous observation, ``((t, T, delta), ...)`` in time
-    order within it (the observer holds the previous ``actuators`` before the first and the
-    last after it; simulation: the plant's actuator states at every plant step, from the
-    interval's start to ``t``; None at the first observation, with ``[sim] actuator_samples =
+    order within it (the observer reads them as linear between samples, and from the
+    previous observation's ``actuators`` and to this one's at the interval's ends;
+    simulation: the plant's actuator states at every plant step, from the interval's start
+    to ``t``; None at the first observation, with ``[sim] actuator_samples =
     false`` and where unknown, as in a deploy): an execution level that steers hard
     within a period (Fossen's Otter flips its steering by +-0.44 rad from one 1-s period to
     the next) is not described by the values at the interval's two ends. ``current_oracle``

@@ -14,6 +14,7 @@ from mpcasv.control.execution import NCMD
 from mpcasv.estimation.current import (
     CurrentObserver,
     MotionMeasurement,
+    _segments,
     measurement,
     measurement_from_estimated_state,
 )
@@ -159,11 +160,12 @@ def test_deterministic_and_refuses_bad_input():
                                     ((11.0, 10.0, 0.0), (12.0, math.inf, 0.0))))  # fmt: skip
 
 
-def test_samples_inside_the_interval_are_held_to_its_ends():
-    """Set-points that arrive between two measurements (a deploy: DUNE's thruster messages
-    at its own times): the previous measurement's actuators are held up to the first sample
-    and the last sample to the measurement; the same prediction as the samples written out
-    to both ends, and another than the ends' mean alone."""
+def test_samples_inside_the_interval_run_to_the_measurements_actuators_at_its_ends():
+    """Samples that do not reach the interval's ends: the signal is linear from the previous
+    measurement's actuators at its time, through the samples, to this measurement's at its
+    time; the same prediction as those two written out as samples, another than either end
+    held (the last sample's held to the end ignored this measurement's actuators before
+    session 47), and a held source written as two samples per change is held."""
     model = World(scenario_from_dict(scenario(10.0))).model
 
     def predicted(samples, ends=(0.0, 0.0)):
@@ -173,9 +175,19 @@ def test_samples_inside_the_interval_are_held_to_its_ends():
         return ob.s.copy()
 
     inside = ((0.3, 200.0, 0.2), (0.6, 200.0, 0.2))
-    full = ((0.0, 50.0, 0.0), *inside, (1.0, 200.0, 0.2))
-    np.testing.assert_array_equal(predicted(inside), predicted(full))
-    assert not np.allclose(predicted(inside), predicted(None, (200.0, 0.2)))
+    ends = (300.0, 0.3)
+    full = ((0.0, 50.0, 0.0), *inside, (1.0, *ends))
+    np.testing.assert_array_equal(predicted(inside, ends), predicted(full, ends))
+    last_held = ((0.0, 50.0, 0.0), *inside, (1.0, 200.0, 0.2))
+    assert not np.allclose(predicted(inside, ends), predicted(last_held, ends), atol=1e-9)
+    first_held = ((0.0, 200.0, 0.2), *inside, (1.0, *ends))
+    assert not np.allclose(predicted(inside, ends), predicted(first_held, ends), atol=1e-9)
+    assert not np.allclose(predicted(inside, ends), predicted(None, ends))
+    held = ((0.0, 50.0, 0.0), (0.3, 50.0, 0.0), (0.3, 200.0, 0.2), (1.0, 200.0, 0.2))
+    steps = _segments(MotionMeasurement(0.0, 0.0, 1.0, 0.0, 0.0, True, (50.0, 0.0)),
+                      MotionMeasurement(1.0, 0.0, 1.0, 0.0, 0.0, True, None, held))
+    assert [(round(h, 9), tuple(a)) for h, a in steps] == [(0.3, (50.0, 0.0)),
+                                                           (0.7, (200.0, 0.2))]
 
 
 def test_drifting_without_actuator_feedback_still_finds_the_current():

@@ -89,13 +89,15 @@ def _log(tmp_path, **link) -> Path:
 
 
 def test_rehearsal_scenario_takes_the_logged_lead(tmp_path):
-    """The scenario to compare a rehearsal with: its duration, and the lead its deploy
-    pushed DUNE's References by; a log without its start, or a lead ``simulate`` cannot
-    follow (DUNE stops the boat within 15 m + |radius| of the Reference), is refused."""
+    """The scenario to compare a rehearsal with: its duration, the lead its deploy pushed
+    DUNE's References by, the actuators at the periods' ends only (a deploy has no samples);
+    a log without its start, or a lead ``simulate`` cannot follow (DUNE stops the boat within
+    15 m + |radius| of the Reference), is refused."""
     world = load_scenario(CASE3)
     sc = rehearsal_scenario(world, _log(tmp_path), 120.0)
     assert sc.sim.reference_lead_m == 20.0 and sc.duration == 120.0
-    assert dataclasses.replace(sc.sim, reference_lead_m=0.0) == world.sim
+    assert world.sim.actuator_samples and not sc.sim.actuator_samples  # as a deploy observes
+    assert dataclasses.replace(sc.sim, reference_lead_m=0.0, actuator_samples=True) == world.sim
     for link, words in (({"reference_lead_m": 10.0}, "follows a lead of 15 m"),
                         ({"reference_radius_m": -10.0}, "follows a lead of 25 m"),
                         ({"reference_lead_m": 2000.0}, "to 1000 m")):  # fmt: skip

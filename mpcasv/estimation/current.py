@@ -142,8 +142,9 @@ class MotionMeasurement:
     body axes ``u``, ``v`` (m/s), yaw rate ``r`` (rad/s), and the actuators' thrust ``T`` (N)
     and steering ``delta`` (rad), or None when not known; ``propeller_on``;
     ``actuator_samples``: ``((t, T, delta), ...)`` through the interval since the previous
-    measurement, in time order within it (held before the first and after the last), or
-    None when not known (then the two ends' ``actuators``)."""
+    measurement, in time order within it (linear between them, and from and to the two
+    measurements' ``actuators`` at the interval's ends: :func:`_segments`), or None when not
+    known (then the two ends' ``actuators``)."""
 
     t: float
     psi: float
@@ -177,30 +178,34 @@ def measurement_from_estimated_state(t: float, psi: float, vx: float, vy: float,
 
 def _segments(a: MotionMeasurement, b: MotionMeasurement) -> list[tuple[float, np.ndarray]] | None:
     """``[(length (s), (T, delta) held), ...]`` from ``a.t`` to ``b.t`` through
-    ``b.actuator_samples`` (each two samples' mean between them); before the first sample
-    the previous measurement's ``actuators`` (else the first sample's), after the last the
-    last sample's. None without samples.
+    ``b.actuator_samples``, read as a piecewise-linear signal (the plant's actuator states,
+    which lag their set-points continuously): each piece between two samples is held at their
+    mean. The interval's ends are the measurements' own ``actuators`` (``a``'s at ``a.t``,
+    ``b``'s at ``b.t``) where the samples do not reach them; where those are unknown, the
+    nearest sample is held. A held source (set-points at their arrival times) gives each
+    change as two samples at the same time, the old value then the new. None without samples.
 
     Raises
     ------
     ValueError
-        Samples out of time order or outside ``[a.t, b.t]`` (an observer not given every
-        observation), or not finite.
+        Samples out of time order, before ``a.t`` or after ``b.t``, or not finite. (Samples
+        cannot show that an observation was skipped: the caller gives every one.)
     """
     if not b.actuator_samples:
         return None
     S = np.asarray(b.actuator_samples, float).reshape(-1, 3)
     if not np.all(np.isfinite(S)):
         raise ValueError(f"current observer: non-finite actuator samples at t = {b.t}")
-    tol = 1e-6 + 1e-12 * abs(b.t)  # a few ulps of a UNIX time
+    tol = 1e-6 + 8 * float(np.spacing(abs(b.t)))  # a microsecond, or a few ulps of a UNIX time
     if S[0, 0] < a.t - tol or S[-1, 0] > b.t + tol or np.any(np.diff(S[:, 0]) < 0):
         raise ValueError(f"current observer: actuator samples at t = {b.t} do not lie in time "
                          f"order between the previous measurement ({a.t}) and this one")
-    if S[0, 0] > a.t + tol:  # hold the actuators of the previous measurement up to the first
+    if S[0, 0] > a.t + tol:  # from the previous measurement's actuators at its time
         first = S[0, 1:] if a.actuators is None else np.asarray(a.actuators, float)
         S = np.vstack([[a.t, *first], S])
-    if S[-1, 0] < b.t - tol:  # and the last sample's from it on
-        S = np.vstack([S, [b.t, *S[-1, 1:]]])
+    if S[-1, 0] < b.t - tol:  # to this measurement's at its time
+        last = S[-1, 1:] if b.actuators is None else np.asarray(b.actuators, float)
+        S = np.vstack([S, [b.t, *last]])
     return [(t1 - ta, 0.5 * (S[i, 1:] + S[i + 1, 1:]))
             for i, (ta, t1) in enumerate(zip(S[:-1, 0], S[1:, 0], strict=True)) if t1 > ta]
 
@@ -331,6 +336,8 @@ class CurrentObserver:
             H = np.repeat([length / k for (length, _), k in zip(segments, n, strict=True)], n)
             m = len(H)
             if m not in self._chains:
+                if len(self._chains) > 64:  # irregular samples: keep it bounded
+                    self._chains.clear()
                 self._chains[m] = self._step.mapaccum("current_obs_chain", m, 2)
             nus, Js = self._chains[m](nu, J, A, H[None, :])
             nu = np.asarray(nus[:, -1], float).ravel()

@@ -103,7 +103,9 @@ def rehearsal_scenario(world: Scenario, deploy_log: str | Path, duration: float)
     the deploy pushed DUNE's References (``[sim] reference_lead_m`` = the logged
     ``link.reference_lead_m``; :func:`mpcasv.interface.pushed_waypoint`), as the SITL's boat
     steered. Without it an MPC's rehearsal parted from its simulation within a minute
-    (docs/deploy.md, "The ASV's actuators").
+    (docs/deploy.md, "The ASV's actuators"). Its observations carry the actuators at the
+    periods' ends only (``[sim] actuator_samples = false``), as a deploy's do: an MPC's
+    current observer then reads the same kind of measurement on both sides.
 
     Raises
     ------
@@ -130,7 +132,8 @@ def rehearsal_scenario(world: Scenario, deploy_log: str | Path, duration: float)
                          f"{HORIZONTAL_TOLERANCE:g} m + |reference_radius_m|: a nearer "
                          f"Reference stops the boat) to {REFERENCE_LEAD_MAX:g} m")
     return scenario_with(world, duration=duration,
-                         sim=dataclasses.replace(world.sim, reference_lead_m=lead))
+                         sim=dataclasses.replace(world.sim, reference_lead_m=lead,
+                                                 actuator_samples=False))
 
 
 def compare_metrics(a: dict, b: dict, rel: float = 0.10, period: float = 1.0,
