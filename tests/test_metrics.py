@@ -159,6 +159,23 @@ def _stationary_auv(name: str, duration: float, every_step: bool):
     })  # fmt: skip
 
 
+def test_path_lengths_start_at_the_start():
+    """The time series begins at the first period's end; the path lengths begin at the
+    scenario's start (t = 0): an AUV at exactly 1 m/s for 10 s has covered 10 m, and an ASV
+    started at 2 m/s straight north its displacement (the first second's leg was left out:
+    9 m, and 2 m short; a new user's finding, session 47)."""
+    sc = _pass_by(10.0, asv={"start": {"speed": 2.0}})
+    res = simulate(sc, make_controller("goto", 1, None, overrides={"waypoint": [500.0, 0.0]}),
+                   seed=0)  # fmt: skip
+    ts = res.timeseries
+    assert ts["t"].iloc[0] == 1.0 and ts["auv0_E"].iloc[-1] == pytest.approx(-190.0)
+    m = compute_metrics(res)
+    assert m["auv_distance_m"] == pytest.approx(10.0, rel=1e-9)
+    assert np.abs(ts["E"]).max() < 1e-6  # straight north: the path is the displacement
+    assert m["asv_distance_m"] == pytest.approx(ts["N"].iloc[-1], rel=1e-9)
+    assert ts["N"].iloc[0] > 1.5  # the first leg is not negligible
+
+
 def test_collision_time_is_counted_at_plant_step_resolution():
     """A stationary AUV; the ASV passes it. The account's time inside r_inner equals the
     plant steps logged inside (an independent count from the per-step log), and a single

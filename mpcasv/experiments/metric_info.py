@@ -33,8 +33,10 @@ def _per_auv(info: MetricInfo) -> MetricInfo:
 _BASE: dict[str, MetricInfo] = {
     # --- run -----------------------------------------------------------------------------
     "duration_s": _i("s", None, "simulated time (end of the last period)"),
-    "asv_distance_m": _i("m", "lower", "path length of the ASV (period ends)"),
-    "auv_distance_m": _i("m", None, "path length of the AUVs, mean over AUVs"),
+    "asv_distance_m": _i("m", "lower",
+                         "path length of the ASV (from its start, t = 0, through the period ends)"),
+    "auv_distance_m": _i("m", None, "path length of the AUVs (from their starts through the "
+                         "period ends), mean over AUVs"),
     "distance_ratio": _i("1", "lower", "asv_distance_m / auv_distance_m",
                          "thesis Table 4.1 (ASV/AUV distance)"),
     # --- safety (ground truth) -----------------------------------------------------------

@@ -41,6 +41,16 @@ def _path_length(N: np.ndarray, E: np.ndarray) -> float:
     return float(np.sum(np.hypot(np.diff(N), np.diff(E))))
 
 
+def _from_start(start, t: pd.Series, N: pd.Series, E: pd.Series) -> tuple[np.ndarray, np.ndarray]:
+    """``(N, E)`` (m) of a path logged at the period ends, with the scenario's ``start``
+    (position at t = 0) before them when the first row is later (every run: the time series
+    begins at the first period's end)."""
+    N, E = N.to_numpy(float), E.to_numpy(float)
+    if len(t) and float(t.iloc[0]) > 0.0:
+        N, E = np.r_[start.N, N], np.r_[start.E, E]
+    return N, E
+
+
 def age_stats(event_times, t_end: float) -> tuple[float, float, float]:
     """(max, p95, mean) over ``[0, t_end]`` of the age ``t - (last event <= t)``, with an
     event at ``t = 0`` (the known start).
@@ -218,11 +228,13 @@ def compute_metrics(result) -> dict:
     mode, reason = ts["mode"].to_numpy(), ts["reason"].to_numpy()
     standby = mode == "standby"
     transit = ~standby
-    # path lengths through the period ends, however the run was logged (with
-    # log_every_step through every plant step they were 0.03-0.06 % longer: session 46)
-    asv_d = _path_length(steps["N"].to_numpy(), steps["E"].to_numpy())
-    auv_d = [_path_length(steps[f"auv{k}_N"].to_numpy(), steps[f"auv{k}_E"].to_numpy())
-             for k in range(n_auv)]  # fmt: skip
+    # path lengths from the start through the period ends, however the run was logged (with
+    # log_every_step through every plant step they were 0.03-0.06 % longer: session 46; the
+    # first period's leg was left out until session 47)
+    sc = result.scenario
+    asv_d = _path_length(*_from_start(sc.asv.start, steps["t"], steps["N"], steps["E"]))
+    auv_d = [_path_length(*_from_start(a.start, steps["t"], steps[f"auv{k}_N"],
+                                       steps[f"auv{k}_E"])) for k, a in enumerate(sc.auv)]
     mean_auv = float(np.mean(auv_d))
 
     prop_s = _sum(ts, "prop_on_s")
