@@ -135,8 +135,12 @@ def test_replay_applies_the_logged_speed_caps(tmp_path):
     decide(40.0, 48.0)
     decide(41.0, 49.2)
     dep.close()
-    logged = [r["cmd"]["speed"] for r in read_jsonl(dep.jsonl.path, "step")]
-    assert logged == [2.0, 1.2, 1.2]  # both caps at work (the preset's speed is 2.5 m/s)
+    steps = read_jsonl(dep.jsonl.path, "step")
+    assert [r["controller_cmd"]["speed"] for r in steps] == [2.5, 1.2, 1.2]  # capped at 1.2
+    # sent: at most command_max; at the cap the controller's own 2.5 m/s is asked for (a
+    # speed loop like DUNE's Otter's locks at the speed it made when asked for just that)
+    assert [r["cmd"]["speed"] for r in steps] == [2.0, 2.0, 2.0]
+    assert [r["speed_ask"] for r in steps] == [None, 2.5, 2.5]
     rep = replay(dep.jsonl.path)
     assert (rep.n_steps, rep.n_differ) == (3, 0), rep.table
     # (a Deploy driven here, never run to its end: also the note that it has no summary)
@@ -328,7 +332,9 @@ def test_a_cap_during_a_field_step_waits_for_the_next_step_and_replays(tmp_path,
     dep.close()
     steps = read_jsonl(dep.jsonl.path, "step")
     assert [r["speed_cap"] for r in steps] == [None, None, 1.2]
-    assert [r["cmd"]["speed"] for r in steps] == [2.0, 2.0, 1.2]
+    assert [r["controller_cmd"]["speed"] for r in steps] == [2.5, 2.5, 1.2]
+    assert [r["speed_ask"] for r in steps] == [None, None, 2.5]  # at the cap: the own 2.5
+    assert [r["cmd"]["speed"] for r in steps] == [2.0, 2.0, 2.0]  # at most command_max
     speeds = _speed_spy(monkeypatch)  # the replayed controller's speed at each decision
     rep = replay_mod.replay(dep.jsonl.path)
     assert (rep.n_steps, rep.n_differ) == (3, 0), rep.table

@@ -164,6 +164,8 @@ class Deploy(Phases, BoatFeedback, FieldMode, Ending):
             self.vessel = deploy_boat(cfg).vessel  # its actuation maps DUNE's set-points
             self.speed = SpeedWatch(cfg.speed)
             self.speed_cap: float | None = None  # applied to the controller (speed_feedback)
+            self.speed_base: float | None = None  # its params.speed before the first cap
+            self.speed_ask: float | None = None  # its top speed then: asked at the cap
             self.closing = False  # shutdown begun: no more decisions
             self.plan_request: int | None = None  # request id of the running FollowReference
             self.plan_done = asyncio.Event()
@@ -221,7 +223,7 @@ class Deploy(Phases, BoatFeedback, FieldMode, Ending):
             ev = self.speed.state(nav.t, math.hypot(nav.v_N, nav.v_E), nav.u)
             if ev is not None:
                 self.event(ev.pop("event"), **ev)
-                self._speed_feedback()
+            self._speed_feedback()  # the cap follows the achievable speed
             if self.phase == ASV_STALE and not self.asv_back(p, nav, now):
                 return  # a late state, from before the verdict: the ASV is not back
             self._advance(now)
@@ -312,7 +314,8 @@ class Deploy(Phases, BoatFeedback, FieldMode, Ending):
     def _act(self, ts, now, obs, status, ages, raw: Command, step_ms: float) -> Command:
         """Guard, cap the speed (``speed_feedback``), send (unless dry run), log."""
         cmd, override = guard(raw, obs, status, ages, self.gp)
-        cmd, capped = cap_command(cmd, self.speed_cap, self.cfg.speed.command_max)
+        ask = None if self.speed_cap is None else self.speed_ask  # once this step's cap is
+        cmd, capped = cap_command(cmd, self.speed_cap, self.cfg.speed.command_max, ask)
         sent = False
         if not self.dry_run:
             lk = self.cfg.link
@@ -336,6 +339,7 @@ class Deploy(Phases, BoatFeedback, FieldMode, Ending):
             "step_ms": step_ms, "followref": self.followref, "diag": diag,
             "propeller_source": self._propeller_source, "thrusters": self.thrusters.values(),
             "speed": self.speed.status(), "speed_cap": self.speed_cap, "speed_capped": capped,
+            "speed_ask": ask,
         })  # fmt: skip
         return cmd
 

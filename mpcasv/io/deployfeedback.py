@@ -34,15 +34,17 @@ USBL_AGREE = 3
 USBL_AGREE_SPAN = 30.0
 
 
-def cap_controller_speed(controller, speed: float) -> tuple[float, float, float | None]:
-    """Lower ``speed`` in ``controller``'s parameters (and in those of its hybrid fallback,
-    for the MPCs) to ``speed`` (m/s), in place: never raised; an MPC's plan is capped at
+def cap_controller_speed(controller, speed: float,
+                         base: float) -> tuple[float, float, float | None]:  # fmt: skip
+    """Set ``speed`` in ``controller``'s parameters (and in those of its hybrid fallback, for
+    the MPCs) to ``speed`` (m/s), in place, never above ``base`` (its own speed before any
+    cap: a cap follows the achievable speed down and back up); an MPC's plan is capped at
     ``speed`` too (:meth:`~mpcasv.mpc.controller.MPCController.set_speed_cap`). Returns
     ``(old, new, plan)``: the speed before and after, and the plan's cap (None for a
     controller without a plan). One definition for the deploy
     (:meth:`BoatFeedback.set_controller_speed`) and its replay (:mod:`mpcasv.io.replay`)."""
     old = float(controller.params.speed)
-    new = min(old, speed)  # never raised (a cap triggered by the plan's speed alone)
+    new = min(float(base), speed)
     controller.params = dataclasses.replace(controller.params, speed=new)
     fallback = getattr(controller, "hybrid", None)
     if fallback is not None and hasattr(getattr(fallback, "params", None), "speed"):
@@ -54,14 +56,33 @@ def cap_controller_speed(controller, speed: float) -> tuple[float, float, float 
     return old, new, plan
 
 
-def cap_command(cmd, speed_cap: float | None, command_max: float | None):
-    """``(cmd, capped)``: a transit's speed capped at the lower of ``speed_cap`` (the learned
-    achievable speed, ``controller.speed_feedback``) and ``command_max`` (``speed.command_max``,
-    the autopilot's limit), either None for none; an MPC's speed comes from its plan, not from
-    ``params.speed``, hence the cap on the command too. One definition for the deploy and its
-    replay."""
+#: a transit commanded at this fraction of the speed cap or more asks for all the boat makes
+#: (:func:`cap_command`): the watch's own tolerance of a speed (10 %)
+AT_CAP = 0.9
+
+
+def cap_command(cmd, speed_cap: float | None, command_max: float | None,
+                ask: float | None = None):  # fmt: skip
+    """``(cmd, capped)``: a transit's speed as sent to the autopilot.
+
+    - Capped at the lower of ``speed_cap`` (the learned achievable speed,
+      ``controller.speed_feedback``) and ``command_max`` (``speed.command_max``, the
+      autopilot's limit), either None for none: an MPC's speed comes from its plan, not from
+      ``params.speed``, hence the cap on the command too.
+    - With ``ask`` (m/s; the controller's own top speed before the cap, given once a cap is
+      applied): a transit at :data:`AT_CAP` x ``speed_cap`` or more, i.e. all the boat makes,
+      asks the autopilot for ``ask`` (at most ``command_max``) instead. A speed loop that
+      climbs only while behind its set-point (DUNE's Otter: a 250-RPM floor, 0.7 m/s, and an
+      integrator of 1 RPM/s per m/s of error) locks at the speed it made when asked for it
+      (docs/deploy.md, "Achieved speed"); the plan keeps the cap.
+
+    ``capped``: the speed was lowered. One definition for the deploy and its replay."""
+    transit = cmd.mode is Mode.TRANSIT
+    if transit and ask is not None and speed_cap is not None and cmd.speed >= AT_CAP * speed_cap:
+        speed = ask if command_max is None else min(ask, command_max)
+        return dataclasses.replace(cmd, speed=speed), speed < cmd.speed
     caps = [c for c in (speed_cap, command_max) if c is not None]
-    capped = bool(caps) and cmd.mode is Mode.TRANSIT and cmd.speed > min(caps)
+    capped = bool(caps) and transit and cmd.speed > min(caps)
     return (dataclasses.replace(cmd, speed=min(caps)) if capped else cmd), capped
 
 
@@ -314,14 +335,25 @@ class BoatFeedback:
         """``controller.speed_feedback``: cap the controller's transit speed with the learned
         achievable speed (:meth:`set_controller_speed`) when it is more than 10 % lower than
         its ``speed`` or, for an MPC, than the highest speed its plan may use
-        (``speed_limit``: the vessel's top speed until capped)."""
+        (``speed_limit``: the vessel's top speed until capped); from then on the cap follows
+        the achievable speed, down or up, whenever they differ by more than 10 %, never above
+        the controller's own top speed (``speed_ask``, which a command at the cap asks the
+        autopilot for: :func:`cap_command`)."""
         cap = self.speed.achievable
         if not self.cfg.controller.speed_feedback or cap is None:
             return
-        current = float(getattr(self.controller.params, "speed", math.inf))
-        plan = float(getattr(self.controller, "speed_limit", -math.inf))
-        if cap < 0.9 * max(current, plan):
-            self.set_controller_speed(round(cap, 2))
+        if self.speed_ask is None:  # no cap yet
+            current = float(getattr(self.controller.params, "speed", math.inf))
+            plan = float(getattr(self.controller, "speed_limit", -math.inf))
+            if cap < 0.9 * max(current, plan):
+                self.speed_base = current
+                self.speed_ask = max(v for v in (current, plan) if math.isfinite(v))
+                self.set_controller_speed(round(cap, 2))
+            return
+        new = round(min(cap, self.speed_ask), 2)
+        now = self.cap_pending if self.cap_pending is not None else self.speed_cap
+        if now is None or abs(new - now) > 0.1 * now:
+            self.set_controller_speed(new)
 
     def set_controller_speed(self, speed: float) -> None:
         """Lower ``speed`` in the controller's parameters (and in those of its hybrid
@@ -340,6 +372,6 @@ class BoatFeedback:
             self.cap_pending = speed
             return
         self.cap_pending = None
-        old, new, plan = cap_controller_speed(self.controller, speed)
+        old, new, plan = cap_controller_speed(self.controller, speed, self.speed_base)
         self.speed_cap = speed
         self.event("controller_speed_cap", old=old, new=new, plan=plan)

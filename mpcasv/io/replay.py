@@ -10,7 +10,7 @@ replayed controller's built as the deploy builds it) and compares command by com
 (:func:`mpcasv.io.records.same_command`; the table has both speeds). The deploy's speed caps
 are replayed as logged: each decision with the ``controller.speed_feedback`` cap it saw
 (:func:`replay` says how an older log's are placed), and every transit command capped as the
-deploy capped it (that cap and ``speed.command_max``:
+deploy capped it (that cap, the speed asked at it and ``speed.command_max``:
 :func:`mpcasv.io.deployfeedback.cap_command`).
 The logged ``controller.overrides`` were written for the logged controller and preset: they
 are applied only when replaying those, and the report says so when they are left out.
@@ -128,11 +128,12 @@ def _cap_of(event: dict) -> float:
     return float(event["plan"] if event.get("plan") is not None else event["new"])
 
 
-def _cap(ctl, cap: float) -> None:
-    """Cap ``ctl`` at ``cap`` as the deploy did (:func:`cap_controller_speed`); a controller
-    without a ``speed`` gets the cap on its commands only."""
-    if hasattr(getattr(ctl, "params", None), "speed"):
-        cap_controller_speed(ctl, cap)
+def _cap(ctl, cap: float, base: float | None) -> None:
+    """Cap ``ctl`` at ``cap`` as the deploy did (:func:`cap_controller_speed`; ``base``: its
+    speed before any cap); a controller without a ``speed`` gets the cap on its commands
+    only."""
+    if base is not None:
+        cap_controller_speed(ctl, cap, base)
 
 
 def replay(log: str | Path, controller: str | None = None, preset: str | None = None,
@@ -192,6 +193,8 @@ def replay(log: str | Path, controller: str | None = None, preset: str | None = 
                               "controller or preset is built from them)")  # fmt: skip
         gp = guard_params(_logged_watchdog(cfg["watchdog"], path, notes), ctl)
     command_max = (cfg.get("speed") or {}).get("command_max")
+    speed = getattr(getattr(ctl, "params", None), "speed", None)
+    base = None if speed is None else float(speed)  # before any cap
     t0 = steps[0]["clock"]
     cmd_cap = ctl_cap = None  # the cap on the commands, the cap applied to the controller
     pending, caps = [], []  # an older log's caps not yet applied to the controller; notes
@@ -210,15 +213,15 @@ def replay(log: str | Path, controller: str | None = None, preset: str | None = 
         if "speed_cap" in s:  # the cap this decision saw, recorded by the deploy
             cmd_cap = s["speed_cap"]
             if cmd_cap is not None and cmd_cap != ctl_cap:
-                _cap(ctl, cmd_cap)
+                _cap(ctl, cmd_cap, base)
                 ctl_cap = cmd_cap
         else:  # an older log: the caps that came before the decision began
             while pending and pending[0][0] <= s["clock"]:
-                _cap(ctl, pending.pop(0)[1])
+                _cap(ctl, pending.pop(0)[1], base)
         obs = obs_from_dict(s["obs"])
         raw = ctl.step(obs)
         cmd, override = guard(raw, obs, s["status"], s["ages"], gp)
-        cmd = cap_command(cmd, cmd_cap, command_max)[0]
+        cmd = cap_command(cmd, cmd_cap, command_max, s.get("speed_ask"))[0]  # None: older logs
         logged = cmd_from_dict(s["cmd"])
         dist = float("nan")
         if cmd.waypoint is not None and logged.waypoint is not None:
