@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -20,6 +21,7 @@ from mpcasv.estimation import (
 )
 from mpcasv.estimation.evaluate import acceptance_ratios, compare_estimators
 from mpcasv.estimation.kalman import cv_model
+from mpcasv.estimation.plan import PlanEstimator
 from mpcasv.estimation.survey_plan import Polyline
 from mpcasv.interface import AUVEstimate
 from mpcasv.models.acoustics import Fix, Report
@@ -56,6 +58,18 @@ def test_retrodiction_inverts_the_mean():
     B, Qb = cv_model(-12.0, 0.01, 50.0)
     np.testing.assert_allclose(B @ F, np.eye(4), atol=1e-12)
     assert np.all(np.linalg.eigvalsh(Qb) >= -1e-12)
+
+
+@pytest.mark.parametrize(("dt", "tau"), [(30.0, math.inf), (30.0, 600.0), (300.0, 600.0),
+                                         (300.0, 20.0)])  # fmt: skip
+def test_retrodiction_noise_is_the_forward_noise_carried_back(dt, tau):
+    """x(t) = F^-1 x(t + dt) - F^-1 w: the noise of a retrodiction over ``dt`` is
+    F^-1 Q F^-T of the integrated forward model (it was the forward noise with its cross term
+    negated, exact only for tau = inf: 53 % short in Q_pp over 300 s at tau = 600 s)."""
+    F1, Q1 = _integrated(dt, 0.01, tau)
+    Fi = np.linalg.inv(F1)
+    _, Qb = cv_model(-dt, 0.01, tau)
+    np.testing.assert_allclose(Qb[np.ix_([0, 2], [0, 2])], Fi @ Q1 @ Fi.T, rtol=1e-7)
 
 
 # --- consistency (NEES) on simulated data --------------------------------------------------------
@@ -407,3 +421,22 @@ def test_a_ratio_with_a_zero_baseline_is_nan_without_a_warning():
         r = acceptance_ratios(table)
     assert r["pos_error_rms_ratio"] == 0.25
     assert math.isnan(r["range_jump_ratio"]) and math.isnan(r["jump_after_acquisition_ratio"])
+
+
+def test_reacquisition_gates_the_distance_across_the_path_on_its_own_variance():
+    """Re-acquiring the plan: the distance across the path (1-D) is gated on the across-track
+    variance with one degree of freedom. An estimate 50 m across a northward path, 2 m
+    (1 sigma) across and 30 m along it, moving with the plan: off the plan (it was gated on
+    the largest 1-sigma, 30 m, with two degrees of freedom: 117 m, and re-acquired)."""
+    plan = KnownPlan(np.array([[1000.0, 0.0]]), 1.5)
+    est = PlanEstimator(AUVEstimate(0.0, 0.0, 10.0, t_last_fix=0.0), plan)
+    est.departed, est.on_plan = True, False
+    off = AUVEstimate(200.0, 50.0, 10.0, 1.5, 0.0, (900.0, 0.0, 0.0, 4.0), 100.0)
+    est.kf.estimate = lambda t: off
+    for t in (100.0, 130.0, 160.0):
+        est._try_acquire(t)
+    assert est.hits == 0
+    on = dataclasses.replace(off, E=5.0)  # 2.5 sigma across: on it
+    est.kf.estimate = lambda t: on
+    est._try_acquire(190.0)
+    assert est.hits == 1

@@ -57,11 +57,12 @@ class KalmanParams:
         velocity by 2.1 m/s; ``sqrt(q T) = 0.55`` m/s per axis over T = 30 s).
     tau_v : float
         Velocity correlation time (s); ``inf`` is the constant-velocity model (K1-K2). The
-        default makes the stationary velocity variance ``q tau_v / 2`` equal to
-        ``U_max^2 / 2`` per axis (an LAUV's top speed 2 m/s in a random direction): over a
-        30-s report interval the model is constant-velocity to within 4 %, but over a long
-        gap without reports (an AUV at the surface) the prediction stops at ``v tau_v``
-        instead of extrapolating a stale velocity for ever.
+        default makes the stationary velocity variance ``q tau_v / 2`` 3.0 m^2/s^2 per axis
+        (1.7 m/s, 1 sigma; an LAUV's top speed of 2 m/s in a random direction would give
+        ``U_max^2 / 2`` = 2.0, at ``tau_v`` = 400 s): over a 30-s report interval the
+        velocity decays by 4.9 % and the distance run falls 2.5 % short of constant
+        velocity, but over a long gap without reports (an AUV at the surface) the prediction
+        stops at ``v tau_v`` instead of extrapolating a stale velocity for ever.
     sigma_v0 : float
         1-sigma per axis of the velocity before any report (m/s): the AUV's velocity is
         unknown at start.
@@ -106,10 +107,11 @@ def cv_model(dt: float, q: float, tau_v: float = math.inf) -> tuple[np.ndarray, 
     F = np.eye(4)
     F[0, 2] = F[1, 3] = f_pv
     F[2, 2] = F[3, 3] = f_vv
-    if dt < 0:  # retrodiction: the inverse transition; the noise as forward, cross term negated
-        F, q_pv = np.linalg.inv(F), -q_pv
     Q1 = q * np.array([[q_pp, q_pv], [q_pv, q_vv]])
     Q = np.kron(Q1, np.eye(2))  # axes independent: [[pp I, pv I], [pv I, vv I]]
+    if dt < 0:  # retrodiction: x(t) = F^-1 x(t + |dt|) - F^-1 w, w ~ N(0, Q)
+        F = np.linalg.inv(F)
+        Q = F @ Q @ F.T  # (the forward noise with its cross term negated only when tau = inf)
     return F, Q
 
 

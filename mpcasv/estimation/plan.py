@@ -245,13 +245,18 @@ class PlanEstimator:
             return
         s, d = self.path.project(est.position)
         _, T = self.path.point(s)
-        sig = math.sqrt(max(est.sigma**2, 0.0) + (self.plan.acceptance + p.sigma_path) ** 2)
+        # d is the distance across the path: its 1-D variance, with the path model's error
+        # (beyond the path's ends, where there is no across, the estimate's largest, 2-D)
+        C = np.reshape(est.cov, (2, 2))
+        n, dof = (np.array([-T[1], T[0]]), 1) if np.any(T) else (None, 2)
+        var = float(n @ C @ n) if n is not None else est.sigma**2
+        sig = math.sqrt(max(var, 0.0) + (self.plan.acceptance + p.sigma_path) ** 2)
         v = np.array([est.v_N, est.v_E])
         u_p = self.plan.speed_at(t)
         along = float(v @ T) if np.any(T) else 0.0
         across = T[0] * v[1] - T[1] * v[0]
         vel_ok = abs(along - u_p) < 0.5 * max(u_p, 0.5) and abs(across) < 0.5 * max(u_p, 0.5)
-        if d < math.sqrt(_chi2_ppf(p.gate_prob, 2)) * sig and vel_ok:
+        if d < math.sqrt(_chi2_ppf(p.gate_prob, dof)) * sig and vel_ok:
             self.hits += 1
         else:
             self.hits = 0

@@ -234,6 +234,8 @@ class Deploy(Phases, BoatFeedback, FieldMode, Ending):
         self.usbl.refused[k].clear()  # the AUV's own word: refused fixes no longer in a row
         est = self.estimators[k]
         est.on_truth(nav.t, nav.N, nav.E, nav.depth, nav.v_N, nav.v_E)
+        sog = math.hypot(nav.v_N, nav.v_E)  # the report's velocity is over ground: its
+        course = math.atan2(nav.v_E, nav.v_N) if sog > 0.0 else nav.psi  # course, not heading
         est.on_report(
             Report(
                 nav.t,
@@ -241,8 +243,8 @@ class Deploy(Phases, BoatFeedback, FieldMode, Ending):
                 nav.N,
                 nav.E,
                 nav.depth,
-                nav.psi,
-                math.hypot(nav.v_N, nav.v_E),
+                course,
+                sog,
                 self.cfg.watchdog.report_sigma_m,
             )
         )
