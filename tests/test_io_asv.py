@@ -280,3 +280,21 @@ def test_console_warnings_say_they_are_warnings():
         text = line(logging.ERROR, "step failed", sys.exc_info())
     assert text.startswith("mpcasv.io.deploy: error: step failed\nTraceback")
     assert text.endswith("ValueError: boom")
+
+
+def test_an_auvs_report_velocity_is_its_course_over_ground(tmp_path):
+    """An AUV heading north, carried east (EstimatedState: psi 0, ground velocity (0, 1.5)):
+    the Kalman estimate's velocity is the ground velocity, east (the report took the heading
+    with the speed over ground: 1.5 m/s north)."""
+    dep = Deploy(_cfg(tmp_path, controller={"estimator": "kalman"}))
+    try:
+        auv = dep.link.auvs[0]
+        auv.id = 0x2811
+        for k in range(1, 31):
+            t = 1.0 * k
+            dep._on_state(auv, NavState(t, 0.0, 1.5 * t, 10.0, 0.0, 1.0, 0, 0, 0.0, 1.5, 0, 0),
+                          t)  # fmt: skip
+        est = dep.estimators[0].estimate(30.0)
+        assert (est.v_N, est.v_E) == pytest.approx((0.0, 1.5), abs=0.05)
+    finally:
+        dep.close()
