@@ -143,7 +143,9 @@ class LinkSpec:
     """Transport, addresses and the IMC timing (seconds of the deploy clock)."""
 
     transport: Literal["udp", "tcp"] = "udp"
-    bind: str = "127.0.0.1"  # the one local address we bind
+    # the one local address we bind; 0.0.0.0 (every one) needs every vehicle's 'address': our
+    # Announce then names the address each vehicle sees us from (netcheck.announced_hosts)
+    bind: str = "127.0.0.1"
     port: Port = 6002  # 0: any free port (tests)
     announce_to: tuple[str, ...] = (
         "224.0.75.69:30100", "224.0.75.69:30101", "224.0.75.69:30102",
@@ -309,6 +311,15 @@ class DeployConfig:
         if self.link.transport == "tcp" and any(v.tcp is None or v.id is None
                                                 for v in self.vehicle):  # fmt: skip
             raise ValueError("link.transport = 'tcp' needs 'tcp' and 'id' for every vehicle")
+        unaddressed = [v.label for v in self.vehicle if v.address is None]
+        if (self.link.transport == "udp" and ipaddress.IPv4Address(self.link.bind).is_unspecified
+                and unaddressed):  # fmt: skip
+            raise FieldError("link.bind", (
+                f"{self.link.bind} (every local address) needs every vehicle's 'address' (not "
+                f"given for {', '.join(unaddressed)}): DUNE streams only to the imc+udp address "
+                "of our Announce that our datagrams come from, which is told from a vehicle's "
+                "address, and keeps the services of our first Announce; give them, or bind to "
+                "this host's address on the vehicles' network"))  # fmt: skip
         return self  # the fields the transport does not read: check_link
 
     @property

@@ -64,6 +64,7 @@ from mpcasv.io.imc import (
     stamp,
 )
 from mpcasv.io.logs import LsfWriter
+from mpcasv.io.netcheck import announced_hosts, is_wildcard
 from mpcasv.io.peers import Peer, PeerDirectory
 from mpcasv.io.statecheck import check_state
 from mpcasv.io.transport import Clock, TcpStream, UdpEndpoint
@@ -131,6 +132,8 @@ class ImcLink(PeerDirectory):
         self._names: dict[int, str] = {}  # message id -> name (imcpy.Factory), memoised
         self._reject_window: dict[str, tuple[float, int]] = {}
         self.endpoint: UdpEndpoint | None = None
+        #: the local addresses our Announce names (UDP; set by :meth:`start`)
+        self.hosts: list[str] = []
         self.discovery: list[UdpEndpoint] = []
         self._tasks: list[asyncio.Task] = []
 
@@ -148,10 +151,16 @@ class ImcLink(PeerDirectory):
     async def _start(self) -> None:
         link = self.cfg.link
         if link.transport == "udp":
+            # bound to 0.0.0.0, the addresses the vehicles see us from (DUNE streams only to
+            # an imc+udp address of our Announce that our datagrams come from): before binding
+            self.hosts = announced_hosts(link.bind, [parse_address(v.address) for v in
+                                                     self.cfg.vehicle if v.address],
+                                         "link.bind")  # fmt: skip
             self.endpoint = await UdpEndpoint.open(link.bind, link.port, self.handle_datagram)
-            if link.bind != "0.0.0.0":
+            if not is_wildcard(link.bind):
                 self.endpoint.multicast_from(link.bind)
-            self.event("bound", address=f"{self.endpoint.address[0]}:{self.endpoint.address[1]}")
+            self.event("bound", address=f"{self.endpoint.address[0]}:{self.endpoint.address[1]}",
+                       services=self.services)  # fmt: skip
             if any(not p.static for p in self.peers):
                 await self._open_discovery()
         else:
@@ -242,10 +251,14 @@ class ImcLink(PeerDirectory):
     # --- output ----------------------------------------------------------------------------
     @property
     def services(self) -> list[str]:
+        """Our Announce's ``imc+udp`` services: the data port at each of :attr:`hosts` (the
+        bound address; bound to 0.0.0.0, the addresses the vehicles see us from:
+        :func:`~mpcasv.io.netcheck.announced_hosts`). DUNE splits them at ';' and keeps one
+        per address (``Transports/UDP/Node.hpp``)."""
         if self.endpoint is None:
             return []
-        host, port = self.endpoint.address
-        return [f"imc+udp://{host}:{port}/"]
+        port = self.endpoint.address[1]
+        return [f"imc+udp://{h}:{port}/" for h in self.hosts]
 
     def announce(self) -> None:
         """Announce us to the discovery addresses and to every vehicle with an address."""
