@@ -417,9 +417,13 @@ def test_discovery_socket_learns_a_name_only_vehicle(tmp_path):
     127.0.0.1), from a socket that is not its data socket; the link learns the data address
     from the imc+udp service and then takes the vehicle's states from there."""
     import dataclasses
+    import socket
 
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:  # a free port (0 is no
+        sock.bind(("127.0.0.1", 0))  # discovery port: refused at load)
+        free = sock.getsockname()[1]
     cfg = _cfg(tmp_path)
-    cfg = dataclasses.replace(cfg, link=dataclasses.replace(cfg.link, discovery_ports=(0,)))
+    cfg = dataclasses.replace(cfg, link=dataclasses.replace(cfg.link, discovery_ports=(free,)))
 
     async def main():
         dep, stop, task = await _start(cfg, tmp_path)
