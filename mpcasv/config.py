@@ -77,6 +77,10 @@ AUV_COUNT_MAX = 10
 #: three times the fastest shipped ASV (the Otter, 3.1 m/s). The execution level caps a speed
 #: at the vessel's ``u_max`` (docs/vessel.md); 25 m/s was accepted and ran as 2.5.
 TRANSIT_SPEED_MAX = 10.0
+#: The longest Reference lead (m), a scenario's ``[sim] reference_lead_m`` and a deployment's
+#: ``link.reference_lead_m``: a transit's waypoint pushed further than a kilometre is no
+#: waypoint (``reference_lead_m = 1e9`` was accepted by a deployment)
+REFERENCE_LEAD_MAX = 1000.0
 #: A transit speed (m/s): in ``(0, TRANSIT_SPEED_MAX]``.
 TransitSpeed = between(0, TRANSIT_SPEED_MAX, "m/s", "about 20 knots; the execution level caps "
                        "a speed at the vessel's u_max", lo_open=True)

@@ -266,7 +266,7 @@ def test_a_repeated_asv_state_does_not_hide_a_fix(tmp_path):
     dep.link.handle_datagram(_fix(0x2801, "lauv-xplore-1", clock.t), ASV)
     assert dep.link.rejects == {"usbl_fix_time": 1}
     t = feed_states(dep, clock, clock.t, 4)
-    dep.link.handle_datagram(_es(clock, 0x2801, t, 0.0), ASV)  # the same state again
+    dep.link.handle_datagram(_es(clock, 0x2801, t - 0.5, 0.0), ASV)  # an older one again
     assert dep.link.rejects["out_of_order"] == 1 and dep.link.asv.track.chain
     dep.link.handle_datagram(_fix(0x2801, "lauv-xplore-1", t + 0.1), ASV)
     assert dep.link.rejects["usbl_fix_time"] == 1

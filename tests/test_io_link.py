@@ -184,7 +184,10 @@ def test_bad_input_rejected_counted_logged(tmp_path):
         await expect("jump", lambda: auv.send(auv.es(t0 + 0.5, 10_100, 50), to, t0 + 0.5))
         await expect("out_of_area", lambda: auv.send(auv.es(t0 + 0.5, 30_000, 0), to, t0 + 0.5))
         await expect("out_of_order", lambda: auv.send(auv.es(t0 - 1.0, 100, 50), to, t0 - 1.0))
-        await expect("out_of_order", lambda: auv.send(auv.es(t0, 100, 50), to, t0))
+        await expect("out_of_order", lambda: auv.send(auv.es(t0, 100.5, 50), to, t0))
+        # the accepted state again (UDP delivers a datagram twice at times): no reject, counted
+        auv.send(auv.es(t0, 100, 50), to, t0)
+        assert await _until(lambda: dict(link.duplicates) == {"fake-auv": 1})
         await expect("time_jump", lambda: auv.send(auv.es(t0 + 1e3, 100, 50), to, t0 + 1e3))
         bad_lat = auv.es(t0 + 0.6, 100, 50)
         bad_lat.lat = 2.0
@@ -414,9 +417,13 @@ def test_discovery_socket_learns_a_name_only_vehicle(tmp_path):
     127.0.0.1), from a socket that is not its data socket; the link learns the data address
     from the imc+udp service and then takes the vehicle's states from there."""
     import dataclasses
+    import socket
 
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:  # a free port (0 is no
+        sock.bind(("127.0.0.1", 0))  # discovery port: refused at load)
+        free = sock.getsockname()[1]
     cfg = _cfg(tmp_path)
-    cfg = dataclasses.replace(cfg, link=dataclasses.replace(cfg.link, discovery_ports=(0,)))
+    cfg = dataclasses.replace(cfg, link=dataclasses.replace(cfg.link, discovery_ports=(free,)))
 
     async def main():
         dep, stop, task = await _start(cfg, tmp_path)

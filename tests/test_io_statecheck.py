@@ -79,3 +79,46 @@ def test_a_real_step_whose_first_states_came_in_a_burst_re_anchors_once_spread()
     assert steps[0]["offset_s"] == pytest.approx(-8.0, abs=1e-3)
     assert dict(link.rejects) == {"out_of_order": 4}
     assert accepted == [0.5 * k for k in range(20)] + [0.5 * k for k in range(24, 40)]
+
+
+def test_a_duplicated_state_is_dropped_silently_and_counted_apart():
+    """UDP delivers a datagram twice at times: an exact copy of the last accepted state is
+    no reject (no counter, no event), counted in ``duplicates`` by vehicle, not handed on
+    again; every state of a stream sent twice is taken once, with no reject."""
+    link, clock, events = _link([{"role": "asv", "id": 0x2801, "address": "10.0.10.50:6002"},
+                                 {"role": "auv", "id": 0x2811, "name": "lauv-x",
+                                  "address": "10.0.10.60:6002"}])  # fmt: skip
+    accepted = []
+    link.on_state = lambda p, nav, now: accepted.append(nav.t)
+    t0 = clock.t
+    for k in range(10):
+        clock.t = t0 + 0.5 * k
+        packet = _es(clock, 0x2811, t0 + 0.5 * k, 0.25 * k)
+        link.handle_datagram(packet, AUV)
+        clock.t += 0.001
+        link.handle_datagram(packet, AUV)  # the copy, a millisecond later
+    assert accepted == [t0 + 0.5 * k for k in range(10)]
+    assert dict(link.rejects) == {}
+    assert not [e for e in events if e["event"] == "reject"]
+    assert dict(link.duplicates) == {"lauv-x": 10}
+    assert link.counters()["duplicates"] == {"lauv-x": 10}
+    assert link.auvs[0].last_heard == t0 + 0.5 * 9  # the copy is no sign of life either
+
+
+def test_an_older_state_or_another_at_the_same_time_is_still_out_of_order():
+    """Not a copy of the last accepted state: an older one (even one accepted before), or
+    another state with the last one's timestamp, is out_of_order, as before."""
+    link, clock, events = _link([{"role": "asv", "id": 0x2801, "address": "10.0.10.50:6002"},
+                                 {"role": "auv", "id": 0x2811,
+                                  "address": "10.0.10.60:6002"}])  # fmt: skip
+    t0 = clock.t
+    first = _es(clock, 0x2811, t0, 0.0)
+    link.handle_datagram(first, AUV)
+    clock.t = t0 + 0.5
+    link.handle_datagram(_es(clock, 0x2811, t0 + 0.5, 0.25), AUV)
+    link.handle_datagram(_es(clock, 0x2811, t0 + 0.5, 0.30), AUV)  # same time, other place
+    link.handle_datagram(first, AUV)  # a copy of an older one: late
+    assert dict(link.rejects) == {"out_of_order": 2}
+    assert len([e for e in events if e["event"] == "reject"]) == 2
+    assert dict(link.duplicates) == {}
+    assert link.auvs[0].nav.N == pytest.approx(0.25, abs=1e-6)

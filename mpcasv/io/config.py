@@ -16,10 +16,14 @@ import ipaddress
 from pathlib import Path
 from typing import Annotated, Literal
 
-from pydantic import Field, Strict, field_validator, model_validator
+from pydantic import AfterValidator, Field, Strict, field_validator, model_validator
 
 from mpcasv.config import (
     AUV_COUNT_MAX,
+    AUV_SPEED_MAX,
+    DISTANCE_MAX,
+    REFERENCE_LEAD_MAX,
+    TRANSIT_SPEED_MAX,
     ConfigError,
     FieldError,
     Float,
@@ -49,7 +53,13 @@ __all__ = [  # the controller's part is mpcasv.io.deploycontroller's, re-exporte
 
 #: An IMC system id (0xFFFF is broadcast, never a vehicle).
 ImcId = Annotated[int, Strict(), Field(ge=0, le=0xFFFE)]
+#: IMC's special system ids (LSTS/imc IMC_Addresses.xml) below 0xFFFF: never ours
+IMC_SPECIAL_IDS = {0x0000: "'announce' (DUNE addresses its Announces to it)",
+                   0xFFF0: "'broadcast'"}  # fmt: skip
 Port = Annotated[int, Strict(), Field(ge=0, le=65535)]
+#: ``link.plan_id``: DUNE's plan engine names the vehicle's log folder after it (changeLog)
+#: and the operator's console shows it; "" was accepted
+PLAN_ID_MAX = 64
 #: ``[link]`` fields read only with ``transport = "udp"``: the TCP backseat link binds no
 #: data port, sends no Announce and opens no discovery socket (:meth:`ImcLink.start`)
 UDP_ONLY = ("port", "announce_to", "announce_period", "discovery_ports", "discovery_group",
@@ -80,6 +90,15 @@ def _system_name(v: str | None) -> str | None:
     return v
 
 
+def _plan_id(v: str) -> str:
+    ok = set("abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789-_.")
+    if not 0 < len(v) <= PLAN_ID_MAX or not set(v) <= ok:
+        shown = repr(v) if len(v) <= PLAN_ID_MAX else f"{v[:20]!r}... ({len(v)} characters)"
+        raise ValueError(f"{shown}: a plan id is 1-{PLAN_ID_MAX} letters, digits, '-', '_' or "
+                         "'.' (DUNE's plan engine names the vehicle's log folder after it)")
+    return v
+
+
 def _check_address(v: str | None) -> str | None:
     if v is not None:
         parse_address(v)
@@ -94,6 +113,14 @@ class Identity:
     id: ImcId = 0x4001
 
     _name = field_validator("name")(_system_name)
+
+    @field_validator("id")
+    @classmethod
+    def _id(cls, v: int) -> int:
+        if v in IMC_SPECIAL_IDS:
+            raise ValueError(f"0x{v:04X} is IMC's special id {IMC_SPECIAL_IDS[v]}, not a "
+                             "system's: take a free one (e.g. 0x4001)")  # fmt: skip
+        return v
 
 
 @frozen
@@ -143,7 +170,9 @@ class LinkSpec:
     """Transport, addresses and the IMC timing (seconds of the deploy clock)."""
 
     transport: Literal["udp", "tcp"] = "udp"
-    bind: str = "127.0.0.1"  # the one local address we bind
+    # the one local address we bind; 0.0.0.0 (every one) needs every vehicle's 'address': our
+    # Announce then names the address each vehicle sees us from (netcheck.announced_hosts)
+    bind: str = "127.0.0.1"
     port: Port = 6002  # 0: any free port (tests)
     announce_to: tuple[str, ...] = (
         "224.0.75.69:30100", "224.0.75.69:30101", "224.0.75.69:30102",
@@ -165,9 +194,15 @@ class LinkSpec:
     # stop if we go silent; 1e5 s switched it off)
     followref_timeout: between(1, 300, "s", "DUNE's own stop when the deploy goes silent: "
                                "minutes switch it off") = 10.0
-    plan_id: str = "mpcasv-followref"
-    plan_start_timeout: Pos = 5.0  # wait this long for PlanControl SUCCESS, then retry
-    reference_lead_m: NonNeg = 20.0  # push the Reference past DUNE's arrival tolerance
+    plan_id: Annotated[str, Strict(), AfterValidator(_plan_id)] = "mpcasv-followref"
+    # wait this long for PlanControl SUCCESS, then retry (checked every watchdog tick: 1e-4 s
+    # re-sent START at every tick, 1e9 s never retried a lost one)
+    plan_start_timeout: between(1, 60, "s", "DUNE answers a START within a second or two; "
+                                "shorter re-sends it before the answer can come, longer "
+                                "leaves a lost one unretried for minutes") = 5.0
+    # push the Reference past DUNE's arrival tolerance
+    reference_lead_m: between(0, REFERENCE_LEAD_MAX, "m", "a lead beyond 1 km is no waypoint, "
+                              "as a scenario's [sim] reference_lead_m") = 20.0
     reference_radius_m: NonNeg = 0.0  # Reference.radius (DUNE arrives at |radius| + 15 m)
     # DUNE announces only to its discovery ports (multicast and loopback), never to our data
     # port: a vehicle without 'address' is learnt there. Opened only if such a vehicle exists.
@@ -176,7 +211,21 @@ class LinkSpec:
     discovery_ports: tuple[Port, ...] = (30100, 30101, 30102, 30103, 30104)
     discovery_group: str = "224.0.75.69"  # joined on the interface of 'bind'
     discovery_bind: str | None = None  # None: 0.0.0.0, or 'bind' if that is a loopback address
-    plan_done_timeout: Pos = 3.0  # at shutdown, wait this long for PlanControl "plan completed"
+    # at shutdown, wait this long for PlanControl "plan completed" (1e9 s never ended)
+    plan_done_timeout: between(0.1, 60, "s", "DUNE answers MANDONE at once; a shutdown that "
+                               "waits minutes for it is no shutdown") = 3.0
+
+    @field_validator("discovery_ports")
+    @classmethod
+    def _ports(cls, v: tuple[int, ...]) -> tuple[int, ...]:
+        if 0 in v:
+            raise ValueError("0 (a port the OS picks) is no discovery port: DUNE announces "
+                             "only to 30100-30104")  # fmt: skip
+        twice = sorted({p for p in v if v.count(p) > 1})
+        if twice:
+            raise ValueError(f"{', '.join(map(str, twice))} given twice: each port is opened "
+                             "once (a second socket on it hears every Announce again)")
+        return v
 
     @field_validator("bind", "discovery_group")
     @classmethod
@@ -218,14 +267,32 @@ class WatchdogSpec:
     # status reports every 30 s or more, tens of seconds (docs/deploy.md)
     auv_stale_s: between(0.5, 600, "s", "ten minutes without a word is no watchdog") = 3.0
     auv_lost_s: between(1, 3600, "s", "an hour without a word is no watchdog") = 30.0
-    auv_speed_max: Pos = 2.0  # how fast an AUV may move away from its last state
+    # how fast an AUV may move away from its last state (jump check; the uncertain disc
+    # grows at it). 1e9 m/s made the jump check and the guard meaningless
+    auv_speed_max: between(0.1, AUV_SPEED_MAX, "m/s", "a glider makes 0.25 m/s; 5 m/s is "
+                           "the fastest AUV, as in a scenario") = 2.0
     auv_rise_rate: NonNeg = 0.5  # how fast it may rise (m/s) towards the surface
-    asv_speed_max: Pos = 6.0  # faster apparent motion is rejected as a jump
-    jump_margin_m: NonNeg = 50.0  # GPS/nav slack added to speed x dt in the jump check
-    max_distance_m: Pos = 20000.0  # states further from the origin are rejected
-    clock_slack_s: NonNeg = 5.0  # a timestamp may run ahead of the arrival clock by this
-    # self-consistent states on a new time base that prove a vehicle clock step (re-anchor)
-    clock_step_states: Annotated[int, Strict(), Field(ge=2)] = 3
+    # faster apparent motion is rejected as a jump (1e-9 m/s: every transit a jump)
+    asv_speed_max: between(1, 2 * TRANSIT_SPEED_MAX, "m/s", "below 1 m/s, slower than a "
+                           "transit, the ASV's own motion over a gap in its states is a jump; "
+                           "beyond 40 knots the jump check is off") = 6.0
+    # GPS/nav slack added to speed x dt in the jump check (1e12 m switched it off)
+    jump_margin_m: between(0, 1000, "m", "a navigation error beyond a kilometre is no "
+                           "position: the jump check would be off") = 50.0
+    # states further from the origin are rejected (1e-9 m: every state)
+    max_distance_m: between(100, DISTANCE_MAX, "m", "below 100 m the ASV's own manoeuvres "
+                            "leave the area; beyond, what the fastest AUV covers in a "
+                            "week") = 20000.0
+    # a timestamp may run ahead of the arrival clock by this (1e12 s switched the time check
+    # off)
+    clock_slack_s: between(0.5, 60, "s", "below half a second arrival jitter makes time "
+                           "jumps and no clock step is proven; beyond a minute the time check "
+                           "is off, and DUNE steps a clock more than 4 s off") = 5.0
+    # self-consistent states on a new time base that prove a vehicle clock step (re-anchor);
+    # each is a state rejected before it (100000: a clock step never recovered)
+    clock_step_states: between(2, 20, "", "each is a state rejected before the re-anchor: "
+                               "20 at DUNE's 2 Hz are 10 s without the vehicle's state",
+                               integer=True) = 3
     propeller: Literal["thruster", "command"] = "thruster"  # where propeller_on comes from
     propeller_on_threshold: Annotated[float, Strict(), Field(gt=0, lt=1)] = 0.05
     report_sigma_m: NonNeg = 1.0  # 1-sigma of an AUV's own navigation (Report.nav_sigma)
@@ -259,7 +326,9 @@ class SpeedSpec:
     settle_s: NonNeg = 5.0  # after a change of commanded speed, before the window opens
     # the autopilot's own limit (DUNE: [General] Maximum Absolute Speed, 2.5 m/s for the
     # Otter): every transit speed sent is capped at it (a plan may ask for the model's u_max)
-    command_max: Pos | None = None
+    command_max: between(0, TRANSIT_SPEED_MAX, "m/s", "the Otter's is 2.5 m/s; 10 m/s is "
+                         "the fastest transit a controller may ask for", lo_open=True
+                         ) | None = None  # fmt: skip
 
 
 @frozen
@@ -300,6 +369,14 @@ class DeployConfig:
             raise FieldError("vehicle", f"{roles.count('auv')} vehicles with role 'auv': at most "
                              f"{AUV_COUNT_MAX}, as in a scenario (docs/experiments.md, "
                              "'Bounds')")  # fmt: skip
+        seen: dict[str, str] = {}  # UDP: the link tells the vehicles apart by address
+        for k, v in enumerate(self.vehicle):
+            if v.address is not None and v.address in seen:
+                raise FieldError(f"vehicle.{k}.address", (
+                    f"{v.address} is also {seen[v.address]}'s: each DUNE has its own port, "
+                    "and from a vehicle's address another system's id is a relay"))  # fmt: skip
+            if v.address is not None:
+                seen[v.address] = v.label
         ids = [v.id for v in self.vehicle if v.id is not None]
         names = [v.name for v in self.vehicle if v.name]
         if len(set(ids)) != len(ids) or len(set(names)) != len(names):
@@ -309,6 +386,15 @@ class DeployConfig:
         if self.link.transport == "tcp" and any(v.tcp is None or v.id is None
                                                 for v in self.vehicle):  # fmt: skip
             raise ValueError("link.transport = 'tcp' needs 'tcp' and 'id' for every vehicle")
+        unaddressed = [v.label for v in self.vehicle if v.address is None]
+        if (self.link.transport == "udp" and ipaddress.IPv4Address(self.link.bind).is_unspecified
+                and unaddressed):  # fmt: skip
+            raise FieldError("link.bind", (
+                f"{self.link.bind} (every local address) needs every vehicle's 'address' (not "
+                f"given for {', '.join(unaddressed)}): DUNE streams only to the imc+udp address "
+                "of our Announce that our datagrams come from, which is told from a vehicle's "
+                "address, and keeps the services of our first Announce; give them, or bind to "
+                "this host's address on the vehicles' network"))  # fmt: skip
         return self  # the fields the transport does not read: check_link
 
     @property

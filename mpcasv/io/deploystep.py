@@ -19,7 +19,7 @@ import math
 import time
 
 from mpcasv.interface import Command
-from mpcasv.io.config import DeployConfig, WatchdogSpec, build_controller
+from mpcasv.io.config import DeployConfig, WatchdogSpec, build_controller, parse_address
 from mpcasv.io.watchdog import GuardParams, guard_sources
 
 log = logging.getLogger("mpcasv.deploy")
@@ -81,14 +81,16 @@ def check_local(cfg: DeployConfig, config, log_dir=None, port: bool = False) -> 
     ``--prepare``, which runs at the quay with the boat's network still down, so that the
     address of ``bind`` may not exist yet: docs/deploy.md) ``link.bind`` (and
     ``link.discovery_bind``) is an address of this host (a UDP socket bound to it and closed
-    at once) and ``link.port`` on it is free.
+    at once) and ``link.port`` on it is free; bound to 0.0.0.0 (UDP), this host has a route
+    to every vehicle's address (the source address our Announce then names:
+    :func:`~mpcasv.io.netcheck.announced_hosts`).
 
     Raises
     ------
     ConfigError
         One line naming ``config``'s field (or ``--log-dir``), the value and the cause.
     """
-    from mpcasv.io.netcheck import check_bindable
+    from mpcasv.io.netcheck import announced_hosts, check_bindable
     from mpcasv.outputs import check_output_folder
 
     check_output_folder(log_dir or cfg.log.dir, "--log-dir" if log_dir else f"{config}: log.dir")
@@ -101,6 +103,9 @@ def check_local(cfg: DeployConfig, config, log_dir=None, port: bool = False) -> 
         check_bindable(lk.bind, 0, f"{config}: link.bind")
     if lk.discovery_bind is not None:
         check_bindable(lk.discovery_bind, 0, f"{config}: link.discovery_bind")
+    if lk.transport == "udp":  # bound to 0.0.0.0: the addresses our Announce names
+        announced_hosts(lk.bind, [parse_address(v.address) for v in cfg.vehicle if v.address],
+                        f"{config}: link.bind")  # fmt: skip
 
 
 def prepare_controller(cfg: DeployConfig) -> dict:

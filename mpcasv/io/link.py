@@ -32,7 +32,9 @@ Checks, in order (reason names in brackets):
 5. no NaN/inf in any float field [``non_finite``];
 6. EstimatedState only: :mod:`mpcasv.io.statecheck` [``out_of_range``, ``out_of_area``,
    ``out_of_order``, ``time_jump``, ``jump``], with recovery from a vehicle clock step
-   (event ``clock_step`` with the offset).
+   (event ``clock_step`` with the offset). An exact copy of the vehicle's last accepted
+   state (UDP delivers a datagram twice at times) is no reject: dropped silently and counted
+   in ``duplicates`` by vehicle.
 
 Announces are heard on the data socket and, when a vehicle has no configured ``address``,
 on DUNE's discovery ports (``link.discovery_ports``, multicast group
@@ -64,8 +66,9 @@ from mpcasv.io.imc import (
     stamp,
 )
 from mpcasv.io.logs import LsfWriter
+from mpcasv.io.netcheck import announced_hosts, is_wildcard
 from mpcasv.io.peers import Peer, PeerDirectory
-from mpcasv.io.statecheck import check_state
+from mpcasv.io.statecheck import Duplicate, check_state
 from mpcasv.io.transport import Clock, TcpStream, UdpEndpoint
 
 __all__ = ["USED", "ImcLink", "Peer"]
@@ -122,6 +125,9 @@ class ImcLink(PeerDirectory):
         self.ignored: Counter[str] = Counter()
         self.relayed: Counter[str] = Counter()
         self.sent: Counter[str] = Counter()
+        #: exact copies of a vehicle's last accepted EstimatedState, by vehicle: dropped
+        #: silently (no reject, no event; statecheck.Duplicate)
+        self.duplicates: Counter[str] = Counter()
         #: systems that announced themselves and are no configured vehicle: name -> IMC id
         #: (at most peers.MAX_STRANGERS; for the run's "no decision" line: a misspelt name)
         self.strangers: dict[str, int] = {}
@@ -131,6 +137,8 @@ class ImcLink(PeerDirectory):
         self._names: dict[int, str] = {}  # message id -> name (imcpy.Factory), memoised
         self._reject_window: dict[str, tuple[float, int]] = {}
         self.endpoint: UdpEndpoint | None = None
+        #: the local addresses our Announce names (UDP; set by :meth:`start`)
+        self.hosts: list[str] = []
         self.discovery: list[UdpEndpoint] = []
         self._tasks: list[asyncio.Task] = []
 
@@ -148,10 +156,16 @@ class ImcLink(PeerDirectory):
     async def _start(self) -> None:
         link = self.cfg.link
         if link.transport == "udp":
+            # bound to 0.0.0.0, the addresses the vehicles see us from (DUNE streams only to
+            # an imc+udp address of our Announce that our datagrams come from): before binding
+            self.hosts = announced_hosts(link.bind, [parse_address(v.address) for v in
+                                                     self.cfg.vehicle if v.address],
+                                         "link.bind")  # fmt: skip
             self.endpoint = await UdpEndpoint.open(link.bind, link.port, self.handle_datagram)
-            if link.bind != "0.0.0.0":
+            if not is_wildcard(link.bind):
                 self.endpoint.multicast_from(link.bind)
-            self.event("bound", address=f"{self.endpoint.address[0]}:{self.endpoint.address[1]}")
+            self.event("bound", address=f"{self.endpoint.address[0]}:{self.endpoint.address[1]}",
+                       services=self.services)  # fmt: skip
             if any(not p.static for p in self.peers):
                 await self._open_discovery()
         else:
@@ -242,10 +256,14 @@ class ImcLink(PeerDirectory):
     # --- output ----------------------------------------------------------------------------
     @property
     def services(self) -> list[str]:
+        """Our Announce's ``imc+udp`` services: the data port at each of :attr:`hosts` (the
+        bound address; bound to 0.0.0.0, the addresses the vehicles see us from:
+        :func:`~mpcasv.io.netcheck.announced_hosts`). DUNE splits them at ';' and keeps one
+        per address (``Transports/UDP/Node.hpp``)."""
         if self.endpoint is None:
             return []
-        host, port = self.endpoint.address
-        return [f"imc+udp://{host}:{port}/"]
+        port = self.endpoint.address[1]
+        return [f"imc+udp://{h}:{port}/" for h in self.hosts]
 
     def announce(self) -> None:
         """Announce us to the discovery addresses and to every vehicle with an address."""
@@ -352,7 +370,7 @@ class ImcLink(PeerDirectory):
             if name == "EstimatedState":
                 wd = self.cfg.watchdog
                 vmax = wd.asv_speed_max if p.role == "asv" else wd.auv_speed_max
-                nav, step = check_state(msg, p.track, now, self.origin, vmax, wd)
+                nav, step = check_state(msg, p.track, now, self.origin, vmax, wd, raw)
                 if step is not None:
                     self.event("clock_step", vehicle=p.label, offset_s=step.offset,
                                states=step.states, t_old=step.t_old, t_new=step.t_new)  # fmt: skip
@@ -362,6 +380,8 @@ class ImcLink(PeerDirectory):
                 self.on_state(p, p.nav, now)
             elif name != "Announce":
                 self.on_message(p, msg, now)
+        except Duplicate:  # UDP delivered it twice: nothing wrong, nothing new
+            self.duplicates[p.label] += 1
         except BadInput as bad:
             self.reject(bad.reason, bad.detail, addr=addr, src=msg.src, msg=name)
         except Exception as exc:  # a bug must not stop the loop: counted and reported
@@ -405,6 +425,7 @@ class ImcLink(PeerDirectory):
         return {
             "rejects": dict(self.rejects), "accepted": dict(self.accepted),
             "ignored": dict(self.ignored), "relayed": dict(self.relayed),
-            "sent": dict(self.sent), "datagrams": self.datagrams,
+            "sent": dict(self.sent), "duplicates": dict(self.duplicates),
+            "datagrams": self.datagrams,
             "send_errors": self.endpoint.send_errors if self.endpoint else 0,
         }  # fmt: skip

@@ -16,7 +16,8 @@ import socket
 
 from mpcasv.config import ConfigError
 
-__all__ = ["PORT_MAX", "check_bindable", "check_ipv4", "check_port"]
+__all__ = ["PORT_MAX", "announced_hosts", "check_bindable", "check_ipv4", "check_port",
+           "is_wildcard"]
 
 PORT_MAX = 65535
 
@@ -57,7 +58,8 @@ def check_bindable(host: str, port: int, what: str, kind: int = socket.SOCK_DGRA
     except OSError as exc:
         cause = {
             errno.EADDRNOTAVAIL: f"{host} is not an address of this host (give one of its "
-                                 "own addresses, 127.0.0.1 or 0.0.0.0)",
+                                 "own addresses: 127.0.0.1, or its address on the vehicles' "
+                                 "network)",
             errno.EADDRINUSE: f"port {port} is in use on {host} (another mpcasv or DUNE?)",
             errno.EACCES: f"port {port} needs privileges (use a port above 1023)",
         }.get(exc.errno, exc.strerror or str(exc))  # fmt: skip
@@ -65,3 +67,46 @@ def check_bindable(host: str, port: int, what: str, kind: int = socket.SOCK_DGRA
         raise ConfigError(f"{what} {shown}: cannot bind: {cause}") from None
     finally:
         sock.close()
+
+
+def is_wildcard(host: str) -> bool:
+    """Whether ``host`` (an IPv4 literal) is the wildcard address 0.0.0.0 (every local one)."""
+    return ipaddress.IPv4Address(host).is_unspecified
+
+
+def announced_hosts(bind: str, remotes, what: str) -> list[str]:
+    """The local addresses to announce in our ``imc+udp`` services when bound to ``bind``.
+
+    DUNE's UDP transport streams to a node only at the one ``imc+udp`` address of its
+    Announce that the node's datagrams come from (``Transports/UDP/Node.hpp``,
+    ``activate()``), and a datagram never comes from 0.0.0.0. Bound to a concrete address,
+    that address; bound to the wildcard, for each remote ``(host, port)`` (the vehicles'
+    addresses) the local address a UDP socket connected to it gets (the route's source
+    address; ``connect()`` sends nothing), deduplicated, in the remotes' order.
+
+    Raises
+    ------
+    ConfigError
+        One line naming ``what``: a remote the OS has no route to (or none given).
+    """
+    if not is_wildcard(bind):
+        return [bind]
+    hosts: list[str] = []
+    for host, port in remotes:
+        sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        try:
+            sock.connect((host, port))
+            local = sock.getsockname()[0]
+        except OSError as exc:
+            raise ConfigError(f"{what} {bind}: cannot tell which address of this host {host} "
+                              f"would see our datagrams from ({exc.strerror or exc}): bind to "
+                              "this host's address on the vehicles' network") from None
+        finally:
+            sock.close()
+        if local not in hosts and not is_wildcard(local):
+            hosts.append(local)
+    if not hosts:
+        raise ConfigError(f"{what} {bind}: no vehicle address to announce ourselves to (DUNE "
+                          "streams only to an imc+udp address of our Announce, never to "
+                          f"{bind}): bind to this host's address on the vehicles' network")
+    return hosts

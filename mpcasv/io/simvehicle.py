@@ -44,6 +44,13 @@ class Node:
     name: str
     services: list[Addr]
     last_hb: float = -math.inf
+    active: Addr | None = None  # the service its datagrams last came from
+
+    @property
+    def dest(self) -> Addr:
+        """Where to send: as DUNE's UDP transport (``Node::activate``), the ``imc+udp``
+        service the node's datagrams come from (an Announce may name several)."""
+        return self.active if self.active in self.services else self.services[0]
 
 
 @dataclass
@@ -117,7 +124,7 @@ class SimVehicle:
             msg.timestamp = t
         for node in self.nodes.values():
             if now - node.last_hb <= HEARD_S and node.services:
-                self._send(msg, node.services[0])
+                self._send(msg, node.dest)
         data = msg.serialize()
         for c in list(self.tcp_clients):
             if c.send(data):
@@ -129,7 +136,7 @@ class SimVehicle:
             stream.send(msg.serialize())
             self.sitl.lsf.write(msg.serialize())
         elif node is not None and node.services:
-            self._send(msg, node.services[0])
+            self._send(msg, node.dest)
 
     def learn(self, msg: imcpy.Announce) -> None:
         if msg.src == self.id:
@@ -160,6 +167,7 @@ class SimVehicle:
         if node is None or addr not in node.services:  # DUNE: only announced systems
             self.sitl.count("drop_unannounced")
             return
+        node.active = addr
         if isinstance(msg, imcpy.Heartbeat):
             node.last_hb = self.sitl.now()
         if isinstance(msg, RELAYED):  # on DUNE's bus, so relayed back, whatever its dst
@@ -174,7 +182,7 @@ class SimVehicle:
         now = self.sitl.now()
         for node in self.nodes.values():
             if now - node.last_hb <= HEARD_S and node.services and self.endpoint is not None:
-                if self.endpoint.sendto(raw, node.services[0]):
+                if self.endpoint.sendto(raw, node.dest):
                     self.sitl.lsf.write(raw)
                     self.sitl.count("relayed")
 

@@ -1,6 +1,9 @@
 """Plausibility checks of a vehicle's EstimatedState, with recovery from a vehicle clock step.
 
-A state is checked against the vehicle's last accepted one: lat/lon in range
+An exact copy of the last accepted state (the same packet, byte for byte: UDP may deliver a
+datagram twice) is no new information and no fault: :class:`Duplicate` is raised, which the
+link counts apart (``duplicates``) and drops silently. Otherwise a state is checked against
+the vehicle's last accepted one: lat/lon in range
 [``out_of_range``], within ``max_distance_m`` of the origin [``out_of_area``], newer
 [``out_of_order``], not further ahead than the arrival clock allows plus ``clock_slack_s``
 [``time_jump``], and not further away than the vehicle's top speed allows plus
@@ -42,7 +45,7 @@ from mpcasv.io.config import WatchdogSpec
 from mpcasv.io.geo import Origin
 from mpcasv.io.imc import BadInput, NavState, nav_state
 
-__all__ = ["ClockStep", "StateTrack", "check_state"]
+__all__ = ["ClockStep", "Duplicate", "StateTrack", "check_state"]
 
 
 @dataclass(frozen=True)
@@ -55,6 +58,10 @@ class ClockStep:
     t_new: float  # the accepted timestamp on the new base
 
 
+class Duplicate(Exception):
+    """The state is an exact copy of the last accepted one (not a reject: nothing is wrong)."""
+
+
 @dataclass
 class StateTrack:
     """Per-vehicle memory of the checks: the last accepted state and a clock-step chain."""
@@ -63,6 +70,7 @@ class StateTrack:
     recv: float = -math.inf  # deploy clock when it arrived
     chain: list[tuple[NavState, float]] = field(default_factory=list)  # (state, arrival)
     offset: float = 0.0  # s subtracted from the vehicle's timestamps (its clock steps)
+    raw: bytes | None = None  # the last accepted state's packet, as received
 
 
 def _consistent(a: NavState, a_recv: float, b: NavState, b_recv: float, vmax: float,
@@ -88,15 +96,22 @@ def _spread(chain: list[tuple[NavState, float]]) -> bool:
 
 
 def check_state(es: imcpy.EstimatedState, track: StateTrack, now: float, origin: Origin,
-                vmax: float, wd: WatchdogSpec) -> tuple[NavState, ClockStep | None]:  # fmt: skip
-    """Check ``es`` (arrived at deploy-clock ``now``) against ``track``; on acceptance update
-    ``track`` and return the state (and the clock step it completed, if any).
+                vmax: float, wd: WatchdogSpec,
+                raw: bytes | None = None) -> tuple[NavState, ClockStep | None]:  # fmt: skip
+    """Check ``es`` (arrived at deploy-clock ``now``; ``raw``: its packet as received) against
+    ``track``; on acceptance update ``track`` and return the state (and the clock step it
+    completed, if any).
 
     Raises
     ------
+    Duplicate
+        ``raw`` is the packet of the last accepted state (the state is dropped, ``track``
+        unchanged: a clock-step chain too).
     BadInput
         With the reason of the module docstring (the state is then not accepted).
     """
+    if raw is not None and track.nav is not None and raw == track.raw:
+        raise Duplicate
     if abs(es.lat) > math.pi / 2 or abs(es.lon) > math.pi or es.depth > 12000:
         raise BadInput("out_of_range", f"lat {es.lat} lon {es.lon} depth {es.depth}")
     nav = nav_state(es, origin)
@@ -122,7 +137,7 @@ def check_state(es: imcpy.EstimatedState, track: StateTrack, now: float, origin:
                 raise BadInput(bad, detail)
             track.offset += step.offset
             nav = dataclasses.replace(nav, t=nav.t - step.offset)
-    track.nav, track.recv = nav, now
+    track.nav, track.recv, track.raw = nav, now, raw
     track.chain.clear()
     return nav, step
 

@@ -16,6 +16,7 @@ from pydantic import field_validator, model_validator
 from mpcasv.config import (
     AUV_COUNT_MAX,
     CONTROL_PERIOD_MAX,
+    REFERENCE_LEAD_MAX,
     ConfigError,
     Duration,
     FieldError,
@@ -94,8 +95,6 @@ def _loads(load, name: str):
 #: vessel's RK4 itself is sub-stepped to its fastest pole (models/envelope.py) at any dt.
 #: Below 1 ms (no autopilot samples faster) a run is millions of steps.
 DT_MIN, DT_MAX = 0.001, 0.2
-#: The longest ``[sim] reference_lead_m`` (m)
-REFERENCE_LEAD_MAX = 1000.0
 #: The most plant steps per supervisory period: they are compiled into one CasADi function
 #: (1000 take about 8 s; ``dt = 1e-6`` hung building a million)
 N_SUB_MAX = 1000

@@ -52,7 +52,7 @@ def _config(log_dir: str, lsf: str | None, port: int, otter: int, auv: int):
         "vehicle": [{"role": "asv", "id": 0x0803, "address": f"127.0.0.1:{otter}"},
                     {"role": "auv", "id": 0x00D1, "address": f"127.0.0.1:{auv}"}],
         "controller": {"name": "hybrid-single", "preset": "paper1-field"},
-        "watchdog": {"clock_slack_s": 1e6, "max_distance_m": 1e6},
+        "watchdog": {"clock_slack_s": 60.0, "max_distance_m": 1e6},  # the widest allowed
         "log": {"dir": log_dir} | ({"lsf": lsf} if lsf else {}),
     })  # fmt: skip
 

@@ -1,0 +1,94 @@
+"""``link.bind = "0.0.0.0"``: our Announce names the addresses the vehicles see us from, never
+0.0.0.0 (DUNE's UDP transport streams to a node only at an ``imc+udp`` address of its Announce
+that the node's datagrams come from: ``Transports/UDP/Node.hpp``, ``activate()``)."""
+
+from __future__ import annotations
+
+import asyncio
+
+import imcpy
+import pytest
+from test_io_link import DEPLOY_ID, ORIGIN_DEG, Fake, _until
+
+from mpcasv.config import ConfigError
+from mpcasv.io.config import deploy_config_from_dict
+from mpcasv.io.imc import udp_services
+from mpcasv.io.link import ImcLink
+from mpcasv.io.netcheck import announced_hosts, check_bindable
+from mpcasv.io.simvehicle import Node
+from mpcasv.io.transport import Clock
+
+
+def _cfg(vehicles, bind="0.0.0.0"):
+    return deploy_config_from_dict({
+        "identity": {"id": DEPLOY_ID},
+        "origin": {"lat_deg": ORIGIN_DEG[0], "lon_deg": ORIGIN_DEG[1]},
+        "link": {"bind": bind, "port": 0, "announce_to": []},
+        "vehicle": vehicles,
+        "controller": {"name": "hybrid-single", "preset": "paper1-field"},
+    })  # fmt: skip
+
+
+def test_bound_to_the_wildcard_the_announce_names_the_address_the_vehicles_see():
+    """Bound to 0.0.0.0 with both vehicles at 127.0.0.1: the Announce a vehicle receives
+    names imc+udp://127.0.0.1:PORT/ (our data port), once, and no 0.0.0.0."""
+
+    async def main():
+        asv = await Fake("fake-asv", 0x2801, imcpy.SystemType.USV).open()
+        auv = await Fake("fake-auv", 0x2811).open()
+        cfg = _cfg([{"role": "asv", "id": 0x2801, "address": f"127.0.0.1:{asv.ep.address[1]}"},
+                    {"role": "auv", "id": 0x2811,
+                     "address": f"127.0.0.1:{auv.ep.address[1]}"}])  # fmt: skip
+        link = ImcLink(cfg, Clock())
+        try:
+            await link.start()
+            assert link.endpoint.address[0] == "0.0.0.0"
+            port = link.endpoint.address[1]
+            assert await _until(lambda: any(isinstance(m, imcpy.Announce) for m in asv.received))
+            msg = next(m for m in asv.received if isinstance(m, imcpy.Announce))
+            assert "0.0.0.0" not in msg.services
+            assert udp_services(msg.services) == [("127.0.0.1", port)]
+            assert msg.services == f"imc+udp://127.0.0.1:{port}/"
+        finally:
+            link.close()
+            asv.close()
+            auv.close()
+
+    asyncio.run(main())
+
+
+def test_announced_hosts_is_the_bound_address_unless_wildcard():
+    assert announced_hosts("127.0.0.1", [("10.0.10.50", 6002)], "link.bind") == ["127.0.0.1"]
+    assert announced_hosts("0.0.0.0", [("127.0.0.1", 6002), ("127.0.0.1", 6003)],
+                           "link.bind") == ["127.0.0.1"]  # fmt: skip
+    with pytest.raises(ConfigError, match="link.bind 0.0.0.0: no vehicle address"):
+        announced_hosts("0.0.0.0", [], "link.bind")
+
+
+def test_the_wildcard_with_a_vehicle_to_discover_is_refused_in_one_line():
+    """Which local address a vehicle learnt from its Announce sees us from is not known when
+    we first announce (and DUNE keeps the services of our first Announce): refused at load,
+    naming link.bind and the vehicle."""
+    with pytest.raises(ConfigError) as err:
+        _cfg([{"role": "asv", "id": 0x2801, "address": "127.0.0.1:6002"},
+              {"role": "auv", "name": "lauv-x"}])  # fmt: skip
+    text = " ".join(ln.strip() for ln in str(err.value).splitlines()[1:])
+    assert "link.bind: 0.0.0.0" in text and "lauv-x" in text
+    assert len(str(err.value).splitlines()) == 2  # the heading and one problem
+    _cfg([{"role": "asv", "id": 0x2801, "address": "127.0.0.1:6002"},
+          {"role": "auv", "name": "lauv-x"}], bind="127.0.0.1")  # a concrete address: fine
+
+
+def test_the_bind_hint_no_longer_suggests_the_wildcard():
+    with pytest.raises(ConfigError) as err:
+        check_bindable("192.0.2.1", 0, "link.bind")  # TEST-NET-1: no address of this host
+    assert "0.0.0.0" not in str(err.value) and "vehicles' network" in str(err.value)
+
+
+def test_the_sitl_answers_at_the_service_a_node_writes_from():
+    """As DUNE's Node::activate: of several imc+udp services, the one the datagrams come
+    from (it sent to the first one)."""
+    node = Node(0x4001, "mpcasv-deploy", [("10.0.0.5", 6002), ("127.0.0.1", 6002)])
+    assert node.dest == ("10.0.0.5", 6002)
+    node.active = ("127.0.0.1", 6002)
+    assert node.dest == ("127.0.0.1", 6002)
