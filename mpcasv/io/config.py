@@ -165,6 +165,11 @@ class LinkSpec:
     # stop if we go silent; 1e5 s switched it off)
     followref_timeout: between(1, 300, "s", "DUNE's own stop when the deploy goes silent: "
                                "minutes switch it off") = 10.0
+    # DUNE answers every Reference with a FollowRefState while FollowReference runs: one left
+    # unanswered this long means the maneuver ended without a word to us (an operator's stop
+    # is answered to the operator): event followref_lost, FollowReference started again
+    followref_lost_s: between(1, 300, "s", "DUNE answers each Reference within milliseconds; "
+                              "minutes without an answer is no watchdog") = 5.0
     plan_id: str = "mpcasv-followref"
     plan_start_timeout: Pos = 5.0  # wait this long for PlanControl SUCCESS, then retry
     reference_lead_m: NonNeg = 20.0  # push the Reference past DUNE's arrival tolerance
