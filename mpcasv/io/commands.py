@@ -182,6 +182,9 @@ def run_deploy_cli(args: argparse.Namespace) -> int:
     _logging(args.quiet)
     summary = run_deploy(args.config, args.dry_run, args.log_dir, args.duration, args.prepare)
     print(json.dumps({"prepared" if args.prepare else "summary": summary}), flush=True)
+    if "plan_ended" in summary:  # DUNE ended our plan (an operator's stop?): not a success
+        print(f"mpcasv deploy: stopped: {summary['plan_ended']}", file=sys.stderr)
+        return 1
     if "no_decision" in summary:  # ran, and never decided: exit 1 (the CLI's "check failed")
         print(f"mpcasv deploy: failed: {summary['no_decision']}", file=sys.stderr)
         return 1

@@ -194,6 +194,11 @@ class LinkSpec:
     # stop if we go silent; 1e5 s switched it off)
     followref_timeout: between(1, 300, "s", "DUNE's own stop when the deploy goes silent: "
                                "minutes switch it off") = 10.0
+    # DUNE answers every Reference with a FollowRefState while FollowReference runs: one left
+    # unanswered this long means the maneuver ended without a word to us (an operator's stop
+    # is answered to the operator): event followref_lost, the run stops (nothing restarted)
+    followref_lost_s: between(1, 300, "s", "DUNE answers each Reference within milliseconds; "
+                              "minutes without an answer is no watchdog") = 5.0
     plan_id: Annotated[str, Strict(), AfterValidator(_plan_id)] = "mpcasv-followref"
     # wait this long for PlanControl SUCCESS, then retry (checked every watchdog tick: 1e-4 s
     # re-sent START at every tick, 1e9 s never retried a lost one)

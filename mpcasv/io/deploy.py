@@ -15,7 +15,8 @@ retried after ``plan_start_timeout``) -> ``running``. The ASV's state older than
 ``asv_stale_s`` -> ``asv_stale``: no more References (DUNE then ends the maneuver on its
 timeout and stops), reported; when a state stamped after that verdict comes (not a late one
 from before it: :meth:`~mpcasv.io.deployphases.Phases.asv_back`) -> ``waiting`` and
-FollowReference is started again. A FollowRefState TIMEOUT for our maneuver also restarts it.
+FollowReference is started again. A FollowRefState TIMEOUT for our maneuver, or none for
+``link.followref_lost_s``, restarts it; DUNE saying our plan ended stops the run (deployphases).
 
 Shutdown (Ctrl-C / SIGTERM, or ``duration``): stop deciding (states are no longer used),
 stop announcing, heart-beating and listening for discovery; a standby Reference (speed 0)
@@ -57,7 +58,7 @@ from mpcasv.io.config import DeployConfig, build_controller, load_deploy_config
 from mpcasv.io.deploycontroller import deploy_boat, known_plans
 from mpcasv.io.deployend import Ending
 from mpcasv.io.deployfeedback import BoatFeedback, cap_command
-from mpcasv.io.deployphases import ASV_STALE, RUNNING, STARTING, WAITING, Phases
+from mpcasv.io.deployphases import ASV_STALE, PLAN_ENDED, RUNNING, STARTING, WAITING, Phases
 from mpcasv.io.deploystep import (
     FieldMode,
     check_local,
@@ -72,8 +73,8 @@ from mpcasv.io.transport import Clock
 from mpcasv.io.watchdog import OK, auv_status, guard, inflate
 from mpcasv.models.acoustics import Report
 
-__all__ = ["ASV_STALE", "RUNNING", "STARTING", "WAITING", "Deploy", "guard_params",
-           "run_deploy"]  # guard_params: from deploystep; the phases: from deployphases
+__all__ = ["ASV_STALE", "PLAN_ENDED", "RUNNING", "STARTING", "WAITING", "Deploy",
+           "guard_params", "run_deploy"]  # from deploystep and deployphases
 
 log = logging.getLogger("mpcasv.deploy")
 
@@ -174,6 +175,7 @@ class Deploy(Phases, BoatFeedback, FieldMode, Ending):
             self._cpu0, self._wall0 = time.process_time(), time.monotonic()
             self._load_mark = (self._cpu0, self._wall0, 0)
             self.followref: dict | None = None
+            self.init_plan_watch()
             self.steps = 0
             self.overrides = 0
             self.stale_events = 0
@@ -203,9 +205,7 @@ class Deploy(Phases, BoatFeedback, FieldMode, Ending):
                       "deploy.jsonl)", rec.get("msg"), rec.get("addr"), rec.get("detail"))
         elif rec.get("event") != "reject":  # a current above the tested one: also --quiet
             detail = {k: v for k, v in rec.items() if k not in ("kind", "event", "t")}
-            level = (logging.WARNING if rec["event"] in ("current_untested", "aborted",
-                                                         "clock_rate", "speed_no_way")
-                     else logging.INFO)  # fmt: skip
+            level = logging.WARNING if rec["event"] in self.WARNING_EVENTS else logging.INFO
             log.log(level, "%s %s", rec["event"], detail)
 
     def event(self, name: str, **info) -> None:
@@ -258,12 +258,7 @@ class Deploy(Phases, BoatFeedback, FieldMode, Ending):
         elif self.closing:
             return
         elif isinstance(msg, imcpy.FollowRefState):
-            state = getattr(msg.state, "name", str(msg.state))
-            self.followref = {"state": state, "proximity": int(msg.proximity), "recv": now}
-            if (state == "TIMEOUT" and msg.control_src == self.link.id
-                    and self.phase == RUNNING):  # fmt: skip
-                self.phase = WAITING
-                self.event("followref_timeout", vehicle=p.label)
+            self._followref_state(p, msg, now)
         elif isinstance(msg, imcpy.SetThrusterActuation):
             self.thrusters.update(msg.id, msg.value, now)
         elif isinstance(msg, imcpy.SetServoPosition):
@@ -319,11 +314,13 @@ class Deploy(Phases, BoatFeedback, FieldMode, Ending):
         ask = None if self.speed_cap is None else self.speed_ask  # once this step's cap is
         cmd, capped = cap_command(cmd, self.speed_cap, self.cfg.speed.command_max, ask)
         sent = False
-        if not self.dry_run:
+        if not self.dry_run and self.phase != PLAN_ENDED:  # (a field-mode step in flight)
             lk = self.cfg.link
             ref = reference(cmd, (obs.asv.N, obs.asv.E), self.link.origin, lk.reference_lead_m,
                             lk.reference_radius_m)  # fmt: skip
             sent = self.link.send(self.link.asv, ref)
+            if sent:
+                self.reference_sent()
         self.last_cmd = cmd
         # the speed watch judges a commanded speed: a dry run commands none (the boat drifts
         # or runs on someone else's commands, never ours)
@@ -359,6 +356,7 @@ class Deploy(Phases, BoatFeedback, FieldMode, Ending):
             raise
 
     async def _run(self, stop: asyncio.Event, duration: float | None) -> dict:
+        self.stop_event = stop  # DUNE ending our plan stops the run (Phases._plan_ended)
         await self.link.start()
         self.t_started = self.clock.now()
         self.event(

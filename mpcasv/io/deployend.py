@@ -24,11 +24,12 @@ class Ending:
 
     def begin_shutdown(self) -> bool:
         """Stop deciding and listening for vehicles, then the final standby and MANDONE (if
-        we ever started FollowReference). True if MANDONE was sent."""
+        we ever started FollowReference, and DUNE has not ended it: after ``plan_ended`` the
+        maneuver is no longer ours to command). True if MANDONE was sent."""
         self.closing = True
         self.link.stop_receiving()
         asv = self.link.asv
-        if self.dry_run or not self.started or asv.id is None:
+        if self.dry_run or not self.started or asv.id is None or self.plan_ended is not None:
             return False
         here = (asv.nav.N, asv.nav.E) if asv.nav is not None else (0.0, 0.0)
         self.link.send(asv, reference(Command.standby(), here, self.link.origin))
@@ -63,10 +64,12 @@ class Ending:
                    "usbl_fix_outliers": list(self.usbl.outliers),
                    "estimator_reordered": [e.reordered for e in self.estimators],
                    "estimator_dropped": [e.dropped for e in self.estimators],
-                   **self.link.counters()}  # fmt: skip
+                   "followref_lost": self.followref_lost, **self.link.counters()}  # fmt: skip
         why = self.no_decision(self.clock.now() - self.t_started)
         if why is not None:
             summary["no_decision"] = why
+        if self.plan_ended is not None:  # DUNE ended our plan: mpcasv deploy exits 1
+            summary["plan_ended"] = self.plan_ended
         summary |= extra
         self.jsonl.write({"kind": "summary", "t": self.clock.now(), **summary})
         self._summary_written = True

@@ -8,6 +8,17 @@ watchdogs (every 0.25 s of the deploy clock) classify the ASV and every AUV
 (:func:`mpcasv.io.watchdog.auv_status`) and move the phases. A run that ends without a
 single decision says why in one line (:meth:`Phases.no_decision`: no vehicle heard, or which
 one never sent a state): ``mpcasv deploy`` then exits 1.
+
+Our maneuver, once running: DUNE answers every Reference with a FollowRefState while it runs.
+Its TIMEOUT (event ``followref_timeout``: we were late) -> ``waiting``: FollowReference is
+started again. A Reference left unanswered for ``link.followref_lost_s`` while the ASV's
+states keep coming (event ``followref_lost``: the maneuver ended without a word to us, e.g.
+an operator's stop, whose answer goes to the operator) -> ``plan_ended``, as below. A
+PlanControl that says the running plan ended or failed (FAILURE, or SUCCESS
+of a STOP or "... completed", with our request id, or our plan id and a request id we never
+sent; not our own MANDONE's answer at shutdown) -> ``plan_ended`` (:meth:`Phases.
+_plan_ended`): no more decisions or References, nothing restarted, the run stops
+(``summary`` field ``plan_ended``: ``mpcasv deploy`` then exits 1).
 """
 
 from __future__ import annotations
@@ -20,6 +31,7 @@ import imcpy
 from mpcasv.io.watchdog import OK, auv_status
 
 WAITING, STARTING, RUNNING, ASV_STALE = "waiting", "starting", "running", "asv_stale"
+PLAN_ENDED = "plan_ended"  # DUNE ended our plan: nothing more is decided, sent or restarted
 _PC = imcpy.PlanControl
 
 
@@ -27,28 +39,128 @@ class Phases:
     """Phase machine and watchdogs; state (``phase``, ``pending``, ``status``, ...) lives in
     the deploy loop."""
 
+    #: events also logged as warnings on the console (the others: info, hidden by --quiet)
+    WARNING_EVENTS = frozenset({"current_untested", "aborted", "clock_rate", "speed_no_way",
+                                "plan_ended", "followref_lost"})
+
+    def init_plan_watch(self) -> None:
+        """The state of the plan's watch (the deploy's constructor)."""
+        self.sent_requests: set[int] = set()  # request ids of our PlanControl STARTs
+        self.unanswered_since: float | None = None  # first Reference no FollowRefState answered
+        self.followref_lost = 0  # followref_lost events (summary)
+        self.plan_ended: str | None = None  # why DUNE ended our plan, in one line (summary)
+        self.stop_event = None  # set by run(): what ends the run when DUNE ended our plan
+
     def _plan_control(self, msg: imcpy.PlanControl, now: float) -> None:
-        ours = self.pending is not None and msg.request_id == self.pending[0]
         info = {"type": int(msg.type), "op": int(msg.op), "request_id": msg.request_id,
                 "plan_id": msg.plan_id, "info": msg.info}  # fmt: skip
         answer = msg.type in (_PC.TypeEnum.SUCCESS, _PC.TypeEnum.FAILURE)
-        if self.closing and answer and msg.request_id == self.plan_request:
+        if (self.closing and answer and msg.request_id == self.plan_request
+                and self.plan_ended is None):  # fmt: skip
             self.event("plan_completed", **info)  # DUNE's answer to our MANDONE
             self.plan_done.set()
             return
-        if not ours or self.phase != STARTING:
+        pending = self.pending is not None and msg.request_id == self.pending[0]
+        if self.phase == RUNNING and not self.closing and self._ends_our_plan(msg):
+            self._plan_ended(msg, info)
+            return
+        if not pending or self.phase != STARTING:
+            ours = msg.request_id in self.sent_requests or msg.plan_id == self.cfg.link.plan_id
             self.event("plan_control", ours=ours, **info)
             return
         if msg.type == _PC.TypeEnum.SUCCESS:
             self.plan_request = self.pending[0]
             self.pending, self.phase, self.started = None, RUNNING, True
             self.t_next = -math.inf
+            self.unanswered_since = None  # the new maneuver: no Reference sent to it yet
             self.event("plan_started", **info)
         elif msg.type == _PC.TypeEnum.FAILURE:
             self.plan_failures += 1
             self.pending, self.phase = None, WAITING
             self.retry_at = now + self.cfg.link.plan_start_timeout
             self.event("plan_start_failed", **info)
+
+    def _ends_our_plan(self, msg: imcpy.PlanControl) -> bool:
+        """Whether PlanControl ``msg`` says the running plan ended or failed: about it (our
+        request id, or our plan id with a request id we never sent: an answer to one of our
+        earlier STARTs, a FAILURE after a TIMEOUT, is about a plan already left), and a
+        FAILURE, or a SUCCESS of a STOP (we send none) or "... completed" (DUNE's "plan
+        completed"; its answers to our START, "plan loaded" and "...: executing maneuver",
+        are not)."""
+        ours = msg.request_id == self.plan_request or (
+            msg.plan_id == self.cfg.link.plan_id and msg.request_id not in self.sent_requests)
+        if not ours:
+            return False
+        if msg.type == _PC.TypeEnum.FAILURE:
+            return True
+        return msg.type == _PC.TypeEnum.SUCCESS and (
+            msg.op == _PC.OperationEnum.STOP or "completed" in msg.info.lower())
+
+    def _plan_ended(self, msg: imcpy.PlanControl, info: dict) -> None:
+        """DUNE ended our plan (:meth:`_ends_our_plan`): event ``plan_ended`` (a warning),
+        phase ``plan_ended`` (no more decisions, References or restarts: the plan may have
+        been stopped by an operator), the run stopped; its shutdown sends no standby and
+        no MANDONE (the maneuver is no longer ours), and the summary says why
+        (``plan_ended``)."""
+        kind = getattr(msg.type, "name", str(msg.type))
+        op = getattr(msg.op, "name", str(msg.op))
+        self.plan_ended = (f"DUNE ended our FollowReference plan {msg.plan_id!r} (PlanControl "
+                           f"{kind} of op {op}, request {msg.request_id}): "
+                           f"{msg.info or '(no info)'}; the deploy stopped deciding and did "
+                           "not restart it")  # fmt: skip
+        self.event("plan_ended", **(info | {"type": kind, "op": op}),
+                   note="no more decisions or References; the plan is not restarted")
+        self.phase = PLAN_ENDED
+        if self.stop_event is not None:
+            self.stop_event.set()
+
+    def _followref_lost(self, now: float) -> None:
+        """No FollowRefState for ``link.followref_lost_s`` while our maneuver runs and the ASV's
+        states keep coming: the maneuver ended without a word to us. DUNE's plan engine
+        answers a stop to whoever asked for it, so an operator's stop from Neptus reaches us
+        only as this silence: event ``followref_lost`` (a warning) and, as for
+        :meth:`_plan_ended`, no more decisions or References and nothing restarted (a
+        restart would undo the operator's stop); the summary's ``plan_ended`` says why."""
+        self.followref_lost += 1
+        unanswered = now - self.unanswered_since
+        self.plan_ended = (f"DUNE stopped answering our References (no FollowRefState for "
+                           f"{unanswered:.1f} s, link.followref_lost_s "
+                           f"{self.cfg.link.followref_lost_s:g} s) while its states kept coming: "
+                           "the maneuver ended without a word to us (an operator's stop is "
+                           "answered to the operator); the deploy stopped deciding and did not "
+                           "restart it")  # fmt: skip
+        self.event("followref_lost", vehicle=self.link.asv.label, request_id=self.plan_request,
+                   unanswered_s=unanswered, limit_s=self.cfg.link.followref_lost_s,
+                   count=self.followref_lost,
+                   note="no FollowRefState answers our References: no more decisions or "
+                   "References; the maneuver is not restarted")  # fmt: skip
+        self.phase, self.unanswered_since = PLAN_ENDED, None
+        if self.stop_event is not None:
+            self.stop_event.set()
+
+    def _followref_state(self, p, msg: imcpy.FollowRefState, now: float) -> None:
+        """DUNE's answer to a Reference: logged with the next decisions; ours (its
+        ``control_src`` our id) answers the References sent so far; its TIMEOUT restarts the
+        maneuver."""
+        state = getattr(msg.state, "name", str(msg.state))
+        self.followref = {"state": state, "proximity": int(msg.proximity), "recv": now}
+        if msg.control_src != self.link.id:
+            return
+        self.unanswered_since = None
+        if state == "TIMEOUT" and self.phase == RUNNING:
+            self.phase = WAITING
+            self.event("followref_timeout", vehicle=p.label)
+
+    def reference_sent(self) -> None:
+        """A Reference went to the ASV: the watch on its answer starts if none is awaited."""
+        if self.unanswered_since is None:
+            self.unanswered_since = self.clock.now()
+
+    def _followref_silent(self, now: float) -> bool:
+        """Whether a Reference to our running maneuver is unanswered for longer than
+        ``link.followref_lost_s`` (never in a dry run: nothing is sent)."""
+        return (self.phase == RUNNING and not self.dry_run and self.unanswered_since is not None
+                and now - self.unanswered_since > self.cfg.link.followref_lost_s)  # fmt: skip
 
     # --- phases and watchdogs ------------------------------------------------------------
     def auv_ages(self, now: float) -> list[float]:
@@ -62,6 +174,8 @@ class Phases:
         """Whether a watchdog would fire at ``now`` on the states read so far."""
         asv = self.link.asv
         if asv.nav is not None and self.phase != ASV_STALE and not self._asv_fresh(now):
+            return True
+        if self._followref_silent(now):
             return True
         ages = self.auv_ages(now)
         return any(p.nav is not None and auv_status(ages[k], self.gp) != self.status[k]
@@ -100,6 +214,7 @@ class Phases:
         pc.arg = fr
         self.link.send(self.link.asv, pc)
         self.pending, self.phase = (self.request_id, now), STARTING
+        self.sent_requests.add(self.request_id)
         self.plan_starts += 1
         self.event("plan_start_sent", request_id=self.request_id)
 
@@ -136,9 +251,13 @@ class Phases:
         ran before the states that had arrived meanwhile, and a fresh ASV was called stale
         (FollowReference restarted, decisions moved off the period grid).
         """
+        if self.phase == PLAN_ENDED:
+            return  # the run is stopping: nothing to restart
         now = self.clock.now()
         if self._looks_stale(now) and self.link.drain():
             now = self.clock.now()
+        if self.phase == PLAN_ENDED:  # said in what was just read
+            return
         wd = self.cfg.watchdog
         asv = self.link.asv
         if asv.nav is not None and self.phase != ASV_STALE and not self._asv_fresh(now):
@@ -155,6 +274,8 @@ class Phases:
                 if st != OK:
                     self.event(f"auv_{st}", vehicle=p.label, auv=k, age_s=age)
                 self.status[k] = st
+        if self._followref_silent(now):  # the maneuver ended without a word to us
+            self._followref_lost(now)
         if self.phase == STARTING and now - self.pending[1] > self.cfg.link.plan_start_timeout:
             self.event("plan_start_timeout", request_id=self.pending[0])
             self.phase, self.pending = WAITING, None
