@@ -15,8 +15,9 @@ retried after ``plan_start_timeout``) -> ``running``. The ASV's state older than
 ``asv_stale_s`` -> ``asv_stale``: no more References (DUNE then ends the maneuver on its
 timeout and stops), reported; when a state stamped after that verdict comes (not a late one
 from before it: :meth:`~mpcasv.io.deployphases.Phases.asv_back`) -> ``waiting`` and
-FollowReference is started again. A FollowRefState TIMEOUT for our maneuver, or none for
-``link.followref_lost_s``, restarts it; DUNE saying our plan ended stops the run (deployphases).
+FollowReference is started again. A FollowRefState TIMEOUT for our maneuver restarts it;
+DUNE saying our plan ended, or no FollowRefState for ``link.followref_lost_s``, stops the run
+(deployphases).
 
 Shutdown (Ctrl-C / SIGTERM, or ``duration``): stop deciding (states are no longer used),
 stop announcing, heart-beating and listening for discovery; a standby Reference (speed 0)
