@@ -139,6 +139,28 @@ def test_search_is_reproducible_whatever_the_number_of_workers(tmp_path):
     assert len(tables[0]) == 4 and tables[0]["margin_m"].notna().all()
 
 
+def test_a_search_killed_while_asking_resumes(tmp_path):
+    """A search stopped while a batch was being asked leaves a RUNNING trial with some of its
+    parameters; a resume draws the rest and runs it (it ended every resume in a traceback,
+    KeyError on the first missing parameter: a new user's Ctrl-C, session 47)."""
+    fam = load_family(short_family(tmp_path, 40.0))
+    setup = SearchSetup(fam, "hybrid-single", "paper1-field", seed=3)
+    db = tmp_path / "s.db"
+    study = search(setup, db, budget=2)
+    first = fam.spec.param[0]
+    trial = study.ask()  # as the interrupted ask left it: one parameter drawn
+    if first.integer:
+        trial.suggest_int(first.name, int(first.low), int(first.high))
+    else:
+        trial.suggest_float(first.name, first.low, first.high)
+    study = search(setup, db, budget=3)
+    table = trials_table(study)
+    assert len(table) == 3 and table["margin_m"].notna().all()
+    resumed = study.trials[trial.number]
+    assert resumed.state.name == "COMPLETE"
+    assert set(resumed.params) == {p.name for p in fam.spec.param}
+
+
 def _falsify_cmd(family: Path, out: Path, budget: int) -> list[str]:
     return [sys.executable, "-m", "mpcasv.cli", "falsify", str(family), "--controller",
             "hybrid-single", "--params", "paper1-field", "--budget", str(budget), "--out",
@@ -193,6 +215,52 @@ def test_killed_search_resumes_without_losing_a_finished_run(tmp_path):
     pd.testing.assert_frame_equal(table.drop(columns="state"), once.drop(columns="state"))
 
 
+def test_ctrl_c_stops_a_search_with_workers_in_one_line(tmp_path):
+    """Ctrl-C (SIGINT to the whole process group, as a terminal sends it) while two worker
+    processes run: exit 130 with the one 'interrupted' line, no worker's traceback (38-73
+    lines of them before: a new user, session 47), and the workers are gone."""
+    family, out = short_family(tmp_path, 120.0), tmp_path / "search"
+    env = os.environ | {"PYTHONPATH": str(ROOT), "MPLBACKEND": "Agg"}
+    proc = subprocess.Popen([*_falsify_cmd(family, out, 40), "--workers", "2"], env=env,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            start_new_session=True)  # fmt: skip
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline and proc.poll() is None:
+        try:
+            if len(_finished(out / "study.db")) >= 2:  # the pool is up and running runs
+                break
+        except sqlite3.OperationalError:  # not created yet / locked
+            pass
+        time.sleep(0.05)
+    assert proc.poll() is None, proc.communicate()
+    for _ in range(3):  # (a Ctrl-C while the pool starts processes is lost: press again)
+        os.killpg(proc.pid, signal.SIGINT)
+        try:
+            _, err = proc.communicate(timeout=20)
+            break
+        except subprocess.TimeoutExpired:
+            continue
+    else:
+        os.killpg(proc.pid, signal.SIGKILL)
+        raise AssertionError("the search did not stop on Ctrl-C")
+    err = err.decode()
+    assert proc.returncode == 130, err
+    assert "Traceback" not in err and "KeyboardInterrupt" not in err, err
+    assert "interrupted" in err
+
+
+def test_the_search_workers_leave_ctrl_c_to_the_search():
+    """The search's worker processes start with SIGINT ignored (the search stops them), so
+    a Ctrl-C to the process group interrupts no worker mid-import or between runs."""
+    from mpcasv.experiments.falsify_pool import WorkerPool
+
+    with WorkerPool(2, None) as pool:
+        handlers = [f.result() for f in [pool.pool.submit(signal.getsignal, signal.SIGINT)
+                                         for _ in range(4)]]  # fmt: skip
+    assert handlers == [signal.SIG_IGN] * 4
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # restored here
+
+
 def test_cli_writes_worst_cases_that_load_and_reproduce_their_margin(tmp_path):
     out = tmp_path / "f"
     code = main(["falsify", str(short_family(tmp_path, 60.0)), "--controller", "hybrid-single",
@@ -236,6 +304,25 @@ def test_simulate_of_a_written_worst_case_is_the_searched_run(tmp_path):
     for wall in WALL_CLOCK:  # measured, not simulated
         searched.pop(wall, None), simulated.pop(wall, None)
     assert searched == simulated
+
+
+def test_a_worst_case_found_with_a_seed_says_the_seed(tmp_path, capsys):
+    """A scenario file holds no seed: a search with --seed 3 writes its worst case with a
+    header naming `--seed 3`, and its last line says to simulate with it; that run is the
+    searched one (at the default seed 0 it was another: a new user, session 47)."""
+    out = tmp_path / "f"
+    assert main(["falsify", str(short_family(tmp_path, 60.0)), "--controller", "hybrid-single",
+                 "--params", "paper1-field", "--budget", "2", "--out", str(out), "--worst", "1",
+                 "--seed", "3", "--quiet"]) == 0  # fmt: skip
+    assert "simulate them with --seed 3" in capsys.readouterr().out
+    summary = json.loads((out / "summary.json").read_text())
+    (name,) = summary["worst_cases"]
+    path = out / "worst" / f"{name}.toml"
+    assert f"# the searched run: mpcasv simulate {name}.toml --seed 3" in path.read_text()
+    run = tmp_path / "sim"
+    assert main(["simulate", str(path), "--out", str(run), "--seed", "3"]) == 0
+    rob = robustness(pd.read_parquet(run / "timeseries.parquet"), 1, 50.0, 1.0)
+    assert rob.margin_m == pytest.approx(summary["worst_margin_m"], abs=1e-9)
 
 
 def test_a_worst_case_names_a_relative_preset_path_from_its_own_folder(tmp_path, monkeypatch):
@@ -387,3 +474,4 @@ def test_a_run_that_does_not_return_is_recorded_as_a_timeout(tmp_path, monkeypat
 def _sleeper(args):  # a module-level stand-in for a run (picklable by reference)
     time.sleep(args[1])
     return {"slept": args[1]}, None
+

@@ -61,6 +61,7 @@ def run(args: argparse.Namespace) -> int:
     from mpcasv.experiments.report import READ_LINE
     from mpcasv.experiments.runner import JOB_TIMEOUT_S, is_url, run_suite, say_untested_current
     from mpcasv.experiments.suite_file import load_suite
+    from mpcasv.experiments.sweep_folder import LOCK_FILE
     from mpcasv.experiments.workers import check_workers
     from mpcasv.outputs import check_not_other_output, check_output_folder
 
@@ -78,7 +79,9 @@ def run(args: argparse.Namespace) -> int:
     limit = JOB_TIMEOUT_S if args.job_timeout is None else (args.job_timeout or None)
     suite = load_suite(args.suite)[0]  # a bad suite (or another kind of file): refused now
     out = check_output_folder(args.out or Path("results") / suite.name)
-    check_not_other_output(out, "mpcasv compare")
+    # a non-empty folder that is no compare's (no suite.toml, no lock) is a user's: refused
+    # (its report.md and results.parquet were replaced: a new user, session 47)
+    check_not_other_output(out, "mpcasv compare", own=("suite.toml", LOCK_FILE))
     if (out / "study.db").exists():  # an Optuna study: tune controller's or falsify's
         raise ConfigError(f"--out {out}: holds an Optuna study (study.db) of 'mpcasv tune "
                           "controller' or 'mpcasv falsify'; 'mpcasv compare' would overwrite "

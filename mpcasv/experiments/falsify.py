@@ -181,6 +181,25 @@ class SearchSetup:
                 self.seed, self.r_sep)  # fmt: skip
 
 
+def _complete(study, trials, dists: dict, seed: int) -> None:
+    """Draw the parameters ``trials`` (RUNNING) lack, by the CMA-ES sampler seeded with
+    ``seed``: a search killed while a batch was being asked left a trial with some of them
+    (every resume then failed in a traceback on the first missing one, a new user's
+    Ctrl-C, session 47)."""
+    import optuna
+
+    study.sampler = optuna.samplers.CmaEsSampler(seed=seed, warn_independent_sampling=False)
+    for t in trials:
+        trial = optuna.trial.Trial(study, t._trial_id)
+        for name, d in dists.items():
+            if name in t.params:
+                continue
+            if isinstance(d, optuna.distributions.IntDistribution):
+                trial.suggest_int(name, d.low, d.high)
+            else:
+                trial.suggest_float(name, d.low, d.high)
+
+
 def search(setup: SearchSetup, storage_path: Path, budget: int, workers: int = 1,
            progress: Callable[[int, dict], None] | None = None,
            timeout: float | None = None):  # fmt: skip
@@ -196,7 +215,8 @@ def search(setup: SearchSetup, storage_path: Path, budget: int, workers: int = 1
     each batch's sampler is seeded from the search's seed and the number of trials asked
     before it (:func:`batch_seed`), so a search killed while its runs go and resumed asks and
     runs what the search run at once does. Not if it was stopped while a batch was being asked
-    (milliseconds between runs): the batches after it start from other trial counts; nor when
+    (milliseconds between runs): the parameters its trials lack are drawn then
+    (:func:`_complete`) and the batches after it start from other trial counts; nor when
     a finished search's budget, not a multiple of :data:`BATCH`, is raised (its last batch was
     short). (Until session 44 the interrupted trials were marked failed and
     others asked in their place, and the sampler's generator ran on from its seed in each
@@ -235,6 +255,11 @@ def search(setup: SearchSetup, storage_path: Path, budget: int, workers: int = 1
 
     with WorkerPool(pool_size(workers, min(BATCH, budget)), timeout) as pool:
         left = study.get_trials(deepcopy=False, states=(optuna.trial.TrialState.RUNNING,))
+        partial = [t for t in left if set(t.params) != set(dists)]
+        if partial:  # killed while its batch was being asked: draw what was not drawn
+            _complete(study, partial, dists, batch_seed(setup.seed, min(t.number for t in
+                                                                       partial)))  # fmt: skip
+            left = study.get_trials(deepcopy=False, states=(optuna.trial.TrialState.RUNNING,))
         if left:  # a killed search's unfinished batch, as it was asked
             run_batch(items(left), pool, tell)
         while (done := n_finished(study)) < budget:

@@ -118,7 +118,9 @@ def _search_and_write(args: argparse.Namespace, setup, out: Path) -> int:
     print(f"{count(len(table), 'run')} ({count(summary['errors'], 'error')}); worst margin "
           f"{worst:.2f} m "
           f"(r_sep {summary['r_sep_m']:g} m), longest stay {summary['longest_stay_s']:.0f} s; "
-          f"worst cases: {', '.join(written)}; table: {out / 'trials.md'}")  # fmt: skip
+          f"worst cases: {', '.join(written)}"
+          + (f" (simulate them with --seed {args.seed}, the search's)" if args.seed else "")
+          + f"; table: {out / 'trials.md'}")  # fmt: skip
     if args.require_margin is not None and worst < args.require_margin:
         print(f"margin check FAIL: {worst:.2f} m < {args.require_margin:g} m")
         return 1
@@ -187,7 +189,8 @@ def check_inputs(args: argparse.Namespace):
                           f"{worst!r}, not a file name: {exc}") from None
     out = args.out or Path("results") / "falsify" / f"{family.name}-{args.controller}"
     check_output_folder(out)
-    check_not_other_output(out, "mpcasv falsify")  # a compare or tune folder: refused
+    # a compare or tune folder, or a non-empty one that is no search's: refused
+    check_not_other_output(out, "mpcasv falsify", own=("study.db", "falsify.lock"))
     setup = SearchSetup(family, args.controller, preset, args.seed, args.separation,
                         args.objective, named=args.params)  # fmt: skip
     identity = study_identity(family, args.controller, args.params, params, args.seed,
@@ -245,7 +248,9 @@ def write_worst(setup, row, rank: int, folder: Path) -> str:
     # the run under the worst case's own name (its run.json and figures named the family)
     scenario = scenario_from_dict(data, f"{fam.source} ({name})")
     folder.mkdir(parents=True, exist_ok=True)
-    header = f"# {data['description']}\n# {prov['falsify']}\n"
+    # the scenario format has no seed: the run is this file with the search's seed
+    again = f"mpcasv simulate {name}.toml" + (f" --seed {setup.seed}" if setup.seed else "")
+    header = f"# {data['description']}\n# {prov['falsify']}\n# the searched run: {again}\n"
     (folder / f"{name}.toml").write_text(header + tomli_w.dumps(data))
     ctrl = make_controller(setup.controller, len(scenario.auv), setup.preset,
                            boat=Boat.of_scenario(scenario))  # fmt: skip

@@ -39,25 +39,37 @@ class WorkerPool:
             self.pool = self._new()
         return self
 
-    def __exit__(self, *exc) -> None:
-        if self.pool is not None:
+    def __exit__(self, kind, *exc) -> None:
+        if self.pool is None:
+            return
+        if kind is None:
             self.pool.shutdown(wait=True, cancel_futures=True)
+        else:  # Ctrl-C or a failure: the runs in flight are ended, not waited for (the
+            self._kill()  # workers ignore SIGINT: spawning_quietly)
 
     def _new(self) -> Executor:
         """A fresh pool whose processes have started (untimed): a run's deadline counts the
         run, not the spawn and imports of a process (seconds on a loaded machine; after a
         restart they made a quick run miss a 3-s deadline in a test under load)."""
+        from mpcasv.experiments.workers import spawning_quietly
+
         pool = ProcessPoolExecutor(self.workers, mp_context=get_context("spawn"),
                                    initializer=_watch_parent, initargs=(os.getpid(),))  # fmt: skip
-        wait([pool.submit(_ready) for _ in range(self.workers)])
+        with spawning_quietly():  # the workers ignore Ctrl-C: this process stops them
+            ready = [pool.submit(_ready) for _ in range(self.workers)]
+        wait(ready)
         return pool
 
-    def restart(self) -> None:
-        """End every worker process (a run that does not return) and start a fresh pool."""
+    def _kill(self) -> None:
+        """End every worker process now."""
         self.pool.shutdown(wait=False, cancel_futures=True)
         for child in multiprocessing.active_children():
             child.kill()
             child.join()
+
+    def restart(self) -> None:
+        """End every worker process (a run that does not return) and start a fresh pool."""
+        self._kill()
         self.pool = self._new()
 
 

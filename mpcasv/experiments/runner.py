@@ -52,7 +52,7 @@ from mpcasv.experiments.sweep_folder import (
     remove_leftovers,
     runs_location,
 )
-from mpcasv.experiments.workers import pool_size, reduced_note
+from mpcasv.experiments.workers import pool_size, reduced_note, spawning_quietly
 from mpcasv.outputs import folder_lock
 from mpcasv.wording import count
 
@@ -210,7 +210,9 @@ def _run_pool(jobs, out: Path, runs: str, stats: SweepStats, workers: int, bar,
     pool = ProcessPool(workers, initializer=_watch_parent, initargs=(os.getpid(),),
                        context=get_context("spawn"))  # fmt: skip
     try:
-        futures = {pool.schedule(run_job, (job, runs), timeout=job_timeout): job for job in jobs}
+        with spawning_quietly():  # the first schedule starts the workers: they ignore Ctrl-C
+            futures = {pool.schedule(run_job, (job, runs), timeout=job_timeout): job
+                       for job in jobs}  # fmt: skip
         for fut in as_completed(futures):
             job = futures[fut]
             try:

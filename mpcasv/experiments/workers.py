@@ -11,7 +11,10 @@ run the jobs: ``--workers`` given with it is refused (it was silently ignored).
 
 from __future__ import annotations
 
+import contextlib
 import os
+import signal
+import threading
 
 from mpcasv.config import ConfigError
 
@@ -65,3 +68,22 @@ def reduced_note(workers: int, used: int, why: str = "the number of jobs to run"
     """`` (--workers N reduced to M, the number of jobs to run)`` when fewer processes start
     than asked, else ``""`` (appended to the command's progress line)."""
     return f" (--workers {workers} reduced to {used}, {why})" if used < workers else ""
+
+
+@contextlib.contextmanager
+def spawning_quietly():
+    """Ignore SIGINT in this process while the block starts worker processes (main thread
+    only; elsewhere nothing changes). A spawned worker inherits the ignored SIGINT through
+    its exec and Python leaves it ignored, so a Ctrl-C, which the terminal sends to the
+    whole process group, reaches only this process, which stops the pool: it no longer
+    interrupts the workers' start-up and imports (38-73 lines of their tracebacks on stderr
+    under ``falsify`` and ``tune controller``: a new user, session 47). A Ctrl-C within the
+    block itself is lost (the block lasts as long as the processes take to start)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
