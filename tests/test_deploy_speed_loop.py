@@ -7,8 +7,8 @@ gain of 1.25 RPM per m/s and an integrator of 1 RPM/s per m/s of error. The depl
 cap its commands at the achievable speed it learned, so DUNE's error went to zero and the
 boat stayed at its floor for a whole mission (a field engineer's finding against the recorded
 traffic, session 47: 0.71 m/s for 10 min; without the cap 0.89 -> 1.35 -> 1.77 m/s at 1, 4
-and 10 min). Now the plan keeps the cap, a command at it asks DUNE for the controller's own
-top speed, and the cap follows the achievable speed up.
+and 10 min). Now a hybrid's command at the cap asks DUNE for its own speed, and the cap
+follows the achievable speed up (an MPC's command is sent capped: docs/deploy.md).
 """
 
 from __future__ import annotations

@@ -197,6 +197,9 @@ def test_deploy_speed_feedback_reaches_the_mpcs_plan(tmp_path):
             t = 0.1 * k
             dep._on_state(asv, NavState(t, 0.12 * k, 0.0, 0.0, 0.0, 1.2, 0, 0, 1.2, 0.0, 0, 0), t)
         assert dep.speed_cap == pytest.approx(1.2) and ctrl.u_cap == pytest.approx(1.2)
+        # an MPC's command comes from its plan and the speed it makes: never read as "all the
+        # boat makes" and lifted (it then asked DUNE for full speed whatever the plan wanted)
+        assert dep.speed_ask is None
         assert ctrl.params.speed == pytest.approx(1.2)  # the hybrid fallback's, as before
         dep.jsonl.flush()
         ev = [r for r in read_jsonl(dep.jsonl.path)

@@ -246,9 +246,10 @@ class PlanEstimator:
         s, d = self.path.project(est.position)
         _, T = self.path.point(s)
         # d is the distance across the path: its 1-D variance, with the path model's error
-        # (beyond the path's ends, where there is no across, the estimate's largest, 2-D)
+        # (at or beyond the path's ends, where d is to the end point, the largest, 2-D)
         C = np.reshape(est.cov, (2, 2))
-        n, dof = (np.array([-T[1], T[0]]), 1) if np.any(T) else (None, 2)
+        inside = np.any(T) and 0.0 < s < self.path.length  # else d is to an end: 2-D
+        n, dof = (np.array([-T[1], T[0]]), 1) if inside else (None, 2)
         var = float(n @ C @ n) if n is not None else est.sigma**2
         sig = math.sqrt(max(var, 0.0) + (self.plan.acceptance + p.sigma_path) ** 2)
         v = np.array([est.v_N, est.v_E])

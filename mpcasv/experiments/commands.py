@@ -79,13 +79,15 @@ def run(args: argparse.Namespace) -> int:
     limit = JOB_TIMEOUT_S if args.job_timeout is None else (args.job_timeout or None)
     suite = load_suite(args.suite)[0]  # a bad suite (or another kind of file): refused now
     out = check_output_folder(args.out or Path("results") / suite.name)
-    # a non-empty folder that is no compare's (no suite.toml, no lock) is a user's: refused
-    # (its report.md and results.parquet were replaced: a new user, session 47)
-    check_not_other_output(out, "mpcasv compare", own=("suite.toml", LOCK_FILE))
+    check_not_other_output(out, "mpcasv compare")
     if (out / "study.db").exists():  # an Optuna study: tune controller's or falsify's
         raise ConfigError(f"--out {out}: holds an Optuna study (study.db) of 'mpcasv tune "
                           "controller' or 'mpcasv falsify'; 'mpcasv compare' would overwrite "
                           "files there: use another folder")  # fmt: skip
+    if not (out / "parts").exists():  # (results without suite.toml: refused by the runner)
+        # a non-empty folder that is no compare's (no suite.toml, no lock) is a user's:
+        # refused (its report.md and results.parquet were replaced: a new user, session 47)
+        check_not_other_output(out, "mpcasv compare", own=("suite.toml", LOCK_FILE))
     if args.runs_dir is not None and not is_url(args.runs_dir) and not args.dask:
         check_output_folder(args.runs_dir, "--runs-dir")  # (with --dask: the workers' paths)
     stats, exp, results = run_suite(args.suite, out, args.workers, args.dask, args.quiet,

@@ -361,6 +361,11 @@ class DeployConfig:
                 f"{self.link.followref_timeout:g} s is shorter than two controller."
                 f"control_period = {Tc:g} s: DUNE would end the maneuver after one late or "
                 "skipped decision"))  # fmt: skip
+        lost = self.link.followref_lost_s
+        if lost < 2 * Tc:  # a Reference goes every period: one lost answer must not end it
+            raise FieldError("link.followref_lost_s", (
+                f"{lost:g} s is shorter than two controller.control_period = {Tc:g} s: one lost "
+                "FollowRefState answer would end the run"))  # fmt: skip
         return self
 
     @model_validator(mode="after")

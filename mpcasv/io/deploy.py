@@ -166,8 +166,9 @@ class Deploy(Phases, BoatFeedback, FieldMode, Ending):
             self.vessel = deploy_boat(cfg).vessel  # its actuation maps DUNE's set-points
             self.speed = SpeedWatch(cfg.speed)
             self.speed_cap: float | None = None  # applied to the controller (speed_feedback)
-            self.speed_base: float | None = None  # its params.speed before the first cap
-            self.speed_ask: float | None = None  # its top speed then: asked at the cap
+            self.speed_base: float | None = None  # its params.speed before the 1st cap
+            self.speed_top: float | None = None  # its top speed then (params or plan)
+            self.speed_ask: float | None = None  # asked at the cap (no plan: hybrids)
             self.closing = False  # shutdown begun: no more decisions
             self.plan_request: int | None = None  # request id of the running FollowReference
             self.plan_done = asyncio.Event()

@@ -24,12 +24,12 @@ class Ending:
 
     def begin_shutdown(self) -> bool:
         """Stop deciding and listening for vehicles, then the final standby and MANDONE (if
-        we ever started FollowReference, and DUNE has not ended it: after ``plan_ended`` the
-        maneuver is no longer ours to command). True if MANDONE was sent."""
+        we ever started FollowReference, and DUNE has not said it ended it: after its
+        ``plan_ended`` the maneuver is no longer ours to command). True if MANDONE was sent."""
         self.closing = True
         self.link.stop_receiving()
         asv = self.link.asv
-        if self.dry_run or not self.started or asv.id is None or self.plan_ended is not None:
+        if self.dry_run or not self.started or asv.id is None or self.ended_by_dune:
             return False
         here = (asv.nav.N, asv.nav.E) if asv.nav is not None else (0.0, 0.0)
         self.link.send(asv, reference(Command.standby(), here, self.link.origin))

@@ -69,12 +69,12 @@ def cap_command(cmd, speed_cap: float | None, command_max: float | None,
       ``controller.speed_feedback``) and ``command_max`` (``speed.command_max``, the
       autopilot's limit), either None for none: an MPC's speed comes from its plan, not from
       ``params.speed``, hence the cap on the command too.
-    - With ``ask`` (m/s; the controller's own top speed before the cap, given once a cap is
-      applied): a transit at :data:`AT_CAP` x ``speed_cap`` or more, i.e. all the boat makes,
-      asks the autopilot for ``ask`` (at most ``command_max``) instead. A speed loop that
-      climbs only while behind its set-point (DUNE's Otter: a 250-RPM floor, 0.7 m/s, and an
-      integrator of 1 RPM/s per m/s of error) locks at the speed it made when asked for it
-      (docs/deploy.md, "Achieved speed"); the plan keeps the cap.
+    - With ``ask`` (m/s; a controller without a plan: its own speed before the cap, given
+      once a cap is applied): a transit at :data:`AT_CAP` x ``speed_cap`` or more, i.e. all
+      the boat makes, asks the autopilot for ``ask`` (at most ``command_max``) instead. A
+      speed loop that climbs only while behind its set-point (DUNE's Otter: a 250-RPM
+      floor, 0.7 m/s, and an integrator of 1 RPM/s per m/s of error) locks at the speed it
+      made when asked for it (docs/deploy.md, "Achieved speed").
 
     ``capped``: the speed was lowered. One definition for the deploy and its replay."""
     transit = cmd.mode is Mode.TRANSIT
@@ -337,20 +337,26 @@ class BoatFeedback:
         its ``speed`` or, for an MPC, than the highest speed its plan may use
         (``speed_limit``: the vessel's top speed until capped); from then on the cap follows
         the achievable speed, down or up, whenever they differ by more than 10 %, never above
-        the controller's own top speed (``speed_ask``, which a command at the cap asks the
-        autopilot for: :func:`cap_command`)."""
+        the controller's own top speed. A controller without a plan (the hybrids) always
+        commands its ``speed``: a command of it at the cap asks the autopilot for its own
+        speed (``speed_ask``, :func:`cap_command`). An MPC's command comes from its plan and
+        the speed it makes (``speed_rule``): it is not read as "all the boat makes", and is
+        sent capped (a review: with the ask, a capped MPC asked DUNE for full speed whatever
+        its plan wanted, and could not slow the boat)."""
         cap = self.speed.achievable
         if not self.cfg.controller.speed_feedback or cap is None:
             return
-        if self.speed_ask is None:  # no cap yet
+        if self.speed_base is None:  # no cap yet
             current = float(getattr(self.controller.params, "speed", math.inf))
             plan = float(getattr(self.controller, "speed_limit", -math.inf))
             if cap < 0.9 * max(current, plan):
                 self.speed_base = current
-                self.speed_ask = max(v for v in (current, plan) if math.isfinite(v))
+                self.speed_top = max(v for v in (current, plan) if math.isfinite(v))
+                if not hasattr(self.controller, "set_speed_cap"):  # no plan: see cap_command
+                    self.speed_ask = current
                 self.set_controller_speed(round(cap, 2))
             return
-        new = round(min(cap, self.speed_ask), 2)
+        new = round(min(cap, self.speed_top), 2)
         now = self.cap_pending if self.cap_pending is not None else self.speed_cap
         if now is None or abs(new - now) > 0.1 * now:
             self.set_controller_speed(new)

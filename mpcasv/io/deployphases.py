@@ -49,6 +49,7 @@ class Phases:
         self.unanswered_since: float | None = None  # first Reference no FollowRefState answered
         self.followref_lost = 0  # followref_lost events (summary)
         self.plan_ended: str | None = None  # why DUNE ended our plan, in one line (summary)
+        self.ended_by_dune = False  # its PlanControl said so (else: its answers stopped)
         self.stop_event = None  # set by run(): what ends the run when DUNE ended our plan
 
     def _plan_control(self, msg: imcpy.PlanControl, now: float) -> None:
@@ -56,7 +57,7 @@ class Phases:
                 "plan_id": msg.plan_id, "info": msg.info}  # fmt: skip
         answer = msg.type in (_PC.TypeEnum.SUCCESS, _PC.TypeEnum.FAILURE)
         if (self.closing and answer and msg.request_id == self.plan_request
-                and self.plan_ended is None):  # fmt: skip
+                and not self.ended_by_dune):  # fmt: skip
             self.event("plan_completed", **info)  # DUNE's answer to our MANDONE
             self.plan_done.set()
             return
@@ -108,6 +109,7 @@ class Phases:
                            f"{kind} of op {op}, request {msg.request_id}): "
                            f"{msg.info or '(no info)'}; the deploy stopped deciding and did "
                            "not restart it")  # fmt: skip
+        self.ended_by_dune = True
         self.event("plan_ended", **(info | {"type": kind, "op": op}),
                    note="no more decisions or References; the plan is not restarted")
         self.phase = PLAN_ENDED
@@ -120,7 +122,10 @@ class Phases:
         answers a stop to whoever asked for it, so an operator's stop from Neptus reaches us
         only as this silence: event ``followref_lost`` (a warning) and, as for
         :meth:`_plan_ended`, no more decisions or References and nothing restarted (a
-        restart would undo the operator's stop); the summary's ``plan_ended`` says why."""
+        restart would undo the operator's stop); the summary's ``plan_ended`` says why. Its
+        shutdown still sends the standby Reference and MANDONE (harmless if the maneuver is
+        gone; if only its answers were lost, they stop the boat at once rather than at DUNE's
+        ``followref_timeout``)."""
         self.followref_lost += 1
         unanswered = now - self.unanswered_since
         self.plan_ended = (f"DUNE stopped answering our References (no FollowRefState for "
@@ -158,9 +163,14 @@ class Phases:
 
     def _followref_silent(self, now: float) -> bool:
         """Whether a Reference to our running maneuver is unanswered for longer than
-        ``link.followref_lost_s`` (never in a dry run: nothing is sent)."""
+        ``link.followref_lost_s`` while the ASV's states arrived for longer than that after
+        it (a dropout that stops both is ``asv_stale``'s, which resumes; never in a dry run:
+        nothing is sent)."""
+        lost, asv = self.cfg.link.followref_lost_s, self.link.asv
+        # ... while the ASV's states kept coming (a radio dropout stops both: asv_stale's)
         return (self.phase == RUNNING and not self.dry_run and self.unanswered_since is not None
-                and now - self.unanswered_since > self.cfg.link.followref_lost_s)  # fmt: skip
+                and now - self.unanswered_since > lost and asv.nav_recv is not None
+                and asv.nav_recv - self.unanswered_since > lost)  # fmt: skip
 
     # --- phases and watchdogs ------------------------------------------------------------
     def auv_ages(self, now: float) -> list[float]:
