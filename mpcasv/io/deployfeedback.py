@@ -362,8 +362,9 @@ class BoatFeedback:
             self.set_controller_speed(new)
 
     def set_controller_speed(self, speed: float) -> None:
-        """Lower ``speed`` in the controller's parameters (and in those of its hybrid
-        fallback, for the MPCs) to ``speed`` (m/s) without rebuilding it: its state (modes,
+        """Set ``speed`` in the controller's parameters (and in those of its hybrid
+        fallback, for the MPCs) to ``speed`` (m/s; never above its own speed before the first
+        cap) without rebuilding it: its state (modes,
         timers, warm start) is kept; an MPC's plan is capped at it too
         (:meth:`~mpcasv.mpc.controller.MPCController.set_speed_cap`: the planned thrust held
         to the steady thrust of that speed). Logged as ``controller_speed_cap`` (``plan``:
