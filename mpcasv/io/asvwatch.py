@@ -18,7 +18,7 @@ set-points of the vessel's actuation (:func:`dune_actuators`, the identification
 
 :class:`SpeedWatch` compares the speed the ASV achieves, over ground (``|(vx, vy)|``) and
 through the water (``u``), with the commanded transit speed (docs: ``[speed]`` of the deploy
-configuration, :class:`mpcasv.io.config.SpeedSpec`). A shortfall that persists sets the
+configuration, :class:`mpcasv.io.config_limits.SpeedSpec`). A shortfall that persists sets the
 *achievable* speed: the mean speed through the water over the window (the boat's own
 propulsion; the speed over ground is logged beside it). DUNE's stock Otter asked for
 2.0 m/s makes 0.8-0.9 m/s (../shared/data/dune-traffic/README.md, 9).

@@ -245,7 +245,7 @@ def replay(log: str | Path, controller: str | None = None, preset: str | None = 
 
 
 def _logged_watchdog(logged: dict, path: Path, notes: list[str]):
-    """The logged ``[watchdog]`` values as :class:`~mpcasv.io.config.WatchdogSpec` would hold
+    """The logged ``[watchdog]`` values as :class:`~mpcasv.io.config_limits.WatchdogSpec` would hold
     them; values this version bounds tighter than the deploy that wrote them did (session
     43: ``asv_stale_s`` in [1, 60] s) are taken as logged, with a note, not refused: the log
     is what happened."""
