@@ -14,13 +14,7 @@ from mpcasv.control.execution import steering_floor
 from mpcasv.control.params import load_execution
 from mpcasv.control.steering import full_lock_turns, lock_thrust
 from mpcasv.control.tuning_speed import PIROUETTE_CASE, pirouette_check, turn
-from mpcasv.models.params import load_vessel
-from mpcasv.models.vessel import IX, VesselModel
-
-
-@pytest.fixture(scope="module")
-def model() -> VesselModel:
-    return VesselModel(load_vessel("gretha"))
+from mpcasv.models.vessel import IX
 
 
 @pytest.fixture(scope="module")

@@ -8,16 +8,10 @@ import numpy as np
 import pytest
 
 from mpcasv.models.frames import body_to_ned, ned_to_body
-from mpcasv.models.params import load_vessel
-from mpcasv.models.vessel import NU, NX, VesselModel
+from mpcasv.models.vessel import NU, NX
 
 RNG = np.random.default_rng(3)
 STATES = [(float(RNG.uniform(-7, 7)), *RNG.uniform(-2, 2, 4)) for _ in range(6)]
-
-
-@pytest.fixture(scope="module")
-def model():
-    return VesselModel(load_vessel("gretha"))
 
 
 @pytest.mark.parametrize("psi,u,v,cN,cE", STATES)

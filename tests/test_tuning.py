@@ -34,16 +34,6 @@ from mpcasv.models.vessel import IX, VesselModel
 warnings.filterwarnings("ignore", category=UserWarning, module="control")
 
 
-@pytest.fixture(scope="module")
-def model() -> VesselModel:
-    return VesselModel(load_vessel("gretha"))
-
-
-@pytest.fixture(scope="module")
-def shipped():
-    return load_execution("gretha")
-
-
 @pytest.mark.parametrize("u0", [0.5, 1.5, 2.5])
 def test_nomoto_matches_linearised_model(model, u0):
     """Second-order Nomoto x steering lag == delta_cmd -> r of the full 8-state Jacobians."""

@@ -15,23 +15,10 @@ from shared_data import CASES
 from shared_data import needs_shared as needs_cases
 
 from mpcasv.cli import main
-from mpcasv.control.params import load_execution
 from mpcasv.control.tuning import run_closed_loop
 from mpcasv.control.tuning_speed import place_speed_pi, speed_figures, surge_plant, turn
-from mpcasv.models.params import load_vessel
-from mpcasv.models.vessel import VesselModel
 
 warnings.filterwarnings("ignore", category=UserWarning, module="control")
-
-
-@pytest.fixture(scope="module")
-def model() -> VesselModel:
-    return VesselModel(load_vessel("gretha"))
-
-
-@pytest.fixture(scope="module")
-def shipped():
-    return load_execution("gretha")
 
 
 def test_speed_loop_design(model, shipped):

@@ -17,11 +17,6 @@ from mpcasv.models.vessel import IX, NX, VesselModel, idle_weight
 DOCS = Path(__file__).resolve().parents[1] / "docs" / "vessel.md"
 
 
-@pytest.fixture(scope="module")
-def model() -> VesselModel:
-    return VesselModel(load_vessel("gretha"))
-
-
 def run(model, x0, u, seconds, dt=0.1, c=(0.0, 0.0)):
     F = model.rk4(dt)
     xs = [np.asarray(x0, float)]
