@@ -41,6 +41,7 @@ from mpcasv.io.deploycontroller import (
     controller_overrides,
     deploy_boat,
 )
+from mpcasv.io.netcheck import is_wildcard
 from mpcasv.models.acoustics import AcousticParams
 
 __all__ = [  # the controller's part is mpcasv.io.deploycontroller's, re-exported
@@ -319,8 +320,7 @@ class DeployConfig:
                                                 for v in self.vehicle):  # fmt: skip
             raise ValueError("link.transport = 'tcp' needs 'tcp' and 'id' for every vehicle")
         unaddressed = [v.label for v in self.vehicle if v.address is None]
-        if (self.link.transport == "udp" and ipaddress.IPv4Address(self.link.bind).is_unspecified
-                and unaddressed):  # fmt: skip
+        if self.link.transport == "udp" and is_wildcard(self.link.bind) and unaddressed:
             raise FieldError("link.bind", (
                 f"{self.link.bind} (every local address) needs every vehicle's 'address' (not "
                 f"given for {', '.join(unaddressed)}): DUNE streams only to the imc+udp address "

@@ -168,7 +168,6 @@ class Deploy(Phases, BoatFeedback, FieldMode, Ending):
             self.speed_cap: float | None = None  # applied to the controller (speed_feedback)
             self.speed_base: float | None = None  # its params.speed before the 1st cap
             self.speed_top: float | None = None  # its top speed then (params or plan)
-            self.speed_ask: float | None = None  # asked at the cap (no plan: hybrids)
             self.closing = False  # shutdown begun: no more decisions
             self.plan_request: int | None = None  # request id of the running FollowReference
             self.plan_done = asyncio.Event()

@@ -331,6 +331,13 @@ class BoatFeedback:
                            "propeller state assumed from our command")  # fmt: skip
         return on, source
 
+    @property
+    def speed_ask(self) -> float | None:
+        """What a transit at the cap asks the autopilot for (m/s, :func:`cap_command`): a
+        controller without a plan (the hybrids) its own speed before the first cap; None for
+        an MPC (its command comes from its plan) and before any cap."""
+        return None if hasattr(self.controller, "set_speed_cap") else self.speed_base
+
     def _speed_feedback(self) -> None:
         """``controller.speed_feedback``: cap the controller's transit speed with the learned
         achievable speed (:meth:`set_controller_speed`) when it is more than 10 % lower than
@@ -352,8 +359,6 @@ class BoatFeedback:
             if cap < 0.9 * max(current, plan):
                 self.speed_base = current
                 self.speed_top = max(v for v in (current, plan) if math.isfinite(v))
-                if not hasattr(self.controller, "set_speed_cap"):  # no plan: see cap_command
-                    self.speed_ask = current
                 self.set_controller_speed(round(cap, 2))
             return
         new = round(min(cap, self.speed_top), 2)

@@ -105,14 +105,18 @@ class Phases:
         (``plan_ended``)."""
         kind = getattr(msg.type, "name", str(msg.type))
         op = getattr(msg.op, "name", str(msg.op))
-        self.plan_ended = (f"DUNE ended our FollowReference plan {msg.plan_id!r} (PlanControl "
-                           f"{kind} of op {op}, request {msg.request_id}): "
-                           f"{msg.info or '(no info)'}; the deploy stopped deciding and did "
-                           "not restart it")  # fmt: skip
         self.ended_by_dune = True
         self.event("plan_ended", **(info | {"type": kind, "op": op}),
                    note="no more decisions or References; the plan is not restarted")
-        self.phase = PLAN_ENDED
+        self._end_run(f"DUNE ended our FollowReference plan {msg.plan_id!r} (PlanControl "
+                      f"{kind} of op {op}, request {msg.request_id}): "
+                      f"{msg.info or '(no info)'}")  # fmt: skip
+
+    def _end_run(self, why: str) -> None:
+        """Phase ``plan_ended``: nothing more decided, sent or restarted; the run stopped; the
+        summary's ``plan_ended`` is ``why`` (one line)."""
+        self.plan_ended = f"{why}; the deploy stopped deciding and did not restart it"
+        self.phase, self.unanswered_since = PLAN_ENDED, None
         if self.stop_event is not None:
             self.stop_event.set()
 
@@ -127,21 +131,15 @@ class Phases:
         gone; if only its answers were lost, they stop the boat at once rather than at DUNE's
         ``followref_timeout``)."""
         self.followref_lost += 1
-        unanswered = now - self.unanswered_since
-        self.plan_ended = (f"DUNE stopped answering our References (no FollowRefState for "
-                           f"{unanswered:.1f} s, link.followref_lost_s "
-                           f"{self.cfg.link.followref_lost_s:g} s) while its states kept coming: "
-                           "the maneuver ended without a word to us (an operator's stop is "
-                           "answered to the operator); the deploy stopped deciding and did not "
-                           "restart it")  # fmt: skip
+        unanswered, limit = now - self.unanswered_since, self.cfg.link.followref_lost_s
         self.event("followref_lost", vehicle=self.link.asv.label, request_id=self.plan_request,
-                   unanswered_s=unanswered, limit_s=self.cfg.link.followref_lost_s,
-                   count=self.followref_lost,
+                   unanswered_s=unanswered, limit_s=limit, count=self.followref_lost,
                    note="no FollowRefState answers our References: no more decisions or "
                    "References; the maneuver is not restarted")  # fmt: skip
-        self.phase, self.unanswered_since = PLAN_ENDED, None
-        if self.stop_event is not None:
-            self.stop_event.set()
+        self._end_run(f"DUNE stopped answering our References (no FollowRefState for "
+                      f"{unanswered:.1f} s, link.followref_lost_s {limit:g} s) while its states "
+                      "kept coming: the maneuver ended without a word to us (an operator's "
+                      "stop is answered to the operator)")  # fmt: skip
 
     def _followref_state(self, p, msg: imcpy.FollowRefState, now: float) -> None:
         """DUNE's answer to a Reference: logged with the next decisions; ours (its
@@ -166,11 +164,9 @@ class Phases:
         ``link.followref_lost_s`` while the ASV's states arrived for longer than that after
         it (a dropout that stops both is ``asv_stale``'s, which resumes; never in a dry run:
         nothing is sent)."""
-        lost, asv = self.cfg.link.followref_lost_s, self.link.asv
-        # ... while the ASV's states kept coming (a radio dropout stops both: asv_stale's)
         return (self.phase == RUNNING and not self.dry_run and self.unanswered_since is not None
-                and now - self.unanswered_since > lost and asv.nav_recv is not None
-                and asv.nav_recv - self.unanswered_since > lost)  # fmt: skip
+                and self.link.asv.nav_recv - self.unanswered_since  # (the last state <= now)
+                > self.cfg.link.followref_lost_s)  # fmt: skip
 
     # --- phases and watchdogs ------------------------------------------------------------
     def auv_ages(self, now: float) -> list[float]:
