@@ -11,6 +11,9 @@ from pathlib import Path
 
 from mpcasv.wording import count
 
+#: the search folder's lock file (:func:`mpcasv.outputs.folder_lock`): one search at a time
+LOCK_FILE = "falsify.lock"
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
@@ -69,7 +72,7 @@ def run(args: argparse.Namespace) -> int:
               file=sys.stderr)  # fmt: skip
     # a second search in the folder took the first one's running trials for a killed
     # search's and ran them again: Optuna's UpdateFinishedTrialError (a review)
-    with folder_lock(out, "mpcasv falsify", "falsify.lock"):
+    with folder_lock(out, "mpcasv falsify", LOCK_FILE):
         record_study(out, identity)
         return _search_and_write(args, setup, out)
 
@@ -190,7 +193,7 @@ def check_inputs(args: argparse.Namespace):
     out = args.out or Path("results") / "falsify" / f"{family.name}-{args.controller}"
     check_output_folder(out)
     # a compare or tune folder, or a non-empty one that is no search's: refused
-    check_not_other_output(out, "mpcasv falsify", own=("study.db", "falsify.lock"))
+    check_not_other_output(out, "mpcasv falsify", own=("study.db", LOCK_FILE))
     setup = SearchSetup(family, args.controller, preset, args.seed, args.separation,
                         args.objective, named=args.params)  # fmt: skip
     identity = study_identity(family, args.controller, args.params, params, args.seed,
