@@ -80,6 +80,11 @@ def test_killed_sweep_resumes_with_every_job_exactly_once(tmp_path):
     err = df[df["status"] == "error"]
     assert list(err["job_id"]) == [FAILING.job_id]
     assert "RuntimeError: injected failure" in err["error"].iloc[0]
+    # the resume did not rerun the failed job; it still names it (it printed nothing, and
+    # exited 1, on a rerun of a sweep whose every error was recorded before: session 47)
+    said = [ln for ln in stdout.decode().splitlines() if "error in" in ln]
+    assert said == [f"  error in {FAILING.run_name} (recorded before; --retry-errors reruns "
+                    "it): RuntimeError: injected failure"], stdout.decode()
     ok = df[df["status"] == "ok"]
     assert len(ok) == len(QUICK.jobs) - 1 and ok["min_range_m"].notna().all()
     for run_dir in ok["run_dir"]:

@@ -106,6 +106,7 @@ def run(args: argparse.Namespace) -> int:
     say_untested_current(results)
     for name, err in stats.error_jobs:
         print(f"  error in {name}: {err}")
+    _say_kept_errors(results, exp, stats)
     if stats.lost:
         print(f"  {count(stats.lost, 'job')} lost with their worker: rerun the same command to "
               "resume")  # fmt: skip
@@ -124,3 +125,18 @@ def run(args: argparse.Namespace) -> int:
     print(f"results table: import pandas as pd; df = {READ_LINE.format(out=out)}")
     return 0 if ok == len(exp.jobs) else 1
 
+
+
+def _say_kept_errors(results, exp, stats) -> None:
+    """Print the error jobs recorded by an earlier sweep and not rerun (without
+    ``--retry-errors``): a rerun of a sweep whose every error was kept printed none of them,
+    and exited 1 (session 47)."""
+    if not len(results):
+        return
+    said = {name for name, _ in stats.error_jobs}
+    names = {j.job_id: j.run_name for j in exp.jobs}
+    for job_id, error in results.loc[results["status"] != "ok", ["job_id", "error"]].values:
+        name = names.get(job_id, job_id)
+        if name not in said:
+            last = (str(error).strip().splitlines() or ["(no message)"])[-1]
+            print(f"  error in {name} (recorded before; --retry-errors reruns it): {last}")
