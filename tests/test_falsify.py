@@ -161,6 +161,20 @@ def test_a_search_killed_while_asking_resumes(tmp_path):
     assert set(resumed.params) == {p.name for p in fam.spec.param}
 
 
+def test_a_smaller_budget_than_the_runs_finished_is_refused(tmp_path):
+    """A rerun with a smaller ``--budget`` ran nothing and wrote a summary saying that budget
+    above more finished runs (session 47's leftover); now refused in one line, as ``tune
+    controller`` refuses it."""
+    setup = SearchSetup(load_family(short_family(tmp_path, 40.0)), "hybrid-single",
+                        "paper1-field", seed=3)  # fmt: skip
+    db = tmp_path / "s.db"
+    search(setup, db, budget=2)
+    with pytest.raises(ConfigError, match=r"holds 2 finished runs already, more than "
+                                          r"--budget 1; give at least 2"):  # fmt: skip
+        search(setup, db, budget=1)
+    assert len(trials_table(search(setup, db, budget=2))) == 2  # the same budget: resumes
+
+
 def _falsify_cmd(family: Path, out: Path, budget: int) -> list[str]:
     return [sys.executable, "-m", "mpcasv.cli", "falsify", str(family), "--controller",
             "hybrid-single", "--params", "paper1-field", "--budget", str(budget), "--out",

@@ -210,7 +210,8 @@ def search(setup: SearchSetup, storage_path: Path, budget: int, workers: int = 1
     ``workers``: at most ``min(BATCH, budget)`` processes start (no more runs go at once).
 
     The study lives in the SQLite file ``storage_path`` (Optuna RDB storage). Finished trials
-    (complete, or failed with their ``error``) are kept and counted. Trials a killed search
+    (complete, or failed with their ``error``) are kept and counted (more of them than
+    ``budget``: :class:`~mpcasv.config.ConfigError`). Trials a killed search
     left running are run again first, with their parameters and under their numbers, and
     each batch's sampler is seeded from the search's seed and the number of trials asked
     before it (:func:`batch_seed`), so a search killed while its runs go and resumed asks and
@@ -234,6 +235,10 @@ def search(setup: SearchSetup, storage_path: Path, budget: int, workers: int = 1
     study = optuna.create_study(study_name=name, storage=storage, direction="minimize",
                                 load_if_exists=True)  # fmt: skip
     study_id = storage.get_study_id_from_name(name)
+    if (done := n_finished(study)) > budget:  # the runs are there: a smaller budget is no
+        # search's (its summary said budget B above more finished runs, session 47)
+        raise ConfigError(f"{storage_path}: holds {done} finished runs already, more than "
+                          f"--budget {budget}; give at least {done}")  # fmt: skip
     dists = {p.name: (optuna.distributions.IntDistribution(int(p.low), int(p.high))
                       if p.integer else optuna.distributions.FloatDistribution(p.low, p.high))
              for p in setup.family.spec.param}  # fmt: skip
