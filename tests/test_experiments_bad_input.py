@@ -70,6 +70,19 @@ def two_cpus(monkeypatch):
     monkeypatch.setattr(workers_mod, "cpu_count", lambda: 2)
 
 
+@pytest.fixture
+def no_scheduler(monkeypatch):
+    """No Dask scheduler answers: a stand-in for ``dask_runner.connect`` that refuses at once
+    (a real connection to a closed port takes Dask's 20 s timeout)."""
+    from mpcasv.config import ConfigError
+    from mpcasv.experiments import dask_runner
+
+    def refuse(address):
+        raise ConfigError(f"--dask {address}: no scheduler (test stand-in)")
+
+    monkeypatch.setattr(dask_runner, "connect", refuse)
+
+
 # --- --workers -------------------------------------------------------------------------------
 
 
@@ -115,21 +128,26 @@ def test_options_dask_would_ignore_are_refused_with_it(command, extra, tmp_path,
     assert not out.exists()
 
 
-def test_no_job_limit_with_dask_is_what_dask_has(tmp_path, capsys, monkeypatch):
+def test_no_job_limit_with_dask_is_what_dask_has(tmp_path, capsys, no_scheduler):
     """``--job-timeout 0`` (no limit) with ``--dask`` is not refused: the command goes on to
     the scheduler, which is asked before anything is written (here a stand-in refuses at
     once; a real connection to a closed port takes Dask's 20 s timeout)."""
-    from mpcasv.config import ConfigError
-    from mpcasv.experiments import dask_runner
-
-    def no_scheduler(address):
-        raise ConfigError(f"--dask {address}: no scheduler (test stand-in)")
-
-    monkeypatch.setattr(dask_runner, "connect", no_scheduler)
     out = tmp_path / "out"
     dask = "tcp://127.0.0.1:9"
     assert main(["compare", str(_suite(tmp_path)), "--out", str(out), "--dask", dask,
                  "--job-timeout", "0"]) == 2  # fmt: skip
+    _one_error_line(capsys, f"--dask {dask}: no scheduler (test stand-in)")
+    assert not out.exists()
+
+
+def test_tune_asks_the_scheduler_before_writing_anything(tmp_path, capsys, no_scheduler):
+    """``tune controller --dask`` to a dead scheduler wrote the folder, its lock and study.db
+    before its error (a leftover of session 46); now the scheduler is asked first, as by
+    ``compare`` (the same stand-in as above)."""
+    out = tmp_path / "out"
+    dask = "tcp://127.0.0.1:9"
+    assert main(["tune", "controller", str(_ranges(tmp_path, '"speed" = { low = 1.0, high = '
+                 '2.5 }')), "--out", str(out), "--dask", dask, "--quiet"]) == 2  # fmt: skip
     _one_error_line(capsys, f"--dask {dask}: no scheduler (test stand-in)")
     assert not out.exists()
 

@@ -73,7 +73,12 @@ def run_tune_controller(args: argparse.Namespace) -> int:
     # the trials already in the study (a budget hint never offers fewer: it was refused next)
     done = study_size(args.out or Path("results") / f"tune-{Path(args.ranges).resolve().stem}")
     spec = load_spec(args.ranges, args.trials, done)
-    check_presets(spec)  # the suite's entry, and range ends no trial could run: before any file
+    train = check_presets(spec)  # the suite's entry, range ends no trial could run: before any file
+    if args.dask:  # the scheduler and its workers, as compare asks them: before any file (a
+        # dead scheduler's error came after study.db and the lock were written, session 46)
+        from mpcasv.experiments.dask_runner import check_dask_cluster
+
+        check_dask_cluster(args.dask, train)
     out = check_output_folder((args.out or Path("results") / f"tune-{spec.path.stem}").resolve())
     check_not_other_output(out, "mpcasv tune controller", own=("study.db", "tune.lock"))
     # two commands on one folder ran the same trials; the second died on a traceback
