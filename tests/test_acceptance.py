@@ -109,10 +109,19 @@ def test_each_target_gets_the_verdict_its_pairs_give():
     assert t.loc["nav_error_rms_m", "median"] == pytest.approx(float(np.median(rel)))
     assert t.loc["nav_error_rms_m", "ci_low"] < t.loc["nav_error_rms_m", "median"] < t.loc[
         "nav_error_rms_m", "ci_high"] < -0.05
-    # hybrid 0 and mpc 0 in seed 0 of every case: no more, no less; left out and counted
-    assert t.loc["collision_domain_s", "pairs"] == 27
+    # hybrid 0 and mpc 0 in seed 0 of every case: in the sums (a world like the others),
+    # left out of the per-pair median (no more, no less) and counted
+    assert t.loc["collision_domain_s", "pairs"] == 30
     assert t.loc["collision_domain_s", "both_zero"] == 3
-    assert t.loc["collision_domain_s", "sums"] == pytest.approx(-1.0)
+    assert t.loc[["collision_domain_s"], ["sums", "sums_low", "sums_high"]].values.tolist() == [
+        [-1.0, -1.0, -1.0]]
+    # the verdict's estimand: the change of the sums, here exactly -50 % in every resample
+    assert t.loc["reliable_fix_age_p95_s", ["sums", "sums_low", "sums_high"]].tolist() == (
+        pytest.approx([-0.5, -0.5, -0.5]))
+    nav = t.loc["nav_error_rms_m"]
+    both = h["nav_error_rms_m"].drop("c0"), m["nav_error_rms_m"].drop("c0")
+    assert nav["sums"] == pytest.approx(both[1].sum() / both[0].sum() - 1)
+    assert nav["sums_low"] < nav["sums"] < nav["sums_high"] < -0.05
 
 
 def test_no_more_is_not_met_by_the_runs_where_neither_spent_anything():
@@ -125,8 +134,9 @@ def test_no_more_is_not_met_by_the_runs_where_neither_spent_anything():
             row = (df.scenario == case) & (df.seed == seed) & (df.variant == v)
             df.loc[row, "collision_domain_s"] = 30.0 if v == "mpc" and i % 10 < 3 else 0.0
     t = acceptance_table(df, Acceptance({"collision_domain_s": 0.0}), "hybrid", "mpc", [])
-    assert t["verdict"].tolist() == ["not met"] and t["pairs"].tolist() == [9]
+    assert t["verdict"].tolist() == ["not met"] and t["pairs"].tolist() == [30]
     assert t["both_zero"].tolist() == [21] and t["sums"].tolist() == [math.inf]
+    assert t["median"].tolist() == [math.inf]  # the 9 that say something
 
 
 @pytest.mark.parametrize("target, better_side", [(0.0, True), (-0.3, False)])
@@ -245,3 +255,53 @@ def test_the_report_says_which_targets_are_not_met_and_where_to_read_why(tmp_pat
     del suite.acceptance  # a suite without targets: no section
     (tmp_path / "b").mkdir()
     assert "## Acceptance" not in write_report(tmp_path / "b", exp, df)[0].read_text()
+
+
+def test_the_sums_resample_worlds_within_each_case():
+    """Case c1: the MPC +50 % in every world, hybrid 100 s in each; c2: -50 %, hybrid 300 s.
+    The sums change by (1500 + 1500 - 4000) / 4000 = -25 % in every resample that keeps
+    each case's ten worlds in it (a point interval); a bootstrap of the pooled worlds
+    would vary the mix of the two cases (its median of the ratios: [-50, +50])."""
+    df = _results()
+    df = df[df.scenario != "c0"].copy()
+    hyb, mpc = df.variant == "hybrid", df.variant == "mpc"
+    for case, ref, factor in (("c1", 100.0, 1.5), ("c2", 300.0, 0.5)):
+        df.loc[hyb & (df.scenario == case), "propeller_on_s"] = ref
+        df.loc[mpc & (df.scenario == case), "propeller_on_s"] = factor * ref
+    t = acceptance_table(df, Acceptance({"propeller_on_s": 0.0}), "hybrid", "mpc", [])
+    row = t.iloc[0]
+    assert [row["sums"], row["sums_low"], row["sums_high"]] == pytest.approx([-0.25] * 3)
+    assert row["verdict"] == "met" and row["worse"] == 10
+    assert row["ci_low"] == pytest.approx(-0.5) and row["ci_high"] == pytest.approx(0.5)
+
+
+def test_a_pooled_median_in_the_gap_between_two_groups_is_no_verdict_on_the_total():
+    """Issue 16's propeller time (a statistician's review, session 48): +15 to +591 % in
+    Cases 1-4, -25 to +17 % in Cases 5-8, the pooled median +9.8 % in a gap no world
+    falls in, "undecided". Here half the worlds +60 %, half -5 %, with noise: the median of
+    the ratios straddles 0 (undecided); the total is clearly more (not met)."""
+    df = _results()
+    df = df[df.scenario != "c0"].copy()
+    rng = np.random.default_rng(7)
+    h = df[df.variant == "hybrid"].set_index(["scenario", "seed"])["propeller_on_s"]
+    for (case, seed), ref in h.items():
+        up = seed % 2 == 0
+        rows = (df.variant == "mpc") & (df.scenario == case) & (df.seed == seed)
+        df.loc[rows, "propeller_on_s"] = ref * ((1.60 if up else 0.95)
+                                                + 0.02 * rng.standard_normal())  # fmt: skip
+    t = acceptance_table(df, Acceptance({"propeller_on_s": 0.0}), "hybrid", "mpc", [])
+    row = t.iloc[0]
+    assert row["ci_low"] < 0 < row["ci_high"]  # the per-pair median: undecided
+    assert 0 < row["sums_low"] < row["sums"] < row["sums_high"]
+    assert row["verdict"] == "not met"
+
+
+def test_infinite_values_have_no_sums_and_no_verdict():
+    """An AUV never revisited (an infinite interval): the sums are not finite; n/a, the
+    per-pair median still computed."""
+    df = _results()
+    df = df[df.scenario != "c0"].copy()
+    df.loc[(df.variant == "hybrid") & (df.seed < 2), "propeller_on_s"] = math.inf
+    t = acceptance_table(df, Acceptance({"propeller_on_s": 0.0}), "hybrid", "mpc", [])
+    assert t["verdict"].tolist() == ["n/a: infinite in 4 pairs (no finite sums)"]
+    assert math.isnan(t["sums"].iloc[0]) and math.isfinite(t["median"].iloc[0])

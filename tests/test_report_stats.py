@@ -3,6 +3,7 @@ and the report rendered from one: headline table first, missing metrics named.""
 
 from __future__ import annotations
 
+import re
 import warnings
 from pathlib import Path
 from types import SimpleNamespace
@@ -330,6 +331,23 @@ def test_report_states_the_negligible_rule_and_the_multiplicity_of_each_table(tm
     assert f"{mu.tests} tests in this table" in line and f"{mu.better} verdicts" in line
     assert f"'better', {mu.better_bh} of them" in line
     assert section.index("Multiple comparisons") < section.index("| metric | case | pairs |")
+
+
+
+def test_the_wins_and_losses_counts_say_how_many_tests_they_rest_on(tmp_path):
+    """The "Significant wins and losses" table counted 'better' verdicts over every metric
+    and case (179 tests in the main job, about 9 expected by chance) without a word on
+    multiplicity (a statistician's review, session 48)."""
+    df = results({"min_range_m": 1.0, "energy_J": 0.0}, variants=("hybrid", "mpc"))
+    md = write_report(tmp_path, _exp(df), df)[0].read_text()
+    section = md.split("## Significant wins and losses (paired)")[1].split("\n## ")[0]
+    line = next(ln for ln in section.splitlines() if "Multiple comparisons" in ln)
+    n = int(re.search(r"(\d+) tests in these counts", line).group(1))
+    mu = stats.multiplicity(paired_table(df, [h.name for h in HEADLINE], directions()))
+    assert n == mu.tests  # (this table's metrics with a direction are the headline's)
+    assert f"{mu.better} verdicts 'better', {mu.better_bh} of them" in line
+    assert f"about {n * stats.ALPHA:.1f} 'better' verdicts expected by chance" in line
+    assert "not the chance of any" in line
 
 
 def test_a_panel_draws_every_variant_alike_when_one_needs_the_envelope():

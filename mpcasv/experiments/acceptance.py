@@ -9,25 +9,31 @@ A suite may name them (issue 16's acceptance in ``experiments/suites/paper.toml`
     targets = { reliable_fix_age_p95_s = -0.30, nav_error_rms_m = -0.20,
                 propeller_on_s = 0.0, collision_domain_s = 0.0 }
 
-A target ``c`` of a metric where lower is better asks for ``(other - ref) / ref <= c``
-(-0.30: at least 30 % lower; 0: no more); where higher is better, ``>= c``. Per pair (the
-report's pairing, :func:`mpcasv.experiments.stats.pairs`) the relative change is
-``(other - ref) / |ref|`` (its limits where undefined: :func:`relative_changes`), pooled over
-every case of the suite except, for a metric that needs fixes (:data:`NEEDS_FIXES`), the
-cases where no USBL fix arrived in any run (there the fix ages are the run's clock and the
-AUVs navigate without fixes whatever the controller). Pairs where both are 0 are left out
-(they say nothing about more or less) and counted, as are runs without a partner; unless
-every pair is 0 against 0: then the change is 0 in each pair, and a target of "no more" (0)
-is met (before, no pair was left to judge and the target, e.g. no time in a collision domain
-for either controller, counted as not met). The rule has a step: 29 pairs at 0 against 0 and
-one where the variant did better leave one pair that says something, too few for an
-interval (``n/a: 1 pair < 6``, not counted as met), while 30 pairs at 0 meet "no more".
-Judging on all 30 with the zeros as 0 would remove the step but also meet "no more" with one
-pair worse (a median of 0); too few pairs that say anything is reported as such instead. The
-median and 95 % bootstrap CI come from :func:`mpcasv.experiments.stats.paired_stat`.
+A target ``c`` of a metric where lower is better asks for ``(sum other - sum ref) / sum ref
+<= c`` (-0.30: at least 30 % lower; 0: no more); where higher is better, ``>= c``: the
+relative change of the sums (equivalently of the means) over the paired worlds (the report's
+pairing, :func:`mpcasv.experiments.stats.pairs`, one pair per world), pooled over every case
+of the suite except, for a metric that needs fixes (:data:`NEEDS_FIXES`), the cases where no
+USBL fix arrived in any run (there the fix ages are the run's clock and the AUVs navigate
+without fixes whatever the controller). Its 95 % CI is a percentile bootstrap that resamples
+the worlds within each case (:func:`sums_stat`; the suite draws a fixed number of worlds per
+case, so the interval is conditional on these cases: it says nothing of cases unlike them).
 Verdict: **met** when the whole CI is at or on the better side of the target, **not met**
 when it is all on the worse side, else **undecided**; a target with unpaired runs is not
 counted as met.
+
+Until session 48 the verdict was the median of the per-pair relative changes ``(other - ref)
+/ |ref|`` with an unstratified bootstrap CI (still shown, :func:`relative_changes`). A
+statistician's review found it the wrong estimand for these targets: pooled over cases whose
+effects go opposite ways it fell in the gap between them (issue 16's propeller time: +15 to
++591 % in Cases 1-4, -25 to +17 % in Cases 5-8, pooled median +9.8 % [-5.1, +32.3],
+"undecided", with no world between +4.2 and +15.4 %; the sums +14.9 % [+11.9, +17.9]), and a
+median meets "no more time in the collision domain" with a few worlds much worse (4 of 80 in
+session 47's main job, each +inf). "At least 30 % lower" and "no more" are statements about
+totals; the sums are also defined where many worlds are 0 (which the per-pair change had to
+leave out). A metric with an infinite value in a used pair (e.g. an AUV never revisited) has
+no finite sums: the verdict is n/a, the per-pair median still shown. Fewer than
+:data:`~mpcasv.experiments.stats.MIN_PAIRS` pairs: n/a.
 """
 
 from __future__ import annotations
@@ -117,27 +123,68 @@ def verdict(better: str, target: float, s: paired.PairedStat) -> str:
     return "undecided"
 
 
+def sums_stat(ref: np.ndarray, other: np.ndarray, cases: np.ndarray,
+              seed: int = paired.SEED) -> paired.PairedStat:  # fmt: skip
+    """The relative change of the sums ``(sum other - sum ref) / sum ref`` of the pairs
+    ``(ref[i], other[i])`` (shape (n,) each, the metric's units; limits as
+    :func:`relative_changes`: both sums 0 is 0, ``sum ref`` 0 alone +-inf) as a
+    :class:`~mpcasv.experiments.stats.PairedStat` (``median`` holds the change, ``p`` NaN),
+    with its 95 % percentile bootstrap CI: :data:`~mpcasv.experiments.stats.N_RESAMPLES`
+    resamples, each drawing every case's pairs with replacement within the case
+    (``cases``, shape (n,): the design's strata; the case with one pair contributes it
+    every time), quantiles without interpolation (an infinite resample stays one).
+
+    n/a (``ci_low``/``ci_high`` NaN, ``note`` says why): fewer than
+    :data:`~mpcasv.experiments.stats.MIN_PAIRS` pairs; an infinite value in a pair."""
+    ref, other = np.asarray(ref, float), np.asarray(other, float)
+    n = len(ref)
+    if n == 0:
+        return paired.PairedStat(0, math.nan, math.nan, math.nan, math.nan, "n/a: no pairs")
+    if not (np.isfinite(ref).all() and np.isfinite(other).all()):
+        bad = int(np.sum(~(np.isfinite(ref) & np.isfinite(other))))
+        return paired.PairedStat(n, math.nan, math.nan, math.nan, math.nan,
+                                 f"n/a: infinite in {count(bad, 'pair')} (no finite sums)")
+    change = float(relative_changes(np.array([ref.sum()]), np.array([other.sum()]))[0])
+    if n < paired.MIN_PAIRS:
+        return paired.PairedStat(n, change, math.nan, math.nan, math.nan,
+                                 f"n/a: {count(n, 'pair')} < {paired.MIN_PAIRS}")  # fmt: skip
+    rng = np.random.default_rng(seed)
+    sum_r = np.zeros(paired.N_RESAMPLES)
+    sum_o = np.zeros(paired.N_RESAMPLES)
+    for case in dict.fromkeys(cases):  # the strata in their order: the same draws each time
+        r, o = ref[cases == case], other[cases == case]
+        idx = rng.integers(0, len(r), size=(paired.N_RESAMPLES, len(r)))
+        sum_r += r[idx].sum(axis=1)
+        sum_o += o[idx].sum(axis=1)
+    boot = relative_changes(sum_r, sum_o)
+    alpha = (1 - paired.CONFIDENCE) / 2
+    lo, hi = np.quantile(boot, [alpha, 1 - alpha], method="inverted_cdf")
+    return paired.PairedStat(n, change, float(lo), float(hi), math.nan, "")
+
+
 def acceptance_table(results: pd.DataFrame, acc: Acceptance, reference: str, other: str,
                      no_fix_cases: list[str]) -> pd.DataFrame:  # fmt: skip
-    """One row per target: ``metric``, ``better``, ``target``, ``pairs`` (used; one per world,
+    """One row per target: ``metric``, ``better``, ``target``, ``pairs`` (one per world,
     :func:`mpcasv.experiments.stats.per_world`), ``runs`` (the pairs of runs they hold),
     ``unpaired`` (runs of either variant without a partner: a failed job, a missing value),
-    ``both_zero`` (pairs left out: both 0, which says nothing about more or less),
-    ``cases`` (pooled), ``median``, ``ci_low``, ``ci_high`` (relative change per pair,
-    dimensionless), ``sums`` (relative change of the sums over the used pairs; +inf from a
-    zero sum), ``worse`` (used pairs where ``other`` is on the worse side of ``reference``:
-    a median can meet "no more" with some worlds worse, a statistician's review, session
-    46) and ``verdict`` (with ", N runs unpaired" when some are). ``no_fix_cases``:
-    the cases left out for :data:`NEEDS_FIXES` metrics. A metric without a column: 0 pairs,
-    "n/a: no column"."""
+    ``cases`` (pooled), ``sums``, ``sums_low``, ``sums_high`` (the relative change of the
+    sums and its CI, :func:`sums_stat`: the verdict's), ``median``, ``ci_low``, ``ci_high``
+    (the median relative change per pair and its bootstrap CI, shown beside it), ``both_zero``
+    (pairs left out of that median: both 0 says nothing about more or less; unless all are:
+    then it is 0), ``worse`` (pairs where ``other`` is on the worse side of ``reference``: a
+    total can meet "no more" with some worlds worse, a statistician's review, session 46) and
+    ``verdict`` (with ", N runs unpaired" when some are). ``no_fix_cases``: the cases left
+    out for :data:`NEEDS_FIXES` metrics. A metric without a column: 0 pairs, "n/a: no
+    column"."""
     rows = []
     for m, c in acc.targets.items():
         better = METRIC_INFO[m].better
         row = {"metric": m, "better": better, "target": float(c)}
         if m not in results:
-            rows.append(row | {"pairs": 0, "runs": 0, "unpaired": 0, "both_zero": 0, "cases": "",
+            rows.append(row | {"pairs": 0, "runs": 0, "unpaired": 0, "cases": "",
+                               "sums": math.nan, "sums_low": math.nan, "sums_high": math.nan,
                                "median": math.nan, "ci_low": math.nan, "ci_high": math.nan,
-                               "sums": math.nan, "worse": 0,
+                               "both_zero": 0, "worse": 0,
                                "verdict": "n/a: no column"})  # fmt: skip
             continue
         p, unpaired = paired.pairs(results, m, reference, other)
@@ -145,21 +192,23 @@ def acceptance_table(results: pd.DataFrame, acc: Acceptance, reference: str, oth
             p = p[~p[paired.CASE].isin(no_fix_cases)]
             unpaired = unpaired.drop(no_fix_cases, errors="ignore")
         p = paired.per_world(p)
-        zero = (p["ref"] == 0) & (p["other"] == 0)
+        ref, oth = p["ref"].to_numpy(float), p["other"].to_numpy(float)
+        total = sums_stat(ref, oth, p[paired.CASE].to_numpy())
+        zero = (ref == 0) & (oth == 0)
         if zero.all():  # both 0 in every pair: the change is 0 in each (not "no pairs")
             zero = zero & False
-        p = p[~zero]
-        ref, oth = p["ref"].to_numpy(float), p["other"].to_numpy(float)
-        s = paired.paired_stat(np.zeros(len(p)), relative_changes(ref, oth))
+        per_pair = paired.paired_stat(np.zeros(int(np.sum(~zero))),
+                                      relative_changes(ref[~zero], oth[~zero]))  # fmt: skip
         n_unpaired = int(unpaired.sum())
-        v = verdict(better, c, s) + (f", {count(n_unpaired, 'run')} unpaired" if n_unpaired else "")
+        v = verdict(better, c, total) + (f", {count(n_unpaired, 'run')} unpaired"
+                                         if n_unpaired else "")  # fmt: skip
         rows.append(row | {"pairs": len(p), "runs": int(p["runs"].sum()),
-                           "unpaired": n_unpaired, "both_zero": int(zero.sum()),
+                           "unpaired": n_unpaired,
                            "cases": ", ".join(dict.fromkeys(p[paired.CASE])),
-                           "median": s.median, "ci_low": s.ci_low, "ci_high": s.ci_high,
-                           "sums": float(relative_changes(np.array([ref.sum()]),
-                                                          np.array([oth.sum()]))[0])
-                           if len(p) else math.nan,  # no pair: no sums to compare
+                           "sums": total.median, "sums_low": total.ci_low,
+                           "sums_high": total.ci_high,
+                           "median": per_pair.median, "ci_low": per_pair.ci_low,
+                           "ci_high": per_pair.ci_high, "both_zero": int(zero.sum()),
                            "worse": int(np.sum(oth > ref) if better == "lower"
                                         else np.sum(oth < ref)),
                            "verdict": v})  # fmt: skip
@@ -179,14 +228,15 @@ def display_table(t: pd.DataFrame) -> pd.DataFrame:
                                           for b, c in zip(t["better"], t["target"],
                                                           strict=True)],
         "pairs": [f"{n}" + (f" {noun(n, 'world')} ({r} runs)" if r > n else "")
-                  + "".join(f" (+{k} {what})" for k, what in ((u, "unpaired"),
-                                                              (z, "both 0 left out")) if k)
-                  for n, r, u, z in zip(t["pairs"], t["runs"], t["unpaired"], t["both_zero"],
-                                        strict=True)],
-        f"relative change per pair: median [{paired.CONFIDENCE:.0%} CI]": [
-            f"{_pct(m)} [{_pct(lo)}, {_pct(hi)}]"
-            for m, lo, hi in zip(t["median"], t["ci_low"], t["ci_high"], strict=True)],
-        "change of the sums": [_pct(v) for v in t["sums"]],
+                  + (f" (+{u} unpaired)" if u else "")
+                  for n, r, u in zip(t["pairs"], t["runs"], t["unpaired"], strict=True)],
+        f"change of the sums [{paired.CONFIDENCE:.0%} CI, worlds resampled in each case]": [
+            _pct(v) + (f" [{_pct(lo)}, {_pct(hi)}]" if not math.isnan(lo) else "")
+            for v, lo, hi in zip(t["sums"], t["sums_low"], t["sums_high"], strict=True)],
+        f"per pair: median [{paired.CONFIDENCE:.0%} CI]": [
+            f"{_pct(m)} [{_pct(lo)}, {_pct(hi)}]" + (f" ({z} both 0 left out)" if z else "")
+            for m, lo, hi, z in zip(t["median"], t["ci_low"], t["ci_high"], t["both_zero"],
+                                    strict=True)],
         "worse in": [f"{w} of {n}" for w, n in zip(t["worse"], t["pairs"], strict=True)],
         "verdict": t["verdict"].to_list(),
     }, index=pd.Index(t["metric"], name="metric"))  # fmt: skip
@@ -196,9 +246,9 @@ def per_case_table(results: pd.DataFrame, acc: Acceptance, reference: str, other
                    no_fix_cases: list[str]) -> pd.DataFrame:  # fmt: skip
     """The targets judged on each case alone (the same rule as :func:`acceptance_table`, on
     one case's pairs): rows are the cases in the order of ``results``, columns the targets'
-    metrics; each cell reads ``"+126 % [+80, +160] (10, 9 worse): not met"`` (median
-    relative change per pair, its 95 % CI, the pairs used and how many of them the other
-    variant did worse in; dimensionless, in %) or ``"no fix"`` for a
+    metrics; each cell reads ``"+126 % [+80, +160] (10, 9 worse): not met"`` (the relative
+    change of the sums, its 95 % CI, the pairs used and how many of them the other variant
+    did worse in; dimensionless, in %) or ``"no fix"`` for a
     :data:`NEEDS_FIXES` metric in one of ``no_fix_cases``. A pooled verdict can sit between
     cases that go opposite ways (issue 16, session 44: propeller +43-126 % in Cases 1-4,
     -5 to -10 % in Cases 5-8, pooled "undecided"); this table shows them."""
@@ -218,9 +268,9 @@ def _cell(row: pd.Series) -> str:
 
     if row["pairs"] == 0:
         return row["verdict"]
-    ci = ("" if math.isnan(row["ci_low"])
-          else f" [{short(row['ci_low'])}, {short(row['ci_high'])}]")  # fmt: skip
-    return f"{_pct(row['median'])}{ci} ({row['pairs']}, {row['worse']} worse): {row['verdict']}"
+    ci = ("" if math.isnan(row["sums_low"])
+          else f" [{short(row['sums_low'])}, {short(row['sums_high'])}]")  # fmt: skip
+    return f"{_pct(row['sums'])}{ci} ({row['pairs']}, {row['worse']} worse): {row['verdict']}"
 
 
 def report_parts(results: pd.DataFrame, acc: Acceptance, names: list[str],
@@ -233,14 +283,16 @@ def report_parts(results: pd.DataFrame, acc: Acceptance, names: list[str],
     needs = [m for m in acc.targets if m.startswith(NEEDS_FIXES)]
     left_out = (f" ({', '.join(needs)} without {', '.join(no_fix_cases)}: no USBL fix arrived "
                 "there)") if no_fix_cases and needs else ""  # fmt: skip
-    rule = (f"Per pair the relative change (other − reference) / |reference|, pooled over the "
-            f"cases{left_out}, one pair per world (the pairs of a case on the same "
-            f"realisation averaged); pairs where both are 0 say nothing about more or less and are "
-            f"left out, unless all are (then the change is 0 in every pair); median with its "
-            f"{paired.CONFIDENCE:.0%} bootstrap CI. *met*: the whole "
-            "CI is at or on the better side of the requirement; *not met*: the whole CI is on "
-            "the worse side; *undecided*: the CI straddles it. A target with unpaired runs (a "
-            "failed job, a missing value) is not counted as met.")  # fmt: skip
+    rule = (f"The relative change of the sums (Σ other − Σ reference) / Σ reference over the "
+            f"paired worlds, pooled over the cases{left_out}, one pair per world (the pairs of "
+            f"a case on the same realisation averaged), with its {paired.CONFIDENCE:.0%} "
+            "percentile bootstrap CI resampling the worlds within each case (so conditional "
+            "on these cases); the median of the per-pair relative changes (other − "
+            "reference) / |reference| is shown beside it (pairs where both are 0 left out of "
+            "it). *met*: the whole CI of the sums' change is at or on the better side of the "
+            "requirement; *not met*: the whole CI is on the worse side; *undecided*: it "
+            "straddles it. A target with unpaired runs (a failed job, a missing value) is not "
+            "counted as met.")  # fmt: skip
     parts = []
     for other in names[1:]:
         t = acceptance_table(results, acc, names[0], other, no_fix_cases)

@@ -54,8 +54,8 @@ BETTER: dict[str, str | None] = {name: info.better for name, info in METRIC_INFO
 BOX_METRICS = ("min_range_m", "reliable_fix_age_max_s", "reliable_fix_age_p95_s",
                "nav_error_rms_m", "propeller_on_s", "energy_J")  # fmt: skip
 
-PER_CASE = ("Per case, the same rule on each case's pairs alone (median relative change per "
-            f"pair [95 % CI] (pairs, of which the other variant did worse in): verdict; fewer "
+PER_CASE = ("Per case, the same rule on each case's pairs alone (the relative change of the "
+            f"sums [95 % CI] (pairs, of which the other variant did worse in): verdict; fewer "
             f"than {paired.MIN_PAIRS} pairs have no interval). A pooled verdict can sit between "
             "cases that go opposite ways.")
 READ_LINE = 'pd.read_parquet("{out}/results.parquet")'
@@ -270,22 +270,7 @@ def write_report(out: Path, exp, results: pd.DataFrame, stats=None) -> tuple[Pat
             sub = f"{other} vs {ref}"
             both(f"\n### {sub}\n", f"<h3>{html.escape(sub)}</h3>")
             if len(th):
-                mu = paired.multiplicity(th)
-                if mu.tests:
-                    bullet(
-                        f"Multiple comparisons: {count(mu.tests, 'test')} in this table at α = "
-                        f"{paired.ALPHA} (about {mu.expected_false:.1f} 'better' verdicts "
-                        f"expected by chance if nothing differed); {count(mu.better, 'verdict')} "
-                        f"'better', {mu.better_bh} of them with Benjamini-Hochberg adjusted "
-                        f"p < {paired.ALPHA} (scipy.stats.false_discovery_control)."
-                    )
-                else:  # the methods say every table says how many tests it holds: this too
-                    bullet(
-                        "Multiple comparisons: none tested in this table (no comparison has a "
-                        f"p-value: fewer than {paired.MIN_PAIRS} pairs or non-zero "
-                        "differences, or all differences zero); no 'better' verdict, nothing "
-                        "to adjust."
-                    )
+                bullet(_multiplicity_line(paired.multiplicity(th), "this table"))
                 md.append("")
                 d = headline_table(th)
                 both(_md_table(d) + "\n", d.to_html())
@@ -321,6 +306,10 @@ def write_report(out: Path, exp, results: pd.DataFrame, stats=None) -> tuple[Pat
             d = win_loss_table(w)
             sub = f"{other} vs {ref}"
             both(f"\n### {sub}\n\n{_md_table(d)}\n", f"<h3>{html.escape(sub)}</h3>{d.to_html()}")
+            # its counts rest on many tests too (a statistician's review, session 48)
+            bullet(_multiplicity_line(paired.multiplicity(table[table["other"] == other]),
+                                      "these counts"))  # fmt: skip
+            md.append("")
     both("\n## The sweep\n", "<h2>The sweep</h2>")
     facts = [
         f"{suite.description}".strip(),
@@ -384,3 +373,18 @@ def write_report(out: Path, exp, results: pd.DataFrame, stats=None) -> tuple[Pat
                          f"{html.escape(title)}</title><style>{CSS}</style></head><body>"
                          + "\n".join(h) + "</body></html>\n")  # fmt: skip
     return md_path, html_path
+
+
+def _multiplicity_line(mu: paired.Multiplicity, what: str) -> str:
+    """The report's line on how much the 'better' verdicts of ``what`` (a table) rest on
+    chance (:func:`mpcasv.experiments.stats.multiplicity`)."""
+    if not mu.tests:  # the methods say every table says how many tests it holds: this too
+        return (f"Multiple comparisons: none tested in {what} (no comparison has a p-value: "
+                f"fewer than {paired.MIN_PAIRS} pairs or non-zero differences, or all "
+                "differences zero); no 'better' verdict, nothing to adjust.")  # fmt: skip
+    return (f"Multiple comparisons: {count(mu.tests, 'test')} in {what} at α = {paired.ALPHA} "
+            f"(about {mu.expected_false:.1f} 'better' verdicts expected by chance if nothing "
+            f"differed); {count(mu.better, 'verdict')} 'better', {mu.better_bh} of them with "
+            f"Benjamini-Hochberg adjusted p < {paired.ALPHA} "
+            "(scipy.stats.false_discovery_control), which bounds the expected share of false "
+            "ones among them, not the chance of any (Holm's adjustment would).")  # fmt: skip
