@@ -15,6 +15,7 @@ delivery while it runs (DUNE: every 0.4 s), READY our plan SUCCESS after MANDONE
 from __future__ import annotations
 
 import asyncio
+import json
 
 import imcpy
 import pytest
@@ -23,8 +24,9 @@ from test_deploy_plan_ended import _deploy as _plain_deploy
 from test_deploy_plan_ended import _run as _plain_run
 from test_deploy_speed_watch import _state
 from test_io_cases import dry_deploy
+from test_io_dune_recording import EXCERPT, FULL, CaptureClock, _cfg, capture
 
-from mpcasv.io.deploy import PLAN_ENDED, RUNNING, WAITING
+from mpcasv.io.deploy import PLAN_ENDED, RUNNING, WAITING, Deploy
 from mpcasv.io.imc import stamp
 
 PCS = imcpy.PlanControlState
@@ -221,3 +223,46 @@ def test_the_auvs_plan_state_and_a_dry_run_end_nothing(tmp_path, request):
         dry.link.handle_datagram(stamp(m, 0x2801, 0xFFFF, dclock.t).serialize(), ASV)
         dry.watch()
     assert dry.phase == RUNNING and not _events(dry, "plan_ended") and dry.steps >= 5
+
+
+@pytest.mark.parametrize("path", [pytest.param(EXCERPT, id="excerpt"), pytest.param(
+    FULL, id="full", marks=pytest.mark.skipif(not FULL.is_file(), reason="no full capture"))])
+def test_recorded_plan_control_state_ends_a_plan_ended_elsewhere(path, tmp_path):
+    """The recorded Otter, its PlanControl answers to us dropped after the START's (as when
+    another system ends the plan: DUNE answers that system) and our own shutdown not run: the
+    recorded READY / mpcasv-followref / SUCCESS (+217.91 s, 7 ms after the recording's
+    MANDONE) ends the run at once. Before: followref_lost, 5 s of silence later."""
+    data = capture(path)
+    dep = Deploy(_cfg(tmp_path))
+    clock = CaptureClock(data[0][0])
+    dep.clock = dep.link.clock = clock
+    dep.link._send_raw = lambda raw, addr, p=None: True
+    dep.request_id = 1  # the recording's START was request 2 (test_io_dune_recording)
+    pc_id = imcpy.Factory.id_from_abbrev("PlanControl")
+    next_watch = data[0][0]
+    try:
+        for t, sent, peer, raw in data:
+            if sent:
+                continue
+            clock.t = t
+            while next_watch <= t:
+                dep.watch()
+                next_watch += 0.25
+            answered = dep.started and int.from_bytes(raw[2:4], "little") == pc_id
+            if answered and t > 1795969701.49:  # after the START's two answers
+                continue
+            dep.link.handle_datagram(raw, peer)
+    finally:
+        dep.close()
+    events = [r for r in map(json.loads, (tmp_path / "log" / "deploy.jsonl").read_text()
+                             .splitlines()) if r["kind"] == "event"]  # fmt: skip
+    ended = [e for e in events if e["event"] == "plan_ended"]
+    assert len(ended) == 1 and ended[0]["source"] == "PlanControlState", [
+        e["event"] for e in events]  # fmt: skip
+    executing = [e for e in events if e["event"] == "plan_executing"]
+    assert len(executing) == 1  # recorded 1.2 ms after "plan loaded", and 2.5 Hz after it
+    assert 0 <= executing[0]["t"] - 1795969701.4823 < 0.01
+    assert (ended[0]["state"], ended[0]["plan_id"], ended[0]["last_outcome"]) == (
+        "READY", PLAN, "SUCCESS")
+    assert 0 <= ended[0]["t"] - 1795969891.522 < 0.6  # the MANDONE (README timeline)
+    assert not [e for e in events if e["event"] == "followref_lost"]
