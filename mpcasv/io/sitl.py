@@ -76,6 +76,7 @@ from mpcasv.io.dune import FollowRefManeuver
 from mpcasv.io.geo import Origin
 from mpcasv.io.imc import BadInput, decode, udp_services
 from mpcasv.io.logs import JsonlWriter, LsfWriter
+from mpcasv.io.netcheck import local_hosts
 from mpcasv.io.simvehicle import SimVehicle
 from mpcasv.io.sitlasv import AsvDune
 from mpcasv.io.sitloptions import SitlOptions
@@ -203,11 +204,15 @@ class Sitl(AsvDune, Publishing):
             if o.tcp:
                 await v.serve_tcp(o.bind)
         self.epoch = float(math.ceil(self.clock.now()) + 1)
+        # the addresses a peer can send to (bound to 0.0.0.0: this host's, loopback first);
+        # the addresses below at the first
+        hosts = local_hosts(o.bind)
         ready = {
-            "pid": os.getpid(), "discovery": f"{o.bind}:{self.discovery.address[1]}",
+            "pid": os.getpid(), "hosts": hosts,
+            "discovery": f"{hosts[0]}:{self.discovery.address[1]}",
             "vehicles": [{"name": v.name, "id": v.id, "role": v.role,
-                          "address": f"{o.bind}:{v.port}",
-                          "tcp": f"{o.bind}:{v.tcp_port}" if o.tcp else None}
+                          "address": f"{hosts[0]}:{v.port}",
+                          "tcp": f"{hosts[0]}:{v.tcp_port}" if o.tcp else None}
                          for v in self.vehicles],
             "acoustics": self.write_acoustics(),
         }  # fmt: skip
