@@ -167,19 +167,6 @@ class Sitl(AsvDune, Publishing):
         (self.opt.out / "acoustics.toml").write_text(head + tomli_w.dumps({"acoustics": channel}))
         return channel
 
-    # --- outages -----------------------------------------------------------------------------
-    def kill_asv(self) -> None:
-        if self.asv.alive:
-            self.asv.close()
-            self.maneuver = None
-            self.event("asv_killed")
-
-    async def restart_asv(self) -> None:
-        if not self.asv.alive:
-            await self.asv.open(self.opt.bind)
-            self.event("asv_restarted", port=self.asv.port)
-            self.asv.announce_to([a[0] for a in self.directory.values() if a])
-
     # --- main loop ---------------------------------------------------------------------------
     def on_discovery(self, data: bytes, addr: Addr) -> None:
         try:
