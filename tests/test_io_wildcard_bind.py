@@ -92,3 +92,40 @@ def test_the_sitl_answers_at_the_service_a_node_writes_from():
     assert node.dest == ("10.0.0.5", 6002)
     node.active = ("127.0.0.1", 6002)
     assert node.dest == ("127.0.0.1", 6002)
+
+
+def test_the_sitl_bound_to_the_wildcard_announces_and_prints_reachable_addresses(tmp_path,
+                                                                                 capsys):
+    """``mpcasv sitl --bind 0.0.0.0``: each vehicle's Announce to a node on 127.0.0.1 names
+    imc+udp://127.0.0.1:PORT/ (its data port, as the node sees it: netcheck.announced_hosts,
+    the deploy's helper), and the printed ready line names reachable addresses, never
+    0.0.0.0 (before: imc+udp://0.0.0.0:PORT/ and "0.0.0.0:PORT", where nobody can send)."""
+    import json
+
+    from test_io_sitl import ME, Node, _run, _until
+
+    async def body(sitl):
+        node = await Node().open()
+        node.announce(("127.0.0.1", sitl.discovery.address[1]))
+        for v in sitl.vehicles:
+            assert await _until(lambda v=v: node.of(imcpy.Announce, v.id))
+            services = {m.services for m in node.of(imcpy.Announce, v.id)}
+            assert services == {f"imc+udp://127.0.0.1:{v.port}/"}, services
+        node.send(imcpy.Heartbeat(), ("127.0.0.1", sitl.asv.port), dst=sitl.asv.id, src=ME)
+        assert await _until(lambda: node.of(imcpy.EstimatedState, sitl.asv.id))
+        # the datagrams come from the address the Announce named (DUNE's Node::activate)
+        assert node.sources["EstimatedState"] == {("127.0.0.1", sitl.asv.port)}
+
+    sitl = _run(tmp_path, body, duration=1000.0, bind="0.0.0.0")
+    assert sitl.discovery.address[0] == "0.0.0.0"  # bound to the wildcard indeed
+    out = capsys.readouterr().out
+    ready = json.loads(next(ln for ln in out.splitlines() if ln.startswith('{"ready"')))["ready"]
+    assert "0.0.0.0" not in json.dumps(ready)
+    from mpcasv.io.netcheck import local_hosts  # (new with it)
+
+    hosts = local_hosts("0.0.0.0")
+    assert ready["hosts"] == hosts and hosts[0] == "127.0.0.1" and "0.0.0.0" not in hosts
+    assert ready["discovery"] == f"127.0.0.1:{sitl.discovery.address[1]}"
+    assert [v["address"] for v in ready["vehicles"]] == [f"127.0.0.1:{v.port}"
+                                                         for v in sitl.vehicles]  # fmt: skip
+    assert local_hosts("127.0.0.1") == ["127.0.0.1"]

@@ -16,8 +16,9 @@ retried after ``plan_start_timeout``) -> ``running``. The ASV's state older than
 timeout and stops), reported; when a state stamped after that verdict comes (not a late one
 from before it: :meth:`~mpcasv.io.deployphases.Phases.asv_back`) -> ``waiting`` and
 FollowReference is started again. A FollowRefState TIMEOUT for our maneuver restarts it;
-DUNE saying our plan ended, or no FollowRefState for ``link.followref_lost_s``, stops the run
-(deployphases).
+DUNE saying our plan ended (a PlanControl to us, or its PlanControlState no longer showing our
+plan EXECUTING: :mod:`~mpcasv.io.planstate`), or no FollowRefState for
+``link.followref_lost_s``, stops the run (deployphases).
 
 Shutdown (Ctrl-C / SIGTERM, or ``duration``): stop deciding (states are no longer used),
 stop announcing, heart-beating and listening for discovery; a standby Reference (speed 0)
@@ -69,6 +70,7 @@ from mpcasv.io.deploystep import (
 from mpcasv.io.imc import reference
 from mpcasv.io.link import ImcLink, Peer
 from mpcasv.io.logs import FolderLock, JsonlWriter, LsfWriter, keep_earlier
+from mpcasv.io.planstate import PlanStateWatch
 from mpcasv.io.records import cmd_to_dict, obs_to_dict
 from mpcasv.io.transport import Clock
 from mpcasv.io.watchdog import OK, auv_status, guard, inflate
@@ -93,7 +95,7 @@ def clock_rate_note(rate: float, speedup: float) -> str:
             f"staleness limits and --duration run {1 / max(rate, 1e-9):.3g} times too fast")
 
 
-class Deploy(Phases, BoatFeedback, FieldMode, Ending):
+class Deploy(Phases, PlanStateWatch, BoatFeedback, FieldMode, Ending):
     """The deploy loop (see the module docstring).
 
     Parameters
@@ -177,6 +179,7 @@ class Deploy(Phases, BoatFeedback, FieldMode, Ending):
             self._load_mark = (self._cpu0, self._wall0, 0)
             self.followref: dict | None = None
             self.init_plan_watch()
+            self.init_plan_state()
             self.steps = 0
             self.overrides = 0
             self.stale_events = 0
@@ -260,6 +263,8 @@ class Deploy(Phases, BoatFeedback, FieldMode, Ending):
             return
         elif isinstance(msg, imcpy.FollowRefState):
             self._followref_state(p, msg, now)
+        elif isinstance(msg, imcpy.PlanControlState):
+            self._plan_control_state(p, msg, now)
         elif isinstance(msg, imcpy.SetThrusterActuation):
             self.thrusters.update(msg.id, msg.value, now)
         elif isinstance(msg, imcpy.SetServoPosition):

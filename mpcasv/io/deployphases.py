@@ -13,7 +13,9 @@ Our maneuver, once running: DUNE answers every Reference with a FollowRefState w
 Its TIMEOUT (event ``followref_timeout``: we were late) -> ``waiting``: FollowReference is
 started again. A Reference left unanswered for ``link.followref_lost_s`` while the ASV's
 states keep coming (event ``followref_lost``: the maneuver ended without a word to us, e.g.
-an operator's stop, whose answer goes to the operator) -> ``plan_ended``, as below. A
+an operator's stop, whose answer goes to the operator, from a DUNE whose PlanControlState does
+not reach us: :mod:`mpcasv.io.planstate` reads it and ends the run at once) -> ``plan_ended``,
+as below. A
 PlanControl that says the running plan ended or failed (FAILURE, or SUCCESS
 of a STOP or "... completed", with our request id, or our plan id and a request id we never
 sent; not our own MANDONE's answer at shutdown) -> ``plan_ended`` (:meth:`Phases.
@@ -124,7 +126,8 @@ class Phases:
         """No FollowRefState for ``link.followref_lost_s`` while our maneuver runs and the ASV's
         states keep coming: the maneuver ended without a word to us. DUNE's plan engine
         answers a stop to whoever asked for it, so an operator's stop from Neptus reaches us
-        only as this silence: event ``followref_lost`` (a warning) and, as for
+        only as this silence when its PlanControlState does not (:mod:`mpcasv.io.planstate`
+        acts on that first): event ``followref_lost`` (a warning) and, as for
         :meth:`_plan_ended`, no more decisions or References and nothing restarted (a
         restart would undo the operator's stop); the summary's ``plan_ended`` says why. Its
         shutdown still sends the standby Reference and MANDONE (harmless if the maneuver is
@@ -221,6 +224,7 @@ class Phases:
         self.link.send(self.link.asv, pc)
         self.pending, self.phase = (self.request_id, now), STARTING
         self.sent_requests.add(self.request_id)
+        self.plan_state_reset()  # its plan is not yet shown EXECUTING (planstate)
         self.plan_starts += 1
         self.event("plan_start_sent", request_id=self.request_id)
 

@@ -75,7 +75,7 @@ __all__ = ["USED", "ImcLink", "Peer"]
 
 Addr = tuple[str, int]
 _ACCEPTED = {
-    "asv": {"EstimatedState", "Heartbeat", "PlanControl", "FollowRefState",
+    "asv": {"EstimatedState", "Heartbeat", "PlanControl", "PlanControlState", "FollowRefState",
             "SetThrusterActuation", "SetServoPosition", "UsblFixExtended"},
     "auv": {"EstimatedState", "Heartbeat"},
 }  # fmt: skip

@@ -14,10 +14,12 @@ import errno
 import ipaddress
 import socket
 
+import psutil
+
 from mpcasv.config import ConfigError
 
 __all__ = ["PORT_MAX", "announced_hosts", "check_bindable", "check_ipv4", "check_port",
-           "is_wildcard"]
+           "is_wildcard", "local_hosts"]
 
 PORT_MAX = 65535
 
@@ -110,3 +112,18 @@ def announced_hosts(bind: str, remotes, what: str) -> list[str]:
                           "streams only to an imc+udp address of our Announce, never to "
                           f"{bind}): bind to this host's address on the vehicles' network")
     return hosts
+
+
+def local_hosts(bind: str) -> list[str]:
+    """The addresses of this host a peer can send to when we are bound to ``bind``: ``bind``
+    itself, or bound to the wildcard, every IPv4 address of this host's interfaces
+    (``psutil.net_if_addrs``), loopback first then in the interfaces' order, none twice,
+    never 0.0.0.0. What ``mpcasv sitl`` prints; which of them a given peer sees us from is
+    :func:`announced_hosts`'s (the route's source address)."""
+    if not is_wildcard(bind):
+        return [bind]
+    found = [a.address for addrs in psutil.net_if_addrs().values() for a in addrs
+             if a.family == socket.AF_INET]  # fmt: skip
+    hosts = sorted(set(found), key=lambda h: (not ipaddress.IPv4Address(h).is_loopback,
+                                              found.index(h)))  # fmt: skip
+    return [h for h in hosts if not is_wildcard(h)] or ["127.0.0.1"]

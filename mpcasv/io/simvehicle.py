@@ -21,9 +21,11 @@ from typing import TYPE_CHECKING
 
 import imcpy
 
+from mpcasv.config import ConfigError
 from mpcasv.io.geo import Origin, to_wgs84
 from mpcasv.io.imc import BROADCAST, BadInput, announce, decode, udp_services
 from mpcasv.io.imc import stamp as _stamp
+from mpcasv.io.netcheck import announced_hosts
 from mpcasv.io.transport import TcpStream, UdpEndpoint
 
 if TYPE_CHECKING:
@@ -92,8 +94,14 @@ class SimVehicle:
             self.announcer.close()
             self.announcer = None
 
-    def services(self) -> list[str]:
-        return [f"imc+udp://{self.sitl.opt.bind}:{self.port}/"]
+    def services(self, to: Addr) -> list[str]:
+        """Our ``imc+udp`` service as seen from ``to``: at ``--bind``, or bound to the
+        wildcard, at the address datagrams from us to ``to`` come from (the route's source
+        address: :func:`~mpcasv.io.netcheck.announced_hosts`, as the deploy's link.bind; a
+        DUNE peer streams only to an address of our Announce that our datagrams come from,
+        never to 0.0.0.0). ConfigError if this host has no route to ``to``."""
+        hosts = announced_hosts(self.sitl.opt.bind, [to], "--bind")
+        return [f"imc+udp://{h}:{self.port}/" for h in hosts]
 
     def stamp(self, msg: imcpy.Message, dst: int = BROADCAST) -> imcpy.Message:
         return _stamp(msg, self.id, dst, self.sitl.now(), src_ent=1)
@@ -104,12 +112,19 @@ class SimVehicle:
             self.sitl.lsf.write(data)
 
     def announce_to(self, addrs) -> None:
+        """Our Announce to each of ``addrs``, naming the service that address can reach
+        (:meth:`services`); an address this host has no route to is skipped and counted
+        (``announce_no_route``)."""
         if not self.alive:
             return
         lat, lon = to_wgs84(*self.sitl.position(self), self.sitl.origin)
-        msg = self.stamp(announce(self.name, self.sys_type, self.services(), lat, lon))
-        data = msg.serialize()
         for a in addrs:
+            try:
+                services = self.services(a)
+            except ConfigError:
+                self.sitl.count("announce_no_route")
+                continue
+            data = self.stamp(announce(self.name, self.sys_type, services, lat, lon)).serialize()
             if self.announcer is not None and self.announcer.sendto(data, a):
                 self.sitl.lsf.write(data)
 

@@ -76,6 +76,7 @@ from mpcasv.io.dune import FollowRefManeuver
 from mpcasv.io.geo import Origin
 from mpcasv.io.imc import BadInput, decode, udp_services
 from mpcasv.io.logs import JsonlWriter, LsfWriter
+from mpcasv.io.netcheck import local_hosts
 from mpcasv.io.simvehicle import SimVehicle
 from mpcasv.io.sitlasv import AsvDune
 from mpcasv.io.sitloptions import SitlOptions
@@ -166,19 +167,6 @@ class Sitl(AsvDune, Publishing):
         (self.opt.out / "acoustics.toml").write_text(head + tomli_w.dumps({"acoustics": channel}))
         return channel
 
-    # --- outages -----------------------------------------------------------------------------
-    def kill_asv(self) -> None:
-        if self.asv.alive:
-            self.asv.close()
-            self.maneuver = None
-            self.event("asv_killed")
-
-    async def restart_asv(self) -> None:
-        if not self.asv.alive:
-            await self.asv.open(self.opt.bind)
-            self.event("asv_restarted", port=self.asv.port)
-            self.asv.announce_to([a[0] for a in self.directory.values() if a])
-
     # --- main loop ---------------------------------------------------------------------------
     def on_discovery(self, data: bytes, addr: Addr) -> None:
         try:
@@ -203,11 +191,15 @@ class Sitl(AsvDune, Publishing):
             if o.tcp:
                 await v.serve_tcp(o.bind)
         self.epoch = float(math.ceil(self.clock.now()) + 1)
+        # the addresses a peer can send to (bound to 0.0.0.0: this host's, loopback first);
+        # the addresses below at the first
+        hosts = local_hosts(o.bind)
         ready = {
-            "pid": os.getpid(), "discovery": f"{o.bind}:{self.discovery.address[1]}",
+            "pid": os.getpid(), "hosts": hosts,
+            "discovery": f"{hosts[0]}:{self.discovery.address[1]}",
             "vehicles": [{"name": v.name, "id": v.id, "role": v.role,
-                          "address": f"{o.bind}:{v.port}",
-                          "tcp": f"{o.bind}:{v.tcp_port}" if o.tcp else None}
+                          "address": f"{hosts[0]}:{v.port}",
+                          "tcp": f"{hosts[0]}:{v.tcp_port}" if o.tcp else None}
                          for v in self.vehicles],
             "acoustics": self.write_acoustics(),
         }  # fmt: skip

@@ -1,7 +1,8 @@
 """The SITL ASV's side of DUNE (a mixin of :class:`mpcasv.io.sitl.Sitl`): PlanControl
 START FollowReference / STOP answered as recorded DUNE answers them, References fed to
 :class:`mpcasv.io.dune.FollowRefManeuver`, "plan completed" after MANDONE, and the command
-vector the world advances with (zeros without a maneuver)."""
+vector the world advances with (zeros without a maneuver); the ASV's DUNE killed and
+restarted (the outages)."""
 
 from __future__ import annotations
 
@@ -78,3 +79,19 @@ class AsvDune:
         if not self.asv.alive or self.maneuver is None:
             return np.zeros(4)
         return self.maneuver.command_vector()
+
+    # --- outages (SIGUSR1 / SIGUSR2, --asv-outage) -------------------------------------
+    def kill_asv(self) -> None:
+        """The ASV's DUNE is gone: its socket closed, no maneuver (loops off)."""
+        if self.asv.alive:
+            self.asv.close()
+            self.maneuver = None
+            self.event("asv_killed")
+
+    async def restart_asv(self) -> None:
+        """A fresh DUNE: the socket open again (the same port), no known systems; it
+        announces itself to those that announced to the discovery socket."""
+        if not self.asv.alive:
+            await self.asv.open(self.opt.bind)
+            self.event("asv_restarted", port=self.asv.port)
+            self.asv.announce_to([a[0] for a in self.directory.values() if a])

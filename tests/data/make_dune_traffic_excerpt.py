@@ -3,7 +3,8 @@ full capture ``/work/shared/data/dune-traffic/dune-traffic.jsonl.gz`` (6.1 MB, n
 repository; its README describes the recording).
 
 Kept, in the capture's order and format: every datagram we sent, every Announce, every
-datagram of a type the deploy decodes (``mpcasv.io.link.USED``), every relay (our echoes,
+datagram of a type the deploy decodes (``mpcasv.io.link.USED``, one definition: since session
+48 PlanControlState, SetServoPosition and UsblFixExtended too), every relay (our echoes,
 messages not addressed to us or to broadcast), and one in ``SUBSAMPLE`` of the rest (DUNE's
 bus traffic, which the deploy only counts). Deterministic.
 
@@ -16,13 +17,10 @@ import struct
 import sys
 from pathlib import Path
 
-import imcpy
+from mpcasv.io.link import USED
 
 SUBSAMPLE = 50
 US = 0x4001
-USED = {imcpy.Factory.id_from_abbrev(n) for n in (
-    "EstimatedState", "Heartbeat", "PlanControl", "FollowRefState", "SetThrusterActuation",
-    "Announce")}  # fmt: skip
 
 
 def main(src: str = "/work/shared/data/dune-traffic/dune-traffic.jsonl.gz") -> None:
