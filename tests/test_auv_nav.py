@@ -14,6 +14,7 @@ from mpcasv.models.acoustics import AcousticParams, NavParams, usbl_fix
 from mpcasv.models.auv_nav import AUVNavFilter
 from mpcasv.sim.scenario import scenario_from_dict
 from mpcasv.sim.simulator import simulate
+from mpcasv.sim.streams import ins_draws
 
 EPS_A = 0.002  # MRU 5 (PAPER-FACTS §1)
 AC = AcousticParams()
@@ -21,7 +22,7 @@ AC = AcousticParams()
 
 def _fix_R(slant: float, rng) -> tuple[np.ndarray, np.ndarray]:
     """(error, covariance) of a USBL fix of an AUV ``slant`` m north of the ASV, at depth 0."""
-    fix = usbl_fix(0.0, 0, (0.0, 0.0), (slant, 0.0, 0.0), AC, rng)
+    fix = usbl_fix(0.0, 0, (0.0, 0.0), (slant, 0.0, 0.0), AC, rng.standard_normal(3))
     return np.array([fix.N - slant, fix.E]), np.reshape(fix.cov, (2, 2))
 
 
@@ -29,7 +30,7 @@ def test_without_fixes_the_error_grows_as_half_eps_a_t_squared():
     t = 100.0
     errs = []
     for seed in range(400):
-        nav = AUVNavFilter(1, NavParams(eps_a=EPS_A), np.random.default_rng(seed))
+        nav = AUVNavFilter(1, NavParams(eps_a=EPS_A), ins_draws(np.random.default_rng(seed)))
         errs.append(np.hypot(*nav.error(t)[0]))
         # the filter knows it: its own 1-sigma radius per axis is 1/2 eps_a t^2 / sqrt(2)
         assert nav.sigma(t)[0] == pytest.approx(0.5 * EPS_A * t**2 / math.sqrt(2))
@@ -44,12 +45,12 @@ def test_periodic_fixes_keep_the_error_bounded_and_the_filter_consistent():
     worst, nees, sig = [], [], []
     for seed in range(60):
         rng = np.random.default_rng(seed)
-        nav = AUVNavFilter(1, NavParams(eps_a=EPS_A), rng)
+        nav = AUVNavFilter(1, NavParams(eps_a=EPS_A), ins_draws(rng))
         err = []
         for j in range(1, 721):
             t = 5.0 * j
             v, R = _fix_R(200.0, rng)
-            nav.update(0, t, v, R)
+            nav.update(0, t, v, R, ins_draws(rng))
             e = nav.error(t + 4.9)[0]  # just before the next fix: the largest error
             err.append(np.hypot(*e))
             P = nav.cov(t + 4.9)[0]
@@ -71,17 +72,18 @@ def test_a_far_fix_moves_the_estimate_less_than_a_near_one():
     (bearing error 12 m across) moves the estimate less than the one from 100 m (1.7 m)."""
     moves = {}
     for slant in (100.0, 700.0):
-        nav = AUVNavFilter(1, NavParams(eps_a=EPS_A), np.random.default_rng(7))
+        nav = AUVNavFilter(1, NavParams(eps_a=EPS_A), ins_draws(np.random.default_rng(7)))
         e_prior = nav.error(100.0)[0].copy()
         _, R = _fix_R(slant, np.random.default_rng(0))
-        moves[slant] = np.hypot(*nav.update(0, 100.0, np.zeros(2), R))  # z = truth
+        ins = ins_draws(np.random.default_rng(8))
+        moves[slant] = np.hypot(*nav.update(0, 100.0, np.zeros(2), R, ins))  # z = truth
         assert np.hypot(*nav.error(100.0)[0]) < np.hypot(*e_prior)
     assert moves[700.0] < moves[100.0]
     # not a reset: the far fix leaves a visible share of the prior error in the estimate
-    nav = AUVNavFilter(1, NavParams(eps_a=EPS_A), np.random.default_rng(7))
+    nav = AUVNavFilter(1, NavParams(eps_a=EPS_A), ins_draws(np.random.default_rng(7)))
     e_prior = nav.error(100.0)[0].copy()
     _, R = _fix_R(700.0, np.random.default_rng(0))
-    nav.update(0, 100.0, np.zeros(2), R)
+    nav.update(0, 100.0, np.zeros(2), R, ins_draws(np.random.default_rng(8)))
     assert np.hypot(*nav.error(100.0)[0]) > 0.05 * np.hypot(*e_prior)
 
 

@@ -30,6 +30,7 @@ from mpcasv.mpc.order import (
     transit_cost,
 )
 from mpcasv.mpc.params import WeightParams
+from mpcasv.sim.streams import ins_draws
 
 AC = AcousticParams()
 EPS_A = NavParams().eps_a
@@ -51,7 +52,7 @@ def moving(N, E, vN, vE):
 def test_variance_grows_as_half_eps_a_t_squared_like_the_auv_filter():
     """dr_variance is the filter's own growth (N2): RMS radius 1/2 eps_a t^2 (thesis eq.
     2.7), the value AUVNavFilter reports without aiding; its integral is the integral."""
-    f = AUVNavFilter(1, NavParams(), np.random.default_rng(0))
+    f = AUVNavFilter(1, NavParams(), ins_draws(np.random.default_rng(0)))
     for t in (10.0, 60.0, 300.0):
         # per-axis variance eps_a^2 / 8 t^4: the filter's sigma (largest eigenvalue's root) and
         # the horizontal radius sqrt(2 V) = 1/2 eps_a t^2
@@ -70,9 +71,9 @@ def test_fix_posterior_is_the_filters_update_and_a_near_fix_removes_more():
     t = 120.0
     post = {}
     for slant in (70.0, 400.0):
-        f = AUVNavFilter(1, NavParams(), np.random.default_rng(1))
+        f = AUVNavFilter(1, NavParams(), ins_draws(np.random.default_rng(1)))
         R_los, R_perp = fix_variance(slant, AC.sigma_range, math.radians(AC.sigma_bearing_deg))
-        f.update(0, t, np.zeros(2), np.diag([R_los, R_perp]))
+        f.update(0, t, np.zeros(2), np.diag([R_los, R_perp]), ins_draws(np.random.default_rng(2)))
         mean_axis = float(np.trace(f.P_u[0])) / 2
         post[slant] = fix_posterior_variance(dr_variance(EPS_A, t), R_los, R_perp)
         assert post[slant] == pytest.approx(mean_axis, rel=1e-9)

@@ -19,6 +19,7 @@ from mpcasv.models.acoustics import AcousticParams, NavParams
 from mpcasv.models.auv_nav import AUVNavFilter, dr_variance, fix_variance
 from mpcasv.mpc.problem import NXV, OCP
 from mpcasv.mpc.variance import N_TAIL, NEXT, fix_gain, n_ext
+from mpcasv.sim.streams import ins_draws
 
 AC = AcousticParams()
 EPS_A = NavParams().eps_a
@@ -30,9 +31,9 @@ def test_fix_gain_is_the_share_of_the_variance_the_filters_update_removes():
     at 70 m removes more than one at 400 m; a fresh AUV gains little from a far fix."""
     t = 120.0
     for slant in (70.0, 400.0):
-        f = AUVNavFilter(1, NavParams(), np.random.default_rng(1))
+        f = AUVNavFilter(1, NavParams(), ins_draws(np.random.default_rng(1)))
         R_los, R_perp = fix_variance(slant, AC.sigma_range, math.radians(AC.sigma_bearing_deg))
-        f.update(0, t, np.zeros(2), np.diag([R_los, R_perp]))
+        f.update(0, t, np.zeros(2), np.diag([R_los, R_perp]), ins_draws(np.random.default_rng(2)))
         post = float(np.trace(f.P_u[0])) / 2
         assert 1 - fix_gain(t, slant, *SIG) == pytest.approx(post / dr_variance(EPS_A, t),
                                                              rel=1e-9)  # fmt: skip

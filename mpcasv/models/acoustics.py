@@ -129,13 +129,18 @@ def usbl_geometry(asv_NE, auv_NEd, p: AcousticParams):
     return los, perp, s_t, R, slant
 
 
-def usbl_fix(t, auv, asv_NE, auv_NEd, p: AcousticParams, rng: np.random.Generator) -> Fix:
+def usbl_fix(t, auv, asv_NE, auv_NEd, p: AcousticParams, z) -> Fix:
     """Measure an AUV from the ASV: range noise along the line of sight, bearing error
-    across it (eq. 2.9: transverse error = bearing error x range)."""
+    across it (eq. 2.9: transverse error = bearing error x range).
+
+    ``z``: shape (3,), standard normals drawn by the caller (the simulator's ping stream,
+    :mod:`mpcasv.sim.streams`): the errors along the line of sight, across it and in depth
+    in units of their 1-sigma."""
     los, perp, s_t, R, slant = usbl_geometry(asv_NE, auv_NEd, p)
-    e = los * p.sigma_range * rng.standard_normal() + perp * s_t * rng.standard_normal()
+    z_los, z_perp, z_d = (float(v) for v in z)
+    e = los * p.sigma_range * z_los + perp * s_t * z_perp
     return Fix(
         t, auv, float(auv_NEd[0] + e[0]), float(auv_NEd[1] + e[1]),
-        float(auv_NEd[2] + p.sigma_range * rng.standard_normal()),
+        float(auv_NEd[2] + p.sigma_range * z_d),
         (float(R[0, 0]), float(R[0, 1]), float(R[1, 0]), float(R[1, 1])), slant,
     )  # fmt: skip

@@ -86,14 +86,17 @@ class AUVNavFilter:
     n_auv : int
     p : NavParams
         ``eps_a`` (m/s^2, RMS accelerometer error) and ``drift_per_distance`` (fraction).
-    rng : numpy.random.Generator
-        Draws the accelerometer error and drift direction of each dead-reckoning interval.
+    ins0 : array_like, shape (n_auv, 3)
+        Each AUV's first dead-reckoning interval's draws: two standard normals (the
+        accelerometer error, N1) and a uniform in [0, 1) (the drift's direction). Every
+        interval's draws come from the caller (:meth:`update`'s ``ins``; the simulator's
+        synchronised streams, :mod:`mpcasv.sim.streams`).
 
     Every AUV starts with a known position (``e = 0``, ``P = 0``) at ``t = 0``.
     """
 
-    def __init__(self, n_auv: int, p: NavParams, rng: np.random.Generator):
-        self.p, self.rng = p, rng
+    def __init__(self, n_auv: int, p: NavParams, ins0):
+        self.p = p
         self.e_u = np.zeros((n_auv, 2))  # error right after the last update, m
         self.P_u = np.zeros((n_auv, 2, 2))  # its covariance, m^2
         self.lam_u = np.zeros(n_auv)  # largest eigenvalue of P_u, m^2
@@ -101,12 +104,13 @@ class AUVNavFilter:
         self.dirn = np.zeros((n_auv, 2))  # direction of the distance-proportional drift
         self.t_u = np.zeros(n_auv)  # time of the last update, s
         self.dist = np.zeros(n_auv)  # distance travelled since, m
+        ins0 = np.asarray(ins0, float).reshape(n_auv, 3)
         for k in range(n_auv):
-            self._new_interval(k, 0.0)
+            self._new_interval(k, 0.0, ins0[k])
 
-    def _new_interval(self, k: int, t: float) -> None:
-        self.a[k] = self.p.eps_a * self.rng.standard_normal(2) / math.sqrt(2)  # (N1)
-        ang = self.rng.uniform(0.0, 2.0 * math.pi)
+    def _new_interval(self, k: int, t: float, ins) -> None:
+        self.a[k] = self.p.eps_a * np.asarray(ins[:2], float) / math.sqrt(2)  # (N1)
+        ang = 2.0 * math.pi * float(ins[2])
         self.dirn[k] = (math.cos(ang), math.sin(ang))
         self.t_u[k], self.dist[k] = t, 0.0
 
@@ -134,7 +138,7 @@ class AUVNavFilter:
         eigenvalue of :meth:`cov` (that of ``P_u`` plus the isotropic growth)."""
         return np.sqrt(self.lam_u + self._grow(t))
 
-    def update(self, k: int, t: float, v: np.ndarray, R: np.ndarray) -> np.ndarray:
+    def update(self, k: int, t: float, v: np.ndarray, R: np.ndarray, ins) -> np.ndarray:
         """Aid AUV ``k`` at time ``t`` with a position measurement whose error is ``v``.
 
         Parameters
@@ -146,6 +150,8 @@ class AUVNavFilter:
             Measurement error ``z - p`` (m): the USBL fix's or the GPS's error.
         R : array_like, shape (2, 2)
             Its covariance (m^2), as the AUV is told it.
+        ins : array_like, shape (3,)
+            The next dead-reckoning interval's draws (as ``ins0`` in the constructor).
 
         Returns
         -------
@@ -174,7 +180,7 @@ class AUVNavFilter:
                           ((k00, k01), (k10, k11)), (r00, r01, r11))  # fmt: skip
         self.P_u[k] = ((a, b), (b, d))
         self.lam_u[k] = max(0.5 * (a + d) + math.sqrt(0.25 * (a - d) ** 2 + b * b), 0.0)
-        self._new_interval(k, t)
+        self._new_interval(k, t, ins)
         return move
 
 

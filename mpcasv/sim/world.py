@@ -9,11 +9,11 @@ docs/metrics.md): per plant step the geometric classes of :mod:`mpcasv.sim.accou
 SCENARIO's evaluation domain, and per AUV the fixes and reliable fixes (Paper 2 eq. 9, via
 :func:`mpcasv.hybrid.domains.reliable_fix_possible`) that define the fix ages.
 
-Randomness: two generators from the one seed, so that the AUVs' navigation never shifts the
-acoustic draws: ``rng`` (``default_rng(seed)``: USBL ping success and fix errors, status
-reports) and ``nav_rng`` (``SeedSequence(seed, spawn_key=(NAV_STREAM,))``: the fix sent back
-to the AUV getting through, INS errors, GPS noise; apart from the scenario-realisation streams,
-whose first spawn key is another tag). Draws happen in a fixed order per period.
+Randomness: the acoustic channel and the AUVs' navigation draw from synchronised streams, one
+per AUV and kind of event, a fixed number of draws per event (:mod:`mpcasv.sim.streams`,
+since session 48), so that two controllers on the same (scenario, seed) meet the same noise
+ping for ping (common random numbers); apart from the scenario-realisation streams
+(:mod:`mpcasv.sim.distributions`), whose first spawn key is another tag.
 """
 
 from __future__ import annotations
@@ -38,14 +38,13 @@ from mpcasv.models.params import load_vessel
 from mpcasv.models.vessel import NX, VesselModel
 from mpcasv.sim.account import StepAccount, classify, evaluation_domain
 from mpcasv.sim.scenario import Scenario
+from mpcasv.sim.streams import ChannelStreams
 
 _PLANT_CACHE: dict = {}
 #: floor of the 1-sigma a status report gives for the AUV's own navigation (m): the filter's
 #: sigma is 0 right after the known start, and a report of zero uncertainty would be trusted
 #: absolutely by the ASV's estimators
 REPORT_SIGMA_MIN = 1.0
-#: spawn key of the AUVs' navigation stream ("NAV")
-NAV_STREAM = 0x4E4156
 
 
 def build_plant(scenario: Scenario):
@@ -108,8 +107,7 @@ class World:
 
     def __init__(self, scenario: Scenario, seed: int = 0, estimator: str | None = None):
         self.sc, self.ac = scenario, scenario.acoustics
-        self.rng = np.random.default_rng(seed)
-        self.nav_rng = np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(NAV_STREAM,)))
+        self.draws = ChannelStreams(seed, len(scenario.auv))  # common random numbers
         self.model, self.ep, self.CL = build_plant(scenario)
         self._CL = _packed(self.CL)
         self.n_auv, self.n_sub = len(scenario.auv), scenario.sim.n_sub
@@ -161,7 +159,7 @@ class World:
             )  # fmt: skip
             for k in range(self.n_auv)
         ]
-        self.nav = AUVNavFilter(self.n_auv, scenario.navigation, self.nav_rng)
+        self.nav = AUVNavFilter(self.n_auv, scenario.navigation, self.draws.start())
         n, ac = self.n_auv, self.ac
         # USBL polls the AUVs in turn: AUV k pings at k*T0/n + j*T0; reports likewise
         self.next_ping = np.array([k * ac.T0 / n for k in range(n)]) + ac.T0
@@ -286,31 +284,34 @@ class World:
         """USBL pings and status reports due in the period just ended (evaluated at its end).
 
         A successful fix goes to the ASV's estimator; the ASV then sends it to the AUV over
-        the same acoustic link (success probability as the ping's, drawn from ``nav_rng``),
-        whose navigation filter fuses it with the fix's covariance. A fix that arrives while
-        :meth:`visiting` holds (``visiting``, per AUV, now) is reliable (Paper 2 eq. 9). At
-        the surface the AUV has GPS.
+        the same acoustic link (success probability as the ping's), whose navigation filter
+        fuses it with the fix's covariance. A fix that arrives while :meth:`visiting` holds
+        (``visiting``, per AUV, now) is reliable (Paper 2 eq. 9). At the surface the AUV has
+        GPS. Every draw comes from the synchronised streams (:mod:`mpcasv.sim.streams`): each
+        ping, report and period draws its values whether or not they are used.
         """
-        ac, t1, S, rng, nav_rng = self.ac, self.t, self.S, self.rng, self.nav_rng
+        ac, t1, S, draws = self.ac, self.t, self.S, self.draws
         prop = self.propeller_on
         fixes, reliable = np.zeros(self.n_auv, int), np.zeros(self.n_auv, int)
         for k in range(self.n_auv):
             at_surface = S[2, k] < 0.5
+            gps, ins = draws.period(k)
             if at_surface:  # GPS at the surface: R = gps_sigma^2 / 2 per axis
                 s2 = ac.gps_sigma**2 / 2
-                self.nav.update(k, t1, math.sqrt(s2) * nav_rng.standard_normal(2), s2 * np.eye(2))
+                self.nav.update(k, t1, math.sqrt(s2) * gps, s2 * np.eye(2), ins)
             modem_ok = not (at_surface and not self.sc.auv[k].modem_at_surface)
             r_h = math.hypot(self.x[0] - S[0, k], self.x[1] - S[1, k])
             slant = math.hypot(r_h, S[2, k])
             p_ok = float(success_probability(slant, prop, ac)) if modem_ok else 0.0
             while self.next_ping[k] <= t1 + 1e-9:
                 self.next_ping[k] += ac.T0
-                if ac.usbl and rng.random() < p_ok:
-                    fix = usbl_fix(t1, k, self.x[:2], S[:3, k], ac, rng)
+                ping = draws.ping(k)
+                if ac.usbl and ping.u_ok < p_ok:
+                    fix = usbl_fix(t1, k, self.x[:2], S[:3, k], ac, ping.z)
                     self.estimators[k].on_fix(fix)
-                    if nav_rng.random() < p_ok:  # the fix reaches the AUV
+                    if ping.u_reach < p_ok:  # the fix reaches the AUV
                         v = np.array([fix.N - S[0, k], fix.E - S[1, k]])
-                        self.nav.update(k, t1, v, np.reshape(fix.cov, (2, 2)))
+                        self.nav.update(k, t1, v, np.reshape(fix.cov, (2, 2)), ping.ins)
                     fixes[k] += 1
                     self.fixes[k].append(fix)
                     self.last_fix[k] = t1
@@ -320,7 +321,7 @@ class World:
                         self.last_reliable[k] = t1
             while self.next_report[k] <= t1 + 1e-9:
                 self.next_report[k] += ac.T_report
-                if rng.random() < p_ok:
+                if draws.report(k) < p_ok:
                     e = self.nav.error(t1)[k]
                     sigma = max(float(self.nav.sigma(t1)[k]), REPORT_SIGMA_MIN)
                     report = Report(t1, k, S[0, k] + e[0], S[1, k] + e[1], S[2, k], S[3, k],
