@@ -296,12 +296,86 @@ def test_a_pooled_median_in_the_gap_between_two_groups_is_no_verdict_on_the_tota
     assert row["verdict"] == "not met"
 
 
-def test_infinite_values_have_no_sums_and_no_verdict():
-    """An AUV never revisited (an infinite interval): the sums are not finite; n/a, the
-    per-pair median still computed."""
+def test_infinite_values_on_both_sides_have_no_sums_and_on_one_side_decide():
+    """An AUV never revisited (an infinite interval): under both controllers the ratio of
+    the sums is undefined (n/a, the per-pair median still computed); under the variant only,
+    its sum is infinite and the target clearly not met (it read n/a, a review)."""
     df = _results()
     df = df[df.scenario != "c0"].copy()
-    df.loc[(df.variant == "hybrid") & (df.seed < 2), "propeller_on_s"] = math.inf
-    t = acceptance_table(df, Acceptance({"propeller_on_s": 0.0}), "hybrid", "mpc", [])
-    assert t["verdict"].tolist() == ["n/a: infinite in 4 pairs (no finite sums)"]
+    both = df.copy()
+    both.loc[(both.variant == "hybrid") & (both.seed < 2), "propeller_on_s"] = math.inf
+    both.loc[(both.variant == "mpc") & (both.seed == 3), "propeller_on_s"] = math.inf
+    t = acceptance_table(both, Acceptance({"propeller_on_s": 0.0}), "hybrid", "mpc", [])
+    assert t["verdict"].tolist() == ["n/a: infinite on both sides (no ratio of their sums)"]
     assert math.isnan(t["sums"].iloc[0]) and math.isfinite(t["median"].iloc[0])
+    one = df.copy()  # the variant 20 % more in every world, and never in one
+    h = one[one.variant == "hybrid"].set_index(["scenario", "seed"])["propeller_on_s"]
+    m = one.variant == "mpc"
+    keys = list(zip(one.loc[m, "scenario"], one.loc[m, "seed"], strict=True))
+    one.loc[m, "propeller_on_s"] = 1.2 * h.loc[keys].to_numpy()
+    one.loc[m & (one.seed == 3) & (one.scenario == "c1"), "propeller_on_s"] = math.inf
+    t = acceptance_table(one, Acceptance({"propeller_on_s": 0.0}), "hybrid", "mpc", [])
+    assert t["sums"].iloc[0] == math.inf and t["verdict"].iloc[0] == "not met"
+    assert t["sums_high"].iloc[0] == math.inf and 0.15 < t["sums_low"].iloc[0] < 0.25
+
+
+def test_one_world_cells_are_collapsed_not_resampled_as_fixed():
+    """Eight cases with one world each, the variant +30 % in four and -40 % in four: each
+    case alone would enter every resample unchanged, a zero-width interval and a verdict
+    with no uncertainty (a review); collapsed into one stratum, the interval spans both."""
+    rows = []
+    for i in range(8):
+        ref = 100.0 + 10 * i
+        for v, val in (("hybrid", ref), ("mpc", ref * (1.3 if i % 2 else 0.6))):
+            rows.append({"index": len(rows), "suite": "t", "scenario": f"c{i}", "variant": v,
+                         "current": "off", "estimator": "perfect", "seed": 0, "status": "ok",
+                         "auv_names": "auv1", "run_dir": f"runs/{i}-{v}",
+                         "propeller_on_s": val})  # fmt: skip
+    t = acceptance_table(pd.DataFrame(rows), Acceptance({"propeller_on_s": 0.0}), "hybrid",
+                         "mpc", []).iloc[0]  # fmt: skip
+    assert t["sums_low"] < t["sums"] < t["sums_high"] and t["sums_low"] < 0 < t["sums_high"]
+    assert t["verdict"] == "undecided"
+    from mpcasv.experiments.acceptance import COLLAPSED, strata
+
+    assert set(strata(np.array([f"c{i}" for i in range(8)]))) == {COLLAPSED}
+    # a lone one-world cell joins the smallest other cell
+    assert strata(np.array(["a", "a", "a", "b", "b", "c"])).tolist() == [
+        "a", "a", "a", "b", "b", "b"]
+
+
+def test_the_cells_are_the_pairing_key_without_the_seed():
+    """Two currents of one scenario are two cells (the suite fixes the worlds of each): a
+    resample keeps five worlds of each current, so a variant +50 % in one current and -50 %
+    in the other, with the reference the same in all, changes the sums by exactly 0 in
+    every resample (resampled by scenario it varied the mix of currents, a review)."""
+    rows = []
+    for cur, factor in (("off", 1.5), ("0.2,0", 0.5)):
+        for seed in range(5):
+            for v, val in (("hybrid", 100.0), ("mpc", 100.0 * factor)):
+                rows.append({"index": len(rows), "suite": "t", "scenario": "c1", "variant": v,
+                             "current": cur, "estimator": "perfect", "seed": seed,
+                             "status": "ok", "auv_names": "auv1",
+                             "run_dir": f"runs/{cur}-{seed}-{v}",
+                             "propeller_on_s": val})  # fmt: skip
+    t = acceptance_table(pd.DataFrame(rows), Acceptance({"propeller_on_s": 0.0}), "hybrid",
+                         "mpc", []).iloc[0]  # fmt: skip
+    assert [t["sums"], t["sums_low"], t["sums_high"]] == pytest.approx([0.0] * 3, abs=1e-12)
+
+
+def test_the_rescaled_bootstrap_matches_the_stratified_variance():
+    """Rao-Wu with m_h = n_h - 1: the resampled sums' variance is the stratified estimator's
+    (N^2 s_h^2 / n_h per stratum, here n_h = N_h), where drawing n_h of n_h gave (n_h - 1) /
+    n_h of it (a review: half with two worlds a case)."""
+    from mpcasv.experiments import stats as paired
+    from mpcasv.experiments.acceptance import sums_stat
+
+    rng = np.random.default_rng(1)
+    ref = np.full(40, 100.0)
+    other = 100.0 + 10.0 * rng.standard_normal(40)
+    cells = np.repeat([f"c{i}" for i in range(20)], 2)  # 20 cells of 2 worlds
+    s = sums_stat(ref, other, cells)
+    var = sum(2 * np.var(other[cells == c], ddof=1) for c in dict.fromkeys(cells))
+    sd = np.sqrt(var) / ref.sum()  # of the relative change
+    z = 1.959963984540054
+    assert (s.ci_high - s.ci_low) / (2 * z * sd) == pytest.approx(1.0, abs=0.06)
+    assert paired.N_RESAMPLES >= 9999

@@ -19,7 +19,17 @@ import json
 
 import imcpy
 import pytest
-from test_deploy_plan_ended import ASV, AUV, AUV_ID, PC, US, FakeDune, _events, _exit_status
+from test_deploy_plan_ended import (
+    ASV,
+    ASV_ID,
+    AUV,
+    AUV_ID,
+    PC,
+    US,
+    FakeDune,
+    _events,
+    _exit_status,
+)
 from test_deploy_plan_ended import _deploy as _plain_deploy
 from test_deploy_plan_ended import _run as _plain_run
 from test_deploy_speed_watch import _state
@@ -188,6 +198,48 @@ def test_a_restart_after_a_timeout_watches_the_new_start(tmp_path, request):
     assert len(_events(dep, "plan_executing")) == 2  # once per START
     assert dune.engine.state == S.EXECUTING and dune.engine.last_outcome == O.FAILURE
     _run(dep, clock, dune, 4.0)
+    assert dep.phase == RUNNING and not _events(dep, "plan_ended")
+
+
+def test_a_late_plan_control_state_ends_nothing(tmp_path, request):
+    """A READY DUNE stamped 1 s before (UDP reordering, a second route, a report from before
+    our START) delivered after our plan's EXECUTING ended the run, with no standby or
+    MANDONE sent (a review); it is counted now, not read."""
+    dep, clock, dune = _deploy(tmp_path, request)
+    _run(dep, clock, dune, 3.0)
+    assert dep.phase == RUNNING and _events(dep, "plan_executing")
+    late = stamp(pcs(S.READY, ""), ASV_ID, US, clock.t - 1.0).serialize()
+    dep.link.handle_datagram(late, ASV)
+    assert dep.phase == RUNNING and not _events(dep, "plan_ended")
+    assert dep.plan_state_late == 1
+
+
+def test_the_starts_own_states_swapped_end_nothing(tmp_path, request):
+    """Our START's INITIALIZING and the EXECUTING DUNE sent 0.9 ms after it, delivered the
+    other way round: the INITIALIZING read last ended the run (a review)."""
+    dep, clock, dune = _deploy(tmp_path, request)
+    dune.engine = None
+    _run(dep, clock, dune, 1.5)
+    assert dep.phase == RUNNING
+    t = clock.t
+    for msg, at in ((pcs(S.EXECUTING, PLAN, O.NONE, "FollowReference"), t + 0.0009),
+                    (pcs(S.INITIALIZING, ""), t)):  # fmt: skip
+        dep.link.handle_datagram(stamp(msg, ASV_ID, US, at).serialize(), ASV)
+    assert dep.phase == RUNNING and _events(dep, "plan_executing")
+    assert not _events(dep, "plan_ended") and dep.plan_state_late == 1
+
+
+def test_another_plan_executing_while_we_run_is_said_once(tmp_path, request):
+    """A DUNE reporting another plan id EXECUTING while our maneuver runs (a plan named
+    otherwise) never arms the watch; an event says so once (a review)."""
+    dep, clock, dune = _deploy(tmp_path, request)
+    dune.engine = None
+    _run(dep, clock, dune, 1.5)
+    for dt in (0.0, 0.4):
+        msg = pcs(S.EXECUTING, "vehicle-plan-7", O.NONE, "FollowReference")
+        dep.link.handle_datagram(stamp(msg, ASV_ID, US, clock.t + dt).serialize(), ASV)
+    said = _events(dep, "plan_state_unarmed")
+    assert len(said) == 1 and "'vehicle-plan-7' EXECUTING" in said[0]["note"]
     assert dep.phase == RUNNING and not _events(dep, "plan_ended")
 
 

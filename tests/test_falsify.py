@@ -372,7 +372,11 @@ PINNED: dict[str, tuple[float, float]] = {
     # at rest over ground, held against the current): every case has a current, starts
     # differently and takes another path (the four pins re-measured, "was": the value
     # before; the mpc-multi case moved within its envelope, below)
-    "falsified-crossing-multi-hybrid-multi-1": (-32.461, 54),  # was -19.370/42 [-31.414, 76];
+    # Session 48's common random numbers (mpcasv.sim.streams: every run meets other channel
+    # and navigation noise than before, ping for ping the same across controllers) moved
+    # every pin but the chaotic mpc-multi envelope; "s48 was": the value before
+    "falsified-crossing-multi-hybrid-multi-1": (-19.465, 46),  # s48 was -32.461/54;
+    # was -19.370/42 [-31.414, 76];
     # search -30.839 m
     # session 13: the exploration's guess goes round the other AUVs (docs/mpc.md, "Controller
     # step" 3): -15.174 m, 49 s on the AVX-512 CPU of sessions 12-13 (-16.072 m, 97 s
@@ -382,9 +386,11 @@ PINNED: dict[str, tuple[float, float]] = {
     # the code before it)
     "falsified-crossing-multi-mpc-multi-1": (-15.174, 49),  # [-14.621, 46] <-15.211, 38>
     # the worst case of the printed eq. 8 (-46.28 m there), run with S1/S2
-    "falsified-crossing-multi-printed-eq8": (-10.090, 30),  # was -8.830/28 [-21.073, 42];
+    "falsified-crossing-multi-printed-eq8": (-8.097, 28),  # s48 was -10.090/30;
+    # was -8.830/28 [-21.073, 42];
     # search -20.622 m
-    "falsified-pursuer-single-hybrid-single-1": (-27.103, 53),  # was -40.178/76; search -29.681
+    "falsified-pursuer-single-hybrid-single-1": (-28.249, 54),  # s48 was -27.103/53;
+    # was -40.178/76; search -29.681
     # search: -25.858 m, 28 s; session 12: the standing-time term (M7s, off while an AUV
     # threatens the ASV) in the preset, 4.987 m without it; no counterexample until session
     # 25 (3.091 m, 0 s). Session 26's ground-speed bounds widened by the current (0.197 m/s
@@ -404,15 +410,20 @@ PINNED: dict[str, tuple[float, float]] = {
     # m, 38 s. An estimation failure, as in the s44 case below: the pursuer was not fixed
     # from t = 135 to 200 s (p_good 0.59, the propeller running), the Kalman estimate's sigma
     # grew to 30 m and it put the pursuer 50-68 m away while it closed from 60 to 25 m
-    "falsified-pursuer-single-mpc-single-1": (-18.410, 38),  # 8.394/0 6.109/0 8.664/0
+    # Session 48's common random numbers: 6.007 m, 0 s: with the other noise the pursuer
+    # was fixed often enough that the estimate did not fail (the kind of failure stands:
+    # docs/mpc.md "Known problems", the Kalman estimate's over-confidence)
+    "falsified-pursuer-single-mpc-single-1": (6.007, 0),  # s48 was -18.410/38
+    # before: 8.394/0 6.109/0 8.664/0
     # {0.443, 0}
     # session 44's searches (docs/safety.md "Session 44"), the first whose runs are the
     # written scenarios (the preset's domain and the power turn in every trial): their worst
     # cases as found, the searches' margins exactly. The MPC's is an estimation failure (the
     # Kalman estimate of the pursuer 55-109 m off while it closes to 0.55 m; p_good 0.36):
     # a change that keeps the ASV off the AUV here moves this pin, which is the point
-    "falsified-pursuer-single-hybrid-single-s44": (-43.003, 57),
-    "falsified-pursuer-single-mpc-single-s44": (-43.505, 139),  # -49.155/199 before s46
+    "falsified-pursuer-single-hybrid-single-s44": (-44.949, 63),  # s48 was -43.003/57
+    "falsified-pursuer-single-mpc-single-s44": (-38.370, 151),  # s48 was -43.505/139;
+    # -49.155/199 before s46
 }
 #: chaotic cases: bounds (margin at least, longest stay at most) around the spread of the run
 #: over the last bits of the floating point. The mpc-multi case's last bits depend on the CPU

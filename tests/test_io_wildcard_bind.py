@@ -124,8 +124,27 @@ def test_the_sitl_bound_to_the_wildcard_announces_and_prints_reachable_addresses
     from mpcasv.io.netcheck import local_hosts  # (new with it)
 
     hosts = local_hosts("0.0.0.0")
-    assert ready["hosts"] == hosts and hosts[0] == "127.0.0.1" and "0.0.0.0" not in hosts
-    assert ready["discovery"] == f"127.0.0.1:{sitl.discovery.address[1]}"
-    assert [v["address"] for v in ready["vehicles"]] == [f"127.0.0.1:{v.port}"
+    assert ready["hosts"] == hosts and "127.0.0.1" in hosts and "0.0.0.0" not in hosts
+    first = hosts[0]  # another host's peers' address when this host has one (below)
+    assert ready["discovery"] == f"{first}:{sitl.discovery.address[1]}"
+    assert [v["address"] for v in ready["vehicles"]] == [f"{first}:{v.port}"
                                                          for v in sitl.vehicles]  # fmt: skip
     assert local_hosts("127.0.0.1") == ["127.0.0.1"]
+
+
+def test_a_wildcard_bind_prints_the_address_other_hosts_reach_first(monkeypatch):
+    """Bound to 0.0.0.0 (for peers on other hosts) the ready line's addresses were the
+    loopback's, which another host cannot reach (a review): loopback comes last now."""
+    import socket
+    from types import SimpleNamespace
+
+    from mpcasv.io import netcheck
+
+    def addr(a):
+        return SimpleNamespace(family=socket.AF_INET, address=a)
+
+    monkeypatch.setattr(netcheck.psutil, "net_if_addrs", lambda: {
+        "lo": [addr("127.0.0.1")], "eth0": [addr("10.0.10.7")], "wlan0": [addr("192.168.1.4")]})
+    assert netcheck.local_hosts("0.0.0.0") == ["10.0.10.7", "192.168.1.4", "127.0.0.1"]
+    monkeypatch.setattr(netcheck.psutil, "net_if_addrs", lambda: {"lo": [addr("127.0.0.1")]})
+    assert netcheck.local_hosts("0.0.0.0") == ["127.0.0.1"]

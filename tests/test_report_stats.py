@@ -333,7 +333,6 @@ def test_report_states_the_negligible_rule_and_the_multiplicity_of_each_table(tm
     assert section.index("Multiple comparisons") < section.index("| metric | case | pairs |")
 
 
-
 def test_the_wins_and_losses_counts_say_how_many_tests_they_rest_on(tmp_path):
     """The "Significant wins and losses" table counted 'better' verdicts over every metric
     and case (179 tests in the main job, about 9 expected by chance) without a word on

@@ -15,9 +15,11 @@ relative change of the sums (equivalently of the means) over the paired worlds (
 pairing, :func:`mpcasv.experiments.stats.pairs`, one pair per world), pooled over every case
 of the suite except, for a metric that needs fixes (:data:`NEEDS_FIXES`), the cases where no
 USBL fix arrived in any run (there the fix ages are the run's clock and the AUVs navigate
-without fixes whatever the controller). Its 95 % CI is a percentile bootstrap that resamples
-the worlds within each case (:func:`sums_stat`; the suite draws a fixed number of worlds per
-case, so the interval is conditional on these cases: it says nothing of cases unlike them).
+without fixes whatever the controller). Its 95 % CI is a percentile bootstrap of the
+stratified design: worlds resampled within each cell (scenario, current, estimator: the
+suite fixes their number per cell), one-world cells collapsed, rescaled (:func:`sums_stat`,
+:func:`strata`); the interval is conditional on these cells: it says nothing of cases unlike
+them.
 Verdict: **met** when the whole CI is at or on the better side of the target, **not met**
 when it is all on the worse side, else **undecided**; a target with unpaired runs is not
 counted as met.
@@ -27,12 +29,13 @@ Until session 48 the verdict was the median of the per-pair relative changes ``(
 statistician's review found it the wrong estimand for these targets: pooled over cases whose
 effects go opposite ways it fell in the gap between them (issue 16's propeller time: +15 to
 +591 % in Cases 1-4, -25 to +17 % in Cases 5-8, pooled median +9.8 % [-5.1, +32.3],
-"undecided", with no world between +4.2 and +15.4 %; the sums +14.9 % [+11.9, +17.9]), and a
+"undecided", with no world between +4.2 and +15.4 %; the sums +14.9 %, not met), and a
 median meets "no more time in the collision domain" with a few worlds much worse (4 of 80 in
 session 47's main job, each +inf). "At least 30 % lower" and "no more" are statements about
 totals; the sums are also defined where many worlds are 0 (which the per-pair change had to
-leave out). A metric with an infinite value in a used pair (e.g. an AUV never revisited) has
-no finite sums: the verdict is n/a, the per-pair median still shown. Fewer than
+leave out). Infinite values on both sides (e.g. AUVs never revisited under both
+controllers) leave the ratio of the sums undefined: n/a, the per-pair median still shown;
+on one side only the sums are infinite or -100 %, as per pair. Fewer than
 :data:`~mpcasv.experiments.stats.MIN_PAIRS` pairs: n/a.
 """
 
@@ -123,27 +126,53 @@ def verdict(better: str, target: float, s: paired.PairedStat) -> str:
     return "undecided"
 
 
-def sums_stat(ref: np.ndarray, other: np.ndarray, cases: np.ndarray,
+#: the label of the stratum the design's one-world cells are collapsed into (:func:`strata`)
+COLLAPSED = "(cells with one world)"
+
+
+def strata(cells: np.ndarray) -> np.ndarray:
+    """The bootstrap's strata (shape (n,), labels) from the design's cells ``cells`` (shape
+    (n,), one label per world): a cell with one world has no variance within it and would
+    enter every resample unchanged (eight one-world cases gave a zero-width interval, a
+    review), so such cells are collapsed into one stratum, and a lone one into the smallest
+    other cell (collapsed strata: Wolter, *Introduction to Variance Estimation*, 2nd ed.
+    2007, §2.5)."""
+    labels = pd.Series(cells, dtype="string").to_numpy(dtype=object)
+    names, sizes = np.unique(labels, return_counts=True)
+    single = names[sizes == 1]
+    if len(single) >= 2:
+        labels = np.where(np.isin(labels, single), COLLAPSED, labels)
+    elif len(single) == 1 and len(names) > 1:
+        big = sizes > 1
+        labels = np.where(labels == single[0], names[big][np.argmin(sizes[big])], labels)
+    return labels
+
+
+def sums_stat(ref: np.ndarray, other: np.ndarray, cells: np.ndarray,
               seed: int = paired.SEED) -> paired.PairedStat:  # fmt: skip
     """The relative change of the sums ``(sum other - sum ref) / sum ref`` of the pairs
     ``(ref[i], other[i])`` (shape (n,) each, the metric's units; limits as
-    :func:`relative_changes`: both sums 0 is 0, ``sum ref`` 0 alone +-inf) as a
+    :func:`relative_changes`: both sums 0 is 0, ``sum ref`` 0 alone +-inf, an infinite
+    ``sum other`` +inf, an infinite ``sum ref`` alone -1) as a
     :class:`~mpcasv.experiments.stats.PairedStat` (``median`` holds the change, ``p`` NaN),
     with its 95 % percentile bootstrap CI: :data:`~mpcasv.experiments.stats.N_RESAMPLES`
-    resamples, each drawing every case's pairs with replacement within the case
-    (``cases``, shape (n,): the design's strata; the case with one pair contributes it
-    every time), quantiles without interpolation (an infinite resample stays one).
+    resamples of the stratified design, the strata the design's cells (``cells``, shape
+    (n,): scenario, current and estimator; :func:`strata`). Each resample draws ``n_h - 1``
+    of a stratum's ``n_h`` worlds with replacement and weights them ``n_h / (n_h - 1)`` (the
+    rescaling bootstrap of Rao & Wu, *JASA* 83:231, 1988, with ``m_h = n_h - 1``, as McCarthy
+    & Snowden 1985: the naive ``n_h`` of ``n_h`` under-states a stratum's variance by
+    ``(n_h - 1) / n_h``); quantiles without interpolation (an infinite resample stays one).
 
     n/a (``ci_low``/``ci_high`` NaN, ``note`` says why): fewer than
-    :data:`~mpcasv.experiments.stats.MIN_PAIRS` pairs; an infinite value in a pair."""
+    :data:`~mpcasv.experiments.stats.MIN_PAIRS` pairs; infinite values on both sides (their
+    sums' ratio is undefined)."""
     ref, other = np.asarray(ref, float), np.asarray(other, float)
     n = len(ref)
     if n == 0:
         return paired.PairedStat(0, math.nan, math.nan, math.nan, math.nan, "n/a: no pairs")
-    if not (np.isfinite(ref).all() and np.isfinite(other).all()):
-        bad = int(np.sum(~(np.isfinite(ref) & np.isfinite(other))))
+    if np.isinf(ref).any() and np.isinf(other).any():
         return paired.PairedStat(n, math.nan, math.nan, math.nan, math.nan,
-                                 f"n/a: infinite in {count(bad, 'pair')} (no finite sums)")
+                                 "n/a: infinite on both sides (no ratio of their sums)")
     change = float(relative_changes(np.array([ref.sum()]), np.array([other.sum()]))[0])
     if n < paired.MIN_PAIRS:
         return paired.PairedStat(n, change, math.nan, math.nan, math.nan,
@@ -151,11 +180,12 @@ def sums_stat(ref: np.ndarray, other: np.ndarray, cases: np.ndarray,
     rng = np.random.default_rng(seed)
     sum_r = np.zeros(paired.N_RESAMPLES)
     sum_o = np.zeros(paired.N_RESAMPLES)
-    for case in dict.fromkeys(cases):  # the strata in their order: the same draws each time
-        r, o = ref[cases == case], other[cases == case]
-        idx = rng.integers(0, len(r), size=(paired.N_RESAMPLES, len(r)))
-        sum_r += r[idx].sum(axis=1)
-        sum_o += o[idx].sum(axis=1)
+    st = strata(cells)
+    for h in dict.fromkeys(st):  # the strata in their order: the same draws each time
+        r, o = ref[st == h], other[st == h]
+        idx = rng.integers(0, len(r), size=(paired.N_RESAMPLES, len(r) - 1))
+        sum_r += len(r) * r[idx].mean(axis=1)
+        sum_o += len(r) * o[idx].mean(axis=1)
     boot = relative_changes(sum_r, sum_o)
     alpha = (1 - paired.CONFIDENCE) / 2
     lo, hi = np.quantile(boot, [alpha, 1 - alpha], method="inverted_cdf")
@@ -193,7 +223,8 @@ def acceptance_table(results: pd.DataFrame, acc: Acceptance, reference: str, oth
             unpaired = unpaired.drop(no_fix_cases, errors="ignore")
         p = paired.per_world(p)
         ref, oth = p["ref"].to_numpy(float), p["other"].to_numpy(float)
-        total = sums_stat(ref, oth, p[paired.CASE].to_numpy())
+        cell = [c for c in paired.pair_key(results) if c not in ("seed", "realisation")]
+        total = sums_stat(ref, oth, p[cell].astype(str).agg(" | ".join, axis=1).to_numpy())
         zero = (ref == 0) & (oth == 0)
         if zero.all():  # both 0 in every pair: the change is 0 in each (not "no pairs")
             zero = zero & False
@@ -230,7 +261,7 @@ def display_table(t: pd.DataFrame) -> pd.DataFrame:
         "pairs": [f"{n}" + (f" {noun(n, 'world')} ({r} runs)" if r > n else "")
                   + (f" (+{u} unpaired)" if u else "")
                   for n, r, u in zip(t["pairs"], t["runs"], t["unpaired"], strict=True)],
-        f"change of the sums [{paired.CONFIDENCE:.0%} CI, worlds resampled in each case]": [
+        f"change of the sums [{paired.CONFIDENCE:.0%} CI, worlds resampled in each cell]": [
             _pct(v) + (f" [{_pct(lo)}, {_pct(hi)}]" if not math.isnan(lo) else "")
             for v, lo, hi in zip(t["sums"], t["sums_low"], t["sums_high"], strict=True)],
         f"per pair: median [{paired.CONFIDENCE:.0%} CI]": [
@@ -286,8 +317,9 @@ def report_parts(results: pd.DataFrame, acc: Acceptance, names: list[str],
     rule = (f"The relative change of the sums (Σ other − Σ reference) / Σ reference over the "
             f"paired worlds, pooled over the cases{left_out}, one pair per world (the pairs of "
             f"a case on the same realisation averaged), with its {paired.CONFIDENCE:.0%} "
-            "percentile bootstrap CI resampling the worlds within each case (so conditional "
-            "on these cases); the median of the per-pair relative changes (other − "
+            "percentile bootstrap CI resampling the worlds within each cell of the design "
+            "(scenario, current, estimator; one-world cells collapsed; Rao-Wu rescaled), so "
+            "conditional on these cells; the median of the per-pair relative changes (other − "
             "reference) / |reference| is shown beside it (pairs where both are 0 left out of "
             "it). *met*: the whole CI of the sums' change is at or on the better side of the "
             "requirement; *not met*: the whole CI is on the worse side; *undecided*: it "

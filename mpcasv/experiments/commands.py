@@ -126,7 +126,6 @@ def run(args: argparse.Namespace) -> int:
     return 0 if ok == len(exp.jobs) else 1
 
 
-
 def _say_kept_errors(results, exp, stats) -> None:
     """Print the error jobs recorded by an earlier sweep and not rerun (without
     ``--retry-errors``): a rerun of a sweep whose every error was kept printed none of them,

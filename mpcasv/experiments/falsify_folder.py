@@ -19,8 +19,10 @@ from pathlib import Path
 
 from mpcasv.config import ConfigError
 
-#: what a search's runs are (:func:`study_identity`); 2 since session 44
-SEARCH_FORMAT = 2
+#: what a search's runs are (:func:`study_identity`); 2 since session 44, 3 since session 48
+#: (the world's synchronised random streams, :mod:`mpcasv.sim.streams`: a study of format 2
+#: holds runs of the old draws and is refused, not extended)
+SEARCH_FORMAT = 3
 #: the file recording the search a folder holds
 IDENTITY_FILE = "falsify.json"
 #: files a search writes into its folder (a folder with any of them and no IDENTITY_FILE was

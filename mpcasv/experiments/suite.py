@@ -128,6 +128,13 @@ def _digest(obj) -> str:
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
+#: The world's random streams a job's run draws from, in its id: 2 since session 48, the
+#: synchronised streams of :mod:`mpcasv.sim.streams` (common random numbers). A results
+#: folder written before holds runs of the old draws under the old ids: resumed, its jobs
+#: run again rather than pair old-noise runs with new ones (a review).
+WORLD_STREAMS = 2
+
+
 #: The shipped vessel and execution files, by name, whose content as of session 44 (their
 #: :func:`~mpcasv.controllers.registry.parameter_hash`) leaves a job id as it was before the
 #: boat's content was in it (frozen: a shipped file edited since has another hash, and its
@@ -264,7 +271,7 @@ def expand(name_or_path: str | Path) -> Expansion:
                     for seed in suite.seeds:
                         real, current_realised = reals[seed][0].id, reals[seed][1]
                         jid = _digest([sc_digest, cname, p_digest, seed, estimator, variant,
-                                       real, *boat])  # fmt: skip
+                                       real, *boat, ["streams", WORLD_STREAMS]])  # fmt: skip
                         if jid in seen:
                             raise ConfigError(f"{where}: job duplicates job #{seen[jid]} "
                                               "(same scenario, parameters, seed)")  # fmt: skip

@@ -64,7 +64,8 @@ class Ending:
                    "usbl_fix_outliers": list(self.usbl.outliers),
                    "estimator_reordered": [e.reordered for e in self.estimators],
                    "estimator_dropped": [e.dropped for e in self.estimators],
-                   "followref_lost": self.followref_lost, **self.link.counters()}  # fmt: skip
+                   "followref_lost": self.followref_lost,
+                   "plan_state_late": self.plan_state_late, **self.link.counters()}  # fmt: skip
         why = self.no_decision(self.clock.now() - self.t_started)
         if why is not None:
             summary["no_decision"] = why

@@ -117,13 +117,14 @@ def announced_hosts(bind: str, remotes, what: str) -> list[str]:
 def local_hosts(bind: str) -> list[str]:
     """The addresses of this host a peer can send to when we are bound to ``bind``: ``bind``
     itself, or bound to the wildcard, every IPv4 address of this host's interfaces
-    (``psutil.net_if_addrs``), loopback first then in the interfaces' order, none twice,
-    never 0.0.0.0. What ``mpcasv sitl`` prints; which of them a given peer sees us from is
-    :func:`announced_hosts`'s (the route's source address)."""
+    (``psutil.net_if_addrs``), loopback last (a wildcard bind is for peers on other hosts,
+    and ``mpcasv sitl`` prints its addresses at the first: a review), else in the
+    interfaces' order, none twice, never 0.0.0.0. Which of them a given peer sees us from
+    is :func:`announced_hosts`'s (the route's source address)."""
     if not is_wildcard(bind):
         return [bind]
     found = [a.address for addrs in psutil.net_if_addrs().values() for a in addrs
              if a.family == socket.AF_INET]  # fmt: skip
-    hosts = sorted(set(found), key=lambda h: (not ipaddress.IPv4Address(h).is_loopback,
+    hosts = sorted(set(found), key=lambda h: (ipaddress.IPv4Address(h).is_loopback,
                                               found.index(h)))  # fmt: skip
     return [h for h in hosts if not is_wildcard(h)] or ["127.0.0.1"]

@@ -44,6 +44,8 @@ deploy's).
 
 from __future__ import annotations
 
+import math
+
 import imcpy
 
 from mpcasv.io.deployphases import RUNNING
@@ -65,10 +67,10 @@ def plan_state_meaning(fields: dict, ours: str) -> str:
     """What a PlanControlState that no longer shows our plan ``ours`` EXECUTING says, in a
     few words (DUNE's ``Plan/Engine``; module docstring)."""
     state, plan, outcome = fields["state"], fields["plan_id"], fields["last_outcome"]
-    if plan != ours and state in ("INITIALIZING", "EXECUTING"):
-        return f"another plan ({plan!r}) was started"
-    if state == "INITIALIZING":
+    if state == "INITIALIZING":  # (it still names the plan before: not the one starting)
         return "a plan is being started (a START from another system)"
+    if plan != ours and state == "EXECUTING":
+        return f"another plan ({plan!r}) was started"
     if state == "BLOCKED":
         return "the plan engine is blocked (a vehicle error, or CALIBRATION or EXTERNAL mode)"
     if outcome == "SUCCESS":
@@ -85,15 +87,27 @@ class PlanStateWatch:
         """The watch's state (the deploy's constructor)."""
         self.plan_executing = False  # our plan shown EXECUTING since our last START
         self.plan_state: dict | None = None  # the ASV's last PlanControlState (fields, recv)
+        self.plan_state_stamp = -math.inf  # the newest one's timestamp (DUNE's clock), s
+        self.plan_state_late = 0  # older or repeated ones, not read (summary)
+        self.plan_state_unarmed = False  # said once: another plan EXECUTING while we run
 
     def plan_state_reset(self) -> None:
         """A START of ours was sent: its plan is not yet shown EXECUTING."""
         self.plan_executing = False
 
     def _plan_control_state(self, p, msg: imcpy.PlanControlState, now: float) -> None:
-        """A PlanControlState from the ASV (the link accepts it from the ASV only)."""
-        if p.role != "asv":  # (an AUV's engine runs its own plans)
+        """A PlanControlState from the ASV (the link accepts it from the ASV only). One
+        stamped before the newest one read is not read, only counted
+        (``plan_state_late``): a datagram reordered on the way, or arriving over a second
+        route, told the end of a plan that was executing (our START's own INITIALIZING after
+        its EXECUTING; a READY from before a TIMEOUT's restart: a review). A DUNE clock
+        stepped back leaves the watch deaf until its stamps pass the newest again
+        (``followref_lost`` still ends a stopped run)."""
+        stamp = float(msg.timestamp)
+        if stamp < self.plan_state_stamp:  # (equal stamps: read in arrival order)
+            self.plan_state_late += 1
             return
+        self.plan_state_stamp = stamp
         fields = plan_state_fields(msg)
         self.plan_state = fields | {"recv": now}
         if self.phase != RUNNING or self.dry_run or self.closing:
@@ -105,8 +119,16 @@ class PlanStateWatch:
                 self.event("plan_executing", vehicle=p.label, request_id=self.plan_request,
                            **fields)  # fmt: skip
             return
-        if not self.plan_executing:
-            return  # our START is still being handled (INITIALIZING, or an older READY)
+        if not self.plan_executing:  # our START is still being handled (INITIALIZING, an
+            # older READY); another plan EXECUTING while we run: a DUNE naming our plan
+            # otherwise leaves the watch unarmed, said once (a review)
+            if msg.state == EXECUTING and not self.plan_state_unarmed:
+                self.plan_state_unarmed = True
+                self.event("plan_state_unarmed", vehicle=p.label, **fields,
+                           note=f"PlanControlState shows plan {msg.plan_id!r} EXECUTING, not "
+                                f"ours ({ours!r}): an operator's stop is then seen only as "
+                                "followref_lost")  # fmt: skip
+            return
         meaning = plan_state_meaning(fields, ours)
         self.ended_by_dune = True
         self.event("plan_ended", source="PlanControlState", vehicle=p.label,

@@ -14,7 +14,8 @@
 - Acoustic status reports every ``T_report`` carry the AUV's own navigation estimate, depth,
   heading and speed.
 
-All randomness comes from one ``numpy.random.Generator`` owned by the simulator.
+No randomness is drawn here: the simulator hands in its draws (the synchronised streams of
+:mod:`mpcasv.sim.streams`).
 """
 
 from __future__ import annotations

@@ -31,8 +31,8 @@ truth, so it runs the filter on the *error* ``e = p_hat - p`` (horizontal, per A
   estimate less than a near one. GPS at the surface: ``R = gps_sigma^2 / 2 I_2``.
 
 How a USBL fix reaches the AUV is the simulator's business (:class:`mpcasv.sim.world.World`
-sends it back over the acoustic link with the channel's success probability). Everything
-random comes from the generator handed in.
+sends it back over the acoustic link with the channel's success probability). Every random
+draw is handed in (the simulator's synchronised streams, :mod:`mpcasv.sim.streams`).
 """
 
 from __future__ import annotations

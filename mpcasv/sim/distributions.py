@@ -15,7 +15,8 @@ from pydantic import Field, model_validator
 
 from mpcasv.config import Float, Pos, Prob, frozen
 
-#: first spawn key of every realisation stream (keeps them apart from ``default_rng(seed)``)
+#: first spawn key of every realisation stream (keeps them apart from the world's streams,
+#: :data:`mpcasv.sim.streams.CHANNEL_STREAM`)
 STREAM_TAG = 0x5EED
 
 
@@ -98,8 +99,8 @@ Dist = Annotated[Uniform | Normal | Choice, Field(discriminator="dist")]
 
 
 def stream(seed: int, key: str) -> np.random.Generator:
-    """The random stream of one uncertain quantity: independent of the world's
-    ``default_rng(seed)``, of the controller and of every other key."""
+    """The random stream of one uncertain quantity: independent of the world's streams
+    (:mod:`mpcasv.sim.streams`), of the controller and of every other key."""
     return np.random.default_rng(
         np.random.SeedSequence(seed, spawn_key=(STREAM_TAG, zlib.crc32(key.encode())))
     )

@@ -12,7 +12,8 @@ declared quantity. :func:`realise` gives the realised :class:`~mpcasv.sim.scenar
 
 Streams. Each quantity has its own random stream, derived from the seed, the scenario's name
 and the quantity's key (e.g. ``case6/auv.auv1.offset_N``) with :class:`numpy.random.SeedSequence`
-spawn keys; none is the world's stream (``default_rng(seed)``: acoustics, INS drift) and no
+spawn keys; none is one of the world's streams (:mod:`mpcasv.sim.streams`: acoustics, INS
+drift) and no
 controller draws from them. So (scenario, seed) gives the same realisation for every controller
 (paired comparisons), declaring one more uncertain quantity does not change the values drawn
 for the others, and two scenarios draw independently for the same seed.
