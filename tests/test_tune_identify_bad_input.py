@@ -52,6 +52,8 @@ def _refused(capsys, argv, *words):
         ("yaw", ["--T-f", "0.05"], ["--dt 0.1", "--T-f", "--dt <= 0.05"]),
         ("speed", ["--w", "100"], ["--w 100", "1/T_thrust = 2 rad/s"]),  # overflow warnings
         ("speed", ["--dt", "100"], ["--dt 100", "T_thrust", "--dt <= 0.5"]),
+        ("speed", ["--u-ff", "0.6", "--k-u", "10"],  # k_u = 10 was recommended and written
+         ["--k-u 10", "above --u-cmd-max 3.0976 m/s", "no pair"]),
         ("yaw", ["--base", "nope"], ["--base nope", "unknown execution 'nope'"]),  # "executio"
     ],
 )

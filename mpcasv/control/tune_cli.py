@@ -191,7 +191,9 @@ def run_tune_speed(args: argparse.Namespace) -> int:
     from mpcasv.control.tuning_report import plot_speed, speed_tables
     from mpcasv.control.tuning_speed import (
         SPEED_STEP,
+        edge_notes,
         feed_forward_gain,
+        merge_grids,
         place_speed_pi,
         recommend,
         speed_figures,
@@ -202,6 +204,7 @@ def run_tune_speed(args: argparse.Namespace) -> int:
     )  # fmt: skip
 
     model, ep, toml = _setup(args, "speed")
+    _check_u_cmd_max(args, ep)
     args.out.mkdir(parents=True, exist_ok=True)
     g = place_speed_pi(model, args.design_speed, args.w, args.zeta)
     ep_new = replace(ep, speed=g)
@@ -233,28 +236,12 @@ def run_tune_speed(args: argparse.Namespace) -> int:
                                progress=not args.quiet)  # fmt: skip
         grids[d] = (rows, runs)
     # recommend on the grid (the last row, "no reference model", is a baseline only)
-    by_pair: dict = {}
-    for rows, _ in grids.values():
-        for r in rows[:-1]:
-            by_pair.setdefault((r.u_ff, r.k_u), []).append(r)
-    from mpcasv.control.tuning_speed import TurnRow
-
-    merged = [
-        TurnRow(
-            u_ff=k[0],
-            k_u=k[1],
-            figures={
-                f"{d}m/{a}": f
-                for d, rs in zip(args.distance, v, strict=True)
-                for a, f in rs.figures.items()
-            },
-        )
-        for k, v in by_pair.items()
-    ]
+    merged = merge_grids(grids)
     try:
-        best = recommend(merged)
-    except ValueError as exc:  # every pair pirouetted: reported, the field values are kept
-        best = None
+        best = recommend(merged, args.u_cmd_max)
+        notes = edge_notes(best, merged, args.u_cmd_max)
+    except ValueError as exc:  # no pair reached every waypoint: reported, the base's kept
+        best, notes = None, []
         none_reason = str(exc)
     ok_loop = all(c["phase_margin_deg"] >= 45 and c["gain_margin_db"] >= 6 and c["stable"]
                   for f in loop.values() for c in f)  # fmt: skip
@@ -276,8 +263,9 @@ def run_tune_speed(args: argparse.Namespace) -> int:
             prov,
             "reference",
             "field tuning, thesis §3.4.1 (kept; the turn grid "
-            + (f"of mpcasv tune speed recommends u_ff={best.u_ff}, k_u={best.k_u})" if best
-               else "of mpcasv tune speed found no pirouette-free pair)"),
+            + (f"of mpcasv tune speed recommends u_ff={best.u_ff}, k_u={best.k_u} within "
+               f"u_cmd,max <= {args.u_cmd_max:.4g} m/s)" if best
+               else "of mpcasv tune speed found no pair that reached every waypoint)"),
         )
     ep_new = replace(ep_new, provenance=prov)
     wrote = _write_if_pass(ok_loop, toml, ep_new, "speed", args)
@@ -291,17 +279,37 @@ def run_tune_speed(args: argparse.Namespace) -> int:
                    d * math.sin(math.radians(a))), args.out,
                    f"{model.params.name}: waypoint {d:g} m at {a:g} deg, from {u0:g} m/s, "
                    f"command u_max = {model.params.u_max:g} m/s")  # fmt: skip
-    text_tables = speed_tables(g, loop, grids, best, steps, limits)
+    text_tables = speed_tables(g, loop, grids, best, steps, limits, args.u_cmd_max, notes)
     (args.out / "speed.md").write_text(text_tables + "\n")
     print(text_tables)
     print(
-        (f"recommended (u_ff, k_u) = ({best.u_ff}, {best.k_u})" if best else
-         "no recommended (u_ff, k_u): every pair of the grid pirouetted")
+        (f"recommended (u_ff, k_u) = ({best.u_ff}, {best.k_u}) (u_ff + k_u pi/2 <= "
+         f"{args.u_cmd_max:.4g} m/s)" if best else
+         "no recommended (u_ff, k_u): no pair of the grid reached every waypoint")
         + f"; {wrote}; wrote "
         f"{args.out}/speed.md and plots; loop margins {'PASS' if ok_loop else 'FAIL'}"
     )
     print(_steps_summary(steps))
+    for note in notes:  # the optimum on the grid's edge: say so where it is seen
+        if "beyond it" in note:
+            print(f"mpcasv tune: warning: recommended {note}", file=sys.stderr)
     return 0 if ok_loop else 1
+
+
+def _check_u_cmd_max(args, ep) -> None:
+    """Default ``--u-cmd-max`` to the base file's own ``u_ff + k_u pi/2`` (the thesis kept it
+    when it changed ``u_ff``, §3.4.1) and refuse a grid none of whose pairs is within it (one
+    line, before any work)."""
+    from mpcasv.control.tuning_speed import u_cmd_max
+
+    if args.u_cmd_max is None:
+        args.u_cmd_max = round(u_cmd_max(ep.reference.u_ff, ep.reference.k_u), 4)
+    low = min(u_cmd_max(a, b) for a in args.u_ff for b in args.k_u)
+    if low > args.u_cmd_max * (1 + 1e-6):
+        raise ConfigError(f"--u-ff {','.join(f'{x:g}' for x in args.u_ff)} --k-u "
+                          f"{','.join(f'{x:g}' for x in args.k_u)}: every pair has u_ff + k_u "
+                          f"pi/2 above --u-cmd-max {args.u_cmd_max:g} m/s (least {low:.4g} m/s): "
+                          "no pair of the grid may be recommended")  # fmt: skip
 
 
 def _steps_summary(steps: dict) -> str:

@@ -28,7 +28,7 @@ from mpcasv.config import ConfigError
 
 #: options of `tune yaw` / `tune speed` that are numbers > 0 (finite); lists: every value
 POSITIVE = ("wn", "wn_per_speed", "zeta", "integral_ratio", "T_f", "dt", "w", "design_speed",
-            "u_ff", "k_u", "distance")  # fmt: skip
+            "u_ff", "k_u", "distance", "u_cmd_max")  # fmt: skip
 
 
 def option(key: str) -> str:
