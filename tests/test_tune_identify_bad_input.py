@@ -63,6 +63,21 @@ def test_bad_tuning_input_is_one_line_and_writes_nothing(tmp_path, capsys, loop,
     assert not out.exists()
 
 
+def test_a_base_files_yaw_filter_is_checked_against_the_step_as_an_option_is(tmp_path, capsys):
+    """`tune speed --base FILE` with T_f = 0.02 s ran its turns at 0.1 s (> 2 T_f: the
+    forward-Euler yaw-rate filter diverges) unrefused: the --dt/--T-f check covered options
+    only. Likewise `tune yaw --dt 0.01 --T-f 0.05`: its nonlinear step runs at 0.1 s."""
+    text = (DATA_DIR / "execution" / "gretha.toml").read_text().replace("T_f = 0.2", "T_f = 0.02")
+    base = tmp_path / "tf.toml"
+    base.write_text(text)
+    out = tmp_path / "out"
+    _refused(capsys, ["tune", "speed", "--base", str(base), "--out", str(out), "--quiet"],
+             f"T_f (--base {base}) = 0.02 s", "the nonlinear checks' step", "T_f >= 0.1 s")
+    _refused(capsys, ["tune", "yaw", "--dt", "0.01", "--T-f", "0.05", "--out", str(out),
+                      "--quiet"], "T_f (--T-f) = 0.05 s", "the nonlinear checks' step")
+    assert not out.exists()
+
+
 def _quiet_run(argv) -> tuple[int, list]:
     """Run ``argv``; the numeric warnings it raised (overflow, badly conditioned filters)."""
     from scipy.signal import BadCoefficients
