@@ -273,3 +273,34 @@ def test_the_pirouette_label_gives_the_circling_after_the_pass(tmp_path, monkeyp
                  if t.get_text().startswith("without"))  # fmt: skip
     assert "within 5 m of the waypoint at 5 s" in label, label
     assert "circles it 6.0-11.0 m away to 60 s" in label, label
+
+
+def test_a_speed_loop_crossing_over_below_the_sweep_is_measured_and_its_steps_must_settle(
+        model, tmp_path, capsys):  # fmt: skip
+    """`tune speed --w 0.0001`: Kp 0, Ki ~1e-5, crossover ~1e-7 rad/s. The margin sweep
+    started at 1e-4 rad/s, found no crossover and overrode python-control's 90 deg with "inf";
+    "loop margins PASS" although a step from 0.5 to 1 m/s never settled in 120 s. The sweep
+    now starts below the loop's crossover, and the steps must settle (exit 1, TOML kept)."""
+    import control as ct
+
+    from mpcasv.control.tuning import loop_margins
+    from mpcasv.control.tuning_speed import pi_tf
+
+    g = place_speed_pi(model, 1.0, 1e-4, 1.0)
+    assert g.Kp == 0 and g.Ki < 2e-5
+    for dt in (None, 0.1):
+        P = surge_plant(model, 1.0)
+        L = ct.ss(pi_tf(g, dt)) * (ct.c2d(P, dt, "zoh") if dt else P)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            m = loop_margins(L)
+        assert m["phase_margin_deg"] == pytest.approx(90.0, abs=0.5), m
+        assert m["w_gain_crossover"] == pytest.approx(1.1e-7, rel=0.05)
+    toml = tmp_path / "e.toml"
+    rc = main(["tune", "speed", "--w", "0.0001", "--speeds", "1", "--u-ff", "0.6", "--k-u",
+               "1.59", "--distance", "50", "--out", str(tmp_path / "o"), "--toml", str(toml),
+               "--quiet"])  # fmt: skip
+    out = capsys.readouterr().out
+    assert rc == 1 and not toml.exists()
+    assert "loop margins PASS; speed steps settle (2 %, within 120 s): FAIL: " in out
+    assert "1->0.5 m/s" in out

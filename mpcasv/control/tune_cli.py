@@ -197,6 +197,7 @@ def run_tune_speed(args: argparse.Namespace) -> int:
     from mpcasv.control.tuning_report import plot_speed, speed_tables
     from mpcasv.control.tuning_speed import (
         SPEED_STEP,
+        STEP_T_END,
         edge_notes,
         feed_forward_gain,
         merge_grids,
@@ -207,6 +208,7 @@ def run_tune_speed(args: argparse.Namespace) -> int:
         straight_speed_limit,
         surge_plant,
         turn_grid,
+        unsettled_steps,
     )  # fmt: skip
 
     model, ep, toml = _setup(args, "speed")
@@ -249,8 +251,10 @@ def run_tune_speed(args: argparse.Namespace) -> int:
     except ValueError as exc:  # no pair reached every waypoint: reported, the base's kept
         best, notes = None, []
         none_reason = str(exc)
-    ok_loop = all(c["phase_margin_deg"] >= 45 and c["gain_margin_db"] >= 6 and c["stable"]
-                  for f in loop.values() for c in f)  # fmt: skip
+    ok_margins = all(c["phase_margin_deg"] >= 45 and c["gain_margin_db"] >= 6 and c["stable"]
+                     for f in loop.values() for c in f)  # fmt: skip
+    unsettled = unsettled_steps(loop, steps)  # a stable loop may still never get there
+    ok_loop = ok_margins and not unsettled
     cmd = _command_line(args, "tune speed")
     text = (f"{cmd}: PI by pole placement on the linearised surge model at "
             f"{args.design_speed} m/s, w {args.w} rad/s, zeta {args.zeta}; min PM "
@@ -293,7 +297,9 @@ def run_tune_speed(args: argparse.Namespace) -> int:
          f"{args.u_cmd_max:.4g} m/s)" if best else
          "no recommended (u_ff, k_u): no pair of the grid reached every waypoint")
         + f"; {wrote}; wrote "
-        f"{args.out}/speed.md and plots; loop margins {'PASS' if ok_loop else 'FAIL'}"
+        f"{args.out}/speed.md and plots; loop margins {'PASS' if ok_margins else 'FAIL'}; "
+        f"speed steps settle (2 %, within {STEP_T_END:g} s): "
+        + ("PASS" if not unsettled else f"FAIL: {', '.join(unsettled)}")
     )
     print(_steps_summary(steps))
     for note in notes:  # the optimum on the grid's edge: say so where it is seen

@@ -115,6 +115,20 @@ def speed_figures(P: ct.StateSpace, g: SpeedLoop, dt: float | None = None,
     return loop_margins(L) | step_figures(y, t, step) | {"stable": stable}
 
 
+def unsettled_steps(loop: dict, steps: dict) -> list[str]:
+    """The speed steps that do not settle (2 %) within their run: the linear ones of
+    :func:`speed_figures` (``loop``: ``{u0: (continuous, sampled)}``, with the feed-forward)
+    and the nonlinear :func:`speed_step` ones that were run (``steps``: ``{u0: [...]}``), as
+    "linear at 0.5 m/s" / "0.5->1 m/s". Part of ``tune speed``'s acceptance, as the nonlinear
+    heading step is of ``tune yaw``'s: margins alone passed a PI with ``Kp = 0``, ``Ki = 1e-5``
+    (``--w 0.0001``, crossover 1e-7 rad/s) whose step from 0.5 to 1 m/s never settled."""
+    out = [f"linear at {u:g} m/s" for u, figs in loop.items()
+           if not all(math.isfinite(f["settling_s"]) for f in figs)]  # fmt: skip
+    out += [f"{st['u0']:g}->{st['u1']:g} m/s" for v in steps.values() for st in v
+            if st["reachable"] and not math.isfinite(st["settling_s"])]  # fmt: skip
+    return out
+
+
 def straight_speed_limit(model: VesselModel, ep: ExecutionParams) -> tuple[float, str]:
     """The fastest speed the execution level can hold on a straight course (m/s) and what
     sets it: the vessel's top speed at ``T_max`` (:attr:`VesselModel.top_speed`), its speed
