@@ -304,3 +304,23 @@ def test_a_speed_loop_crossing_over_below_the_sweep_is_measured_and_its_steps_mu
     assert rc == 1 and not toml.exists()
     assert "loop margins PASS; speed steps settle (2 %, within 120 s): FAIL: " in out
     assert "1->0.5 m/s" in out
+
+
+def test_the_regenerate_recipe_in_the_toml_uses_the_real_out(tmp_path, capsys):
+    """The TOML's "Regenerate" recipe said `--out runs/tune-yaw` / `runs/tune-speed` whatever
+    `--out` was given; it now holds the command that wrote the file, this run's --out, and
+    the other tool's --out from its provenance (Gretha's shipped yaw: runs/tune-yaw)."""
+    import shlex
+
+    out, toml = tmp_path / "my speed", tmp_path / "e.toml"
+    rc = main(["tune", "speed", "--speeds", "1", "--u-ff", "0.6", "--k-u", "1.59", "--distance",
+               "50", "--out", str(out), "--toml", str(toml), "--quiet"])  # fmt: skip
+    capsys.readouterr()
+    head = [ln for ln in toml.read_text().splitlines() if ln.startswith("#")]
+    q = shlex.quote(str(out))
+    assert rc == 0
+    assert any(ln.startswith("# Written by: mpcasv tune speed ") and f"--out {q}" in ln
+               for ln in head), head  # fmt: skip
+    speed = next(ln for ln in head if ln.startswith("#   mpcasv tune speed"))
+    assert f"--out {q} " in speed and "runs/tune-speed" not in speed
+    assert any(ln.startswith("#   mpcasv tune yaw --out runs/tune-yaw ") for ln in head)
