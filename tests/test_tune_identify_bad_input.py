@@ -52,12 +52,29 @@ def _refused(capsys, argv, *words):
         ("yaw", ["--T-f", "0.05"], ["--dt 0.1", "--T-f", "--dt <= 0.05"]),
         ("speed", ["--w", "100"], ["--w 100", "1/T_thrust = 2 rad/s"]),  # overflow warnings
         ("speed", ["--dt", "100"], ["--dt 100", "T_thrust", "--dt <= 0.5"]),
+        ("speed", ["--u-ff", "0.6", "--k-u", "10"],  # k_u = 10 was recommended and written
+         ["--k-u 10", "above --u-cmd-max 3.0976 m/s", "no pair"]),
         ("yaw", ["--base", "nope"], ["--base nope", "unknown execution 'nope'"]),  # "executio"
     ],
 )
 def test_bad_tuning_input_is_one_line_and_writes_nothing(tmp_path, capsys, loop, args, words):
     out = tmp_path / "out"
     _refused(capsys, ["tune", loop, *args, "--out", str(out), "--quiet"], *words)
+    assert not out.exists()
+
+
+def test_a_base_files_yaw_filter_is_checked_against_the_step_as_an_option_is(tmp_path, capsys):
+    """`tune speed --base FILE` with T_f = 0.02 s ran its turns at 0.1 s (> 2 T_f: the
+    forward-Euler yaw-rate filter diverges) unrefused: the --dt/--T-f check covered options
+    only. Likewise `tune yaw --dt 0.01 --T-f 0.05`: its nonlinear step runs at 0.1 s."""
+    text = (DATA_DIR / "execution" / "gretha.toml").read_text().replace("T_f = 0.2", "T_f = 0.02")
+    base = tmp_path / "tf.toml"
+    base.write_text(text)
+    out = tmp_path / "out"
+    _refused(capsys, ["tune", "speed", "--base", str(base), "--out", str(out), "--quiet"],
+             f"T_f (--base {base}) = 0.02 s", "the nonlinear checks' step", "T_f >= 0.1 s")
+    _refused(capsys, ["tune", "yaw", "--dt", "0.01", "--T-f", "0.05", "--out", str(out),
+                      "--quiet"], "T_f (--T-f) = 0.05 s", "the nonlinear checks' step")
     assert not out.exists()
 
 

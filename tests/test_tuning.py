@@ -356,3 +356,21 @@ def test_fossens_otter_refusal_names_the_zero_turn_gain_not_a_missing_steering_e
     assert "Y_v = 0 in the vessel file" in err[0] and not (tmp_path / "execution.toml").exists()
 
 
+
+
+def test_gains_held_above_the_schedule_are_checked_up_to_the_top_speed(tmp_path, capsys):
+    """`tune yaw --speeds 0.5` PASSed: the 0.5 m/s gains held above it, up to Gretha's top
+    speed 2.5 m/s, were never checked (sampled PM 30.1 deg there against the 45 deg bar). They
+    run in every faster transit, so they count in the acceptance: exit 1, TOML not written."""
+    from mpcasv.control.tuning_schedule import off_speeds
+
+    assert [u for u, w in off_speeds([0.5], 2.5) if w.startswith("above")] == pytest.approx(
+        [0.5 + 2 / 3, 0.5 + 4 / 3, 2.5], abs=1e-3)
+    assert not [u for u, w in off_speeds([0.5, 2.5], 2.5) if w.startswith("above")]
+    toml = tmp_path / "e.toml"
+    rc = main(["tune", "yaw", "--speeds", "0.5", "--out", str(tmp_path / "o"), "--toml",
+               str(toml), "--quiet"])  # fmt: skip
+    out = capsys.readouterr().out
+    assert rc == 1 and not toml.exists()
+    assert "| 2.5 | above (gains held) |" in out and "30.1 |" in out.split("| 2.5 | above")[1]
+    assert "2.5 m/s (PM 30.1 deg" in out and "above them to the top speed: FAIL" in out

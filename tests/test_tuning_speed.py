@@ -32,35 +32,96 @@ def test_speed_loop_design(model, shipped):
 
 def test_turn_detects_pirouettes(model, shipped):
     """A waypoint inside the full-power turning circle is circled (pirouette) without eq. 3.1;
-    with eq. 3.1 (slowing towards u_ff in the turn) the boat gets on course; one far enough is
+    with eq. 3.1 (slowing towards u_ff in the turn) the boat reaches it; one far enough is
     reached either way. (Before issue 13 the 'power turn' thrust floor made the shipped
     execution level circle the 10 m waypoint too.)"""
-    from mpcasv.control.tuning_speed import without_reference
+    from mpcasv.control.tuning_speed import PIROUETTE_TURN, without_reference
 
     shipped = dataclasses.replace(shipped, turn_thrust=0.0)  # eq. 3.1 without the power turn
     _, near_none = turn(model, without_reference(shipped, model), math.radians(90.0), 10.0)
     _, near = turn(model, shipped, math.radians(90.0), 10.0)
     _, far = turn(model, shipped, math.radians(90.0), 50.0)
-    assert near_none["pirouette"] and not math.isfinite(near_none["turn_s"])
+    assert near_none["pirouette"] and near_none["circling_deg"] > 2 * math.degrees(PIROUETTE_TURN)
     # with eq. 3.1 the boat slows from full speed (2.5 m/s) in the turn; the steering floor
     # gets it on course before it is down to u_ff (measured min 0.70 m/s)
     assert not near["pirouette"] and near["min_u"] < 0.4 * model.params.u_max
     assert not far["pirouette"] and 0 < far["turn_s"] < 60 and far["total_turn_deg"] < 180
 
 
-def test_turn_grid_close_waypoint_picks_the_field_u_ff(model, shipped):
-    """The turn grid with its close waypoint (10 m at 90 deg, inside the full-power turning
-    circle): u_ff = 0.8 pirouettes there, the field value 0.6 does not, so the grid recommends
-    0.6 (docs/tuning.md). At 20 m and 50 m neither pirouettes, which made the old 20,50 grid
-    recommend 0.8."""
-    from mpcasv.control.tuning_speed import recommend, turn_grid
+def test_a_turn_that_reaches_the_waypoint_is_not_a_pirouette(model, shipped):
+    """A new user: u_ff = 0.8, k_u = 1.59 in a 90 deg turn to a waypoint 10 m away reaches
+    5 m of it at 35.3 s over 48.6 m (0.4 m closest approach, 12 deg heading error on arrival,
+    still closing) and was flagged a pirouette ("not within 10 deg by 5 m"), as was a 30 deg
+    turn from 0.6 m/s with 37 deg of turning; that label alone excluded u_ff = 0.8 from the
+    grid. A pirouette is circling the waypoint instead of reaching it (PIROUETTE_TURN); the
+    turn is done on arrival."""
+    from mpcasv.config import replace
+    from mpcasv.control.params import SpeedReference
+    from mpcasv.control.tuning_speed import PIROUETTE_CASE, turn_grid, without_reference
 
     ep = dataclasses.replace(shipped, turn_thrust=0.0)
+    e08 = replace(ep, reference=SpeedReference(u_ff=0.8, k_u=1.59))
+    _, f = turn(model, e08, math.radians(90.0), 10.0)
+    assert f["reached"] and not f["pirouette"]
+    assert f["turn_s"] == pytest.approx(35.3, abs=0.15) and f["reach_s"] == f["turn_s"]
+    assert f["turn_m"] == pytest.approx(48.6, abs=0.2)
+    _, f30 = turn(model, ep, math.radians(30.0), 10.0, u0=0.6)
+    assert not f30["pirouette"] and f30["total_turn_deg"] < 45
     rows, _ = turn_grid(model, ep, [(0.6, 1.59), (0.8, 1.59)], angles_deg=(90.0,), distance=10.0)
-    assert [r.ok for r in rows] == [True, False]
-    assert recommend(rows).u_ff == 0.6
-    far, _ = turn_grid(model, ep, [(0.6, 1.59), (0.8, 1.59)], angles_deg=(90.0,), distance=20.0)
-    assert all(r.ok for r in far) and recommend(far).u_ff == 0.8
+    assert [r.ok for r in rows] == [True, True]
+    # the boat without eq. 3.1 passes the waypoint and circles it: still a pirouette
+    a, d, u0 = PIROUETTE_CASE
+    _, none = turn(model, without_reference(ep, model), math.radians(a), d, 120.0, u0=u0)
+    assert none["reached"] and none["pirouette"]
+
+
+def _rows(costs: dict):
+    """TurnRows of one 90-deg turn each with the given turn times {(u_ff, k_u): s}."""
+    from mpcasv.control.tuning_speed import TurnRow
+
+    return [TurnRow(u_ff=a, k_u=b, figures={90.0: {"turn_s": t, "reached": True,
+                                                   "pirouette": False}})
+            for (a, b), t in costs.items()]  # fmt: skip
+
+
+def test_the_recommendation_keeps_u_cmd_max_within_the_bound_and_says_when_on_the_edge():
+    """The turn times only fall as k_u grows, so the grid's largest k_u always won (k_u = 10
+    was written by --set-reference). The thesis held u_cmd,max = u_ff + k_u pi/2 at the rated
+    maximum speed (3.1 m/s, §3.4.1): pairs above the bound are not recommended, and an
+    optimum on the grid's edge is said."""
+    from mpcasv.control.tuning_speed import edge_notes, recommend
+
+    rows = _rows({(0.6, 1.2): 30.0, (0.6, 1.59): 29.0, (0.6, 10.0): 20.0, (0.8, 1.2): 25.0,
+                  (0.8, 1.59): 24.0})  # fmt: skip
+    assert recommend(rows).k_u == 10.0  # unbounded: the edge
+    best = recommend(rows, 3.1)
+    assert (best.u_ff, best.k_u) == (0.8, 1.2)  # 0.8 + 1.59 pi/2 = 3.30 > 3.1
+    notes = edge_notes(best, rows, 3.1)
+    assert any("u_ff = 0.8 is the grid's largest" in n for n in notes), notes
+    assert any("k_u = 1.2" in n and "the bound sets it" in n for n in notes), notes
+    assert recommend(rows, 3.0976).k_u == 1.2  # the field pair's own 0.6 + 1.59 pi/2 admitted
+    assert (recommend(rows[:3], 0.6 + 1.59 * math.pi / 2).k_u) == 1.59
+    with pytest.raises(ValueError, match="u_ff \\+ k_u pi/2 <= 2"):
+        recommend(rows, 2.0)
+
+
+def test_set_reference_writes_no_k_u_above_the_bound(tmp_path, capsys):
+    """`tune speed --k-u 1.59,10 --set-reference` wrote k_u = 10 (u_cmd,max 16.3 m/s)."""
+    from mpcasv.control.params import load_execution
+
+    toml = tmp_path / "e.toml"
+    rc = main(["tune", "speed", "--speeds", "1", "--u-ff", "0.6", "--k-u", "1.59,10",
+               "--distance", "50", "--set-reference", "--out", str(tmp_path / "o"),
+               "--toml", str(toml), "--quiet"])  # fmt: skip
+    cap = capsys.readouterr()
+    assert rc == 0 and "(0.6, 1.59)" in cap.out and "(above the bound)" in cap.out
+    assert load_execution(toml).reference.k_u == 1.59
+    assert "the bound sets it" in cap.out
+    rc = main(["tune", "speed", "--speeds", "1", "--u-ff", "0.6", "--k-u", "1.2,1.59",
+               "--u-cmd-max", "5", "--distance", "50", "--out", str(tmp_path / "p"),
+               "--quiet"])  # fmt: skip
+    err = capsys.readouterr().err
+    assert rc == 0 and "warning: recommended k_u = 1.59 is the grid's largest" in err, err
 
 
 @needs_cases
@@ -212,3 +273,54 @@ def test_the_pirouette_label_gives_the_circling_after_the_pass(tmp_path, monkeyp
                  if t.get_text().startswith("without"))  # fmt: skip
     assert "within 5 m of the waypoint at 5 s" in label, label
     assert "circles it 6.0-11.0 m away to 60 s" in label, label
+
+
+def test_a_speed_loop_crossing_over_below_the_sweep_is_measured_and_its_steps_must_settle(
+        model, tmp_path, capsys):  # fmt: skip
+    """`tune speed --w 0.0001`: Kp 0, Ki ~1e-5, crossover ~1e-7 rad/s. The margin sweep
+    started at 1e-4 rad/s, found no crossover and overrode python-control's 90 deg with "inf";
+    "loop margins PASS" although a step from 0.5 to 1 m/s never settled in 120 s. The sweep
+    now starts below the loop's crossover, and the steps must settle (exit 1, TOML kept)."""
+    import control as ct
+
+    from mpcasv.control.tuning import loop_margins
+    from mpcasv.control.tuning_speed import pi_tf
+
+    g = place_speed_pi(model, 1.0, 1e-4, 1.0)
+    assert g.Kp == 0 and g.Ki < 2e-5
+    for dt in (None, 0.1):
+        P = surge_plant(model, 1.0)
+        L = ct.ss(pi_tf(g, dt)) * (ct.c2d(P, dt, "zoh") if dt else P)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            m = loop_margins(L)
+        assert m["phase_margin_deg"] == pytest.approx(90.0, abs=0.5), m
+        assert m["w_gain_crossover"] == pytest.approx(1.1e-7, rel=0.05)
+    toml = tmp_path / "e.toml"
+    rc = main(["tune", "speed", "--w", "0.0001", "--speeds", "1", "--u-ff", "0.6", "--k-u",
+               "1.59", "--distance", "50", "--out", str(tmp_path / "o"), "--toml", str(toml),
+               "--quiet"])  # fmt: skip
+    out = capsys.readouterr().out
+    assert rc == 1 and not toml.exists()
+    assert "loop margins PASS; speed steps settle (2 %, within 120 s): FAIL: " in out
+    assert "1->0.5 m/s" in out
+
+
+def test_the_regenerate_recipe_in_the_toml_uses_the_real_out(tmp_path, capsys):
+    """The TOML's "Regenerate" recipe said `--out runs/tune-yaw` / `runs/tune-speed` whatever
+    `--out` was given; it now holds the command that wrote the file, this run's --out, and
+    the other tool's --out from its provenance (Gretha's shipped yaw: runs/tune-yaw)."""
+    import shlex
+
+    out, toml = tmp_path / "my speed", tmp_path / "e.toml"
+    rc = main(["tune", "speed", "--speeds", "1", "--u-ff", "0.6", "--k-u", "1.59", "--distance",
+               "50", "--out", str(out), "--toml", str(toml), "--quiet"])  # fmt: skip
+    capsys.readouterr()
+    head = [ln for ln in toml.read_text().splitlines() if ln.startswith("#")]
+    q = shlex.quote(str(out))
+    assert rc == 0
+    assert any(ln.startswith("# Written by: mpcasv tune speed ") and f"--out {q}" in ln
+               for ln in head), head  # fmt: skip
+    speed = next(ln for ln in head if ln.startswith("#   mpcasv tune speed"))
+    assert f"--out {q} " in speed and "runs/tune-speed" not in speed
+    assert any(ln.startswith("#   mpcasv tune yaw --out runs/tune-yaw ") for ln in head)

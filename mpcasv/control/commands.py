@@ -133,6 +133,13 @@ def register(sub: argparse._SubParsersAction) -> None:
         "full-power turning circle, where turning while accelerating pirouettes)",
     )
     s.add_argument(
+        "--u-cmd-max",
+        type=float,
+        help="bound on eq. 3.1's largest command u_ff + k_u pi/2 for the recommendation, m/s "
+        "(default: the base file's own, 3.1 for Gretha: the thesis held it at the rated "
+        "maximum speed, section 3.4.1); grid pairs above it are not recommended",
+    )
+    s.add_argument(
         "--set-reference",
         action="store_true",
         help="write the recommended (u_ff, k_u) into the TOML (default: keep the "

@@ -75,6 +75,8 @@ def _setup(args, what: str):
         if args.design_speed is None:
             args.design_speed = round(DESIGN_FRACTION * top, 4)
         tc.check_speed_limits(model, args)
+        # the turns and steps run the base file's yaw loop: its T_f as if given (--T-f)
+        tc.check_yaw_sampling(model, ep.yaw.T_f, f"--base {args.base}")
     check_output_folder(args.out)
     toml = check_output_file(args.toml or args.out / "execution.toml", "--toml", (".toml",),
                              parents=True)  # fmt: skip
@@ -107,7 +109,8 @@ def _write_if_pass(ok: bool, toml: Path, ep, what: str, args) -> str:
 
     if not ok:
         return f"{toml} NOT written (acceptance FAIL; the {what} design is in the report)"
-    write_execution_toml(toml, ep, _header(ep, args.vessel, toml))
+    command = _command_line(args, f"tune {what}")
+    write_execution_toml(toml, ep, _header(ep, args.vessel, toml, command, what, args.out))
     return f"wrote {toml}"
 
 
@@ -116,6 +119,7 @@ def run_tune_yaw(args: argparse.Namespace) -> int:
     from mpcasv.control.tuning_checks import check_yaw_limits
     from mpcasv.control.tuning_report import plot_yaw, yaw_table
     from mpcasv.control.tuning_schedule import (
+        above_ok,
         off_schedule,
         off_schedule_summary,
         poles_text,
@@ -150,13 +154,15 @@ def run_tune_yaw(args: argparse.Namespace) -> int:
     except CourseUnstable as exc:
         raise ConfigError(f"{args.vessel}: {exc}") from None
     plot_yaw(model, designs, runs, args.T_f, args.out)
-    off = off_schedule(model, ep_new, args.dt)  # gains held below, interpolated between
+    off = off_schedule(model, ep_new, args.dt)  # held below/above, interpolated between
     table = "\n".join([yaw_table(designs), *schedule_notes(designs, off)])
     # nan (a margin neither python-control nor the sweep could compute) fails every >= test
     ok = all(d.sampled["phase_margin_deg"] >= 45 and d.sampled["gain_margin_db"] >= 6
              and d.linear["phase_margin_deg"] >= 45 and d.linear["gain_margin_db"] >= 6
              and d.linear["stable"] and d.sampled["stable"]
              and math.isfinite(d.nonlinear["settling_s"]) for d in designs)  # fmt: skip
+    ok_above = above_ok(off)  # gains held above the schedule: every faster transit runs them
+    ok = ok and ok_above
     ts_max = max(d.nonlinear["settling_s"] for d in designs)
     cmd = _command_line(args, "tune yaw")
     text = (f"{cmd}: pole placement on first-order Nomoto models of vessel "
@@ -173,8 +179,9 @@ def run_tune_yaw(args: argparse.Namespace) -> int:
     print(table)
     print(
         f"{wrote}; wrote {args.out}/yaw.md, yaw.json and plots; acceptance "
-        f"(PM >= 45 deg, GM >= 6 dB, nonlinear step settles) at the schedule speeds: "
-        f"{'PASS' if ok else 'FAIL'}; {off_schedule_summary(off)} (yaw.md)"
+        f"(PM >= 45 deg, GM >= 6 dB, nonlinear step settles) at the schedule speeds and "
+        f"above them to the top speed: {'PASS' if ok else 'FAIL'}; "
+        f"{off_schedule_summary(off)} (yaw.md)"
     )
     for d in designs:
         if d.kd_clip:
@@ -191,7 +198,10 @@ def run_tune_speed(args: argparse.Namespace) -> int:
     from mpcasv.control.tuning_report import plot_speed, speed_tables
     from mpcasv.control.tuning_speed import (
         SPEED_STEP,
+        STEP_T_END,
+        edge_notes,
         feed_forward_gain,
+        merge_grids,
         place_speed_pi,
         recommend,
         speed_figures,
@@ -199,9 +209,11 @@ def run_tune_speed(args: argparse.Namespace) -> int:
         straight_speed_limit,
         surge_plant,
         turn_grid,
+        unsettled_steps,
     )  # fmt: skip
 
     model, ep, toml = _setup(args, "speed")
+    _check_u_cmd_max(args, ep)
     args.out.mkdir(parents=True, exist_ok=True)
     g = place_speed_pi(model, args.design_speed, args.w, args.zeta)
     ep_new = replace(ep, speed=g)
@@ -233,31 +245,17 @@ def run_tune_speed(args: argparse.Namespace) -> int:
                                progress=not args.quiet)  # fmt: skip
         grids[d] = (rows, runs)
     # recommend on the grid (the last row, "no reference model", is a baseline only)
-    by_pair: dict = {}
-    for rows, _ in grids.values():
-        for r in rows[:-1]:
-            by_pair.setdefault((r.u_ff, r.k_u), []).append(r)
-    from mpcasv.control.tuning_speed import TurnRow
-
-    merged = [
-        TurnRow(
-            u_ff=k[0],
-            k_u=k[1],
-            figures={
-                f"{d}m/{a}": f
-                for d, rs in zip(args.distance, v, strict=True)
-                for a, f in rs.figures.items()
-            },
-        )
-        for k, v in by_pair.items()
-    ]
+    merged = merge_grids(grids)
     try:
-        best = recommend(merged)
-    except ValueError as exc:  # every pair pirouetted: reported, the field values are kept
-        best = None
+        best = recommend(merged, args.u_cmd_max)
+        notes = edge_notes(best, merged, args.u_cmd_max)
+    except ValueError as exc:  # no pair reached every waypoint: reported, the base's kept
+        best, notes = None, []
         none_reason = str(exc)
-    ok_loop = all(c["phase_margin_deg"] >= 45 and c["gain_margin_db"] >= 6 and c["stable"]
-                  for f in loop.values() for c in f)  # fmt: skip
+    ok_margins = all(c["phase_margin_deg"] >= 45 and c["gain_margin_db"] >= 6 and c["stable"]
+                     for f in loop.values() for c in f)  # fmt: skip
+    unsettled = unsettled_steps(loop, steps)  # a stable loop may still never get there
+    ok_loop = ok_margins and not unsettled
     cmd = _command_line(args, "tune speed")
     text = (f"{cmd}: PI by pole placement on the linearised surge model at "
             f"{args.design_speed} m/s, w {args.w} rad/s, zeta {args.zeta}; min PM "
@@ -276,8 +274,9 @@ def run_tune_speed(args: argparse.Namespace) -> int:
             prov,
             "reference",
             "field tuning, thesis §3.4.1 (kept; the turn grid "
-            + (f"of mpcasv tune speed recommends u_ff={best.u_ff}, k_u={best.k_u})" if best
-               else "of mpcasv tune speed found no pirouette-free pair)"),
+            + (f"of mpcasv tune speed recommends u_ff={best.u_ff}, k_u={best.k_u} within "
+               f"u_cmd,max <= {args.u_cmd_max:.4g} m/s)" if best
+               else "of mpcasv tune speed found no pair that reached every waypoint)"),
         )
     ep_new = replace(ep_new, provenance=prov)
     wrote = _write_if_pass(ok_loop, toml, ep_new, "speed", args)
@@ -291,17 +290,39 @@ def run_tune_speed(args: argparse.Namespace) -> int:
                    d * math.sin(math.radians(a))), args.out,
                    f"{model.params.name}: waypoint {d:g} m at {a:g} deg, from {u0:g} m/s, "
                    f"command u_max = {model.params.u_max:g} m/s")  # fmt: skip
-    text_tables = speed_tables(g, loop, grids, best, steps, limits)
+    text_tables = speed_tables(g, loop, grids, best, steps, limits, args.u_cmd_max, notes)
     (args.out / "speed.md").write_text(text_tables + "\n")
     print(text_tables)
     print(
-        (f"recommended (u_ff, k_u) = ({best.u_ff}, {best.k_u})" if best else
-         "no recommended (u_ff, k_u): every pair of the grid pirouetted")
+        (f"recommended (u_ff, k_u) = ({best.u_ff}, {best.k_u}) (u_ff + k_u pi/2 <= "
+         f"{args.u_cmd_max:.4g} m/s)" if best else
+         "no recommended (u_ff, k_u): no pair of the grid reached every waypoint")
         + f"; {wrote}; wrote "
-        f"{args.out}/speed.md and plots; loop margins {'PASS' if ok_loop else 'FAIL'}"
+        f"{args.out}/speed.md and plots; loop margins {'PASS' if ok_margins else 'FAIL'}; "
+        f"speed steps settle (2 %, within {STEP_T_END:g} s): "
+        + ("PASS" if not unsettled else f"FAIL: {', '.join(unsettled)}")
     )
     print(_steps_summary(steps))
+    for note in notes:  # the optimum on the grid's edge: say so where it is seen
+        if "beyond it" in note:
+            print(f"mpcasv tune: warning: recommended {note}", file=sys.stderr)
     return 0 if ok_loop else 1
+
+
+def _check_u_cmd_max(args, ep) -> None:
+    """Default ``--u-cmd-max`` to the base file's own ``u_ff + k_u pi/2`` (the thesis kept it
+    when it changed ``u_ff``, §3.4.1) and refuse a grid none of whose pairs is within it (one
+    line, before any work)."""
+    from mpcasv.control.tuning_speed import u_cmd_max
+
+    if args.u_cmd_max is None:
+        args.u_cmd_max = round(u_cmd_max(ep.reference.u_ff, ep.reference.k_u), 4)
+    low = min(u_cmd_max(a, b) for a in args.u_ff for b in args.k_u)
+    if low > args.u_cmd_max * (1 + 1e-6):
+        raise ConfigError(f"--u-ff {','.join(f'{x:g}' for x in args.u_ff)} --k-u "
+                          f"{','.join(f'{x:g}' for x in args.k_u)}: every pair has u_ff + k_u "
+                          f"pi/2 above --u-cmd-max {args.u_cmd_max:g} m/s (least {low:.4g} m/s): "
+                          "no pair of the grid may be recommended")  # fmt: skip
 
 
 def _steps_summary(steps: dict) -> str:
@@ -320,22 +341,43 @@ def _steps_summary(steps: dict) -> str:
     return text + (f"; UNREACHABLE: {', '.join(no)} m/s" if no else "") + " (speed.md)"
 
 
-def _header(ep, vessel: str, toml: Path) -> list[str]:
+def _recorded_out(provenance: str, what: str) -> str | None:
+    """The ``--out`` of the ``mpcasv tune <what>`` command recorded in ``provenance`` (its
+    ``"<what>: mpcasv tune <what> ...: ..."`` entry), or None."""
+    for part in provenance.split(" | "):
+        if part.startswith(f"{what}: mpcasv tune {what} "):
+            try:
+                words = shlex.split(part[len(what) + 2:].split(": ", 1)[0])
+            except ValueError:
+                return None
+            if "--out" in words[:-1]:
+                return words[words.index("--out") + 1]
+    return None
+
+
+def _header(ep, vessel: str, toml: Path, command: str | None = None, what: str = "",
+            out: Path | None = None) -> list[str]:  # fmt: skip
     """The comment heading an execution TOML of ``vessel`` (``--vessel`` as given) written to
-    ``toml``: what it holds and how to regenerate it (it said "of Gretha" whatever the
-    vessel until session 43)."""
+    ``toml`` by ``command`` (``mpcasv tune <what> ... --out out``): what it holds, the command
+    that wrote it and how to regenerate it (it said "of Gretha" whatever the vessel until
+    session 43; its recipe said ``--out runs/tune-yaw`` whatever ``--out`` was given: the
+    recipe now takes this run's ``--out`` and the other tool's from its provenance)."""
     v = "" if vessel == BASE_DEFAULT else f" --vessel {shlex.quote(str(vessel))}"
+    outs = {w: shlex.quote(str(out)) if w == what and out is not None else
+            shlex.quote(_recorded_out(ep.provenance, w) or f"runs/tune-{w}")
+            for w in ("yaw", "speed")}  # fmt: skip
     toml = shlex.quote(str(toml))
     lines = [
         f"Execution level of {vessel}: yaw PID gain schedule, speed loop, surge-speed",
         "reference model. GENERATED by `mpcasv tune yaw` ([yaw]) and `mpcasv tune speed`",
         f"([speed]) on the shared vessel model ({vessel}); [reference] is the field tuning of",
-        "thesis §3.4.1 unless the provenance says otherwise. Regenerate (yaw, speed, then yaw",
-        "again so that its nonlinear check uses the new speed loop; the designs themselves do",
-        "not depend on each other):",
-        f"  mpcasv tune yaw{v} --out runs/tune-yaw --toml {toml}",
-        f"  mpcasv tune speed{v} --base {toml} --out runs/tune-speed --toml {toml}",
-        f"  mpcasv tune yaw{v} --base {toml} --out runs/tune-yaw --toml {toml}",
+        "thesis §3.4.1 unless the provenance says otherwise.",
+        *([f"Written by: {command}"] if command else []),
+        "Regenerate (yaw, speed, then yaw again so that its nonlinear check uses the new speed",
+        "loop; the designs themselves do not depend on each other):",
+        f"  mpcasv tune yaw{v} --out {outs['yaw']} --toml {toml}",
+        f"  mpcasv tune speed{v} --base {toml} --out {outs['speed']} --toml {toml}",
+        f"  mpcasv tune yaw{v} --base {toml} --out {outs['yaw']} --toml {toml}",
         "Provenance of each table:",
     ]
     return lines + [f"  {p}" for p in ep.provenance.split(" | ")]

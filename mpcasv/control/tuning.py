@@ -154,11 +154,32 @@ def _stability_margins(L) -> tuple[float, float, float, float, str]:
     return gm, pm, wg, wp, method + ill
 
 
+#: the frequency sweep's grid density (points per decade) and its lowest possible start (rad/s)
+SWEEP_PER_DECADE, SWEEP_LOWEST = 3000, 1e-12
+
+
+def sweep_floor(L, crossovers) -> float:
+    """Where the frequency sweep of :func:`loop_margins` starts (rad/s): 1e-4, or two decades
+    below the lowest finite crossover python-control found (``crossovers``, rad/s), and lower
+    still, a decade at a time down to :data:`SWEEP_LOWEST`, while the loop's gain is below 10
+    and still rising towards low frequency (an integrator whose crossover lies below: a speed
+    PI with ``Ki ~ 1e-5`` crosses over at 1e-7 rad/s, and a sweep from 1e-4 found none and
+    reported PM "inf")."""
+    def gain(w: float) -> float:
+        return float(np.abs(np.asarray(L.frequency_response([w]).complex).ravel()[0]))
+
+    lo = min([1e-4, *(w / 100 for w in crossovers if np.isfinite(w) and w > 0)])
+    while lo > SWEEP_LOWEST * (1 + 1e-9) and gain(lo) < 10 and gain(lo / 10) > 2 * gain(lo):
+        lo /= 10
+    return lo
+
+
 def loop_margins(L) -> dict:
     """Classical and balanced disk margins of an open loop ``L`` (continuous or sampled).
 
     ``control.stability_margins`` is cross-checked against :func:`sweep_margins` on a dense
-    grid (up to Nyquist for a sampled loop). Where they disagree (python-control 0.10's
+    grid from :func:`sweep_floor` (below every crossover) up to 1e3 rad/s, or to Nyquist for
+    a sampled loop. Where they disagree (python-control 0.10's
     discrete-time margins miss gain crossovers: ``inf`` where the loop has one, see
     ../shared/cases/sampled-phase-margin) the sweep's value is reported and
     ``margin_check`` says so; a margin neither can compute is ``nan``, which fails every
@@ -174,9 +195,11 @@ def loop_margins(L) -> dict:
 
     gm, pm, wg, wp, method = _stability_margins(L)
     dt = L.dt if L.isdtime() else None
-    omega = np.logspace(-3, math.log10(math.pi / dt if dt else 100.0) - 1e-6, 2000)
-    sweep = sweep_margins(L, np.logspace(-4, math.log10(math.pi / dt if dt else 1e3) - 1e-6,
-                                         20000))  # fmt: skip
+    lo = sweep_floor(L, (wg, wp))
+    top = math.log10(math.pi / dt if dt else 1e3) - 1e-6
+    omega = np.logspace(math.log10(lo) + 1, top - (0 if dt else 1), 2000)
+    sweep = sweep_margins(L, np.logspace(math.log10(lo), top,
+                                         int(SWEEP_PER_DECADE * (top - math.log10(lo)))))
     lib = {"gain_margin_db": 20 * math.log10(gm) if np.isfinite(gm) and gm > 0 else
            (math.inf if gm == math.inf else math.nan),
            "phase_margin_deg": float(pm)}  # fmt: skip

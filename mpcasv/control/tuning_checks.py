@@ -14,7 +14,10 @@ models that neglect them (docs/tuning.md, "Usable ranges"):
   represent it. The yaw-rate filter is forward Euler (``r_f += dt/T_f (r - r_f)``,
   :func:`mpcasv.control.execution.execution_law`): it rings for ``dt > T_f`` and diverges for
   ``dt > 2 T_f``. With ``dt`` within these limits the Nyquist frequency ``pi/dt`` is above
-  every admitted design frequency.
+  every admitted design frequency. The nonlinear checks run the yaw loop at the simulator's
+  step (:data:`mpcasv.control.tuning.DT`) whatever ``--dt``, with ``--T-f`` in ``tune yaw``
+  and the ``--base`` file's ``T_f`` in ``tune speed``: both are checked against it too
+  (:func:`check_yaw_sampling`).
 * **speeds**: every speed option (``--speeds``, ``--design-speed``, ``--u-ff``) must be one the
   vessel can hold, in ``(0, top speed]`` (:func:`mpcasv.control.tuning_yaw.check_speeds`).
 """
@@ -28,7 +31,7 @@ from mpcasv.config import ConfigError
 
 #: options of `tune yaw` / `tune speed` that are numbers > 0 (finite); lists: every value
 POSITIVE = ("wn", "wn_per_speed", "zeta", "integral_ratio", "T_f", "dt", "w", "design_speed",
-            "u_ff", "k_u", "distance")  # fmt: skip
+            "u_ff", "k_u", "distance", "u_cmd_max")  # fmt: skip
 
 
 def option(key: str) -> str:
@@ -75,21 +78,42 @@ def check_speed(model, opt: str, value: float) -> None:
                           f"{model.params.T_max:g} N")  # fmt: skip
 
 
-def _sampling(dt: float, limits: dict[str, float], loop: str, why: str) -> None:
+def _sampling(dt: float, limits: dict[str, float], loop: str, why: str, opt: str = "--dt",
+              fix: str | None = None) -> None:  # fmt: skip
     tau = min(limits.values())
     if dt > tau * (1 + 1e-9):
         what = ", ".join(f"{k} = {v:g} s" for k, v in limits.items())
-        raise ConfigError(f"--dt {dt:g} s: longer than the {loop} loop's fastest time constant "
-                          f"({what}): use --dt <= {tau:g} s ({why})")
+        raise ConfigError(f"{opt} {dt:g} s: longer than the {loop} loop's fastest time constant "
+                          f"({what}): {fix or f'use {opt} <= {tau:g} s'} ({why})")
+
+
+#: why a yaw loop cannot run at a step longer than its fastest time constant
+YAW_SAMPLING = ("a sampled loop cannot follow a faster lag; the forward-Euler yaw-rate filter "
+                "rings for dt > T_f and diverges for dt > 2 T_f")
+
+
+def check_yaw_sampling(model, T_f: float, T_f_from: str, dt: float | None = None) -> None:
+    """Refuse a yaw loop (``T_f`` (s) from ``T_f_from``: ``--T-f`` or ``--base FILE``, and the
+    vessel's ``T_delta``) that is run at a step longer than its fastest time constant: the
+    sampled analysis's ``dt`` (``--dt``, if given) and the nonlinear checks' step
+    :data:`mpcasv.control.tuning.DT` (the simulator's default), where a base file's ``T_f``
+    is run by ``tune speed`` too (``T_f = 0.02`` at 0.1 s: the filter diverged unrefused)."""
+    from mpcasv.control.tuning import DT
+
+    P = model.params
+    limits = {f"T_f ({T_f_from})": T_f, f"T_delta ({P.name})": P.T_delta}
+    if dt is not None:
+        _sampling(dt, limits, "yaw", YAW_SAMPLING)
+    _sampling(DT, limits, "yaw", YAW_SAMPLING, "the nonlinear checks' step (the simulator's)",
+              f"the yaw loop must have T_f >= {DT:g} s")
 
 
 def check_yaw_limits(model, args: argparse.Namespace, wn: list[float]) -> None:
-    """Refuse a yaw design outside the usable range (module docstring): ``--dt`` above ``T_f``
-    or ``T_delta``; ``wn`` at or above ``1/T_delta`` or ``1/T_f``."""
+    """Refuse a yaw design outside the usable range (module docstring): ``--dt`` or the
+    nonlinear checks' step above ``T_f`` or ``T_delta``; ``wn`` at or above ``1/T_delta`` or
+    ``1/T_f``."""
     P = model.params
-    _sampling(args.dt, {"T_f (--T-f)": args.T_f, f"T_delta ({P.name})": P.T_delta}, "yaw",
-              "a sampled loop cannot follow a faster lag; the forward-Euler yaw-rate filter rings "
-              "for dt > T_f and diverges for dt > 2 T_f")
+    check_yaw_sampling(model, args.T_f, "--T-f", args.dt)
     corners = {"1/T_delta": 1.0 / P.T_delta, "1/T_f": 1.0 / args.T_f}
     w_max = min(corners.values())
     for u, w in zip(args.speeds, wn, strict=True):

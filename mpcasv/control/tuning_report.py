@@ -13,6 +13,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from mpcasv.control.tuning import ILL
+from mpcasv.control.tuning_speed import ARRIVAL_RADIUS, TURN_BAND, U_CMD_MAX_RTOL, u_cmd_max
 from mpcasv.control.tuning_yaw import SETTLE_BAND, yaw_loop, yaw_plant
 
 
@@ -195,11 +196,13 @@ def plot_yaw(model, designs, runs, T_f: float, out: Path) -> list[Path]:
     return [*paths, p]
 
 
-def speed_tables(g, loop, grids, best, steps=None, limits=None) -> str:
+def speed_tables(g, loop, grids, best, steps=None, limits=None, bound: float = math.inf,
+                 notes=()) -> str:  # fmt: skip
     """Markdown: speed loop margins per speed; speed steps, linear beside nonlinear
     (``steps``: :func:`~mpcasv.control.tuning_speed.speed_step` figures per speed, ``limits``
     the words on the thrust limits and the straight-course top speed); turn grid per
-    distance."""
+    distance; the recommendation under the ``u_cmd,max`` ``bound`` (m/s) and its ``notes``
+    (:func:`~mpcasv.control.tuning_speed.edge_notes`)."""
     out = [f"Speed loop: Kp = {g.Kp:.1f} N/(m/s), Ki = {g.Ki:.1f} N/(m/s s)", "",
            "| u0 (m/s) | GM dB (cont / sampled) | PM deg (cont / sampled) | disk margin "
            "(sampled) |", "|" + "---|" * 4]  # fmt: skip
@@ -212,18 +215,26 @@ def speed_tables(g, loop, grids, best, steps=None, limits=None) -> str:
     out += _step_table(loop, steps or {}, limits)
     for d, (rows, _) in grids.items():
         angles = list(rows[0].figures)
-        out += ["", f"Turns from full speed, waypoint {d:g} m away (time s / path m to stay within "
-                "10 deg; P = pirouette)", "",
-                "| u_ff | k_u | " + " | ".join(f"{a:g} deg" for a in angles) + " |",
-                "|" + "---|" * (2 + len(angles))]  # fmt: skip
+        out += ["", f"Turns from full speed, waypoint {d:g} m away (time s / path m until on "
+                f"course, within {math.degrees(TURN_BAND):g} deg, or within {ARRIVAL_RADIUS:g} m "
+                "of the waypoint; P = pirouette: a full circle of turning without heading for "
+                f"it; NR = not within {ARRIVAL_RADIUS:g} m in the run)", "",
+                "| u_ff | k_u | u_ff + k_u pi/2 | " + " | ".join(f"{a:g} deg" for a in angles)
+                + " |", "|" + "---|" * (3 + len(angles))]  # fmt: skip
         for r in rows:
-            cells = [("P " if f["pirouette"] else "") + f"{_f(f['turn_s'])} / {_f(f['turn_m'])}"
-                     for f in r.figures.values()]  # fmt: skip
-            label = " (no reference model)" if r.k_u == 0 and r is rows[-1] else ""
-            out.append(f"| {r.u_ff:g}{label} | {r.k_u:g} | " + " | ".join(cells) + " |")
-    out += ["", f"Recommended (grid, pirouette-free, least total turn time): u_ff = {best.u_ff}, "
-            f"k_u = {best.k_u}" if best else "Recommended: none (every pair of the grid "
-            "pirouetted)"]  # fmt: skip
+            cells = [("P " if f["pirouette"] else "") + ("" if f["reached"] else "NR ")
+                     + f"{_f(f['turn_s'])} / {_f(f['turn_m'])}" for f in r.figures.values()]
+            base = r.k_u == 0 and r is rows[-1]
+            label = " (no reference model)" if base else ""
+            top = u_cmd_max(r.u_ff, r.k_u)
+            over = "" if base or top <= bound * (1 + U_CMD_MAX_RTOL) else " (above the bound)"
+            out.append(f"| {r.u_ff:g}{label} | {r.k_u:g} | {top:.2f}{over} | "
+                       + " | ".join(cells) + " |")
+    rule = (f"every turn reached without a pirouette, u_ff + k_u pi/2 <= {bound:.4g} m/s "
+            "(--u-cmd-max), least total turn time")
+    out += ["", f"Recommended (grid; {rule}): u_ff = {best.u_ff}, k_u = {best.k_u}" if best
+            else f"Recommended: none (no pair of the grid with {rule.split(', least')[0]})"]
+    out += [f"- {n}" for n in notes]
     return "\n".join(out)
 
 
@@ -279,13 +290,13 @@ def plot_speed(model, g, grids, field, best, out: Path) -> list[Path]:
                                                        else field) and k_u != 0.0):  # fmt: skip
                     continue
                 label = ("no ref. model" if k_u == 0 else f"u_ff={u_ff}, k_u={k_u}") + (
-                    ": PIROUETTE (never on course)" if (u_ff, k_u, a) in pir else "")
-                near = np.hypot(r.X[:, 0] - wp[0], r.X[:, 1] - wp[1]) < 5.0
+                    ": PIROUETTE (circles the waypoint)" if (u_ff, k_u, a) in pir else "")
+                near = np.hypot(r.X[:, 0] - wp[0], r.X[:, 1] - wp[1]) < ARRIVAL_RADIUS
                 n = int(np.argmax(near)) + 1 if near.any() else len(r.t)
                 ax.plot(r.X[:n, 1], r.X[:n, 0], ls="--" if k_u == 0 else "-",
                         lw=1.0 if k_u == 0 else 1.6, zorder=3 if k_u == 0 else 2,
-                        label=label + ("" if near.any() else f" (never within 5 m, "
-                                       f"{r.t[-1]:.0f} s)"))  # fmt: skip
+                        label=label + ("" if near.any() else f" (never within "
+                                       f"{ARRIVAL_RADIUS:g} m, {r.t[-1]:.0f} s)"))  # fmt: skip
             ax.plot(wp[1], wp[0], "kx", ms=9, zorder=4, label="waypoint")
             ax.plot(0, 0, "ko", ms=5, zorder=4, label="start (heading north)")
             ax.set_aspect("equal")
@@ -296,7 +307,7 @@ def plot_speed(model, g, grids, field, best, out: Path) -> list[Path]:
             ax.grid(True, alpha=0.3)
         fig.set_layout_engine("constrained")
         fig.suptitle(f"turns from full speed, heading north at (0, 0), to a waypoint (x) {d:g} "
-                     "m away (paths until 5 m from it)", fontsize=10)  # fmt: skip
+                     f"m away (paths until {ARRIVAL_RADIUS:g} m from it)", fontsize=10)  # fmt: skip
         p = out / f"turns_{d:g}m.png"
         fig.savefig(p, dpi=100)
         plt.close(fig)
@@ -311,7 +322,7 @@ def _circling(dist: np.ndarray, n: int | None) -> np.ndarray:
     within 5 m (``n`` None); empty if it stayed inside to the end."""
     if n is None:
         return dist
-    again = np.nonzero(dist[n - 1:] >= 5.0)[0]
+    again = np.nonzero(dist[n - 1:] >= ARRIVAL_RADIUS)[0]
     return dist[n - 1 + again[0]:] if len(again) else dist[:0]
 
 
@@ -328,22 +339,23 @@ def plot_pirouette(checks: dict, wp, out: Path, title: str) -> Path:
     ax2 = ax1.twinx()
     for key, color in (("with", "C0"), ("without", "C3")):
         run, f = checks[key]
-        reach = np.hypot(run.X[:, 0] - wp[0], run.X[:, 1] - wp[1]) < 5.0  # as turn() counts
+        reach = np.hypot(run.X[:, 0] - wp[0], run.X[:, 1] - wp[1]) < ARRIVAL_RADIUS  # as turn()
         n = int(np.argmax(reach)) + 1 if reach.any() else len(run.t)
         if f["pirouette"]:
             total = float(np.degrees(np.sum(np.abs(np.diff(np.unwrap(run.X[:, 2]))))))
             c = _circling(np.hypot(run.X[:, 0] - wp[0], run.X[:, 1] - wp[1]), n if
                           reach.any() else None)  # fmt: skip
-            what = ("PIROUETTE, never on course:\n" + (
-                f"within 5 m of the waypoint at {run.t[n - 1]:.0f} s, heading error "
+            R = ARRIVAL_RADIUS
+            what = ("PIROUETTE, circles the waypoint:\n" + (
+                f"within {R:g} m of the waypoint at {run.t[n - 1]:.0f} s, heading error "
                 f"{abs(math.degrees(run.psi_error[n - 1])):.0f} deg, then (dashed)\n"
                 if reach.any() else "") + (f"circles it {c.min():.1f}-{c.max():.1f} m away"
-                if len(c) else "stays within 5 m of it") + f" to {run.t[-1]:.0f} s, turned "
+                if len(c) else f"stays within {R:g} m of it") + f" to {run.t[-1]:.0f} s, turned "
                 f"{total:.0f} deg")  # fmt: skip
         else:
-            what = (f"on course after {f['turn_s']:.0f} s, turned {f['total_turn_deg']:.0f} "
-                    "deg" + (f", within 5 m of the waypoint at {run.t[n - 1]:.0f} s"
-                             if reach.any() else ""))  # fmt: skip
+            what = (f"turn done after {f['turn_s']:.0f} s, turned {f['total_turn_deg']:.0f} "
+                    "deg" + (f", within {ARRIVAL_RADIUS:g} m of the waypoint at "
+                             f"{run.t[n - 1]:.0f} s" if reach.any() else ""))  # fmt: skip
         label = f"{key} eq. 3.1: {what}"
         ax0.plot(run.X[:n, 1], run.X[:n, 0], color=color, label=label)
         ax1.plot(run.t[:n], run.X[:n, 3], color=color, label=f"u, {key} eq. 3.1")
@@ -351,7 +363,8 @@ def plot_pirouette(checks: dict, wp, out: Path, title: str) -> Path:
         if f["pirouette"] and n < len(run.t):
             ax0.plot(run.X[n - 1:, 1], run.X[n - 1:, 0], color=color, ls="--", lw=0.8, alpha=0.6)
             ax1.plot(run.t[n - 1:], run.X[n - 1:, 3], color=color, ls="--", lw=0.8, alpha=0.6)
-    ax0.plot(wp[1], wp[0], "k*", ms=12, zorder=5, label="waypoint (reached: within 5 m)")
+    ax0.plot(wp[1], wp[0], "k*", ms=12, zorder=5,
+             label=f"waypoint (reached: within {ARRIVAL_RADIUS:g} m)")
     ax0.plot(0, 0, "ko", zorder=5, label="start (heading north)")
     ax0.set_aspect("equal")
     ax0.set_xlabel("E (m)")
@@ -362,7 +375,7 @@ def plot_pirouette(checks: dict, wp, out: Path, title: str) -> Path:
     ax0.grid(True, alpha=0.3)
     ax0.set_title(title, fontsize=9)
     ax1.set_xlabel("time (s)")
-    ax1.set_ylabel("surge u (m/s), solid (dashed: after 5 m)")
+    ax1.set_ylabel(f"surge u (m/s), solid (dashed: after {ARRIVAL_RADIUS:g} m)")
     ax2.set_ylabel("|heading error| (deg), dotted")
     ax1.legend(fontsize=8, loc="upper right")
     ax1.grid(True, alpha=0.3)

@@ -9,7 +9,8 @@ placement was given up, and the margins off the schedule speeds.
 * **Off the schedule.** The execution level interpolates the gains linearly between the
   schedule speeds and holds them below the lowest and above the highest
   (:func:`mpcasv.control.execution.pwlinear`, on the measured surge speed), so the loop at
-  0.3 m/s runs the 0.5 m/s gains on a slower hull. :func:`off_schedule` checks the margins
+  0.3 m/s runs the 0.5 m/s gains on a slower hull, and a schedule that ends below the top
+  speed runs its last gains on a faster one. :func:`off_schedule` checks the margins
   there (continuous and sampled, steering lag included) against the same bar as the schedule
   speeds, PM >= 45 deg and GM >= 6 dB.
 """
@@ -20,6 +21,9 @@ import numpy as np
 
 #: speeds below the lowest schedule speed that are checked, as fractions of it
 BELOW = (0.4, 0.6, 0.8)
+#: speeds above the highest schedule speed that are checked, as fractions of the way from it
+#: to the vessel's top speed (the last: the top speed itself)
+ABOVE = (1 / 3, 2 / 3, 1.0)
 #: the acceptance bar of the yaw loop (deg, dB)
 PM_MIN, GM_MIN = 45.0, 6.0
 
@@ -56,19 +60,24 @@ def poles_text(poles) -> str:
     return ", ".join(out)
 
 
-def off_speeds(speeds) -> list[tuple[float, str]]:
-    """The speeds off the schedule that are checked: :data:`BELOW` times the lowest, and the
-    midpoints between schedule speeds (m/s), each with "below" / "between"."""
+def off_speeds(speeds, top: float) -> list[tuple[float, str]]:
+    """The speeds off the schedule that are checked: :data:`BELOW` times the lowest, the
+    midpoints between schedule speeds and, when the highest is below the vessel's top speed
+    ``top`` (m/s), :data:`ABOVE` of the way from it to ``top`` (the gains are held there in
+    every transit faster than the schedule), each with "below" / "between" / "above"."""
     s = sorted(float(u) for u in speeds)
     below = [(round(f * s[0], 4), "below (gains held)") for f in BELOW]
     mid = [(round((a + b) / 2, 4), "between (gains interpolated)") for a, b in zip(s, s[1:],
                                                                                  strict=False)]
-    return below + mid
+    gap = top - s[-1]
+    above = [(round(s[-1] + f * gap, 4), "above (gains held)") for f in ABOVE] if gap > 1e-6 else []
+    return below + mid + above
 
 
 def off_schedule(model, ep, dt: float) -> list[dict]:
-    """Margins of the yaw loop at :func:`off_speeds` with the gains the execution level
-    uses there (interpolated, held at the ends), continuous and sampled at ``dt``.
+    """Margins of the yaw loop at :func:`off_speeds` (up to the vessel's top speed, the least
+    of its top speed at ``T_max`` and ``u_max``) with the gains the execution level uses
+    there (interpolated, held at the ends), continuous and sampled at ``dt``.
 
     Returns one dict per speed: ``u0``, ``where``, ``gains`` (Kp, Ki, Kd), the continuous and
     sampled ``phase_margin_deg``, ``gain_margin_db``, ``stable``, and ``ok`` (both loops stable
@@ -78,7 +87,8 @@ def off_schedule(model, ep, dt: float) -> list[dict]:
 
     ys = ep.yaw
     rows = []
-    for u, where in off_speeds(ys.speeds):  # the execution level's own schedule lookup
+    top = min(model.top_speed, model.params.u_max)
+    for u, where in off_speeds(ys.speeds, top):  # the execution level's own schedule lookup
         g = PIDGains(*(float(pwlinear(u, ys.speeds, k)) for k in (ys.Kp, ys.Ki, ys.Kd)))
         P = yaw_plant(model, u)
         c, s = loop_figures(yaw_loop(P, g, ys.T_f)), loop_figures(yaw_loop(P, g, ys.T_f, dt))
@@ -117,8 +127,19 @@ def schedule_notes(designs, rows) -> list[str]:
                 + ", ".join(f"{r['u0']:g}" for r in bad) + " m/s" + (
                     " (below the lowest schedule speed the gains are held; a slower schedule "
                     "speed in --speeds may cover it, not checked here)"
-                    if any(r["where"].startswith("below") for r in bad) else "") + "."]
+                    if any(r["where"].startswith("below") for r in bad) else "") + (
+                    " (above the highest schedule speed the gains are held in every faster "
+                    "transit: this fails the acceptance; add a schedule speed up to the top "
+                    "speed to --speeds)" if any(r["where"].startswith("above") for r in bad)
+                    else "") + "."]
     return out
+
+
+def above_ok(rows) -> bool:
+    """Whether the loop passes the bar at every checked speed above the schedule (part of
+    ``tune yaw``'s acceptance: unlike below the lowest, where the boat only passes when it
+    leaves standby, the held gains run every transit faster than the schedule)."""
+    return all(r["ok"] for r in rows if r["where"].startswith("above"))
 
 
 def off_schedule_summary(rows) -> str:

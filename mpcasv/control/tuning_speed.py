@@ -9,8 +9,8 @@ figures are checked at every speed *with* the thrust lag, continuous and sampled
 
 Surge-speed reference model, thesis eq. 3.1: ``u_cmd = u_ff + k_u (pi/2 - |psi_e|)``
 (``u_ff`` if ``|psi_e| >= pi/2``). It is checked on the nonlinear closed loop: starting at full
-speed, turns of 90 and 180 deg towards a waypoint at a fixed distance must converge without
-"pirouettes" (circling instead of settling on the new heading).
+speed, turns of 90 and 180 deg towards a waypoint at a fixed distance must reach it without
+"pirouettes" (circling the waypoint instead of reaching it: :data:`PIROUETTE_TURN`).
 """
 
 from __future__ import annotations
@@ -26,10 +26,21 @@ from mpcasv.control.params import ExecutionParams, SpeedLoop, SpeedReference
 from mpcasv.control.tuning import run_closed_loop, settling_time
 from mpcasv.models.vessel import IX, VesselModel
 
-#: heading band that counts as "turned" (rad), and how long it must hold (s)
+#: heading band that counts as "on course" (rad)
 TURN_BAND = math.radians(10.0)
-#: total heading change beyond the commanded turn that counts as a pirouette (rad)
-PIROUETTE_EXCESS = math.radians(270.0)
+#: radius of the acceptance circle (m): a turn has reached its waypoint once the boat is this
+#: close to it (about one hull length of Gretha, 5.2 m, PAPER-FACTS §1: the scale below which
+#: a point is reached; the turn's figures stop there, where the line-of-sight heading to a point
+#: under the bow stops meaning anything)
+ARRIVAL_RADIUS = 5.0
+#: heading change (rad) with the heading error outside :data:`TURN_BAND` (beyond the commanded
+#: turn, for the stretch that starts it) that makes a pirouette: one full circle. A boat whose
+#: turning circle leaves the waypoint outside points its bow at it within one revolution (its
+#: heading sweeps every direction while the line of sight to the waypoint moves less); one that
+#: turns a full circle without doing so circles the waypoint instead of reaching it, the
+#: pirouettes of thesis §3.4.1 ("pirouettes instead of following its set-point ... not able to
+#: achieve its desired heading")
+PIROUETTE_TURN = 2 * math.pi
 #: size of the speed steps of ``mpcasv tune speed`` (m/s) and length of their nonlinear runs (s)
 SPEED_STEP, STEP_T_END = 0.5, 120.0
 
@@ -104,6 +115,20 @@ def speed_figures(P: ct.StateSpace, g: SpeedLoop, dt: float | None = None,
     return loop_margins(L) | step_figures(y, t, step) | {"stable": stable}
 
 
+def unsettled_steps(loop: dict, steps: dict) -> list[str]:
+    """The speed steps that do not settle (2 %) within their run: the linear ones of
+    :func:`speed_figures` (``loop``: ``{u0: (continuous, sampled)}``, with the feed-forward)
+    and the nonlinear :func:`speed_step` ones that were run (``steps``: ``{u0: [...]}``), as
+    "linear at 0.5 m/s" / "0.5->1 m/s". Part of ``tune speed``'s acceptance, as the nonlinear
+    heading step is of ``tune yaw``'s: margins alone passed a PI with ``Kp = 0``, ``Ki = 1e-5``
+    (``--w 0.0001``, crossover 1e-7 rad/s) whose step from 0.5 to 1 m/s never settled."""
+    out = [f"linear at {u:g} m/s" for u, figs in loop.items()
+           if not all(math.isfinite(f["settling_s"]) for f in figs)]  # fmt: skip
+    out += [f"{st['u0']:g}->{st['u1']:g} m/s" for v in steps.values() for st in v
+            if st["reachable"] and not math.isfinite(st["settling_s"])]  # fmt: skip
+    return out
+
+
 def straight_speed_limit(model: VesselModel, ep: ExecutionParams) -> tuple[float, str]:
     """The fastest speed the execution level can hold on a straight course (m/s) and what
     sets it: the vessel's top speed at ``T_max`` (:attr:`VesselModel.top_speed`), its speed
@@ -111,7 +136,7 @@ def straight_speed_limit(model: VesselModel, ep: ExecutionParams) -> tuple[float
     P, ref = model.params, ep.reference
     limits = {f"top speed at T_max = {P.T_max:.4g} N": model.top_speed,
               "speed cap u_max": P.u_max,
-              "eq. 3.1's u_ff + k_u pi/2": ref.u_ff + ref.k_u * math.pi / 2}  # fmt: skip
+              "eq. 3.1's u_ff + k_u pi/2": u_cmd_max(ref.u_ff, ref.k_u)}  # fmt: skip
     why = min(limits, key=limits.get)
     return float(limits[why]), why
 
@@ -158,15 +183,46 @@ def speed_step(model: VesselModel, ep: ExecutionParams, u0: float, u1: float,
     }  # fmt: skip
 
 
+def circling(run, wp, angle: float) -> float:
+    """The most heading change (rad) the boat of ``run`` turned without heading for the
+    waypoint ``wp``: over each stretch with ``|psi_e| > TURN_BAND``, the heading change, less
+    the commanded turn ``|angle|`` for the stretch the run starts with. Stretches are cut at
+    the first arrival within :data:`ARRIVAL_RADIUS` (the line of sight to a waypoint under the
+    bow swings round as the boat passes it), and those after the arrival are counted until the
+    boat first heads back for it: a boat that has reached the waypoint and turned back towards
+    it is not circling it. More than :data:`PIROUETTE_TURN` is a pirouette."""
+    dist = np.hypot(run.X[:, 0] - wp[0], run.X[:, 1] - wp[1])
+    n = int(np.argmax(dist < ARRIVAL_RADIUS)) if (dist < ARRIVAL_RADIUS).any() else len(dist)
+    out = ~(np.abs(run.psi_error) <= TURN_BAND)  # a non-finite error is outside
+    dpsi = np.abs(np.diff(np.unwrap(run.X[:, 2])))
+    worst, i = 0.0, 0
+    while i < len(out):
+        if not out[i]:
+            if i >= n:  # on course again after the arrival: done
+                break
+            i += 1
+            continue
+        j = i
+        while j < len(out) and out[j] and (j != n or i == n):  # cut at the arrival
+            j += 1
+        turned = float(np.sum(dpsi[i:j - 1])) - (abs(angle) if i == 0 else 0.0)
+        worst = max(worst, turned)
+        i = j
+    return worst
+
+
 def turn(model: VesselModel, ep: ExecutionParams, angle: float, distance: float,
          t_end: float = 150.0, u0: float | None = None):  # fmt: skip
     """Turn by ``angle`` (rad) from full speed (or trim at ``u0``; the speed integrator at its
     trim value, :func:`trim_integrator`) towards a waypoint ``distance`` m away.
 
-    Returns the run and ``{"turn_s", "turn_m", "pirouette", "total_turn_deg", "min_u"}``:
-    time and path length until the heading error stays within 10 deg (until the run ends or
-    the waypoint is within 5 m), the total heading change before that, and whether it
-    pirouetted (never settled, or turned more than 270 deg beyond the commanded turn).
+    Returns the run and ``{"turn_s", "turn_m", "reached", "reach_s", "pirouette",
+    "circling_deg", "total_turn_deg", "min_u"}``: time (s) and path length (m) until the turn
+    is done, i.e. the heading error stays within :data:`TURN_BAND` until the arrival, or the
+    boat is within :data:`ARRIVAL_RADIUS` of the waypoint, whichever comes first (``inf`` if
+    neither within ``t_end``); whether and when (s) it reached that circle; the heading change
+    (deg) until the turn was done; :func:`circling` (deg) and whether it pirouetted (more than
+    :data:`PIROUETTE_TURN`); the least surge speed (m/s) until the turn was done.
     """
     if u0 is None:
         u0 = min(model.top_speed, model.params.u_max)
@@ -174,17 +230,21 @@ def turn(model: VesselModel, ep: ExecutionParams, angle: float, distance: float,
     wp = (distance * math.cos(angle), distance * math.sin(angle))
     run = run_closed_loop(model, ep, x0, wp, model.params.u_max, t_end,
                           I_u=trim_integrator(model, u0))
-    reach = np.hypot(run.X[:, 0] - wp[0], run.X[:, 1] - wp[1]) < 5.0
+    reach = np.hypot(run.X[:, 0] - wp[0], run.X[:, 1] - wp[1]) < ARRIVAL_RADIUS
     n = int(np.argmax(reach)) if reach.any() else len(run.t)
-    err = run.psi_error[:n]
-    ts = settling_time(run.t[:n], err, TURN_BAND)
-    i = int(round(ts / (run.t[1] - run.t[0]))) if math.isfinite(ts) else n - 1
+    ts = settling_time(run.t[:n], run.psi_error[:n], TURN_BAND)  # on course until the arrival
+    if reach.any() and not ts < run.t[n]:
+        ts = float(run.t[n])
+    i = int(round(ts / (run.t[1] - run.t[0]))) if math.isfinite(ts) else len(run.t) - 1
     total = float(np.sum(np.abs(np.diff(np.unwrap(run.X[: i + 1, 2])))))
-    pirouette = (not math.isfinite(ts)) or total > abs(angle) + PIROUETTE_EXCESS
+    circ = circling(run, wp, angle)
     return run, {
         "turn_s": ts,
         "turn_m": float(run.distance[i]) if math.isfinite(ts) else math.inf,
-        "pirouette": bool(pirouette),
+        "reached": bool(reach.any()),
+        "reach_s": float(run.t[n]) if reach.any() else math.inf,
+        "pirouette": bool(circ > PIROUETTE_TURN),
+        "circling_deg": float(np.degrees(circ)),
         "total_turn_deg": float(np.degrees(total)),
         "min_u": float(run.X[: i + 1, 3].min()),
     }
@@ -200,11 +260,14 @@ class TurnRow:
 
     @property
     def ok(self) -> bool:
-        return not any(f["pirouette"] for f in self.figures.values())
+        """Every turn reached its waypoint (within :data:`ARRIVAL_RADIUS`) without a
+        pirouette (:data:`PIROUETTE_TURN`)."""
+        return all(f["reached"] and not f["pirouette"] for f in self.figures.values())
 
     @property
     def cost(self) -> float:
-        """Sum of the turn times (s): the recommendation minimises it among pirouette-free."""
+        """Sum of the turn times (s): :func:`recommend` minimises it among the rows that are
+        :attr:`ok` and within the ``u_cmd,max`` bound."""
         return float(sum(f["turn_s"] for f in self.figures.values()))
 
 
@@ -223,12 +286,68 @@ def turn_grid(model: VesselModel, ep: ExecutionParams, pairs, angles_deg=(90.0, 
     return rows, runs
 
 
-def recommend(rows: list[TurnRow]) -> TurnRow:
-    """The pirouette-free row with the shortest total turn time; ValueError if none."""
-    good = [r for r in rows if r.ok]
+def merge_grids(grids: dict) -> list[TurnRow]:
+    """One row per (u_ff, k_u) with the turns of every distance of ``grids`` (``{distance:
+    (rows, runs)}`` of :func:`turn_grid`; the last row of each, the baseline without the
+    reference model, left out), figures keyed ``"<distance>m/<angle>"``."""
+    by_pair: dict = {}
+    for d, (rows, _) in grids.items():
+        for r in rows[:-1]:
+            figs = by_pair.setdefault((r.u_ff, r.k_u), {})
+            figs.update({f"{d}m/{a}": f for a, f in r.figures.items()})
+    return [TurnRow(u_ff=a, k_u=b, figures=f) for (a, b), f in by_pair.items()]
+
+
+def u_cmd_max(u_ff: float, k_u: float) -> float:
+    """Eq. 3.1's largest speed command, at zero heading error: ``u_ff + k_u pi/2`` (m/s)."""
+    return u_ff + k_u * math.pi / 2
+
+
+#: relative slack of the ``u_cmd,max`` bound, so that the bound a pair itself sets admits it
+U_CMD_MAX_RTOL = 1e-6
+
+
+def admitted(rows: list[TurnRow], bound: float) -> list[TurnRow]:
+    """The rows whose :func:`u_cmd_max` is at most ``bound`` (m/s). The thesis chose ``k_u``
+    for a given ``u_ff`` to hold ``u_cmd,max`` at the boat's rated maximum speed (§3.4.1:
+    ``u_ff`` 0.4 -> 0.6 m/s with ``k_u`` 1.72 -> 1.59 m/s "to maintain the maximum commanded
+    speed", 3.1 m/s), and found lower ``k_u`` more stable: the turn times alone only fall as
+    ``k_u`` grows, so without the bound the grid's largest ``k_u`` always won."""
+    return [r for r in rows if u_cmd_max(r.u_ff, r.k_u) <= bound * (1 + U_CMD_MAX_RTOL)]
+
+
+def recommend(rows: list[TurnRow], bound: float = math.inf) -> TurnRow:
+    """Among the rows :func:`admitted` under ``bound`` (m/s) whose turns all reached the
+    waypoint without a pirouette (:attr:`TurnRow.ok`), the one with the least total turn
+    time; ValueError if none."""
+    good = [r for r in admitted(rows, bound) if r.ok]
     if not good:
-        raise ValueError("every (u_ff, k_u) pair pirouetted: no recommendation")
+        raise ValueError("no (u_ff, k_u) pair of the grid with u_ff + k_u pi/2 <= "
+                         f"{bound:.4g} m/s reached every waypoint without a pirouette: no "
+                         "recommendation")  # fmt: skip
     return min(good, key=lambda r: r.cost)
+
+
+def edge_notes(best: TurnRow, rows: list[TurnRow], bound: float) -> list[str]:
+    """Where the recommendation ``best`` sits on the grid ``rows``: on its edge (the largest
+    or smallest ``u_ff`` or ``k_u`` given: the optimum may lie beyond, a warning), or with
+    ``k_u`` set by the ``u_cmd,max`` ``bound`` (a larger ``k_u`` of the grid at that ``u_ff``
+    was excluded by it: the rule at work)."""
+    out = []
+    for name, values, v in (("u_ff", {r.u_ff for r in rows}, best.u_ff),
+                            ("k_u", {r.k_u for r in rows}, best.k_u)):  # fmt: skip
+        if len(values) < 2:
+            continue
+        larger_cut = name == "k_u" and any(r.u_ff == best.u_ff and r.k_u > best.k_u
+                                           for r in rows if r not in admitted(rows, bound))
+        if larger_cut:
+            out.append(f"k_u = {v:g} is the largest of the grid at u_ff = {best.u_ff:g} with "
+                       f"u_ff + k_u pi/2 <= {bound:.4g} m/s (--u-cmd-max): the bound sets it")
+        elif v in (max(values), min(values)):
+            end = "largest" if v == max(values) else "smallest"
+            out.append(f"{name} = {v:g} is the grid's {end}: the least turn time may lie "
+                       f"beyond it (extend --{name.replace('_', '-')})")
+    return out
 
 
 def without_reference(ep: ExecutionParams, model: VesselModel) -> ExecutionParams:
