@@ -37,11 +37,11 @@ import numpy as np
 import pandas as pd
 
 from mpcasv.errors import LogError
-from mpcasv.io.asvwatch import dune_actuators
 from mpcasv.io.lsf import read_lsf, read_messages
 from mpcasv.models.ident_table import identification_table
 from mpcasv.models.identify import IDENTIFIED, identify
 from mpcasv.models.params import MODEL_COEFFS, VesselParams
+from mpcasv.models.vessel import dune_actuators
 
 __all__ = ["load_log", "map_table", "pick_vehicle", "run_cli"]
 
@@ -175,7 +175,7 @@ def _differential_inputs(df: pd.DataFrame, path, prior: VesselParams) -> pd.Data
     """Two fixed thrusters (prior ``actuation = "differential"``): SetThrusterActuation id 0
     (port) and id 1 (starboard), fractions ``a_0, a_1`` of each thruster's ``T_max / 2``:
     ``T_cmd = (a_0 + a_1) T_max / 2`` and ``delta_cmd = delta_max (a_0 - a_1) / 2``
-    (:func:`mpcasv.io.asvwatch.dune_actuators`, which the deploy reads its actuators with)."""
+    (:func:`mpcasv.models.vessel.dune_actuators`, which the deploy reads its actuators with)."""
     for col, i in (("thrust_0", 0), ("thrust_1", 1)):
         if col not in df.columns or df[col].isna().all():
             raise LogError(f"{path}: missing messages: no SetThrusterActuation id {i} (a vessel "
