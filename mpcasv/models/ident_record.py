@@ -64,9 +64,10 @@ def check_identification(table: dict | None, text: str, path: str | Path) -> Non
     if table is None:
         first = next((ln for ln in text.splitlines() if ln.startswith(LEGACY_FAILED)), None)
         if first is not None:
+            said = first.lstrip("# ").rstrip().rstrip(".")
             raise ConfigError(f"{path}: mpcasv identify marked this vessel file VALIDATION "
-                              f"FAILED (its header: {first.lstrip('# ').rstrip()}); to use it "
-                              f"anyway (you accept the model) add a [{TABLE}] table with "
+                              f"FAILED (its header: {said}); to use it "
+                              f"anyway (you accept the model) add an [{TABLE}] table with "
                               'validation = "failed" and use_anyway = true')  # fmt: skip
         return
     if not isinstance(table, dict):
