@@ -35,7 +35,9 @@ def run_identify(args: argparse.Namespace) -> int:
     """``mpcasv identify``: 0 identified and validated; 1 identified, but a held-out fit is
     below 0 % (the model predicts the validation data worse than their mean) or its held-out
     weighted error is above the prior's (:func:`~mpcasv.models.ident_checks.worse_than_prior`:
-    it predicts them worse than the prior): reported, and the TOML says VALIDATION FAILED; 2
+    it predicts them worse than the prior): reported, and the TOML says VALIDATION FAILED (in
+    its header and, machine-readable, ``[identification] validation = "failed"``, which every
+    loader refuses: :mod:`mpcasv.models.ident_record`); 2
     bad input (incl. coefficients the logs cannot identify, nothing written)."""
     from mpcasv.io.identlog import run_cli
     from mpcasv.models.ident_checks import validation_failures, worse_than_prior
@@ -51,10 +53,12 @@ def run_identify(args: argparse.Namespace) -> int:
         fits = ", ".join(f"{c} {v:.1f} %" for c, v in failed.items())
         print(f"validation FAIL: held-out fit below 0 % for {fits}: the identified model "
               f"predicts the held-out data worse than their mean; {args.out} is marked "
-              "VALIDATION FAILED, do not use it as is")  # fmt: skip
+              "VALIDATION FAILED, do not use it as is (its [identification] validation = "
+              "\"failed\": mpcasv refuses to load it unless use_anyway = true there)")  # fmt: skip
     worse = worse_than_prior(rec.get("validation_error", {}))
     if worse:
         print(f"validation FAIL: held-out weighted error {worse:.3g} x the prior's: the "
               f"identified model predicts the held-out data worse than the prior; {args.out} "
-              "is marked VALIDATION FAILED, keep the prior")  # fmt: skip
+              "is marked VALIDATION FAILED, keep the prior (its [identification] validation = "
+              "\"failed\": mpcasv refuses to load it unless use_anyway = true there)")  # fmt: skip
     return 1 if failed or worse else rc

@@ -39,23 +39,10 @@ from collections import deque
 from dataclasses import dataclass, field
 
 from mpcasv.io.config import SpeedSpec
+from mpcasv.models.vessel import dune_actuators  # the one definition (re-exported)
 
 __all__ = ["NO_WAY_MS", "ClockRate", "SpeedWatch", "Thrusters", "UsblFixes", "dune_actuators",
            "dune_set_points"]
-
-
-def dune_actuators(vessel, a0, a1=0.0, servo=0.0):
-    """The model's ``(T, delta)`` (N, rad) from DUNE's set-points: SetThrusterActuation ids 0
-    and 1 (fractions ``a0``, ``a1``) and SetServoPosition id 0 (``servo``, rad). Steerable
-    drive: ``T = a0 T_max``, ``delta = servo``; two fixed thrusters (``vessel.actuation =
-    "differential"``, id 0 port, 1 starboard): ``T = (a0 + a1) T_max / 2``, ``delta =
-    delta_max (a0 - a1) / 2`` (so that ``T_port - T_stbd = T_max delta / delta_max``,
-    :func:`mpcasv.models.vessel.actuator_forces`). The thrust is taken as proportional to the
-    set-point (no thrust-speed map), as in the identification (:mod:`mpcasv.io.identlog`).
-    Numbers or arrays."""
-    if vessel.actuation == "differential":
-        return (a0 + a1) * vessel.T_max / 2, (a0 - a1) * vessel.delta_max / 2
-    return a0 * vessel.T_max, servo
 
 
 def dune_set_points(vessel, T: float, delta: float) -> tuple[dict[int, float], dict[int, float]]:

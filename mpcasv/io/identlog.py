@@ -31,17 +31,18 @@ from __future__ import annotations
 
 import json
 import shlex
+import sys
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
 from mpcasv.errors import LogError
-from mpcasv.io.asvwatch import dune_actuators
 from mpcasv.io.lsf import read_lsf, read_messages
 from mpcasv.models.ident_table import identification_table
 from mpcasv.models.identify import IDENTIFIED, identify
 from mpcasv.models.params import MODEL_COEFFS, VesselParams
+from mpcasv.models.vessel import dune_actuators
 
 __all__ = ["load_log", "map_table", "pick_vehicle", "run_cli"]
 
@@ -175,7 +176,7 @@ def _differential_inputs(df: pd.DataFrame, path, prior: VesselParams) -> pd.Data
     """Two fixed thrusters (prior ``actuation = "differential"``): SetThrusterActuation id 0
     (port) and id 1 (starboard), fractions ``a_0, a_1`` of each thruster's ``T_max / 2``:
     ``T_cmd = (a_0 + a_1) T_max / 2`` and ``delta_cmd = delta_max (a_0 - a_1) / 2``
-    (:func:`mpcasv.io.asvwatch.dune_actuators`, which the deploy reads its actuators with)."""
+    (:func:`mpcasv.models.vessel.dune_actuators`, which the deploy reads its actuators with)."""
     for col, i in (("thrust_0", 0), ("thrust_1", 1)):
         if col not in df.columns or df[col].isna().all():
             raise LogError(f"{path}: missing messages: no SetThrusterActuation id {i} (a vessel "
@@ -264,6 +265,9 @@ def run_map_identification(args, prior: VesselParams, tmap) -> int:
     """``mpcasv identify`` through a thruster map: writes the vessel file and a report
     folder beside it (``identify.md``, ``identify.json``)."""
     from mpcasv.models.ident_mapout import (
+        gap_warning,
+        held_out_text,
+        map_params,
         phase_speeds,
         plot_map_replay,
         report,
@@ -271,6 +275,7 @@ def run_map_identification(args, prior: VesselParams, tmap) -> int:
         written_vessel,
     )  # fmt: skip
     from mpcasv.models.ident_thrust import HULL_COEFFS, identify_through_map, vsim_structure
+    from mpcasv.models.ident_written import written_accuracy
 
     coeffs = tuple(c.strip() for c in args.coeffs.split(",")) if args.coeffs else HULL_COEFFS
     bad = [c for c in coeffs if c not in HULL_COEFFS]
@@ -285,7 +290,9 @@ def run_map_identification(args, prior: VesselParams, tmap) -> int:
     say = (lambda m: None) if args.quiet else print
     fit = identify_through_map(table, shaped, tmap, coeffs, validation=args.validation, say=say)
     name = args.out.stem
-    P, data = written_vessel(fit, tmap, name, held, [str(log)], prior)
+    as_written = written_accuracy(table, map_params(fit, tmap), args.validation)
+    P, data = written_vessel(fit, tmap, name, held, [str(log)], prior, as_written)
+    warn = gap_warning(fit, as_written)
     pick = getattr(args, "vehicle_pick", None)
     q = shlex.quote
     command = (f"mpcasv identify {q(str(log))} --vessel {q(str(args.vessel))}"
@@ -295,8 +302,12 @@ def run_map_identification(args, prior: VesselParams, tmap) -> int:
     header = (f"# {name}: identified by `{command}` through DUNE's thruster map "
               f"({tmap.source}).\n# Hull from the log; held values and the thrust limit: see "
               "[provenance] and docs/deploy.md.\n"
-              f"# 1-sigma: {fit.sigma_method}.\n")  # fmt: skip
+              f"# 1-sigma: {fit.sigma_method}.\n"
+              f"# Accuracy: {held_out_text(fit, as_written)}; also in [identification].\n"
+              + (f"# {warn}.\n" if warn else ""))  # fmt: skip
     write_vessel(args.out, data, header)
+    if warn:
+        print(f"{args.out}: {warn}", file=sys.stderr)
     cmd = nav["ref_speed"].to_numpy(float) if "ref_speed" in nav else None
     phases = None
     if cmd is not None:
@@ -306,7 +317,7 @@ def run_map_identification(args, prior: VesselParams, tmap) -> int:
         phases = phase_speeds(table["t"].to_numpy()[:n], cmd[:n], table["u"].to_numpy()[:n],
                               a[:n])  # fmt: skip
         phases = [ph for ph in phases if ph["commanded"] >= 0]
-    table_md = report(fit, P, tmap, prior, phases)
+    table_md = report(fit, P, tmap, prior, phases, as_written)
     folder = args.out.with_name(args.out.stem + "-report")
     folder.mkdir(parents=True, exist_ok=True)
     (folder / "identify.md").write_text(table_md + "\n")
@@ -316,6 +327,7 @@ def run_map_identification(args, prior: VesselParams, tmap) -> int:
         "rel_std_plain": fit.rel_std_plain, "var_ratio": fit.var_ratio,
         "sigma_rel_sd": fit.sigma_rel_sd, "sigma_lag": fit.sigma_lag, "at_bound": fit.at_bound,
         "sigma_method": fit.sigma_method, "metrics": fit.metrics, "split_s": fit.split_s,
+        "as_written": {"validation": as_written["validation"], "std": as_written["std"]},
         "T_max": P.T_max, "u_max": P.u_max,
         "phases": phases}, indent=1))  # fmt: skip
     print(table_md)

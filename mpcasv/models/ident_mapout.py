@@ -21,6 +21,7 @@ import numpy as np
 
 from mpcasv.models.ident_cov import data_name, fixed, report_notes
 from mpcasv.models.ident_thrust import MapFit, ThrusterMap
+from mpcasv.models.ident_written import gap
 from mpcasv.models.params import VesselParams
 from mpcasv.models.vessel import resistance, top_speed
 
@@ -29,14 +30,9 @@ from mpcasv.models.vessel import resistance, top_speed
 DUNE_RPM_FULL, DUNE_RPM_FLOOR, DUNE_RPM_LOOP_MAX = 1200.0, 250.0, 120.0 * 2.5 + 400.0
 
 
-def written_vessel(fit: MapFit, tmap: ThrusterMap, name: str, held: dict[str, str],
-                   sources: list[str], prior: VesselParams) -> tuple[VesselParams, dict]:
-    """(parameters, TOML data with ``[provenance]``) of the identified vessel.
-
-    ``held``: provenance of the values :func:`~mpcasv.models.ident_thrust.vsim_structure`
-    set; identified coefficients name the logs, the method, the 1-sigma and the held-out
-    errors; the others keep the prior's provenance, marked as held.
-    """
+def map_params(fit: MapFit, tmap: ThrusterMap) -> VesselParams:
+    """The identified vessel's parameters: the fitted hull with ``T_max``, ``u_max`` and the
+    effective ``y_thr`` of the thruster map (module docstring)."""
     P = fit.params
     u_top = tmap.steady_speed(P, 1.0)
     T_max = resistance(P, u_top)
@@ -44,9 +40,53 @@ def written_vessel(fit: MapFit, tmap: ThrusterMap, name: str, held: dict[str, st
     P = P.with_coeffs(T_max=T_max, u_max=u_top, y_thr=y_eff, T_min=0.0)
     if abs(top_speed(P) / u_top - 1) > 1e-6:  # the model's own top speed at T_max
         raise RuntimeError(f"top speed {top_speed(P):.4f} != {u_top:.4f} m/s (a bug)")
-    val = fit.metrics["identified"]["validation"]
-    held_out = (f"held-out ({fit.split_s:.0f} s to the end) RMS u {val['u']:.4f} m/s, r "
-                f"{val['r']:.4f} rad/s, psi {val['psi']:.3f} rad")  # fmt: skip
+    return P
+
+
+def held_out_text(fit: MapFit, as_written: dict) -> str:
+    """The two held-out accuracies, each named (provenance and header): through the map (the
+    fit's actuator model, not in the file) and as written (the file's own actuator model,
+    :mod:`mpcasv.models.ident_written`), with the held-out signals' spread."""
+    m, w, sd = fit.metrics["identified"]["validation"], as_written["validation"], as_written["std"]
+    return (f"held-out ({fit.split_s:.0f} s to the end, 30-s replay windows) RMS through "
+            f"DUNE's thruster map (the fit's actuator model, not in this file) u {m['u']:.4f} "
+            f"m/s, r {m['r']:.4f} rad/s, psi {m['psi']:.3f} rad; AS WRITTEN (this file's own "
+            f"linear actuator model, which simulate, tune and the MPC use) u {w['u']:.4f} m/s, "
+            f"r {w['r']:.4f} rad/s, psi {w['psi']:.3f} rad (held-out std u {sd['u']:.3f} m/s, "
+            f"r {sd['r']:.3f} rad/s)")  # fmt: skip
+
+
+def gap_warning(fit: MapFit, as_written: dict) -> str | None:
+    """One line when the as-written held-out RMS is above
+    :data:`~mpcasv.models.ident_written.GAP_FACTOR` times the one through the map (stderr
+    and the file's header), else None."""
+    g = gap(fit.metrics["identified"]["validation"], as_written["validation"])
+    if not g:
+        return None
+    ratios = ", ".join(f"{c} {r:.3g} x" for c, r in g.items())
+    return (f"WARNING: as written (its own linear actuator model) this vessel predicts the "
+            f"held-out data far worse than through DUNE's thruster map it was fitted with "
+            f"(RMS {ratios}): the file's actuators are not DUNE's map; see docs/deploy.md, "
+            "'The vessel file as written'")  # fmt: skip
+
+
+def written_vessel(fit: MapFit, tmap: ThrusterMap, name: str, held: dict[str, str],
+                   sources: list[str], prior: VesselParams,
+                   as_written: dict) -> tuple[VesselParams, dict]:  # fmt: skip
+    """(parameters, TOML data with ``[provenance]`` and ``[identification]``) of the
+    identified vessel.
+
+    ``held``: provenance of the values :func:`~mpcasv.models.ident_thrust.vsim_structure`
+    set; identified coefficients name the logs, the method, the 1-sigma and the held-out
+    errors, through the map and as written (``as_written``:
+    :func:`mpcasv.models.ident_written.written_accuracy` of :func:`map_params`); the others
+    keep the prior's provenance, marked as held. ``[identification]``
+    (:mod:`mpcasv.models.ident_record`): no acceptance bar (``validation = "not checked"``),
+    both held-out accuracies and the held-out spread.
+    """
+    P = map_params(fit, tmap)
+    u_top, y_eff = P.u_max, P.y_thr
+    held_out = held_out_text(fit, as_written)
     src = ", ".join(sources)
     prov = {}
     data = {f.name: getattr(P, f.name) for f in dataclasses.fields(P)}
@@ -86,7 +126,15 @@ def written_vessel(fit: MapFit, tmap: ThrusterMap, name: str, held: dict[str, st
             prov[key] = "0: DUNE's speed loop never commands astern thrust in transit"
         else:
             prov[key] = "held at the prior: " + prior.provenance.get(key, "(no provenance)")
-    return P, {**data, "provenance": prov}
+    def sig(d: dict) -> dict:
+        return {c: float(f"{v:.4g}") for c, v in d.items()}
+
+    record = {"validation": "not checked",
+              "held_out_from_s": round(fit.split_s, 1),
+              "held_out_rms_through_map": sig(fit.metrics["identified"]["validation"]),
+              "held_out_rms_as_written": sig(as_written["validation"]),
+              "held_out_std": sig(as_written["std"])}  # fmt: skip
+    return P, {**data, "provenance": prov, "identification": record}
 
 
 def speed_at_rpm(P: VesselParams, tmap: ThrusterMap, rpm: float) -> float:
@@ -104,8 +152,9 @@ def write_vessel(path: Path, data: dict, header: str) -> None:
 
 
 def report(fit: MapFit, P: VesselParams, tmap: ThrusterMap, prior: VesselParams,
-           phases: list[dict] | None = None) -> str:  # fmt: skip
-    """Markdown: coefficients, held-out errors against the prior's, speed figures."""
+           phases: list[dict] | None = None, as_written: dict | None = None) -> str:  # fmt: skip
+    """Markdown: coefficients, held-out errors against the prior's (and as written:
+    ``as_written``, :func:`mpcasv.models.ident_written.written_accuracy`), speed figures."""
     lines = ["| coefficient | start (prior) | identified | 1-sigma % |", "|---|---|---|---|"]
     for c in fit.coeffs:
         sd = "at bound" if c in fit.at_bound else fixed(100 * fit.rel_std[c], 1)
@@ -116,9 +165,23 @@ def report(fit: MapFit, P: VesselParams, tmap: ThrusterMap, prior: VesselParams,
               "|---|---|---|---|---|"]  # fmt: skip
     for stage, d in fit.metrics.items():
         for part, m in d.items():
-            lines.append(f"| {stage} | {part} | {m['u']:.4f} | {m['r']:.4f} | {m['psi']:.3f} |")
+            lines.append(f"| {stage} (through the map) | {part} | {m['u']:.4f} | {m['r']:.4f} "
+                         f"| {m['psi']:.3f} |")  # fmt: skip
+    if as_written is not None:
+        m, sd = as_written["validation"], as_written["std"]
+        lines.append(f"| identified, AS WRITTEN (the file's own linear actuator model) | "
+                     f"validation | {m['u']:.4f} | {m['r']:.4f} | {m['psi']:.3f} |")
+        lines.append(f"| held-out std of the log | validation | {sd['u']:.4f} | {sd['r']:.4f} "
+                     "| |")  # fmt: skip
     lines += ["", f"Held out: from {fit.split_s:.1f} s (log time) to the end; replay windows "
-              "re-initialised from the measurement; psi is reported, not fitted.", "",
+              "re-initialised from the measurement; psi is reported, not fitted. \"Through "
+              "the map\": the log's actuations through DUNE's thruster map, as fitted (the map "
+              "is not in the vessel file); \"as written\": through the vessel file's own "
+              "actuator model, what simulate, tune and the MPC use."]
+    warn = gap_warning(fit, as_written) if as_written is not None else None
+    if warn:
+        lines += ["", warn + "."]
+    lines += ["",
               "| both thrusters at | actuation | steady speed, identified model (m/s) |",
               "|---|---|---|"]  # fmt: skip
     for label, rpm in (("DUNE's RPM floor", DUNE_RPM_FLOOR),

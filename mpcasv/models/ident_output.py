@@ -24,8 +24,13 @@ def write_params(path: Path, res: Identification, prior: VesselParams, sources: 
     Every number keeps a provenance entry: identified ones name the logs, the method, the
     1-sigma uncertainty and the validation fit; the others are the prior's, marked as held.
     A model that failed its validation (a held-out fit below 0 %,
-    :func:`mpcasv.models.ident_checks.validation_failures`; ``mpcasv identify`` exits 1) says
-    so in the header and in every identified coefficient's provenance.
+    :func:`mpcasv.models.ident_checks.validation_failures`, or a held-out error above the
+    prior's; ``mpcasv identify`` exits 1) says so in the header, in every identified
+    coefficient's provenance and, machine-readable, in its ``[identification]`` table
+    (``validation = "failed"``, :mod:`mpcasv.models.ident_record`): loading refuses it unless
+    the user sets ``use_anyway = true`` there. The validation fits are of the model as
+    written: the logs' set-points are its own inputs (a DUNE log's through
+    :func:`mpcasv.models.vessel.dune_actuators`, its own actuator model).
     """
     import tomli_w
 
@@ -78,8 +83,21 @@ def write_params(path: Path, res: Identification, prior: VesselParams, sources: 
         header += (f"# VALIDATION FAILED: held-out weighted error {worse:.3g} x the prior's: this "
                    "model predicts the validation data worse than the prior does; keep the "
                    "prior.\n")  # fmt: skip
+    reasons = []
+    if failed:
+        fits_txt = ", ".join(f"{c} {fixed(v, 1)} %" for c, v in failed.items())
+        reasons.append(f"held-out fit below 0 % for {fits_txt}")
+    if worse:
+        reasons.append(f"held-out weighted error {worse:.3g} x the prior's")
+    why = "; ".join(reasons)
+    record = ({"validation": "failed", "why": why, "use_anyway": False} if why
+              else {"validation": "passed"})  # fmt: skip
+    if why:
+        header += ("# [identification] validation = \"failed\": every mpcasv command refuses "
+                   "this file unless you set use_anyway = true there.\n")  # fmt: skip
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(header + tomli_w.dumps({**data, "provenance": prov}))
+    path.write_text(header + tomli_w.dumps({**data, "provenance": prov,
+                                            "identification": record}))  # fmt: skip
 
 
 def plot_replay(res: Identification, out: Path) -> Path:

@@ -257,10 +257,16 @@ def load_vessel(name_or_path: str | Path = "gretha") -> VesselParams:
     """Load vessel parameters: a shipped name (``"gretha"``) or a TOML path.
 
     The TOML has the numbers at top level and a ``[provenance]`` table with one entry per
-    number; a missing provenance entry is an error for shipped files.
+    number; a missing provenance entry is an error for shipped files. A file written by
+    ``mpcasv identify`` has an ``[identification]`` table: one whose validation failed is
+    refused unless it says ``use_anyway = true``
+    (:func:`mpcasv.models.ident_record.check_identification`).
     """
+    from mpcasv.models.ident_record import TABLE, check_identification
+
     path = resolve("vessels", name_or_path)
     data = load_toml(path, "vessel")
+    check_identification(data.pop(TABLE, None), Path(path).read_text(errors="replace"), path)
     try:
         params = parse(VesselParams, data, path)
     except ValueError as exc:

@@ -89,6 +89,22 @@ def actuator_forces(T, delta, u_r, P):
     )
 
 
+def dune_actuators(vessel, a0, a1=0.0, servo=0.0):
+    """The model's ``(T, delta)`` (N, rad) from DUNE's set-points: SetThrusterActuation ids 0
+    and 1 (fractions ``a0``, ``a1``) and SetServoPosition id 0 (``servo``, rad). Steerable
+    drive: ``T = a0 T_max``, ``delta = servo``; two fixed thrusters (``vessel.actuation =
+    "differential"``, id 0 port, 1 starboard): ``T = (a0 + a1) T_max / 2``, ``delta =
+    delta_max (a0 - a1) / 2`` (so that ``T_port - T_stbd = T_max delta / delta_max``,
+    :func:`mpcasv.models.vessel.actuator_forces`). The thrust is taken as proportional to the
+    set-point (no thrust-speed map), as in the identification (:mod:`mpcasv.io.identlog`):
+    this is a vessel file's own actuator model (the deploy reads DUNE's set-points with it,
+    :mod:`mpcasv.io.asvwatch`; a vessel identified through DUNE's thruster map is replayed
+    with it as written, :mod:`mpcasv.models.ident_written`). Numbers or arrays."""
+    if vessel.actuation == "differential":
+        return (a0 + a1) * vessel.T_max / 2, (a0 - a1) * vessel.delta_max / 2
+    return a0 * vessel.T_max, servo
+
+
 def mass_matrices(P):
     """Rigid-body and added mass matrices ``(M_RB, M_A)`` of the 3-DOF model (kg, kg m,
     kg m^2 entries), ``M = M_RB + M_A`` multiplying ``[u_dot, v_dot, r_dot]`` in (2.6).
