@@ -4,7 +4,7 @@ file that failed its validation (:func:`check_identification`, run by
 :func:`mpcasv.models.params.load_vessel`, so by ``tune``, ``simulate``, ``compare``,
 ``deploy`` and ``identify``'s prior alike).
 
-Until session 49 the verdict was only a comment at the top (``# VALIDATION FAILED ... do not
+Until session 48 the verdict was only a comment at the top (``# VALIDATION FAILED ... do not
 use it as is``), which TOML loaders drop: ``mpcasv tune yaw --vessel`` tuned on such a file,
 exit 0, without a word. Fields (all optional but ``validation``):
 
