@@ -225,7 +225,7 @@ def test_the_shipped_vessel_file_is_what_the_command_writes(identified):
     for c in ("m", "I_z", "X_u", "X_uu", "N_r", "N_rr", "Y_ur", "T_max", "u_max", "y_thr"):
         assert getattr(shipped, c) == pytest.approx(getattr(fitted, c), rel=1e-4, abs=1e-9), c
     # and its accuracy claims are the command's: both held-out figures, each named (the
-    # shipped file quoted the map's alone, session 49)
+    # shipped file quoted the map's alone, session 48)
     for c in ("m", "I_z", "X_u", "X_uu", "N_r", "N_rr"):
         tail = [P.provenance[c].split("; held-out (", 1)[1] for P in (fitted, shipped)]
         assert tail[0] == tail[1], c
@@ -254,7 +254,7 @@ def test_written_vessel_speeds_and_provenance(identified):
 #: held-out RMS of ``dune-otter`` *as written* (the log's actuations through the file's own
 #: linear actuator model, its lags, 30-s windows from the measurement), measured by an
 #: independent replay (a new user's scratch ``replay_linear2.py``: the file's CasADi RK4 step
-#: with its lags started at the set-points; session 49): u 0.0985 m/s, r 0.0901 rad/s
+#: with its lags started at the set-points; session 48): u 0.0985 m/s, r 0.0901 rad/s
 AS_WRITTEN = {"u": 0.0985, "r": 0.0901}
 
 
