@@ -324,3 +324,73 @@ def test_the_regenerate_recipe_in_the_toml_uses_the_real_out(tmp_path, capsys):
     speed = next(ln for ln in head if ln.startswith("#   mpcasv tune speed"))
     assert f"--out {q} " in speed and "runs/tune-speed" not in speed
     assert any(ln.startswith("#   mpcasv tune yaw --out runs/tune-yaw ") for ln in head)
+
+
+def _orbit(rho: float, loops: float = 3.0):
+    """A synthetic turn to the waypoint (0, 10) m: straight at it from the origin, on course
+    until 5 m from it (off course from there: it arrives turning), to 1 m from it, then
+    orbiting it at radius ``rho`` m, 90 deg off the line of sight, for ``loops`` turns."""
+    from types import SimpleNamespace
+
+    approach = np.linspace(0.0, 9.0, 90)
+    ang = np.linspace(0.0, 2 * np.pi * loops, int(200 * loops))
+    N = np.concatenate([np.zeros_like(approach), rho * np.sin(ang)])
+    E = np.concatenate([approach, 10.0 - rho * np.cos(ang)])
+    psi = np.concatenate([np.full_like(approach, np.pi / 2), np.pi / 2 + ang])
+    err = np.concatenate([np.where(approach > 5.0, np.pi / 2, 0.0), np.full_like(ang, np.pi / 2)])
+    X = np.zeros((len(N), 6))
+    X[:, 0], X[:, 1], X[:, 2] = N, E, psi
+    return SimpleNamespace(X=X, psi_error=err)
+
+
+def test_an_orbit_inside_the_arrival_circle_is_not_a_pirouette_one_round_it_is():
+    """After the arrival only the turning outside the circle counts: a small hull that passed
+    the waypoint and orbits within 2 m of it reached it (every dune-otter turn read as a
+    pirouette, 496 deg, a review); one that passed it and loops round it at 8 m circles it
+    (3 loops)."""
+    from mpcasv.control.tuning_speed import ARRIVAL_RADIUS, PIROUETTE_TURN, circling
+
+    assert ARRIVAL_RADIUS > 2.0
+    assert circling(_orbit(2.0), (0.0, 10.0), math.radians(90.0)) == 0.0
+    round_it = circling(_orbit(8.0), (0.0, 10.0), math.radians(90.0))
+    assert round_it > 2 * PIROUETTE_TURN and round_it == pytest.approx(3 * 2 * np.pi, rel=0.02)
+
+
+def test_the_bound_is_said_to_set_k_u_only_when_it_does():
+    """(0.4, 1.2) recommended while (0.4, 1.59) was within u_cmd,max = 3.1 m/s and lost on
+    time: the note said "the bound sets it" (a review); it is the grid's smallest k_u. With
+    every larger k_u at that u_ff above the bound, the bound does set it."""
+    from mpcasv.control.tuning_speed import TurnRow, edge_notes, recommend
+
+    def rows(costs):
+        return [TurnRow(u_ff=a, k_u=b, figures={90.0: {"turn_s": t, "reached": True,
+                                                       "pirouette": False}})
+                for (a, b), t in costs.items()]  # fmt: skip
+
+    r = rows({(0.4, 1.2): 10.0, (0.4, 1.59): 12.0, (0.4, 2.0): 5.0, (0.6, 1.2): 11.0})
+    best = recommend(r, 3.1)
+    assert (best.u_ff, best.k_u) == (0.4, 1.2)
+    notes = edge_notes(best, r, 3.1)
+    assert not any("the bound sets it" in n for n in notes)
+    assert any(n.startswith("k_u = 1.2 is the grid's smallest") for n in notes)
+    r = rows({(0.4, 1.2): 10.0, (0.4, 2.0): 5.0, (0.6, 1.2): 11.0})
+    assert any("the bound sets it" in n for n in edge_notes(recommend(r, 3.1), r, 3.1))
+
+
+def test_a_vessel_with_fast_steering_is_tuned_at_the_simulators_step(tmp_path):
+    """The nonlinear checks' 0.1 s step was checked against the vessel's T_delta too, so Gretha
+    with T_delta = 0.05 s could not be tuned at all (the simulator integrates the steering
+    lag in its sub-steps; only the forward-Euler yaw-rate filter needs T_f >= 0.1 s)."""
+    from mpcasv.config import ConfigError, resolve
+    from mpcasv.control.tuning_checks import check_yaw_sampling
+    from mpcasv.models.params import load_vessel
+    from mpcasv.models.vessel import VesselModel
+
+    text = resolve("vessels", "gretha").read_text()
+    assert "T_delta = 0.3\n" in text
+    path = tmp_path / "fast.toml"
+    path.write_text(text.replace("T_delta = 0.3\n", "T_delta = 0.05\n", 1))
+    model = VesselModel(load_vessel(path))
+    check_yaw_sampling(model, 0.2, "--T-f")  # no refusal
+    with pytest.raises(ConfigError, match="T_delta"):
+        check_yaw_sampling(model, 0.2, "--T-f", dt=0.1)  # the sampled design at 0.1 s: refused

@@ -93,18 +93,23 @@ YAW_SAMPLING = ("a sampled loop cannot follow a faster lag; the forward-Euler ya
 
 
 def check_yaw_sampling(model, T_f: float, T_f_from: str, dt: float | None = None) -> None:
-    """Refuse a yaw loop (``T_f`` (s) from ``T_f_from``: ``--T-f`` or ``--base FILE``, and the
-    vessel's ``T_delta``) that is run at a step longer than its fastest time constant: the
-    sampled analysis's ``dt`` (``--dt``, if given) and the nonlinear checks' step
-    :data:`mpcasv.control.tuning.DT` (the simulator's default), where a base file's ``T_f``
-    is run by ``tune speed`` too (``T_f = 0.02`` at 0.1 s: the filter diverged unrefused)."""
+    """Refuse a yaw loop run at a step longer than its fastest time constant: the sampled
+    analysis's ``dt`` (``--dt``, if given) longer than ``T_f`` (s, from ``T_f_from``:
+    ``--T-f`` or ``--base FILE``) or the vessel's ``T_delta``; the nonlinear checks' step
+    :data:`mpcasv.control.tuning.DT` (the simulator's default) longer than ``T_f``, where a
+    base file's ``T_f`` is run by ``tune speed`` too (``T_f = 0.02`` at 0.1 s: the filter
+    diverged unrefused). The plant's ``T_delta`` is integrated in the simulator's sub-steps:
+    not checked against ``DT``."""
     from mpcasv.control.tuning import DT
 
     P = model.params
-    limits = {f"T_f ({T_f_from})": T_f, f"T_delta ({P.name})": P.T_delta}
-    if dt is not None:
-        _sampling(dt, limits, "yaw", YAW_SAMPLING)
-    _sampling(DT, limits, "yaw", YAW_SAMPLING, "the nonlinear checks' step (the simulator's)",
+    filt = {f"T_f ({T_f_from})": T_f}
+    if dt is not None:  # the sampled design: the filter and the steering lag
+        _sampling(dt, filt | {f"T_delta ({P.name})": P.T_delta}, "yaw", YAW_SAMPLING)
+    # the nonlinear checks: the forward-Euler filter alone (the plant's steering lag is
+    # integrated by the simulator in its sub-steps: a vessel with T_delta = 0.05 s was refused
+    # here although it runs, a review)
+    _sampling(DT, filt, "yaw", YAW_SAMPLING, "the nonlinear checks' step (the simulator's)",
               f"the yaw loop must have T_f >= {DT:g} s")
 
 

@@ -186,28 +186,33 @@ def speed_step(model: VesselModel, ep: ExecutionParams, u0: float, u1: float,
 def circling(run, wp, angle: float) -> float:
     """The most heading change (rad) the boat of ``run`` turned without heading for the
     waypoint ``wp``: over each stretch with ``|psi_e| > TURN_BAND``, the heading change, less
-    the commanded turn ``|angle|`` for the stretch the run starts with. Stretches are cut at
-    the first arrival within :data:`ARRIVAL_RADIUS` (the line of sight to a waypoint under the
-    bow swings round as the boat passes it), and those after the arrival are counted until the
-    boat first heads back for it: a boat that has reached the waypoint and turned back towards
-    it is not circling it. More than :data:`PIROUETTE_TURN` is a pirouette."""
+    the commanded turn ``|angle|`` for the stretch the run starts with, up to the first
+    arrival within :data:`ARRIVAL_RADIUS` (the line of sight to a waypoint under the bow swings
+    round as the boat passes it); after the arrival, until the boat first heads back for the
+    waypoint, the heading change made outside that circle: a boat that has reached the
+    waypoint and turned back towards it is not circling it, nor one that orbits inside the
+    circle (a small hull that passed it: every dune-otter turn read as a pirouette, a
+    review), while one that loops round it, passing near it each time (Gretha without eq.
+    3.1), is. More than :data:`PIROUETTE_TURN` is a pirouette."""
     dist = np.hypot(run.X[:, 0] - wp[0], run.X[:, 1] - wp[1])
     n = int(np.argmax(dist < ARRIVAL_RADIUS)) if (dist < ARRIVAL_RADIUS).any() else len(dist)
     out = ~(np.abs(run.psi_error) <= TURN_BAND)  # a non-finite error is outside
     dpsi = np.abs(np.diff(np.unwrap(run.X[:, 2])))
     worst, i = 0.0, 0
-    while i < len(out):
+    while i < n:  # the approach: each stretch off course, cut at the arrival
         if not out[i]:
-            if i >= n:  # on course again after the arrival: done
-                break
             i += 1
             continue
         j = i
-        while j < len(out) and out[j] and (j != n or i == n):  # cut at the arrival
+        while j < n and out[j]:
             j += 1
         turned = float(np.sum(dpsi[i:j - 1])) - (abs(angle) if i == 0 else 0.0)
         worst = max(worst, turned)
         i = j
+    if n < len(out):  # after the arrival: off course until it heads back, outside the circle
+        back = np.flatnonzero(~out[n:])
+        k = np.arange(n, n + (int(back[0]) if len(back) else len(out) - n - 1))
+        worst = max(worst, float(np.sum(dpsi[k][dist[k] >= ARRIVAL_RADIUS])))
     return worst
 
 
@@ -338,8 +343,11 @@ def edge_notes(best: TurnRow, rows: list[TurnRow], bound: float) -> list[str]:
                             ("k_u", {r.k_u for r in rows}, best.k_u)):  # fmt: skip
         if len(values) < 2:
             continue
-        larger_cut = name == "k_u" and any(r.u_ff == best.u_ff and r.k_u > best.k_u
-                                           for r in rows if r not in admitted(rows, bound))
+        ok = admitted(rows, bound)
+        larger = [r for r in rows if r.u_ff == best.u_ff and r.k_u > best.k_u]
+        # the bound sets k_u only when every larger k_u at this u_ff is above it (one within
+        # it lost on time or on a pirouette: then the note was false, a review)
+        larger_cut = name == "k_u" and bool(larger) and not any(r in ok for r in larger)
         if larger_cut:
             out.append(f"k_u = {v:g} is the largest of the grid at u_ff = {best.u_ff:g} with "
                        f"u_ff + k_u pi/2 <= {bound:.4g} m/s (--u-cmd-max): the bound sets it")
