@@ -191,7 +191,7 @@ class Sitl(AsvDune, Publishing):
             if o.tcp:
                 await v.serve_tcp(o.bind)
         self.epoch = float(math.ceil(self.clock.now()) + 1)
-        # the addresses a peer can send to (bound to 0.0.0.0: this host's, loopback first);
+        # the addresses a peer can send to (bound to 0.0.0.0: this host's, loopback last);
         # the addresses below at the first
         hosts = local_hosts(o.bind)
         ready = {
