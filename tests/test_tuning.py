@@ -367,6 +367,10 @@ def test_gains_held_above_the_schedule_are_checked_up_to_the_top_speed(tmp_path,
     assert [u for u, w in off_speeds([0.5], 2.5) if w.startswith("above")] == pytest.approx(
         [0.5 + 2 / 3, 0.5 + 4 / 3, 2.5], abs=1e-3)
     assert not [u for u, w in off_speeds([0.5, 2.5], 2.5) if w.startswith("above")]
+    # a top speed a hair above the last schedule speed: one row at it, not three equal ones
+    # (dune-otter: 3.4783 -> 3.47844 m/s gave three "3.4784", a review)
+    assert [u for u, w in off_speeds([1.0, 3.4783], 3.47844) if w.startswith("above")] == [
+        3.4784]
     toml = tmp_path / "e.toml"
     rc = main(["tune", "yaw", "--speeds", "0.5", "--out", str(tmp_path / "o"), "--toml",
                str(toml), "--quiet"])  # fmt: skip

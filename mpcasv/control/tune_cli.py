@@ -313,12 +313,12 @@ def _check_u_cmd_max(args, ep) -> None:
     """Default ``--u-cmd-max`` to the base file's own ``u_ff + k_u pi/2`` (the thesis kept it
     when it changed ``u_ff``, §3.4.1) and refuse a grid none of whose pairs is within it (one
     line, before any work)."""
-    from mpcasv.control.tuning_speed import u_cmd_max
+    from mpcasv.control.tuning_speed import u_cmd_max, within
 
     if args.u_cmd_max is None:
         args.u_cmd_max = round(u_cmd_max(ep.reference.u_ff, ep.reference.k_u), 4)
     low = min(u_cmd_max(a, b) for a in args.u_ff for b in args.k_u)
-    if low > args.u_cmd_max * (1 + 1e-6):
+    if not any(within(a, b, args.u_cmd_max) for a in args.u_ff for b in args.k_u):
         raise ConfigError(f"--u-ff {','.join(f'{x:g}' for x in args.u_ff)} --k-u "
                           f"{','.join(f'{x:g}' for x in args.k_u)}: every pair has u_ff + k_u "
                           f"pi/2 above --u-cmd-max {args.u_cmd_max:g} m/s (least {low:.4g} m/s): "

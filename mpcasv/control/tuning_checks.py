@@ -114,9 +114,9 @@ def check_yaw_sampling(model, T_f: float, T_f_from: str, dt: float | None = None
 
 
 def check_yaw_limits(model, args: argparse.Namespace, wn: list[float]) -> None:
-    """Refuse a yaw design outside the usable range (module docstring): ``--dt`` or the
-    nonlinear checks' step above ``T_f`` or ``T_delta``; ``wn`` at or above ``1/T_delta`` or
-    ``1/T_f``."""
+    """Refuse a yaw design outside the usable range (module docstring): ``--dt`` above ``T_f``
+    or ``T_delta``, the nonlinear checks' step above ``T_f`` (:func:`check_yaw_sampling`);
+    ``wn`` at or above ``1/T_delta`` or ``1/T_f``."""
     P = model.params
     check_yaw_sampling(model, args.T_f, "--T-f", args.dt)
     corners = {"1/T_delta": 1.0 / P.T_delta, "1/T_f": 1.0 / args.T_f}

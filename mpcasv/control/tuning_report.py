@@ -13,7 +13,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from mpcasv.control.tuning import ILL
-from mpcasv.control.tuning_speed import ARRIVAL_RADIUS, TURN_BAND, U_CMD_MAX_RTOL, u_cmd_max
+from mpcasv.control.tuning_speed import ARRIVAL_RADIUS, TURN_BAND, arrival, u_cmd_max, within
 from mpcasv.control.tuning_yaw import SETTLE_BAND, yaw_loop, yaw_plant
 
 
@@ -227,7 +227,7 @@ def speed_tables(g, loop, grids, best, steps=None, limits=None, bound: float = m
             base = r.k_u == 0 and r is rows[-1]
             label = " (no reference model)" if base else ""
             top = u_cmd_max(r.u_ff, r.k_u)
-            over = "" if base or top <= bound * (1 + U_CMD_MAX_RTOL) else " (above the bound)"
+            over = "" if base or within(r.u_ff, r.k_u, bound) else " (above the bound)"
             out.append(f"| {r.u_ff:g}{label} | {r.k_u:g} | {top:.2f}{over} | "
                        + " | ".join(cells) + " |")
     rule = (f"every turn reached without a pirouette, u_ff + k_u pi/2 <= {bound:.4g} m/s "
@@ -291,11 +291,12 @@ def plot_speed(model, g, grids, field, best, out: Path) -> list[Path]:
                     continue
                 label = ("no ref. model" if k_u == 0 else f"u_ff={u_ff}, k_u={k_u}") + (
                     ": PIROUETTE (circles the waypoint)" if (u_ff, k_u, a) in pir else "")
-                near = np.hypot(r.X[:, 0] - wp[0], r.X[:, 1] - wp[1]) < ARRIVAL_RADIUS
-                n = int(np.argmax(near)) + 1 if near.any() else len(r.t)
+                _, first = arrival(r.X, wp)
+                reached = first < len(r.t)
+                n = first + 1 if reached else len(r.t)
                 ax.plot(r.X[:n, 1], r.X[:n, 0], ls="--" if k_u == 0 else "-",
                         lw=1.0 if k_u == 0 else 1.6, zorder=3 if k_u == 0 else 2,
-                        label=label + ("" if near.any() else f" (never within "
+                        label=label + ("" if reached else f" (never within "
                                        f"{ARRIVAL_RADIUS:g} m, {r.t[-1]:.0f} s)"))  # fmt: skip
             ax.plot(wp[1], wp[0], "kx", ms=9, zorder=4, label="waypoint")
             ax.plot(0, 0, "ko", ms=5, zorder=4, label="start (heading north)")
@@ -339,23 +340,23 @@ def plot_pirouette(checks: dict, wp, out: Path, title: str) -> Path:
     ax2 = ax1.twinx()
     for key, color in (("with", "C0"), ("without", "C3")):
         run, f = checks[key]
-        reach = np.hypot(run.X[:, 0] - wp[0], run.X[:, 1] - wp[1]) < ARRIVAL_RADIUS  # as turn()
-        n = int(np.argmax(reach)) + 1 if reach.any() else len(run.t)
+        dist, first = arrival(run.X, wp)  # as turn() counts
+        reached = first < len(run.t)
+        n = first + 1 if reached else len(run.t)
         if f["pirouette"]:
             total = float(np.degrees(np.sum(np.abs(np.diff(np.unwrap(run.X[:, 2]))))))
-            c = _circling(np.hypot(run.X[:, 0] - wp[0], run.X[:, 1] - wp[1]), n if
-                          reach.any() else None)  # fmt: skip
+            c = _circling(dist, n if reached else None)
             R = ARRIVAL_RADIUS
             what = ("PIROUETTE, circles the waypoint:\n" + (
                 f"within {R:g} m of the waypoint at {run.t[n - 1]:.0f} s, heading error "
                 f"{abs(math.degrees(run.psi_error[n - 1])):.0f} deg, then (dashed)\n"
-                if reach.any() else "") + (f"circles it {c.min():.1f}-{c.max():.1f} m away"
+                if reached else "") + (f"circles it {c.min():.1f}-{c.max():.1f} m away"
                 if len(c) else f"stays within {R:g} m of it") + f" to {run.t[-1]:.0f} s, turned "
                 f"{total:.0f} deg")  # fmt: skip
         else:
             what = (f"turn done after {f['turn_s']:.0f} s, turned {f['total_turn_deg']:.0f} "
                     "deg" + (f", within {ARRIVAL_RADIUS:g} m of the waypoint at "
-                             f"{run.t[n - 1]:.0f} s" if reach.any() else ""))  # fmt: skip
+                             f"{run.t[n - 1]:.0f} s" if reached else ""))  # fmt: skip
         label = f"{key} eq. 3.1: {what}"
         ax0.plot(run.X[:n, 1], run.X[:n, 0], color=color, label=label)
         ax1.plot(run.t[:n], run.X[:n, 3], color=color, label=f"u, {key} eq. 3.1")

@@ -69,9 +69,10 @@ def off_speeds(speeds, top: float) -> list[tuple[float, str]]:
     below = [(round(f * s[0], 4), "below (gains held)") for f in BELOW]
     mid = [(round((a + b) / 2, 4), "between (gains interpolated)") for a, b in zip(s, s[1:],
                                                                                  strict=False)]
-    gap = top - s[-1]
-    above = [(round(s[-1] + f * gap, 4), "above (gains held)") for f in ABOVE] if gap > 1e-6 else []
-    return below + mid + above
+    # rounded, above the schedule and once each (a top speed a hair above the last schedule
+    # speed gave three equal rows, a review)
+    above = dict.fromkeys(u for f in ABOVE if (u := round(s[-1] + f * (top - s[-1]), 4)) > s[-1])
+    return below + mid + [(u, "above (gains held)") for u in above]
 
 
 def off_schedule(model, ep, dt: float) -> list[dict]:

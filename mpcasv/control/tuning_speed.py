@@ -183,6 +183,15 @@ def speed_step(model: VesselModel, ep: ExecutionParams, u0: float, u1: float,
     }  # fmt: skip
 
 
+def arrival(X: np.ndarray, wp) -> tuple[np.ndarray, int]:
+    """The distances (m, shape (n,)) of the states ``X`` (rows ``[N, E, ...]``) from the
+    waypoint ``wp`` and the index of the first within :data:`ARRIVAL_RADIUS` (``n`` if none):
+    the one definition of "reached" for the turns, their rule and their plots."""
+    dist = np.hypot(X[:, 0] - wp[0], X[:, 1] - wp[1])
+    near = dist < ARRIVAL_RADIUS
+    return dist, int(np.argmax(near)) if near.any() else len(dist)
+
+
 def circling(run, wp, angle: float) -> float:
     """The most heading change (rad) the boat of ``run`` turned without heading for the
     waypoint ``wp``: over each stretch with ``|psi_e| > TURN_BAND``, the heading change, less
@@ -194,8 +203,7 @@ def circling(run, wp, angle: float) -> float:
     circle (a small hull that passed it: every dune-otter turn read as a pirouette, a
     review), while one that loops round it, passing near it each time (Gretha without eq.
     3.1), is. More than :data:`PIROUETTE_TURN` is a pirouette."""
-    dist = np.hypot(run.X[:, 0] - wp[0], run.X[:, 1] - wp[1])
-    n = int(np.argmax(dist < ARRIVAL_RADIUS)) if (dist < ARRIVAL_RADIUS).any() else len(dist)
+    dist, n = arrival(run.X, wp)
     out = ~(np.abs(run.psi_error) <= TURN_BAND)  # a non-finite error is outside
     dpsi = np.abs(np.diff(np.unwrap(run.X[:, 2])))
     worst, i = 0.0, 0
@@ -235,10 +243,10 @@ def turn(model: VesselModel, ep: ExecutionParams, angle: float, distance: float,
     wp = (distance * math.cos(angle), distance * math.sin(angle))
     run = run_closed_loop(model, ep, x0, wp, model.params.u_max, t_end,
                           I_u=trim_integrator(model, u0))
-    reach = np.hypot(run.X[:, 0] - wp[0], run.X[:, 1] - wp[1]) < ARRIVAL_RADIUS
-    n = int(np.argmax(reach)) if reach.any() else len(run.t)
+    _, n = arrival(run.X, wp)
+    reached = n < len(run.t)
     ts = settling_time(run.t[:n], run.psi_error[:n], TURN_BAND)  # on course until the arrival
-    if reach.any() and not ts < run.t[n]:
+    if reached and not ts < run.t[n]:
         ts = float(run.t[n])
     i = int(round(ts / (run.t[1] - run.t[0]))) if math.isfinite(ts) else len(run.t) - 1
     total = float(np.sum(np.abs(np.diff(np.unwrap(run.X[: i + 1, 2])))))
@@ -246,8 +254,8 @@ def turn(model: VesselModel, ep: ExecutionParams, angle: float, distance: float,
     return run, {
         "turn_s": ts,
         "turn_m": float(run.distance[i]) if math.isfinite(ts) else math.inf,
-        "reached": bool(reach.any()),
-        "reach_s": float(run.t[n]) if reach.any() else math.inf,
+        "reached": reached,
+        "reach_s": float(run.t[n]) if reached else math.inf,
         "pirouette": bool(circ > PIROUETTE_TURN),
         "circling_deg": float(np.degrees(circ)),
         "total_turn_deg": float(np.degrees(total)),
@@ -312,13 +320,19 @@ def u_cmd_max(u_ff: float, k_u: float) -> float:
 U_CMD_MAX_RTOL = 1e-6
 
 
+def within(u_ff: float, k_u: float, bound: float) -> bool:
+    """Whether eq. 3.1's largest command :func:`u_cmd_max` is at most ``bound`` (m/s), with
+    :data:`U_CMD_MAX_RTOL` of slack (the bound a pair itself sets admits it)."""
+    return u_cmd_max(u_ff, k_u) <= bound * (1 + U_CMD_MAX_RTOL)
+
+
 def admitted(rows: list[TurnRow], bound: float) -> list[TurnRow]:
     """The rows whose :func:`u_cmd_max` is at most ``bound`` (m/s). The thesis chose ``k_u``
     for a given ``u_ff`` to hold ``u_cmd,max`` at the boat's rated maximum speed (§3.4.1:
     ``u_ff`` 0.4 -> 0.6 m/s with ``k_u`` 1.72 -> 1.59 m/s "to maintain the maximum commanded
     speed", 3.1 m/s), and found lower ``k_u`` more stable: the turn times alone only fall as
     ``k_u`` grows, so without the bound the grid's largest ``k_u`` always won."""
-    return [r for r in rows if u_cmd_max(r.u_ff, r.k_u) <= bound * (1 + U_CMD_MAX_RTOL)]
+    return [r for r in rows if within(r.u_ff, r.k_u, bound)]
 
 
 def recommend(rows: list[TurnRow], bound: float = math.inf) -> TurnRow:
