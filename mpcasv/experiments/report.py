@@ -92,31 +92,38 @@ code{background:#f4f4f4;padding:1px 4px}"""
 
 def headline_table(t: pd.DataFrame) -> pd.DataFrame:
     """Display form of one (reference, other) pair of :func:`stats.paired_table` for the
-    headline: one row per metric and case; the metric named on its first row only."""
+    headline: one row per metric and case; the metric named on its first row only. The
+    difference is the Hodges-Lehmann estimate with its interval (the Wilcoxon test's own
+    estimand; :func:`stats.hodges_lehmann`); where the interval and the test still disagree
+    (possible only with tied or zero differences: whole seconds, counts) the p cell says so."""
     ref, other = t["reference"].iloc[0], t["other"].iloc[0]
     units = {h.name: h.unit for h in paired.HEADLINE}
+    est = "estimate" if "estimate" in t else "median"
     rows, last = [], None
     for _, r in t.iterrows():
         n = (f"{r['n']}" + (f" {noun(r['n'], 'world')} ({r['runs']} runs)"
                             if r.get("runs", 0) > r["n"] else "")
              + (f" (+{r['n_unpaired']} unpaired)" if r["n_unpaired"] else ""))
         if np.isfinite(r["ci_low"]):
-            diff = f"{num(r['median'])} [{num(r['ci_low'])}, {num(r['ci_high'])}]"
+            diff = f"{num(r[est])} [{num(r['ci_low'])}, {num(r['ci_high'])}]"
         else:
-            diff = num(r["median"]) if np.isfinite(r["median"]) else ""
+            diff = num(r[est]) if np.isfinite(r[est]) else ""
         p = f"{r['p']:.2g}" if np.isfinite(r["p"]) else (r["note"] or "n/a")
         if r["note"] and np.isfinite(r["p"]):
             p += f" ({r['note']})"
         elif r["note"] and p != r["note"]:
             p = f"n/a ({r['note']})"
+        if np.isfinite(r["p"]) and paired.interval_disagrees(r):
+            p += " (the interval disagrees: tied or zero differences)"
         unit = units.get(r["metric"], "")
         first = r["metric"] != last
-        rows.append({
+        row = {
             "metric": f"{r['metric']} ({unit}, {r['better']} better)" if first else "",
             "case": r["case"], "pairs": n, f"{ref} median": num(r["ref_median"]),
-            f"Δ = {other} − {ref}: median [95 % CI]": diff, "Wilcoxon p": p,
+            f"Δ = {other} − {ref}: Hodges-Lehmann [95 % CI]": diff, "Wilcoxon p": p,
             "verdict": r["verdict"],
-        })  # fmt: skip
+        }  # fmt: skip
+        rows.append(row)
         last = r["metric"]
     return pd.DataFrame(rows).set_index("metric")
 
@@ -230,10 +237,15 @@ def write_report(out: Path, exp, results: pd.DataFrame, stats=None) -> tuple[Pat
             f"Δ = other − reference per pair; the pairs of a case on the same realisation "
             f"(seeds whose draws repeat, conditions such as estimators on one world) are one "
             f"world and averaged into one pair (the unit is the world, not the run). "
-            f"Median Δ with its {paired.CONFIDENCE:.0%} "
-            f"bootstrap CI (scipy.stats.bootstrap, paired, percentile, "
-            f"{paired.N_RESAMPLES} resamples, seed {paired.SEED}) and the two-sided Wilcoxon "
-            f"signed-rank p (zero differences dropped). A variant is *better* only if the CI "
+            f"The Hodges-Lehmann estimate of Δ (the median of the Walsh averages, the "
+            f"pseudo-median the Wilcoxon signed-rank test is about) with its "
+            f"{paired.CONFIDENCE:.0%} distribution-free CI (the Walsh averages' order "
+            f"statistics that invert the test; Hollander, Wolfe & Chicken 2014, §3.3; no "
+            f"random draw) and the two-sided Wilcoxon signed-rank p (scipy.stats.wilcoxon's "
+            f"test, zero differences dropped): without tied or zero differences the CI "
+            f"excludes 0 exactly when p < {paired.ALPHA}; with them the two can part at the "
+            f"boundary, and the p cell says so. The reference's median is the median of its "
+            f"own values over the worlds. A variant is *better* only if the CI "
             f"excludes 0, p < {paired.ALPHA} and the CI is not inside ±{paired.NEGLIGIBLE:.1%} "
             f"of the reference's median (else: negligible difference). No correction for "
             f"multiple comparisons in the verdicts: each table says how many tests it holds and "

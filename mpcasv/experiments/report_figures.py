@@ -58,26 +58,36 @@ def group_label(r, conditions: Sequence[str]) -> str:
 # ----------------------------------------------------------------------------- forest
 
 
+def centre(g: pd.DataFrame) -> str:
+    """The column of :func:`stats.paired_table` its interval is about: ``estimate`` (the
+    Hodges-Lehmann estimate; since session 49), else ``median`` (an older table)."""
+    return "estimate" if "estimate" in g else "median"
+
+
 def float_noise(g: pd.DataFrame) -> pd.Series:
-    """Rows of :func:`stats.paired_table` whose median and CI bounds are all zero to
-    floating-point precision (within :data:`FLOAT_NOISE` of the larger of the reference's
-    and the other's median) but not all exactly zero: no difference, drawn at 0."""
-    size = np.maximum(np.abs(g["ref_median"]), np.abs(g["ref_median"] + g["median"]))
-    cols = [g[c].where(np.isfinite(g[c]), 0.0) for c in ("median", "ci_low", "ci_high")]
+    """Rows of :func:`stats.paired_table` whose estimate (:func:`centre`) and CI bounds are
+    all zero to floating-point precision (within :data:`FLOAT_NOISE` of the larger of the
+    reference's and the other's median) but not all exactly zero: no difference, drawn at
+    0."""
+    est = centre(g)
+    size = np.maximum(np.abs(g["ref_median"]), np.abs(g["ref_median"] + g[est]))
+    cols = [g[c].where(np.isfinite(g[c]), 0.0) for c in (est, "ci_low", "ci_high")]
     tiny = np.logical_and.reduce([np.abs(v) <= FLOAT_NOISE * size for v in cols])
-    return pd.Series(tiny & (np.abs(g["median"]) > 0), index=g.index)
+    return pd.Series(tiny & (np.abs(g[est]) > 0), index=g.index)
 
 
 def forest_figure(table: pd.DataFrame, metrics: Sequence[HeadlineMetric], path: Path) -> Path:
     """Paired-difference plot of one (reference, other) pair of :func:`stats.paired_table`.
 
     One panel per metric of ``metrics`` present in ``table``; y: the cases; a dot at the
-    median difference (other - reference), the 95 % bootstrap CI as a bar; green where
-    ``other`` is significantly better, red where the reference is, grey otherwise; hollow
-    grey dots where the CI is n/a (the reason on the right); a difference zero to
+    Hodges-Lehmann estimate of the difference (other - reference; :func:`centre`), its
+    95 % distribution-free CI (the Wilcoxon test's, :func:`stats.hodges_lehmann`) as a bar;
+    green where ``other`` is significantly better, red where the reference is, grey
+    otherwise; hollow grey dots where the CI is n/a (the reason on the right); a difference zero to
     floating-point precision (:func:`float_noise`) at 0, its value on the right.
     """
     ref, other = table["reference"].iloc[0], table["other"].iloc[0]
+    est = centre(table)
     specs = [h for h in metrics if h.name in set(table["metric"])]
     cases = list(dict.fromkeys(table["case"]))
     ncol = 2
@@ -104,20 +114,20 @@ def forest_figure(table: pd.DataFrame, metrics: Sequence[HeadlineMetric], path: 
             elif noise[r.name]:  # zero but for rounding: at 0, its value on the right
                 ax.plot(0.0, yi, "o", color=c, ms=5)
                 why = f" ({r['note']})" if not np.isfinite(r["ci_low"]) and r["note"] else ""
-                right.append(f"0 to float precision ({num(r['median'])}) n={r['n']}{why}")
+                right.append(f"0 to float precision ({num(r[est])}) n={r['n']}{why}")
             elif np.isfinite(r["ci_low"]):
-                ax.errorbar(r["median"], yi, xerr=[[r["median"] - r["ci_low"]],
-                            [r["ci_high"] - r["median"]]], fmt="o", color=c, ms=5,
+                ax.errorbar(r[est], yi, xerr=[[r[est] - r["ci_low"]],
+                            [r["ci_high"] - r[est]]], fmt="o", color=c, ms=5,
                             capsize=3, lw=1.5)  # fmt: skip
                 p = "n/a" if not np.isfinite(r["p"]) else f"{r['p']:.2g}"
                 right.append(
-                    f"{num(r['median'])} [{num(r['ci_low'])}, {num(r['ci_high'])}]"
+                    f"{num(r[est])} [{num(r['ci_low'])}, {num(r['ci_high'])}]"
                     f" p={p} n={r['n']}"
                     + (" negligible" if r["verdict"].startswith("negl") else "")
                 )
-            elif np.isfinite(r["median"]):
-                ax.plot(r["median"], yi, "o", mfc="none", color="0.5", ms=5)
-                right.append(f"{num(r['median'])} ({r['note']})")
+            elif np.isfinite(r[est]):
+                ax.plot(r[est], yi, "o", mfc="none", color="0.5", ms=5)
+                right.append(f"{num(r[est])} ({r['note']})")
             else:
                 right.append(r["note"] or "no pairs")
         ax.axvline(0.0, color="k", lw=0.8)
@@ -130,7 +140,7 @@ def forest_figure(table: pd.DataFrame, metrics: Sequence[HeadlineMetric], path: 
         span = max(abs(lo), abs(hi))
         ax.set_xlim(-span * 1.05, span * 1.05)  # zero in the middle: both sides labelled
         scale = ""
-        med = np.abs(g.loc[~noise, "median"].to_numpy(float))
+        med = np.abs(g.loc[~noise, est].to_numpy(float))
         med = med[np.isfinite(med) & (med > 0)]
         if len(med) and med.max() > SYMLOG_RATIO * med.min():  # cases of very different size
             # linear within the smallest case (at most 3 decades below the largest)
@@ -146,12 +156,14 @@ def forest_figure(table: pd.DataFrame, metrics: Sequence[HeadlineMetric], path: 
         ax.text(0.99, 1.01, f"{ref if left_is_other else other} better →",
                 transform=ax.transAxes, fontsize=7, ha="right", va="bottom")  # fmt: skip
         ax.set_title(f"{h.name} ({h.group}; {h.better} is better)", fontsize=9, pad=12)
-        ax.set_xlabel(f"median paired difference, {other} − {ref} ({h.unit}{scale})", fontsize=8)
+        ax.set_xlabel(f"Hodges-Lehmann paired difference, {other} − {ref} ({h.unit}{scale})",
+                      fontsize=8)
         ax.tick_params(axis="x", labelsize=7)
         ax.grid(axis="x", alpha=0.3)
     for ax in list(axes.flat)[len(specs) :]:
         ax.axis("off")
-    fig.suptitle(f"Paired differences {other} − {ref} per case: median and 95 % bootstrap CI\n"
+    fig.suptitle(f"Paired differences {other} − {ref} per case: Hodges-Lehmann estimate "
+                 "and its 95 % CI (Walsh averages)\n"
                  f"green: {other} significantly better, red: {ref} significantly better (CI "
                  f"excludes 0, Wilcoxon p < {ALPHA}, not negligible); grey: neither",
                  fontsize=10)  # fmt: skip
