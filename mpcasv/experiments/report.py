@@ -37,9 +37,11 @@ from mpcasv.experiments.metric_info import WALL_CLOCK
 from mpcasv.experiments.metrics import METRIC_INFO
 from mpcasv.experiments.report_figures import num
 from mpcasv.experiments.report_tables import (  # noqa: F401 (re-exported)
+    CEILING_METRICS,
     LIST_SUMMARY,
     cases_without_fixes,
     metric_columns,
+    never_fixed_table,
     scenario_table,
     summary_table,
     with_list_summaries,
@@ -58,6 +60,8 @@ PER_CASE = ("Per case, the same rule on each case's pairs alone (the relative ch
             f"sums [95 % CI] (pairs, of which the other variant did worse in): verdict; fewer "
             f"than {paired.MIN_PAIRS} pairs have no interval). A pooled verdict can sit between "
             "cases that go opposite ways.")
+#: the headline's column of AUV-runs never reliably fixed (the fix ages' ceiling)
+NEVER_COLUMN = "AUV-runs never reliably fixed"
 READ_LINE = 'pd.read_parquet("{out}/results.parquet")'
 
 
@@ -90,12 +94,15 @@ td:first-child,th:first-child{text-align:left}img{max-width:100%}
 code{background:#f4f4f4;padding:1px 4px}"""
 
 
-def headline_table(t: pd.DataFrame) -> pd.DataFrame:
+def headline_table(t: pd.DataFrame, never: pd.DataFrame | None = None) -> pd.DataFrame:
     """Display form of one (reference, other) pair of :func:`stats.paired_table` for the
     headline: one row per metric and case; the metric named on its first row only. The
     difference is the Hodges-Lehmann estimate with its interval (the Wilcoxon test's own
     estimand; :func:`stats.hodges_lehmann`); where the interval and the test still disagree
-    (possible only with tied or zero differences: whole seconds, counts) the p cell says so."""
+    (possible only with tied or zero differences: whole seconds, counts) the p cell says so.
+    ``never`` (:func:`report_tables.never_fixed_table`, per case): a column on the
+    reliable-fix age rows with the AUV-runs never reliably fixed per variant, whose fix age
+    sits at its ceiling (0.95 x the run's length for the p95)."""
     ref, other = t["reference"].iloc[0], t["other"].iloc[0]
     units = {h.name: h.unit for h in paired.HEADLINE}
     est = "estimate" if "estimate" in t else "median"
@@ -123,6 +130,14 @@ def headline_table(t: pd.DataFrame) -> pd.DataFrame:
             f"Δ = {other} − {ref}: Hodges-Lehmann [95 % CI]": diff, "Wilcoxon p": p,
             "verdict": r["verdict"],
         }  # fmt: skip
+        if never is not None and len(never):
+            cell = ""
+            if r["metric"] in CEILING_METRICS and r["case"] in never.index:
+                c = never.loc[r["case"]]
+                cell = (f"{ref} {c['ref_never']}/{c['ref_auv_runs']}, "
+                        f"{other} {c['other_never']}/{c['other_auv_runs']}"
+                        + (f"; both in {count(int(c['both']), 'pair')}" if c["both"] else ""))
+            row[NEVER_COLUMN] = cell
         rows.append(row)
         last = r["metric"]
     return pd.DataFrame(rows).set_index("metric")
@@ -267,6 +282,20 @@ def write_report(out: Path, exp, results: pd.DataFrame, stats=None) -> tuple[Pat
                 "only drawn value, a discrete draw that repeated, or conditions such as the "
                 "estimators on one world), so the statistics count worlds, not runs."
             )  # fmt: skip
+        never = never_fixed_table(results, ref, names[1], key) if len(names) == 2 else None
+        if never is not None and (never[["ref_never", "other_never"]].to_numpy().sum()):
+            lines.append(
+                "A run that never reliably fixed an AUV gives that AUV a reliable-fix age of "
+                "0.95 x the run's length (p95) and the run's length (max), the metric's "
+                "ceiling: the worst AUV's value then says no more than 'never served', and two "
+                "runs that both leave one unserved read 'no change'. The column "
+                f"'{NEVER_COLUMN}' counts them per case and variant (AUVs x runs) and the "
+                "pairs in which both runs left one unserved: " + "; ".join(
+                    f"{c} {ref} {int(r_['ref_never'])}, {names[1]} {int(r_['other_never'])}"
+                    + (f", both in {count(int(r_['both']), 'pair')}" if r_["both"] else "")
+                    for c, r_ in never.iterrows() if r_["ref_never"] or r_["other_never"])
+                + "."
+            )  # fmt: skip
         no_fix = cases_without_fixes(ok)
         if no_fix:
             lines.append(
@@ -284,7 +313,8 @@ def write_report(out: Path, exp, results: pd.DataFrame, stats=None) -> tuple[Pat
             if len(th):
                 bullet(_multiplicity_line(paired.multiplicity(th), "this table"))
                 md.append("")
-                d = headline_table(th)
+                nv = never_fixed_table(results, ref, str(other), key)
+                d = headline_table(th, nv)
                 both(_md_table(d) + "\n", d.to_html())
                 figure(
                     rf.forest_figure(

@@ -86,6 +86,51 @@ def summary_table(df: pd.DataFrame) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
+#: the fix-age metrics whose value has a ceiling where an AUV was never reliably fixed
+CEILING_METRICS = ("reliable_fix_age_p95_s", "reliable_fix_age_max_s", "reliable_fix_age_mean_s")
+
+
+def never_fixed(df: pd.DataFrame) -> pd.Series:
+    """Per run (index of ``df``): how many of its AUVs had no reliable fix at all
+    (``reliable_fixes_auv<k>`` 0), NaN where the table has no such column or the run no
+    value. Such an AUV's reliable-fix age runs from 0 to the run's end: its p95 is 0.95 x
+    the run's length, its max the length (:func:`mpcasv.experiments.metrics.age_stats`),
+    the most the metric can say, whatever else happened; two runs that both leave an AUV
+    unserved read "no change" on it."""
+    cols = _auv_columns(df, "reliable_fixes_auv")
+    if not cols:
+        return pd.Series(math.nan, index=df.index)
+    v = df[cols].apply(pd.to_numeric, errors="coerce")
+    out = (v == 0).sum(axis=1).astype(float)
+    return out.where(v.notna().any(axis=1))
+
+
+def never_fixed_table(df: pd.DataFrame, reference: str, other: str,
+                      pair_key: list[str]) -> pd.DataFrame:  # fmt: skip
+    """Per case (index ``scenario``, the order of ``df``): the AUV-runs never reliably fixed
+    (:func:`never_fixed`) of ``reference`` and ``other`` (``ref_never``, ``other_never``) out
+    of their AUV-runs (``ref_auv_runs``, ``other_auv_runs``), and ``both``: the pairs of runs
+    (equal on ``pair_key``) in which each run left at least one AUV without a reliable fix
+    (the worst AUV's fix age at its ceiling on both sides). Only ``status == "ok"`` rows."""
+    ok = df[df["status"] == "ok"]
+    cols = _auv_columns(ok, "reliable_fixes_auv")
+    never = never_fixed(ok)
+    auvs = (ok[cols].notna().sum(axis=1) if cols else pd.Series(0, index=ok.index))
+    rows = {}
+    for case, g in ok.groupby("scenario", sort=False):
+        row = {}
+        for name, v in (("ref", reference), ("other", other)):
+            sel = g["variant"] == v
+            row[f"{name}_never"] = int(never[g.index][sel].fillna(0).sum())
+            row[f"{name}_auv_runs"] = int(auvs[g.index][sel].sum())
+        a = g[g["variant"] == reference].assign(_n=never).set_index(pair_key)["_n"]
+        b = g[g["variant"] == other].assign(_n=never).set_index(pair_key)["_n"]
+        a, b = a.align(b, join="inner")
+        row["both"] = int(((a > 0) & (b > 0)).sum())
+        rows[case] = row
+    return pd.DataFrame.from_dict(rows, orient="index").rename_axis("scenario")
+
+
 def cases_without_fixes(ok: pd.DataFrame) -> list[str]:
     """Scenarios in which no USBL fix arrived in any ok run (``fixes`` 0 everywhere): there
     the fix ages are the run's clock and the AUVs' navigation does not depend on the
