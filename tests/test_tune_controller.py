@@ -114,7 +114,7 @@ def test_matched_comparison_pairs_held_out_runs_by_realisation(tiny, tmp_path):
     front = pd.read_csv(tiny / "front.csv")
     assert len(df) == 2 * int(front["heldout_front"].sum())  # two other objectives each
     assert (df["mismatch"] == 0).all() and (df["n"] == 6).all()
-    assert (df["median_diff"] == 0).all() and set(df["verdict"]) == {"no difference"}
+    assert (df["estimate"] == 0).all() and set(df["verdict"]) == {"no difference"}
     other = tmp_path / "other"
     other.mkdir()
     for name in ("tune.json", "front.csv"):

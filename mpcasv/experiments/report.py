@@ -3,8 +3,9 @@
 - **Headline** (first): every controller variant against the reference variant (the first of
   the suite) on the same (scenario, realisation) pairs, per headline metric
   (:data:`mpcasv.experiments.stats.HEADLINE`: safety, liveness, AUV navigation, effort) and
-  case: the median paired difference with its 95 % bootstrap CI, the Wilcoxon signed-rank
-  p-value and which variant is significantly better (:mod:`mpcasv.experiments.stats`), and a
+  case: the Hodges-Lehmann estimate of the paired difference with its 95 % distribution-free
+  CI, the Wilcoxon signed-rank p-value of the same estimand and which variant is
+  significantly better (:mod:`mpcasv.experiments.stats`), and a
   forest plot per pair. Metrics missing from the table are named, never filled in.
 - **Significant wins and losses**: per metric with a direction (:data:`BETTER` and the
   headline's), in how many cases each variant is significantly better on the paired test

@@ -7,8 +7,9 @@ realisations, the other controller's front point (among those feasible on the he
 with the nearest held-out mean of the matching metric (``--at``, default ``energy_J``) is
 taken, if that mean is within ``--tolerance`` (relative) of the reference's; the two trials'
 held-out runs are then paired by realisation (scenario, current, estimator, seed: both
-searches must use the same held-out realisations) and every other objective gets the median
-paired difference (other - reference), its bootstrap CI and the Wilcoxon p-value
+searches must use the same held-out realisations) and every other objective gets the
+Hodges-Lehmann estimate of the paired difference (other - reference, column ``estimate``), its
+distribution-free CI and the Wilcoxon p-value of the same estimand
 (:func:`mpcasv.experiments.stats.paired_stat`, at least ``stats.MIN_PAIRS`` pairs) and a
 verdict (:func:`mpcasv.experiments.stats.verdict`).
 """
@@ -112,7 +113,7 @@ def matched_comparison(ref_dir: str | Path, other_dir: str | Path, at: str = "en
             s = paired_stat(a.loc[both, m].to_numpy(float), b.loc[both, m].to_numpy(float))
             ref_med = float(a.loc[both, m].median()) if len(both) else math.nan
             out.append(base | {"metric": m, "n": s.n, "ref_median": ref_med,
-                               "median_diff": s.median, "ci_low": s.ci_low,
+                               "estimate": s.estimate, "ci_low": s.ci_low,
                                "ci_high": s.ci_high, "p": s.p, "note": s.note,
                                "verdict": verdict(s, METRIC_INFO[m].better, ca, cb,
                                                   ref_med)})  # fmt: skip
