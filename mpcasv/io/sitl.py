@@ -230,13 +230,16 @@ class Sitl(AsvDune, Publishing):
         await self.start()
         n_steps = self.opt.periods(self.sc)
         per = round(self.Tc / self.h)
-        flusher = asyncio.create_task(self._flush_loop())
+        helpers = [asyncio.create_task(self._flush_loop()),
+                   asyncio.create_task(self.publish_plan_states())]  # fmt: skip
         try:
             wall_s, overruns = await self._loop(stop, n_steps, per)
         finally:
-            flusher.cancel()
-        with contextlib.suppress(asyncio.CancelledError):
-            await flusher
+            for task in helpers:
+                task.cancel()
+        for task in helpers:
+            with contextlib.suppress(asyncio.CancelledError):
+                await task
         return self.finish(wall_s, overruns)
 
     async def _loop(self, stop: asyncio.Event, n_steps: int, per: int) -> tuple[float, int]:
@@ -259,9 +262,7 @@ class Sitl(AsvDune, Publishing):
                     self.kill_asv()
                 elif not self.asv.alive and self.world.t >= outage[1]:
                     await self.restart_asv()
-            if self.maneuver is not None and self.maneuver.check_timeout(self.now()):
-                self.event("maneuver_timeout")
-                self.asv.publish(self.maneuver.state_message())
+            self.maneuver_timeout()
             at_boundary = self.n == boundary or self.held
             if at_boundary:
                 self.ref_event.clear()  # only a Reference answering this state counts
