@@ -74,6 +74,12 @@ def _recorded_otter():
     return out
 
 
+def _from(msgs, first) -> list:
+    """``msgs`` from the first matching ``first`` (periodic reports sent before a request
+    was handled may come first)."""
+    return msgs[next(k for k, m in enumerate(msgs) if first(m)):]
+
+
 def _window(msgs, first, last) -> list:
     """``msgs`` from the first matching ``first`` to the first after it matching ``last``."""
     i = next(k for k, m in enumerate(msgs) if first(m))
@@ -119,13 +125,15 @@ def test_the_sitl_asv_reports_its_plan_as_the_recorded_dune(tmp_path):
         pc.arg = fr
         node.send(pc, asv, dst=sitl.asv.id)
         assert await _until(lambda: any(is_frs(m) for m in node.got[mark:]))
-        got["start"] = [m for m in node.got[mark:] if isinstance(m, WATCHED) and m.src != ME]
+        got["start"] = _from([m for m in node.got[mark:] if isinstance(m, WATCHED)
+                              and m.src != ME], is_init)  # fmt: skip
         mark = len(node.got)
         ref = imcpy.Reference()
         ref.flags = imcpy.Reference.FlagsBits.MANDONE
         node.send(ref, asv, dst=sitl.asv.id)
         assert await _until(lambda: any(is_ready(m) for m in node.got[mark:]))
-        got["end"] = [m for m in node.got[mark:] if isinstance(m, (PC, PCS)) and m.src != ME]
+        got["end"] = _from([m for m in node.got[mark:] if isinstance(m, (PC, PCS))
+                            and m.src != ME], is_done)  # fmt: skip
         # each AUV's engine reports too (READY, no plan), as the recorded LAUV's
         for auv in sitl.auvs:
             node.send(imcpy.Heartbeat(), ("127.0.0.1", auv.port), dst=auv.id)
@@ -176,10 +184,17 @@ def test_a_stop_and_a_timeout_end_the_plan_with_failure(tmp_path):
         mark = request(PC.OperationEnum.STOP, 3)
         got["idle_stop"] = await collect(mark, answer)
         mark = request(PC.OperationEnum.START, 4, timeout=2.0)  # 2 s: 0.1 s of wall at 20x
-        got["timeout"] = await collect(mark, lambda m: ready(m) and len(node.got) > mark)
+
+        def ended_after_timeout():  # (READY reports of the idle engine come before it)
+            new = node.got[mark:]
+            at = [k for k, m in enumerate(new) if isinstance(m, FRS) and m.state.name == "TIMEOUT"]
+            return bool(at) and any(ready(m) for m in new[at[0]:])
+
+        assert await _until(ended_after_timeout, timeout=3.0)
+        got["timeout"] = [m for m in node.got[mark:] if isinstance(m, WATCHED) and m.src != ME]
 
     _run(tmp_path, body, duration=1000.0)
-    stop = _shape(got["stop"], "p")
+    stop = _shape(_from(got["stop"], lambda m: isinstance(m, PC)), "p")
     assert stop[0] == ("PlanControl", "SUCCESS", "plan stopped")
     assert stop[-1] == ("PlanControlState", "READY", "ours", "", "FAILURE")
     assert [(m.type.name, m.request_id) for m in got["idle_stop"] if isinstance(m, PC)] == [
