@@ -166,10 +166,21 @@ class Phases:
         """Whether a Reference to our running maneuver is unanswered for longer than
         ``link.followref_lost_s`` while the ASV's states arrived for longer than that after
         it (a dropout that stops both is ``asv_stale``'s, which resumes; never in a dry run:
-        nothing is sent)."""
+        nothing is sent), and no PlanControlState read since that Reference shows our plan
+        still EXECUTING (:meth:`~mpcasv.io.planstate.PlanStateWatch.plan_shown_running`).
+
+        DUNE's ``Maneuver/FollowReference`` ends the maneuver itself ``timeout`` s
+        (``link.followref_timeout``, 10 s) after the last Reference it *received*
+        (FollowRefState TIMEOUT, which restarts it here). With only the silence to go on,
+        References lost on the way out (states still coming) ended the run at
+        ``followref_lost_s`` (5 s) while DUNE still ran our maneuver and would have taken the
+        next Reference that got through. DUNE's engine saying our plan executes is the
+        better word: the run then waits for DUNE's own verdict (TIMEOUT: restarted; READY:
+        ``plan_ended``)."""
         return (self.phase == RUNNING and not self.dry_run and self.unanswered_since is not None
                 and self.link.asv.nav_recv - self.unanswered_since  # (the last state <= now)
-                > self.cfg.link.followref_lost_s)  # fmt: skip
+                > self.cfg.link.followref_lost_s
+                and not self.plan_shown_running(self.unanswered_since))  # fmt: skip
 
     # --- phases and watchdogs ------------------------------------------------------------
     def auv_ages(self, now: float) -> list[float]:

@@ -91,6 +91,15 @@ class PlanStateWatch:
         self.plan_state_late = 0  # older or repeated ones, not read (summary)
         self.plan_state_unarmed = False  # said once: another plan EXECUTING while we run
 
+    def plan_shown_running(self, since: float) -> bool:
+        """Whether a PlanControlState read at or after ``since`` (deploy clock, s) shows our
+        plan EXECUTING: the newest one read does (any other would have ended the run) and
+        it came then. Read by the FollowRefState silence (``followref_lost``): DUNE's engine
+        still executing our plan means our References do not reach it (its own timeout
+        will end the maneuver) or its answers do not reach us, not that it ended."""
+        return (self.plan_executing and self.plan_state is not None
+                and self.plan_state["recv"] >= since)  # fmt: skip
+
     def plan_state_reset(self) -> None:
         """A START of ours was sent: its plan is not yet shown EXECUTING."""
         self.plan_executing = False

@@ -26,6 +26,7 @@ from mpcasv.io.geo import Origin, to_wgs84
 from mpcasv.io.imc import BROADCAST, BadInput, announce, decode, udp_services
 from mpcasv.io.imc import stamp as _stamp
 from mpcasv.io.netcheck import announced_hosts
+from mpcasv.io.sitlplan import PlanEngine
 from mpcasv.io.transport import TcpStream, UdpEndpoint
 
 if TYPE_CHECKING:
@@ -73,6 +74,7 @@ class SimVehicle:
     tcp_server: asyncio.base_events.Server | None = None
     tcp_port: int = 0
     tcp_clients: list[TcpStream] = field(default_factory=list)
+    engine: PlanEngine = field(default_factory=PlanEngine)  # its PlanControlState
 
     @property
     def sys_type(self):
@@ -83,6 +85,7 @@ class SimVehicle:
         self.port = self.endpoint.address[1]
         self.announcer = await UdpEndpoint.open(host, 0, lambda data, addr: None)
         self.nodes.clear()
+        self.engine = PlanEngine()  # a fresh DUNE: no plan, outcome NONE
         self.alive = True
 
     def close(self) -> None:

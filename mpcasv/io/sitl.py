@@ -22,7 +22,10 @@ Each vehicle has its own UDP socket (its ``imc+udp`` service) and IMC id. Like D
   MANDONE, as recorded DUNE;
   FAILURE for anything else; ignored unless addressed to it or broadcast) and then runs
   :class:`mpcasv.io.dune.FollowRefManeuver` (References, FollowRefState, MANDONE, timeout,
-  speed 0 = loops off).
+  speed 0 = loops off);
+- every vehicle reports its plan engine's PlanControlState every 0.4 s and at every change,
+  the ASV's around START, STOP, MANDONE and a timeout as DUNE's (:mod:`mpcasv.io.sitlplan`,
+  :mod:`mpcasv.io.sitlasv`).
 
 The physics is :class:`mpcasv.sim.world.World`, advanced one supervisory period at a time
 with the command vector of the ASV's maneuver (zeros when there is none). After publishing
@@ -50,16 +53,15 @@ The options are checked before anything is written or bound for good
 (:mod:`mpcasv.io.sitloptions`: ranges, distinct ids and names, the address and ports tried).
 Output folder ``--out``: ``sitl.lsf`` (every packet in and out), ``sitl.jsonl`` (events)
 and, on exit (duration reached, SIGINT or SIGTERM), ``run/`` written as ``mpcasv simulate``
-writes a run (``timeseries.parquet``, ``metrics.json``, ``run.json``...; the mode comes
-from the References, the reasons are unknown to a vehicle: :mod:`mpcasv.io.rehearsal` joins
-them from the deploy log).
+writes a run (``timeseries.parquet``, ``metrics.json``, ``run.json``...:
+:mod:`mpcasv.io.sitlout`; the mode comes from the References, the reasons are unknown to a
+vehicle: :mod:`mpcasv.io.rehearsal` joins them from the deploy log).
 """
 
 from __future__ import annotations
 
 import asyncio
 import contextlib
-import dataclasses
 import json
 import logging
 import math
@@ -69,7 +71,6 @@ import time
 from pathlib import Path
 
 import imcpy
-import numpy as np
 
 from mpcasv.interface import Command, Mode, Reason
 from mpcasv.io.dune import FollowRefManeuver
@@ -80,6 +81,7 @@ from mpcasv.io.netcheck import local_hosts
 from mpcasv.io.simvehicle import SimVehicle
 from mpcasv.io.sitlasv import AsvDune
 from mpcasv.io.sitloptions import SitlOptions
+from mpcasv.io.sitlout import RunOutput
 from mpcasv.io.sitlpublish import Publishing
 from mpcasv.io.transport import Clock, UdpEndpoint
 from mpcasv.sim.scenario import Scenario
@@ -91,7 +93,7 @@ Addr = tuple[str, int]
 ANNOUNCE_S = 10.0
 
 
-class Sitl(AsvDune, Publishing):
+class Sitl(AsvDune, Publishing, RunOutput):
     """The SITL runner (see the module docstring)."""
 
     def __init__(self, scenario: Scenario, opt: SitlOptions) -> None:
@@ -151,21 +153,6 @@ class Sitl(AsvDune, Publishing):
         self.jsonl.write({"kind": "event", "event": name, "t": self.now(),
                           "t_world": self.world.t} | info)  # fmt: skip
         log.info("%s %s", name, info)
-
-    def write_acoustics(self) -> dict:
-        """``<out>/acoustics.toml``: the world's acoustic channel (the scenario's, drawn for
-        the seed) as the deploy configuration's ``[acoustics]`` table, which an MPC plans
-        its fixes with; ``mpcasv simulate`` of the same scenario and seed plans with it.
-        Returns the table (for the ready information)."""
-        import tomli_w
-
-        head = ("# the acoustic channel of this SITL's world (scenario "
-                f"{self.sc.name!r}, seed {self.opt.seed}): paste into the deploy "
-                "configuration\n# so that an MPC plans with it, as mpcasv simulate of the same "
-                "scenario and seed does\n")  # fmt: skip
-        channel = dataclasses.asdict(self.sc.acoustics)
-        (self.opt.out / "acoustics.toml").write_text(head + tomli_w.dumps({"acoustics": channel}))
-        return channel
 
     # --- main loop ---------------------------------------------------------------------------
     def on_discovery(self, data: bytes, addr: Addr) -> None:
@@ -230,13 +217,16 @@ class Sitl(AsvDune, Publishing):
         await self.start()
         n_steps = self.opt.periods(self.sc)
         per = round(self.Tc / self.h)
-        flusher = asyncio.create_task(self._flush_loop())
+        helpers = [asyncio.create_task(self._flush_loop()),
+                   asyncio.create_task(self.publish_plan_states())]  # fmt: skip
         try:
             wall_s, overruns = await self._loop(stop, n_steps, per)
         finally:
-            flusher.cancel()
-        with contextlib.suppress(asyncio.CancelledError):
-            await flusher
+            for task in helpers:
+                task.cancel()
+        for task in helpers:
+            with contextlib.suppress(asyncio.CancelledError):
+                await task
         return self.finish(wall_s, overruns)
 
     async def _loop(self, stop: asyncio.Event, n_steps: int, per: int) -> tuple[float, int]:
@@ -259,9 +249,7 @@ class Sitl(AsvDune, Publishing):
                     self.kill_asv()
                 elif not self.asv.alive and self.world.t >= outage[1]:
                     await self.restart_asv()
-            if self.maneuver is not None and self.maneuver.check_timeout(self.now()):
-                self.event("maneuver_timeout")
-                self.asv.publish(self.maneuver.state_message())
+            self.maneuver_timeout()
             at_boundary = self.n == boundary or self.held
             if at_boundary:
                 self.ref_event.clear()  # only a Reference answering this state counts
@@ -341,41 +329,6 @@ class Sitl(AsvDune, Publishing):
         finally:
             self.jsonl.close()
             self.lsf.close()
-
-    def finish(self, wall_s: float, overruns: int) -> dict:
-        """Close the sockets and write the run folder; return the run info. A world that
-        never completed a period writes none: the info then says why (``no_run``: held at
-        t = 0 by ``--hold``, no Reference having come, or stopped within the first period)."""
-        import pandas as pd
-
-        from mpcasv.experiments.metrics import compute_metrics
-        from mpcasv.sim.record import write_run
-        from mpcasv.sim.scenario import scenario_with
-        from mpcasv.sim.simulator import RunResult
-
-        self.close_sockets()
-        w = self.world
-        info = {"ts_offset": self.ts_offset, "periods": len(self.rows), "speedup":
-                self.opt.speedup, "overruns": overruns, "counts": self.counts,
-                "sitl_wall_s": wall_s,
-                "auv_states": self.opt.auv_states, "usbl_delay": self.opt.usbl_delay,
-                **({"lockstep": True} if self.opt.lockstep else {})}  # fmt: skip
-        if not self.rows:
-            info["no_run"] = ("the world stood at t = 0 (--hold): no Reference came" if self.held
-                              else "stopped before the world's first period ended")
-        self.event("finished", **info)
-        self.jsonl.close()
-        self.lsf.close()
-        if self.rows:
-            sc = scenario_with(self.sc, duration=len(self.rows) * self.Tc)
-            res = RunResult(sc, "sitl", self.opt.seed, pd.DataFrame(self.rows),
-                            np.zeros(len(self.rows)), w.fix_times, w.reliable_times, 0, None, [],
-                            w.energy_J, w.min_range, w.min_slant, wall_s, self.domain)  # fmt: skip
-            info["metrics"] = write_run(res, self.opt.out / "run", compute_metrics(res),
-                                        plots=self.opt.plots, extra={
-                                            "sitl": info,
-                                            "realisation": self.realisation.as_dict()})  # fmt: skip
-        return info
 
 
 def run_sitl(scenario: Scenario, opt: SitlOptions) -> dict:

@@ -2,8 +2,9 @@
 :class:`mpcasv.io.sitl.Sitl`; its state lives there): the AUVs' and the ASV's EstimatedState
 (reference points re-anchored every ``--reanchor`` m), the ASV's actuator set-points while its
 loops run (:func:`mpcasv.io.asvwatch.dune_set_points`: SetThrusterActuation, SetServoPosition;
-one 0.0 each when they stop, then none) and a UsblFixExtended per USBL fix of the world
-(DUNE's ``Transports/Evologics`` dispatches one per USBL position)."""
+one 0.0 each when they stop, then none), a UsblFixExtended per USBL fix of the world
+(DUNE's ``Transports/Evologics`` dispatches one per USBL position) and every vehicle's
+PlanControlState at its plan engine's rate (:meth:`Publishing.publish_plan_states`)."""
 
 from __future__ import annotations
 
@@ -16,6 +17,7 @@ import numpy as np
 from mpcasv.io.asvwatch import dune_set_points
 from mpcasv.io.geo import Origin, to_local, to_wgs84
 from mpcasv.io.imc import NavState, estimated_state, usbl_fix_extended
+from mpcasv.io.sitlplan import REPORT_PERIOD_S
 from mpcasv.models.frames import body_to_ned
 
 if TYPE_CHECKING:
@@ -86,6 +88,17 @@ class Publishing:
                     self.asv.publish(sp)
             self.loops_on = loops
             self.asv.publish(self._es(self.asv, self._nav_asv(x)))
+
+    async def publish_plan_states(self) -> None:
+        """Every :data:`~mpcasv.io.sitlplan.REPORT_PERIOD_S` of the SITL clock, each live
+        vehicle's PlanControlState (:mod:`mpcasv.io.sitlplan`), as every DUNE node's plan
+        engine reports it (the changes go out as they happen: :mod:`mpcasv.io.sitlasv`).
+        Stamped, as everything the SITL sends, at its tick time (:meth:`now`): in order with
+        the changes, at the ticks' resolution."""
+        while True:
+            await self.clock.sleep(REPORT_PERIOD_S)
+            for v in self.vehicles:
+                v.publish(v.engine.message())
 
     def publish_reports(self) -> None:
         """``--auv-states acoustic``, once the AUVs dived (the ASV's first Reference): each
