@@ -394,3 +394,24 @@ def test_a_vessel_with_fast_steering_is_tuned_at_the_simulators_step(tmp_path):
     check_yaw_sampling(model, 0.2, "--T-f")  # no refusal
     with pytest.raises(ConfigError, match="T_delta"):
         check_yaw_sampling(model, 0.2, "--T-f", dt=0.1)  # the sampled design at 0.1 s: refused
+
+
+def test_no_recommendation_says_the_pairs_pirouetted_not_that_they_missed(tmp_path, capsys,
+                                                                          monkeypatch):
+    """Every pair reached every waypoint and pirouetted: the summary line said "no pair of the
+    grid reached every waypoint" (speed.md said the right thing; a review). It says why."""
+    from mpcasv.control import tuning_speed as ts
+
+    real = ts.turn
+
+    def pirouetting(*a, **k):
+        run, f = real(*a, **k)
+        return run, f | {"pirouette": True}
+
+    monkeypatch.setattr(ts, "turn", pirouetting)
+    rc = main(["tune", "speed", "--speeds", "1", "--u-ff", "0.6", "--k-u", "1.59",
+               "--distance", "50", "--out", str(tmp_path / "o"), "--quiet"])  # fmt: skip
+    line = next(s for s in capsys.readouterr().out.splitlines()
+                if s.startswith("no recommended"))  # fmt: skip
+    assert rc == 0 and "reached every waypoint" not in line, line
+    assert "1 pirouetted in a turn (P)" in line and "(NR)" not in line, line

@@ -249,7 +249,7 @@ def run_tune_speed(args: argparse.Namespace) -> int:
     try:
         best = recommend(merged, args.u_cmd_max)
         notes = edge_notes(best, merged, args.u_cmd_max)
-    except ValueError as exc:  # no pair reached every waypoint: reported, the base's kept
+    except ValueError as exc:  # no pair passed (P or NR, why_none): reported, the base's kept
         best, notes = None, []
         none_reason = str(exc)
     ok_margins = all(c["phase_margin_deg"] >= 45 and c["gain_margin_db"] >= 6 and c["stable"]
@@ -276,7 +276,7 @@ def run_tune_speed(args: argparse.Namespace) -> int:
             "field tuning, thesis §3.4.1 (kept; the turn grid "
             + (f"of mpcasv tune speed recommends u_ff={best.u_ff}, k_u={best.k_u} within "
                f"u_cmd,max <= {args.u_cmd_max:.4g} m/s)" if best
-               else "of mpcasv tune speed found no pair that reached every waypoint)"),
+               else f"of mpcasv tune speed recommends none: {none_reason})"),
         )
     ep_new = replace(ep_new, provenance=prov)
     wrote = _write_if_pass(ok_loop, toml, ep_new, "speed", args)
@@ -296,7 +296,7 @@ def run_tune_speed(args: argparse.Namespace) -> int:
     print(
         (f"recommended (u_ff, k_u) = ({best.u_ff}, {best.k_u}) (u_ff + k_u pi/2 <= "
          f"{args.u_cmd_max:.4g} m/s)" if best else
-         "no recommended (u_ff, k_u): no pair of the grid reached every waypoint")
+         f"no recommended (u_ff, k_u): {none_reason}")
         + f"; {wrote}; wrote "
         f"{args.out}/speed.md and plots; loop margins {'PASS' if ok_margins else 'FAIL'}; "
         f"speed steps settle (2 %, within {STEP_T_END:g} s): "

@@ -341,10 +341,22 @@ def recommend(rows: list[TurnRow], bound: float = math.inf) -> TurnRow:
     time; ValueError if none."""
     good = [r for r in admitted(rows, bound) if r.ok]
     if not good:
-        raise ValueError("no (u_ff, k_u) pair of the grid with u_ff + k_u pi/2 <= "
-                         f"{bound:.4g} m/s reached every waypoint without a pirouette: no "
-                         "recommendation")  # fmt: skip
+        raise ValueError(why_none(rows, bound))
     return min(good, key=lambda r: r.cost)
+
+
+def why_none(rows: list[TurnRow], bound: float) -> str:
+    """Why :func:`recommend` found no pair: of the rows :func:`admitted` under ``bound``
+    (m/s), how many pirouetted in some turn (P) and how many missed a waypoint in the run (NR).
+    The summary said "no pair of the grid reached every waypoint" when every pair had reached
+    every waypoint and pirouetted (a review)."""
+    ok = admitted(rows, bound)
+    pir = sum(any(f["pirouette"] for f in r.figures.values()) for r in ok)
+    nr = sum(any(not f["reached"] for f in r.figures.values()) for r in ok)
+    parts = [f"{pir} pirouetted in a turn (P)"] if pir else []
+    parts += [f"{nr} did not reach a waypoint within the run (NR)"] if nr else []
+    return (f"of the {len(ok)} (u_ff, k_u) pairs of the grid with u_ff + k_u pi/2 <= "
+            f"{bound:.4g} m/s, {' and '.join(parts) or 'none passed'}: no recommendation")
 
 
 def edge_notes(best: TurnRow, rows: list[TurnRow], bound: float) -> list[str]:
