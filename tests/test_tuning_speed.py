@@ -415,3 +415,39 @@ def test_no_recommendation_says_the_pairs_pirouetted_not_that_they_missed(tmp_pa
                 if s.startswith("no recommended"))  # fmt: skip
     assert rc == 0 and "reached every waypoint" not in line, line
     assert "1 pirouetted in a turn (P)" in line and "(NR)" not in line, line
+
+
+def _spin(turns: float, wp=(0.0, 30.0)):
+    """A synthetic boat spinning at 10 deg/s on a 1 m circle at the origin, never nearer the
+    waypoint ``wp`` (m) than 29 m: its bow sweeps through the waypoint's bearing once a turn."""
+    from types import SimpleNamespace
+
+    psi = np.radians(10.0) * np.arange(0.0, 36.0 * turns, 0.1)
+    N, E = np.sin(psi), 1.0 - np.cos(psi)
+    X = np.zeros((len(psi), 6))
+    X[:, 0], X[:, 1], X[:, 2] = N, E, psi
+    los = np.arctan2(wp[1] - E, wp[0] - N)
+    return SimpleNamespace(X=X, psi_error=(psi - los + np.pi) % (2 * np.pi) - np.pi)
+
+
+def test_a_boat_spinning_through_its_heading_is_a_pirouette():
+    """Three and a third turns of spin, the bow crossing the waypoint's bearing each turn
+    (within 10 deg for 2 s): the rule cut the count at each crossing (339 deg of 1199, no
+    pirouette; a review). Crossing the bearing is not heading for the waypoint: that needs
+    the error within the band and the boat closing on it (|psi_e| < pi/2) until it arrives.
+    A boat that heads for it and wobbles 15 deg out of the band on the way is not circling."""
+    from types import SimpleNamespace
+
+    from mpcasv.control.tuning_speed import PIROUETTE_TURN, circling
+
+    spin = _spin(10 / 3)
+    turned = float(np.sum(np.abs(np.diff(spin.X[:, 2]))))
+    assert turned > 3 * 2 * np.pi
+    assert circling(spin, (0.0, 30.0), math.radians(90.0)) > PIROUETTE_TURN
+    # on course (east) from the start, weaving +-15 deg on the way to the waypoint 30 m east
+    t = np.arange(0.0, 30.0, 0.1)
+    err = np.radians(15.0) * np.sin(2 * np.pi * t / 5.0)
+    X = np.zeros((len(t), 6))
+    X[:, 1], X[:, 2] = t, np.pi / 2 + err
+    weave = SimpleNamespace(X=X, psi_error=err)
+    assert circling(weave, (0.0, 30.0), math.radians(90.0)) < math.radians(30.0)

@@ -183,45 +183,71 @@ def speed_step(model: VesselModel, ep: ExecutionParams, u0: float, u1: float,
     }  # fmt: skip
 
 
-def arrival(X: np.ndarray, wp) -> tuple[np.ndarray, int]:
+def arrival(X: np.ndarray, wp, radius: float = ARRIVAL_RADIUS) -> tuple[np.ndarray, int]:
     """The distances (m, shape (n,)) of the states ``X`` (rows ``[N, E, ...]``) from the
-    waypoint ``wp`` and the index of the first within :data:`ARRIVAL_RADIUS` (``n`` if none):
-    the one definition of "reached" for the turns, their rule and their plots."""
+    waypoint ``wp`` and the index of the first within ``radius`` m (``n`` if none): the one
+    definition of "reached" for the turns, their rule and their plots."""
     dist = np.hypot(X[:, 0] - wp[0], X[:, 1] - wp[1])
-    near = dist < ARRIVAL_RADIUS
+    near = dist < radius
     return dist, int(np.argmax(near)) if near.any() else len(dist)
 
 
-def circling(run, wp, angle: float) -> float:
-    """The most heading change (rad) the boat of ``run`` turned without heading for the
-    waypoint ``wp``: over each stretch with ``|psi_e| > TURN_BAND``, the heading change, less
-    the commanded turn ``|angle|`` for the stretch the run starts with, up to the first
-    arrival within :data:`ARRIVAL_RADIUS` (the line of sight to a waypoint under the bow swings
-    round as the boat passes it); after the arrival, until the boat first heads back for the
-    waypoint, the heading change made outside that circle: a boat that has reached the
-    waypoint and turned back towards it is not circling it, nor one that orbits inside the
-    circle (a small hull that passed it: every dune-otter turn read as a pirouette, a
-    review), while one that loops round it, passing near it each time (Gretha without eq.
-    3.1), is. More than :data:`PIROUETTE_TURN` is a pirouette."""
-    dist, n = arrival(run.X, wp)
-    out = ~(np.abs(run.psi_error) <= TURN_BAND)  # a non-finite error is outside
-    dpsi = np.abs(np.diff(np.unwrap(run.X[:, 2])))
-    worst, i = 0.0, 0
-    while i < n:  # the approach: each stretch off course, cut at the arrival
-        if not out[i]:
+def headed_for(psi_e: np.ndarray, dist: np.ndarray, start: int, radius: float) -> int:
+    """The first index from ``start`` at which the boat heads for the waypoint: its heading
+    error ``psi_e`` (rad) is within :data:`TURN_BAND` and stays below pi/2 (the boat keeps
+    closing on the waypoint, as seen from its bow: eq. 3.1's ``|psi_e| < pi/2``) until it is
+    next within ``radius`` m of it (``dist``, m), or to the end of the run; ``len(psi_e)`` if
+    never. A heading that only sweeps through the band (a boat spinning through its heading)
+    is not heading for the waypoint: the rule cut its stretches there, so 1199 deg of spin
+    counted as 339 deg (a review); a boat that heads for it and wobbles out of the band on the
+    way (Gretha turning back after passing it: on course, then 16 deg off as she speeds up)
+    still is."""
+    err = np.abs(psi_e)
+    on, closing = err <= TURN_BAND, err < math.pi / 2  # a non-finite error is neither
+    m = len(err)
+    inside = np.flatnonzero(dist[start:] < radius) + start
+    i = start
+    while i < m:
+        if not on[i]:
             i += 1
             continue
-        j = i
-        while j < n and out[j]:
-            j += 1
-        turned = float(np.sum(dpsi[i:j - 1])) - (abs(angle) if i == 0 else 0.0)
-        worst = max(worst, turned)
-        i = j
+        nxt = inside[inside >= i]
+        stop = int(nxt[0]) if len(nxt) else m  # the next arrival (or the end)
+        away = np.flatnonzero(~closing[i:stop])
+        if not len(away):
+            return i
+        i += int(away[0])
+    return m
+
+
+def circling(run, wp, angle: float, radius: float = ARRIVAL_RADIUS) -> float:
+    """The heading change (rad) the boat of ``run`` turned without heading for the waypoint
+    ``wp`` (:func:`headed_for`: on course, ``|psi_e| <= TURN_BAND``, and staying so until it
+    is next within ``radius`` m of it), the larger of two parts:
+
+    * the approach, until the first arrival within ``radius`` (the line of sight to a
+      waypoint under the bow swings round as the boat passes it): every heading change made
+      off course before the boat heads for it, less the commanded turn ``|angle|``;
+    * after the arrival, until the boat heads back for the waypoint: the heading change made
+      off course outside the circle. A boat that has reached the waypoint and turned back
+      towards it is not circling it, nor one that orbits inside the circle (a small hull that
+      passed it: every dune-otter turn read as a pirouette, a review), while one that loops
+      round it, passing near it each time (Gretha without eq. 3.1), is.
+
+    More than :data:`PIROUETTE_TURN` is a pirouette. (Until a review each stretch off course
+    was counted alone, cut wherever the heading error swept through the band: a boat spinning
+    in place, its bow crossing the waypoint's bearing once a turn, was never flagged.)"""
+    dist, n = arrival(run.X, wp, radius)
+    out = ~(np.abs(run.psi_error) <= TURN_BAND)  # a non-finite error is outside
+    dpsi = np.abs(np.diff(np.unwrap(run.X[:, 2])))  # dpsi[k]: from sample k to k + 1
+    k = np.arange(len(dpsi))
+    j = headed_for(run.psi_error[:n], dist[:n], 0, radius)
+    worst = float(np.sum(dpsi[(k < j) & out[:-1]])) - abs(angle)
     if n < len(out):  # after the arrival: off course until it heads back, outside the circle
-        back = np.flatnonzero(~out[n:])
-        k = np.arange(n, n + (int(back[0]) if len(back) else len(out) - n - 1))
-        worst = max(worst, float(np.sum(dpsi[k][dist[k] >= ARRIVAL_RADIUS])))
-    return worst
+        back = headed_for(run.psi_error, dist, n, radius)
+        sel = (k >= n) & (k < back) & out[:-1] & (dist[:-1] >= radius)
+        worst = max(worst, float(np.sum(dpsi[sel])))
+    return max(worst, 0.0)
 
 
 def turn(model: VesselModel, ep: ExecutionParams, angle: float, distance: float,
