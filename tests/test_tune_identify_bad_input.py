@@ -44,6 +44,8 @@ def _refused(capsys, argv, *words):
         ("yaw", ["--speeds", ",,"], ["--speeds", "',,'"]),  # pydantic traceback
         ("speed", ["--u-ff", "0.4,0.4"], ["--u-ff 0.4,0.4", "more than once"]),  # zip() error
         ("speed", ["--distance", "50,50"], ["--distance 50,50", "more than once"]),
+        # inside the arrival circle: every turn "done" in 0.0 s over 0.0 m, recommended
+        ("speed", ["--distance", "10,3"], ["--distance 3 m", "inside the 5 m arrival circle"]),
         ("speed", ["--design-speed", "100"], ["--design-speed 100", "(0, 2.5] m/s"]),  # Kp = 0
         ("speed", ["--u-ff", "3"], ["--u-ff 3", "(0, 2.5] m/s"]),
         ("yaw", ["--wn", "100"], ["--wn 100", "1/T_delta = 3.33 rad/s"]),  # overflow warnings

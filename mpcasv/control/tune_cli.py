@@ -75,6 +75,7 @@ def _setup(args, what: str):
         if args.design_speed is None:
             args.design_speed = round(DESIGN_FRACTION * top, 4)
         tc.check_speed_limits(model, args)
+        tc.check_distances(args)
         # the turns and steps run the base file's yaw loop: its T_f as if given (--T-f)
         tc.check_yaw_sampling(model, ep.yaw.T_f, f"--base {args.base}")
     check_output_folder(args.out)
@@ -195,6 +196,7 @@ def run_tune_yaw(args: argparse.Namespace) -> int:
 def run_tune_speed(args: argparse.Namespace) -> int:
     from mpcasv.config import replace
     from mpcasv.control.params import SpeedReference
+    from mpcasv.control.tuning_checks import check_u_cmd_max
     from mpcasv.control.tuning_report import plot_speed, speed_tables
     from mpcasv.control.tuning_speed import (
         SPEED_STEP,
@@ -213,7 +215,7 @@ def run_tune_speed(args: argparse.Namespace) -> int:
     )  # fmt: skip
 
     model, ep, toml = _setup(args, "speed")
-    _check_u_cmd_max(args, ep)
+    bound_note = check_u_cmd_max(args, ep, model)
     args.out.mkdir(parents=True, exist_ok=True)
     g = place_speed_pi(model, args.design_speed, args.w, args.zeta)
     ep_new = replace(ep, speed=g)
@@ -249,7 +251,7 @@ def run_tune_speed(args: argparse.Namespace) -> int:
     try:
         best = recommend(merged, args.u_cmd_max)
         notes = edge_notes(best, merged, args.u_cmd_max)
-    except ValueError as exc:  # no pair reached every waypoint: reported, the base's kept
+    except ValueError as exc:  # no pair passed (P or NR, why_none): reported, the base's kept
         best, notes = None, []
         none_reason = str(exc)
     ok_margins = all(c["phase_margin_deg"] >= 45 and c["gain_margin_db"] >= 6 and c["stable"]
@@ -276,7 +278,7 @@ def run_tune_speed(args: argparse.Namespace) -> int:
             "field tuning, thesis §3.4.1 (kept; the turn grid "
             + (f"of mpcasv tune speed recommends u_ff={best.u_ff}, k_u={best.k_u} within "
                f"u_cmd,max <= {args.u_cmd_max:.4g} m/s)" if best
-               else "of mpcasv tune speed found no pair that reached every waypoint)"),
+               else f"of mpcasv tune speed recommends none: {none_reason})"),
         )
     ep_new = replace(ep_new, provenance=prov)
     wrote = _write_if_pass(ok_loop, toml, ep_new, "speed", args)
@@ -290,39 +292,27 @@ def run_tune_speed(args: argparse.Namespace) -> int:
                    d * math.sin(math.radians(a))), args.out,
                    f"{model.params.name}: waypoint {d:g} m at {a:g} deg, from {u0:g} m/s, "
                    f"command u_max = {model.params.u_max:g} m/s")  # fmt: skip
-    text_tables = speed_tables(g, loop, grids, best, steps, limits, args.u_cmd_max, notes)
+    text_tables = speed_tables(g, loop, grids, best, steps, limits, args.u_cmd_max,
+                               [*notes, *([bound_note] if bound_note else [])],
+                               (model.params.name, model.params.L))  # fmt: skip
     (args.out / "speed.md").write_text(text_tables + "\n")
     print(text_tables)
     print(
         (f"recommended (u_ff, k_u) = ({best.u_ff}, {best.k_u}) (u_ff + k_u pi/2 <= "
          f"{args.u_cmd_max:.4g} m/s)" if best else
-         "no recommended (u_ff, k_u): no pair of the grid reached every waypoint")
+         f"no recommended (u_ff, k_u): {none_reason}")
         + f"; {wrote}; wrote "
         f"{args.out}/speed.md and plots; loop margins {'PASS' if ok_margins else 'FAIL'}; "
         f"speed steps settle (2 %, within {STEP_T_END:g} s): "
         + ("PASS" if not unsettled else f"FAIL: {', '.join(unsettled)}")
     )
     print(_steps_summary(steps))
+    if bound_note:  # the bound is not the base file's own: say whose it is
+        print(f"mpcasv tune: note: {bound_note}", file=sys.stderr)
     for note in notes:  # the optimum on the grid's edge: say so where it is seen
         if "beyond it" in note:
             print(f"mpcasv tune: warning: recommended {note}", file=sys.stderr)
     return 0 if ok_loop else 1
-
-
-def _check_u_cmd_max(args, ep) -> None:
-    """Default ``--u-cmd-max`` to the base file's own ``u_ff + k_u pi/2`` (the thesis kept it
-    when it changed ``u_ff``, §3.4.1) and refuse a grid none of whose pairs is within it (one
-    line, before any work)."""
-    from mpcasv.control.tuning_speed import u_cmd_max, within
-
-    if args.u_cmd_max is None:
-        args.u_cmd_max = round(u_cmd_max(ep.reference.u_ff, ep.reference.k_u), 4)
-    low = min(u_cmd_max(a, b) for a in args.u_ff for b in args.k_u)
-    if not any(within(a, b, args.u_cmd_max) for a in args.u_ff for b in args.k_u):
-        raise ConfigError(f"--u-ff {','.join(f'{x:g}' for x in args.u_ff)} --k-u "
-                          f"{','.join(f'{x:g}' for x in args.k_u)}: every pair has u_ff + k_u "
-                          f"pi/2 above --u-cmd-max {args.u_cmd_max:g} m/s (least {low:.4g} m/s): "
-                          "no pair of the grid may be recommended")  # fmt: skip
 
 
 def _steps_summary(steps: dict) -> str:

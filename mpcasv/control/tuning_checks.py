@@ -146,3 +146,63 @@ def check_speed_limits(model, args: argparse.Namespace) -> None:
                           f"below the thrust lag's corner 1/T_thrust = {1 / P.T_thrust:.3g} "
                           f"rad/s ({P.name}): the PI is placed on a surge model without it, a "
                           "faster loop is unstable")  # fmt: skip
+
+
+def check_distances(args: argparse.Namespace) -> None:
+    """Refuse a turn-grid ``--distance`` (m) at or inside the arrival circle
+    (:data:`mpcasv.control.tuning_turns.ARRIVAL_RADIUS`): the boat starts within it, so every
+    turn was "done" at once, 0.0 s over 0.0 m, and recommended (a review)."""
+    from mpcasv.control.tuning_turns import ARRIVAL_RADIUS
+
+    for d in args.distance:
+        if not d > ARRIVAL_RADIUS:
+            raise ConfigError(f"--distance {d:g} m: inside the {ARRIVAL_RADIUS:g} m arrival "
+                              "circle, where the boat starts: every turn would be done at once "
+                              f"(0 s, 0 m); give distances above {ARRIVAL_RADIUS:g} m")  # fmt: skip
+
+
+def reference_vessel(provenance: str) -> str | None:
+    """Whose eq. 3.1 pair an execution file's ``[reference]`` is, from its provenance: Gretha's
+    for the thesis's field tuning, the ``--vessel`` of the ``mpcasv tune speed
+    --set-reference`` that wrote it, None if the provenance does not say."""
+    import shlex
+
+    for part in provenance.split(" | "):
+        if part.startswith("reference: field tuning"):
+            return "gretha"
+        if part.startswith("reference: mpcasv tune speed "):
+            try:
+                words = shlex.split(part[len("reference: "):].split(": ", 1)[0])
+            except ValueError:
+                return None
+            return words[words.index("--vessel") + 1] if "--vessel" in words[:-1] else None
+    return None
+
+
+def check_u_cmd_max(args: argparse.Namespace, ep, model) -> str | None:
+    """Default ``--u-cmd-max`` (m/s), the bound on eq. 3.1's largest command
+    ``u_ff + k_u pi/2``, and refuse a grid none of whose pairs is within it (one line, before
+    any work). The default is the base file's own ``u_ff + k_u pi/2`` when its ``[reference]``
+    is this vessel's (the thesis kept ``u_cmd,max`` at the rated top speed when it changed
+    ``u_ff``, §3.4.1: Gretha's 3.0976 m/s), else the vessel's own top speed ``u_max``: the
+    base defaults to Gretha's file, and her bound was used for every ``--vessel`` (a review).
+    Returns the words on where a default not the base's own came from (None otherwise)."""
+    from mpcasv.control.tuning_turns import u_cmd_max, within
+
+    note = None
+    if args.u_cmd_max is None:
+        own = reference_vessel(ep.provenance)
+        args.u_cmd_max = round(u_cmd_max(ep.reference.u_ff, ep.reference.k_u), 4)
+        if own is not None and own not in (str(args.vessel), model.params.name):
+            base = args.u_cmd_max
+            args.u_cmd_max = round(model.params.u_max, 4)
+            note = (f"--u-cmd-max defaults to {model.params.name}'s top speed u_max = "
+                    f"{args.u_cmd_max:g} m/s: the [reference] of --base {args.base} is "
+                    f"{own}'s (u_ff + k_u pi/2 = {base:g} m/s)")  # fmt: skip
+    low = min(u_cmd_max(a, b) for a in args.u_ff for b in args.k_u)
+    if not any(within(a, b, args.u_cmd_max) for a in args.u_ff for b in args.k_u):
+        raise ConfigError(f"--u-ff {_text(args.u_ff)} --k-u {_text(args.k_u)}: every pair has "
+                          f"u_ff + k_u pi/2 above --u-cmd-max {args.u_cmd_max:g} m/s (least "
+                          f"{low:.4g} m/s): no pair of the grid may be recommended"
+                          + (f" ({note})" if note else ""))  # fmt: skip
+    return note

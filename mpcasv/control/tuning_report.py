@@ -13,7 +13,14 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from mpcasv.control.tuning import ILL
-from mpcasv.control.tuning_speed import ARRIVAL_RADIUS, TURN_BAND, arrival, u_cmd_max, within
+from mpcasv.control.tuning_speed import (
+    ARRIVAL_RADIUS,
+    TURN_BAND,
+    TURN_T_END,
+    arrival,
+    u_cmd_max,
+    within,
+)  # fmt: skip
 from mpcasv.control.tuning_yaw import SETTLE_BAND, yaw_loop, yaw_plant
 
 
@@ -197,11 +204,12 @@ def plot_yaw(model, designs, runs, T_f: float, out: Path) -> list[Path]:
 
 
 def speed_tables(g, loop, grids, best, steps=None, limits=None, bound: float = math.inf,
-                 notes=()) -> str:  # fmt: skip
+                 notes=(), hull: tuple[str, float] | None = None) -> str:  # fmt: skip
     """Markdown: speed loop margins per speed; speed steps, linear beside nonlinear
     (``steps``: :func:`~mpcasv.control.tuning_speed.speed_step` figures per speed, ``limits``
     the words on the thrust limits and the straight-course top speed); turn grid per
-    distance; the recommendation under the ``u_cmd,max`` ``bound`` (m/s) and its ``notes``
+    distance, its arrival radius beside the vessel's name and length ``hull`` (m); the
+    recommendation under the ``u_cmd,max`` ``bound`` (m/s) and its ``notes``
     (:func:`~mpcasv.control.tuning_speed.edge_notes`)."""
     out = [f"Speed loop: Kp = {g.Kp:.1f} N/(m/s), Ki = {g.Ki:.1f} N/(m/s s)", "",
            "| u0 (m/s) | GM dB (cont / sampled) | PM deg (cont / sampled) | disk margin "
@@ -215,10 +223,13 @@ def speed_tables(g, loop, grids, best, steps=None, limits=None, bound: float = m
     out += _step_table(loop, steps or {}, limits)
     for d, (rows, _) in grids.items():
         angles = list(rows[0].figures)
+        R = next(iter(rows[0].figures.values()))["radius"]
+        length = f"; {hull[0]} is {hull[1]:g} m long" if hull else ""
         out += ["", f"Turns from full speed, waypoint {d:g} m away (time s / path m until on "
-                f"course, within {math.degrees(TURN_BAND):g} deg, or within {ARRIVAL_RADIUS:g} m "
-                "of the waypoint; P = pirouette: a full circle of turning without heading for "
-                f"it; NR = not within {ARRIVAL_RADIUS:g} m in the run)", "",
+                f"course, within {math.degrees(TURN_BAND):g} deg, or within {R:g} m of the "
+                f"waypoint, a fixed radius for every vessel{length}; P = pirouette: a full "
+                f"circle of turning without heading for it; NR = not within {R:g} m in the run, "
+                f"{TURN_T_END:g} s + {d:g} m / min(u_ff, u_max))", "",
                 "| u_ff | k_u | u_ff + k_u pi/2 | " + " | ".join(f"{a:g} deg" for a in angles)
                 + " |", "|" + "---|" * (3 + len(angles))]  # fmt: skip
         for r in rows:
@@ -277,6 +288,7 @@ def plot_speed(model, g, grids, field, best, out: Path) -> list[Path]:
     paths = [out / "bode_speed.png"]
     fig.savefig(paths[0], dpi=100)
     plt.close(fig)
+    R = ARRIVAL_RADIUS
     for d, (rows, runs) in grids.items():
         pir = {(r.u_ff, r.k_u, a) for r in rows for a, f in r.figures.items() if f["pirouette"]}
         # one panel per turn angle: in one, the "no ref. model" 90 deg circle lay under the
@@ -291,13 +303,13 @@ def plot_speed(model, g, grids, field, best, out: Path) -> list[Path]:
                     continue
                 label = ("no ref. model" if k_u == 0 else f"u_ff={u_ff}, k_u={k_u}") + (
                     ": PIROUETTE (circles the waypoint)" if (u_ff, k_u, a) in pir else "")
-                _, first = arrival(r.X, wp)
+                _, first = arrival(r.X, wp, R)
                 reached = first < len(r.t)
                 n = first + 1 if reached else len(r.t)
                 ax.plot(r.X[:n, 1], r.X[:n, 0], ls="--" if k_u == 0 else "-",
                         lw=1.0 if k_u == 0 else 1.6, zorder=3 if k_u == 0 else 2,
                         label=label + ("" if reached else f" (never within "
-                                       f"{ARRIVAL_RADIUS:g} m, {r.t[-1]:.0f} s)"))  # fmt: skip
+                                       f"{R:g} m, {r.t[-1]:.0f} s)"))  # fmt: skip
             ax.plot(wp[1], wp[0], "kx", ms=9, zorder=4, label="waypoint")
             ax.plot(0, 0, "ko", ms=5, zorder=4, label="start (heading north)")
             ax.set_aspect("equal")
@@ -308,7 +320,7 @@ def plot_speed(model, g, grids, field, best, out: Path) -> list[Path]:
             ax.grid(True, alpha=0.3)
         fig.set_layout_engine("constrained")
         fig.suptitle(f"turns from full speed, heading north at (0, 0), to a waypoint (x) {d:g} "
-                     f"m away (paths until {ARRIVAL_RADIUS:g} m from it)", fontsize=10)  # fmt: skip
+                     f"m away (paths until {R:g} m from it)", fontsize=10)  # fmt: skip
         p = out / f"turns_{d:g}m.png"
         fig.savefig(p, dpi=100)
         plt.close(fig)
@@ -316,14 +328,14 @@ def plot_speed(model, g, grids, field, best, out: Path) -> list[Path]:
     return paths
 
 
-def _circling(dist: np.ndarray, n: int | None) -> np.ndarray:
+def _circling(dist: np.ndarray, n: int | None, R: float = ARRIVAL_RADIUS) -> np.ndarray:
     """The distances (m) from the waypoint of a pirouette's circling: after the pass (the
-    first ``n`` samples reach 5 m), from the sample where it is 5 m or more away again, so
-    that the pass's own samples inside 5 m are not counted; the whole run if it never came
-    within 5 m (``n`` None); empty if it stayed inside to the end."""
+    first ``n`` samples reach ``R`` m), from the sample where it is ``R`` m or more away
+    again, so that the pass's own samples inside are not counted; the whole run if it never
+    came within ``R`` (``n`` None); empty if it stayed inside to the end."""
     if n is None:
         return dist
-    again = np.nonzero(dist[n - 1:] >= ARRIVAL_RADIUS)[0]
+    again = np.nonzero(dist[n - 1:] >= R)[0]
     return dist[n - 1 + again[0]:] if len(again) else dist[:0]
 
 
@@ -332,21 +344,21 @@ def plot_pirouette(checks: dict, wp, out: Path, title: str) -> Path:
     (hard turn while accelerating, with and without eq. 3.1).
 
     Each run is drawn solid as far as :func:`~mpcasv.control.tuning_speed.turn` counted it
-    (until it got on course, or came within 5 m of the waypoint); a pirouette's rest of the
-    run is drawn dashed, and its label says what the whole run does (a new user, session 46:
-    "circles it, never on course" beside a trace that ended at 21 s, where it passed 5 m from
-    the waypoint)."""
+    (until it got on course, or came within ARRIVAL_RADIUS of the waypoint); a pirouette's
+    rest of the run is drawn dashed, and its label says what the whole run does (a new user,
+    session 46: "circles it, never on course" beside a trace that ended at 21 s, where it
+    passed 5 m from the waypoint)."""
     fig, (ax0, ax1) = plt.subplots(1, 2, figsize=(11, 6.2))
     ax2 = ax1.twinx()
     for key, color in (("with", "C0"), ("without", "C3")):
         run, f = checks[key]
-        dist, first = arrival(run.X, wp)  # as turn() counts
+        R = f.get("radius", ARRIVAL_RADIUS)
+        dist, first = arrival(run.X, wp, R)  # as turn() counts
         reached = first < len(run.t)
         n = first + 1 if reached else len(run.t)
         if f["pirouette"]:
             total = float(np.degrees(np.sum(np.abs(np.diff(np.unwrap(run.X[:, 2]))))))
-            c = _circling(dist, n if reached else None)
-            R = ARRIVAL_RADIUS
+            c = _circling(dist, n if reached else None, R)
             what = ("PIROUETTE, circles the waypoint:\n" + (
                 f"within {R:g} m of the waypoint at {run.t[n - 1]:.0f} s, heading error "
                 f"{abs(math.degrees(run.psi_error[n - 1])):.0f} deg, then (dashed)\n"
@@ -355,7 +367,7 @@ def plot_pirouette(checks: dict, wp, out: Path, title: str) -> Path:
                 f"{total:.0f} deg")  # fmt: skip
         else:
             what = (f"turn done after {f['turn_s']:.0f} s, turned {f['total_turn_deg']:.0f} "
-                    "deg" + (f", within {ARRIVAL_RADIUS:g} m of the waypoint at "
+                    "deg" + (f", within {R:g} m of the waypoint at "
                              f"{run.t[n - 1]:.0f} s" if reached else ""))  # fmt: skip
         label = f"{key} eq. 3.1: {what}"
         ax0.plot(run.X[:n, 1], run.X[:n, 0], color=color, label=label)
@@ -365,7 +377,7 @@ def plot_pirouette(checks: dict, wp, out: Path, title: str) -> Path:
             ax0.plot(run.X[n - 1:, 1], run.X[n - 1:, 0], color=color, ls="--", lw=0.8, alpha=0.6)
             ax1.plot(run.t[n - 1:], run.X[n - 1:, 3], color=color, ls="--", lw=0.8, alpha=0.6)
     ax0.plot(wp[1], wp[0], "k*", ms=12, zorder=5,
-             label=f"waypoint (reached: within {ARRIVAL_RADIUS:g} m)")
+             label=f"waypoint (reached: within {R:g} m)")
     ax0.plot(0, 0, "ko", zorder=5, label="start (heading north)")
     ax0.set_aspect("equal")
     ax0.set_xlabel("E (m)")
@@ -376,7 +388,7 @@ def plot_pirouette(checks: dict, wp, out: Path, title: str) -> Path:
     ax0.grid(True, alpha=0.3)
     ax0.set_title(title, fontsize=9)
     ax1.set_xlabel("time (s)")
-    ax1.set_ylabel(f"surge u (m/s), solid (dashed: after {ARRIVAL_RADIUS:g} m)")
+    ax1.set_ylabel(f"surge u (m/s), solid (dashed: after {R:g} m)")
     ax2.set_ylabel("|heading error| (deg), dotted")
     ax1.legend(fontsize=8, loc="upper right")
     ax1.grid(True, alpha=0.3)

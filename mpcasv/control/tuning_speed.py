@@ -10,37 +10,45 @@ figures are checked at every speed *with* the thrust lag, continuous and sampled
 Surge-speed reference model, thesis eq. 3.1: ``u_cmd = u_ff + k_u (pi/2 - |psi_e|)``
 (``u_ff`` if ``|psi_e| >= pi/2``). It is checked on the nonlinear closed loop: starting at full
 speed, turns of 90 and 180 deg towards a waypoint at a fixed distance must reach it without
-"pirouettes" (circling the waypoint instead of reaching it: :data:`PIROUETTE_TURN`).
+"pirouettes" (circling the waypoint instead of reaching it): :mod:`mpcasv.control.tuning_turns`,
+whose names are re-exported here.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import math
 
 import control as ct
 import numpy as np
 
-from mpcasv.config import replace
-from mpcasv.control.params import ExecutionParams, SpeedLoop, SpeedReference
-from mpcasv.control.tuning import run_closed_loop, settling_time
+from mpcasv.control.params import ExecutionParams, SpeedLoop
+from mpcasv.control.tuning import run_closed_loop
+from mpcasv.control.tuning_turns import (  # noqa: F401  (re-exported: one place to import)
+    ARRIVAL_RADIUS,
+    PIROUETTE_CASE,
+    PIROUETTE_TURN,
+    TURN_BAND,
+    TURN_T_END,
+    U_CMD_MAX_RTOL,
+    TurnRow,
+    admitted,
+    arrival,
+    circling,
+    edge_notes,
+    headed_for,
+    merge_grids,
+    pirouette_check,
+    recommend,
+    turn,
+    turn_grid,
+    turn_time,
+    u_cmd_max,
+    why_none,
+    within,
+    without_reference,
+)
 from mpcasv.models.vessel import IX, VesselModel
 
-#: heading band that counts as "on course" (rad)
-TURN_BAND = math.radians(10.0)
-#: radius of the acceptance circle (m): a turn has reached its waypoint once the boat is this
-#: close to it (about one hull length of Gretha, 5.2 m, PAPER-FACTS §1: the scale below which
-#: a point is reached; the turn's figures stop there, where the line-of-sight heading to a point
-#: under the bow stops meaning anything)
-ARRIVAL_RADIUS = 5.0
-#: heading change (rad) with the heading error outside :data:`TURN_BAND` (beyond the commanded
-#: turn, for the stretch that starts it) that makes a pirouette: one full circle. A boat whose
-#: turning circle leaves the waypoint outside points its bow at it within one revolution (its
-#: heading sweeps every direction while the line of sight to the waypoint moves less); one that
-#: turns a full circle without doing so circles the waypoint instead of reaching it, the
-#: pirouettes of thesis §3.4.1 ("pirouettes instead of following its set-point ... not able to
-#: achieve its desired heading")
-PIROUETTE_TURN = 2 * math.pi
 #: size of the speed steps of ``mpcasv tune speed`` (m/s) and length of their nonlinear runs (s)
 SPEED_STEP, STEP_T_END = 0.5, 120.0
 
@@ -181,217 +189,3 @@ def speed_step(model: VesselModel, ep: ExecutionParams, u0: float, u1: float,
         "u_end": float(run.X[-1, IX["u"]]),
         "t_end": float(run.t[-1]),
     }  # fmt: skip
-
-
-def arrival(X: np.ndarray, wp) -> tuple[np.ndarray, int]:
-    """The distances (m, shape (n,)) of the states ``X`` (rows ``[N, E, ...]``) from the
-    waypoint ``wp`` and the index of the first within :data:`ARRIVAL_RADIUS` (``n`` if none):
-    the one definition of "reached" for the turns, their rule and their plots."""
-    dist = np.hypot(X[:, 0] - wp[0], X[:, 1] - wp[1])
-    near = dist < ARRIVAL_RADIUS
-    return dist, int(np.argmax(near)) if near.any() else len(dist)
-
-
-def circling(run, wp, angle: float) -> float:
-    """The most heading change (rad) the boat of ``run`` turned without heading for the
-    waypoint ``wp``: over each stretch with ``|psi_e| > TURN_BAND``, the heading change, less
-    the commanded turn ``|angle|`` for the stretch the run starts with, up to the first
-    arrival within :data:`ARRIVAL_RADIUS` (the line of sight to a waypoint under the bow swings
-    round as the boat passes it); after the arrival, until the boat first heads back for the
-    waypoint, the heading change made outside that circle: a boat that has reached the
-    waypoint and turned back towards it is not circling it, nor one that orbits inside the
-    circle (a small hull that passed it: every dune-otter turn read as a pirouette, a
-    review), while one that loops round it, passing near it each time (Gretha without eq.
-    3.1), is. More than :data:`PIROUETTE_TURN` is a pirouette."""
-    dist, n = arrival(run.X, wp)
-    out = ~(np.abs(run.psi_error) <= TURN_BAND)  # a non-finite error is outside
-    dpsi = np.abs(np.diff(np.unwrap(run.X[:, 2])))
-    worst, i = 0.0, 0
-    while i < n:  # the approach: each stretch off course, cut at the arrival
-        if not out[i]:
-            i += 1
-            continue
-        j = i
-        while j < n and out[j]:
-            j += 1
-        turned = float(np.sum(dpsi[i:j - 1])) - (abs(angle) if i == 0 else 0.0)
-        worst = max(worst, turned)
-        i = j
-    if n < len(out):  # after the arrival: off course until it heads back, outside the circle
-        back = np.flatnonzero(~out[n:])
-        k = np.arange(n, n + (int(back[0]) if len(back) else len(out) - n - 1))
-        worst = max(worst, float(np.sum(dpsi[k][dist[k] >= ARRIVAL_RADIUS])))
-    return worst
-
-
-def turn(model: VesselModel, ep: ExecutionParams, angle: float, distance: float,
-         t_end: float = 150.0, u0: float | None = None):  # fmt: skip
-    """Turn by ``angle`` (rad) from full speed (or trim at ``u0``; the speed integrator at its
-    trim value, :func:`trim_integrator`) towards a waypoint ``distance`` m away.
-
-    Returns the run and ``{"turn_s", "turn_m", "reached", "reach_s", "pirouette",
-    "circling_deg", "total_turn_deg", "min_u"}``: time (s) and path length (m) until the turn
-    is done, i.e. the heading error stays within :data:`TURN_BAND` until the arrival, or the
-    boat is within :data:`ARRIVAL_RADIUS` of the waypoint, whichever comes first (``inf`` if
-    neither within ``t_end``); whether and when (s) it reached that circle; the heading change
-    (deg) until the turn was done; :func:`circling` (deg) and whether it pirouetted (more than
-    :data:`PIROUETTE_TURN`); the least surge speed (m/s) until the turn was done.
-    """
-    if u0 is None:
-        u0 = min(model.top_speed, model.params.u_max)
-    x0, _ = model.trim(u0)
-    wp = (distance * math.cos(angle), distance * math.sin(angle))
-    run = run_closed_loop(model, ep, x0, wp, model.params.u_max, t_end,
-                          I_u=trim_integrator(model, u0))
-    _, n = arrival(run.X, wp)
-    reached = n < len(run.t)
-    ts = settling_time(run.t[:n], run.psi_error[:n], TURN_BAND)  # on course until the arrival
-    if reached and not ts < run.t[n]:
-        ts = float(run.t[n])
-    i = int(round(ts / (run.t[1] - run.t[0]))) if math.isfinite(ts) else len(run.t) - 1
-    total = float(np.sum(np.abs(np.diff(np.unwrap(run.X[: i + 1, 2])))))
-    circ = circling(run, wp, angle)
-    return run, {
-        "turn_s": ts,
-        "turn_m": float(run.distance[i]) if math.isfinite(ts) else math.inf,
-        "reached": reached,
-        "reach_s": float(run.t[n]) if reached else math.inf,
-        "pirouette": bool(circ > PIROUETTE_TURN),
-        "circling_deg": float(np.degrees(circ)),
-        "total_turn_deg": float(np.degrees(total)),
-        "min_u": float(run.X[: i + 1, 3].min()),
-    }
-
-
-@dataclasses.dataclass(frozen=True)
-class TurnRow:
-    """One (u_ff, k_u) pair of the reference-model grid."""
-
-    u_ff: float
-    k_u: float
-    figures: dict  # angle_deg -> turn() figures
-
-    @property
-    def ok(self) -> bool:
-        """Every turn reached its waypoint (within :data:`ARRIVAL_RADIUS`) without a
-        pirouette (:data:`PIROUETTE_TURN`)."""
-        return all(f["reached"] and not f["pirouette"] for f in self.figures.values())
-
-    @property
-    def cost(self) -> float:
-        """Sum of the turn times (s): :func:`recommend` minimises it among the rows that are
-        :attr:`ok` and within the ``u_cmd,max`` bound."""
-        return float(sum(f["turn_s"] for f in self.figures.values()))
-
-
-def turn_grid(model: VesselModel, ep: ExecutionParams, pairs, angles_deg=(90.0, 180.0),
-              distance: float = 50.0, progress: bool = False):  # fmt: skip
-    """Run :func:`turn` for each (u_ff, k_u) pair and angle; returns rows and runs."""
-    from tqdm import tqdm
-
-    rows, runs = [], {}
-    for u_ff, k_u in tqdm(list(pairs), desc="turn grid", disable=not progress):
-        epi = replace(ep, reference=SpeedReference(u_ff=u_ff, k_u=k_u))
-        figs = {}
-        for a in angles_deg:
-            runs[(u_ff, k_u, a)], figs[a] = turn(model, epi, math.radians(a), distance)
-        rows.append(TurnRow(u_ff=u_ff, k_u=k_u, figures=figs))
-    return rows, runs
-
-
-def merge_grids(grids: dict) -> list[TurnRow]:
-    """One row per (u_ff, k_u) with the turns of every distance of ``grids`` (``{distance:
-    (rows, runs)}`` of :func:`turn_grid`; the last row of each, the baseline without the
-    reference model, left out), figures keyed ``"<distance>m/<angle>"``."""
-    by_pair: dict = {}
-    for d, (rows, _) in grids.items():
-        for r in rows[:-1]:
-            figs = by_pair.setdefault((r.u_ff, r.k_u), {})
-            figs.update({f"{d}m/{a}": f for a, f in r.figures.items()})
-    return [TurnRow(u_ff=a, k_u=b, figures=f) for (a, b), f in by_pair.items()]
-
-
-def u_cmd_max(u_ff: float, k_u: float) -> float:
-    """Eq. 3.1's largest speed command, at zero heading error: ``u_ff + k_u pi/2`` (m/s)."""
-    return u_ff + k_u * math.pi / 2
-
-
-#: relative slack of the ``u_cmd,max`` bound, so that the bound a pair itself sets admits it
-U_CMD_MAX_RTOL = 1e-6
-
-
-def within(u_ff: float, k_u: float, bound: float) -> bool:
-    """Whether eq. 3.1's largest command :func:`u_cmd_max` is at most ``bound`` (m/s), with
-    :data:`U_CMD_MAX_RTOL` of slack (the bound a pair itself sets admits it)."""
-    return u_cmd_max(u_ff, k_u) <= bound * (1 + U_CMD_MAX_RTOL)
-
-
-def admitted(rows: list[TurnRow], bound: float) -> list[TurnRow]:
-    """The rows whose :func:`u_cmd_max` is at most ``bound`` (m/s). The thesis chose ``k_u``
-    for a given ``u_ff`` to hold ``u_cmd,max`` at the boat's rated maximum speed (§3.4.1:
-    ``u_ff`` 0.4 -> 0.6 m/s with ``k_u`` 1.72 -> 1.59 m/s "to maintain the maximum commanded
-    speed", 3.1 m/s), and found lower ``k_u`` more stable: the turn times alone only fall as
-    ``k_u`` grows, so without the bound the grid's largest ``k_u`` always won."""
-    return [r for r in rows if within(r.u_ff, r.k_u, bound)]
-
-
-def recommend(rows: list[TurnRow], bound: float = math.inf) -> TurnRow:
-    """Among the rows :func:`admitted` under ``bound`` (m/s) whose turns all reached the
-    waypoint without a pirouette (:attr:`TurnRow.ok`), the one with the least total turn
-    time; ValueError if none."""
-    good = [r for r in admitted(rows, bound) if r.ok]
-    if not good:
-        raise ValueError("no (u_ff, k_u) pair of the grid with u_ff + k_u pi/2 <= "
-                         f"{bound:.4g} m/s reached every waypoint without a pirouette: no "
-                         "recommendation")  # fmt: skip
-    return min(good, key=lambda r: r.cost)
-
-
-def edge_notes(best: TurnRow, rows: list[TurnRow], bound: float) -> list[str]:
-    """Where the recommendation ``best`` sits on the grid ``rows``: on its edge (the largest
-    or smallest ``u_ff`` or ``k_u`` given: the optimum may lie beyond, a warning), or with
-    ``k_u`` set by the ``u_cmd,max`` ``bound`` (a larger ``k_u`` of the grid at that ``u_ff``
-    was excluded by it: the rule at work)."""
-    out = []
-    for name, values, v in (("u_ff", {r.u_ff for r in rows}, best.u_ff),
-                            ("k_u", {r.k_u for r in rows}, best.k_u)):  # fmt: skip
-        if len(values) < 2:
-            continue
-        ok = admitted(rows, bound)
-        larger = [r for r in rows if r.u_ff == best.u_ff and r.k_u > best.k_u]
-        # the bound sets k_u only when every larger k_u at this u_ff is above it (one within
-        # it lost on time or on a pirouette: then the note was false, a review)
-        larger_cut = name == "k_u" and bool(larger) and not any(r in ok for r in larger)
-        if larger_cut:
-            out.append(f"k_u = {v:g} is the largest of the grid at u_ff = {best.u_ff:g} with "
-                       f"u_ff + k_u pi/2 <= {bound:.4g} m/s (--u-cmd-max): the bound sets it")
-        elif v in (max(values), min(values)):
-            end = "largest" if v == max(values) else "smallest"
-            out.append(f"{name} = {v:g} is the grid's {end}: the least turn time may lie "
-                       f"beyond it (extend --{name.replace('_', '-')})")
-    return out
-
-
-def without_reference(ep: ExecutionParams, model: VesselModel) -> ExecutionParams:
-    """``ep`` with eq. 3.1 switched off: the speed reference is the command at every heading
-    error (``u_ff = u_max``, ``k_u = 0``)."""
-    return replace(ep, reference=SpeedReference(u_ff=model.params.u_max, k_u=0.0))
-
-
-#: the pirouette check of docs/tuning.md: (angle deg, distance m, start speed m/s)
-PIROUETTE_CASE = (90.0, 10.0, 0.6)
-
-
-def pirouette_check(model: VesselModel, ep: ExecutionParams, angle_deg: float = 150.0,
-                    distance: float = 25.0, u0: float = 0.6, t_end: float = 120.0):  # fmt: skip
-    """Hard turn while accelerating (thesis §3.4.1), with and without eq. 3.1.
-
-    From trim at ``u0`` (slow, e.g. leaving standby) the waypoint is ``distance`` m away at
-    ``angle_deg`` off the bow and the command asks for ``u_max``. Returns
-    ``{"with": (run, figures), "without": (run, figures)}`` with :func:`turn`'s figures.
-    """
-    a = math.radians(angle_deg)
-    return {
-        "with": turn(model, ep, a, distance, t_end, u0=u0),
-        "without": turn(model, without_reference(ep, model), a, distance, t_end, u0=u0),
-    }
