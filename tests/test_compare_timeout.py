@@ -4,14 +4,17 @@
 from __future__ import annotations
 
 import dataclasses
+import signal
 import time
+from concurrent.futures import TimeoutError as FutureTimeout
 
 import pandas as pd
 
 from mpcasv.config import DURATION_MAX
-from mpcasv.experiments.runner import SweepStats, pending_jobs, run_jobs
+from mpcasv.experiments.runner import SweepStats, make_pool, pending_jobs, run_jobs
 from mpcasv.experiments.store import write_results
 from mpcasv.experiments.suite import expand
+from mpcasv.experiments.workers import spawning_quietly
 
 
 def test_a_job_past_its_time_limit_is_ended_and_the_sweep_goes_on(tmp_path):
@@ -34,3 +37,27 @@ def test_a_job_past_its_time_limit_is_ended_and_the_sweep_goes_on(tmp_path):
         assert table.loc[job.job_id, "status"] == "ok"
     assert stats.ran == 3 and stats.ok == 2 and stats.errors == 1 and stats.lost == 0
     assert took < 120.0, f"the sweep took {took:.0f} s"
+
+
+def test_a_worker_started_after_a_timeout_ignores_ctrl_c():
+    """The first workers start under ``spawning_quietly``; the one Pebble starts in place of
+    a worker it ended at a job timeout does not, yet runs its jobs with SIGINT ignored
+    (Pebble's worker routine ignores it): a Ctrl-C, which reaches the whole process group,
+    stops the sweep without the replacement's traceback. docs/experiments.md said otherwise
+    until session 49; this pins what it says now."""
+    pool = make_pool(1)
+    try:
+        with spawning_quietly():
+            first = pool.schedule(signal.getsignal, (signal.SIGINT,))
+            assert first.result(timeout=60) == signal.SIG_IGN
+        hung = pool.schedule(time.sleep, (60.0,), timeout=1.0)
+        try:
+            hung.result(timeout=60)
+            raise AssertionError("the job past its time limit was not ended")
+        except FutureTimeout:
+            pass
+        replacement = pool.schedule(signal.getsignal, (signal.SIGINT,))
+        assert replacement.result(timeout=60) == signal.SIG_IGN
+    finally:
+        pool.stop()
+        pool.join()

@@ -203,12 +203,22 @@ def run_jobs(jobs: list[Job], out: Path, stats: SweepStats, workers: int = 1,
         bar.close()
 
 
+def make_pool(workers: int):
+    """The sweep's Pebble process pool of ``workers`` spawned processes; each worker, a
+    replacement for one ended at a job timeout included, runs :func:`_watch_parent` first.
+    Pebble's worker routine ignores SIGINT before it runs any job, so only a worker's start-up
+    imports need ``spawning_quietly`` (the first workers); a replacement's are outside it."""
+    from pebble import ProcessPool
+
+    return ProcessPool(workers, initializer=_watch_parent, initargs=(os.getpid(),),
+                       context=get_context("spawn"))  # fmt: skip
+
+
 def _run_pool(jobs, out: Path, runs: str, stats: SweepStats, workers: int, bar,
               job_timeout: float | None = JOB_TIMEOUT_S) -> None:  # fmt: skip
-    from pebble import ProcessExpired, ProcessPool
+    from pebble import ProcessExpired
 
-    pool = ProcessPool(workers, initializer=_watch_parent, initargs=(os.getpid(),),
-                       context=get_context("spawn"))  # fmt: skip
+    pool = make_pool(workers)
     try:
         with spawning_quietly():  # the first schedule starts the workers: they ignore Ctrl-C
             futures = {pool.schedule(run_job, (job, runs), timeout=job_timeout): job
