@@ -77,3 +77,41 @@ def test_under_the_asv_the_covariance_does_not_depend_on_north():
     s = math.radians(P.sigma_bearing_deg) * 60.0
     np.testing.assert_allclose(np.reshape(f.cov, (2, 2)), s**2 * np.eye(2), rtol=1e-9)
     assert (f.N, f.E, f.depth) == (3.0, 4.0, 60.0)  # z = 0: no error
+
+
+def test_a_ping_through_far_and_near_has_the_same_standard_errors():
+    """Common random numbers (mpcasv.sim.streams) with the 3-D geometry: the ASV standing
+    100 m and 400 m from a deep AUV, the same seed; every fix both runs got carries the same
+    three standard normals (range, across, elevation), scaled by each run's geometry (U1).
+    (tests/test_common_random_numbers.py compares the depth errors, which the 3-D model
+    makes depend on the geometry.)"""
+    from mpcasv.sim.scenario import scenario_from_dict
+    from mpcasv.sim.usbl import usbl_error_map
+
+    sc = scenario_from_dict({
+        "name": "crn", "duration": 600.0,
+        "acoustics": {"p_good": 0.6, "p_sporadic": 0.3, "d1": 150.0, "d2": 450.0},
+        "auv": [{"name": "a", "start": {"N": 100.0, "depth": 30.0},
+                 "behaviour": {"plan": {"speed": 1.0, "route": [
+                     {"waypoints": [[100.0, 0.0, 30.0]]}]}}}],
+    })  # fmt: skip
+
+    def standard_errors(asv_N):
+        w = world.World(sc, seed=2)
+        w.x[0] = asv_N
+        at = {}
+        for _ in range(600):
+            w.advance(np.zeros(4))
+            at[round(w.t, 6)] = (w.x[:2].copy(), w.S[:3, 0].copy())
+        out = {}
+        for f in w.fixes[0]:
+            asv, auv = at[round(f.t, 6)]
+            J, _ = usbl_error_map(asv, auv, w.ac)
+            out[f.t] = np.linalg.solve(J, np.array([f.N, f.E, f.depth]) - auv)
+        return out
+
+    near, far = standard_errors(0.0), standard_errors(-300.0)
+    common = set(near) & set(far)
+    assert len(common) >= 10
+    for t in common:
+        np.testing.assert_allclose(near[t], far[t], atol=1e-6)
