@@ -21,7 +21,8 @@ Measurements:
 
 - USBL fix: ``z = [N, E]`` with the fix's own covariance ``R`` (thesis eq. 2.9's angle error
   on the 3-D line of sight, across it and in elevation, and the range noise, projected to the
-  horizontal: :mod:`mpcasv.sim.usbl` in the simulator).
+  horizontal: :func:`mpcasv.models.acoustics.usbl_error_map`, the simulator's fixes and the
+  deploy's covariance of a DUNE fix without an accuracy).
 - Status report: the AUV's own navigation estimate ``[N, E]`` with ``R = nav_sigma^2 I``, and
   its velocity over ground ``U [cos psi, sin psi]`` (``psi`` the course, ``U`` the speed over
   ground) with ``R_v = sigma_U^2 I + (U sigma_psi)^2 n n^T``,

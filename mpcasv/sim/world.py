@@ -29,7 +29,7 @@ from mpcasv.control.params import ExecutionParams, load_execution
 from mpcasv.estimation import check_plan_estimator, known_plan, make_estimator
 from mpcasv.hybrid.domains import r_inner, r_outer, r_target
 from mpcasv.interface import ASVState, AUVEstimate, Observation
-from mpcasv.models.acoustics import Fix, Report, success_probability
+from mpcasv.models.acoustics import Fix, Report, success_probability, usbl_fix
 from mpcasv.models.auv import NA, auv_step_function
 from mpcasv.models.auv_nav import AUVNavFilter
 from mpcasv.models.behaviours import Scripted
@@ -39,7 +39,6 @@ from mpcasv.models.vessel import NX, VesselModel
 from mpcasv.sim.account import StepAccount, classify, evaluation_domain
 from mpcasv.sim.scenario import Scenario
 from mpcasv.sim.streams import ChannelStreams
-from mpcasv.sim.usbl import usbl_fix
 
 _PLANT_CACHE: dict = {}
 #: floor of the 1-sigma a status report gives for the AUV's own navigation (m): the filter's
