@@ -182,7 +182,9 @@ def test_a_fix_stamped_before_the_auvs_last_state_is_put_in_its_place(tmp_path):
 def test_the_fix_covariance_and_depth(tmp_path):
     """``accuracy`` (m) is the horizontal RMS error: ``accuracy^2 / 2`` on each axis. DUNE's
     drivers that leave it 0: thesis eq. 2.9 with the deploy's ``[acoustics]`` from the ASV's
-    last state (range noise along the line of sight, bearing error x slant range across).
+    last state (eq. 2.9 on the 3-D line of sight, as the simulator's fixes: range noise and the
+    elevation-angle error along the horizontal line of sight, bearing error x slant range
+    across).
     A ``z`` that is no depth: the AUV's last reported depth, said once."""
     dep, clock = dry_deploy(
         tmp_path, vehicle=VEHICLES, acoustics={"sigma_range": 0.5, "sigma_bearing_deg": 2.0},
@@ -195,10 +197,14 @@ def test_the_fix_covariance_and_depth(tmp_path):
     assert fix.depth == pytest.approx(20.0, abs=1e-4)
     np.testing.assert_allclose(fix.cov, (1.125, 0.0, 0.0, 1.125))
     fix = dep._fix(0, usbl_fix_extended("lauv-xplore-1", 100.0, 0.0, 20.0, 0.0, ORIGIN), t, asv)
-    los = np.array([70.0, -40.0]) / math.hypot(70.0, 40.0)  # from the ASV to the AUV
-    slant = math.hypot(math.hypot(70.0, 40.0), 20.0)
+    r_h = math.hypot(70.0, 40.0)
+    los = np.array([70.0, -40.0]) / r_h  # from the ASV to the AUV
+    slant = math.hypot(r_h, 20.0)
     across = np.array([-los[1], los[0]])
-    R = 0.25 * np.outer(los, los) + (math.radians(2.0) * slant) ** 2 * np.outer(across, across)
+    # the simulator's geometry (models.acoustics U2): range noise and the elevation-angle error
+    # along the horizontal line of sight, the angle error x slant range across it
+    along2 = (0.5 * r_h / slant) ** 2 + (math.radians(2.0) * 20.0) ** 2
+    R = along2 * np.outer(los, los) + (math.radians(2.0) * slant) ** 2 * np.outer(across, across)
     assert fix.slant == pytest.approx(slant, abs=1e-4)
     np.testing.assert_allclose(fix.cov, R.ravel(), atol=1e-6)
     msg.z_units = type(msg.z_units).ALTITUDE

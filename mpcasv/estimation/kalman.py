@@ -19,14 +19,15 @@ which tends to the CV model ``F = [[1, dt], [0, 1]]``,
 
 Measurements:
 
-- USBL fix: ``z = [N, E]`` with the fix's own covariance ``R`` (range noise along the line of
-  sight, bearing error x slant range across it: thesis eq. 2.9; built in
-  :func:`mpcasv.models.acoustics.usbl_fix`).
+- USBL fix: ``z = [N, E]`` with the fix's own covariance ``R`` (thesis eq. 2.9's angle error
+  on the 3-D line of sight, across it and in elevation, and the range noise, projected to the
+  horizontal: :func:`mpcasv.models.acoustics.usbl_error_map`, the simulator's fixes and the
+  deploy's covariance of a DUNE fix without an accuracy).
 - Status report: the AUV's own navigation estimate ``[N, E]`` with ``R = nav_sigma^2 I``, and
-  its velocity ``U [cos psi, sin psi]`` with ``R_v = sigma_U^2 I + (U sigma_psi)^2 n n^T``,
-  ``n = [-sin psi, cos psi]``: speed noise in every direction (speed through water vs over
-  ground, heading vs course) plus the first-order effect of the heading error across the
-  track; never singular, also for an AUV at rest.
+  its velocity over ground ``U [cos psi, sin psi]`` (``psi`` the course, ``U`` the speed over
+  ground) with ``R_v = sigma_U^2 I + (U sigma_psi)^2 n n^T``,
+  ``n = [-sin psi, cos psi]``: speed noise in every direction plus the first-order effect of
+  the course error across the track; never singular, also for an AUV at rest.
 
 Updates use the Joseph form. :meth:`KalmanEstimator.estimate` predicts from the last update
 without changing the filter (the prediction is a pure function of the stored state).

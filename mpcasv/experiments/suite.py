@@ -131,8 +131,11 @@ def _digest(obj) -> str:
 #: The world's random streams a job's run draws from, in its id: 2 since session 48, the
 #: synchronised streams of :mod:`mpcasv.sim.streams` (common random numbers). A results
 #: folder written before holds runs of the old draws under the old ids: resumed, its jobs
-#: run again rather than pair old-noise runs with new ones (a review).
-WORLD_STREAMS = 2
+#: run again rather than pair old-noise runs with new ones (a review). 3 since session 49: the
+#: same draws, but a fix's three normals are its range, across and elevation errors on the 3-D
+#: line of sight (:func:`mpcasv.models.acoustics.usbl_error_map`) and the AUVs' reports carry
+#: their course and speed over ground: every run with fixes means another world.
+WORLD_STREAMS = 3
 
 
 #: The shipped vessel and execution files, by name, whose content as of session 44 (their

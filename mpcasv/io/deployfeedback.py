@@ -19,7 +19,7 @@ from mpcasv.interface import Mode
 from mpcasv.io.geo import to_local
 from mpcasv.io.imc import BadInput
 from mpcasv.io.watchdog import OK
-from mpcasv.models.acoustics import Fix, usbl_geometry
+from mpcasv.models.acoustics import Fix, usbl_covariance
 
 __all__ = ["USBL_AGREE", "USBL_AGREE_SPAN", "USBL_GATE", "BoatFeedback", "cap_command",
            "cap_controller_speed"]
@@ -286,7 +286,7 @@ class BoatFeedback:
         ``accuracy`` (m) taken as the horizontal RMS error, ``accuracy^2 / 2`` on each axis
         (the SITL sends ``sqrt(trace R)``), or, where DUNE leaves it 0, thesis eq. 2.9 with
         the deploy's ``[acoustics]`` seen from the ASV's last state ``asv``
-        (:func:`~mpcasv.models.acoustics.usbl_geometry`)."""
+        (:func:`~mpcasv.models.acoustics.usbl_covariance`, the simulator's fixes' covariance)."""
         N, E, _ = to_local(msg.lat, msg.lon, self.link.origin.height, self.link.origin)
         if msg.z_units == imcpy.ZUnits.DEPTH and math.isfinite(msg.z):
             depth = float(msg.z)
@@ -297,7 +297,7 @@ class BoatFeedback:
                 self.event("usbl_fix_depth", target=msg.target, z_units=str(msg.z_units),
                            depth=depth, note="not a depth: the AUV's last reported depth "
                            "is used (0 before its first state)")  # fmt: skip
-        _, _, _, R, slant = usbl_geometry((asv.N, asv.E), (N, E, depth), self.cfg.acoustics)
+        R, slant = usbl_covariance((asv.N, asv.E), (N, E, depth), self.cfg.acoustics)
         acc = float(msg.accuracy)
         if math.isfinite(acc) and acc > 0:
             R = np.eye(2) * acc**2 / 2

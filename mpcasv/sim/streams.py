@@ -13,10 +13,12 @@ Now each AUV ``k`` has three streams, ``SeedSequence(seed, spawn_key=(CHANNEL_ST
 k))``, and every event draws the same number of values whether or not they are used:
 
 - **ping** (every USBL ping of AUV ``k``, at its fixed times ``k T0 / n + j T0``): a uniform
-  for the ping's success (``< p``), three standard normals for the fix's errors (along the line
-  of sight, across it, depth: :func:`mpcasv.models.acoustics.usbl_fix`), a uniform for the fix
-  getting back to the AUV (``< p``) and the new dead-reckoning interval's draws (two standard
-  normals and a uniform, :class:`mpcasv.models.auv_nav.AUVNavFilter`);
+  for the ping's success (``< p``), three standard normals for the fix's errors (the slant
+  range's, and the angle's across the line of sight and in elevation:
+  :func:`mpcasv.models.acoustics.usbl_fix`; before the 3-D geometry the same three were the errors
+  along the line of sight, across it and in depth), a uniform for the fix getting back to the
+  AUV (``< p``) and the new dead-reckoning interval's draws (two standard normals and a
+  uniform, :class:`mpcasv.models.auv_nav.AUVNavFilter`);
 - **report** (every status report of AUV ``k``, at ``k T_report / n + i T_report``): a uniform
   for its success;
 - **period** (every control period, for every AUV, at the surface or not): two standard

@@ -195,6 +195,17 @@ class World:
         c = self.C_auv[:, k]
         return N, E, d, U * math.cos(psi) + c[0], U * math.sin(psi) + c[1]
 
+    def auv_course_over_ground(self, k: int) -> tuple[float, float]:
+        """(course, speed) over ground of AUV ``k`` (rad from north, m/s): what its status
+        report carries. The filters' state is the velocity over ground, and an AUV's navigation
+        reports it (IMC EstimatedState's ``vx``, ``vy``; ``mpcasv deploy`` reads a report's
+        course and speed from them): the heading and the speed through the water plus the
+        current carrying the AUV (thesis eq. 2.6). At rest over ground the course is the
+        heading (as in the deploy)."""
+        _, _, _, v_N, v_E = self.auv_truth(k)
+        sog = math.hypot(v_N, v_E)
+        return (math.atan2(v_E, v_N) if sog > 0.0 else float(self.S[3, k])), sog
+
     @property
     def fix_times(self) -> list[list[float]]:
         """The times (s) of every successful USBL fix, per AUV (of :attr:`fixes`)."""
@@ -324,8 +335,9 @@ class World:
                 if draws.report(k) < p_ok:
                     e = self.nav.error(t1)[k]
                     sigma = max(float(self.nav.sigma(t1)[k]), REPORT_SIGMA_MIN)
-                    report = Report(t1, k, S[0, k] + e[0], S[1, k] + e[1], S[2, k], S[3, k],
-                                    S[4, k], sigma)  # fmt: skip
+                    course, sog = self.auv_course_over_ground(k)
+                    report = Report(t1, k, S[0, k] + e[0], S[1, k] + e[1], S[2, k], course,
+                                    sog, sigma)  # fmt: skip
                     self.estimators[k].on_report(report)
                     self.reports[k].append(report)
         return fixes, reliable
