@@ -14,6 +14,7 @@ our maneuver (a limit docs/deploy.md listed since session 47).
 from __future__ import annotations
 
 import imcpy
+import test_deploy_plan_ended
 from test_deploy_plan_ended import FRS, PC, _events
 from test_deploy_plan_state import O, S, _deploy, _run, pcs
 
@@ -57,13 +58,62 @@ def test_references_lost_while_dune_executes_our_plan_wait_for_dunes_timeout(tmp
     assert len(dune.starts()) == 2 and dep.phase == RUNNING  # restarted, running again
 
 
-def test_without_dunes_word_the_silence_still_ends_the_run(tmp_path, request):
-    """A DUNE whose PlanControlState does not reach us: the silence is the one sign left
-    (``followref_lost`` after ``followref_lost_s``), as before."""
+def _lose_references(dep):
+    """From now on every Reference the deploy sends is lost on the way out."""
+    received = dep.link._send_raw
+
+    def send(data, addr, p=None):
+        if isinstance(imcpy.Packet.deserialize(data), imcpy.Reference):
+            return True
+        return received(data, addr, p)
+
+    dep.link._send_raw = send
+
+
+def test_dunes_word_must_be_fresh_when_its_reports_stop(tmp_path, request):
+    """EXECUTING read after the first lost Reference, then DUNE's PlanControlState stops
+    (its engine task blocked, a filter) while the ASV's states go on: that old word does not
+    hold the run for ever (DUNE's own timeout stops the maneuver after 10 s); the silence
+    ends it once no report was read within ``followref_lost_s`` of the last state (a review:
+    the run went on for 300 s and more)."""
     dep, clock, dune = _deploy(tmp_path, request)
-    dune.engine = None
     _run(dep, clock, dune, 5.0)
-    assert dep.phase == RUNNING
+    _lose_references(dep)
+    _run(dep, clock, dune, 1.0)  # EXECUTING reports read after the first unanswered Reference
+    assert dep.plan_state["recv"] >= dep.unanswered_since
+    dune.engine = None  # the 560 stream stops; the ASV's states go on
+    lost = dep.cfg.link.followref_lost_s
+    _run(dep, clock, dune, 2 * lost + 2.0)
+    assert len(_events(dep, "followref_lost")) == 1
+
+
+def test_a_dune_clock_stepped_back_does_not_hold_the_run(tmp_path, request, monkeypatch):
+    """EXECUTING read, then every later report stamped a minute behind (a DUNE clock stepped
+    back): they are all late, not read; the run must not wait on the last one read past
+    ``followref_timeout + followref_lost_s`` of silence."""
+    dep, clock, dune = _deploy(tmp_path, request)
+    _run(dep, clock, dune, 5.0)
+    _lose_references(dep)
+    _run(dep, clock, dune, 1.0)
+    real = test_deploy_plan_ended.stamp
+    monkeypatch.setattr(test_deploy_plan_ended, "stamp", lambda m, src, ent, t: real(
+        m, src, ent, t - 60.0 if isinstance(m, imcpy.PlanControlState) else t))
+    link = dep.cfg.link
+    _run(dep, clock, dune, link.followref_timeout + 2 * link.followref_lost_s)
+    assert dep.plan_state_late > 0
+    assert len(_events(dep, "followref_lost")) == 1
+
+
+def test_an_old_executing_does_not_hide_an_operators_stop(tmp_path, request):
+    """EXECUTING read long ago, then DUNE's PlanControlState stops reaching us, then the
+    References go unanswered (the operator stopped the plan): the silence ends the run at
+    ``followref_lost_s``, the old report is no word (it was read before the first unanswered
+    Reference)."""
+    dep, clock, dune = _deploy(tmp_path, request)
+    lost = dep.cfg.link.followref_lost_s
+    _run(dep, clock, dune, 5.0)
+    dune.engine = None
+    _run(dep, clock, dune, 2.0)
     dune.answer_references = False
-    _run(dep, clock, dune, dep.cfg.link.followref_lost_s + 2.0)
+    _run(dep, clock, dune, lost + 2.0)
     assert len(_events(dep, "followref_lost")) == 1

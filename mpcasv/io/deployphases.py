@@ -176,11 +176,22 @@ class Phases:
         ``followref_lost_s`` (5 s) while DUNE still ran our maneuver and would have taken the
         next Reference that got through. DUNE's engine saying our plan executes is the
         better word: the run then waits for DUNE's own verdict (TIMEOUT: restarted; READY:
-        ``plan_ended``)."""
-        return (self.phase == RUNNING and not self.dry_run and self.unanswered_since is not None
-                and self.link.asv.nav_recv - self.unanswered_since  # (the last state <= now)
-                > self.cfg.link.followref_lost_s
-                and not self.plan_shown_running(self.unanswered_since))  # fmt: skip
+        ``plan_ended``), while that word is fresh: a PlanControlState read within
+        ``followref_lost_s`` of the ASV's last state (DUNE sends one every 0.4 s; a stream
+        that stops, or a DUNE clock stepped back whose reports are all "late", is no word),
+        and never past ``followref_timeout + followref_lost_s`` of silence, by when DUNE's
+        own timeout has stopped the maneuver whatever reached us (a review: one EXECUTING
+        read after the first unanswered Reference kept a run going for ever)."""
+        if self.phase != RUNNING or self.dry_run or self.unanswered_since is None:
+            return False
+        lost = self.cfg.link.followref_lost_s
+        silence = self.link.asv.nav_recv - self.unanswered_since  # (the last state <= now)
+        if silence <= lost:
+            return False
+        if silence > self.cfg.link.followref_timeout + lost:
+            return True
+        fresh = max(self.unanswered_since, self.link.asv.nav_recv - lost)
+        return not self.plan_shown_running(fresh)
 
     # --- phases and watchdogs ------------------------------------------------------------
     def auv_ages(self, now: float) -> list[float]:

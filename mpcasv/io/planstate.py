@@ -37,9 +37,11 @@ start itself, INITIALIZING or READY, are not read as its end), any later one tha
 vehicle may run someone else's plan). Stock DUNE answers an operator's STOP to the operator
 only; this is how it reaches us (READY, our plan, FAILURE) within one report period, where
 the FollowRefState silence took ``link.followref_lost_s``. A DUNE that sends no
-PlanControlState (or a link that loses them) leaves that silence as the one sign
-(``followref_lost``). Not in a dry run (we start no plan: one of ours may be another
-deploy's).
+PlanControlState (or a link that loses them: none read within ``followref_lost_s`` of the
+ASV's last state) leaves that silence as the one sign (``followref_lost``), and past
+``followref_timeout + followref_lost_s`` of silence it ends the run whatever the last one
+said (:meth:`mpcasv.io.deployphases.Phases._followref_silent`). Not in a dry run (we start no
+plan: one of ours may be another deploy's).
 """
 
 from __future__ import annotations
@@ -94,9 +96,10 @@ class PlanStateWatch:
     def plan_shown_running(self, since: float) -> bool:
         """Whether a PlanControlState read at or after ``since`` (deploy clock, s) shows our
         plan EXECUTING: the newest one read does (any other would have ended the run) and
-        it came then. Read by the FollowRefState silence (``followref_lost``): DUNE's engine
-        still executing our plan means our References do not reach it (its own timeout
-        will end the maneuver) or its answers do not reach us, not that it ended."""
+        it came then (the caller makes ``since`` recent enough to be news). Read by the
+        FollowRefState silence (``followref_lost``): DUNE's engine still executing our plan
+        means our References do not reach it (its own timeout will end the maneuver) or its
+        answers do not reach us, not that it ended."""
         return (self.plan_executing and self.plan_state is not None
                 and self.plan_state["recv"] >= since)  # fmt: skip
 
@@ -111,7 +114,7 @@ class PlanStateWatch:
         route, told the end of a plan that was executing (our START's own INITIALIZING after
         its EXECUTING; a READY from before a TIMEOUT's restart: a review). A DUNE clock
         stepped back leaves the watch deaf until its stamps pass the newest again
-        (``followref_lost`` still ends a stopped run)."""
+        (``followref_lost`` still ends a stopped run: the last one read goes stale)."""
         stamp = float(msg.timestamp)
         if stamp < self.plan_state_stamp:  # (equal stamps: read in arrival order)
             self.plan_state_late += 1

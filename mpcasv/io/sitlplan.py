@@ -23,8 +23,9 @@ What it copies, and from where:
   START (a plan started after a failure executes with FAILURE from before).
 
 Not simulated: BLOCKED (a vehicle error, CALIBRATION or EXTERNAL mode, no VehicleState for
-2.5 s), the plan's progress and ETA (``plan_progress`` -1, ``plan_eta`` 0: "Compute
-Progress" is off by default), LOAD/GET requests.
+2.5 s), the plan's progress and ETA (sent as the recorded Otter's, whose "Compute Progress"
+was on: ``plan_progress`` -1; EXECUTING ``plan_eta`` -1, ``man_eta`` 65535; READY
+``plan_eta`` 0), LOAD/GET requests.
 """
 
 from __future__ import annotations
@@ -84,5 +85,9 @@ class PlanEngine:
         m = PCS()
         m.state, m.plan_id, m.last_outcome = self.state, self.plan_id, self.last_outcome
         m.man_id, m.man_type = self.man_id, self.man_type
-        m.plan_eta, m.plan_progress, m.man_eta = 0, -1.0, 0
+        # as recorded (the Otter, "Compute Progress" on, yet no ETA): EXECUTING plan_eta -1,
+        # man_eta 65535; READY 0, and man_eta 65535 once a plan ran (0 before)
+        executing = self.state == _S.EXECUTING
+        m.plan_eta, m.plan_progress = (-1 if executing else 0), -1.0
+        m.man_eta = 0xFFFF if executing or self.plan_id else 0
         return m
