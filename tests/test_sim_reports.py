@@ -107,3 +107,21 @@ def test_kalman_on_a_carried_auv_is_consistent(monkeypatch):
     still = _mean_nees(0.0, seeds, monkeypatch)
     assert 2.0 <= carried <= 6.0, carried
     assert carried == pytest.approx(still, rel=0.05), (carried, still)
+
+
+def test_the_sitls_auv_states_carry_the_velocity_over_ground():
+    """``mpcasv sitl``'s 2 Hz AUV EstimatedStates: ``vx``, ``vy`` over ground (the current
+    carrying the AUV included) as DUNE's and as the world's reports; they gave the velocity
+    through the water (0 across the track in a 0.3 m/s cross current)."""
+    from types import SimpleNamespace
+
+    from mpcasv.io.sitlpublish import Publishing
+    from mpcasv.sim.world import World
+
+    w = World(_carried(0.3, 60.0), seed=0)
+    for _ in range(20):
+        w.advance(np.zeros(4))
+    nav = Publishing._nav_auv(SimpleNamespace(world=w, now=lambda: w.t), w.S, 0)
+    _, _, _, v_N, v_E = w.auv_truth(0)
+    assert abs(v_E) > 0.25  # carried across its northward track
+    assert (nav.v_N, nav.v_E) == pytest.approx((v_N, v_E), abs=1e-9)

@@ -38,9 +38,13 @@ class Publishing:
         return NavState(self.now(), N, E, 0.0, psi, u, v, r, vN, vE, math.nan, math.nan)
 
     def _nav_auv(self, S: np.ndarray, k: int) -> NavState:
+        """AUV ``k``'s state (``S`` the world's AUV states, shape (5, K)): heading and surge
+        speed through the water, ``vx``, ``vy`` over ground with the current carrying it
+        (as the world's reports, :meth:`mpcasv.sim.world.World.auv_course_over_ground`)."""
         N, E, d, psi, U = (float(a) for a in S[:, k])
-        return NavState(self.now(), N, E, d, psi, U, 0.0, 0.0, U * math.cos(psi),
-                        U * math.sin(psi), math.nan, math.nan)  # fmt: skip
+        c_N, c_E = (float(c) for c in self.world.C_auv[:, k])
+        return NavState(self.now(), N, E, d, psi, U, 0.0, 0.0, U * math.cos(psi) + c_N,
+                        U * math.sin(psi) + c_E, math.nan, math.nan)  # fmt: skip
 
     def _es(self, v: SimVehicle, nav: NavState) -> imcpy.EstimatedState:
         if v.anchor is None or math.hypot(*self._offset(v, nav)) > self.opt.reanchor_m:
@@ -104,7 +108,8 @@ class Publishing:
         """``--auv-states acoustic``, once the AUVs dived (the ASV's first Reference): each
         AUV's status reports of the world up to this tick that got through, each as its
         EstimatedState stamped at the report's time (the AUV's own navigation: the true
-        position plus its navigation error; its heading and speed, no current): what the
+        position plus its navigation error; its course and speed over ground, ``vx``, ``vy``
+        as DUNE's; ``psi`` the course too, the report carrying no heading): what the
         deploy's estimators get in place of 2 Hz states. A report made while the ASV's DUNE
         is down is lost (it would come through the ASV's modem)."""
         t_tick = self.now() - self.ts_offset
