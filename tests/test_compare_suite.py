@@ -169,9 +169,11 @@ def test_a_job_id_holds_the_content_of_the_vessel_and_execution_files(tmp_path):
     # it (the MPC's runs changed with the observer that reads the samples: an older folder's
     # MPC results are another code's and are not resumed); since session 48 the id holds the
     # world's random streams (suite.WORLD_STREAMS: common random numbers), and every id
-    # changed again (38af74da69019118 ... e8d967277ba1f95f before)
+    # changed again (38af74da69019118 ... e8d967277ba1f95f before); since session 49 with
+    # WORLD_STREAMS = 3 (the fixes' 3-D geometry, the reports over ground): 134886f18470f464
+    # ... 9539de1d2e588ca1 before
     paper = expand("paper").jobs
-    assert (paper[0].job_id, paper[-1].job_id) == ("134886f18470f464", "9539de1d2e588ca1")
+    assert (paper[0].job_id, paper[-1].job_id) == ("26443032569b1f38", "f7448e962eb6a03c")
 
 
 def test_scenario_paths_are_relative_to_the_suite_file(tmp_path):
