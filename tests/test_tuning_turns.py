@@ -108,3 +108,68 @@ def test_no_provenance_parsing_of_vessel_names_is_left():
 
     assert not hasattr(tuning_checks, "reference_vessel")
     assert math.isfinite(_bound("gretha")[0])
+
+
+def _no_work(monkeypatch):
+    """Make any design work fail the test at once (a refusal must come before it: the old
+    code ran ``--distance 1e9`` for ever)."""
+    from mpcasv.control import tuning_speed
+
+    def started(*a, **k):
+        raise AssertionError("the design started: not refused")
+
+    monkeypatch.setattr(tuning_speed, "place_speed_pi", started)
+
+
+@pytest.mark.parametrize(("argv", "words"), [
+    (["--distance", "1e9"], ["--distance 1e+09 m", "above the 1800 s cap",
+                             "at 0.4 m/s distances must be at most 660 m"]),
+    (["--distance", "50", "--u-ff", "0.01"], ["--distance 50 m", "= 5150 s, above the 1800 s",
+                                              "or give a larger --u-ff"]),
+    (["--distance", "20,5"], ["--distance 5 m", "at or inside the 5 m arrival circle",
+                              "distances must exceed 5 m"]),
+])  # fmt: skip
+def test_a_distance_outside_the_runs_bounds_is_refused_in_one_line(tmp_path, capsys,
+                                                                   monkeypatch, argv, words):
+    """``--distance 1e9`` hung (the run lasts 150 s + distance / min(u_ff, u_max), a review):
+    a turn's run is capped at TURN_RUN_MAX, refused beyond it before any work, one line,
+    exit 2; so is a distance not beyond the arrival radius, in the words the rule uses."""
+    _no_work(monkeypatch)
+    try:
+        rc = main(["tune", "speed", *argv, "--out", str(tmp_path / "o"), "--quiet"])
+    except SystemExit as exc:
+        rc = exc.code
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 2 and len(err) == 1, err
+    for w in words:
+        assert w in err[0], (w, err[0])
+
+
+def test_a_waypoint_on_the_arrival_circle_is_inside_it_everywhere(model, shipped):
+    """`--distance 5` was refused as "inside" the 5 m circle while arrival() took only
+    ``dist < 5`` for reached (a review): the edge is inside for both, one rule
+    (tuning_turns.in_circle), and turn() says it in the same words as the refusal."""
+    import numpy as np
+
+    from mpcasv.control.tuning_turns import ARRIVAL_RADIUS, arrival, turn
+
+    X = np.zeros((3, 6))
+    X[:, 1] = [9.0, ARRIVAL_RADIUS, 1.0]  # east of a waypoint at the origin
+    assert arrival(X, (0.0, 0.0))[1] == 1  # the sample on the circle has arrived
+    ep = dataclasses.replace(shipped, turn_thrust=0.0)
+    with pytest.raises(ValueError, match="waypoint 5 m: at or inside the 5 m arrival circle"):
+        turn(model, ep, math.radians(90.0), ARRIVAL_RADIUS)
+
+
+def test_the_speed_options_help_says_the_real_defaults_and_bounds(capsys):
+    """`--u-cmd-max`'s help said "the base file's own" beside a default that was not; the
+    `--distance` help gave no bound (a review). The numbers are the code's."""
+    from mpcasv.control.tuning_turns import ARRIVAL_RADIUS, TURN_RUN_MAX, TURN_T_END
+
+    with pytest.raises(SystemExit):
+        main(["tune", "speed", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert f"must exceed the {ARRIVAL_RADIUS:g} m arrival radius" in text, text
+    assert f"at most {TURN_RUN_MAX:g} s ({TURN_T_END:g} s + distance / min(u_ff, u_max))" in text
+    assert ("default: the --base file's own u_ff + k_u pi/2, 3.0976 for Gretha's shipped "
+            "file") in text, text

@@ -75,7 +75,7 @@ def _setup(args, what: str):
         if args.design_speed is None:
             args.design_speed = round(DESIGN_FRACTION * top, 4)
         tc.check_speed_limits(model, args)
-        tc.check_distances(args)
+        tc.check_distances(args, model)
         # the turns and steps run the base file's yaw loop: its T_f as if given (--T-f)
         tc.check_yaw_sampling(model, ep.yaw.T_f, f"--base {args.base}")
     check_output_folder(args.out)

@@ -148,17 +148,18 @@ def check_speed_limits(model, args: argparse.Namespace) -> None:
                           "faster loop is unstable")  # fmt: skip
 
 
-def check_distances(args: argparse.Namespace) -> None:
-    """Refuse a turn-grid ``--distance`` (m) at or inside the arrival circle
-    (:data:`mpcasv.control.tuning_turns.ARRIVAL_RADIUS`): the boat starts within it, so every
-    turn was "done" at once, 0.0 s over 0.0 m, and recommended (a review)."""
-    from mpcasv.control.tuning_turns import ARRIVAL_RADIUS
+def check_distances(args: argparse.Namespace, model) -> None:
+    """Refuse a turn-grid ``--distance`` (m) that
+    :func:`mpcasv.control.tuning_turns.distance_refusal` refuses: at or inside the arrival
+    circle, or a run longer than its cap at the grid's slowest speed ``min(u_ff, u_max)``
+    (``--distance 1e9`` ran for ever, a review)."""
+    from mpcasv.control.tuning_turns import distance_refusal
 
+    u_slow = min(min(args.u_ff), model.params.u_max)
     for d in args.distance:
-        if not d > ARRIVAL_RADIUS:
-            raise ConfigError(f"--distance {d:g} m: inside the {ARRIVAL_RADIUS:g} m arrival "
-                              "circle, where the boat starts: every turn would be done at once "
-                              f"(0 s, 0 m); give distances above {ARRIVAL_RADIUS:g} m")  # fmt: skip
+        why = distance_refusal(d, u_slow)
+        if why:
+            raise ConfigError(f"--distance {why}")
 
 
 def check_u_cmd_max(args: argparse.Namespace, ep, model) -> list[str]:
