@@ -173,3 +173,41 @@ def test_the_speed_options_help_says_the_real_defaults_and_bounds(capsys):
     assert f"at most {TURN_RUN_MAX:g} s ({TURN_T_END:g} s + distance / min(u_ff, u_max))" in text
     assert ("default: the --base file's own u_ff + k_u pi/2, 3.0976 for Gretha's shipped "
             "file") in text, text
+
+
+def _pass_and_loop(loops: float = 1.5, wp=(0.0, 30.0), rho: float = 10.0):
+    """A synthetic boat heading east straight at the waypoint ``wp`` (m), on course into the
+    5 m circle and through it, then looping ``loops`` times round the waypoint ``rho`` m
+    away (heading error 90 deg: never heading back for it)."""
+    from types import SimpleNamespace
+
+    import numpy as np
+
+    E = np.arange(0.0, wp[1] + rho, 0.1)
+    N, psi = np.zeros_like(E), np.full_like(E, np.pi / 2)
+    th = np.linspace(np.pi / 2, np.pi / 2 + 2 * np.pi * loops, 2000)[1:]
+    N = np.concatenate([N, wp[0] + rho * np.cos(th)])
+    E = np.concatenate([E, wp[1] + rho * np.sin(th)])
+    psi = np.concatenate([psi, th + np.pi / 2])  # the tangent, anticlockwise on the chart
+    X = np.zeros((len(N), 6))
+    X[:, 0], X[:, 1], X[:, 2] = N, E, psi
+    los = np.arctan2(wp[1] - E, wp[0] - N)
+    return SimpleNamespace(X=X, psi_error=(psi - los + np.pi) % (2 * np.pi) - np.pi)
+
+
+def test_the_turning_after_the_arrival_counts_from_the_first_sample_outside_the_circle():
+    """The post-arrival window started at the arrival sample itself, so the heading error
+    of that one sample decided the verdict (a review): a boat arriving on course was taken
+    as "heading back" at once, and a loop and a half round the waypoint after passing it
+    counted 0 deg. The window starts at the first sample back outside the circle."""
+    import numpy as np
+
+    from mpcasv.control.tuning_turns import PIROUETTE_TURN, arrival, circling
+
+    run = _pass_and_loop(1.5)
+    dist, n = arrival(run.X, (0.0, 30.0))
+    assert abs(run.psi_error[n]) < math.radians(1.0)  # on course at the arrival
+    c = circling(run, (0.0, 30.0), 0.0)
+    assert c > PIROUETTE_TURN, np.degrees(c)  # 1.5 loops (540 deg) + the 90 deg swing
+    assert circling(_pass_and_loop(0.5), (0.0, 30.0), 0.0) < PIROUETTE_TURN  # half a loop
+

@@ -102,11 +102,12 @@ def circling(run, wp, angle: float, radius: float = ARRIVAL_RADIUS) -> float:
     * the approach, until the first arrival within ``radius`` (the line of sight to a
       waypoint under the bow swings round as the boat passes it): every heading change made
       off course before the boat heads for it, less the commanded turn ``|angle|``;
-    * after the arrival, until the boat heads back for the waypoint: the heading change made
-      off course outside the circle. A boat that has reached the waypoint and turned back
-      towards it is not circling it, nor one that orbits inside the circle (a small hull that
-      passed it: every dune-otter turn read as a pirouette, a review), while one that loops
-      round it, passing near it each time (Gretha without eq. 3.1), is.
+    * after the arrival, from the first sample back outside the circle until the boat heads
+      back for the waypoint: the heading change made off course outside the circle. A boat
+      that has reached the waypoint and turned back towards it is not circling it, nor one
+      that orbits inside the circle (a small hull that passed it: every dune-otter turn read
+      as a pirouette, a review), while one that loops round it, passing near it each time
+      (Gretha without eq. 3.1), is.
 
     More than :data:`PIROUETTE_TURN` is a pirouette. (Until a review each stretch off course
     was counted alone, cut wherever the heading error swept through the band: a boat spinning
@@ -117,9 +118,15 @@ def circling(run, wp, angle: float, radius: float = ARRIVAL_RADIUS) -> float:
     k = np.arange(len(dpsi))
     j = headed_for(run.psi_error[:n], dist[:n], 0, radius)
     worst = float(np.sum(dpsi[(k < j) & out[:-1]])) - abs(angle)
-    if n < len(out):  # after the arrival: off course until it heads back, outside the circle
-        back = headed_for(run.psi_error, dist, n, radius)
-        sel = (k >= n) & (k < back) & out[:-1] & ~in_circle(dist[:-1], radius)
+    # after the arrival, from the first sample back outside the circle: off course until it
+    # heads back, outside the circle (from the arrival itself, the heading error of that one
+    # sample decided whether any of it counted: within 10 deg, the boat was "heading back"
+    # at once, a review)
+    again = np.flatnonzero(~in_circle(dist[n:], radius)) + n
+    if len(again):
+        o = int(again[0])
+        back = headed_for(run.psi_error, dist, o, radius)
+        sel = (k >= o) & (k < back) & out[:-1] & ~in_circle(dist[:-1], radius)
         worst = max(worst, float(np.sum(dpsi[sel])))
     return max(worst, 0.0)
 
