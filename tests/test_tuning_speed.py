@@ -450,7 +450,9 @@ def test_a_boat_spinning_through_its_heading_is_a_pirouette():
     X = np.zeros((len(t), 6))
     X[:, 1], X[:, 2] = t, np.pi / 2 + err
     weave = SimpleNamespace(X=X, psi_error=err)
-    assert circling(weave, (0.0, 30.0), math.radians(90.0)) < math.radians(30.0)
+    # commanded turn 0: with 90 deg (as until a review) the allowance for the commanded turn
+    # absorbed the wobble, and the check passed whether or not the wobble counted
+    assert circling(weave, (0.0, 30.0), 0.0) < math.radians(30.0)
 
 
 def test_a_far_waypoint_is_reached_in_a_run_as_long_as_the_distance_needs(model, shipped):
