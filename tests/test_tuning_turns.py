@@ -211,3 +211,22 @@ def test_the_turning_after_the_arrival_counts_from_the_first_sample_outside_the_
     assert c > PIROUETTE_TURN, np.degrees(c)  # 1.5 loops (540 deg) + the 90 deg swing
     assert circling(_pass_and_loop(0.5), (0.0, 30.0), 0.0) < PIROUETTE_TURN  # half a loop
 
+
+def test_no_recommendation_counts_each_pair_once():
+    """"of the 1 (u_ff, k_u) pairs ... 1 pirouetted (P) and 1 did not reach (NR)" read as
+    two pairs (a review): a pair that pirouetted in one turn and missed the waypoint in
+    another is counted once, as both; the counts add up to the pairs."""
+    from mpcasv.control.tuning_turns import TurnRow, why_none
+
+    def row(u_ff, *flags):
+        return TurnRow(u_ff=u_ff, k_u=1.0, figures={
+            a: {"pirouette": "P" in f, "reached": "NR" not in f, "turn_s": 1.0}
+            for a, f in zip((90.0, 180.0), flags, strict=True)})  # fmt: skip
+
+    one = why_none([row(0.6, "P", "NR")], 5.0)
+    assert one == ("of the 1 (u_ff, k_u) pair of the grid with u_ff + k_u pi/2 <= 5 m/s, 1 did "
+                   "both (P and NR): no recommendation"), one
+    three = why_none([row(0.4, "P", "NR"), row(0.6, "P", ""), row(0.8, "", "NR")], 5.0)
+    assert ("of the 3 (u_ff, k_u) pairs of the grid with u_ff + k_u pi/2 <= 5 m/s, 1 pirouetted "
+            "in a turn (P), 1 did not reach a waypoint within the run (NR) and 1 did both (P "
+            "and NR): no recommendation") == three, three

@@ -299,16 +299,25 @@ def recommend(rows: list[TurnRow], bound: float = math.inf) -> TurnRow:
 
 def why_none(rows: list[TurnRow], bound: float) -> str:
     """Why :func:`recommend` found no pair: of the rows :func:`admitted` under ``bound``
-    (m/s), how many pirouetted in some turn (P) and how many missed a waypoint in the run (NR).
-    The summary said "no pair of the grid reached every waypoint" when every pair had reached
-    every waypoint and pirouetted (a review)."""
+    (m/s), each counted once, how many pirouetted in some turn (P), how many missed a waypoint
+    in the run (NR), and how many did both. The summary said "no pair of the grid reached
+    every waypoint" when every pair had reached every waypoint and pirouetted, and then "of
+    the 1 (u_ff, k_u) pairs ... 1 pirouetted (P) and 1 did not reach (NR)", one pair read as
+    two (reviews)."""
     ok = admitted(rows, bound)
-    pir = sum(any(f["pirouette"] for f in r.figures.values()) for r in ok)
-    nr = sum(any(not f["reached"] for f in r.figures.values()) for r in ok)
+    both = pir = nr = 0
+    for r in ok:
+        p = any(f["pirouette"] for f in r.figures.values())
+        n = any(not f["reached"] for f in r.figures.values())
+        both, pir, nr = both + (p and n), pir + (p and not n), nr + (n and not p)
     parts = [f"{pir} pirouetted in a turn (P)"] if pir else []
     parts += [f"{nr} did not reach a waypoint within the run (NR)"] if nr else []
-    return (f"of the {len(ok)} (u_ff, k_u) pairs of the grid with u_ff + k_u pi/2 <= "
-            f"{bound:.4g} m/s, {' and '.join(parts) or 'none passed'}: no recommendation")
+    parts += [f"{both} did both (P and NR)"] if both else []
+    text = ", ".join(parts[:-1]) + (" and " if len(parts) > 1 else "") + (parts[-1] if parts
+                                                                         else "none passed")
+    pairs = "pair" if len(ok) == 1 else "pairs"
+    return (f"of the {len(ok)} (u_ff, k_u) {pairs} of the grid with u_ff + k_u pi/2 <= "
+            f"{bound:.4g} m/s, {text}: no recommendation")
 
 
 def edge_notes(best: TurnRow, rows: list[TurnRow], bound: float) -> list[str]:
