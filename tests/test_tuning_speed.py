@@ -129,13 +129,8 @@ def test_set_reference_writes_no_k_u_above_the_bound(tmp_path, capsys):
 def test_tune_speed_runs_on_third_party_hulls(tmp_path, capsys, vessel):
     """Acceptance of issue 13: `mpcasv tune speed` on the Otter and CyberShip II files, no
     traceback, honest margins (exit 0 = pass, 1 = acceptance FAIL; never an exception)."""
-    from mpcasv.models.params import load_vessel
-
-    # k_u holding u_ff + k_u pi/2 at the hull's top speed, as the thesis held Gretha's at hers
-    # (the default --u-cmd-max of a vessel whose own eq. 3.1 pair the base does not hold)
-    k_u = (load_vessel(CASES / "vessels" / vessel).u_max - 0.6) / (math.pi / 2)
     rc = main(["tune", "speed", "--vessel", str(CASES / "vessels" / vessel), "--out",
-               str(tmp_path), "--u-ff", "0.6", "--k-u", f"{k_u:.4f}", "--distance", "50",
+               str(tmp_path), "--u-ff", "0.6", "--k-u", "1.59", "--distance", "50",
                "--quiet"])  # fmt: skip
     out = capsys.readouterr().out
     assert rc in (0, 1) and "loop margins" in out
@@ -455,7 +450,9 @@ def test_a_boat_spinning_through_its_heading_is_a_pirouette():
     X = np.zeros((len(t), 6))
     X[:, 1], X[:, 2] = t, np.pi / 2 + err
     weave = SimpleNamespace(X=X, psi_error=err)
-    assert circling(weave, (0.0, 30.0), math.radians(90.0)) < math.radians(30.0)
+    # commanded turn 0: with 90 deg (as until a review) the allowance for the commanded turn
+    # absorbed the wobble, and the check passed whether or not the wobble counted
+    assert circling(weave, (0.0, 30.0), 0.0) < math.radians(30.0)
 
 
 def test_a_far_waypoint_is_reached_in_a_run_as_long_as_the_distance_needs(model, shipped):
@@ -474,11 +471,12 @@ def test_a_far_waypoint_is_reached_in_a_run_as_long_as_the_distance_needs(model,
         turn(model, ep, math.radians(90.0), 0.6 * ARRIVAL_RADIUS)
 
 
-def test_another_vessels_bound_is_its_own_and_the_arrival_radius_is_stated(tmp_path, capsys):
-    """`tune speed --vessel dune-otter` bounded u_ff + k_u pi/2 by the base file's (Gretha's)
-    3.0976 m/s, and its speed.md said "within 5 m" as if 5 m were the boat's (a review): the
-    bound defaults to the vessel's own top speed u_max when the base's [reference] is
-    another vessel's, and says so; the 5 m is stated as fixed, beside the hull length."""
+def test_the_bound_is_the_base_files_own_and_says_so_and_the_radius_is_stated(tmp_path,
+                                                                              capsys):
+    """`tune speed --vessel dune-otter` bounds u_ff + k_u pi/2 by the base file's (Gretha's)
+    3.0976 m/s, as before a review's default from vessel names parsed out of the provenance
+    (it refused working commands): speed.md and stderr say where the bound came from; the
+    5 m arrival radius is stated as fixed, beside the hull length."""
     from mpcasv.models.params import load_vessel
 
     P = load_vessel("dune-otter")
@@ -487,15 +485,9 @@ def test_another_vessels_bound_is_its_own_and_the_arrival_radius_is_stated(tmp_p
                "--quiet"])  # fmt: skip
     cap = capsys.readouterr()
     md = (tmp_path / "o" / "speed.md").read_text()
-    bound = f"u_ff + k_u pi/2 <= {P.u_max:.4g} m/s (--u-cmd-max)"
-    assert rc == 0 and bound in md, md
-    assert f"dune-otter's top speed u_max = {round(P.u_max, 4):g} m/s" in cap.err, cap.err
+    origin = ("--u-cmd-max defaulted to the --base file's own u_ff + k_u pi/2 = 3.0976 m/s "
+              "(--base gretha: u_ff = 0.6, k_u = 1.59 m/s); for another hull pass --u-cmd-max")
+    assert rc == 0 and "u_ff + k_u pi/2 <= 3.098 m/s (--u-cmd-max)" in md, md
+    assert f"- {origin}" in md and f"mpcasv tune: note: {origin}" in cap.err, cap.err
+    assert "below --u-cmd-max" not in cap.err  # dune-otter's u_max 3.48 m/s is above it
     assert f"a fixed radius for every vessel; dune-otter is {P.L:g} m long" in md
-    from mpcasv.control.params import load_execution
-    from mpcasv.control.tuning_checks import reference_vessel
-
-    assert reference_vessel(load_execution("gretha").provenance) == "gretha"
-    # Gretha's own: the base file's bound, as before
-    rc = main(["tune", "speed", "--speeds", "1", "--u-ff", "0.6", "--k-u", "1.59",
-               "--distance", "50", "--out", str(tmp_path / "g"), "--quiet"])  # fmt: skip
-    assert rc == 0 and "u_ff + k_u pi/2 <= 3.098 m/s" in capsys.readouterr().out

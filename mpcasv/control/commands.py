@@ -130,20 +130,23 @@ def register(sub: argparse._SubParsersAction) -> None:
         type=_floats,
         default=_floats("10,20,50"),
         help="waypoint distances of the turns, m (default 10,20,50: 10 m is inside the "
-        "full-power turning circle, where turning while accelerating pirouettes)",
+        "full-power turning circle, where turning while accelerating pirouettes); each must "
+        "exceed the 5 m arrival radius, and a turn may run at most 1800 s (150 s + distance / "
+        "min(u_ff, u_max))",
     )
     s.add_argument(
         "--u-cmd-max",
         type=float,
         help="bound on eq. 3.1's largest command u_ff + k_u pi/2 for the recommendation, m/s "
-        "(default: the base file's own, 3.1 for Gretha: the thesis held it at the rated "
-        "maximum speed, section 3.4.1); grid pairs above it are not recommended",
+        "(default: the --base file's own u_ff + k_u pi/2, 3.0976 for Gretha's shipped file: "
+        "the thesis held it at the rated maximum speed, section 3.4.1; the same for every "
+        "--vessel: for another hull pass it); grid pairs above it are not recommended",
     )
     s.add_argument(
         "--set-reference",
         action="store_true",
         help="write the recommended (u_ff, k_u) into the TOML (default: keep the "
-        "base file's, i.e. the field tuning)",
+        "base file's: for the shipped one, the field tuning)",
     )
     _common(s)
     s.set_defaults(func=run_tune_speed)

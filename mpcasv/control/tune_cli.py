@@ -75,7 +75,7 @@ def _setup(args, what: str):
         if args.design_speed is None:
             args.design_speed = round(DESIGN_FRACTION * top, 4)
         tc.check_speed_limits(model, args)
-        tc.check_distances(args)
+        tc.check_distances(args, model)
         # the turns and steps run the base file's yaw loop: its T_f as if given (--T-f)
         tc.check_yaw_sampling(model, ep.yaw.T_f, f"--base {args.base}")
     check_output_folder(args.out)
@@ -215,7 +215,7 @@ def run_tune_speed(args: argparse.Namespace) -> int:
     )  # fmt: skip
 
     model, ep, toml = _setup(args, "speed")
-    bound_note = check_u_cmd_max(args, ep, model)
+    bound_notes = check_u_cmd_max(args, ep, model)  # where the bound came from
     args.out.mkdir(parents=True, exist_ok=True)
     g = place_speed_pi(model, args.design_speed, args.w, args.zeta)
     ep_new = replace(ep, speed=g)
@@ -272,10 +272,15 @@ def run_tune_speed(args: argparse.Namespace) -> int:
             prov, "reference", f"{_command_line(args, 'tune speed')}: recommended by the turn grid"
         )
     elif "reference: " not in prov or "reference: field tuning" in prov:
+        # "field tuning" only for the shipped values: a [reference] of unknown origin was
+        # labelled so, and read as Gretha's next time (a review)
+        field = ep.reference == SpeedReference()
         prov = _provenance(
             prov,
             "reference",
-            "field tuning, thesis §3.4.1 (kept; the turn grid "
+            ("field tuning, thesis §3.4.1 (kept; the turn grid " if field else
+             f"kept from --base {args.base}, origin not recorded (u_ff = {ep.reference.u_ff:g}, "
+             f"k_u = {ep.reference.k_u:g} m/s; the turn grid ")
             + (f"of mpcasv tune speed recommends u_ff={best.u_ff}, k_u={best.k_u} within "
                f"u_cmd,max <= {args.u_cmd_max:.4g} m/s)" if best
                else f"of mpcasv tune speed recommends none: {none_reason})"),
@@ -293,7 +298,7 @@ def run_tune_speed(args: argparse.Namespace) -> int:
                    f"{model.params.name}: waypoint {d:g} m at {a:g} deg, from {u0:g} m/s, "
                    f"command u_max = {model.params.u_max:g} m/s")  # fmt: skip
     text_tables = speed_tables(g, loop, grids, best, steps, limits, args.u_cmd_max,
-                               [*notes, *([bound_note] if bound_note else [])],
+                               [*notes, *bound_notes],
                                (model.params.name, model.params.L))  # fmt: skip
     (args.out / "speed.md").write_text(text_tables + "\n")
     print(text_tables)
@@ -307,8 +312,8 @@ def run_tune_speed(args: argparse.Namespace) -> int:
         + ("PASS" if not unsettled else f"FAIL: {', '.join(unsettled)}")
     )
     print(_steps_summary(steps))
-    if bound_note:  # the bound is not the base file's own: say whose it is
-        print(f"mpcasv tune: note: {bound_note}", file=sys.stderr)
+    for note in bound_notes:  # where the bound came from, every run (speed.md too)
+        print(f"mpcasv tune: note: {note}", file=sys.stderr)
     for note in notes:  # the optimum on the grid's edge: say so where it is seen
         if "beyond it" in note:
             print(f"mpcasv tune: warning: recommended {note}", file=sys.stderr)

@@ -148,61 +148,49 @@ def check_speed_limits(model, args: argparse.Namespace) -> None:
                           "faster loop is unstable")  # fmt: skip
 
 
-def check_distances(args: argparse.Namespace) -> None:
-    """Refuse a turn-grid ``--distance`` (m) at or inside the arrival circle
-    (:data:`mpcasv.control.tuning_turns.ARRIVAL_RADIUS`): the boat starts within it, so every
-    turn was "done" at once, 0.0 s over 0.0 m, and recommended (a review)."""
-    from mpcasv.control.tuning_turns import ARRIVAL_RADIUS
+def check_distances(args: argparse.Namespace, model) -> None:
+    """Refuse a turn-grid ``--distance`` (m) that
+    :func:`mpcasv.control.tuning_turns.distance_refusal` refuses: at or inside the arrival
+    circle, or a run longer than its cap at the grid's slowest speed ``min(u_ff, u_max)``
+    (``--distance 1e9`` ran for ever, a review)."""
+    from mpcasv.control.tuning_turns import distance_refusal
 
+    u_slow = min(min(args.u_ff), model.params.u_max)
     for d in args.distance:
-        if not d > ARRIVAL_RADIUS:
-            raise ConfigError(f"--distance {d:g} m: inside the {ARRIVAL_RADIUS:g} m arrival "
-                              "circle, where the boat starts: every turn would be done at once "
-                              f"(0 s, 0 m); give distances above {ARRIVAL_RADIUS:g} m")  # fmt: skip
+        why = distance_refusal(d, u_slow)
+        if why:
+            raise ConfigError(f"--distance {why}")
 
 
-def reference_vessel(provenance: str) -> str | None:
-    """Whose eq. 3.1 pair an execution file's ``[reference]`` is, from its provenance: Gretha's
-    for the thesis's field tuning, the ``--vessel`` of the ``mpcasv tune speed
-    --set-reference`` that wrote it, None if the provenance does not say."""
-    import shlex
-
-    for part in provenance.split(" | "):
-        if part.startswith("reference: field tuning"):
-            return "gretha"
-        if part.startswith("reference: mpcasv tune speed "):
-            try:
-                words = shlex.split(part[len("reference: "):].split(": ", 1)[0])
-            except ValueError:
-                return None
-            return words[words.index("--vessel") + 1] if "--vessel" in words[:-1] else None
-    return None
-
-
-def check_u_cmd_max(args: argparse.Namespace, ep, model) -> str | None:
+def check_u_cmd_max(args: argparse.Namespace, ep, model) -> list[str]:
     """Default ``--u-cmd-max`` (m/s), the bound on eq. 3.1's largest command
-    ``u_ff + k_u pi/2``, and refuse a grid none of whose pairs is within it (one line, before
-    any work). The default is the base file's own ``u_ff + k_u pi/2`` when its ``[reference]``
-    is this vessel's (the thesis kept ``u_cmd,max`` at the rated top speed when it changed
-    ``u_ff``, §3.4.1: Gretha's 3.0976 m/s), else the vessel's own top speed ``u_max``: the
-    base defaults to Gretha's file, and her bound was used for every ``--vessel`` (a review).
-    Returns the words on where a default not the base's own came from (None otherwise)."""
+    ``u_ff + k_u pi/2``, to the ``--base`` file's own (the thesis kept ``u_cmd,max`` at the
+    rated top speed when it changed ``u_ff``, §3.4.1: 3.0976 m/s for Gretha's field pair), and
+    refuse a grid none of whose pairs is within it (one line, before any work).
+
+    Returns the notes on the bound, for stderr and speed.md: where a default came from (the
+    base file's own, which for another hull may be another vessel's: pass ``--u-cmd-max``),
+    and when the vessel's top speed ``u_max`` is below it (the execution level caps the
+    reference there). The base's [reference] is not attributed to a vessel: a default taken
+    from names parsed out of the provenance refused working commands (a review)."""
     from mpcasv.control.tuning_turns import u_cmd_max, within
 
-    note = None
-    if args.u_cmd_max is None:
-        own = reference_vessel(ep.provenance)
+    notes, defaulted = [], args.u_cmd_max is None
+    if defaulted:
         args.u_cmd_max = round(u_cmd_max(ep.reference.u_ff, ep.reference.k_u), 4)
-        if own is not None and own not in (str(args.vessel), model.params.name):
-            base = args.u_cmd_max
-            args.u_cmd_max = round(model.params.u_max, 4)
-            note = (f"--u-cmd-max defaults to {model.params.name}'s top speed u_max = "
-                    f"{args.u_cmd_max:g} m/s: the [reference] of --base {args.base} is "
-                    f"{own}'s (u_ff + k_u pi/2 = {base:g} m/s)")  # fmt: skip
+        notes.append(f"--u-cmd-max defaulted to the --base file's own u_ff + k_u pi/2 = "
+                     f"{args.u_cmd_max:g} m/s (--base {args.base}: u_ff = {ep.reference.u_ff:g}"
+                     f", k_u = {ep.reference.k_u:g} m/s); for another hull pass "
+                     "--u-cmd-max")  # fmt: skip
+    P = model.params
+    if P.u_max < args.u_cmd_max:
+        notes.append(f"{P.name}'s top speed u_max = {P.u_max:g} m/s is below --u-cmd-max "
+                     f"{args.u_cmd_max:g} m/s: the execution level caps the speed reference "
+                     "at u_max, so commands above it are not run")  # fmt: skip
     low = min(u_cmd_max(a, b) for a in args.u_ff for b in args.k_u)
     if not any(within(a, b, args.u_cmd_max) for a in args.u_ff for b in args.k_u):
         raise ConfigError(f"--u-ff {_text(args.u_ff)} --k-u {_text(args.k_u)}: every pair has "
                           f"u_ff + k_u pi/2 above --u-cmd-max {args.u_cmd_max:g} m/s (least "
                           f"{low:.4g} m/s): no pair of the grid may be recommended"
-                          + (f" ({note})" if note else ""))  # fmt: skip
-    return note
+                          + (f" ({notes[0]})" if defaulted else ""))  # fmt: skip
+    return notes

@@ -18,6 +18,7 @@ from mpcasv.control.tuning_speed import (
     TURN_BAND,
     TURN_T_END,
     arrival,
+    in_circle,
     u_cmd_max,
     within,
 )  # fmt: skip
@@ -335,7 +336,7 @@ def _circling(dist: np.ndarray, n: int | None, R: float = ARRIVAL_RADIUS) -> np.
     came within ``R`` (``n`` None); empty if it stayed inside to the end."""
     if n is None:
         return dist
-    again = np.nonzero(dist[n - 1:] >= R)[0]
+    again = np.nonzero(~in_circle(dist[n - 1:], R))[0]
     return dist[n - 1 + again[0]:] if len(again) else dist[:0]
 
 

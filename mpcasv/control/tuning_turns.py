@@ -45,6 +45,16 @@ PIROUETTE_TURN = 2 * math.pi
 #: time (s) :func:`turn` allows for the turn itself (the fixed run length until a review; the
 #: default grid's slowest turn is done in 89 s); :func:`turn_time` adds the straight run
 TURN_T_END = 150.0
+#: longest run (s) of a turn (:func:`turn_time`): a ``--distance`` or ``--u-ff`` asking for
+#: more is refused (:func:`distance_refusal`); ``--distance 1e9`` ran for ever (a review)
+TURN_RUN_MAX = 1800.0
+
+
+def in_circle(dist, radius: float = ARRIVAL_RADIUS):
+    """Whether a distance ``dist`` (m, array or number) from the waypoint is within the
+    arrival circle of ``radius`` m, its edge included: the one definition of "inside" for
+    :func:`arrival`, the pirouette rule and the refusal of a ``--distance`` not beyond it."""
+    return dist <= radius
 
 
 def arrival(X: np.ndarray, wp, radius: float = ARRIVAL_RADIUS) -> tuple[np.ndarray, int]:
@@ -52,7 +62,7 @@ def arrival(X: np.ndarray, wp, radius: float = ARRIVAL_RADIUS) -> tuple[np.ndarr
     waypoint ``wp`` and the index of the first within ``radius`` m (``n`` if none): the one
     definition of "reached" for the turns, their rule and their plots."""
     dist = np.hypot(X[:, 0] - wp[0], X[:, 1] - wp[1])
-    near = dist < radius
+    near = in_circle(dist, radius)
     return dist, int(np.argmax(near)) if near.any() else len(dist)
 
 
@@ -69,7 +79,7 @@ def headed_for(psi_e: np.ndarray, dist: np.ndarray, start: int, radius: float) -
     err = np.abs(psi_e)
     on, closing = err <= TURN_BAND, err < math.pi / 2  # a non-finite error is neither
     m = len(err)
-    inside = np.flatnonzero(dist[start:] < radius) + start
+    inside = np.flatnonzero(in_circle(dist[start:], radius)) + start
     i = start
     while i < m:
         if not on[i]:
@@ -92,11 +102,12 @@ def circling(run, wp, angle: float, radius: float = ARRIVAL_RADIUS) -> float:
     * the approach, until the first arrival within ``radius`` (the line of sight to a
       waypoint under the bow swings round as the boat passes it): every heading change made
       off course before the boat heads for it, less the commanded turn ``|angle|``;
-    * after the arrival, until the boat heads back for the waypoint: the heading change made
-      off course outside the circle. A boat that has reached the waypoint and turned back
-      towards it is not circling it, nor one that orbits inside the circle (a small hull that
-      passed it: every dune-otter turn read as a pirouette, a review), while one that loops
-      round it, passing near it each time (Gretha without eq. 3.1), is.
+    * after the arrival, from the first sample back outside the circle until the boat heads
+      back for the waypoint: the heading change made off course outside the circle. A boat
+      that has reached the waypoint and turned back towards it is not circling it, nor one
+      that orbits inside the circle (a small hull that passed it: every dune-otter turn read
+      as a pirouette, a review), while one that loops round it, passing near it each time
+      (Gretha without eq. 3.1), is.
 
     More than :data:`PIROUETTE_TURN` is a pirouette. (Until a review each stretch off course
     was counted alone, cut wherever the heading error swept through the band: a boat spinning
@@ -107,11 +118,37 @@ def circling(run, wp, angle: float, radius: float = ARRIVAL_RADIUS) -> float:
     k = np.arange(len(dpsi))
     j = headed_for(run.psi_error[:n], dist[:n], 0, radius)
     worst = float(np.sum(dpsi[(k < j) & out[:-1]])) - abs(angle)
-    if n < len(out):  # after the arrival: off course until it heads back, outside the circle
-        back = headed_for(run.psi_error, dist, n, radius)
-        sel = (k >= n) & (k < back) & out[:-1] & (dist[:-1] >= radius)
+    # after the arrival, from the first sample back outside the circle: off course until it
+    # heads back, outside the circle (from the arrival itself, the heading error of that one
+    # sample decided whether any of it counted: within 10 deg, the boat was "heading back"
+    # at once, a review)
+    again = np.flatnonzero(~in_circle(dist[n:], radius)) + n
+    if len(again):
+        o = int(again[0])
+        back = headed_for(run.psi_error, dist, o, radius)
+        sel = (k >= o) & (k < back) & out[:-1] & ~in_circle(dist[:-1], radius)
         worst = max(worst, float(np.sum(dpsi[sel])))
     return max(worst, 0.0)
+
+
+def distance_refusal(distance: float, u_slow: float | None = None,
+                     radius: float = ARRIVAL_RADIUS) -> str | None:  # fmt: skip
+    """Why a turn to a waypoint ``distance`` m away cannot be run (None if it can), the one
+    rule and message of :func:`turn` and ``--distance``'s refusal: at or inside the arrival
+    circle of ``radius`` m (:func:`in_circle`), where the boat starts, so every turn is
+    reached at once (0.0 s over 0.0 m, and recommended, a review); or, with ``u_slow`` the
+    run's slowest speed (m/s, ``min(u_ff, u_max)``), a run (:func:`turn_time`) longer than
+    :data:`TURN_RUN_MAX`."""
+    if in_circle(distance, radius):
+        return (f"{distance:g} m: at or inside the {radius:g} m arrival circle, where the boat "
+                "starts: every turn would be reached at once (0 s, 0 m); distances must exceed "
+                f"{radius:g} m")  # fmt: skip
+    if u_slow is not None and TURN_T_END + distance / u_slow > TURN_RUN_MAX:
+        return (f"{distance:g} m: a turn would run {TURN_T_END:g} s + {distance:g} m / "
+                f"{u_slow:g} m/s (min(u_ff, u_max)) = {TURN_T_END + distance / u_slow:.4g} s, "
+                f"above the {TURN_RUN_MAX:g} s cap; at {u_slow:g} m/s distances must be at most "
+                f"{(TURN_RUN_MAX - TURN_T_END) * u_slow:.4g} m (or give a larger --u-ff)")
+    return None
 
 
 def turn_time(model: VesselModel, ep: ExecutionParams, distance: float) -> float:
@@ -119,7 +156,7 @@ def turn_time(model: VesselModel, ep: ExecutionParams, distance: float) -> float
     for the turn, plus the straight run to the waypoint at the slowest speed eq. 3.1 asks
     for, ``min(u_ff, u_max)`` (m/s; ``u_cmd = u_ff`` from ``|psi_e| >= pi/2``). With a fixed
     150 s a waypoint 400 m away was "not reached" (NR) by every pair: a property of the run,
-    not of the tuning (a review)."""
+    not of the tuning (a review). At most :data:`TURN_RUN_MAX` (:func:`distance_refusal`)."""
     return TURN_T_END + distance / min(ep.reference.u_ff, model.params.u_max)
 
 
@@ -139,13 +176,14 @@ def turn(model: VesselModel, ep: ExecutionParams, angle: float, distance: float,
     (``inf`` if neither within ``t_end``); whether and when (s) it reached that circle; the
     heading change (deg) until the turn was done; :func:`circling` (deg) and whether it
     pirouetted (more than :data:`PIROUETTE_TURN`); the least surge speed (m/s) until the turn
-    was done; the radius (m) and run length (s) used. ValueError for a waypoint within
-    ``radius`` at the start (it was "reached" in 0.0 s over 0.0 m, a review).
+    was done; the radius (m) and run length (s) used. ValueError for a waypoint
+    :func:`distance_refusal` refuses (the run length only when ``t_end`` is not given).
     """
     radius = ARRIVAL_RADIUS if radius is None else radius
-    if not distance > radius:
-        raise ValueError(f"waypoint {distance:g} m away: inside the {radius:g} m arrival circle "
-                         "at the start, so every turn is done at once")  # fmt: skip
+    u_slow = min(ep.reference.u_ff, model.params.u_max) if t_end is None else None
+    why = distance_refusal(distance, u_slow, radius)
+    if why:
+        raise ValueError(f"waypoint {why}")
     from mpcasv.control.tuning_speed import trim_integrator
 
     t_end = turn_time(model, ep, distance) if t_end is None else t_end
@@ -261,16 +299,25 @@ def recommend(rows: list[TurnRow], bound: float = math.inf) -> TurnRow:
 
 def why_none(rows: list[TurnRow], bound: float) -> str:
     """Why :func:`recommend` found no pair: of the rows :func:`admitted` under ``bound``
-    (m/s), how many pirouetted in some turn (P) and how many missed a waypoint in the run (NR).
-    The summary said "no pair of the grid reached every waypoint" when every pair had reached
-    every waypoint and pirouetted (a review)."""
+    (m/s), each counted once, how many pirouetted in some turn (P), how many missed a waypoint
+    in the run (NR), and how many did both. The summary said "no pair of the grid reached
+    every waypoint" when every pair had reached every waypoint and pirouetted, and then "of
+    the 1 (u_ff, k_u) pairs ... 1 pirouetted (P) and 1 did not reach (NR)", one pair read as
+    two (reviews)."""
     ok = admitted(rows, bound)
-    pir = sum(any(f["pirouette"] for f in r.figures.values()) for r in ok)
-    nr = sum(any(not f["reached"] for f in r.figures.values()) for r in ok)
+    both = pir = nr = 0
+    for r in ok:
+        p = any(f["pirouette"] for f in r.figures.values())
+        n = any(not f["reached"] for f in r.figures.values())
+        both, pir, nr = both + (p and n), pir + (p and not n), nr + (n and not p)
     parts = [f"{pir} pirouetted in a turn (P)"] if pir else []
     parts += [f"{nr} did not reach a waypoint within the run (NR)"] if nr else []
-    return (f"of the {len(ok)} (u_ff, k_u) pairs of the grid with u_ff + k_u pi/2 <= "
-            f"{bound:.4g} m/s, {' and '.join(parts) or 'none passed'}: no recommendation")
+    parts += [f"{both} did both (P and NR)"] if both else []
+    text = ", ".join(parts[:-1]) + (" and " if len(parts) > 1 else "") + (parts[-1] if parts
+                                                                         else "none passed")
+    pairs = "pair" if len(ok) == 1 else "pairs"
+    return (f"of the {len(ok)} (u_ff, k_u) {pairs} of the grid with u_ff + k_u pi/2 <= "
+            f"{bound:.4g} m/s, {text}: no recommendation")
 
 
 def edge_notes(best: TurnRow, rows: list[TurnRow], bound: float) -> list[str]:
