@@ -12,6 +12,7 @@ import math
 from collections.abc import Callable
 from typing import Protocol
 
+from mpcasv.estimation.depth import DepthFilter
 from mpcasv.interface import AUVEstimate
 from mpcasv.models.acoustics import Fix, Report
 
@@ -59,24 +60,33 @@ class StationaryEstimator:
     """The last fix or report, held constant in between (the thesis's field trial, Case 5).
 
     The covariance is that of the last measurement; it does not grow, which is exactly the
-    weakness the Kalman filter addresses.
+    weakness the Kalman filter addresses. The depth is the Kalman filter's
+    (:class:`~mpcasv.estimation.depth.DepthFilter`, default tuning): a fix's USBL depth
+    (1.7 m off at 100 m, 7 m at 400 m) is weighed against the reports' pressure depths, not
+    copied.
     """
 
     name = "acoustic"
 
     def __init__(self, initial: AUVEstimate | None = None) -> None:
         self._est = initial or AUVEstimate(math.nan, math.nan, 0.0)
+        self._depth = DepthFilter()
+        if initial is not None and math.isfinite(initial.depth):
+            t0 = initial.t_last_fix if math.isfinite(initial.t_last_fix) else 0.0
+            self._depth.start(t0, initial.depth, self._depth.sigma_report**2)
 
     def on_truth(self, t, N, E, depth, v_N, v_E) -> None:
         pass
 
     def on_fix(self, fix: Fix) -> None:
-        self._est = AUVEstimate(fix.N, fix.E, fix.depth, 0.0, 0.0, fix.cov, fix.t)
+        self._depth.measure(fix.t, fix.depth, fix.depth_var)
+        self._est = AUVEstimate(fix.N, fix.E, self._depth.depth, 0.0, 0.0, fix.cov, fix.t)
 
     def on_report(self, report: Report) -> None:
         s2 = report.nav_sigma**2
+        self._depth.report(report.t, report.depth)
         self._est = AUVEstimate(
-            report.N, report.E, report.depth, 0.0, 0.0, (s2, 0.0, 0.0, s2), report.t
+            report.N, report.E, self._depth.depth, 0.0, 0.0, (s2, 0.0, 0.0, s2), report.t
         )
 
     def estimate(self, t: float) -> AUVEstimate:

@@ -1,6 +1,8 @@
 """A nearly-constant-velocity Kalman filter per AUV, on USBL fixes and acoustic status reports.
 
-State ``x = [N, E, v_N, v_E]`` (m, m/s), horizontal only; depth is the last measured depth.
+State ``x = [N, E, v_N, v_E]`` (m, m/s), horizontal; the depth has its own filter
+(:class:`mpcasv.estimation.depth.DepthFilter`: the reports' pressure depths and the fixes'
+USBL depths, each weighted by its variance).
 
 Motion model (per horizontal axis, white-noise acceleration of power spectral density ``q``,
 m^2/s^3). With ``tau_v = inf`` it is the constant-velocity (CV) model; with a finite
@@ -40,6 +42,7 @@ import math
 import numpy as np
 
 from mpcasv.config import Flag, NonNeg, Pos, PosOrInf, frozen
+from mpcasv.estimation.depth import DepthFilter
 from mpcasv.interface import AUVEstimate
 from mpcasv.models.acoustics import Fix, Report
 
@@ -76,6 +79,15 @@ class KalmanParams:
         Noise of the reported heading, 1 sigma (deg): heading vs course over ground.
     report_velocity : bool
         Use the reports' heading and speed (False: position only).
+    q_depth : float
+        Vertical-acceleration power spectral density of the depth filter (m^2/s^3;
+        :class:`~mpcasv.estimation.depth.DepthFilter`): ``sqrt(q T) = 0.12`` m/s over a
+        30-s report interval.
+    sigma_w0 : float
+        1-sigma of the vertical speed before it is measured (m/s): an LAUV's vertical speed
+        limit (the domains' ``w_max``).
+    sigma_depth : float
+        Noise of a report's (pressure sensor) depth, 1 sigma (m).
     """
 
     q: Pos = 0.01
@@ -85,6 +97,9 @@ class KalmanParams:
     sigma_speed: NonNeg = 0.1
     sigma_heading_deg: NonNeg = 5.0
     report_velocity: Flag = True
+    q_depth: Pos = 5e-4
+    sigma_w0: NonNeg = 0.5
+    sigma_depth: Pos = 0.1
 
 
 def cv_model(dt: float, q: float, tau_v: float = math.inf) -> tuple[np.ndarray, np.ndarray]:
@@ -143,12 +158,12 @@ class KalmanEstimator:
         self.x = np.full(4, math.nan)
         self.P = np.full((4, 4), math.nan)
         self.t = math.nan  # time of x, P
-        self.depth = math.nan
+        p = self.params
+        self.depth_filter = DepthFilter(p.q_depth, p.sigma_w0, p.sigma_depth)
         self.t_last = -math.inf  # time of the last measurement
         self.nis: float = math.nan  # normalised innovation squared of the last update
         self.n_updates = 0
         if initial is not None and math.isfinite(initial.N) and math.isfinite(initial.E):
-            p = self.params
             self.x = np.array([initial.N, initial.E, initial.v_N, initial.v_E], float)
             self.P = np.zeros((4, 4))
             self.P[:2, :2] = np.reshape(initial.cov, (2, 2))
@@ -156,7 +171,14 @@ class KalmanEstimator:
             self.P[2:, 2:] = p.sigma_v0**2 * np.eye(2)
             self.t = initial.t_last_fix if math.isfinite(initial.t_last_fix) else 0.0
             self.t_last = initial.t_last_fix
-            self.depth = initial.depth
+        if initial is not None and math.isfinite(initial.depth):  # known: as a report's
+            t0 = initial.t_last_fix if math.isfinite(initial.t_last_fix) else 0.0
+            self.depth_filter.start(t0, initial.depth, p.sigma_depth**2)
+
+    @property
+    def depth(self) -> float:
+        """The depth estimate (m; NaN before any depth)."""
+        return self.depth_filter.depth
 
     @property
     def initialised(self) -> bool:
@@ -169,7 +191,8 @@ class KalmanEstimator:
 
     def on_fix(self, fix: Fix) -> None:
         R = np.reshape(fix.cov, (2, 2))
-        self._measure(fix.t, np.array([fix.N, fix.E]), R, fix.depth, velocity=False)
+        self._measure(fix.t, np.array([fix.N, fix.E]), R, velocity=False)
+        self.depth_filter.measure(fix.t, fix.depth, fix.depth_var)
 
     def on_report(self, report: Report) -> None:
         p = self.params
@@ -178,7 +201,8 @@ class KalmanEstimator:
             zv, Rv = report_velocity(report, p.sigma_speed, math.radians(p.sigma_heading_deg))
             z = np.concatenate([z, zv])
             R = np.block([[R, np.zeros((2, 2))], [np.zeros((2, 2)), Rv]])
-        self._measure(report.t, z, R, report.depth, velocity=p.report_velocity)
+        self._measure(report.t, z, R, velocity=p.report_velocity)
+        self.depth_filter.report(report.t, report.depth)
 
     # -- filter ---------------------------------------------------------------------------
 
@@ -196,7 +220,7 @@ class KalmanEstimator:
         H = np.eye(4)[: len(z)]
         return z - H @ x, H @ P @ H.T + R, H, x, P
 
-    def _measure(self, t: float, z: np.ndarray, R: np.ndarray, depth: float, velocity: bool):
+    def _measure(self, t: float, z: np.ndarray, R: np.ndarray, velocity: bool):
         if not self.initialised:
             self._start(t, z, R)
         else:
@@ -209,7 +233,6 @@ class KalmanEstimator:
             self.nis = float(nu @ np.linalg.solve(S, nu))
         self.t = t
         self.t_last = max(self.t_last, t)
-        self.depth = depth
         self.n_updates += 1
 
     def _start(self, t: float, z: np.ndarray, R: np.ndarray) -> None:

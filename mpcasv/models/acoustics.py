@@ -118,7 +118,11 @@ def success_probability(slant, propeller_on, p: AcousticParams):
 
 @dataclass(frozen=True, slots=True)
 class Fix:
-    """A USBL fix of AUV ``auv`` at time ``t``: measured position and its covariance."""
+    """A USBL fix of AUV ``auv`` at time ``t``: measured position and its covariance.
+
+    ``depth`` is the USBL's (the 3-D fix's vertical part, as DUNE's ``UsblFixExtended``),
+    ``depth_var`` its variance (m^2; ``J[2] @ J[2]`` of (U1): ``sigma_b r_h`` is 1.7 m at
+    100 m, 7 m at 400 m); NaN: not known (the estimators then use the depth only to start)."""
 
     t: float
     auv: int
@@ -127,6 +131,7 @@ class Fix:
     depth: float
     cov: tuple[float, float, float, float]
     slant: float
+    depth_var: float = math.nan
 
 
 @dataclass(frozen=True, slots=True)
@@ -175,7 +180,8 @@ def usbl_covariance(asv_NE, auv_NEd, p: AcousticParams) -> tuple[np.ndarray, flo
 
 def usbl_fix(t, auv, asv_NE, auv_NEd, p: AcousticParams, z) -> Fix:
     """A USBL fix of AUV ``auv`` at ``auv_NEd`` from the ASV at ``asv_NE``: the position plus
-    ``J z`` (U1), with the horizontal covariance (U2) of the same ``J``.
+    ``J z`` (U1), with the horizontal covariance (U2) of the same ``J`` and the depth's
+    variance (its vertical row's ``J[2] @ J[2]``).
 
     ``z``: shape (3,), standard normals drawn by the caller (the simulator's ping stream,
     :mod:`mpcasv.sim.streams`): the range error, the angle error across the line of sight
@@ -186,4 +192,5 @@ def usbl_fix(t, auv, asv_NE, auv_NEd, p: AcousticParams, z) -> Fix:
     return Fix(
         t, auv, float(auv_NEd[0] + e[0]), float(auv_NEd[1] + e[1]), float(auv_NEd[2] + e[2]),
         (float(R[0, 0]), float(R[0, 1]), float(R[1, 0]), float(R[1, 1])), slant,
+        float(J[2] @ J[2]),
     )  # fmt: skip
