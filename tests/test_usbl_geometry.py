@@ -11,6 +11,7 @@ import math
 import numpy as np
 import pytest
 
+from mpcasv.models import acoustics
 from mpcasv.models.acoustics import AcousticParams
 from mpcasv.sim import world  # the fix function the simulator calls (world.usbl_fix)
 
@@ -68,6 +69,20 @@ def test_fix_and_its_covariance_are_the_3d_error_projected(r_h, depth, bearing_d
     assert nees.mean() == pytest.approx(2.0, abs=0.06)  # 2 dof; its standard error 0.014
     # the depth is the 3-D error's vertical part: sigma_range d / rho and sigma_b r_h
     assert math.sqrt(C_draw[2, 2]) == pytest.approx(math.sqrt(C_mc[2, 2]), rel=0.03)
+    # ... its variance handed on with the fix (J[2] @ J[2]) is the Monte Carlo's
+    assert math.sqrt(fixes[0].depth_var) == pytest.approx(math.sqrt(C_mc[2, 2]), rel=0.02)
+    # and its correlation with the horizontal error (the elevation error moves a fix out and
+    # up together: at r_h 100 m / depth 28 m along-line and depth correlate by -0.6; the sign
+    # of the elevation vector b is seen only here) is the Monte Carlo's, from the drawn fixes
+    # and from the map
+    J, _ = acoustics.usbl_error_map(asv, auv, P)
+    C_map = J @ J.T
+    for C in (C_draw, C_map):
+        for ang in np.radians([0.0, 45.0, 90.0, 135.0]):
+            v = np.array([math.cos(ang), math.sin(ang)])
+            corr = (v @ C[:2, 2]) / math.sqrt((v @ C[:2, :2] @ v) * C[2, 2])
+            corr_mc = (v @ C_mc[:2, 2]) / math.sqrt((v @ C_mc[:2, :2] @ v) * C_mc[2, 2])
+            assert corr == pytest.approx(corr_mc, abs=0.03)
 
 
 def test_under_the_asv_the_covariance_does_not_depend_on_north():
