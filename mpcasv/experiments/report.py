@@ -27,7 +27,6 @@ import html
 import re
 from pathlib import Path
 
-import numpy as np
 import pandas as pd
 
 from mpcasv.experiments import acceptance
@@ -36,15 +35,17 @@ from mpcasv.experiments import report_series as rs
 from mpcasv.experiments import stats as paired
 from mpcasv.experiments.metric_info import WALL_CLOCK
 from mpcasv.experiments.metrics import METRIC_INFO
-from mpcasv.experiments.report_figures import num
 from mpcasv.experiments.report_tables import (  # noqa: F401 (re-exported)
     CEILING_METRICS,
     LIST_SUMMARY,
+    NEVER_COLUMN,
     cases_without_fixes,
+    headline_table,
     metric_columns,
     never_fixed_table,
     scenario_table,
     summary_table,
+    win_loss_table,
     with_list_summaries,
 )
 from mpcasv.wording import count, noun
@@ -61,8 +62,6 @@ PER_CASE = ("Per case, the same rule on each case's pairs alone (the relative ch
             f"sums [95 % CI] (pairs, of which the other variant did worse in): verdict; fewer "
             f"than {paired.MIN_PAIRS} pairs have no interval). A pooled verdict can sit between "
             "cases that go opposite ways.")
-#: the headline's column of AUV-runs never reliably fixed (the fix ages' ceiling)
-NEVER_COLUMN = "AUV-runs never reliably fixed"
 READ_LINE = 'pd.read_parquet("{out}/results.parquet")'
 
 
@@ -93,65 +92,6 @@ table{border-collapse:collapse;font-size:12px;margin:0.5em 0}
 td,th{border:1px solid #ccc;padding:2px 6px;text-align:right}th{background:#eee}
 td:first-child,th:first-child{text-align:left}img{max-width:100%}
 code{background:#f4f4f4;padding:1px 4px}"""
-
-
-def headline_table(t: pd.DataFrame, never: pd.DataFrame | None = None) -> pd.DataFrame:
-    """Display form of one (reference, other) pair of :func:`stats.paired_table` for the
-    headline: one row per metric and case; the metric named on its first row only. The
-    difference is the Hodges-Lehmann estimate with its interval (the Wilcoxon test's own
-    estimand; :func:`stats.hodges_lehmann`); where the interval and the test still disagree
-    (possible only with tied or zero differences: whole seconds, counts) the p cell says so.
-    ``never`` (:func:`report_tables.never_fixed_table`, per case): a column on the
-    reliable-fix age rows with the AUV-runs never reliably fixed per variant, whose fix age
-    sits at its ceiling (0.95 x the run's length for the p95)."""
-    ref, other = t["reference"].iloc[0], t["other"].iloc[0]
-    units = {h.name: h.unit for h in paired.HEADLINE}
-    est = "estimate" if "estimate" in t else "median"
-    rows, last = [], None
-    for _, r in t.iterrows():
-        n = (f"{r['n']}" + (f" {noun(r['n'], 'world')} ({r['runs']} runs)"
-                            if r.get("runs", 0) > r["n"] else "")
-             + (f" (+{r['n_unpaired']} unpaired)" if r["n_unpaired"] else ""))
-        if np.isfinite(r["ci_low"]):
-            diff = f"{num(r[est])} [{num(r['ci_low'])}, {num(r['ci_high'])}]"
-        else:
-            diff = num(r[est]) if np.isfinite(r[est]) else ""
-        p = f"{r['p']:.2g}" if np.isfinite(r["p"]) else (r["note"] or "n/a")
-        if r["note"] and np.isfinite(r["p"]):
-            p += f" ({r['note']})"
-        elif r["note"] and p != r["note"]:
-            p = f"n/a ({r['note']})"
-        if np.isfinite(r["p"]) and paired.interval_disagrees(r):
-            p += " (the interval disagrees: tied or zero differences)"
-        unit = units.get(r["metric"], "")
-        first = r["metric"] != last
-        row = {
-            "metric": f"{r['metric']} ({unit}, {r['better']} better)" if first else "",
-            "case": r["case"], "pairs": n, f"{ref} median": num(r["ref_median"]),
-            f"Δ = {other} − {ref}: Hodges-Lehmann [95 % CI]": diff, "Wilcoxon p": p,
-            "verdict": r["verdict"],
-        }  # fmt: skip
-        if never is not None and len(never):
-            cell = ""
-            if r["metric"] in CEILING_METRICS and r["case"] in never.index:
-                c = never.loc[r["case"]]
-                cell = (f"{ref} {c['ref_never']}/{c['ref_auv_runs']}, "
-                        f"{other} {c['other_never']}/{c['other_auv_runs']}"
-                        + (f"; both in {count(int(c['both']), 'pair')}" if c["both"] else ""))
-            row[NEVER_COLUMN] = cell
-        rows.append(row)
-        last = r["metric"]
-    return pd.DataFrame(rows).set_index("metric")
-
-
-def win_loss_table(wl: pd.DataFrame) -> pd.DataFrame:
-    """Display form of :func:`stats.significant_win_loss` for one (reference, other) pair."""
-    ref, other = wl["reference"].iloc[0], wl["other"].iloc[0]
-    t = wl.set_index("metric")[["better", "other_better", "reference_better",
-                                "not_significant", "n/a"]].copy()  # fmt: skip
-    t.columns = ["better", f"{other} better", f"{ref} better", "no significant difference",
-                 "n/a"]  # fmt: skip
-    return t
 
 
 def run_link(path: Path, out: Path) -> str:

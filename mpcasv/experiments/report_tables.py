@@ -9,8 +9,10 @@ import math
 import numpy as np
 import pandas as pd
 
+from mpcasv.experiments import stats as paired
 from mpcasv.experiments.metrics import METRIC_NAMES, auv_column
 from mpcasv.experiments.report_figures import CONDITION, group_label, num
+from mpcasv.wording import count, noun
 
 #: how a per-AUV list metric is summarised per run for wins and losses
 LIST_SUMMARY = {"fixes_auv": "sum", "reliable_fixes_auv": "sum",
@@ -174,3 +176,66 @@ def _cell(r: pd.Series) -> str:
         # hybrid "375.2 ± 73.81, inf in 4" beside the MPC's 400.2, a statistician's review)
         text = f"inf in {r['n_inf']} of {r['n']}" + (f"; the others {text}" if text else "")
     return text + (f" ({r['n']} of {r['runs']} runs)" if r["n"] < r["runs"] else "")
+
+
+#: the headline's column of AUV-runs never reliably fixed (the fix ages' ceiling)
+NEVER_COLUMN = "AUV-runs never reliably fixed"
+
+
+def headline_table(t: pd.DataFrame, never: pd.DataFrame | None = None) -> pd.DataFrame:
+    """Display form of one (reference, other) pair of :func:`stats.paired_table` for the
+    headline: one row per metric and case; the metric named on its first row only. The
+    difference is the Hodges-Lehmann estimate with its interval (the Wilcoxon test's own
+    estimand; :func:`stats.hodges_lehmann`); where the interval and the test still disagree
+    (possible only with tied or zero differences: whole seconds, counts) the p cell says so.
+    ``never`` (:func:`report_tables.never_fixed_table`, per case): a column on the
+    reliable-fix age rows with the AUV-runs never reliably fixed per variant, whose fix age
+    sits at its ceiling (0.95 x the run's length for the p95)."""
+    ref, other = t["reference"].iloc[0], t["other"].iloc[0]
+    units = {h.name: h.unit for h in paired.HEADLINE}
+    est = "estimate" if "estimate" in t else "median"
+    rows, last = [], None
+    for _, r in t.iterrows():
+        n = (f"{r['n']}" + (f" {noun(r['n'], 'world')} ({r['runs']} runs)"
+                            if r.get("runs", 0) > r["n"] else "")
+             + (f" (+{r['n_unpaired']} unpaired)" if r["n_unpaired"] else ""))
+        if np.isfinite(r["ci_low"]):
+            diff = f"{num(r[est])} [{num(r['ci_low'])}, {num(r['ci_high'])}]"
+        else:
+            diff = num(r[est]) if np.isfinite(r[est]) else ""
+        p = f"{r['p']:.2g}" if np.isfinite(r["p"]) else (r["note"] or "n/a")
+        if r["note"] and np.isfinite(r["p"]):
+            p += f" ({r['note']})"
+        elif r["note"] and p != r["note"]:
+            p = f"n/a ({r['note']})"
+        if np.isfinite(r["p"]) and paired.interval_disagrees(r):
+            p += " (the interval disagrees: tied or zero differences)"
+        unit = units.get(r["metric"], "")
+        first = r["metric"] != last
+        row = {
+            "metric": f"{r['metric']} ({unit}, {r['better']} better)" if first else "",
+            "case": r["case"], "pairs": n, f"{ref} median": num(r["ref_median"]),
+            f"Δ = {other} − {ref}: Hodges-Lehmann [95 % CI]": diff, "Wilcoxon p": p,
+            "verdict": r["verdict"],
+        }  # fmt: skip
+        if never is not None and len(never):
+            cell = ""
+            if r["metric"] in CEILING_METRICS and r["case"] in never.index:
+                c = never.loc[r["case"]]
+                cell = (f"{ref} {c['ref_never']}/{c['ref_auv_runs']}, "
+                        f"{other} {c['other_never']}/{c['other_auv_runs']}"
+                        + (f"; both in {count(int(c['both']), 'pair')}" if c["both"] else ""))
+            row[NEVER_COLUMN] = cell
+        rows.append(row)
+        last = r["metric"]
+    return pd.DataFrame(rows).set_index("metric")
+
+
+def win_loss_table(wl: pd.DataFrame) -> pd.DataFrame:
+    """Display form of :func:`stats.significant_win_loss` for one (reference, other) pair."""
+    ref, other = wl["reference"].iloc[0], wl["other"].iloc[0]
+    t = wl.set_index("metric")[["better", "other_better", "reference_better",
+                                "not_significant", "n/a"]].copy()  # fmt: skip
+    t.columns = ["better", f"{other} better", f"{ref} better", "no significant difference",
+                 "n/a"]  # fmt: skip
+    return t
