@@ -46,7 +46,7 @@ class _Recorder:
         return self.inner.estimate(t)
 
 
-def _carried(current_E: float, duration: float):
+def _carried(current_E: float, duration: float, current_N: float = 0.0):
     """Case 1's ASV and an AUV running north at 1.4 m/s, 28 m deep, carried by a current of
     ``current_E`` m/s across its track (``auv_factor = 1``); status reports every 30 s only
     (no USBL: the velocity the reports give is all the filter knows of the motion)."""
@@ -56,7 +56,7 @@ def _carried(current_E: float, duration: float):
     d["auv"][0]["start"] = {"N": -150.0, "E": 100.0, "depth": 28.0, "psi_deg": 0.0}
     d["auv"][0]["behaviour"] = {"plan": {"speed": 1.4,
                                          "route": [{"waypoints": [[3000.0, 100.0, 28.0]]}]}}
-    d["current"] = [0.0, current_E]
+    d["current"] = [current_N, current_E]
     d["current_field"] = {"auv_factor": 1.0}
     d["acoustics"] = {"usbl": False, "T_report": 30.0}
     return scenario_from_dict(d)
@@ -111,14 +111,15 @@ def test_kalman_on_a_carried_auv_is_consistent(monkeypatch):
 
 def test_the_sitls_auv_states_carry_the_velocity_over_ground():
     """``mpcasv sitl``'s 2 Hz AUV EstimatedStates: ``vx``, ``vy`` over ground (the current
-    carrying the AUV included) as DUNE's and as the world's reports; they gave the velocity
-    through the water (0 across the track in a 0.3 m/s cross current)."""
+    carrying the AUV included, a diagonal one: each component must be added) as DUNE's and
+    as the world's reports; they gave the velocity through the water (0 across the track in
+    a 0.3 m/s cross current)."""
     from types import SimpleNamespace
 
     from mpcasv.io.sitlpublish import Publishing
     from mpcasv.sim.world import World
 
-    w = World(_carried(0.3, 60.0), seed=0)
+    w = World(_carried(0.3, 60.0, current_N=0.2), seed=0)  # diagonal: both components
     for _ in range(20):
         w.advance(np.zeros(4))
     nav = Publishing._nav_auv(SimpleNamespace(world=w, now=lambda: w.t), w.S, 0)

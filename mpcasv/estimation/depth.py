@@ -23,7 +23,7 @@ depth change (its vertical speed after two reports) and the fixes in between.
 The estimate handed out is the posterior depth at the last measurement, held (as before:
 the anti-collision domains account for how far the AUV may have moved since, ``w_max tau``),
 not above the surface. The MPC's vertical speed (``mpcasv/mpc/worldview.py``) differences
-these held depths, so it is that of the filter's output, not of raw fix depths (session 50:
+these held depths, so it is that of the filter's output, not of raw fix depths (session 49:
 with the fix depths copied in, a steady AUV at 28 m gave a 60-s depth forecast spread, p5-p95,
 of 0-157 m at 400 m range).
 """
