@@ -403,8 +403,10 @@ PINNED: dict[str, tuple[float, float]] = {
     "falsified-crossing-multi-mpc-multi-1": (-15.174, 49),  # [-14.621, 46] <-15.211, 38>
     # the worst case of the printed eq. 8 (-46.28 m there), run with S1/S2
     # Session 49's USBL fixes on the 3-D line of sight (mpcasv.models.acoustics U1; every
-    # fix's error and depth changed) moved the three cases that estimate: "s49 was"
-    "falsified-crossing-multi-printed-eq8": (-6.280, 22),  # s49 was -8.097/28;
+    # fix's error and depth changed) moved the three cases that estimate: "s49 was"; then the
+    # estimators' depth filter (mpcasv.estimation.depth: the fixes' USBL depths weighed
+    # against the reports' pressure depths) moved them again: "s49a"
+    "falsified-crossing-multi-printed-eq8": (-8.752, 28),  # s49a -6.280/22, s49 was -8.097/28;
     # s48 was -10.090/30;
     # was -8.830/28 [-21.073, 42];
     # search -20.622 m
@@ -432,8 +434,12 @@ PINNED: dict[str, tuple[float, float]] = {
     # Session 48's common random numbers: 6.007 m, 0 s: with the other noise the pursuer
     # was fixed often enough that the estimate did not fail (the kind of failure stands:
     # docs/mpc.md "Known problems", the Kalman estimate's over-confidence)
-    # Session 49's 3-D USBL fixes: 2.533 m, 0 s (6.007 before)
-    "falsified-pursuer-single-mpc-single-1": (2.533, 0),  # s49 was 6.007/0, s48 -18.410/38
+    # Session 49's 3-D USBL fixes: 2.533 m, 0 s (6.007 before); with the depth filter
+    # -7.862 m, 19 s: its depth estimate within 0.6 m of the truth (20.3-27.8 m for a 23.7 m
+    # AUV before), the ASV stood by at t = 101-107 s while the Kalman estimate put the closing
+    # pursuer 82-85 m away where it was 68-82 m (the horizontal estimate's lag again)
+    "falsified-pursuer-single-mpc-single-1": (-7.862, 19),  # s49a 2.533/0, s49 was 6.007/0,
+    # s48 -18.410/38
     # before: 8.394/0 6.109/0 8.664/0
     # {0.443, 0}
     # session 44's searches (docs/safety.md "Session 44"), the first whose runs are the
@@ -442,7 +448,8 @@ PINNED: dict[str, tuple[float, float]] = {
     # Kalman estimate of the pursuer 55-109 m off while it closes to 0.55 m; p_good 0.36):
     # a change that keeps the ASV off the AUV here moves this pin, which is the point
     "falsified-pursuer-single-hybrid-single-s44": (-44.949, 63),  # s48 was -43.003/57
-    "falsified-pursuer-single-mpc-single-s44": (-44.982, 181),  # s49 was -38.370/151;
+    "falsified-pursuer-single-mpc-single-s44": (-35.732, 177),  # s49a -44.982/181,
+    # s49 was -38.370/151;
     # s48 was -43.505/139;
     # -49.155/199 before s46
 }
