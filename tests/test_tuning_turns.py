@@ -101,6 +101,32 @@ def test_a_reference_of_unknown_origin_is_not_called_the_field_tuning(tmp_path, 
                               "(u_ff = 0.7, k_u = 1.5 m/s;"), ref  # fmt: skip
 
 
+def test_a_kept_reference_gets_each_runs_recommendation(tmp_path, capsys):
+    """A [reference] "kept from --base FILE, origin not recorded" was copied unchanged into
+    the next run's file (a review): a second run recommending (0.8, 1.2) wrote the first
+    run's "recommends u_ff=0.6, k_u=1.2". The origin (the first base) is kept, the
+    recommendation is this run's."""
+    base = _base(tmp_path, SpeedReference(u_ff=0.7, k_u=1.5), "")
+
+    def run(b, u_ff, out):
+        rc = main(["tune", "speed", "--base", str(b), "--speeds", "1", "--u-ff", u_ff,
+                   "--k-u", "1.2", "--distance", "50", "--out", str(tmp_path / out),
+                   "--quiet"])  # fmt: skip
+        assert rc == 0
+        prov = load_execution(tmp_path / out / "execution.toml").provenance
+        return next(p for p in prov.split(" | ") if p.startswith("reference: "))
+
+    first = run(base, "0.6", "ch1")
+    assert "recommends u_ff=0.6, k_u=1.2 " in first, first
+    capsys.readouterr()
+    second = run(tmp_path / "ch1" / "execution.toml", "0.8,0.4", "ch2")
+    assert "recommended (u_ff, k_u) = (0.8, 1.2)" in capsys.readouterr().out
+    assert second.startswith(f"reference: kept from --base {base}, origin not recorded "
+                             "(u_ff = 0.7, k_u = 1.5 m/s; the turn grid of mpcasv tune speed "
+                             "recommends u_ff=0.8, k_u=1.2 within"), second  # fmt: skip
+    assert second.count("recommends") == 1, second
+
+
 def test_no_provenance_parsing_of_vessel_names_is_left():
     """One parser of the provenance's commands (tune_cli._recorded_out): the vessel-name one
     is gone with the default it decided."""
