@@ -187,6 +187,21 @@ def test_a_waypoint_on_the_arrival_circle_is_inside_it_everywhere(model, shipped
         turn(model, ep, math.radians(90.0), ARRIVAL_RADIUS)
 
 
+@pytest.mark.parametrize("distance", [math.nan, math.inf, -math.inf])
+@pytest.mark.parametrize("u_slow", [None, 0.4])
+def test_a_distance_that_is_not_finite_is_refused(model, shipped, distance, u_slow):
+    """``distance_refusal`` passed NaN (``NaN <= radius`` is False, and so is the run cap's
+    ``>``) and, without a run cap, inf (a review): turn() would have run them. Both are
+    refused, by the rule and by turn()."""
+    from mpcasv.control.tuning_turns import distance_refusal, turn
+
+    why = distance_refusal(distance, u_slow)
+    assert why is not None and "not a finite number" in why, why
+    ep = dataclasses.replace(shipped, turn_thrust=0.0)
+    with pytest.raises(ValueError, match="not a finite number"):
+        turn(model, ep, math.radians(90.0), distance, t_end=1.0)
+
+
 def test_the_speed_options_help_says_the_real_defaults_and_bounds(capsys):
     """`--u-cmd-max`'s help said "the base file's own" beside a default that was not; the
     `--distance` help gave no bound (a review). The numbers are the code's."""

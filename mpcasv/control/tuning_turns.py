@@ -138,7 +138,11 @@ def distance_refusal(distance: float, u_slow: float | None = None,
     circle of ``radius`` m (:func:`in_circle`), where the boat starts, so every turn is
     reached at once (0.0 s over 0.0 m, and recommended, a review); or, with ``u_slow`` the
     run's slowest speed (m/s, ``min(u_ff, u_max)``), a run (:func:`turn_time`) longer than
-    :data:`TURN_RUN_MAX`."""
+    :data:`TURN_RUN_MAX`. A distance that is not a finite number (NaN, inf) is refused first:
+    ``NaN <= radius`` is False, so it passed the arrival circle's rule (a review)."""
+    if not math.isfinite(distance):
+        return (f"{distance:g} m: not a finite number; distances must be finite and exceed "
+                f"{radius:g} m")  # fmt: skip
     if in_circle(distance, radius):
         return (f"{distance:g} m: at or inside the {radius:g} m arrival circle, where the boat "
                 "starts: every turn would be reached at once (0 s, 0 m); distances must exceed "
