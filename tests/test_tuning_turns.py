@@ -202,6 +202,30 @@ def test_a_distance_that_is_not_finite_is_refused(model, shipped, distance, u_sl
         turn(model, ep, math.radians(90.0), distance, t_end=1.0)
 
 
+@pytest.mark.parametrize(("distance", "u_slow", "words"), [
+    (660.0001, 0.4, ["660.0001 m: a turn would run 150 s + 660.0001 m / 0.4 m/s",
+                     "= 1800.0002 s, above the 1800 s cap", "must be at most 660 m"]),
+    (660.06, 0.40002, ["= 1800.1 s", "at 0.40002 m/s distances must be at most 660 m"]),
+    (16.5001, 0.01, ["= 1800.01 s", "at 0.01 m/s distances must be at most 16.5 m"]),
+    (4.9999999, None, ["4.9999999 m: at or inside the 5 m arrival circle"]),
+])  # fmt: skip
+def test_the_run_caps_refusal_shows_the_digits_that_differ(distance, u_slow, words):
+    """The run cap's refusal rounded with ``:g``: "660 m: ... = 1800 s, above the 1800 s
+    cap; ... at most 660 m" for 660.0001 m (a review). It shows the distance as given, the
+    run above the cap and a longest distance not above the refused one."""
+    import re
+
+    from mpcasv.control.tuning_turns import distance_refusal
+
+    why = distance_refusal(distance, u_slow)
+    for w in words:
+        assert w in why, (w, why)
+    run = re.search(r"= ([0-9.e+]+) s, above", why)
+    most = re.search(r"at most ([0-9.e+]+) m", why)
+    if run:
+        assert float(run.group(1)) > 1800 and float(most.group(1)) < distance, why
+
+
 def test_the_speed_options_help_says_the_real_defaults_and_bounds(capsys):
     """`--u-cmd-max`'s help said "the base file's own" beside a default that was not; the
     `--distance` help gave no bound (a review). The numbers are the code's."""
