@@ -54,6 +54,11 @@ def test_a_top_speed_below_the_bound_is_noted_not_refused():
     _, notes = _bound("gretha")
     assert any("gretha's top speed u_max = 2.5 m/s is below --u-cmd-max 3.0976" in n
                for n in notes), notes  # fmt: skip
+    # they run, at u_max ("commands above it are not run", a review): u_ref = min(eq. 3.1,
+    # command, u_max) in the execution level
+    note = next(n for n in notes if "below --u-cmd-max" in n)
+    assert note.endswith("(u_ref = min(eq. 3.1, command, u_max)), so speeds eq. 3.1 asks "
+                         "above it are run at u_max"), note  # fmt: skip
     assert not any("below --u-cmd-max" in n for n in _bound("dune-otter")[1])
 
 
