@@ -54,6 +54,11 @@ def test_a_top_speed_below_the_bound_is_noted_not_refused():
     _, notes = _bound("gretha")
     assert any("gretha's top speed u_max = 2.5 m/s is below --u-cmd-max 3.0976" in n
                for n in notes), notes  # fmt: skip
+    # they run, at u_max ("commands above it are not run", a review): u_ref = min(eq. 3.1,
+    # command, u_max) in the execution level
+    note = next(n for n in notes if "below --u-cmd-max" in n)
+    assert note.endswith("(u_ref = min(eq. 3.1, command, u_max)), so speeds eq. 3.1 asks "
+                         "above it are run at u_max"), note  # fmt: skip
     assert not any("below --u-cmd-max" in n for n in _bound("dune-otter")[1])
 
 
@@ -99,6 +104,32 @@ def test_a_reference_of_unknown_origin_is_not_called_the_field_tuning(tmp_path, 
         assert "field tuning" not in ref, ref
         assert ref.startswith(f"reference: kept from --base {base}, origin not recorded "
                               "(u_ff = 0.7, k_u = 1.5 m/s;"), ref  # fmt: skip
+
+
+def test_a_kept_reference_gets_each_runs_recommendation(tmp_path, capsys):
+    """A [reference] "kept from --base FILE, origin not recorded" was copied unchanged into
+    the next run's file (a review): a second run recommending (0.8, 1.2) wrote the first
+    run's "recommends u_ff=0.6, k_u=1.2". The origin (the first base) is kept, the
+    recommendation is this run's."""
+    base = _base(tmp_path, SpeedReference(u_ff=0.7, k_u=1.5), "")
+
+    def run(b, u_ff, out):
+        rc = main(["tune", "speed", "--base", str(b), "--speeds", "1", "--u-ff", u_ff,
+                   "--k-u", "1.2", "--distance", "50", "--out", str(tmp_path / out),
+                   "--quiet"])  # fmt: skip
+        assert rc == 0
+        prov = load_execution(tmp_path / out / "execution.toml").provenance
+        return next(p for p in prov.split(" | ") if p.startswith("reference: "))
+
+    first = run(base, "0.6", "ch1")
+    assert "recommends u_ff=0.6, k_u=1.2 " in first, first
+    capsys.readouterr()
+    second = run(tmp_path / "ch1" / "execution.toml", "0.8,0.4", "ch2")
+    assert "recommended (u_ff, k_u) = (0.8, 1.2)" in capsys.readouterr().out
+    assert second.startswith(f"reference: kept from --base {base}, origin not recorded "
+                             "(u_ff = 0.7, k_u = 1.5 m/s; the turn grid of mpcasv tune speed "
+                             "recommends u_ff=0.8, k_u=1.2 within"), second  # fmt: skip
+    assert second.count("recommends") == 1, second
 
 
 def test_no_provenance_parsing_of_vessel_names_is_left():
@@ -159,6 +190,45 @@ def test_a_waypoint_on_the_arrival_circle_is_inside_it_everywhere(model, shipped
     ep = dataclasses.replace(shipped, turn_thrust=0.0)
     with pytest.raises(ValueError, match="waypoint 5 m: at or inside the 5 m arrival circle"):
         turn(model, ep, math.radians(90.0), ARRIVAL_RADIUS)
+
+
+@pytest.mark.parametrize("distance", [math.nan, math.inf, -math.inf])
+@pytest.mark.parametrize("u_slow", [None, 0.4])
+def test_a_distance_that_is_not_finite_is_refused(model, shipped, distance, u_slow):
+    """``distance_refusal`` passed NaN (``NaN <= radius`` is False, and so is the run cap's
+    ``>``) and, without a run cap, inf (a review): turn() would have run them. Both are
+    refused, by the rule and by turn()."""
+    from mpcasv.control.tuning_turns import distance_refusal, turn
+
+    why = distance_refusal(distance, u_slow)
+    assert why is not None and "not a finite number" in why, why
+    ep = dataclasses.replace(shipped, turn_thrust=0.0)
+    with pytest.raises(ValueError, match="not a finite number"):
+        turn(model, ep, math.radians(90.0), distance, t_end=1.0)
+
+
+@pytest.mark.parametrize(("distance", "u_slow", "words"), [
+    (660.0001, 0.4, ["660.0001 m: a turn would run 150 s + 660.0001 m / 0.4 m/s",
+                     "= 1800.0002 s, above the 1800 s cap", "must be at most 660 m"]),
+    (660.06, 0.40002, ["= 1800.1 s", "at 0.40002 m/s distances must be at most 660 m"]),
+    (16.5001, 0.01, ["= 1800.01 s", "at 0.01 m/s distances must be at most 16.5 m"]),
+    (4.9999999, None, ["4.9999999 m: at or inside the 5 m arrival circle"]),
+])  # fmt: skip
+def test_the_run_caps_refusal_shows_the_digits_that_differ(distance, u_slow, words):
+    """The run cap's refusal rounded with ``:g``: "660 m: ... = 1800 s, above the 1800 s
+    cap; ... at most 660 m" for 660.0001 m (a review). It shows the distance as given, the
+    run above the cap and a longest distance not above the refused one."""
+    import re
+
+    from mpcasv.control.tuning_turns import distance_refusal
+
+    why = distance_refusal(distance, u_slow)
+    for w in words:
+        assert w in why, (w, why)
+    run = re.search(r"= ([0-9.e+]+) s, above", why)
+    most = re.search(r"at most ([0-9.e+]+) m", why)
+    if run:
+        assert float(run.group(1)) > 1800 and float(most.group(1)) < distance, why
 
 
 def test_the_speed_options_help_says_the_real_defaults_and_bounds(capsys):

@@ -51,6 +51,19 @@ def _provenance(old: str, key: str, text: str) -> str:
     return " | ".join(sorted([*parts, f"{key}: {text}"]))
 
 
+_KEPT = "reference: kept from --base "
+_KEPT_END = ", origin not recorded ("
+
+
+def _kept_origin(prov: str) -> str | None:
+    """The file a ``reference: kept from --base FILE, origin not recorded (...)`` part of
+    the provenance names (None without one): a chain of runs keeps the first base."""
+    for part in prov.split(" | "):
+        if part.startswith(_KEPT) and _KEPT_END in part:
+            return part[len(_KEPT):].split(_KEPT_END)[0]
+    return None
+
+
 def _setup(args, what: str):
     """Load and check everything before any work (one line, exit 2, for bad input)."""
     from mpcasv.control import tuning_checks as tc
@@ -271,15 +284,19 @@ def run_tune_speed(args: argparse.Namespace) -> int:
         prov = _provenance(
             prov, "reference", f"{_command_line(args, 'tune speed')}: recommended by the turn grid"
         )
-    elif "reference: " not in prov or "reference: field tuning" in prov:
+    elif ("reference: " not in prov or "reference: field tuning" in prov
+          or _KEPT in prov):  # fmt: skip
         # "field tuning" only for the shipped values: a [reference] of unknown origin was
-        # labelled so, and read as Gretha's next time (a review)
+        # labelled so, and read as Gretha's next time (a review). A [reference] kept from an
+        # earlier --base keeps that file as its origin, with this run's recommendation (the
+        # last run's was copied on unchanged, a review)
         field = ep.reference == SpeedReference()
+        origin = _kept_origin(prov) or str(args.base)
         prov = _provenance(
             prov,
             "reference",
             ("field tuning, thesis §3.4.1 (kept; the turn grid " if field else
-             f"kept from --base {args.base}, origin not recorded (u_ff = {ep.reference.u_ff:g}, "
+             f"kept from --base {origin}, origin not recorded (u_ff = {ep.reference.u_ff:g}, "
              f"k_u = {ep.reference.k_u:g} m/s; the turn grid ")
             + (f"of mpcasv tune speed recommends u_ff={best.u_ff}, k_u={best.k_u} within "
                f"u_cmd,max <= {args.u_cmd_max:.4g} m/s)" if best

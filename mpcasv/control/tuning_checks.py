@@ -186,7 +186,8 @@ def check_u_cmd_max(args: argparse.Namespace, ep, model) -> list[str]:
     if P.u_max < args.u_cmd_max:
         notes.append(f"{P.name}'s top speed u_max = {P.u_max:g} m/s is below --u-cmd-max "
                      f"{args.u_cmd_max:g} m/s: the execution level caps the speed reference "
-                     "at u_max, so commands above it are not run")  # fmt: skip
+                     "at u_max (u_ref = min(eq. 3.1, command, u_max)), so speeds eq. 3.1 asks "
+                     "above it are run at u_max")  # fmt: skip
     low = min(u_cmd_max(a, b) for a in args.u_ff for b in args.k_u)
     if not any(within(a, b, args.u_cmd_max) for a in args.u_ff for b in args.k_u):
         raise ConfigError(f"--u-ff {_text(args.u_ff)} --k-u {_text(args.k_u)}: every pair has "

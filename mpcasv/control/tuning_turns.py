@@ -138,17 +138,37 @@ def distance_refusal(distance: float, u_slow: float | None = None,
     circle of ``radius`` m (:func:`in_circle`), where the boat starts, so every turn is
     reached at once (0.0 s over 0.0 m, and recommended, a review); or, with ``u_slow`` the
     run's slowest speed (m/s, ``min(u_ff, u_max)``), a run (:func:`turn_time`) longer than
-    :data:`TURN_RUN_MAX`."""
+    :data:`TURN_RUN_MAX`. A distance that is not a finite number (NaN, inf) is refused first:
+    ``NaN <= radius`` is False, so it passed the arrival circle's rule (a review)."""
+    if not math.isfinite(distance):
+        return (f"{distance:g} m: not a finite number; distances must be finite and exceed "
+                f"{radius:g} m")  # fmt: skip
+    d = _digits(distance, lambda v: v == distance)
     if in_circle(distance, radius):
-        return (f"{distance:g} m: at or inside the {radius:g} m arrival circle, where the boat "
+        return (f"{d} m: at or inside the {radius:g} m arrival circle, where the boat "
                 "starts: every turn would be reached at once (0 s, 0 m); distances must exceed "
                 f"{radius:g} m")  # fmt: skip
     if u_slow is not None and TURN_T_END + distance / u_slow > TURN_RUN_MAX:
-        return (f"{distance:g} m: a turn would run {TURN_T_END:g} s + {distance:g} m / "
-                f"{u_slow:g} m/s (min(u_ff, u_max)) = {TURN_T_END + distance / u_slow:.4g} s, "
-                f"above the {TURN_RUN_MAX:g} s cap; at {u_slow:g} m/s distances must be at most "
-                f"{(TURN_RUN_MAX - TURN_T_END) * u_slow:.4g} m (or give a larger --u-ff)")
+        # the digits to show the run above the cap and the longest distance not above the
+        # refused one ("= 1800 s, above the 1800 s cap; at most 660 m" for 660.0001, a review)
+        t, most = TURN_T_END + distance / u_slow, (TURN_RUN_MAX - TURN_T_END) * u_slow
+        u = _digits(u_slow, lambda v: v == u_slow)
+        return (f"{d} m: a turn would run {TURN_T_END:g} s + {d} m / "
+                f"{u} m/s (min(u_ff, u_max)) = {_digits(t, lambda v: v > TURN_RUN_MAX)} "
+                f"s, above the {TURN_RUN_MAX:g} s cap; at {u} m/s distances must be at "
+                f"most {_digits(most, lambda v: v <= most and v < distance)} m (or give a "
+                "larger --u-ff)")  # fmt: skip
     return None
+
+
+def _digits(x: float, shows) -> str:
+    """``x`` with the fewest significant digits (4 at least) whose value ``shows`` holds for,
+    e.g. above a cap it is compared with; Python's shortest round trip if none does."""
+    for p in range(4, 18):
+        text = f"{x:.{p}g}"
+        if shows(float(text)):
+            return text
+    return repr(x)
 
 
 def turn_time(model: VesselModel, ep: ExecutionParams, distance: float) -> float:
