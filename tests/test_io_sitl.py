@@ -110,13 +110,19 @@ def test_streams_only_to_announced_heartbeating_systems(tmp_path):
     _run(tmp_path, body, duration=1000.0)
 
 
+async def _heard(sitl):
+    """(the SITL ASV's address, a node it has heard: announced, then a Heartbeat to it)."""
+    asv = ("127.0.0.1", sitl.asv.port)
+    node = await Node().open()
+    node.announce(sitl.discovery.address)
+    assert await _until(lambda: node.of(imcpy.Announce, sitl.asv.id))
+    node.send(imcpy.Heartbeat(), asv, dst=sitl.asv.id)
+    return asv, node
+
+
 def test_plan_control_followreference_timeout_and_speed_zero(tmp_path):
     async def body(sitl):
-        asv = ("127.0.0.1", sitl.asv.port)
-        node = await Node().open()
-        node.announce(sitl.discovery.address)
-        assert await _until(lambda: node.of(imcpy.Announce, sitl.asv.id))
-        node.send(imcpy.Heartbeat(), asv, dst=sitl.asv.id)
+        asv, node = await _heard(sitl)
 
         def start(req, dst, arg=True):
             pc = imcpy.PlanControl()

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import imcpy
 from test_io_dune_recording import EXCERPT, HDR, OTTER, US, capture
-from test_io_sitl import ME, Node, _run, _until
+from test_io_sitl import ME, Node, _heard, _run, _until
 
 from mpcasv.config import load_toml
 from mpcasv.io.config import deploy_config_from_dict
@@ -104,11 +104,7 @@ def test_the_sitl_asv_reports_its_plan_as_the_recorded_dune(tmp_path):
     got = {}
 
     async def body(sitl):
-        asv = ("127.0.0.1", sitl.asv.port)
-        node = await Node().open()
-        node.announce(sitl.discovery.address)
-        assert await _until(lambda: node.of(imcpy.Announce, sitl.asv.id))
-        node.send(imcpy.Heartbeat(), asv, dst=sitl.asv.id)
+        asv, node = await _heard(sitl)
         # the periodic reports: PlanControlStates over a stretch of the SITL clock
         assert await _until(lambda: node.of(PCS, sitl.asv.id))
         n0, c0 = len(node.of(PCS, sitl.asv.id)), sitl.clock.now()
@@ -155,11 +151,7 @@ def test_a_stop_and_a_timeout_end_the_plan_with_failure(tmp_path):
     got = {}
 
     async def body(sitl):
-        asv = ("127.0.0.1", sitl.asv.port)
-        node = await Node().open()
-        node.announce(sitl.discovery.address)
-        assert await _until(lambda: node.of(imcpy.Announce, sitl.asv.id))
-        node.send(imcpy.Heartbeat(), asv, dst=sitl.asv.id)
+        asv, node = await _heard(sitl)
 
         def request(op, req, timeout=None):
             pc = PC()

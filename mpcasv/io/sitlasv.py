@@ -97,12 +97,7 @@ class AsvDune:
         request id of the start) to the system that started the plan."""
         if self.plan_owner is None:
             return
-        req, plan_id, node, stream = self.plan_owner
-        ans = imcpy.PlanControl()
-        ans.type, ans.op, ans.request_id = _PC.TypeEnum.SUCCESS, _PC.OperationEnum.START, req
-        ans.plan_id, ans.info = plan_id, "plan completed"
-        v.reply(ans, node, stream)
-        self.plan_owner = None
+        self._answer_starter(v, _PC.TypeEnum.SUCCESS, "plan completed")
         v.engine.ended(success=True)
         v.publish(v.engine.message())
 
@@ -117,14 +112,19 @@ class AsvDune:
         v = self.asv
         v.publish(self.maneuver.state_message())
         if self.plan_owner is not None:
-            req, plan_id, node, stream = self.plan_owner
-            ans = imcpy.PlanControl()
-            ans.type, ans.op, ans.request_id = _PC.TypeEnum.FAILURE, _PC.OperationEnum.START, req
-            ans.plan_id, ans.info = plan_id, "reference source timed out"
-            v.reply(ans, node, stream)
-            self.plan_owner = None
+            self._answer_starter(v, _PC.TypeEnum.FAILURE, "reference source timed out")
         v.engine.ended(success=False)
         v.publish(v.engine.message())
+
+    def _answer_starter(self, v: SimVehicle, kind, info: str) -> None:
+        """PlanControl ``kind`` with ``info`` (op START, the start's request id) to the system
+        that started the plan, which then has none."""
+        req, plan_id, node, stream = self.plan_owner
+        ans = imcpy.PlanControl()
+        ans.type, ans.op, ans.request_id = kind, _PC.OperationEnum.START, req
+        ans.plan_id, ans.info = plan_id, info
+        v.reply(ans, node, stream)
+        self.plan_owner = None
 
     def command_vector(self) -> np.ndarray:
         if not self.asv.alive or self.maneuver is None:
