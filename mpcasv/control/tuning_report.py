@@ -307,10 +307,14 @@ def plot_speed(model, g, grids, field, best, out: Path) -> list[Path]:
                 _, first = arrival(r.X, wp, R)
                 reached = first < len(r.t)
                 n = first + 1 if reached else len(r.t)
-                ax.plot(r.X[:n, 1], r.X[:n, 0], ls="--" if k_u == 0 else "-",
-                        lw=1.0 if k_u == 0 else 1.6, zorder=3 if k_u == 0 else 2,
-                        label=label + ("" if reached else f" (never within "
-                                       f"{R:g} m, {r.t[-1]:.0f} s)"))  # fmt: skip
+                (line,) = ax.plot(r.X[:n, 1], r.X[:n, 0], ls="--" if k_u == 0 else "-",
+                                  lw=1.0 if k_u == 0 else 1.6, zorder=3 if k_u == 0 else 2,
+                                  label=label + ("" if reached else f" (never within "
+                                                 f"{R:g} m, {r.t[-1]:.0f} s)"))  # fmt: skip
+                if reached and (u_ff, k_u, a) in pir:  # its verdict is in what follows (a
+                    # review: the path stopped 5 m short of the waypoint, labelled PIROUETTE)
+                    ax.plot(r.X[n - 1:, 1], r.X[n - 1:, 0], ls=":", lw=0.8,
+                            color=line.get_color(), zorder=1)  # fmt: skip
             ax.plot(wp[1], wp[0], "kx", ms=9, zorder=4, label="waypoint")
             ax.plot(0, 0, "ko", ms=5, zorder=4, label="start (heading north)")
             ax.set_aspect("equal")
@@ -321,7 +325,8 @@ def plot_speed(model, g, grids, field, best, out: Path) -> list[Path]:
             ax.grid(True, alpha=0.3)
         fig.set_layout_engine("constrained")
         fig.suptitle(f"turns from full speed, heading north at (0, 0), to a waypoint (x) {d:g} "
-                     f"m away (paths until {R:g} m from it)", fontsize=10)  # fmt: skip
+                     f"m away (paths until {R:g} m from it; a pirouette's whole run dotted "
+                     "after)", fontsize=10)  # fmt: skip
         p = out / f"turns_{d:g}m.png"
         fig.savefig(p, dpi=100)
         plt.close(fig)
