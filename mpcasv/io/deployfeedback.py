@@ -19,7 +19,7 @@ from mpcasv.interface import Mode
 from mpcasv.io.geo import to_local
 from mpcasv.io.imc import BadInput
 from mpcasv.io.watchdog import OK
-from mpcasv.models.acoustics import Fix, usbl_error_map
+from mpcasv.models.acoustics import Fix, usbl_fix
 
 __all__ = ["USBL_AGREE", "USBL_AGREE_SPAN", "USBL_GATE", "BoatFeedback", "cap_command",
            "cap_controller_speed"]
@@ -286,7 +286,7 @@ class BoatFeedback:
         ``accuracy`` (m) taken as the horizontal RMS error, ``accuracy^2 / 2`` on each axis
         (the SITL sends ``sqrt(trace R)``), or, where DUNE leaves it 0, thesis eq. 2.9 with
         the deploy's ``[acoustics]`` seen from the ASV's last state ``asv``
-        (:func:`~mpcasv.models.acoustics.usbl_covariance`, the simulator's fixes' covariance);
+        (:func:`~mpcasv.models.acoustics.usbl_fix`'s, the simulator's fixes' covariance);
         the depth's variance from the same map's vertical row (DUNE's depth is the USBL's,
         as the simulator's; NaN for a depth taken from the AUV's report)."""
         N, E, _ = to_local(msg.lat, msg.lon, self.link.origin.height, self.link.origin)
@@ -300,16 +300,15 @@ class BoatFeedback:
                 self.event("usbl_fix_depth", target=msg.target, z_units=str(msg.z_units),
                            depth=depth, note="not a depth: the AUV's last reported depth "
                            "is used (0 before its first state)")  # fmt: skip
-        J, slant = usbl_error_map((asv.N, asv.E), (N, E, depth), self.cfg.acoustics)
-        R = J[:2] @ J[:2].T  # (U2), usbl_covariance's
+        # the simulator's fix at the measured position, without an error: its covariance and
+        # depth variance (DUNE's fix depth is the USBL's too, UsblTools toFix)
+        fix = usbl_fix(t, k, (asv.N, asv.E), (N, E, depth), self.cfg.acoustics, np.zeros(3))
         acc = float(msg.accuracy)
         if math.isfinite(acc) and acc > 0:
-            R = np.eye(2) * acc**2 / 2
-        cov = (float(R[0, 0]), float(R[0, 1]), float(R[1, 0]), float(R[1, 1]))
-        # the depth's variance: DUNE's fix depth is the USBL's too (UsblTools toFix), the same
-        # map's vertical row; a depth not from the USBL (the AUV's last report) is not measured
-        depth_var = float(J[2] @ J[2]) if usbl_depth else math.nan
-        return Fix(t, k, N, E, depth, cov, slant, depth_var)
+            fix = dataclasses.replace(fix, cov=(acc**2 / 2, 0.0, 0.0, acc**2 / 2))
+        if not usbl_depth:  # the AUV's last report: no depth measured
+            fix = dataclasses.replace(fix, depth_var=math.nan)
+        return fix
 
     def _propeller_on(self, now: float) -> tuple[bool, str]:
         """(propeller on, source): :class:`mpcasv.io.asvwatch.Thrusters`; reported once per

@@ -7,7 +7,7 @@
   thesis eq. 2.9's angle error (transverse error = angle error x range) across it and in
   elevation, projected to the horizontal for the covariance (U1, U2 below). One definition
   for the simulator's fixes (:func:`usbl_fix`) and the deploy's covariance of a DUNE fix
-  without an accuracy (:func:`usbl_covariance`).
+  without an accuracy (:func:`usbl_fix` at the measured position).
 - Each AUV's own navigation (:class:`NavParams`: dp = 1/2 eps_a t^2 between fixes, thesis
   eq. 2.7) is filtered by :class:`mpcasv.models.auv_nav.AUVNavFilter`: dead reckoning, and a
   Kalman update with each USBL fix that reaches the AUV (weighted by the fix's covariance)
@@ -169,13 +169,6 @@ def usbl_error_map(asv_NE, auv_NEd, p: AcousticParams) -> tuple[np.ndarray, floa
     b = np.array([-sv * los[0], -sv * los[1], ch])
     J = np.column_stack([p.sigma_range * u, s_t * a, s_t * b])
     return J, slant
-
-
-def usbl_covariance(asv_NE, auv_NEd, p: AcousticParams) -> tuple[np.ndarray, float]:
-    """``(R, slant)``: the horizontal covariance (U2) of a fix (2 x 2, m^2; ``J_h J_h^T``
-    with ``J_h`` the first two rows of (U1)) and the slant range (m)."""
-    J, slant = usbl_error_map(asv_NE, auv_NEd, p)
-    return J[:2] @ J[:2].T, slant
 
 
 def usbl_fix(t, auv, asv_NE, auv_NEd, p: AcousticParams, z) -> Fix:
